@@ -1,0 +1,770 @@
+/* dump.c: render dumps -- recognising renderer conventions, loading, checking and
+ * writing them (see dump.h; the conventions are in notes/libraries.md §4). */
+#define _POSIX_C_SOURCE 200809L
+#include <mcpost/dump.h>
+#include <mcpost/imageio.h>
+
+#include <ctype.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+
+/* ---- names of things ---- */
+
+static const char *convention_names[] = {"auto", "pbrt", "mitsuba", "blender", "mcpost",
+                                         "plain"};
+
+const char *
+mcp_convention_name(mcp_convention c)
+{
+    return (unsigned)c < sizeof convention_names / sizeof *convention_names
+               ? convention_names[c]
+               : "unknown";
+}
+
+int
+mcp_convention_from_name(const char *name, mcp_convention *out)
+{
+    for (int i = 0; i < (int)(sizeof convention_names / sizeof *convention_names); i++)
+        if (strcasecmp(name, convention_names[i]) == 0) {
+            *out = (mcp_convention)i;
+            return 0;
+        }
+    return mcp_error("unknown convention '%s' (auto, pbrt, mitsuba, blender, mcpost, "
+                     "plain)", name);
+}
+
+int
+mcp_variance_kind_from_name(const char *name, mcp_variance_kind *out)
+{
+    if (strcmp(name, "per-sample") == 0)
+        *out = MCP_VAR_PER_SAMPLE;
+    else if (strcmp(name, "of-mean") == 0)
+        *out = MCP_VAR_OF_MEAN;
+    else
+        return mcp_error("unknown variance semantics '%s' (per-sample or of-mean)", name);
+    return 0;
+}
+
+int
+mcp_badval_policy_from_name(const char *name, mcp_badval_policy *out)
+{
+    if (strcmp(name, "fail") == 0)
+        *out = MCP_BADVAL_FAIL;
+    else if (strcmp(name, "zero") == 0)
+        *out = MCP_BADVAL_ZERO;
+    else
+        return mcp_error("unknown bad-value policy '%s' (fail or zero)", name);
+    return 0;
+}
+
+mcp_dump_spec
+mcp_dump_spec_defaults(void)
+{
+    mcp_dump_spec s;
+    memset(&s, 0, sizeof s);
+    return s;
+}
+
+/* ---- detection ---- */
+
+/* The Blender view-layer prefix ("ViewLayer" in "ViewLayer.Combined.R"), or NULL. */
+static char *
+blender_layer(const mcp_image *img)
+{
+    for (int c = 0; c < img->channels; c++) {
+        const char *at = strstr(img->names[c], ".Combined.R");
+        if (at && at[strlen(".Combined.R")] == '\0') {
+            size_t n = (size_t)(at - img->names[c]);
+            char *layer = mcp_malloc(n + 1);
+            if (layer) {
+                memcpy(layer, img->names[c], n);
+                layer[n] = '\0';
+            }
+            return layer;
+        }
+    }
+    return NULL;
+}
+
+static int
+has(const mcp_image *img, const char *name)
+{
+    return mcp_image_channel(img, name) >= 0;
+}
+
+static int
+contains_ci(const char *s, const char *needle)
+{
+    size_t n = strlen(needle);
+    for (; *s; s++)
+        if (strncasecmp(s, needle, n) == 0)
+            return 1;
+    return 0;
+}
+
+/* The prefix P of the first triple P.<s0>, P.<s1>, P.<s2> whose P contains `word`
+ * (case-insensitive); written into buf. */
+static int
+find_triple(const mcp_image *img, const char *word, const char *const sfx[3], char *buf,
+            size_t cap)
+{
+    for (int c = 0; c < img->channels; c++) {
+        const char *name = img->names[c], *dot = strrchr(name, '.');
+        if (!dot || strcmp(dot + 1, sfx[0]) != 0)
+            continue;
+        int plen = (int)(dot - name);
+        snprintf(buf, cap, "%.*s", plen, name);
+        if (!contains_ci(buf, word))
+            continue;
+        char other[512];
+        int ok = 1;
+        for (int k = 1; k < 3; k++) {
+            snprintf(other, sizeof other, "%s.%s", buf, sfx[k]);
+            ok &= has(img, other);
+        }
+        if (ok)
+            return 1;
+    }
+    return 0;
+}
+
+mcp_convention
+mcp_dump_detect(const mcp_image *img)
+{
+    char *layer = blender_layer(img);
+    if (layer) {
+        free(layer);
+        return MCP_CONV_BLENDER;
+    }
+    const mcp_attr *gen = mcp_attrs_find(&img->attrs, "generatedBy");
+    if (has(img, "m2_R") || (gen && gen->type == MCP_ATTR_STRING && strstr(gen->s, "Mitsuba")))
+        return MCP_CONV_MITSUBA;
+    if (has(img, "Covariance.RG") || has(img, "SampleCount"))
+        return MCP_CONV_MCPOST;
+    if (has(img, "Variance.R") || has(img, "Albedo.R") || has(img, "N.X") ||
+        mcp_attrs_find(&img->attrs, "samplesPerPixel"))
+        return MCP_CONV_PBRT;
+    char buf[512];
+    static const char *const rgb[3] = {"R", "G", "B"}, *const xyz[3] = {"X", "Y", "Z"};
+    if (find_triple(img, "albedo", rgb, buf, sizeof buf) ||
+        find_triple(img, "normal", xyz, buf, sizeof buf))
+        return MCP_CONV_MITSUBA;
+    return MCP_CONV_PLAIN;
+}
+
+/* ---- the channel layout of one convention ---- */
+
+typedef struct layout {
+    char color[3][512], var[3][512], m2[3][512], cov[3][512], albedo[3][512],
+        normal[3][512];
+    int has_var, has_m2, has_cov, has_albedo, has_normal;
+    mcp_variance_kind var_kind;
+    double spp;          /* from the header, 0 if none */
+    char spp_channel[64];
+} layout;
+
+static void
+set3(char dst[3][512], const char *prefix, const char *const sfx[3])
+{
+    for (int k = 0; k < 3; k++)
+        snprintf(dst[k], 512, "%s%s", prefix, sfx[k]);
+}
+
+static int
+has3(const mcp_image *img, char names[3][512])
+{
+    return has(img, names[0]) && has(img, names[1]) && has(img, names[2]);
+}
+
+static double
+header_spp(const mcp_image *img, const char *blender_layer_name)
+{
+    static const char *keys[] = {"samplesPerPixel", "spp", "samples"};
+    for (size_t i = 0; i < sizeof keys / sizeof *keys; i++) {
+        const mcp_attr *a = mcp_attrs_find(&img->attrs, keys[i]);
+        if (a && a->type != MCP_ATTR_STRING)
+            return a->f;
+    }
+    if (blender_layer_name) {
+        char key[600];
+        snprintf(key, sizeof key, "cycles.%s.samples", blender_layer_name);
+        const mcp_attr *a = mcp_attrs_find(&img->attrs, key);
+        if (a && a->type == MCP_ATTR_STRING)
+            return atof(a->s);
+    }
+    return 0;
+}
+
+static int
+layout_for(const mcp_image *img, mcp_convention conv, layout *L)
+{
+    static const char *const rgb[3] = {"R", "G", "B"}, *const xyz[3] = {"X", "Y", "Z"},
+                             *const offdiag[3] = {"RG", "RB", "GB"};
+    char prefix[600];
+    memset(L, 0, sizeof *L);
+    L->var_kind = MCP_VAR_PER_SAMPLE;
+    switch (conv) {
+    case MCP_CONV_BLENDER: {
+        char *layer = blender_layer(img);
+        if (!layer)
+            return mcp_error("%s: no Blender '<layer>.Combined.R' channels", img->source);
+        snprintf(prefix, sizeof prefix, "%s.Combined.", layer);
+        set3(L->color, prefix, rgb);
+        snprintf(prefix, sizeof prefix, "%s.Variance.", layer);
+        set3(L->var, prefix, rgb);
+        snprintf(prefix, sizeof prefix, "%s.Denoising Albedo.", layer);
+        set3(L->albedo, prefix, rgb);
+        snprintf(prefix, sizeof prefix, "%s.Denoising Normal.", layer);
+        set3(L->normal, prefix, xyz);
+        L->spp = header_spp(img, layer);
+        free(layer);
+        break;
+    }
+    case MCP_CONV_MITSUBA: {
+        set3(L->color, "", rgb);
+        set3(L->m2, "m2_", rgb);
+        L->has_m2 = has3(img, L->m2);
+        char p[512];
+        if (find_triple(img, "albedo", rgb, p, sizeof p)) {
+            snprintf(prefix, sizeof prefix, "%s.", p);
+            set3(L->albedo, prefix, rgb);
+        }
+        if (find_triple(img, "sh_normal", xyz, p, sizeof p) ||
+            find_triple(img, "normal", xyz, p, sizeof p)) {
+            snprintf(prefix, sizeof prefix, "%s.", p);
+            set3(L->normal, prefix, xyz);
+        }
+        L->spp = header_spp(img, NULL);
+        break;
+    }
+    default: /* pbrt, mcpost, plain */
+        set3(L->color, "", rgb);
+        set3(L->var, "Variance.", rgb);
+        set3(L->cov, "Covariance.", offdiag);
+        set3(L->albedo, "Albedo.", rgb);
+        set3(L->normal, "N.", xyz);
+        if (!has3(img, L->normal))
+            set3(L->normal, "Ns.", xyz);
+        snprintf(L->spp_channel, sizeof L->spp_channel, "SampleCount");
+        L->spp = header_spp(img, NULL);
+        break;
+    }
+    L->has_var = L->var[0][0] && has3(img, L->var);
+    L->has_cov = L->cov[0][0] && has3(img, L->cov);
+    L->has_albedo = L->albedo[0][0] && has3(img, L->albedo);
+    L->has_normal = L->normal[0][0] && has3(img, L->normal);
+    return 0;
+}
+
+/* ---- loading ---- */
+
+static int
+pick3(const mcp_image *img, char names[3][512], mcp_image **out)
+{
+    const char *n[3] = {names[0], names[1], names[2]};
+    int idx[3];
+    return mcp_image_channels(img, n, 3, idx) || mcp_image_copy_channels(img, idx, 3, out);
+}
+
+static int
+rename3(mcp_image *img, const char *a, const char *b, const char *c)
+{
+    return mcp_image_set_channel_name(img, 0, a) || mcp_image_set_channel_name(img, 1, b) ||
+           mcp_image_set_channel_name(img, 2, c);
+}
+
+/* Reads a separate part file and takes its colour-like triple (R,G,B / X,Y,Z or the
+ * first three channels). */
+static int
+load_part(const char *path, const char *const names[3], const mcp_image *like,
+          mcp_image **out)
+{
+    mcp_image *img = NULL;
+    mcp_read_options ro = mcp_read_defaults();
+    ro.srgb_decode = 0; /* data, not colour */
+    if (mcp_image_read(path, &ro, &img))
+        return -1;
+    int idx[3] = {0, 1, 2}, rc = -1;
+    if (mcp_image_channels(img, names, 3, idx) && img->channels >= 3) {
+        idx[0] = 0, idx[1] = 1, idx[2] = 2;
+    } else if (img->channels < 3) {
+        mcp_error("%s: needs 3 channels (%s,%s,%s), has %d", path, names[0], names[1],
+                  names[2], img->channels);
+        goto done;
+    }
+    if (!mcp_image_same_size(img, like))
+        goto done;
+    rc = mcp_image_copy_channels(img, idx, 3, out);
+done:
+    mcp_image_free(img);
+    return rc;
+}
+
+/* NaN/Inf (and, for variance, negative values): fail naming the first, or zero them. */
+static int
+check_values(mcp_image *img, const char *part, int is_variance, mcp_badval_policy policy,
+             long *replaced)
+{
+    if (!img)
+        return 0;
+    for (int c = 0; c < img->channels; c++) {
+        long bad = 0;
+        int fx = -1, fy = -1;
+        float first = 0;
+        for (int y = 0; y < img->height; y++)
+            for (int x = 0; x < img->width; x++) {
+                float *v = &mcp_image_px(img, x, y)[c];
+                if (isfinite(*v) && !(is_variance && *v < 0))
+                    continue;
+                if (!bad++)
+                    fx = x, fy = y, first = *v;
+                if (policy == MCP_BADVAL_ZERO)
+                    *v = 0;
+            }
+        if (bad && policy == MCP_BADVAL_FAIL)
+            return mcp_error("%s: %s channel '%s' has %ld %s value%s (first %g at pixel "
+                             "%d,%d; set bad_values: zero to replace them)",
+                             img->source, part, img->names[c], bad,
+                             is_variance && isfinite(first) ? "negative" : "NaN/Inf",
+                             bad == 1 ? "" : "s", first, fx, fy);
+        *replaced += bad;
+    }
+    return 0;
+}
+
+static int
+load_spp(mcp_dump *d, const mcp_image *img, const mcp_dump_spec *spec, const layout *L)
+{
+    if (spec->spp_map_path) {
+        mcp_image *m = NULL;
+        if (mcp_image_read(spec->spp_map_path, NULL, &m))
+            return -1;
+        int idx = 0;
+        int ok = mcp_image_same_size(m, d->color) &&
+                 !mcp_image_copy_channels(m, &idx, 1, &d->spp_map);
+        mcp_image_free(m);
+        if (!ok)
+            return -1;
+    } else if (L->spp_channel[0] && has(img, L->spp_channel)) {
+        int idx = mcp_image_channel(img, L->spp_channel);
+        if (mcp_image_copy_channels(img, &idx, 1, &d->spp_map))
+            return -1;
+    }
+    if (d->spp_map) {
+        for (int y = 0; y < d->spp_map->height; y++)
+            for (int x = 0; x < d->spp_map->width; x++) {
+                float n = mcp_image_px(d->spp_map, x, y)[0];
+                if (!(n > 0) || !isfinite(n))
+                    return mcp_error("%s: sample count %g at pixel %d,%d (must be > 0)",
+                                     d->spp_map->source, n, x, y);
+            }
+        d->spp = 0;
+        return 0;
+    }
+    d->spp = spec->spp > 0 ? spec->spp : L->spp;
+    if (spec->spp < 0 || !isfinite(spec->spp))
+        return mcp_error("%s: sample count %g given (must be > 0)", d->source, spec->spp);
+    if (d->spp == 0 && (d->var_of_mean || d->cov_of_mean) &&
+        d->variance_in_file == MCP_VAR_PER_SAMPLE)
+        return mcp_error("%s: no sample count: the file has none (samplesPerPixel) and "
+                         "none was given (spp)", d->source);
+    if (d->spp < 0 || !isfinite(d->spp))
+        return mcp_error("%s: sample count %g in the file (must be > 0)", d->source, d->spp);
+    return 0;
+}
+
+/* Divides per-sample variance (and covariance) by the sample count. */
+static void
+to_variance_of_mean(mcp_dump *d)
+{
+    mcp_image *parts[2] = {d->var_of_mean, d->cov_of_mean};
+    for (int p = 0; p < 2; p++) {
+        if (!parts[p])
+            continue;
+        for (int y = 0; y < parts[p]->height; y++)
+            for (int x = 0; x < parts[p]->width; x++) {
+                double n = mcp_dump_spp_at(d, x, y);
+                float *v = mcp_image_px(parts[p], x, y);
+                for (int c = 0; c < 3; c++)
+                    v[c] = (float)(v[c] / n);
+            }
+    }
+}
+
+int
+mcp_dump_from_image(const mcp_image *img, const mcp_dump_spec *spec, mcp_dump **out)
+{
+    mcp_dump_spec defaults = mcp_dump_spec_defaults();
+    if (!spec)
+        spec = &defaults;
+    *out = NULL;
+    mcp_dump *d = mcp_calloc(1, sizeof *d);
+    if (!d)
+        return -1;
+    d->convention = spec->convention ? spec->convention : mcp_dump_detect(img);
+    layout L;
+    if (!(d->source = mcp_strdup(img->source)) || mcp_attrs_copy(&img->attrs, &d->attrs) ||
+        layout_for(img, d->convention, &L))
+        goto fail;
+    /* explicit names win over the convention */
+    for (int k = 0; k < 3; k++) {
+        if (spec->color[k])
+            snprintf(L.color[k], 512, "%s", spec->color[k]);
+        if (spec->var[k])
+            snprintf(L.var[k], 512, "%s", spec->var[k]), L.has_var = 1;
+        if (spec->albedo[k])
+            snprintf(L.albedo[k], 512, "%s", spec->albedo[k]), L.has_albedo = 1;
+        if (spec->normal[k])
+            snprintf(L.normal[k], 512, "%s", spec->normal[k]), L.has_normal = 1;
+    }
+    if (pick3(img, L.color, &d->color) || rename3(d->color, "R", "G", "B"))
+        goto fail;
+    if (L.has_albedo && (pick3(img, L.albedo, &d->albedo) || rename3(d->albedo, "R", "G", "B")))
+        goto fail;
+    if (L.has_normal && (pick3(img, L.normal, &d->normal) || rename3(d->normal, "X", "Y", "Z")))
+        goto fail;
+    if (L.has_cov && (pick3(img, L.cov, &d->cov_of_mean) ||
+                      rename3(d->cov_of_mean, "RG", "RB", "GB")))
+        goto fail;
+    d->variance_in_file = spec->variance ? spec->variance : L.var_kind;
+    if (L.has_var) {
+        if (pick3(img, L.var, &d->var_of_mean) || rename3(d->var_of_mean, "R", "G", "B"))
+            goto fail;
+    } else if (L.has_m2) {
+        /* Mitsuba's moment integrator: per-sample variance = E[x^2] - E[x]^2; float
+         * rounding can make it slightly negative where the variance is ~0 */
+        if (pick3(img, L.m2, &d->var_of_mean) || rename3(d->var_of_mean, "R", "G", "B"))
+            goto fail;
+        for (int y = 0; y < img->height; y++)
+            for (int x = 0; x < img->width; x++) {
+                float *v = mcp_image_px(d->var_of_mean, x, y);
+                const float *m = mcp_image_px(d->color, x, y);
+                for (int c = 0; c < 3; c++) {
+                    double var = (double)v[c] - (double)m[c] * m[c];
+                    double tol = 1e-6 * fabs((double)v[c]) + 1e-30;
+                    v[c] = (float)(var < 0 && var > -tol ? 0 : var);
+                }
+            }
+        d->variance_in_file = MCP_VAR_PER_SAMPLE;
+    }
+    if (spec->variance_path) {
+        mcp_image_free(d->var_of_mean);
+        d->var_of_mean = NULL;
+        if (load_part(spec->variance_path, (const char *const[]){"R", "G", "B"}, d->color,
+                      &d->var_of_mean) ||
+            rename3(d->var_of_mean, "R", "G", "B"))
+            goto fail;
+        d->variance_in_file = spec->variance ? spec->variance : MCP_VAR_OF_MEAN;
+    }
+    if (spec->albedo_path) {
+        mcp_image_free(d->albedo);
+        d->albedo = NULL;
+        if (load_part(spec->albedo_path, (const char *const[]){"R", "G", "B"}, d->color,
+                      &d->albedo) ||
+            rename3(d->albedo, "R", "G", "B"))
+            goto fail;
+    }
+    if (spec->normal_path) {
+        mcp_image_free(d->normal);
+        d->normal = NULL;
+        if (load_part(spec->normal_path, (const char *const[]){"X", "Y", "Z"}, d->color,
+                      &d->normal) ||
+            rename3(d->normal, "X", "Y", "Z"))
+            goto fail;
+    }
+    if (load_spp(d, img, spec, &L) ||
+        check_values(d->color, "colour", 0, spec->bad_values, &d->n_bad_values) ||
+        check_values(d->albedo, "albedo", 0, spec->bad_values, &d->n_bad_values) ||
+        check_values(d->normal, "normal", 0, spec->bad_values, &d->n_bad_values) ||
+        check_values(d->var_of_mean, "variance", 1, spec->bad_values, &d->n_bad_values) ||
+        check_values(d->cov_of_mean, "covariance", 0, spec->bad_values, &d->n_bad_values))
+        goto fail;
+    if (d->variance_in_file == MCP_VAR_PER_SAMPLE)
+        to_variance_of_mean(d);
+    *out = d;
+    return 0;
+fail:
+    mcp_dump_free(d);
+    return -1;
+}
+
+int
+mcp_dump_load(const mcp_dump_spec *spec, mcp_dump **out)
+{
+    *out = NULL;
+    if (!spec || !spec->path)
+        return mcp_error("render dump: no file given");
+    mcp_image *img = NULL;
+    mcp_read_options ro = mcp_read_defaults();
+    if (mcp_image_read(spec->path, &ro, &img))
+        return -1;
+    int rc = mcp_dump_from_image(img, spec, out);
+    mcp_image_free(img);
+    return rc;
+}
+
+int
+mcp_dump_read(const char *path, mcp_dump **out)
+{
+    mcp_dump_spec spec = mcp_dump_spec_defaults();
+    spec.path = path;
+    return mcp_dump_load(&spec, out);
+}
+
+void
+mcp_dump_free(mcp_dump *d)
+{
+    if (!d)
+        return;
+    mcp_image_free(d->color);
+    mcp_image_free(d->var_of_mean);
+    mcp_image_free(d->cov_of_mean);
+    mcp_image_free(d->albedo);
+    mcp_image_free(d->normal);
+    mcp_image_free(d->spp_map);
+    mcp_attrs_clear(&d->attrs);
+    free(d->source);
+    free(d);
+}
+
+double
+mcp_dump_spp_at(const mcp_dump *d, int x, int y)
+{
+    return d->spp_map ? (double)mcp_image_px(d->spp_map, x, y)[0] : d->spp;
+}
+
+/* ---- writing ---- */
+
+/* Copies 3 channels of part (times the per-pixel sample count when per_sample, plus
+ * the squared mean when add_mean_sq) into channels [at, at+3) of out. */
+static void
+put3(mcp_image *out, int at, const mcp_image *part, const mcp_dump *d, int per_sample,
+     int add_mean_sq)
+{
+    for (int y = 0; y < out->height; y++)
+        for (int x = 0; x < out->width; x++) {
+            const float *s = mcp_image_px(part, x, y), *m = mcp_image_px(d->color, x, y);
+            float *o = mcp_image_px(out, x, y) + at;
+            double n = per_sample ? mcp_dump_spp_at(d, x, y) : 1.0;
+            for (int c = 0; c < 3; c++)
+                o[c] = (float)(s[c] * n + (add_mean_sq ? (double)m[c] * m[c] : 0.0));
+        }
+}
+
+int
+mcp_dump_write(const mcp_dump *d, const char *path, mcp_convention conv,
+               const mcp_write_options *opt)
+{
+    static const char *const rgb[3] = {"R", "G", "B"}, *const xyz[3] = {"X", "Y", "Z"},
+                             *const offdiag[3] = {"RG", "RB", "GB"};
+    const char *L = "ViewLayer";
+    char names[20][128];
+    int n = 0, at_var = -1, at_cov = -1, at_alb = -1, at_nrm = -1, at_spp = -1;
+    if (conv == MCP_CONV_AUTO || conv == MCP_CONV_PLAIN)
+        conv = d->spp_map || d->cov_of_mean ? MCP_CONV_MCPOST : MCP_CONV_PBRT;
+    if (d->spp_map && conv != MCP_CONV_MCPOST)
+        return mcp_error("%s: per-pixel sample counts can only be written in the mcpost "
+                         "convention", path);
+    for (int k = 0; k < 3; k++) {
+        if (conv == MCP_CONV_BLENDER)
+            snprintf(names[n++], 128, "%s.Combined.%s", L, rgb[k]);
+        else
+            snprintf(names[n++], 128, "%s", rgb[k]);
+    }
+    if (d->var_of_mean) {
+        at_var = n;
+        for (int k = 0; k < 3; k++)
+            snprintf(names[n++], 128,
+                     conv == MCP_CONV_MITSUBA ? "m2_%s%s"
+                     : conv == MCP_CONV_BLENDER ? "ViewLayer.Variance.%s%s"
+                                                : "Variance.%s%s",
+                     rgb[k], "");
+    }
+    if (d->cov_of_mean && conv == MCP_CONV_MCPOST) {
+        at_cov = n;
+        for (int k = 0; k < 3; k++)
+            snprintf(names[n++], 128, "Covariance.%s", offdiag[k]);
+    }
+    if (d->albedo) {
+        at_alb = n;
+        for (int k = 0; k < 3; k++)
+            snprintf(names[n++], 128,
+                     conv == MCP_CONV_MITSUBA ? "albedo.%s"
+                     : conv == MCP_CONV_BLENDER ? "ViewLayer.Denoising Albedo.%s"
+                                                : "Albedo.%s",
+                     rgb[k]);
+    }
+    if (d->normal) {
+        at_nrm = n;
+        for (int k = 0; k < 3; k++)
+            snprintf(names[n++], 128,
+                     conv == MCP_CONV_MITSUBA ? "sh_normal.%s"
+                     : conv == MCP_CONV_BLENDER ? "ViewLayer.Denoising Normal.%s"
+                                                : "N.%s",
+                     xyz[k]);
+    }
+    if (d->spp_map)
+        at_spp = n, snprintf(names[n++], 128, "SampleCount");
+    const char *np[20];
+    for (int i = 0; i < n; i++)
+        np[i] = names[i];
+    mcp_image *img;
+    if (mcp_image_new(d->color->width, d->color->height, n, np, &img))
+        return -1;
+    int rc = -1;
+    put3(img, 0, d->color, d, 0, 0);
+    if (at_var >= 0)
+        put3(img, at_var, d->var_of_mean, d, 1, conv == MCP_CONV_MITSUBA);
+    if (at_cov >= 0)
+        put3(img, at_cov, d->cov_of_mean, d, 1, 0);
+    if (at_alb >= 0)
+        put3(img, at_alb, d->albedo, d, 0, 0);
+    if (at_nrm >= 0)
+        put3(img, at_nrm, d->normal, d, 0, 0);
+    if (at_spp >= 0)
+        for (int y = 0; y < img->height; y++)
+            for (int x = 0; x < img->width; x++)
+                mcp_image_px(img, x, y)[at_spp] = mcp_image_px(d->spp_map, x, y)[0];
+    if (mcp_attrs_copy(&d->attrs, &img->attrs))
+        goto done;
+    if (d->spp > 0) {
+        char text[64];
+        snprintf(text, sizeof text, "%.0f", d->spp);
+        if (conv == MCP_CONV_BLENDER ? mcp_attrs_set_string(&img->attrs,
+                                                            "cycles.ViewLayer.samples", text)
+            : conv == MCP_CONV_MITSUBA ? 0 /* Mitsuba writes no sample count */
+                                       : mcp_attrs_set_int(&img->attrs, "samplesPerPixel",
+                                                           (int64_t)llround(d->spp)))
+            goto done;
+    }
+    rc = mcp_image_write(img, path, opt);
+done:
+    mcp_image_free(img);
+    return rc;
+}
+
+/* ---- series ---- */
+
+void
+mcp_series_free(mcp_series *s)
+{
+    if (!s)
+        return;
+    for (int i = 0; i < s->count; i++)
+        free(s->paths[i]);
+    free(s->paths);
+    free(s->spp);
+    free(s);
+}
+
+static int
+series_new(int count, mcp_series **out)
+{
+    *out = NULL;
+    if (count < 1)
+        return mcp_error("a series needs at least one dump");
+    mcp_series *s = mcp_calloc(1, sizeof *s);
+    if (!s)
+        return -1;
+    s->count = count;
+    s->paths = mcp_calloc((size_t)count, sizeof *s->paths);
+    s->spp = mcp_calloc((size_t)count, sizeof *s->spp);
+    if (!s->paths || !s->spp) {
+        mcp_series_free(s);
+        return -1;
+    }
+    s->spec = mcp_dump_spec_defaults();
+    *out = s;
+    return 0;
+}
+
+/* Accepts exactly one integer conversion (%d, %i, %u with flags/width) and no other
+ * conversion but "%%", so a pattern can never read a missing argument. */
+static int
+pattern_ok(const char *p)
+{
+    int conversions = 0;
+    for (; *p; p++) {
+        if (*p != '%')
+            continue;
+        if (p[1] == '%') {
+            p++;
+            continue;
+        }
+        p++;
+        while (*p && strchr("0-+ #", *p))
+            p++;
+        while (isdigit((unsigned char)*p))
+            p++;
+        if (!*p || !strchr("diu", *p))
+            return 0;
+        conversions++;
+    }
+    return conversions == 1;
+}
+
+int
+mcp_series_from_pattern(const char *pattern, const int *spps, int count, mcp_series **out)
+{
+    if (!pattern_ok(pattern))
+        return mcp_error("series pattern '%s' must hold exactly one integer conversion "
+                         "such as %%04d", pattern);
+    mcp_series *s;
+    if (series_new(count, &s))
+        return -1;
+    for (int i = 0; i < count; i++) {
+        if (spps[i] < 1) {
+            mcp_series_free(s);
+            return mcp_error("series '%s': sample count %d (must be >= 1)", pattern,
+                             spps[i]);
+        }
+        if (i && spps[i] <= spps[i - 1]) {
+            mcp_series_free(s);
+            return mcp_error("series '%s': sample counts must increase (%d after %d)",
+                             pattern, spps[i], spps[i - 1]);
+        }
+        int n = snprintf(NULL, 0, pattern, spps[i]) + 1;
+        if (!(s->paths[i] = mcp_malloc((size_t)n))) {
+            mcp_series_free(s);
+            return -1;
+        }
+        snprintf(s->paths[i], (size_t)n, pattern, spps[i]);
+        s->spp[i] = spps[i];
+    }
+    *out = s;
+    return 0;
+}
+
+int
+mcp_series_from_paths(const char *const *paths, const double *spps, int count,
+                      mcp_series **out)
+{
+    mcp_series *s;
+    if (series_new(count, &s))
+        return -1;
+    for (int i = 0; i < count; i++) {
+        if (!(s->paths[i] = mcp_strdup(paths[i]))) {
+            mcp_series_free(s);
+            return -1;
+        }
+        s->spp[i] = spps ? spps[i] : 0;
+    }
+    *out = s;
+    return 0;
+}
+
+int
+mcp_series_load(const mcp_series *s, int i, mcp_dump **out)
+{
+    *out = NULL;
+    if (i < 0 || i >= s->count)
+        return mcp_error("series member %d of %d does not exist", i, s->count);
+    mcp_dump_spec spec = s->spec;
+    spec.path = s->paths[i];
+    if (s->spp[i] > 0)
+        spec.spp = s->spp[i];
+    return mcp_dump_load(&spec, out);
+}

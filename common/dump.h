@@ -1,0 +1,146 @@
+/* dump.h: render dumps -- what a Monte Carlo renderer knows about one image -- and
+ * series of them (a progressive render).
+ *
+ * A dump holds, per pixel, the colour mean X (RGB), the variance of that mean
+ * (per channel, and optionally the 3x3 colour covariance of the mean), the sample
+ * count (scalar or per-pixel map), optional albedo and normal, and the header
+ * attributes. Variance is ALWAYS stored as variance of the mean in memory; files that
+ * store per-sample variance (pbrt-v4, Mitsuba's moments) are divided by the sample
+ * count on load. SPEC "Notation".
+ *
+ * Conventions recognised from channel names and attributes (notes/libraries.md §4):
+ *   pbrt-v4 GBufferFilm: R,G,B; Variance.R/G/B (per-sample); Albedo.*; N.X/Y/Z;
+ *                        int samplesPerPixel
+ *   Mitsuba 3:           R,G,B; <aov>.R/G/B whose name contains "albedo";
+ *                        <aov>.X/Y/Z whose name contains "normal"; moment integrator
+ *                        m2_R/m2_G/m2_B (second moments: per-sample var = m2 - mean^2);
+ *                        no sample count in the file
+ *   Blender Cycles:      <layer>.Combined.R/G/B, <layer>.Denoising Albedo.*,
+ *                        <layer>.Denoising Normal.*, string cycles.<layer>.samples;
+ *                        <layer>.Variance.R/G/B when present (per-sample)
+ *   mcpost:              as pbrt-v4, plus Covariance.RG/RB/GB (per-sample) and a
+ *                        per-pixel sample-count channel "SampleCount"
+ *   plain:               R,G,B only; everything else from separate files
+ * An explicit mapping (mcp_dump_spec) overrides detection. */
+#ifndef MCP_DUMP_H
+#define MCP_DUMP_H
+
+#include <mcpost/image.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef enum {
+    MCP_CONV_AUTO = 0, /* detect from the file */
+    MCP_CONV_PBRT,
+    MCP_CONV_MITSUBA,
+    MCP_CONV_BLENDER,
+    MCP_CONV_MCPOST,
+    MCP_CONV_PLAIN
+} mcp_convention;
+
+MCP_API const char *mcp_convention_name(mcp_convention c);
+MCP_API int mcp_convention_from_name(const char *name, mcp_convention *out);
+
+typedef enum {
+    MCP_VAR_DEFAULT = 0,  /* what the convention says */
+    MCP_VAR_PER_SAMPLE,   /* variance of one sample: divided by n on load */
+    MCP_VAR_OF_MEAN       /* already the variance of the pixel mean */
+} mcp_variance_kind;
+
+MCP_API int mcp_variance_kind_from_name(const char *name, mcp_variance_kind *out);
+
+typedef enum {
+    MCP_BADVAL_FAIL = 0, /* NaN/Inf in colour or features, negative variance: error */
+    MCP_BADVAL_ZERO      /* replace them by 0 and count them in the dump */
+} mcp_badval_policy;
+
+MCP_API int mcp_badval_policy_from_name(const char *name, mcp_badval_policy *out);
+
+/* How to load a dump. Zero-initialise (or use mcp_dump_spec_defaults()); set only what
+ * detection should not decide. Paths in the *_path fields name separate files. */
+typedef struct mcp_dump_spec {
+    const char *path;           /* the main file (colour, and whatever else it holds) */
+    mcp_convention convention;  /* [auto] */
+    mcp_variance_kind variance; /* [per convention] */
+    mcp_badval_policy bad_values; /* [fail] */
+    double spp;                 /* sample count when the file has none (0: from file) */
+    /* explicit channel names in the main file (NULL: detect) */
+    const char *color[3];
+    const char *var[3];
+    const char *albedo[3];
+    const char *normal[3];
+    /* separate files (NULL: none); they are read with the same channel rules */
+    const char *variance_path;
+    const char *albedo_path;
+    const char *normal_path;
+    const char *spp_map_path;   /* one channel: per-pixel sample counts */
+} mcp_dump_spec;
+
+MCP_API mcp_dump_spec mcp_dump_spec_defaults(void);
+
+typedef struct mcp_dump {
+    mcp_image *color;        /* 3 channels R,G,B: the sample mean */
+    mcp_image *var_of_mean;  /* 3 channels R,G,B, or NULL when the file has none */
+    mcp_image *cov_of_mean;  /* 3 channels RG,RB,GB (off-diagonal), or NULL */
+    mcp_image *albedo;       /* 3 channels R,G,B, or NULL */
+    mcp_image *normal;       /* 3 channels X,Y,Z, or NULL */
+    double spp;              /* scalar sample count; 0 when spp_map is used */
+    mcp_image *spp_map;      /* 1 channel, or NULL */
+    mcp_convention convention;
+    mcp_variance_kind variance_in_file; /* how the file stored it */
+    mcp_attrs attrs;         /* the main file's header */
+    char *source;            /* the main file's path */
+    long n_bad_values;       /* NaN/Inf/negative-variance values replaced (policy zero) */
+} mcp_dump;
+
+/* Loads a dump by spec. Checks: colour present; every part the same size; sample
+ * count present and > 0 wherever variance must be converted or is needed; no
+ * NaN/Inf/negative variance (or replaced, per policy). */
+MCP_API int mcp_dump_load(const mcp_dump_spec *spec, mcp_dump **out);
+
+/* Shorthand: detect everything from one file. */
+MCP_API int mcp_dump_read(const char *path, mcp_dump **out);
+
+/* Builds a dump from an image already in memory (detection as for files). */
+MCP_API int mcp_dump_from_image(const mcp_image *img, const mcp_dump_spec *spec,
+                                mcp_dump **out);
+
+MCP_API void mcp_dump_free(mcp_dump *dump);
+
+/* Sample count at pixel (x, y). */
+MCP_API double mcp_dump_spp_at(const mcp_dump *dump, int x, int y);
+
+/* Writes the dump as one EXR in a convention (PBRT, MCPOST, MITSUBA or BLENDER), with
+ * the variance stored as that convention stores it. opt may be NULL (float, ZIP). */
+struct mcp_write_options;
+MCP_API int mcp_dump_write(const mcp_dump *dump, const char *path, mcp_convention conv,
+                           const struct mcp_write_options *opt);
+
+/* Guesses the convention of an image's channels/attributes (never AUTO). */
+MCP_API mcp_convention mcp_dump_detect(const mcp_image *img);
+
+/* ---- series: a progressive render ---- */
+
+typedef struct mcp_series {
+    int count;
+    char **paths;   /* dump files, in increasing spp */
+    double *spp;    /* their sample counts (0: read from the file) */
+    mcp_dump_spec spec; /* applied to every member; .path and .spp are per member */
+} mcp_series;
+
+/* A series from a printf-style pattern with one integer conversion (e.g.
+ * "cornell_%04d.exr") and a list of spp values, or from an explicit list of paths
+ * (spp from the files when spps is NULL). */
+MCP_API int mcp_series_from_pattern(const char *pattern, const int *spps, int count,
+                                    mcp_series **out);
+MCP_API int mcp_series_from_paths(const char *const *paths, const double *spps,
+                                  int count, mcp_series **out);
+MCP_API int mcp_series_load(const mcp_series *s, int i, mcp_dump **out);
+MCP_API void mcp_series_free(mcp_series *s);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

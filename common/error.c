@@ -1,0 +1,97 @@
+/* error.c: the thread-local error line (see error.h). */
+#include <mcpost/error.h>
+
+#include <stdarg.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define MCP_ERROR_MAX 1024
+
+static _Thread_local char error_line[MCP_ERROR_MAX];
+
+int
+mcp_error(const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(error_line, sizeof error_line, fmt, ap);
+    va_end(ap);
+    return -1;
+}
+
+int
+mcp_error_prefix(const char *fmt, ...)
+{
+    char prefix[MCP_ERROR_MAX / 2], old[MCP_ERROR_MAX];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(prefix, sizeof prefix, fmt, ap);
+    va_end(ap);
+    memcpy(old, error_line, sizeof old);
+    size_t n = strlen(prefix);
+    /* truncation of an over-long message is acceptable: it stays one line */
+    memcpy(error_line, prefix, n);
+    size_t rest = sizeof error_line - 1 - n;
+    size_t m = strlen(old) < rest ? strlen(old) : rest;
+    memcpy(error_line + n, old, m);
+    error_line[n + m] = '\0';
+    return -1;
+}
+
+const char *
+mcp_error_message(void)
+{
+    return error_line;
+}
+
+void
+mcp_error_clear(void)
+{
+    error_line[0] = '\0';
+}
+
+int
+mcp_size_mul(size_t a, size_t b, size_t *out)
+{
+    if (b != 0 && a > SIZE_MAX / b)
+        return -1;
+    *out = a * b;
+    return 0;
+}
+
+int
+mcp_size_mul3(size_t a, size_t b, size_t c, size_t *out)
+{
+    size_t ab;
+    return mcp_size_mul(a, b, &ab) ? -1 : mcp_size_mul(ab, c, out);
+}
+
+void *
+mcp_malloc(size_t bytes)
+{
+    void *p = malloc(bytes ? bytes : 1);
+    if (!p)
+        mcp_error("out of memory (%zu bytes)", bytes);
+    return p;
+}
+
+void *
+mcp_calloc(size_t count, size_t size)
+{
+    void *p = calloc(count ? count : 1, size ? size : 1);
+    if (!p)
+        mcp_error("out of memory (%zu x %zu bytes)", count, size);
+    return p;
+}
+
+char *
+mcp_strdup(const char *s)
+{
+    size_t n = strlen(s) + 1;
+    char *p = mcp_malloc(n);
+    if (p)
+        memcpy(p, s, n);
+    return p;
+}

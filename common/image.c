@@ -1,0 +1,363 @@
+/* image.c: the shared float32 interleaved image with named channels (see image.h). */
+#include <mcpost/image.h>
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static int
+names_new(int channels, const char *const *names, char ***out)
+{
+    char **n = mcp_calloc((size_t)channels, sizeof *n);
+    if (!n)
+        return -1;
+    for (int c = 0; c < channels; c++) {
+        char fallback[32];
+        snprintf(fallback, sizeof fallback, "C%d", c);
+        n[c] = mcp_strdup(names && names[c] ? names[c] : fallback);
+        if (!n[c]) {
+            while (c--)
+                free(n[c]);
+            free(n);
+            return -1;
+        }
+    }
+    *out = n;
+    return 0;
+}
+
+/* An image header with names and source but no pixels. */
+static mcp_image *
+header_new(int width, int height, int channels, const char *const *names,
+           const char *source)
+{
+    mcp_image *img = mcp_calloc(1, sizeof *img);
+    if (!img)
+        return NULL;
+    img->width = width;
+    img->height = height;
+    img->channels = channels;
+    img->pixel_stride = channels;
+    img->row_stride = (ptrdiff_t)width * channels;
+    if (names_new(channels, names, &img->names) ||
+        !(img->source = mcp_strdup(source ? source : "(image)"))) {
+        mcp_image_free(img);
+        return NULL;
+    }
+    return img;
+}
+
+int
+mcp_image_new(int width, int height, int channels, const char *const *names,
+              mcp_image **out)
+{
+    size_t n;
+    *out = NULL;
+    if (width < 1 || height < 1 || channels < 1 || width > MCP_MAX_DIM ||
+        height > MCP_MAX_DIM || channels > 4096 ||
+        mcp_size_mul3((size_t)width, (size_t)height, (size_t)channels, &n) ||
+        mcp_size_mul(n, sizeof(float), &n))
+        return mcp_error("bad image size %dx%dx%d", width, height, channels);
+    mcp_image *img = header_new(width, height, channels, names, NULL);
+    if (!img)
+        return -1;
+    img->data = calloc(n / sizeof(float), sizeof(float));
+    if (!img->data) {
+        mcp_image_free(img);
+        return mcp_error("out of memory for a %dx%dx%d image", width, height, channels);
+    }
+    img->owns_data = 1;
+    *out = img;
+    return 0;
+}
+
+void
+mcp_image_free(mcp_image *img)
+{
+    if (!img)
+        return;
+    if (img->names)
+        for (int c = 0; c < img->channels; c++)
+            free(img->names[c]);
+    free(img->names);
+    mcp_attrs_clear(&img->attrs);
+    free(img->source);
+    if (img->owns_data)
+        free(img->data);
+    free(img);
+}
+
+int
+mcp_image_copy(const mcp_image *img, mcp_image **out)
+{
+    mcp_image *copy;
+    if (mcp_image_new(img->width, img->height, img->channels,
+                      (const char *const *)img->names, &copy))
+        return -1;
+    for (int y = 0; y < img->height; y++)
+        for (int x = 0; x < img->width; x++)
+            memcpy(mcp_image_px(copy, x, y), mcp_image_px(img, x, y),
+                   (size_t)img->channels * sizeof(float));
+    if (mcp_attrs_copy(&img->attrs, &copy->attrs) ||
+        mcp_image_set_source(copy, img->source)) {
+        mcp_image_free(copy);
+        return -1;
+    }
+    *out = copy;
+    return 0;
+}
+
+/* A view sharing img's pixels from `first`, with `channels` channels named after
+ * img's channels first..first+channels-1. */
+static int
+view_new(const mcp_image *img, float *first, int width, int height, int channels,
+         const char *const *names, mcp_image **out)
+{
+    mcp_image *v = header_new(width, height, channels, names, img->source);
+    if (!v)
+        return -1;
+    v->pixel_stride = img->pixel_stride;
+    v->row_stride = img->row_stride;
+    v->data = first;
+    v->owns_data = 0;
+    *out = v;
+    return 0;
+}
+
+int
+mcp_image_crop_view(const mcp_image *img, int x0, int y0, int w, int h, mcp_image **out)
+{
+    *out = NULL;
+    if (x0 < 0 || y0 < 0 || w < 1 || h < 1 || x0 + w > img->width || y0 + h > img->height)
+        return mcp_error("%s: crop %dx%d+%d+%d lies outside the %dx%d image", img->source,
+                         w, h, x0, y0, img->width, img->height);
+    return view_new(img, mcp_image_px(img, x0, y0), w, h, img->channels,
+                    (const char *const *)img->names, out);
+}
+
+int
+mcp_image_channel_view(const mcp_image *img, int first, int count, mcp_image **out)
+{
+    *out = NULL;
+    if (first < 0 || count < 1 || first + count > img->channels)
+        return mcp_error("%s: channel range [%d, %d) outside its %d channels",
+                         img->source, first, first + count, img->channels);
+    return view_new(img, img->data + first, img->width, img->height, count,
+                    (const char *const *)img->names + first, out);
+}
+
+int
+mcp_image_channel(const mcp_image *img, const char *name)
+{
+    for (int c = 0; c < img->channels; c++)
+        if (strcmp(img->names[c], name) == 0)
+            return c;
+    return -1;
+}
+
+int
+mcp_image_channels(const mcp_image *img, const char *const *names, int count, int *index)
+{
+    for (int i = 0; i < count; i++) {
+        index[i] = mcp_image_channel(img, names[i]);
+        if (index[i] < 0)
+            return mcp_error("%s: no channel '%s'", img->source, names[i]);
+    }
+    return 0;
+}
+
+int
+mcp_image_copy_channels(const mcp_image *img, const int *index, int count,
+                        mcp_image **out)
+{
+    *out = NULL;
+    if (count < 1)
+        return mcp_error("%s: no channels to copy", img->source);
+    const char **names = mcp_calloc((size_t)count, sizeof *names);
+    if (!names)
+        return -1;
+    for (int i = 0; i < count; i++) {
+        if (index[i] < 0 || index[i] >= img->channels) {
+            free(names);
+            return mcp_error("%s: channel index %d outside its %d channels", img->source,
+                             index[i], img->channels);
+        }
+        names[i] = img->names[index[i]];
+    }
+    mcp_image *sub;
+    int rc = mcp_image_new(img->width, img->height, count, names, &sub);
+    free(names);
+    if (rc)
+        return -1;
+    for (int y = 0; y < img->height; y++)
+        for (int x = 0; x < img->width; x++) {
+            const float *s = mcp_image_px(img, x, y);
+            float *d = mcp_image_px(sub, x, y);
+            for (int i = 0; i < count; i++)
+                d[i] = s[index[i]];
+        }
+    if (mcp_attrs_copy(&img->attrs, &sub->attrs) ||
+        mcp_image_set_source(sub, img->source)) {
+        mcp_image_free(sub);
+        return -1;
+    }
+    *out = sub;
+    return 0;
+}
+
+int
+mcp_image_set_channel_name(mcp_image *img, int c, const char *name)
+{
+    if (c < 0 || c >= img->channels)
+        return mcp_error("%s: channel index %d outside its %d channels", img->source, c,
+                         img->channels);
+    char *copy = mcp_strdup(name);
+    if (!copy)
+        return -1;
+    free(img->names[c]);
+    img->names[c] = copy;
+    return 0;
+}
+
+int
+mcp_image_set_source(mcp_image *img, const char *source)
+{
+    char *copy = mcp_strdup(source ? source : "(image)");
+    if (!copy)
+        return -1;
+    free(img->source);
+    img->source = copy;
+    return 0;
+}
+
+int
+mcp_image_is_packed(const mcp_image *img)
+{
+    return img->pixel_stride == img->channels &&
+           img->row_stride == (ptrdiff_t)img->width * img->channels;
+}
+
+int
+mcp_image_same_size(const mcp_image *a, const mcp_image *b)
+{
+    if (a->width == b->width && a->height == b->height)
+        return 1;
+    mcp_error("%s: size %dx%d does not match %s (%dx%d)", a->source, a->width, a->height,
+              b->source, b->width, b->height);
+    return 0;
+}
+
+/* ---- attributes ---- */
+
+const mcp_attr *
+mcp_attrs_find(const mcp_attrs *attrs, const char *name)
+{
+    for (int i = 0; i < attrs->count; i++)
+        if (strcmp(attrs->items[i].name, name) == 0)
+            return &attrs->items[i];
+    return NULL;
+}
+
+static void
+attr_clear(mcp_attr *a)
+{
+    free(a->name);
+    free(a->s);
+    memset(a, 0, sizeof *a);
+}
+
+/* The slot for name: the existing one (cleared of its value) or a new one. */
+static mcp_attr *
+attr_slot(mcp_attrs *attrs, const char *name)
+{
+    mcp_attr *a = (mcp_attr *)mcp_attrs_find(attrs, name);
+    if (a) {
+        free(a->s);
+        a->s = NULL;
+        return a;
+    }
+    mcp_attr *items = realloc(attrs->items, (size_t)(attrs->count + 1) * sizeof *items);
+    if (!items) {
+        mcp_error("out of memory for attribute '%s'", name);
+        return NULL;
+    }
+    attrs->items = items;
+    a = &items[attrs->count];
+    memset(a, 0, sizeof *a);
+    if (!(a->name = mcp_strdup(name)))
+        return NULL;
+    attrs->count++;
+    return a;
+}
+
+int
+mcp_attrs_set_int(mcp_attrs *attrs, const char *name, int64_t value)
+{
+    mcp_attr *a = attr_slot(attrs, name);
+    if (!a)
+        return -1;
+    a->type = MCP_ATTR_INT;
+    a->i = value;
+    a->f = (double)value;
+    return 0;
+}
+
+int
+mcp_attrs_set_float(mcp_attrs *attrs, const char *name, float value)
+{
+    mcp_attr *a = attr_slot(attrs, name);
+    if (!a)
+        return -1;
+    a->type = MCP_ATTR_FLOAT;
+    a->f = value;
+    return 0;
+}
+
+int
+mcp_attrs_set_double(mcp_attrs *attrs, const char *name, double value)
+{
+    mcp_attr *a = attr_slot(attrs, name);
+    if (!a)
+        return -1;
+    a->type = MCP_ATTR_DOUBLE;
+    a->f = value;
+    return 0;
+}
+
+int
+mcp_attrs_set_string(mcp_attrs *attrs, const char *name, const char *value)
+{
+    mcp_attr *a = attr_slot(attrs, name);
+    if (!a)
+        return -1;
+    a->type = MCP_ATTR_STRING;
+    return (a->s = mcp_strdup(value)) ? 0 : -1;
+}
+
+int
+mcp_attrs_copy(const mcp_attrs *from, mcp_attrs *to)
+{
+    for (int i = 0; i < from->count; i++) {
+        const mcp_attr *a = &from->items[i];
+        int rc = 0;
+        switch (a->type) {
+        case MCP_ATTR_INT: rc = mcp_attrs_set_int(to, a->name, a->i); break;
+        case MCP_ATTR_FLOAT: rc = mcp_attrs_set_float(to, a->name, (float)a->f); break;
+        case MCP_ATTR_DOUBLE: rc = mcp_attrs_set_double(to, a->name, a->f); break;
+        case MCP_ATTR_STRING: rc = mcp_attrs_set_string(to, a->name, a->s); break;
+        }
+        if (rc)
+            return -1;
+    }
+    return 0;
+}
+
+void
+mcp_attrs_clear(mcp_attrs *attrs)
+{
+    for (int i = 0; i < attrs->count; i++)
+        attr_clear(&attrs->items[i]);
+    free(attrs->items);
+    attrs->items = NULL;
+    attrs->count = 0;
+}

@@ -1,0 +1,420 @@
+/* imageio.c: format dispatch, the lazily loaded OpenImageIO plug-in, sRGB coding,
+ * and atomic output files (see imageio.h). */
+#define _POSIX_C_SOURCE 200809L
+#include "internal.h"
+
+#include <dlfcn.h>
+#include <errno.h>
+#include <math.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+/* ---- formats ---- */
+
+static const struct {
+    const char *ext;
+    mcp_format format;
+} extensions[] = {
+    {"exr", MCP_FORMAT_EXR},  {"pfm", MCP_FORMAT_PFM},  {"png", MCP_FORMAT_PNG},
+    {"jpg", MCP_FORMAT_JPEG}, {"jpeg", MCP_FORMAT_JPEG}, {"hdr", MCP_FORMAT_HDR},
+    {"tif", MCP_FORMAT_TIFF}, {"tiff", MCP_FORMAT_TIFF},
+};
+
+mcp_format
+mcp_format_from_path(const char *path)
+{
+    const char *dot = strrchr(path, '.'), *slash = strrchr(path, '/');
+    if (!dot || (slash && dot < slash))
+        return MCP_FORMAT_UNKNOWN;
+    for (size_t i = 0; i < sizeof extensions / sizeof *extensions; i++)
+        if (strcasecmp(dot + 1, extensions[i].ext) == 0)
+            return extensions[i].format;
+    return MCP_FORMAT_UNKNOWN;
+}
+
+const char *
+mcp_format_name(mcp_format format)
+{
+    static const char *names[] = {"unknown", "exr", "pfm", "png", "jpeg", "hdr", "tiff"};
+    return (unsigned)format < sizeof names / sizeof *names ? names[format] : "unknown";
+}
+
+mcp_read_options
+mcp_read_defaults(void)
+{
+    return (mcp_read_options){.srgb_decode = 1};
+}
+
+mcp_write_options
+mcp_write_defaults(void)
+{
+    return (mcp_write_options){.exr_pixel = MCP_EXR_FLOAT,
+                               .compression = MCP_EXR_ZIP,
+                               .exr_tiled = 0,
+                               .exr_tile_size = 64,
+                               .srgb_encode = 1};
+}
+
+int
+mcp_exr_compression_from_name(const char *name, mcp_exr_compression *out)
+{
+    static const char *names[] = {"none", "rle",  "zips", "zip",  "piz",
+                                  "pxr24", "b44", "b44a", "dwaa", "dwab"};
+    for (int i = 0; i < (int)(sizeof names / sizeof *names); i++)
+        if (strcasecmp(name, names[i]) == 0) {
+            *out = (mcp_exr_compression)i;
+            return 0;
+        }
+    return mcp_error("unknown EXR compression '%s' (none, rle, zips, zip, piz, pxr24)",
+                     name);
+}
+
+float
+mcp_srgb_to_linear(float c)
+{
+    return c <= 0.04045f ? c / 12.92f : powf((c + 0.055f) / 1.055f, 2.4f);
+}
+
+float
+mcp_linear_to_srgb(float l)
+{
+    return l <= 0.0031308f ? 12.92f * l : 1.055f * powf(l, 1.0f / 2.4f) - 0.055f;
+}
+
+/* ---- the OpenImageIO plug-in ---- */
+
+static struct {
+    pthread_once_t once;
+    void *handle;
+    mcp__oiio_read_fn read;
+    mcp__oiio_write_fn write;
+    char error[1024];
+} oiio = {PTHREAD_ONCE_INIT, NULL, NULL, NULL, ""};
+
+static void
+oiio_load(void)
+{
+    const char *env = getenv("MCPOST_PLUGIN_DIR");
+    const char *dirs[] = {env, MCP_PLUGIN_BUILD_DIR, MCP_PLUGIN_INSTALL_DIR};
+    size_t n = 0;
+    for (size_t i = 0; i < sizeof dirs / sizeof *dirs; i++) {
+        if (!dirs[i] || !*dirs[i])
+            continue;
+        char path[4096];
+        snprintf(path, sizeof path, "%s/mcpost_oiio.so", dirs[i]);
+        if (access(path, R_OK) != 0)
+            continue;
+        void *h = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+        if (!h) {
+            n += (size_t)snprintf(oiio.error + n, n < sizeof oiio.error ? sizeof oiio.error - n : 0,
+                                  "%s; ", dlerror());
+            continue;
+        }
+        oiio.read = (mcp__oiio_read_fn)(uintptr_t)dlsym(h, MCP__OIIO_READ);
+        oiio.write = (mcp__oiio_write_fn)(uintptr_t)dlsym(h, MCP__OIIO_WRITE);
+        if (oiio.read && oiio.write) {
+            oiio.handle = h;
+            return;
+        }
+        dlclose(h);
+    }
+    if (!n)
+        snprintf(oiio.error, sizeof oiio.error,
+                 "mcpost_oiio.so not found (set MCPOST_PLUGIN_DIR)");
+}
+
+static int
+oiio_ready(const char *path)
+{
+    pthread_once(&oiio.once, oiio_load);
+    if (!oiio.handle)
+        return mcp_error("%s: this format needs the OpenImageIO plug-in: %s", path,
+                         oiio.error);
+    return 0;
+}
+
+int
+mcp_oiio_loaded(void)
+{
+    return oiio.handle != NULL;
+}
+
+static int
+oiio_read(const char *path, const mcp_read_options *opt, mcp_image **out)
+{
+    int w, h, c, bits;
+    float *data = NULL;
+    char **names = NULL, err[1024] = "";
+    if (oiio_ready(path))
+        return -1;
+    if (oiio.read(path, &w, &h, &c, &data, &names, &bits, err, sizeof err))
+        return mcp_error("%s", err);
+    mcp_image *img = NULL;
+    int rc = -1;
+    if (w > MCP_MAX_DIM || h > MCP_MAX_DIM)
+        mcp_error("%s: image too large (%dx%d)", path, w, h);
+    else if (!mcp_image_new(w, h, c, (const char *const *)names, &img) &&
+             !mcp_image_set_source(img, path)) {
+        memcpy(img->data, data, (size_t)w * h * c * sizeof(float));
+        /* integer files hold sRGB-encoded values; alpha stays linear */
+        if (bits && opt->srgb_decode)
+            for (size_t i = 0; i < (size_t)w * h; i++)
+                for (int k = 0; k < c; k++)
+                    if (strcmp(img->names[k], "A") != 0)
+                        img->data[i * c + k] = mcp_srgb_to_linear(img->data[i * c + k]);
+        *out = img;
+        img = NULL;
+        rc = 0;
+    }
+    for (int k = 0; k < c; k++)
+        free(names[k]);
+    free(names);
+    free(data);
+    mcp_image_free(img);
+    return rc;
+}
+
+static int
+oiio_write(const mcp_image *img, const char *path, mcp_format format,
+           const mcp_write_options *opt)
+{
+    int c = img->channels;
+    int ldr = format == MCP_FORMAT_PNG || format == MCP_FORMAT_JPEG;
+    if (ldr && c != 1 && c != 3 && c != 4)
+        return mcp_error("%s: %s takes 1, 3 or 4 channels, not %d (pick channels first)",
+                         path, mcp_format_name(format), c);
+    if (format == MCP_FORMAT_HDR && c != 3)
+        return mcp_error("%s: hdr takes 3 channels, not %d", path, c);
+    if (oiio_ready(path))
+        return -1;
+    size_t n = (size_t)img->width * img->height * c;
+    float *buf = mcp_malloc(n * sizeof(float));
+    if (!buf)
+        return -1;
+    for (int y = 0; y < img->height; y++)
+        for (int x = 0; x < img->width; x++)
+            for (int k = 0; k < c; k++) {
+                float v = mcp_image_px(img, x, y)[k];
+                if (ldr && opt->srgb_encode && !(c == 4 && k == 3))
+                    v = mcp_linear_to_srgb(v < 0 ? 0 : v > 1 ? 1 : v);
+                buf[((size_t)y * img->width + x) * c + k] = v;
+            }
+    char err[1024] = "";
+    int rc = oiio.write(path, img->width, img->height, c, buf, ldr ? 8 : 0, err, sizeof err);
+    free(buf);
+    return rc ? mcp_error("%s", err) : 0;
+}
+
+/* ---- atomic output files ---- */
+
+/* Temporary files in flight, removed if the process is interrupted. Only async-signal-
+ * safe calls (unlink, signal, raise) run in the handler. */
+#define MAX_IN_FLIGHT 32
+static char *volatile in_flight[MAX_IN_FLIGHT];
+static pthread_mutex_t in_flight_lock = PTHREAD_MUTEX_INITIALIZER;
+
+static void
+on_fatal_signal(int sig)
+{
+    for (int i = 0; i < MAX_IN_FLIGHT; i++)
+        if (in_flight[i])
+            unlink(in_flight[i]);
+    signal(sig, SIG_DFL);
+    raise(sig);
+}
+
+static void
+install_handlers(void)
+{
+    int sigs[] = {SIGINT, SIGTERM, SIGHUP};
+    for (size_t i = 0; i < sizeof sigs / sizeof *sigs; i++) {
+        struct sigaction sa, old;
+        memset(&sa, 0, sizeof sa);
+        sa.sa_handler = on_fatal_signal;
+        /* leave handlers that the embedding program installed alone */
+        if (sigaction(sigs[i], NULL, &old) == 0 && old.sa_handler == SIG_DFL)
+            sigaction(sigs[i], &sa, NULL);
+    }
+}
+
+static void
+install_signal_cleanup(void)
+{
+    static pthread_once_t once = PTHREAD_ONCE_INIT;
+    pthread_once(&once, install_handlers);
+}
+
+static void
+track(char *tmp, int add)
+{
+    pthread_mutex_lock(&in_flight_lock);
+    for (int i = 0; i < MAX_IN_FLIGHT; i++)
+        if (add ? !in_flight[i] : in_flight[i] == tmp) {
+            in_flight[i] = add ? tmp : NULL;
+            break;
+        }
+    pthread_mutex_unlock(&in_flight_lock);
+}
+
+int
+mcp_atomic_begin(mcp_atomic_file *f, const char *path)
+{
+    static _Atomic unsigned counter;
+    memset(f, 0, sizeof *f);
+    /* keep the extension last: format libraries choose the format from it */
+    const char *slash = strrchr(path, '/'), *dot = strrchr(path, '.');
+    if (!dot || (slash && dot < slash))
+        dot = path + strlen(path);
+    size_t n = strlen(path) + 64;
+    f->final_path = mcp_strdup(path);
+    f->tmp_path = mcp_malloc(n);
+    if (!f->final_path || !f->tmp_path) {
+        mcp_atomic_abort(f);
+        return -1;
+    }
+    snprintf(f->tmp_path, n, "%.*s.tmp-%d-%u%s", (int)(dot - path), path, (int)getpid(),
+             counter++, dot);
+    FILE *probe = fopen(f->tmp_path, "wb");
+    if (!probe) {
+        int e = errno;
+        mcp_atomic_abort(f);
+        return mcp_error("%s: cannot write: %s", path, strerror(e));
+    }
+    fclose(probe);
+    install_signal_cleanup();
+    track(f->tmp_path, 1);
+    return 0;
+}
+
+int
+mcp_atomic_commit(mcp_atomic_file *f)
+{
+    if (rename(f->tmp_path, f->final_path) != 0) {
+        int e = errno;
+        mcp_error("%s: cannot rename the finished file into place: %s", f->final_path,
+                  strerror(e));
+        mcp_atomic_abort(f);
+        return -1;
+    }
+    track(f->tmp_path, 0);
+    free(f->tmp_path);
+    free(f->final_path);
+    memset(f, 0, sizeof *f);
+    return 0;
+}
+
+void
+mcp_atomic_abort(mcp_atomic_file *f)
+{
+    if (f->tmp_path) {
+        unlink(f->tmp_path);
+        track(f->tmp_path, 0);
+    }
+    free(f->tmp_path);
+    free(f->final_path);
+    memset(f, 0, sizeof *f);
+}
+
+int
+mcp_write_file_atomic(const char *path, const void *data, size_t size)
+{
+    mcp_atomic_file af;
+    if (mcp_atomic_begin(&af, path))
+        return -1;
+    FILE *f = fopen(af.tmp_path, "wb");
+    int ok = f && fwrite(data, 1, size, f) == size;
+    if (f && fclose(f) != 0)
+        ok = 0;
+    if (!ok) {
+        mcp_atomic_abort(&af);
+        return mcp_error("%s: write failed (disk full?)", path);
+    }
+    return mcp_atomic_commit(&af);
+}
+
+/* ---- public read/write ---- */
+
+int
+mcp_image_read(const char *path, const mcp_read_options *opt, mcp_image **out)
+{
+    mcp_read_options defaults = mcp_read_defaults();
+    *out = NULL;
+    if (!opt)
+        opt = &defaults;
+    struct stat st;
+    if (stat(path, &st) != 0)
+        return mcp_error("%s: cannot open: %s", path, strerror(errno));
+    if (S_ISDIR(st.st_mode))
+        return mcp_error("%s: is a directory, not an image", path);
+    switch (mcp_format_from_path(path)) {
+    case MCP_FORMAT_EXR: return mcp__exr_read(path, out);
+    case MCP_FORMAT_PFM: return mcp__pfm_read(path, out);
+    case MCP_FORMAT_UNKNOWN: {
+        /* no known extension: sniff the EXR magic number before trying OIIO */
+        unsigned char magic[4] = {0};
+        FILE *f = fopen(path, "rb");
+        if (f) {
+            size_t got = fread(magic, 1, 4, f);
+            fclose(f);
+            if (got == 4 && magic[0] == 0x76 && magic[1] == 0x2f && magic[2] == 0x31 &&
+                magic[3] == 0x01)
+                return mcp__exr_read(path, out);
+        }
+        return oiio_read(path, opt, out);
+    }
+    default: return oiio_read(path, opt, out);
+    }
+}
+
+int
+mcp_image_write(const mcp_image *img, const char *path, const mcp_write_options *opt)
+{
+    mcp_write_options defaults = mcp_write_defaults();
+    if (!opt)
+        opt = &defaults;
+    mcp_format format = mcp_format_from_path(path);
+    if (format == MCP_FORMAT_UNKNOWN)
+        return mcp_error("%s: unknown output format (use .exr, .pfm, .png, .jpg, .hdr or "
+                         ".tif)", path);
+    mcp_atomic_file af;
+    if (mcp_atomic_begin(&af, path))
+        return -1;
+    int rc;
+    switch (format) {
+    case MCP_FORMAT_EXR: rc = mcp__exr_write(img, af.tmp_path, opt); break;
+    case MCP_FORMAT_PFM: rc = mcp__pfm_write(img, af.tmp_path); break;
+    default: rc = oiio_write(img, af.tmp_path, format, opt); break;
+    }
+    if (rc) {
+        /* name the real output, not the temporary file, in the message */
+        char msg[1024];
+        snprintf(msg, sizeof msg, "%s", mcp_error_message());
+        char *at = strstr(msg, af.tmp_path);
+        if (at)
+            mcp_error("%.*s%s%s", (int)(at - msg), msg, path, at + strlen(af.tmp_path));
+        mcp_atomic_abort(&af);
+        return -1;
+    }
+    return mcp_atomic_commit(&af);
+}
+
+int
+mcp_write_rgb8(const unsigned char *rgb8, int width, int height, const char *path)
+{
+    mcp_image *img;
+    if (mcp_image_new(width, height, 3, (const char *[]){"R", "G", "B"}, &img))
+        return -1;
+    for (size_t i = 0; i < (size_t)width * height * 3; i++)
+        img->data[i] = rgb8[i] / 255.0f;
+    mcp_write_options opt = mcp_write_defaults();
+    opt.srgb_encode = 0; /* already display-encoded bytes */
+    int rc = mcp_image_write(img, path, &opt);
+    mcp_image_free(img);
+    return rc;
+}

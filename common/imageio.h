@@ -1,0 +1,113 @@
+/* imageio.h: reading and writing images.
+ *
+ * EXR goes through the OpenEXR Core C API and PFM is read and written directly; both
+ * are always available. PNG, JPEG, HDR and TIFF go through OpenImageIO, in a plug-in
+ * (mcpost_oiio.so) that is dlopen()ed only when such a file is used, because linking
+ * OpenImageIO costs about half a second per process start.
+ *
+ * Writers write to "<path>.tmp-<pid>" and rename, so a failed or interrupted write
+ * never leaves a partial file at <path>. */
+#ifndef MCP_IMAGEIO_H
+#define MCP_IMAGEIO_H
+
+#include <mcpost/image.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef enum {
+    MCP_FORMAT_UNKNOWN,
+    MCP_FORMAT_EXR,
+    MCP_FORMAT_PFM,
+    MCP_FORMAT_PNG,
+    MCP_FORMAT_JPEG,
+    MCP_FORMAT_HDR,
+    MCP_FORMAT_TIFF
+} mcp_format;
+
+/* The format named by a path's extension (case-insensitive). */
+MCP_API mcp_format mcp_format_from_path(const char *path);
+MCP_API const char *mcp_format_name(mcp_format format);
+
+typedef struct mcp_read_options {
+    /* 8-bit (and 16-bit integer) inputs are sRGB-encoded: decode them to linear. [1] */
+    int srgb_decode;
+} mcp_read_options;
+
+MCP_API mcp_read_options mcp_read_defaults(void);
+
+/* Reads every channel of the first part/subimage; sets img->source = path and copies
+ * header attributes. opt may be NULL. */
+MCP_API int mcp_image_read(const char *path, const mcp_read_options *opt,
+                           mcp_image **out);
+
+typedef enum {
+    MCP_EXR_FLOAT,
+    MCP_EXR_HALF
+} mcp_exr_pixel;
+
+typedef enum {
+    MCP_EXR_NONE,
+    MCP_EXR_RLE,
+    MCP_EXR_ZIPS,
+    MCP_EXR_ZIP,
+    MCP_EXR_PIZ,
+    MCP_EXR_PXR24,
+    MCP_EXR_B44,
+    MCP_EXR_B44A,
+    MCP_EXR_DWAA,
+    MCP_EXR_DWAB
+} mcp_exr_compression;
+
+typedef struct mcp_write_options {
+    mcp_exr_pixel exr_pixel;           /* [float] */
+    mcp_exr_compression compression;   /* [zip] */
+    int exr_tiled;                     /* write tiles of exr_tile_size instead of scanlines [0] */
+    int exr_tile_size;                 /* [64] */
+    int exr_data_x, exr_data_y;        /* data-window origin [0, 0] */
+    /* LDR outputs: encode linear values to sRGB before quantising [1] */
+    int srgb_encode;
+} mcp_write_options;
+
+MCP_API mcp_write_options mcp_write_defaults(void);
+MCP_API int mcp_exr_compression_from_name(const char *name, mcp_exr_compression *out);
+
+/* Writes img (any strides) in the format the extension names. EXR keeps every
+ * channel and the attributes; LDR formats take 1, 3 or 4 channels. opt may be NULL. */
+MCP_API int mcp_image_write(const mcp_image *img, const char *path,
+                            const mcp_write_options *opt);
+
+/* Writes an 8-bit RGB buffer (e.g. from mcp_colormap_apply) as PNG. */
+MCP_API int mcp_write_rgb8(const unsigned char *rgb8, int width, int height,
+                           const char *path);
+
+/* 1 once the OpenImageIO plug-in has been loaded in this process. */
+MCP_API int mcp_oiio_loaded(void);
+
+/* ---- atomic output files (used by every writer, usable by anyone) ---- */
+
+typedef struct mcp_atomic_file {
+    char *final_path;
+    char *tmp_path;
+} mcp_atomic_file;
+
+/* Picks a temporary name next to path; fails early when the directory is not
+ * writable, naming path. */
+MCP_API int mcp_atomic_begin(mcp_atomic_file *f, const char *path);
+/* Renames the temporary file onto the final path. */
+MCP_API int mcp_atomic_commit(mcp_atomic_file *f);
+/* Removes the temporary file (safe after commit, and twice). */
+MCP_API void mcp_atomic_abort(mcp_atomic_file *f);
+
+/* Writes a whole text/binary buffer atomically. */
+MCP_API int mcp_write_file_atomic(const char *path, const void *data, size_t size);
+
+/* sRGB transfer functions (IEC 61966-2-1, as FLIP uses them). */
+MCP_API float mcp_srgb_to_linear(float c);
+MCP_API float mcp_linear_to_srgb(float l);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,137 @@
+/* job.h: job files (YAML, read with libyaml; JSON parses too) and the stage registry.
+ *
+ * A job names inputs, an output folder and a list of stages:
+ *
+ *   inputs:
+ *     noisy:     {dump: renders/frame_0064.exr}          # a render dump
+ *     progress:  {series: renders/frame_%04d.exr, spp: [1, 2, 4, 8]}
+ *     reference: {image: renders/reference.exr}
+ *   output: out/frame                                     # relative to the job file
+ *   stages:
+ *     - info: {input: noisy}
+ *     - convert: {input: reference, output: reference.png}
+ *
+ * Paths are relative to the job file's folder. Every stage is looked up by name in a
+ * table that the caller passes in (cli/stages.c), so a module adds a stage by adding
+ * one entry there. Unknown keys, wrong types and missing inputs are errors that name
+ * "job.yaml:LINE". */
+#ifndef MCP_JOB_H
+#define MCP_JOB_H
+
+#include <mcpost/dump.h>
+#include <mcpost/report.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* ---- the parsed document ---- */
+
+typedef enum { MCP_NODE_SCALAR, MCP_NODE_SEQ, MCP_NODE_MAP } mcp_node_kind;
+
+typedef struct mcp_node {
+    mcp_node_kind kind;
+    int line, column;         /* 1-based position in the file */
+    const char *file;         /* the file's path (shared, owned by the root) */
+    char *value;              /* MCP_NODE_SCALAR: the text */
+    int quoted;               /* scalar was quoted (so "1" is a string) */
+    int count;                /* SEQ: items; MAP: pairs */
+    struct mcp_node **items;  /* SEQ items, or MAP values */
+    struct mcp_node **keys;   /* MAP keys (scalar nodes) */
+} mcp_node;
+
+MCP_API int mcp_yaml_parse_file(const char *path, mcp_node **out);
+MCP_API int mcp_yaml_parse_string(const char *text, const char *label, mcp_node **out);
+MCP_API void mcp_node_free(mcp_node *root);
+
+/* The value under key in a map, or NULL (also when node is not a map). */
+MCP_API const mcp_node *mcp_node_get(const mcp_node *map, const char *key);
+
+/* Fails with "FILE:LINE: unknown key 'K' in WHAT (known: a, b, c)" when the map has a
+ * key not in allowed (NULL-terminated). Also fails when node is not a map. */
+MCP_API int mcp_node_check_keys(const mcp_node *map, const char *const *allowed,
+                                 const char *what);
+
+/* Typed reads of a scalar, each failing with "FILE:LINE: KEY must be ... (got 'V')".
+ * `key` is only for the message. */
+MCP_API int mcp_node_int(const mcp_node *n, const char *key, int *out);
+MCP_API int mcp_node_double(const mcp_node *n, const char *key, double *out);
+MCP_API int mcp_node_bool(const mcp_node *n, const char *key, int *out);
+MCP_API int mcp_node_string(const mcp_node *n, const char *key, const char **out);
+
+/* Optional keys in a map: leave *out unchanged when absent; fail on a wrong type. */
+MCP_API int mcp_node_opt_int(const mcp_node *map, const char *key, int *out);
+MCP_API int mcp_node_opt_double(const mcp_node *map, const char *key, double *out);
+MCP_API int mcp_node_opt_bool(const mcp_node *map, const char *key, int *out);
+MCP_API int mcp_node_opt_string(const mcp_node *map, const char *key, const char **out);
+/* A list of numbers (a scalar counts as a list of one); *out is malloc'd. */
+MCP_API int mcp_node_opt_doubles(const mcp_node *map, const char *key, double **out,
+                                 int *count);
+/* The same, required: fails with "FILE:LINE: missing key 'K' in WHAT". */
+MCP_API int mcp_node_require(const mcp_node *map, const char *key, const char *what,
+                             const mcp_node **out);
+
+/* "FILE:LINE: " + message, as an error; returns -1. */
+MCP_API int mcp_node_error(const mcp_node *n, const char *fmt, ...) MCP_PRINTF(2, 3);
+
+/* ---- jobs ---- */
+
+typedef struct mcp_job mcp_job;
+
+typedef struct mcp_stage {
+    const char *name;
+    const char *summary;            /* one line for `mcpost run --list` */
+    const char *const *keys;        /* allowed settings keys, NULL-terminated */
+    /* settings is the stage's map (never NULL: an empty map when none given) */
+    int (*run)(mcp_job *job, const mcp_node *settings);
+} mcp_stage;
+
+typedef struct mcp_job_options {
+    const char *output_dir;   /* overrides the job's `output:` [NULL] */
+    int json_stdout;          /* print the report JSON on stdout when done [0] */
+    int quiet;                /* no progress on stderr [0] */
+} mcp_job_options;
+
+MCP_API mcp_job_options mcp_job_defaults(void);
+
+/* Parses, validates (every stage known, its keys allowed, every input's file
+ * present) and runs a job. stages is NULL-terminated. Writes report.json (and what
+ * the stages add) to the output folder. */
+MCP_API int mcp_job_run_file(const char *path, const mcp_stage *const *stages,
+                             const mcp_job_options *opt);
+
+/* For stages: the job file (for messages), the folder relative paths resolve to, and
+ * the output folder (created on first use). */
+MCP_API const char *mcp_job_path(const mcp_job *job);
+MCP_API const char *mcp_job_output_dir(mcp_job *job);
+
+/* Resolves a path written in the job file (relative to its folder) into buf. */
+MCP_API int mcp_job_resolve(const mcp_job *job, const char *rel, char *buf, size_t cap);
+/* The path of an output file `name` inside the output folder (folders created). */
+MCP_API int mcp_job_output_path(mcp_job *job, const char *name, char *buf, size_t cap);
+
+/* Named inputs and results. Lookups take the settings map and the key whose value
+ * names the input (e.g. "input"), so that a missing name is reported at its line.
+ * Returned objects are borrowed from the job (loaded once, freed with the job). */
+MCP_API int mcp_job_dump(mcp_job *job, const mcp_node *settings, const char *key,
+                         const mcp_dump **out);
+MCP_API int mcp_job_image(mcp_job *job, const mcp_node *settings, const char *key,
+                          const mcp_image **out);
+MCP_API int mcp_job_series(mcp_job *job, const mcp_node *settings, const char *key,
+                           const mcp_series **out);
+/* By name, without a settings line (NULL when absent; no error). */
+MCP_API const mcp_image *mcp_job_find_image(mcp_job *job, const char *name);
+
+/* Stages publish results for later stages (the job takes ownership). A dump's colour
+ * is also visible as an image of the same name. */
+MCP_API int mcp_job_put_image(mcp_job *job, const char *name, mcp_image *img);
+MCP_API int mcp_job_put_dump(mcp_job *job, const char *name, mcp_dump *dump);
+
+/* The job's report (figures and sections that stages add). */
+MCP_API mcp_report *mcp_job_report(mcp_job *job);
+MCP_API int mcp_job_quiet(const mcp_job *job);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

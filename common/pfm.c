@@ -1,0 +1,93 @@
+/* pfm.c: Portable Float Map read/write, done by hand because OpenImageIO 2.4 cannot
+ * write PFM (notes/libraries.md 2b). Rows are stored bottom to top; a negative scale
+ * means little-endian. Colour files ("PF") hold R,G,B; grey files ("Pf") hold Y. */
+#include "internal.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static int
+host_is_little_endian(void)
+{
+    const uint16_t one = 1;
+    return *(const uint8_t *)&one == 1;
+}
+
+static void
+swap_floats(float *v, size_t n)
+{
+    for (size_t i = 0; i < n; i++) {
+        uint8_t *b = (uint8_t *)&v[i], t;
+        t = b[0], b[0] = b[3], b[3] = t;
+        t = b[1], b[1] = b[2], b[2] = t;
+    }
+}
+
+int
+mcp__pfm_read(const char *path, mcp_image **out)
+{
+    *out = NULL;
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return mcp_error("%s: cannot open", path);
+    char magic[3] = {0};
+    int w = 0, h = 0, rc = -1;
+    double scale = 0;
+    mcp_image *img = NULL;
+    if (fscanf(f, "%2s %d %d %lf", magic, &w, &h, &scale) != 4 ||
+        (strcmp(magic, "PF") && strcmp(magic, "Pf")) || scale == 0 || fgetc(f) == EOF) {
+        mcp_error("%s: not a PFM file (bad header)", path);
+        goto done;
+    }
+    int channels = magic[1] == 'F' ? 3 : 1;
+    static const char *rgb[] = {"R", "G", "B"}, *grey[] = {"Y"};
+    if (w < 1 || h < 1 || w > MCP_MAX_DIM || h > MCP_MAX_DIM) {
+        mcp_error("%s: bad PFM size %dx%d", path, w, h);
+        goto done;
+    }
+    if (mcp_image_new(w, h, channels, channels == 3 ? rgb : grey, &img) ||
+        mcp_image_set_source(img, path))
+        goto done;
+    size_t row = (size_t)w * channels;
+    for (int y = h - 1; y >= 0; y--)
+        if (fread(mcp_image_px(img, 0, y), sizeof(float), row, f) != row) {
+            mcp_error("%s: truncated PFM data (row %d of %d missing)", path, h - y, h);
+            goto done;
+        }
+    if ((scale < 0) != host_is_little_endian())
+        swap_floats(img->data, row * (size_t)h);
+    *out = img;
+    img = NULL;
+    rc = 0;
+done:
+    mcp_image_free(img);
+    fclose(f);
+    return rc;
+}
+
+int
+mcp__pfm_write(const mcp_image *img, const char *path)
+{
+    if (img->channels != 1 && img->channels != 3)
+        return mcp_error("%s: PFM holds 1 or 3 channels, not %d (pick channels first)",
+                         path, img->channels);
+    FILE *f = fopen(path, "wb");
+    if (!f)
+        return mcp_error("%s: cannot create", path);
+    size_t row = (size_t)img->width * img->channels;
+    float *buf = mcp_malloc(row * sizeof(float));
+    int ok = buf != NULL;
+    ok = ok && fprintf(f, "%s\n%d %d\n%s\n", img->channels == 3 ? "PF" : "Pf", img->width,
+                       img->height, host_is_little_endian() ? "-1.0" : "1.0") > 0;
+    for (int y = img->height - 1; ok && y >= 0; y--) {
+        for (int x = 0; x < img->width; x++)
+            memcpy(buf + (size_t)x * img->channels, mcp_image_px(img, x, y),
+                   (size_t)img->channels * sizeof(float));
+        ok = fwrite(buf, sizeof(float), row, f) == row;
+    }
+    free(buf);
+    if (fclose(f) != 0 || !ok)
+        return mcp_error("%s: write failed (disk full?)", path);
+    return 0;
+}

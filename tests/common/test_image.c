@@ -1,0 +1,122 @@
+/* test_image.c: the shared image type -- creation, views, channel lookup, attributes. */
+#include "testing.h"
+
+#include <mcpost/image.h>
+#include <stdlib.h>
+#include <string.h>
+
+static void
+test_new_is_zeroed_and_packed(void **state)
+{
+    (void)state;
+    mcp_image *img = NULL;
+    assert_int_equal(mcp_image_new(5, 3, 2, (const char *[]){"a", "b"}, &img), 0);
+    assert_true(mcp_image_is_packed(img));
+    for (int i = 0; i < 30; i++)
+        assert_true(img->data[i] == 0.0f);
+    assert_string_equal(img->names[1], "b");
+    mcp_image_free(img);
+    mcp_image_free(NULL);
+}
+
+static void
+test_bad_sizes_are_refused(void **state)
+{
+    (void)state;
+    mcp_image *img = (mcp_image *)1;
+    assert_error_contains(mcp_image_new(0, 3, 1, NULL, &img), "bad image size 0x3x1");
+    assert_null(img);
+    assert_error_contains(mcp_image_new(MCP_MAX_DIM + 1, 1, 1, NULL, &img), "bad image size");
+    assert_error_contains(mcp_image_new(4, 4, -1, NULL, &img), "bad image size");
+}
+
+static void
+test_crop_view_shares_pixels(void **state)
+{
+    (void)state;
+    mcp_image *img = mcp_test_ramp(8, 6, 3, NULL), *view = NULL, *copy = NULL;
+    assert_int_equal(mcp_image_crop_view(img, 2, 1, 4, 3, &view), 0);
+    assert_false(mcp_image_is_packed(view));
+    /* ramp value = x + 10 y + 100 c, in parent coordinates */
+    assert_true(mcp_image_px(view, 0, 0)[1] == 2 + 10 * 1 + 100);
+    assert_true(mcp_image_px(view, 3, 2)[2] == 5 + 10 * 3 + 200);
+    mcp_image_px(view, 1, 1)[0] = -7;
+    assert_true(mcp_image_px(img, 3, 2)[0] == -7);
+    assert_int_equal(mcp_image_copy(view, &copy), 0);
+    assert_true(mcp_image_is_packed(copy));
+    assert_true(mcp_test_max_abs_diff(copy, view) == 0);
+    assert_error_contains(mcp_image_crop_view(img, 6, 0, 4, 1, &view), "lies outside");
+    mcp_image_free(copy);
+    mcp_image_free(view);
+    mcp_image_free(img);
+}
+
+static void
+test_channel_view_and_subset(void **state)
+{
+    (void)state;
+    const char *names[] = {"R", "G", "B", "Variance.R", "Variance.G", "Variance.B"};
+    mcp_image *img = mcp_test_ramp(4, 4, 6, names), *var = NULL, *sub = NULL;
+    assert_int_equal(mcp_image_channel_view(img, 3, 3, &var), 0);
+    assert_string_equal(var->names[0], "Variance.R");
+    assert_true(mcp_image_px(var, 2, 3)[1] == 2 + 30 + 400);
+    int idx[3];
+    assert_int_equal(mcp_image_channels(img, (const char *[]){"B", "R", "Variance.G"}, 3, idx), 0);
+    assert_int_equal(idx[0], 2);
+    assert_int_equal(mcp_image_copy_channels(img, idx, 3, &sub), 0);
+    assert_string_equal(sub->names[2], "Variance.G");
+    assert_true(mcp_image_px(sub, 1, 2)[0] == 1 + 20 + 200);
+    assert_true(mcp_image_px(sub, 1, 2)[2] == 1 + 20 + 400);
+    assert_int_equal(mcp_image_channel(img, "A"), -1);
+    mcp_image_set_source(img, "x.exr");
+    assert_error_contains(mcp_image_channels(img, (const char *[]){"R", "A"}, 2, idx),
+                          "x.exr: no channel 'A'");
+    mcp_image_free(sub);
+    mcp_image_free(var);
+    mcp_image_free(img);
+}
+
+static void
+test_attributes(void **state)
+{
+    (void)state;
+    mcp_attrs a = {0}, b = {0};
+    assert_int_equal(mcp_attrs_set_int(&a, "samplesPerPixel", 64), 0);
+    assert_int_equal(mcp_attrs_set_string(&a, "renderer", "pbrt"), 0);
+    assert_int_equal(mcp_attrs_set_double(&a, "exposure", 0.25), 0);
+    assert_int_equal(mcp_attrs_set_int(&a, "samplesPerPixel", 128), 0);
+    assert_int_equal(a.count, 3);
+    assert_int_equal(mcp_attrs_copy(&a, &b), 0);
+    mcp_attrs_clear(&a);
+    assert_int_equal(mcp_attrs_find(&b, "samplesPerPixel")->i, 128);
+    assert_string_equal(mcp_attrs_find(&b, "renderer")->s, "pbrt");
+    assert_null(mcp_attrs_find(&b, "nope"));
+    mcp_attrs_clear(&b);
+}
+
+static void
+test_same_size_message(void **state)
+{
+    (void)state;
+    mcp_image *a = mcp_test_constant(4, 4, 1, 0, NULL), *b = mcp_test_constant(4, 5, 1, 0, NULL);
+    mcp_image_set_source(a, "a.exr");
+    mcp_image_set_source(b, "b.exr");
+    assert_false(mcp_image_same_size(a, b));
+    assert_string_equal(mcp_error_message(), "a.exr: size 4x4 does not match b.exr (4x5)");
+    mcp_image_free(a);
+    mcp_image_free(b);
+}
+
+int
+main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_new_is_zeroed_and_packed),
+        cmocka_unit_test(test_bad_sizes_are_refused),
+        cmocka_unit_test(test_crop_view_shares_pixels),
+        cmocka_unit_test(test_channel_view_and_subset),
+        cmocka_unit_test(test_attributes),
+        cmocka_unit_test(test_same_size_message),
+    };
+    return cmocka_run_group_tests_name("common/image", tests, NULL, NULL);
+}

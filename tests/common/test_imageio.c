@@ -1,0 +1,283 @@
+/* test_imageio.c: EXR (Core) and PFM round trips, OpenImageIO formats through the
+ * lazily loaded plug-in, atomic writes and every bad-file class. */
+#include "testing.h"
+
+#include <mcpost/imageio.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+static const char *names6[] = {"R", "G", "B", "Variance.R", "albedo.G", "N.X"};
+
+static void
+test_exr_float_roundtrip_all_compressions(void **state)
+{
+    (void)state;
+    /* odd size: the last chunk of every compression is partial */
+    mcp_image *img = mcp_test_random(37, 45, 6, -2.0f, 5.0f, 7, names6);
+    mcp_attrs_set_int(&img->attrs, "samplesPerPixel", 64);
+    mcp_attrs_set_string(&img->attrs, "renderer", "test");
+    mcp_attrs_set_float(&img->attrs, "exposure", 1.5f);
+    mcp_attrs_set_double(&img->attrs, "scale", 0.125);
+    const char *comps[] = {"none", "rle", "zips", "zip", "piz"};
+    for (int i = 0; i < 5; i++) {
+        mcp_write_options o = mcp_write_defaults();
+        assert_int_equal(mcp_exr_compression_from_name(comps[i], &o.compression), 0);
+        const char *path = mcp_test_path("rt.exr");
+        assert_int_equal(mcp_image_write(img, path, &o), 0);
+        mcp_image *back = NULL;
+        assert_int_equal(mcp_image_read(path, NULL, &back), 0);
+        assert_int_equal(back->channels, 6);
+        /* Core sorts channels by name; compare by name */
+        for (int c = 0; c < 6; c++) {
+            int b = mcp_image_channel(back, names6[c]);
+            assert_true(b >= 0);
+            for (int y = 0; y < 45; y++)
+                for (int x = 0; x < 37; x++)
+                    assert_true(mcp_image_px(back, x, y)[b] == mcp_image_px(img, x, y)[c]);
+        }
+        assert_int_equal(mcp_attrs_find(&back->attrs, "samplesPerPixel")->i, 64);
+        assert_string_equal(mcp_attrs_find(&back->attrs, "renderer")->s, "test");
+        assert_true(mcp_attrs_find(&back->attrs, "exposure")->f == 1.5);
+        assert_true(mcp_attrs_find(&back->attrs, "scale")->f == 0.125);
+        mcp_image_free(back);
+    }
+    mcp_image_free(img);
+}
+
+static void
+test_exr_half_tiled_and_data_window(void **state)
+{
+    (void)state;
+    mcp_image *img = mcp_test_random(70, 33, 3, 0.0f, 100.0f, 3, (const char *[]){"R", "G", "B"});
+    mcp_write_options o = mcp_write_defaults();
+    o.exr_pixel = MCP_EXR_HALF;
+    o.exr_tiled = 1;
+    o.exr_tile_size = 16;
+    o.exr_data_x = 5;
+    o.exr_data_y = -3;
+    const char *path = mcp_test_path("tiled.exr");
+    assert_int_equal(mcp_image_write(img, path, &o), 0);
+    mcp_image *back = NULL;
+    assert_int_equal(mcp_image_read(path, NULL, &back), 0);
+    assert_int_equal(back->width, 70);
+    assert_int_equal(back->height, 33);
+    assert_int_equal(mcp_attrs_find(&back->attrs, "dataWindowX")->i, 5);
+    assert_int_equal(mcp_attrs_find(&back->attrs, "dataWindowY")->i, -3);
+    /* half keeps 11 significant bits: relative error <= 2^-11 */
+    for (int y = 0; y < 33; y++)
+        for (int x = 0; x < 70; x++)
+            for (int c = 0; c < 3; c++) {
+                float a = mcp_image_px(img, x, y)[c];
+                int b = mcp_image_channel(back, (const char *[]){"R", "G", "B"}[c]);
+                assert_close(mcp_image_px(back, x, y)[b], a, 1.0 / 2048, 1e-7);
+            }
+    mcp_image_free(back);
+    mcp_image_free(img);
+}
+
+static void
+test_exr_write_view(void **state)
+{
+    (void)state;
+    /* a crop of a channel range: strides differ from the packed layout */
+    mcp_image *img = mcp_test_ramp(20, 10, 6, names6), *crop, *chans, *back = NULL;
+    assert_int_equal(mcp_image_crop_view(img, 3, 2, 9, 7, &crop), 0);
+    assert_int_equal(mcp_image_channel_view(crop, 3, 2, &chans), 0);
+    const char *path = mcp_test_path("view.exr");
+    assert_int_equal(mcp_image_write(chans, path, NULL), 0);
+    assert_int_equal(mcp_image_read(path, NULL, &back), 0);
+    int b = mcp_image_channel(back, "albedo.G");
+    assert_true(mcp_image_px(back, 4, 5)[b] == 3 + 4 + 10 * (2 + 5) + 100 * 4);
+    mcp_image_free(back);
+    mcp_image_free(chans);
+    mcp_image_free(crop);
+    mcp_image_free(img);
+}
+
+static void
+test_pfm_roundtrip(void **state)
+{
+    (void)state;
+    mcp_image *img = mcp_test_random(13, 7, 3, -1.0f, 1e6f, 11, NULL), *back = NULL;
+    const char *path = mcp_test_path("x.pfm");
+    assert_int_equal(mcp_image_write(img, path, NULL), 0);
+    assert_int_equal(mcp_image_read(path, NULL, &back), 0);
+    assert_string_equal(back->names[2], "B");
+    assert_true(mcp_test_max_abs_diff(img, back) == 0);
+    mcp_image_free(back);
+    mcp_image *six = mcp_test_constant(4, 4, 6, 0, NULL);
+    assert_error_contains(mcp_image_write(six, path, NULL), "PFM holds 1 or 3 channels");
+    mcp_image_free(six);
+    mcp_image_free(img);
+}
+
+static int
+maps_mention(const char *what)
+{
+    FILE *f = fopen("/proc/self/maps", "r");
+    char line[4096];
+    int found = 0;
+    while (f && fgets(line, sizeof line, f))
+        found |= strstr(line, what) != NULL;
+    if (f)
+        fclose(f);
+    return found;
+}
+
+/* Runs first in this binary: EXR and PFM must not load OpenImageIO. */
+static void
+test_exr_only_does_not_load_oiio(void **state)
+{
+    (void)state;
+    mcp_image *img = mcp_test_constant(8, 8, 3, 0.5f, NULL), *back = NULL;
+    assert_int_equal(mcp_image_write(img, mcp_test_path("lazy.exr"), NULL), 0);
+    assert_int_equal(mcp_image_read(mcp_test_path("lazy.exr"), NULL, &back), 0);
+    mcp_image_free(back);
+    assert_false(mcp_oiio_loaded());
+    assert_false(maps_mention("libOpenImageIO"));
+    mcp_image_free(img);
+}
+
+static void
+test_png_roundtrip_loads_plugin(void **state)
+{
+    (void)state;
+    /* linear values; PNG stores sRGB-encoded 8-bit, decoded on read */
+    mcp_image *img = mcp_test_random(16, 9, 3, 0.0f, 1.0f, 5, (const char *[]){"R", "G", "B"});
+    mcp_image *back = NULL;
+    const char *path = mcp_test_path("x.png");
+    assert_int_equal(mcp_image_write(img, path, NULL), 0);
+    assert_true(mcp_oiio_loaded());
+    assert_true(maps_mention("libOpenImageIO"));
+    assert_int_equal(mcp_image_read(path, NULL, &back), 0);
+    /* 8-bit sRGB quantisation: half a step of 1/255 in the encoded domain; the
+     * decode slope is at most ~1/12.92.. 2.4*(1.055)^-1 < 2.3 */
+    for (size_t i = 0; i < 16 * 9 * 3; i++)
+        assert_close(back->data[i], img->data[i], 0, 0.5 / 255 * 2.3);
+    mcp_image_free(back);
+    mcp_read_options raw = mcp_read_defaults();
+    raw.srgb_decode = 0;
+    assert_int_equal(mcp_image_read(path, &raw, &back), 0);
+    assert_close(back->data[0], mcp_linear_to_srgb(img->data[0]), 0, 0.5 / 255 + 1e-6);
+    mcp_image_free(back);
+    /* HDR and TIFF go through the plug-in as float */
+    assert_int_equal(mcp_image_write(img, mcp_test_path("x.tif"), NULL), 0);
+    assert_int_equal(mcp_image_read(mcp_test_path("x.tif"), NULL, &back), 0);
+    assert_true(mcp_test_max_abs_diff(img, back) < 1e-7);
+    mcp_image_free(back);
+    mcp_image_free(img);
+}
+
+static void
+test_srgb_transfer(void **state)
+{
+    (void)state;
+    /* FLIP's constants; the two branches meet at 0.04045 / 0.0031308 */
+    assert_close(mcp_srgb_to_linear(0.04045f), 0.04045 / 12.92, 1e-6, 0);
+    assert_close(mcp_srgb_to_linear(1.0f), 1.0, 1e-6, 0);
+    assert_close(mcp_srgb_to_linear(0.5f), 0.21404114, 1e-5, 0);
+    for (float v = 0; v <= 1.0f; v += 0.01f)
+        assert_close(mcp_linear_to_srgb(mcp_srgb_to_linear(v)), v, 1e-5, 1e-6);
+}
+
+static long
+file_size(const char *path)
+{
+    struct stat st;
+    return stat(path, &st) == 0 ? (long)st.st_size : -1;
+}
+
+static void
+test_bad_files(void **state)
+{
+    (void)state;
+    mcp_image *img = NULL;
+    assert_error_contains(mcp_image_read(mcp_test_path("missing.exr"), NULL, &img),
+                          "missing.exr: cannot open");
+    assert_null(img);
+    /* not an EXR at all */
+    mcp_test_write_text(mcp_test_path("text.exr"), "hello, I am not an image\n");
+    assert_error_contains(mcp_image_read(mcp_test_path("text.exr"), NULL, &img),
+                          "text.exr: cannot read as OpenEXR");
+    /* truncated: a valid file cut in half */
+    mcp_image *big = mcp_test_random(64, 64, 3, 0, 1, 1, NULL);
+    mcp_write_options o = mcp_write_defaults();
+    o.compression = MCP_EXR_NONE;
+    const char *full = mcp_test_path("full.exr"), *cut = mcp_test_path("cut.exr");
+    assert_int_equal(mcp_image_write(big, full, &o), 0);
+    char *bytes = mcp_test_read_text(full);
+    long n = file_size(full);
+    FILE *f = fopen(cut, "wb");
+    fwrite(bytes, 1, (size_t)n / 2, f);
+    fclose(f);
+    assert_int_equal(mcp_image_read(cut, NULL, &img), -1);
+    assert_non_null(strstr(mcp_error_message(), "cut.exr"));
+    assert_null(strchr(mcp_error_message(), '\n'));
+    /* DWAA: patch the compression byte of an uncompressed file (value 0 -> 8) */
+    char *at = NULL;
+    for (long i = 0; i + 16 < n && !at; i++)
+        if (memcmp(bytes + i, "compression\0compression\0", 24) == 0)
+            at = bytes + i + 24 + 4;
+    assert_non_null(at);
+    *at = 8;
+    const char *dwa = mcp_test_path("dwa.exr");
+    f = fopen(dwa, "wb");
+    fwrite(bytes, 1, (size_t)n, f);
+    fclose(f);
+    assert_error_contains(mcp_image_read(dwa, NULL, &img), "dwaa compression cannot be read");
+    free(bytes);
+    /* PFM truncated */
+    assert_int_equal(mcp_image_write(big, mcp_test_path("t.pfm"), NULL), 0);
+    assert_int_equal(truncate(mcp_test_path("t.pfm"), 200), 0);
+    assert_error_contains(mcp_image_read(mcp_test_path("t.pfm"), NULL, &img),
+                          "truncated PFM data");
+    /* unwritable output leaves nothing behind */
+    assert_error_contains(mcp_image_write(big, "/nonexistent-dir/x.exr", NULL),
+                          "/nonexistent-dir/x.exr: cannot write");
+    assert_error_contains(mcp_image_write(big, mcp_test_path("x.bmpx"), NULL),
+                          "unknown output format");
+    o.compression = MCP_EXR_DWAA;
+    assert_error_contains(mcp_image_write(big, mcp_test_path("d.exr"), &o),
+                          "cannot write dwaa compression");
+    assert_int_equal(file_size(mcp_test_path("d.exr")), -1);
+    mcp_image_free(big);
+}
+
+static void
+test_atomic_write_keeps_old_file_on_failure(void **state)
+{
+    (void)state;
+    const char *path = mcp_test_path("keep.pfm");
+    mcp_image *good = mcp_test_constant(4, 4, 3, 1, NULL), *bad = mcp_test_constant(4, 4, 2, 1, NULL);
+    assert_int_equal(mcp_image_write(good, path, NULL), 0);
+    long before = file_size(path);
+    assert_int_equal(mcp_image_write(bad, path, NULL), -1);
+    assert_int_equal(file_size(path), before);
+    /* no temporary file is left in the folder */
+    char cmd[4200];
+    snprintf(cmd, sizeof cmd, "ls '%s' | grep -c tmp- >/dev/null", mcp_test_path(""));
+    assert_int_not_equal(system(cmd), 0);
+    mcp_image_free(good);
+    mcp_image_free(bad);
+}
+
+int
+main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_exr_only_does_not_load_oiio),
+        cmocka_unit_test(test_exr_float_roundtrip_all_compressions),
+        cmocka_unit_test(test_exr_half_tiled_and_data_window),
+        cmocka_unit_test(test_exr_write_view),
+        cmocka_unit_test(test_pfm_roundtrip),
+        cmocka_unit_test(test_srgb_transfer),
+        cmocka_unit_test(test_bad_files),
+        cmocka_unit_test(test_atomic_write_keeps_old_file_on_failure),
+        cmocka_unit_test(test_png_roundtrip_loads_plugin),
+    };
+    return cmocka_run_group_tests_name("common/imageio", tests, NULL, NULL);
+}
