@@ -1,0 +1,247 @@
+/* test_dump.c: render dumps in every convention -- written, detected, read back with
+ * the right semantics (per-sample variance divided by n) -- and each bad-input class. */
+#include "testing.h"
+
+#include <mcpost/dump.h>
+#include <mcpost/imageio.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* A dump with known values: colour ramp, variance of the mean v, albedo, normal. */
+static mcp_dump *
+make_dump(int w, int h, double spp)
+{
+    mcp_dump *d = calloc(1, sizeof *d);
+    d->color = mcp_test_random(w, h, 3, 0.0f, 4.0f, 1, (const char *[]){"R", "G", "B"});
+    d->var_of_mean = mcp_test_random(w, h, 3, 0.0f, 0.5f, 2, (const char *[]){"R", "G", "B"});
+    d->albedo = mcp_test_random(w, h, 3, 0.0f, 1.0f, 3, (const char *[]){"R", "G", "B"});
+    d->normal = mcp_test_random(w, h, 3, -1.0f, 1.0f, 4, (const char *[]){"X", "Y", "Z"});
+    d->spp = spp;
+    d->source = strdup("made");
+    return d;
+}
+
+static void
+assert_images_close(const mcp_image *a, const mcp_image *b, double rtol, double atol)
+{
+    assert_int_equal(a->width, b->width);
+    for (int y = 0; y < a->height; y++)
+        for (int x = 0; x < a->width; x++)
+            for (int c = 0; c < 3; c++)
+                assert_close(mcp_image_px(a, x, y)[c], mcp_image_px(b, x, y)[c], rtol,
+                             atol + 1e-12);
+}
+
+static void
+roundtrip(mcp_convention conv, const char *file, int give_spp)
+{
+    mcp_dump *d = make_dump(19, 11, 64), *back = NULL;
+    const char *path = mcp_test_path(file);
+    assert_int_equal(mcp_dump_write(d, path, conv, NULL), 0);
+    mcp_image *raw = NULL;
+    assert_int_equal(mcp_image_read(path, NULL, &raw), 0);
+    assert_int_equal(mcp_dump_detect(raw), conv);
+    mcp_image_free(raw);
+    mcp_dump_spec spec = mcp_dump_spec_defaults();
+    spec.path = path;
+    if (give_spp)
+        spec.spp = 64;
+    assert_int_equal(mcp_dump_load(&spec, &back), 0);
+    assert_int_equal(back->convention, conv);
+    assert_true(back->spp == 64);
+    assert_int_equal(back->variance_in_file, MCP_VAR_PER_SAMPLE);
+    assert_images_close(back->color, d->color, 0, 0);
+    /* stored per-sample (x64), read as of-mean. Mitsuba stores the second moment
+     * m2 = 64 v + mean^2 in float: recovering v cancels mean^2 <= 16, so its absolute
+     * error is about 2 ulp(16) / 64 = 2 * 2^-19 / 64 ~ 6e-8 */
+    assert_images_close(back->var_of_mean, d->var_of_mean, 1e-6,
+                        conv == MCP_CONV_MITSUBA ? 6e-8 : 0);
+    assert_images_close(back->albedo, d->albedo, 0, 0);
+    assert_images_close(back->normal, d->normal, 0, 0);
+    mcp_dump_free(back);
+    mcp_dump_free(d);
+}
+
+static void
+test_pbrt_roundtrip(void **state)
+{
+    (void)state;
+    roundtrip(MCP_CONV_PBRT, "pbrt.exr", 0);
+}
+
+static void
+test_blender_roundtrip(void **state)
+{
+    (void)state;
+    roundtrip(MCP_CONV_BLENDER, "blender.exr", 0);
+}
+
+static void
+test_mitsuba_roundtrip_needs_spp(void **state)
+{
+    (void)state;
+    roundtrip(MCP_CONV_MITSUBA, "mitsuba.exr", 1);
+    mcp_dump *back = NULL;
+    assert_error_contains(mcp_dump_read(mcp_test_path("mitsuba.exr"), &back),
+                          "mitsuba.exr: no sample count");
+}
+
+static void
+test_per_sample_variance_semantics(void **state)
+{
+    (void)state;
+    /* A pbrt file with Variance = 8 (per sample) at 32 spp holds variance of the
+     * mean 0.25; declared of-mean, the same file gives 8. */
+    const char *names[] = {"R", "G", "B", "Variance.R", "Variance.G", "Variance.B"};
+    mcp_image *img = mcp_test_constant(5, 4, 6, 8.0f, names);
+    mcp_attrs_set_int(&img->attrs, "samplesPerPixel", 32);
+    const char *path = mcp_test_path("semantics.exr");
+    assert_int_equal(mcp_image_write(img, path, NULL), 0);
+    mcp_dump *d = NULL;
+    assert_int_equal(mcp_dump_read(path, &d), 0);
+    assert_true(mcp_image_px(d->var_of_mean, 2, 3)[1] == 0.25f);
+    mcp_dump_free(d);
+    mcp_dump_spec spec = mcp_dump_spec_defaults();
+    spec.path = path;
+    assert_int_equal(mcp_variance_kind_from_name("of-mean", &spec.variance), 0);
+    assert_int_equal(mcp_dump_load(&spec, &d), 0);
+    assert_true(mcp_image_px(d->var_of_mean, 2, 3)[1] == 8.0f);
+    mcp_dump_free(d);
+    mcp_image_free(img);
+}
+
+static void
+test_mcpost_convention_per_pixel_spp_and_covariance(void **state)
+{
+    (void)state;
+    mcp_dump *d = make_dump(8, 6, 0), *back = NULL;
+    d->spp_map = mcp_test_random(8, 6, 1, 1.0f, 100.0f, 9, (const char *[]){"n"});
+    for (int i = 0; i < 48; i++)
+        d->spp_map->data[i] = floorf(d->spp_map->data[i]);
+    d->cov_of_mean = mcp_test_random(8, 6, 3, -0.1f, 0.1f, 5, (const char *[]){"RG", "RB", "GB"});
+    const char *path = mcp_test_path("mcpost.exr");
+    assert_int_equal(mcp_dump_write(d, path, MCP_CONV_MCPOST, NULL), 0);
+    assert_int_equal(mcp_dump_read(path, &back), 0);
+    assert_int_equal(back->convention, MCP_CONV_MCPOST);
+    assert_non_null(back->spp_map);
+    assert_true(mcp_dump_spp_at(back, 3, 4) == mcp_dump_spp_at(d, 3, 4));
+    assert_images_close(back->var_of_mean, d->var_of_mean, 1e-6, 0);
+    assert_images_close(back->cov_of_mean, d->cov_of_mean, 1e-6, 0);
+    /* pbrt cannot hold per-pixel counts */
+    assert_error_contains(mcp_dump_write(d, mcp_test_path("no.exr"), MCP_CONV_PBRT, NULL),
+                          "per-pixel sample counts");
+    mcp_dump_free(back);
+    mcp_dump_free(d);
+}
+
+static void
+test_plain_with_separate_files(void **state)
+{
+    (void)state;
+    mcp_image *color = mcp_test_constant(6, 6, 3, 1, (const char *[]){"R", "G", "B"});
+    mcp_image *var = mcp_test_constant(6, 6, 3, 0.5f, (const char *[]){"R", "G", "B"});
+    mcp_image *alb = mcp_test_constant(6, 6, 3, 0.7f, (const char *[]){"R", "G", "B"});
+    mcp_image *small = mcp_test_constant(5, 6, 3, 0.7f, (const char *[]){"X", "Y", "Z"});
+    assert_int_equal(mcp_image_write(color, mcp_test_path("c.pfm"), NULL), 0);
+    assert_int_equal(mcp_image_write(var, mcp_test_path("v.pfm"), NULL), 0);
+    assert_int_equal(mcp_image_write(alb, mcp_test_path("a.pfm"), NULL), 0);
+    assert_int_equal(mcp_image_write(small, mcp_test_path("n.exr"), NULL), 0);
+    mcp_dump_spec spec = mcp_dump_spec_defaults();
+    spec.path = mcp_test_path("c.pfm");
+    spec.variance_path = mcp_test_path("v.pfm");
+    spec.albedo_path = mcp_test_path("a.pfm");
+    spec.spp = 16;
+    mcp_dump *d = NULL;
+    assert_int_equal(mcp_dump_load(&spec, &d), 0);
+    assert_int_equal(d->convention, MCP_CONV_PLAIN);
+    /* a separate variance file is of-mean unless said otherwise */
+    assert_true(d->var_of_mean->data[0] == 0.5f);
+    assert_true(d->albedo->data[4] == 0.7f);
+    mcp_dump_free(d);
+    spec.variance = MCP_VAR_PER_SAMPLE;
+    assert_int_equal(mcp_dump_load(&spec, &d), 0);
+    assert_true(d->var_of_mean->data[0] == 0.5f / 16);
+    mcp_dump_free(d);
+    spec.normal_path = mcp_test_path("n.exr");
+    assert_error_contains(mcp_dump_load(&spec, &d), "n.exr: size 5x6 does not match");
+    mcp_image_free(color);
+    mcp_image_free(var);
+    mcp_image_free(alb);
+    mcp_image_free(small);
+}
+
+static void
+test_bad_values(void **state)
+{
+    (void)state;
+    const char *names[] = {"R", "G", "B", "Variance.R", "Variance.G", "Variance.B"};
+    mcp_image *img = mcp_test_constant(5, 4, 6, 1.0f, names);
+    mcp_attrs_set_int(&img->attrs, "samplesPerPixel", 4);
+    mcp_image_set_source(img, "bad.exr");
+    mcp_image_px(img, 2, 1)[1] = NAN;
+    mcp_image_px(img, 3, 1)[1] = INFINITY;
+    mcp_dump *d = NULL;
+    assert_error_contains(mcp_dump_from_image(img, NULL, &d),
+                          "bad.exr: colour channel 'G' has 2 NaN/Inf values (first nan at "
+                          "pixel 2,1");
+    mcp_dump_spec spec = mcp_dump_spec_defaults();
+    spec.bad_values = MCP_BADVAL_ZERO;
+    assert_int_equal(mcp_dump_from_image(img, &spec, &d), 0);
+    assert_int_equal(d->n_bad_values, 2);
+    assert_true(mcp_image_px(d->color, 2, 1)[1] == 0);
+    mcp_dump_free(d);
+    mcp_image_px(img, 2, 1)[1] = 1;
+    mcp_image_px(img, 3, 1)[1] = 1;
+    mcp_image_px(img, 4, 3)[5] = -0.5f;
+    assert_error_contains(mcp_dump_from_image(img, NULL, &d),
+                          "variance channel 'B' has 1 negative value");
+    mcp_image_px(img, 4, 3)[5] = 1;
+    /* zero / missing sample counts */
+    mcp_attrs_set_int(&img->attrs, "samplesPerPixel", 0);
+    assert_error_contains(mcp_dump_from_image(img, NULL, &d), "bad.exr: no sample count");
+    spec = mcp_dump_spec_defaults();
+    spec.spp = -3;
+    assert_error_contains(mcp_dump_from_image(img, &spec, &d), "sample count -3 given");
+    /* missing colour channels */
+    mcp_image *nocolor = mcp_test_constant(4, 4, 1, 0, (const char *[]){"Y"});
+    mcp_image_set_source(nocolor, "grey.exr");
+    assert_error_contains(mcp_dump_from_image(nocolor, NULL, &d), "grey.exr: no channel 'R'");
+    mcp_image_free(nocolor);
+    mcp_image_free(img);
+}
+
+static void
+test_series_pattern(void **state)
+{
+    (void)state;
+    mcp_series *s = NULL;
+    assert_int_equal(mcp_series_from_pattern("r/x_%04d.exr", (int[]){1, 2, 4}, 3, &s), 0);
+    assert_string_equal(s->paths[2], "r/x_0004.exr");
+    assert_true(s->spp[1] == 2);
+    mcp_series_free(s);
+    assert_error_contains(mcp_series_from_pattern("x_%s.exr", (int[]){1}, 1, &s),
+                          "exactly one integer conversion");
+    assert_error_contains(mcp_series_from_pattern("x_%d_%d.exr", (int[]){1}, 1, &s),
+                          "exactly one integer conversion");
+    assert_error_contains(mcp_series_from_pattern("x_%d.exr", (int[]){4, 2}, 2, &s),
+                          "must increase");
+    assert_error_contains(mcp_series_from_pattern("x_%d.exr", (int[]){0}, 1, &s),
+                          "sample count 0");
+}
+
+int
+main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_pbrt_roundtrip),
+        cmocka_unit_test(test_blender_roundtrip),
+        cmocka_unit_test(test_mitsuba_roundtrip_needs_spp),
+        cmocka_unit_test(test_per_sample_variance_semantics),
+        cmocka_unit_test(test_mcpost_convention_per_pixel_spp_and_covariance),
+        cmocka_unit_test(test_plain_with_separate_files),
+        cmocka_unit_test(test_bad_values),
+        cmocka_unit_test(test_series_pattern),
+    };
+    return cmocka_run_group_tests_name("common/dump", tests, NULL, NULL);
+}
