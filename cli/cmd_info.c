@@ -1,0 +1,255 @@
+/* cmd_info.c: `mcpost info FILE` and the `info` job stage -- what a file or input
+ * holds: size, channels with statistics, the render-dump convention and sample count. */
+#include "cli.h"
+
+#include <mcpost/progress.h>
+#include <mcpost/stats.h>
+
+#include <getopt.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Appends statistics of every channel of img to the array, names prefixed. */
+static int
+add_channels(cJSON *array, const mcp_image *img, const char *prefix)
+{
+    for (int c = 0; c < img->channels; c++) {
+        mcp_channel_stats s;
+        if (mcp_channel_stats_compute(img, c, &s))
+            return -1;
+        char name[600];
+        snprintf(name, sizeof name, "%s%s", prefix, img->names[c]);
+        cJSON *ch = cJSON_CreateObject();
+        cJSON_AddStringToObject(ch, "name", name);
+        cJSON_AddNumberToObject(ch, "min", s.min);
+        cJSON_AddNumberToObject(ch, "mean", s.mean);
+        cJSON_AddNumberToObject(ch, "max", s.max);
+        cJSON_AddNumberToObject(ch, "nan", (double)s.n_nan);
+        cJSON_AddNumberToObject(ch, "inf", (double)s.n_inf);
+        cJSON_AddNumberToObject(ch, "negative", (double)s.n_negative);
+        cJSON_AddItemToArray(array, ch);
+    }
+    return 0;
+}
+
+static void
+add_dump(cJSON *o, const mcp_dump *d)
+{
+    cJSON_AddStringToObject(o, "convention", mcp_convention_name(d->convention));
+    if (d->spp_map)
+        cJSON_AddStringToObject(o, "spp", "per-pixel map");
+    else if (d->spp > 0)
+        cJSON_AddNumberToObject(o, "spp", d->spp);
+    else
+        cJSON_AddNullToObject(o, "spp");
+    cJSON_AddStringToObject(o, "variance",
+                            !d->var_of_mean ? "none"
+                            : d->variance_in_file == MCP_VAR_PER_SAMPLE
+                                ? "per-sample in the file (divided by spp)"
+                                : "of the mean in the file");
+    cJSON_AddBoolToObject(o, "covariance", d->cov_of_mean != NULL);
+    cJSON_AddBoolToObject(o, "albedo", d->albedo != NULL);
+    cJSON_AddBoolToObject(o, "normal", d->normal != NULL);
+}
+
+static void
+add_attrs(cJSON *o, const mcp_attrs *attrs)
+{
+    cJSON *a = cJSON_AddObjectToObject(o, "attributes");
+    for (int i = 0; i < attrs->count; i++) {
+        const mcp_attr *t = &attrs->items[i];
+        if (t->type == MCP_ATTR_STRING)
+            cJSON_AddStringToObject(a, t->name, t->s);
+        else
+            cJSON_AddNumberToObject(a, t->name, t->type == MCP_ATTR_INT ? (double)t->i : t->f);
+    }
+}
+
+/* The description of a file: the raw channels, and what it means as a render dump
+ * (or why it is none). */
+static cJSON *
+describe_file(const char *path, const mcp_image *img, const mcp_dump_spec *spec)
+{
+    cJSON *o = cJSON_CreateObject();
+    cJSON_AddStringToObject(o, "file", path);
+    cJSON_AddStringToObject(o, "format", mcp_format_name(mcp_format_from_path(path)));
+    cJSON_AddNumberToObject(o, "width", img->width);
+    cJSON_AddNumberToObject(o, "height", img->height);
+    mcp_dump *d = NULL;
+    if (mcp_dump_from_image(img, spec, &d) == 0) {
+        add_dump(o, d);
+        mcp_dump_free(d);
+    } else {
+        cJSON_AddStringToObject(o, "convention", mcp_convention_name(mcp_dump_detect(img)));
+        cJSON_AddStringToObject(o, "dump_error", mcp_error_message());
+    }
+    if (add_channels(cJSON_AddArrayToObject(o, "channels"), img, "")) {
+        cJSON_Delete(o);
+        return NULL;
+    }
+    add_attrs(o, &img->attrs);
+    return o;
+}
+
+static void
+print_text(const cJSON *o)
+{
+    const cJSON *spp = cJSON_GetObjectItem(o, "spp");
+    printf("file:        %s\n", cJSON_GetObjectItem(o, "file")->valuestring);
+    printf("size:        %dx%d, %d channels (%s)\n", cJSON_GetObjectItem(o, "width")->valueint,
+           cJSON_GetObjectItem(o, "height")->valueint,
+           cJSON_GetArraySize(cJSON_GetObjectItem(o, "channels")),
+           cJSON_GetObjectItem(o, "format")->valuestring);
+    printf("convention:  %s\n", cJSON_GetObjectItem(o, "convention")->valuestring);
+    if (cJSON_IsNumber(spp))
+        printf("samples:     %g per pixel\n", spp->valuedouble);
+    else if (cJSON_IsString(spp))
+        printf("samples:     %s\n", spp->valuestring);
+    else
+        printf("samples:     unknown (give --spp)\n");
+    const cJSON *var = cJSON_GetObjectItem(o, "variance");
+    if (var)
+        printf("variance:    %s\n", var->valuestring);
+    const cJSON *err = cJSON_GetObjectItem(o, "dump_error");
+    if (err)
+        printf("as a dump:   %s\n", err->valuestring);
+    printf("\n%-28s %12s %12s %12s %8s %8s %8s\n", "channel", "min", "mean", "max", "NaN",
+           "Inf", "negative");
+    const cJSON *ch;
+    cJSON_ArrayForEach(ch, cJSON_GetObjectItem(o, "channels"))
+    printf("%-28s %12.6g %12.6g %12.6g %8.0f %8.0f %8.0f\n",
+           cJSON_GetObjectItem(ch, "name")->valuestring,
+           cJSON_GetObjectItem(ch, "min")->valuedouble,
+           cJSON_GetObjectItem(ch, "mean")->valuedouble,
+           cJSON_GetObjectItem(ch, "max")->valuedouble,
+           cJSON_GetObjectItem(ch, "nan")->valuedouble,
+           cJSON_GetObjectItem(ch, "inf")->valuedouble,
+           cJSON_GetObjectItem(ch, "negative")->valuedouble);
+    const cJSON *a = cJSON_GetObjectItem(o, "attributes");
+    if (cJSON_GetArraySize(a))
+        printf("\nattributes:\n");
+    cJSON_ArrayForEach(ch, a)
+    {
+        if (cJSON_IsString(ch))
+            printf("  %-26s %s\n", ch->string, ch->valuestring);
+        else
+            printf("  %-26s %.10g\n", ch->string, ch->valuedouble);
+    }
+}
+
+static const char usage[] =
+    "usage: mcpost info FILE [--json] [--spp N] [--convention NAME] [--variance KIND]\n"
+    "  Prints size, channels with min/mean/max and NaN/Inf/negative counts, the\n"
+    "  render-dump convention (pbrt, mitsuba, blender, mcpost, plain) and the sample\n"
+    "  count. --spp gives the count for files that hold none (Mitsuba);\n"
+    "  --variance per-sample|of-mean overrides what the convention says.\n";
+
+static int
+cmd_info(int argc, char **argv)
+{
+    static const struct option longs[] = {{"json", no_argument, 0, 'j'},
+                                          {"spp", required_argument, 0, 's'},
+                                          {"convention", required_argument, 0, 'c'},
+                                          {"variance", required_argument, 0, 'v'},
+                                          {"help", no_argument, 0, 'h'},
+                                          {0, 0, 0, 0}};
+    int json = 0, opt;
+    mcp_dump_spec spec = mcp_dump_spec_defaults();
+    optind = 1;
+    while ((opt = getopt_long(argc, argv, "h", longs, NULL)) != -1) {
+        int rc = 0;
+        switch (opt) {
+        case 'j': json = 1; break;
+        case 's':
+            rc = mcp_cli_double("--spp", optarg, &spec.spp);
+            if (!rc && spec.spp <= 0)
+                rc = mcp_error("--spp must be > 0 (got %s)", optarg);
+            break;
+        case 'c': rc = mcp_convention_from_name(optarg, &spec.convention); break;
+        case 'v': rc = mcp_variance_kind_from_name(optarg, &spec.variance); break;
+        case 'h': fputs(usage, stdout); return 0;
+        default: return mcp_cli_usage("info", "bad option");
+        }
+        if (rc)
+            return mcp_cli_fail();
+    }
+    if (optind >= argc)
+        return mcp_cli_usage("info", "no file given");
+    int status = 0;
+    cJSON *all = cJSON_CreateArray();
+    for (int i = optind; i < argc; i++) {
+        mcp_image *img = NULL;
+        if (mcp_image_read(argv[i], NULL, &img)) {
+            status = mcp_cli_fail();
+            continue;
+        }
+        cJSON *o = describe_file(argv[i], img, &spec);
+        mcp_image_free(img);
+        if (!o) {
+            status = mcp_cli_fail();
+            continue;
+        }
+        if (json) {
+            cJSON_AddItemToArray(all, o);
+        } else {
+            if (i > optind)
+                printf("\n");
+            print_text(o);
+            cJSON_Delete(o);
+        }
+    }
+    if (json && cJSON_GetArraySize(all) == 1 && argc - optind == 1) {
+        cJSON *one = cJSON_DetachItemFromArray(all, 0);
+        cJSON_Delete(all);
+        all = one;
+    }
+    if (json)
+        mcp_cli_print_json(all);
+    else
+        cJSON_Delete(all);
+    return status;
+}
+
+const mcp_command mcp_command_info = {"info", "describe images and render dumps", cmd_info};
+
+/* ---- the job stage: describe an input into the report ---- */
+
+static const char *const info_keys[] = {"input", NULL};
+
+static int
+stage_info(mcp_job *job, const mcp_node *settings)
+{
+    const char *name = NULL;
+    const mcp_image *img = NULL;
+    if (mcp_node_opt_string(settings, "input", &name) ||
+        mcp_job_image(job, settings, "input", &img))
+        return -1;
+    cJSON *section = mcp_report_section(mcp_job_report(job), "info", name);
+    if (!section)
+        return -1;
+    cJSON_AddNumberToObject(section, "width", img->width);
+    cJSON_AddNumberToObject(section, "height", img->height);
+    cJSON *channels = cJSON_AddArrayToObject(section, "channels");
+    const mcp_dump *d = NULL;
+    /* a dump input: describe every part that it holds */
+    if (mcp_node_get(settings, "input") && mcp_job_dump(job, settings, "input", &d) == 0) {
+        add_dump(section, d);
+        const mcp_image *parts[] = {d->color, d->var_of_mean, d->cov_of_mean, d->albedo,
+                                    d->normal, d->spp_map};
+        const char *prefixes[] = {"", "variance_of_mean.", "covariance_of_mean.", "albedo.",
+                                  "normal.", "spp."};
+        for (int i = 0; i < 6; i++)
+            if (parts[i] && add_channels(channels, parts[i], prefixes[i]))
+                return -1;
+    } else if (add_channels(channels, img, "")) {
+        return -1;
+    }
+    mcp_error_clear();
+    mcp_note("%s: %dx%d", name, img->width, img->height);
+    return 0;
+}
+
+const mcp_stage mcp_stage_info = {"info", "describe an input (channels, statistics, "
+                                          "convention, sample count) in the report",
+                                  info_keys, stage_info};

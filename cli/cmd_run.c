@@ -1,0 +1,47 @@
+/* cmd_run.c: `mcpost run JOB.yaml` -- runs a whole pipeline from one job file. */
+#include "cli.h"
+
+#include <mcpost/progress.h>
+
+#include <getopt.h>
+#include <stdio.h>
+#include <string.h>
+
+static const char usage[] =
+    "usage: mcpost run JOB.yaml [--output DIR] [--json] [--quiet] [--list]\n"
+    "  Runs the stages of a job file in order and writes the results, report.json and\n"
+    "  report.html into the job's output folder (output: in the file, relative to it;\n"
+    "  --output overrides). --json prints the report on stdout. --list names the stages.\n";
+
+static int
+cmd_run(int argc, char **argv)
+{
+    static const struct option longs[] = {{"output", required_argument, 0, 'o'},
+                                          {"json", no_argument, 0, 'j'},
+                                          {"quiet", no_argument, 0, 'q'},
+                                          {"list", no_argument, 0, 'l'},
+                                          {"help", no_argument, 0, 'h'},
+                                          {0, 0, 0, 0}};
+    mcp_job_options jo = mcp_job_defaults();
+    int opt;
+    optind = 1;
+    while ((opt = getopt_long(argc, argv, "o:qh", longs, NULL)) != -1) {
+        switch (opt) {
+        case 'o': jo.output_dir = optarg; break;
+        case 'j': jo.json_stdout = 1; break;
+        case 'q': jo.quiet = 1; break;
+        case 'l':
+            for (const mcp_stage *const *s = mcp_stages; *s; s++)
+                printf("%-12s %s\n", (*s)->name, (*s)->summary);
+            return 0;
+        case 'h': fputs(usage, stdout); return 0;
+        default: return mcp_cli_usage("run", "bad option");
+        }
+    }
+    if (argc - optind != 1)
+        return mcp_cli_usage("run", "give one job file");
+    mcp_progress_set_quiet(jo.quiet);
+    return mcp_job_run_file(argv[optind], mcp_stages, &jo) ? mcp_cli_fail() : 0;
+}
+
+const mcp_command mcp_command_run = {"run", "run a pipeline from a YAML job file", cmd_run};

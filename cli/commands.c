@@ -1,0 +1,11 @@
+/* commands.c: the subcommand table. A module adds its subcommand here, one line. */
+#include "cli.h"
+
+extern const mcp_command mcp_command_info, mcp_command_convert, mcp_command_run;
+
+const mcp_command *const mcp_commands[] = {
+    &mcp_command_info,
+    &mcp_command_convert,
+    &mcp_command_run,
+    NULL,
+};

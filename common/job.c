@@ -1,0 +1,654 @@
+/* job.c: running a job file -- inputs, output folder, stages from a registry, the
+ * report (see job.h). Everything is checked before the first stage runs, so a typo
+ * on the last line fails in a second, not after an hour of work. */
+#define _POSIX_C_SOURCE 200809L
+#include <mcpost/job.h>
+#include <mcpost/imageio.h>
+#include <mcpost/progress.h>
+
+#include <errno.h>
+#include <libgen.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+typedef enum { ENTRY_DUMP, ENTRY_IMAGE, ENTRY_SERIES } entry_kind;
+
+typedef struct entry {
+    char *name;
+    entry_kind kind;
+    const mcp_node *def; /* the input's definition (NULL for results of stages) */
+    mcp_dump *dump;
+    mcp_image *image;
+    mcp_series *series;
+} entry;
+
+struct mcp_job {
+    char *path, *dir, *output_dir;
+    int output_made;
+    mcp_node *root;
+    entry *entries;
+    int n_entries;
+    mcp_report *report;
+    mcp_job_options opt;
+};
+
+static const char *const root_keys[] = {"title", "inputs", "output", "stages", NULL};
+/* keys shared by dump and series inputs: how to read a render dump */
+#define DUMP_KEYS                                                                        \
+    "convention", "variance", "spp", "bad_values", "variance_file", "albedo_file",       \
+        "normal_file", "spp_map_file", "channels"
+static const char *const dump_keys[] = {"dump", DUMP_KEYS, NULL};
+static const char *const series_keys[] = {"series", DUMP_KEYS, NULL};
+static const char *const image_keys[] = {"image", NULL};
+static const char *const channel_keys[] = {"color", "variance", "albedo", "normal", NULL};
+
+mcp_job_options
+mcp_job_defaults(void)
+{
+    return (mcp_job_options){.output_dir = NULL, .json_stdout = 0, .quiet = 0};
+}
+
+/* ---- paths ---- */
+
+int
+mcp_job_resolve(const mcp_job *job, const char *rel, char *buf, size_t cap)
+{
+    int n = rel[0] == '/' ? snprintf(buf, cap, "%s", rel)
+                          : snprintf(buf, cap, "%s/%s", job->dir, rel);
+    if (n < 0 || (size_t)n >= cap)
+        return mcp_error("%s: path too long: %s", job->path, rel);
+    return 0;
+}
+
+static int
+make_dirs(const char *path)
+{
+    char buf[4096];
+    snprintf(buf, sizeof buf, "%s", path);
+    for (char *p = buf + 1;; p++) {
+        if (*p == '/' || !*p) {
+            char saved = *p;
+            *p = '\0';
+            if (mkdir(buf, 0777) != 0 && errno != EEXIST)
+                return mcp_error("%s: cannot create folder: %s", buf, strerror(errno));
+            if (!(*p = saved))
+                break;
+        }
+    }
+    return 0;
+}
+
+const char *
+mcp_job_path(const mcp_job *job)
+{
+    return job->path;
+}
+
+const char *
+mcp_job_output_dir(mcp_job *job)
+{
+    if (!job->output_made && !make_dirs(job->output_dir))
+        job->output_made = 1;
+    return job->output_dir;
+}
+
+int
+mcp_job_output_path(mcp_job *job, const char *name, char *buf, size_t cap)
+{
+    if (!job->output_made && make_dirs(job->output_dir))
+        return -1;
+    job->output_made = 1;
+    int n = snprintf(buf, cap, "%s/%s", job->output_dir, name);
+    if (n < 0 || (size_t)n >= cap)
+        return mcp_error("%s: output path too long: %s", job->path, name);
+    /* names may hold sub-folders ("maps/flip.png") */
+    char *slash = strrchr(buf, '/');
+    if (slash && slash > buf + strlen(job->output_dir)) {
+        *slash = '\0';
+        int rc = make_dirs(buf);
+        *slash = '/';
+        return rc;
+    }
+    return 0;
+}
+
+mcp_report *
+mcp_job_report(mcp_job *job)
+{
+    return job->report;
+}
+
+int
+mcp_job_quiet(const mcp_job *job)
+{
+    return job->opt.quiet;
+}
+
+/* ---- inputs ---- */
+
+static int
+file_exists(const mcp_node *at, const char *path)
+{
+    struct stat st;
+    if (stat(path, &st) != 0)
+        return mcp_node_error(at, "input file %s: %s", path, strerror(errno));
+    return 0;
+}
+
+/* Fills a dump spec from an input definition; strings point into the node tree or
+ * into `store` (resolved paths), which must outlive the spec. */
+static int
+dump_spec_from(mcp_job *job, const mcp_node *def, mcp_dump_spec *spec, char store[6][4096])
+{
+    *spec = mcp_dump_spec_defaults();
+    const char *s = NULL;
+    if (mcp_node_opt_string(def, "convention", &s) ||
+        (s && mcp_convention_from_name(s, &spec->convention)))
+        return mcp_node_error(mcp_node_get(def, "convention"), "%s", mcp_error_message());
+    s = NULL;
+    if (mcp_node_opt_string(def, "variance", &s) ||
+        (s && mcp_variance_kind_from_name(s, &spec->variance)))
+        return mcp_node_error(mcp_node_get(def, "variance"), "%s", mcp_error_message());
+    s = NULL;
+    if (mcp_node_opt_string(def, "bad_values", &s) ||
+        (s && mcp_badval_policy_from_name(s, &spec->bad_values)))
+        return mcp_node_error(mcp_node_get(def, "bad_values"), "%s", mcp_error_message());
+    const mcp_node *spp = mcp_node_get(def, "spp");
+    if (spp && spp->kind == MCP_NODE_SCALAR) {
+        if (mcp_node_double(spp, "spp", &spec->spp))
+            return -1;
+        if (spec->spp <= 0)
+            return mcp_node_error(spp, "spp must be > 0 (got %g)", spec->spp);
+    }
+    static const char *file_keys[] = {"variance_file", "albedo_file", "normal_file",
+                                      "spp_map_file"};
+    const char **targets[] = {&spec->variance_path, &spec->albedo_path, &spec->normal_path,
+                              &spec->spp_map_path};
+    for (int i = 0; i < 4; i++) {
+        const mcp_node *n = mcp_node_get(def, file_keys[i]);
+        if (!n)
+            continue;
+        if (mcp_node_string(n, file_keys[i], &s) || mcp_job_resolve(job, s, store[i], 4096) ||
+            file_exists(n, store[i]))
+            return -1;
+        *targets[i] = store[i];
+    }
+    const mcp_node *ch = mcp_node_get(def, "channels");
+    if (ch) {
+        if (mcp_node_check_keys(ch, channel_keys, "channels"))
+            return -1;
+        const char **dst[] = {spec->color, spec->var, spec->albedo, spec->normal};
+        for (int k = 0; k < 4; k++) {
+            const mcp_node *list = mcp_node_get(ch, channel_keys[k]);
+            if (!list)
+                continue;
+            if (list->kind != MCP_NODE_SEQ || list->count != 3)
+                return mcp_node_error(list, "channels.%s must list 3 channel names",
+                                      channel_keys[k]);
+            for (int i = 0; i < 3; i++)
+                if (mcp_node_string(list->items[i], channel_keys[k], &dst[k][i]))
+                    return -1;
+        }
+    }
+    return 0;
+}
+
+static entry *
+find_entry(mcp_job *job, const char *name)
+{
+    for (int i = 0; i < job->n_entries; i++)
+        if (strcmp(job->entries[i].name, name) == 0)
+            return &job->entries[i];
+    return NULL;
+}
+
+static entry *
+add_entry(mcp_job *job, const char *name)
+{
+    entry *e = find_entry(job, name);
+    if (e) {
+        mcp_dump_free(e->dump);
+        mcp_image_free(e->image);
+        mcp_series_free(e->series);
+        e->dump = NULL, e->image = NULL, e->series = NULL;
+        return e;
+    }
+    entry *grown = realloc(job->entries, (size_t)(job->n_entries + 1) * sizeof *grown);
+    if (!grown) {
+        mcp_error("out of memory");
+        return NULL;
+    }
+    job->entries = grown;
+    e = &grown[job->n_entries];
+    memset(e, 0, sizeof *e);
+    if (!(e->name = mcp_strdup(name)))
+        return NULL;
+    job->n_entries++;
+    return e;
+}
+
+/* Builds the series of an input definition (not its dumps). */
+static int
+series_from(mcp_job *job, const mcp_node *def, mcp_series **out)
+{
+    const mcp_node *src = mcp_node_get(def, "series"), *spp = mcp_node_get(def, "spp");
+    char path[4096];
+    int rc;
+    if (src->kind == MCP_NODE_SCALAR) {
+        if (!spp || spp->kind != MCP_NODE_SEQ)
+            return mcp_node_error(src, "a series pattern needs 'spp: [list of sample "
+                                       "counts]'");
+        int *counts = mcp_calloc((size_t)spp->count, sizeof *counts);
+        if (!counts)
+            return -1;
+        rc = 0;
+        for (int i = 0; i < spp->count && !rc; i++)
+            rc = mcp_node_int(spp->items[i], "spp", &counts[i]);
+        if (!rc && (mcp_job_resolve(job, src->value, path, sizeof path) ||
+                    mcp_series_from_pattern(path, counts, spp->count, out)))
+            rc = mcp_node_error(src, "%s", mcp_error_message());
+        free(counts);
+        if (rc)
+            return -1;
+    } else if (src->kind == MCP_NODE_SEQ) {
+        char **paths = mcp_calloc((size_t)src->count, sizeof *paths);
+        double *counts = NULL;
+        if (!paths)
+            return -1;
+        rc = 0;
+        for (int i = 0; i < src->count && !rc; i++) {
+            const char *s;
+            rc = mcp_node_string(src->items[i], "series", &s) ||
+                 mcp_job_resolve(job, s, path, sizeof path) || !(paths[i] = mcp_strdup(path));
+        }
+        if (!rc && spp) {
+            int n = 0;
+            rc = mcp_node_opt_doubles(def, "spp", &counts, &n);
+            if (!rc && n != src->count)
+                rc = mcp_node_error(spp, "spp lists %d counts for %d files", n, src->count);
+        }
+        rc = rc || mcp_series_from_paths((const char *const *)paths, counts, src->count, out);
+        for (int i = 0; i < src->count; i++)
+            free(paths[i]);
+        free(paths);
+        free(counts);
+    } else {
+        return mcp_node_error(src, "series must be a file pattern or a list of files");
+    }
+    if (rc)
+        return -1;
+    for (int i = 0; i < (*out)->count; i++)
+        if (file_exists(src, (*out)->paths[i])) {
+            mcp_series_free(*out);
+            *out = NULL;
+            return -1;
+        }
+    return 0;
+}
+
+/* Checks every input definition (keys, types, files present) without loading. */
+static int
+check_inputs(mcp_job *job)
+{
+    const mcp_node *inputs = mcp_node_get(job->root, "inputs");
+    if (!inputs)
+        return 0;
+    if (inputs->kind != MCP_NODE_MAP)
+        return mcp_node_error(inputs, "inputs must map names to inputs");
+    for (int i = 0; i < inputs->count; i++) {
+        const mcp_node *def = inputs->items[i];
+        const char *name = inputs->keys[i]->value;
+        char what[256];
+        snprintf(what, sizeof what, "input '%s'", name);
+        if (def->kind != MCP_NODE_MAP)
+            return mcp_node_error(def, "input '%s' must be a map (dump:, image: or series:)",
+                                  name);
+        entry *e = add_entry(job, name);
+        if (!e)
+            return -1;
+        e->def = def;
+        char path[4096], store[6][4096];
+        const char *file;
+        mcp_dump_spec spec;
+        if (mcp_node_get(def, "dump")) {
+            e->kind = ENTRY_DUMP;
+            if (mcp_node_check_keys(def, dump_keys, what) ||
+                mcp_node_string(mcp_node_get(def, "dump"), "dump", &file) ||
+                mcp_job_resolve(job, file, path, sizeof path) ||
+                file_exists(mcp_node_get(def, "dump"), path) ||
+                dump_spec_from(job, def, &spec, store))
+                return -1;
+        } else if (mcp_node_get(def, "image")) {
+            e->kind = ENTRY_IMAGE;
+            if (mcp_node_check_keys(def, image_keys, what) ||
+                mcp_node_string(mcp_node_get(def, "image"), "image", &file) ||
+                mcp_job_resolve(job, file, path, sizeof path) ||
+                file_exists(mcp_node_get(def, "image"), path))
+                return -1;
+        } else if (mcp_node_get(def, "series")) {
+            e->kind = ENTRY_SERIES;
+            mcp_series *s = NULL;
+            if (mcp_node_check_keys(def, series_keys, what) || series_from(job, def, &s) ||
+                dump_spec_from(job, def, &spec, store)) {
+                mcp_series_free(s);
+                return -1;
+            }
+            mcp_series_free(s);
+        } else {
+            return mcp_node_error(def, "input '%s' needs one of dump:, image: or series:",
+                                  name);
+        }
+    }
+    return 0;
+}
+
+static int
+load_entry(mcp_job *job, entry *e)
+{
+    char path[4096], store[6][4096];
+    const char *file = NULL;
+    mcp_dump_spec spec;
+    switch (e->kind) {
+    case ENTRY_DUMP:
+        if (e->dump)
+            return 0;
+        mcp_node_string(mcp_node_get(e->def, "dump"), "dump", &file);
+        if (mcp_job_resolve(job, file, path, sizeof path) ||
+            dump_spec_from(job, e->def, &spec, store))
+            return -1;
+        spec.path = path;
+        return mcp_dump_load(&spec, &e->dump);
+    case ENTRY_IMAGE:
+        if (e->image)
+            return 0;
+        mcp_node_string(mcp_node_get(e->def, "image"), "image", &file);
+        if (mcp_job_resolve(job, file, path, sizeof path))
+            return -1;
+        return mcp_image_read(path, NULL, &e->image);
+    case ENTRY_SERIES:
+        if (e->series)
+            return 0;
+        if (series_from(job, e->def, &e->series) ||
+            dump_spec_from(job, e->def, &e->series->spec, store))
+            return -1;
+        /* the spec's extra file paths point into `store`: series members share the
+         * main settings only */
+        e->series->spec.variance_path = e->series->spec.albedo_path = NULL;
+        e->series->spec.normal_path = e->series->spec.spp_map_path = NULL;
+        e->series->spec.spp = 0;
+        return 0;
+    }
+    return -1;
+}
+
+static int
+lookup(mcp_job *job, const mcp_node *settings, const char *key, entry **out)
+{
+    const mcp_node *n = mcp_node_get(settings, key);
+    const char *name;
+    if (!n)
+        return mcp_node_error(settings, "missing key '%s' (the name of an input)", key);
+    if (mcp_node_string(n, key, &name))
+        return -1;
+    entry *e = find_entry(job, name);
+    if (!e)
+        return mcp_node_error(n, "no input or result called '%s'", name);
+    if (e->def && load_entry(job, e))
+        return mcp_node_error(n, "%s", mcp_error_message());
+    *out = e;
+    return 0;
+}
+
+int
+mcp_job_dump(mcp_job *job, const mcp_node *settings, const char *key, const mcp_dump **out)
+{
+    entry *e;
+    if (lookup(job, settings, key, &e))
+        return -1;
+    if (!e->dump)
+        return mcp_node_error(mcp_node_get(settings, key), "'%s' is not a render dump",
+                              e->name);
+    *out = e->dump;
+    return 0;
+}
+
+int
+mcp_job_image(mcp_job *job, const mcp_node *settings, const char *key,
+              const mcp_image **out)
+{
+    entry *e;
+    if (lookup(job, settings, key, &e))
+        return -1;
+    if (!e->image && !e->dump)
+        return mcp_node_error(mcp_node_get(settings, key), "'%s' is not an image",
+                              e->name);
+    *out = e->image ? e->image : e->dump->color;
+    return 0;
+}
+
+int
+mcp_job_series(mcp_job *job, const mcp_node *settings, const char *key,
+               const mcp_series **out)
+{
+    entry *e;
+    if (lookup(job, settings, key, &e))
+        return -1;
+    if (!e->series)
+        return mcp_node_error(mcp_node_get(settings, key), "'%s' is not a series",
+                              e->name);
+    *out = e->series;
+    return 0;
+}
+
+const mcp_image *
+mcp_job_find_image(mcp_job *job, const char *name)
+{
+    entry *e = find_entry(job, name);
+    if (!e || (e->def && load_entry(job, e)))
+        return NULL;
+    return e->image ? e->image : e->dump ? e->dump->color : NULL;
+}
+
+int
+mcp_job_put_image(mcp_job *job, const char *name, mcp_image *img)
+{
+    entry *e = add_entry(job, name);
+    if (!e) {
+        mcp_image_free(img);
+        return -1;
+    }
+    e->def = NULL;
+    e->kind = ENTRY_IMAGE;
+    e->image = img;
+    return 0;
+}
+
+int
+mcp_job_put_dump(mcp_job *job, const char *name, mcp_dump *dump)
+{
+    entry *e = add_entry(job, name);
+    if (!e) {
+        mcp_dump_free(dump);
+        return -1;
+    }
+    e->def = NULL;
+    e->kind = ENTRY_DUMP;
+    e->dump = dump;
+    return 0;
+}
+
+/* ---- stages ---- */
+
+static const mcp_stage *
+find_stage(const mcp_stage *const *stages, const char *name)
+{
+    for (; *stages; stages++)
+        if (strcmp((*stages)->name, name) == 0)
+            return *stages;
+    return NULL;
+}
+
+/* An empty settings map, for "- info:" with nothing after it. */
+static mcp_node *
+empty_map_at(const mcp_node *at)
+{
+    mcp_node *n = mcp_calloc(1, sizeof *n);
+    if (n) {
+        n->kind = MCP_NODE_MAP;
+        n->line = at->line;
+        n->column = at->column;
+        n->file = at->file;
+    }
+    return n;
+}
+
+/* Resolves stage i of the list to its definition and settings (checked). */
+static int
+stage_at(const mcp_node *item, const mcp_stage *const *stages, const mcp_stage **stage,
+         const mcp_node **settings)
+{
+    if (item->kind != MCP_NODE_MAP || item->count != 1)
+        return mcp_node_error(item, "each stage must be one 'name: {settings}' entry");
+    const char *name = item->keys[0]->value;
+    *stage = find_stage(stages, name);
+    if (!*stage) {
+        char known[512] = "";
+        size_t n = 0;
+        for (const mcp_stage *const *s = stages; *s; s++)
+            n += (size_t)snprintf(known + n, n < sizeof known ? sizeof known - n : 0, "%s%s",
+                                  s == stages ? "" : ", ", (*s)->name);
+        return mcp_node_error(item->keys[0], "unknown stage '%s' (known: %s)", name, known);
+    }
+    *settings = item->items[0];
+    if ((*settings)->kind == MCP_NODE_SCALAR && (*settings)->value[0] == '\0')
+        *settings = NULL; /* no settings given */
+    char what[128];
+    snprintf(what, sizeof what, "stage '%s'", name);
+    return *settings ? mcp_node_check_keys(*settings, (*stage)->keys, what) : 0;
+}
+
+static void
+job_free(mcp_job *job)
+{
+    if (!job)
+        return;
+    for (int i = 0; i < job->n_entries; i++) {
+        free(job->entries[i].name);
+        mcp_dump_free(job->entries[i].dump);
+        mcp_image_free(job->entries[i].image);
+        mcp_series_free(job->entries[i].series);
+    }
+    free(job->entries);
+    mcp_node_free(job->root);
+    mcp_report_free(job->report);
+    free(job->path);
+    free(job->dir);
+    free(job->output_dir);
+    free(job);
+}
+
+static int
+job_open(const char *path, const mcp_job_options *opt, mcp_job **out)
+{
+    mcp_job *job = mcp_calloc(1, sizeof *job);
+    if (!job)
+        return -1;
+    job->opt = opt ? *opt : mcp_job_defaults();
+    char tmp[4096];
+    snprintf(tmp, sizeof tmp, "%s", path);
+    const char *title = NULL, *output = NULL;
+    if (!(job->path = mcp_strdup(path)) || !(job->dir = mcp_strdup(dirname(tmp))) ||
+        mcp_yaml_parse_file(path, &job->root))
+        goto fail;
+    if (job->root->kind != MCP_NODE_MAP) {
+        mcp_node_error(job->root, "a job file is a map with inputs:, output: and stages:");
+        goto fail;
+    }
+    if (mcp_node_check_keys(job->root, root_keys, "the job file") ||
+        mcp_node_opt_string(job->root, "title", &title) ||
+        mcp_node_opt_string(job->root, "output", &output))
+        goto fail;
+    if (job->opt.output_dir) {
+        job->output_dir = mcp_strdup(job->opt.output_dir);
+    } else {
+        char name[512], resolved[4096];
+        snprintf(tmp, sizeof tmp, "%s", path);
+        snprintf(name, sizeof name, "out/%s", basename(tmp));
+        char *dot = strrchr(name, '.');
+        if (dot && dot > name + 4)
+            *dot = '\0';
+        if (mcp_job_resolve(job, output ? output : name, resolved, sizeof resolved))
+            goto fail;
+        job->output_dir = mcp_strdup(resolved);
+    }
+    if (!job->output_dir ||
+        mcp_report_new(title ? title : job->path, &job->report))
+        goto fail;
+    *out = job;
+    return 0;
+fail:
+    job_free(job);
+    return -1;
+}
+
+int
+mcp_job_run_file(const char *path, const mcp_stage *const *stages,
+                 const mcp_job_options *opt)
+{
+    mcp_job *job = NULL;
+    if (job_open(path, opt, &job))
+        return -1;
+    int rc = -1;
+    const mcp_node *list = mcp_node_get(job->root, "stages");
+    if (!list || list->kind != MCP_NODE_SEQ || list->count == 0) {
+        mcp_node_error(list ? list : job->root, "the job needs a list of stages");
+        goto done;
+    }
+    /* check everything before running anything */
+    if (check_inputs(job))
+        goto done;
+    for (int i = 0; i < list->count; i++) {
+        const mcp_stage *stage;
+        const mcp_node *settings;
+        if (stage_at(list->items[i], stages, &stage, &settings))
+            goto done;
+    }
+    if (!mcp_job_output_dir(job) || !job->output_made) {
+        mcp_error_prefix("%s: output: ", job->path);
+        goto done;
+    }
+    for (int i = 0; i < list->count; i++) {
+        const mcp_stage *stage;
+        const mcp_node *settings;
+        stage_at(list->items[i], stages, &stage, &settings);
+        mcp_node *empty = settings ? NULL : empty_map_at(list->items[i]);
+        if (!settings && !empty)
+            goto done;
+        mcp_note("[%d/%d] %s", i + 1, list->count, stage->name);
+        int failed = stage->run(job, settings ? settings : empty);
+        free(empty);
+        if (failed) {
+            /* put the stage's place in front unless the message already names one */
+            if (!strstr(mcp_error_message(), job->path))
+                mcp_error_prefix("%s:%d: stage '%s': ", job->path, list->items[i]->line,
+                                 stage->name);
+            goto done;
+        }
+    }
+    if (mcp_report_write(job->report, job->output_dir))
+        goto done;
+    if (job->opt.json_stdout) {
+        char *json = cJSON_Print(mcp_report_json(job->report));
+        if (json)
+            puts(json);
+        free(json);
+    }
+    mcp_note("results in %s (report.html, report.json)", job->output_dir);
+    rc = 0;
+done:
+    job_free(job);
+    return rc;
+}
