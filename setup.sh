@@ -1,0 +1,71 @@
+#!/usr/bin/env bash
+# setup.sh: everything from a fresh Debian 12 machine to results.
+#
+#   ./setup.sh demo    install what is missing, build, run samples/jobs/demo.yaml
+#   ./setup.sh test    install what is missing, build (plain and ASan+UBSan), run all tests
+#   ./setup.sh build   install what is missing and build only
+#
+# Builds go to build/ (and build-asan/ for the sanitizer build). Set MCPOST_NO_ASAN=1
+# to skip the sanitizer build in `test`, MCPOST_JOBS to change the parallelism.
+set -euo pipefail
+cd "$(dirname "$0")"
+
+# Debian 12 packages that mcpost needs (README.md lists what each is for).
+PACKAGES=(gcc g++ make cmake pkg-config
+          libopenexr-dev libopenimageio-dev libopencv-core-dev libopencv-imgproc-dev
+          libyaml-dev libcjson-dev libcmocka-dev)
+JOBS=${MCPOST_JOBS:-$(nproc)}
+
+install_packages() {
+    local missing=()
+    for p in "${PACKAGES[@]}"; do
+        dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" ||
+            missing+=("$p")
+    done
+    [ ${#missing[@]} -eq 0 ] && return 0
+    echo "setup: installing ${missing[*]}" >&2
+    local sudo=""
+    [ "$(id -u)" -eq 0 ] || sudo="sudo"
+    $sudo apt-get update -q
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -q --no-install-recommends \
+        "${missing[@]}"
+}
+
+build() { # build DIR [cmake args...]
+    local dir=$1
+    shift
+    cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo "$@" >/dev/null
+    cmake --build "$dir" -j "$JOBS"
+}
+
+run_tests() { # run_tests DIR
+    ctest --test-dir "$1" --output-on-failure -j "$JOBS"
+}
+
+case "${1:-}" in
+demo)
+    install_packages
+    build build
+    ./build/mcpost run samples/jobs/demo.yaml
+    ;;
+test)
+    install_packages
+    build build
+    run_tests build
+    if [ -z "${MCPOST_NO_ASAN:-}" ]; then
+        build build-asan -DMCPOST_SANITIZE=ON -DMCPOST_BENCH=OFF
+        ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 \
+            LSAN_OPTIONS=suppressions=$PWD/tests/lsan.supp:print_suppressions=0 \
+            UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+            run_tests build-asan
+    fi
+    ;;
+build)
+    install_packages
+    build build
+    ;;
+*)
+    echo "usage: ./setup.sh demo|test|build" >&2
+    exit 2
+    ;;
+esac

@@ -1,0 +1,262 @@
+/* test_cli.c: the mcpost executable -- info on pbrt-v4, Mitsuba 3 and Blender files,
+ * convert, run, and the one-line error with a non-zero exit for every bad-input class. */
+#include "testing.h"
+
+#include <cjson/cJSON.h>
+#include <mcpost/dump.h>
+#include <mcpost/imageio.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+static char out[1 << 16], err[1 << 16];
+
+static int
+run(const char *fmt, ...)
+{
+    char args[8192];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(args, sizeof args, fmt, ap);
+    va_end(ap);
+    return mcp_test_run_mcpost(args, out, sizeof out, err, sizeof err);
+}
+
+/* The failure contract: non-zero exit, exactly one stderr line "mcpost: ...needle...". */
+static void
+assert_one_line_error(int status, const char *needle)
+{
+    if (status == 0 || strncmp(err, "mcpost: ", 8) != 0 || !strstr(err, needle) ||
+        strchr(err, '\n') != err + strlen(err) - 1)
+        fail_msg("status %d, stderr \"%s\", wanted one line with \"%s\"", status, err, needle);
+}
+
+static mcp_dump *
+sample_dump(void)
+{
+    mcp_dump *d = calloc(1, sizeof *d);
+    d->color = mcp_test_random(16, 8, 3, 0.0f, 2.0f, 1, (const char *[]){"R", "G", "B"});
+    d->var_of_mean = mcp_test_random(16, 8, 3, 0.0f, 0.1f, 2, (const char *[]){"R", "G", "B"});
+    d->albedo = mcp_test_random(16, 8, 3, 0.0f, 1.0f, 3, (const char *[]){"R", "G", "B"});
+    d->normal = mcp_test_random(16, 8, 3, -1.0f, 1.0f, 4, (const char *[]){"X", "Y", "Z"});
+    d->spp = 128;
+    d->source = strdup("sample");
+    return d;
+}
+
+static void
+test_info_describes_each_renderer(void **state)
+{
+    (void)state;
+    mcp_dump *d = sample_dump();
+    struct {
+        mcp_convention conv;
+        const char *file, *convention, *samples, *channel;
+    } cases[] = {
+        {MCP_CONV_PBRT, "pbrt.exr", "convention:  pbrt", "samples:     128 per pixel", "Variance.R"},
+        {MCP_CONV_MITSUBA, "mitsuba.exr", "convention:  mitsuba", "samples:     unknown", "m2_R"},
+        {MCP_CONV_BLENDER, "blender.exr", "convention:  blender", "samples:     128 per pixel",
+         "ViewLayer.Denoising Albedo.G"},
+    };
+    for (int i = 0; i < 3; i++) {
+        const char *path = mcp_test_path(cases[i].file);
+        assert_int_equal(mcp_dump_write(d, path, cases[i].conv, NULL), 0);
+        assert_int_equal(run("info '%s'", path), 0);
+        assert_non_null(strstr(out, cases[i].convention));
+        assert_non_null(strstr(out, cases[i].samples));
+        assert_non_null(strstr(out, cases[i].channel));
+        assert_non_null(strstr(out, "size:        16x8"));
+    }
+    /* Mitsuba has no count in the file: --spp gives it */
+    assert_int_equal(run("info --spp 128 '%s'", mcp_test_path("mitsuba.exr")), 0);
+    assert_non_null(strstr(out, "samples:     128 per pixel"));
+    /* JSON: the statistics are exact */
+    assert_int_equal(run("info --json '%s'", mcp_test_path("pbrt.exr")), 0);
+    cJSON *j = cJSON_Parse(out);
+    assert_non_null(j);
+    assert_true(cJSON_GetObjectItem(j, "spp")->valuedouble == 128);
+    double mean = 0;
+    for (int i = 0; i < 16 * 8; i++)
+        mean += d->color->data[i * 3];
+    const cJSON *ch;
+    cJSON_ArrayForEach(ch, cJSON_GetObjectItem(j, "channels"))
+    {
+        if (!strcmp(cJSON_GetObjectItem(ch, "name")->valuestring, "R"))
+            assert_close(cJSON_GetObjectItem(ch, "mean")->valuedouble, mean / 128, 1e-12, 0);
+    }
+    cJSON_Delete(j);
+    mcp_dump_free(d);
+}
+
+static void
+test_info_counts_bad_values(void **state)
+{
+    (void)state;
+    mcp_image *img = mcp_test_constant(4, 4, 3, 1, (const char *[]){"R", "G", "B"});
+    img->data[0] = NAN;
+    img->data[3] = INFINITY;
+    img->data[6] = -2;
+    assert_int_equal(mcp_image_write(img, mcp_test_path("nan.exr"), NULL), 0);
+    assert_int_equal(run("info --json '%s'", mcp_test_path("nan.exr")), 0);
+    cJSON *j = cJSON_Parse(out);
+    const cJSON *r = cJSON_GetArrayItem(cJSON_GetObjectItem(j, "channels"), 2); /* sorted: B G R */
+    assert_string_equal(cJSON_GetObjectItem(r, "name")->valuestring, "R");
+    assert_true(cJSON_GetObjectItem(r, "nan")->valuedouble == 1);
+    assert_true(cJSON_GetObjectItem(r, "inf")->valuedouble == 1);
+    assert_true(cJSON_GetObjectItem(r, "negative")->valuedouble == 1);
+    cJSON_Delete(j);
+    mcp_image_free(img);
+}
+
+static void
+test_convert(void **state)
+{
+    (void)state;
+    mcp_dump *d = sample_dump();
+    assert_int_equal(mcp_dump_write(d, mcp_test_path("c.exr"), MCP_CONV_PBRT, NULL), 0);
+    assert_int_equal(run("convert '%s' '%s' --channels B,R --half --compression piz",
+                         mcp_test_path("c.exr"), mcp_test_path("br.exr")), 0);
+    mcp_image *img = NULL;
+    assert_int_equal(mcp_image_read(mcp_test_path("br.exr"), NULL, &img), 0);
+    assert_int_equal(img->channels, 2);
+    mcp_image_free(img);
+    /* a dump rewritten in Blender's convention keeps its meaning */
+    assert_int_equal(run("convert --dump blender '%s' '%s'", mcp_test_path("c.exr"),
+                         mcp_test_path("b.exr")), 0);
+    mcp_dump *back = NULL;
+    assert_int_equal(mcp_dump_read(mcp_test_path("b.exr"), &back), 0);
+    assert_int_equal(back->convention, MCP_CONV_BLENDER);
+    assert_close(back->var_of_mean->data[7], d->var_of_mean->data[7], 1e-6, 0);
+    mcp_dump_free(back);
+    mcp_dump_free(d);
+}
+
+static void
+test_every_bad_input_class(void **state)
+{
+    (void)state;
+    mcp_dump *d = sample_dump();
+    char good[4096]; /* mcp_test_path's buffers rotate: keep a copy */
+    snprintf(good, sizeof good, "%s", mcp_test_path("good.exr"));
+    assert_int_equal(mcp_dump_write(d, good, MCP_CONV_PBRT, NULL), 0);
+    /* missing or misnamed channel */
+    assert_one_line_error(run("convert '%s' '%s' --channels R,Q", good, mcp_test_path("q.exr")),
+                          "good.exr: no channel 'Q'");
+    /* unreadable, corrupt, truncated */
+    assert_one_line_error(run("info '%s'", mcp_test_path("nothing.exr")), "nothing.exr: cannot open");
+    mcp_test_write_text(mcp_test_path("junk.exr"), "not an exr");
+    assert_one_line_error(run("info '%s'", mcp_test_path("junk.exr")), "junk.exr");
+    char *bytes = mcp_test_read_text(good);
+    FILE *f = fopen(mcp_test_path("cut.exr"), "wb");
+    fwrite(bytes, 1, 600, f);
+    fclose(f);
+    free(bytes);
+    assert_one_line_error(run("info '%s'", mcp_test_path("cut.exr")), "cut.exr");
+    /* NaN in colour, negative variance */
+    mcp_image *img = NULL;
+    if (mcp_image_read(good, NULL, &img))
+        fail_msg("%s", mcp_error_message());
+    int r = mcp_image_channel(img, "R"), vg = mcp_image_channel(img, "Variance.G");
+    mcp_image_px(img, 3, 2)[r] = NAN;
+    assert_int_equal(mcp_image_write(img, mcp_test_path("nan.exr"), NULL), 0);
+    assert_one_line_error(run("convert --dump pbrt '%s' '%s'", mcp_test_path("nan.exr"),
+                              mcp_test_path("o.exr")),
+                          "nan.exr: colour channel 'R' has 1 NaN/Inf value (first nan at pixel 3,2");
+    mcp_image_px(img, 3, 2)[r] = 1;
+    mcp_image_px(img, 5, 1)[vg] = -1;
+    assert_int_equal(mcp_image_write(img, mcp_test_path("neg.exr"), NULL), 0);
+    assert_one_line_error(run("convert --dump pbrt '%s' '%s'", mcp_test_path("neg.exr"),
+                              mcp_test_path("o.exr")),
+                          "neg.exr: variance channel 'G' has 1 negative value");
+    /* zero sample count */
+    mcp_image_px(img, 5, 1)[vg] = 1;
+    mcp_attrs_set_int(&img->attrs, "samplesPerPixel", 0);
+    assert_int_equal(mcp_image_write(img, mcp_test_path("zero.exr"), NULL), 0);
+    assert_one_line_error(run("convert --dump mcpost '%s' '%s'", mcp_test_path("zero.exr"),
+                              mcp_test_path("o.exr")),
+                          "zero.exr: no sample count");
+    assert_int_equal(access(mcp_test_path("o.exr"), F_OK), -1);
+    mcp_image_free(img);
+    /* mismatched sizes between dump parts (job file: a separate albedo) */
+    mcp_image *small = mcp_test_constant(5, 5, 3, 1, (const char *[]){"R", "G", "B"});
+    assert_int_equal(mcp_image_write(small, mcp_test_path("small.exr"), NULL), 0);
+    mcp_image_free(small);
+    mcp_test_write_text(mcp_test_path("size.yaml"),
+                        "inputs:\n  d: {dump: good.exr, albedo_file: small.exr}\n"
+                        "stages:\n  - info: {input: d}\n");
+    assert_one_line_error(run("run -q '%s'", mcp_test_path("size.yaml")),
+                          "small.exr: size 5x5 does not match");
+    /* unwritable output */
+    assert_one_line_error(run("convert '%s' /nonexistent-dir/o.exr", good),
+                          "/nonexistent-dir/o.exr: cannot write");
+    /* unknown job key, with its line */
+    mcp_test_write_text(mcp_test_path("key.yaml"),
+                        "inputs:\n  d: {dump: good.exr}\nstages:\n  - info: {input: d}\n"
+                        "  - convert: {input: d, output: x.exr, chanels: [R]}\n");
+    assert_one_line_error(run("run -q '%s'", mcp_test_path("key.yaml")),
+                          "key.yaml:5: unknown key 'chanels' in stage 'convert'");
+    /* usage errors exit 2 */
+    assert_int_equal(run("frobnicate"), 2);
+    assert_int_equal(run("info"), 2);
+    mcp_dump_free(d);
+}
+
+static void
+test_run_job_with_info_and_convert(void **state)
+{
+    (void)state;
+    mcp_dump *d = sample_dump();
+    assert_int_equal(mcp_dump_write(d, mcp_test_path("job_in.exr"), MCP_CONV_PBRT, NULL), 0);
+    mcp_test_write_text(mcp_test_path("job.yaml"),
+                        "title: test job\n"
+                        "inputs:\n  noisy: {dump: job_in.exr}\n"
+                        "output: results\n"
+                        "stages:\n"
+                        "  - info: {input: noisy}\n"
+                        "  - convert: {input: noisy, output: noisy.png}\n"
+                        "  - convert: {input: noisy, output: maps/noisy.exr, channels: [G], pixel: half}\n");
+    assert_int_equal(run("run --json '%s'", mcp_test_path("job.yaml")), 0);
+    cJSON *j = cJSON_Parse(out);
+    assert_non_null(j);
+    assert_string_equal(cJSON_GetObjectItem(j, "title")->valuestring, "test job");
+    const cJSON *info = cJSON_GetArrayItem(cJSON_GetObjectItem(j, "sections"), 0);
+    assert_true(cJSON_GetObjectItem(info, "spp")->valuedouble == 128);
+    cJSON_Delete(j);
+    mcp_image *img = NULL;
+    assert_int_equal(mcp_image_read(mcp_test_path("results/maps/noisy.exr"), NULL, &img), 0);
+    assert_string_equal(img->names[0], "G");
+    mcp_image_free(img);
+    assert_int_equal(access(mcp_test_path("results/noisy.png"), R_OK), 0);
+    assert_int_equal(access(mcp_test_path("results/report.html"), R_OK), 0);
+    assert_non_null(strstr(err, "results in"));
+    mcp_dump_free(d);
+}
+
+static void
+test_help_and_version(void **state)
+{
+    (void)state;
+    assert_int_equal(run("--version"), 0);
+    assert_non_null(strstr(out, "mcpost 0."));
+    assert_int_equal(run("--help"), 0);
+    assert_non_null(strstr(out, "info"));
+    assert_non_null(strstr(out, "run"));
+    assert_int_equal(run("run --list"), 0);
+    assert_non_null(strstr(out, "convert"));
+}
+
+int
+main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_info_describes_each_renderer),
+        cmocka_unit_test(test_info_counts_bad_values),
+        cmocka_unit_test(test_convert),
+        cmocka_unit_test(test_every_bad_input_class),
+        cmocka_unit_test(test_run_job_with_info_and_convert),
+        cmocka_unit_test(test_help_and_version),
+    };
+    return cmocka_run_group_tests_name("cli", tests, NULL, NULL);
+}

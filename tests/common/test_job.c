@@ -1,0 +1,213 @@
+/* test_job.c: job files -- YAML (and JSON) parsing with line numbers, typed access,
+ * unknown keys, missing inputs, and the runner calling stages from a table. */
+#include "testing.h"
+
+#include <mcpost/imageio.h>
+#include <mcpost/job.h>
+#include <mcpost/progress.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static void
+test_yaml_tree_and_lines(void **state)
+{
+    (void)state;
+    const char *text = "title: demo\n"
+                       "inputs:\n"
+                       "  noisy: {dump: a.exr, spp: 64}\n"
+                       "stages:\n"
+                       "  - info: {input: noisy}\n"
+                       "  - metrics:\n"
+                       "      percentiles: [0.5, 0.9, 0.99]\n"
+                       "      quoted: \"12\"\n";
+    mcp_node *root = NULL;
+    assert_int_equal(mcp_yaml_parse_string(text, "job.yaml", &root), 0);
+    const mcp_node *stages = mcp_node_get(root, "stages");
+    assert_int_equal(stages->kind, MCP_NODE_SEQ);
+    assert_int_equal(stages->count, 2);
+    const mcp_node *m = stages->items[1]->items[0];
+    double *p = NULL;
+    int n = 0;
+    assert_int_equal(mcp_node_opt_doubles(m, "percentiles", &p, &n), 0);
+    assert_int_equal(n, 3);
+    assert_true(p[2] == 0.99);
+    free(p);
+    assert_int_equal(mcp_node_get(m, "percentiles")->line, 7);
+    int spp = 0;
+    assert_int_equal(mcp_node_opt_int(mcp_node_get(mcp_node_get(root, "inputs"), "noisy"), "spp", &spp), 0);
+    assert_int_equal(spp, 64);
+    /* a quoted number is a string, not a number */
+    assert_error_contains(mcp_node_opt_int(m, "quoted", &spp),
+                          "job.yaml:8: quoted must be an integer (got '12')");
+    const char *allowed[] = {"percentiles", NULL};
+    assert_error_contains(mcp_node_check_keys(m, allowed, "stage 'metrics'"),
+                          "job.yaml:8: unknown key 'quoted' in stage 'metrics' (known: percentiles)");
+    mcp_node_free(root);
+}
+
+static void
+test_json_parses_too(void **state)
+{
+    (void)state;
+    mcp_node *root = NULL;
+    assert_int_equal(mcp_yaml_parse_string("{\"a\": [1, 2.5, true], \"b\": {\"c\": \"x\"}}",
+                                           "j.json", &root), 0);
+    int b = 0;
+    double d = 0;
+    assert_int_equal(mcp_node_bool(mcp_node_get(root, "a")->items[2], "a", &b), 0);
+    assert_true(b);
+    assert_int_equal(mcp_node_double(mcp_node_get(root, "a")->items[1], "a", &d), 0);
+    assert_true(d == 2.5);
+    mcp_node_free(root);
+}
+
+static void
+test_yaml_errors_name_the_line(void **state)
+{
+    (void)state;
+    mcp_node *root = NULL;
+    assert_error_contains(mcp_yaml_parse_string("a: 1\nb: [1, 2\nc: 3\n", "bad.yaml", &root),
+                          "bad.yaml:");
+    assert_error_contains(mcp_yaml_parse_string("a: 1\na: 2\n", "dup.yaml", &root),
+                          "dup.yaml:2: key 'a' appears twice (first at line 1)");
+    assert_error_contains(mcp_yaml_parse_string("a: &x 1\nb: *x\n", "al.yaml", &root),
+                          "al.yaml:2: aliases are not supported");
+    assert_error_contains(mcp_yaml_parse_string("", "empty.yaml", &root), "empty job file");
+    assert_error_contains(mcp_yaml_parse_file("/nonexistent/job.yaml", &root),
+                          "/nonexistent/job.yaml: cannot open");
+}
+
+/* ---- the runner, with stages defined here ---- */
+
+static int calls;
+static double seen_mean;
+
+static int
+stage_probe(mcp_job *job, const mcp_node *settings)
+{
+    const mcp_dump *d = NULL;
+    int scale = 1;
+    if (mcp_node_opt_int(settings, "scale", &scale) || mcp_job_dump(job, settings, "input", &d))
+        return -1;
+    seen_mean = d->color->data[0] * scale;
+    calls++;
+    mcp_image *copy;
+    if (mcp_image_copy(d->color, &copy) || mcp_job_put_image(job, "probed", copy))
+        return -1;
+    cJSON *s = mcp_report_section(mcp_job_report(job), "probe", "probe");
+    cJSON_AddNumberToObject(s, "value", seen_mean);
+    return 0;
+}
+
+static int
+stage_consume(mcp_job *job, const mcp_node *settings)
+{
+    const mcp_image *img = NULL;
+    if (mcp_job_image(job, settings, "input", &img))
+        return -1;
+    char path[4096];
+    if (mcp_job_output_path(job, "sub/out.exr", path, sizeof path))
+        return -1;
+    calls++;
+    return mcp_image_write(img, path, NULL);
+}
+
+static const char *const probe_keys[] = {"input", "scale", NULL};
+static const mcp_stage probe = {"probe", "test stage", probe_keys, stage_probe};
+static const mcp_stage consume = {"consume", "test stage", probe_keys, stage_consume};
+static const mcp_stage *const table[] = {&probe, &consume, NULL};
+
+static const char *
+write_job(const char *name, const char *text)
+{
+    const char *path = mcp_test_path(name);
+    mcp_test_write_text(path, text);
+    return path;
+}
+
+static void
+setup_input(void)
+{
+    const char *names[] = {"R", "G", "B"};
+    mcp_image *img = mcp_test_constant(4, 3, 3, 0.25f, names);
+    mcp_attrs_set_int(&img->attrs, "samplesPerPixel", 8);
+    assert_int_equal(mcp_image_write(img, mcp_test_path("in.exr"), NULL), 0);
+    mcp_image_free(img);
+}
+
+static void
+test_runner_runs_stages_in_order(void **state)
+{
+    (void)state;
+    setup_input();
+    mcp_progress_set_quiet(1);
+    const char *job = write_job("ok.yaml", "inputs:\n"
+                                           "  noisy: {dump: in.exr}\n"
+                                           "output: out/ok\n"
+                                           "stages:\n"
+                                           "  - probe: {input: noisy, scale: 4}\n"
+                                           "  - consume: {input: probed}\n");
+    calls = 0;
+    assert_int_equal(mcp_job_run_file(job, table, NULL), 0);
+    assert_int_equal(calls, 2);
+    assert_true(seen_mean == 1.0);
+    mcp_image *back = NULL;
+    assert_int_equal(mcp_image_read(mcp_test_path("out/ok/sub/out.exr"), NULL, &back), 0);
+    assert_true(back->data[5] == 0.25f);
+    mcp_image_free(back);
+    char *report = mcp_test_read_text(mcp_test_path("out/ok/report.json"));
+    assert_non_null(strstr(report, "\"value\":\t1"));
+    free(report);
+}
+
+static void
+test_runner_checks_everything_first(void **state)
+{
+    (void)state;
+    setup_input();
+    mcp_progress_set_quiet(1);
+    struct {
+        const char *text, *error;
+    } cases[] = {
+        {"inputs:\n  noisy: {dump: in.exr}\nstages:\n  - probe: {input: noisy}\n"
+         "  - probe: {input: noisy, scael: 2}\n",
+         "bad.yaml:5: unknown key 'scael' in stage 'probe' (known: input, scale)"},
+        {"inputs:\n  noisy: {dump: in.exr}\nstages:\n  - probe: {input: noisy}\n  - frobnicate:\n",
+         "bad.yaml:5: unknown stage 'frobnicate' (known: probe, consume)"},
+        {"inputs:\n  noisy: {dump: missing.exr}\nstages:\n  - probe: {input: noisy}\n",
+         "bad.yaml:2: input file"},
+        {"inputs:\n  noisy: {dump: in.exr, spp: many}\nstages:\n  - probe: {input: noisy}\n",
+         "bad.yaml:2: spp must be a number (got 'many')"},
+        {"inputs:\n  noisy: {dump: in.exr}\nstages:\n  - probe: {input: nosiy}\n",
+         "bad.yaml:4: no input or result called 'nosiy'"},
+        {"inputs:\n  noisy: {dump: in.exr}\nstages:\n  - probe: {input: noisy, scale: 1.5}\n",
+         "bad.yaml:4: scale must be an integer (got '1.5')"},
+        {"inptus:\n  noisy: {dump: in.exr}\nstages:\n  - probe: {input: noisy}\n",
+         "bad.yaml:1: unknown key 'inptus' in the job file"},
+        {"inputs:\n  s: {series: 'x_%04d.exr', spp: [1, 2]}\nstages:\n  - probe: {input: s}\n",
+         "bad.yaml:2: input file"},
+        {"inputs:\n  noisy: {dump: in.exr, convention: povray}\nstages:\n  - probe: {input: noisy}\n",
+         "bad.yaml:2: unknown convention 'povray'"},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
+        calls = 0;
+        const char *job = write_job("bad.yaml", cases[i].text);
+        assert_error_contains(mcp_job_run_file(job, table, NULL), cases[i].error);
+        /* nothing ran: the failing line could be the last one */
+        assert_int_equal(calls, 0);
+    }
+}
+
+int
+main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_yaml_tree_and_lines),
+        cmocka_unit_test(test_json_parses_too),
+        cmocka_unit_test(test_yaml_errors_name_the_line),
+        cmocka_unit_test(test_runner_runs_stages_in_order),
+        cmocka_unit_test(test_runner_checks_everything_first),
+    };
+    return cmocka_run_group_tests_name("common/job", tests, NULL, NULL);
+}
