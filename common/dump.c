@@ -157,9 +157,13 @@ mcp_dump_detect(const mcp_image *img)
 
 /* ---- the channel layout of one convention ---- */
 
+/* Three channel names (colour R,G,B or normal X,Y,Z). */
+typedef struct name3 {
+    char c[3][512];
+} name3;
+
 typedef struct layout {
-    char color[3][512], var[3][512], m2[3][512], cov[3][512], albedo[3][512],
-        normal[3][512];
+    name3 color, var, m2, cov, albedo, normal;
     int has_var, has_m2, has_cov, has_albedo, has_normal;
     mcp_variance_kind var_kind;
     double spp;          /* from the header, 0 if none */
@@ -167,16 +171,16 @@ typedef struct layout {
 } layout;
 
 static void
-set3(char dst[3][512], const char *prefix, const char *const sfx[3])
+set3(name3 *dst, const char *prefix, const char *const sfx[3])
 {
     for (int k = 0; k < 3; k++)
-        snprintf(dst[k], 512, "%s%s", prefix, sfx[k]);
+        snprintf(dst->c[k], sizeof dst->c[k], "%s%s", prefix, sfx[k]);
 }
 
 static int
-has3(const mcp_image *img, char names[3][512])
+has3(const mcp_image *img, const name3 *names)
 {
-    return has(img, names[0]) && has(img, names[1]) && has(img, names[2]);
+    return has(img, names->c[0]) && has(img, names->c[1]) && has(img, names->c[2]);
 }
 
 static double
@@ -212,59 +216,59 @@ layout_for(const mcp_image *img, mcp_convention conv, layout *L)
         if (!layer)
             return mcp_error("%s: no Blender '<layer>.Combined.R' channels", img->source);
         snprintf(prefix, sizeof prefix, "%s.Combined.", layer);
-        set3(L->color, prefix, rgb);
+        set3(&L->color, prefix, rgb);
         snprintf(prefix, sizeof prefix, "%s.Variance.", layer);
-        set3(L->var, prefix, rgb);
+        set3(&L->var, prefix, rgb);
         snprintf(prefix, sizeof prefix, "%s.Denoising Albedo.", layer);
-        set3(L->albedo, prefix, rgb);
+        set3(&L->albedo, prefix, rgb);
         snprintf(prefix, sizeof prefix, "%s.Denoising Normal.", layer);
-        set3(L->normal, prefix, xyz);
+        set3(&L->normal, prefix, xyz);
         L->spp = header_spp(img, layer);
         free(layer);
         break;
     }
     case MCP_CONV_MITSUBA: {
-        set3(L->color, "", rgb);
-        set3(L->m2, "m2_", rgb);
-        L->has_m2 = has3(img, L->m2);
+        set3(&L->color, "", rgb);
+        set3(&L->m2, "m2_", rgb);
+        L->has_m2 = has3(img, &L->m2);
         char p[512];
         if (find_triple(img, "albedo", rgb, p, sizeof p)) {
             snprintf(prefix, sizeof prefix, "%s.", p);
-            set3(L->albedo, prefix, rgb);
+            set3(&L->albedo, prefix, rgb);
         }
         if (find_triple(img, "sh_normal", xyz, p, sizeof p) ||
             find_triple(img, "normal", xyz, p, sizeof p)) {
             snprintf(prefix, sizeof prefix, "%s.", p);
-            set3(L->normal, prefix, xyz);
+            set3(&L->normal, prefix, xyz);
         }
         L->spp = header_spp(img, NULL);
         break;
     }
     default: /* pbrt, mcpost, plain */
-        set3(L->color, "", rgb);
-        set3(L->var, "Variance.", rgb);
-        set3(L->cov, "Covariance.", offdiag);
-        set3(L->albedo, "Albedo.", rgb);
-        set3(L->normal, "N.", xyz);
-        if (!has3(img, L->normal))
-            set3(L->normal, "Ns.", xyz);
+        set3(&L->color, "", rgb);
+        set3(&L->var, "Variance.", rgb);
+        set3(&L->cov, "Covariance.", offdiag);
+        set3(&L->albedo, "Albedo.", rgb);
+        set3(&L->normal, "N.", xyz);
+        if (!has3(img, &L->normal))
+            set3(&L->normal, "Ns.", xyz);
         snprintf(L->spp_channel, sizeof L->spp_channel, "SampleCount");
         L->spp = header_spp(img, NULL);
         break;
     }
-    L->has_var = L->var[0][0] && has3(img, L->var);
-    L->has_cov = L->cov[0][0] && has3(img, L->cov);
-    L->has_albedo = L->albedo[0][0] && has3(img, L->albedo);
-    L->has_normal = L->normal[0][0] && has3(img, L->normal);
+    L->has_var = L->var.c[0][0] && has3(img, &L->var);
+    L->has_cov = L->cov.c[0][0] && has3(img, &L->cov);
+    L->has_albedo = L->albedo.c[0][0] && has3(img, &L->albedo);
+    L->has_normal = L->normal.c[0][0] && has3(img, &L->normal);
     return 0;
 }
 
 /* ---- loading ---- */
 
 static int
-pick3(const mcp_image *img, char names[3][512], mcp_image **out)
+pick3(const mcp_image *img, const name3 *names, mcp_image **out)
 {
-    const char *n[3] = {names[0], names[1], names[2]};
+    const char *n[3] = {names->c[0], names->c[1], names->c[2]};
     int idx[3];
     return mcp_image_channels(img, n, 3, idx) || mcp_image_copy_channels(img, idx, 3, out);
 }
@@ -412,31 +416,31 @@ mcp_dump_from_image(const mcp_image *img, const mcp_dump_spec *spec, mcp_dump **
     /* explicit names win over the convention */
     for (int k = 0; k < 3; k++) {
         if (spec->color[k])
-            snprintf(L.color[k], 512, "%s", spec->color[k]);
+            snprintf(L.color.c[k], sizeof L.color.c[k], "%s", spec->color[k]);
         if (spec->var[k])
-            snprintf(L.var[k], 512, "%s", spec->var[k]), L.has_var = 1;
+            snprintf(L.var.c[k], 512, "%s", spec->var[k]), L.has_var = 1;
         if (spec->albedo[k])
-            snprintf(L.albedo[k], 512, "%s", spec->albedo[k]), L.has_albedo = 1;
+            snprintf(L.albedo.c[k], 512, "%s", spec->albedo[k]), L.has_albedo = 1;
         if (spec->normal[k])
-            snprintf(L.normal[k], 512, "%s", spec->normal[k]), L.has_normal = 1;
+            snprintf(L.normal.c[k], 512, "%s", spec->normal[k]), L.has_normal = 1;
     }
-    if (pick3(img, L.color, &d->color) || rename3(d->color, "R", "G", "B"))
+    if (pick3(img, &L.color, &d->color) || rename3(d->color, "R", "G", "B"))
         goto fail;
-    if (L.has_albedo && (pick3(img, L.albedo, &d->albedo) || rename3(d->albedo, "R", "G", "B")))
+    if (L.has_albedo && (pick3(img, &L.albedo, &d->albedo) || rename3(d->albedo, "R", "G", "B")))
         goto fail;
-    if (L.has_normal && (pick3(img, L.normal, &d->normal) || rename3(d->normal, "X", "Y", "Z")))
+    if (L.has_normal && (pick3(img, &L.normal, &d->normal) || rename3(d->normal, "X", "Y", "Z")))
         goto fail;
-    if (L.has_cov && (pick3(img, L.cov, &d->cov_of_mean) ||
+    if (L.has_cov && (pick3(img, &L.cov, &d->cov_of_mean) ||
                       rename3(d->cov_of_mean, "RG", "RB", "GB")))
         goto fail;
     d->variance_in_file = spec->variance ? spec->variance : L.var_kind;
     if (L.has_var) {
-        if (pick3(img, L.var, &d->var_of_mean) || rename3(d->var_of_mean, "R", "G", "B"))
+        if (pick3(img, &L.var, &d->var_of_mean) || rename3(d->var_of_mean, "R", "G", "B"))
             goto fail;
     } else if (L.has_m2) {
         /* Mitsuba's moment integrator: per-sample variance = E[x^2] - E[x]^2; float
          * rounding can make it slightly negative where the variance is ~0 */
-        if (pick3(img, L.m2, &d->var_of_mean) || rename3(d->var_of_mean, "R", "G", "B"))
+        if (pick3(img, &L.m2, &d->var_of_mean) || rename3(d->var_of_mean, "R", "G", "B"))
             goto fail;
         for (int y = 0; y < img->height; y++)
             for (int x = 0; x < img->width; x++) {

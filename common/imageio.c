@@ -1,6 +1,6 @@
 /* imageio.c: format dispatch, the lazily loaded OpenImageIO plug-in, sRGB coding,
  * and atomic output files (see imageio.h). */
-#define _POSIX_C_SOURCE 200809L
+#define _GNU_SOURCE /* dladdr */
 #include "internal.h"
 
 #include <dlfcn.h>
@@ -97,16 +97,27 @@ static struct {
     char error[1024];
 } oiio = {PTHREAD_ONCE_INIT, NULL, NULL, NULL, ""};
 
+/* Looks for the plug-in in: $MCPOST_PLUGIN_DIR; beside the mcpost library that this
+ * code is in (<libdir>/mcpost/, found with dladdr, so an installed tree can move); the
+ * build tree; the configured install folder. */
 static void
 oiio_load(void)
 {
-    const char *env = getenv("MCPOST_PLUGIN_DIR");
-    const char *dirs[] = {env, MCP_PLUGIN_BUILD_DIR, MCP_PLUGIN_INSTALL_DIR};
+    char beside_lib[4096] = "";
+    Dl_info info;
+    if (dladdr((void *)&mcp_image_read, &info) && info.dli_fname) {
+        const char *slash = strrchr(info.dli_fname, '/');
+        if (slash)
+            snprintf(beside_lib, sizeof beside_lib, "%.*s/mcpost",
+                     (int)(slash - info.dli_fname), info.dli_fname);
+    }
+    const char *dirs[] = {getenv("MCPOST_PLUGIN_DIR"), beside_lib, MCP_PLUGIN_BUILD_DIR,
+                          MCP_PLUGIN_INSTALL_DIR};
     size_t n = 0;
     for (size_t i = 0; i < sizeof dirs / sizeof *dirs; i++) {
         if (!dirs[i] || !*dirs[i])
             continue;
-        char path[4096];
+        char path[4200];
         snprintf(path, sizeof path, "%s/mcpost_oiio.so", dirs[i]);
         if (access(path, R_OK) != 0)
             continue;

@@ -45,9 +45,10 @@ test_crop_view_shares_pixels(void **state)
     assert_int_equal(mcp_image_copy(view, &copy), 0);
     assert_true(mcp_image_is_packed(copy));
     assert_true(mcp_test_max_abs_diff(copy, view) == 0);
-    assert_error_contains(mcp_image_crop_view(img, 6, 0, 4, 1, &view), "lies outside");
-    mcp_image_free(copy);
     mcp_image_free(view);
+    assert_error_contains(mcp_image_crop_view(img, 6, 0, 4, 1, &view), "lies outside");
+    assert_null(view);
+    mcp_image_free(copy);
     mcp_image_free(img);
 }
 
