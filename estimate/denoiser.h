@@ -1,0 +1,83 @@
+/* denoiser.h: the denoiser interface -- F(colour, albedo?, normal?) and its
+ * Jacobian-vector products J·t, several tangents at once (SPEC "estimate/Denoisers").
+ *
+ * Built-in denoisers compute J·t exactly by forward-mode differentiation (a tangent is
+ * propagated through every operation). A black box (an external command, issue 6)
+ * gives (F(x + δt) − F(x)) / δ and says so with exact = 0. A neural network fits the
+ * same struct. Denoisers are created by name from a settings map, so the CLI
+ * (`--denoiser NAME --denoiser-opt key=value`) and job files
+ * (`denoiser: {name: NAME, key: value}`) share one path. */
+#ifndef MCP_DENOISER_H
+#define MCP_DENOISER_H
+
+#include <mcpost/dump.h>
+#include <mcpost/job.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* What a denoiser reads: colour (3 channels), optional albedo and normal (3 each),
+ * all the same size. */
+typedef struct mcp_denoise_input {
+    const mcp_image *color;
+    const mcp_image *albedo; /* NULL: not given */
+    const mcp_image *normal; /* NULL: not given */
+} mcp_denoise_input;
+
+/* A direction in input space. The colour part is required; feature parts may be NULL
+ * (zero), and are used by joint SURE (Li 2017) when features are noisy. */
+typedef struct mcp_denoise_tangent {
+    const mcp_image *color;
+    const mcp_image *albedo;
+    const mcp_image *normal;
+} mcp_denoise_tangent;
+
+typedef struct mcp_denoiser mcp_denoiser;
+
+struct mcp_denoiser {
+    const char *name;     /* "gauss", "bilateral", "unet", "external", ... */
+    int exact;            /* 1: jvp is exact forward mode; 0: finite differences */
+    int uses_albedo;      /* reads in->albedo when given */
+    int uses_normal;      /* reads in->normal when given */
+    /* F(in): a new 3-channel image "R,G,B". */
+    int (*apply)(const mcp_denoiser *self, const mcp_denoise_input *in, mcp_image **out);
+    /* J·t_k for k < n at the point `at`, in one primal pass: out[k] receives a new
+     * 3-channel image; primal (may be NULL) receives F(at). On failure every out[k]
+     * and *primal stay NULL. */
+    int (*jvp)(const mcp_denoiser *self, const mcp_denoise_input *at,
+               const mcp_denoise_tangent *t, int n, mcp_image **primal, mcp_image **out);
+    void (*destroy)(mcp_denoiser *self); /* frees state and self */
+    void *state;
+};
+
+/* Creates a denoiser from a settings node: a scalar (its name) or a map with `name`
+ * and that denoiser's own keys; unknown keys fail with the node's line. Relative paths
+ * in settings (e.g. weights) resolve against base_dir (NULL: current folder). */
+MCP_API int mcp_denoiser_create(const mcp_node *settings, const char *base_dir,
+                                mcp_denoiser **out);
+
+/* The same from command-line words: name and "key=value" options. */
+MCP_API int mcp_denoiser_create_from_args(const char *name, const char *const *opts,
+                                          int n_opts, mcp_denoiser **out);
+
+MCP_API void mcp_denoiser_free(mcp_denoiser *d);
+
+/* The denoiser input of a dump (borrowed views of its parts). */
+MCP_API mcp_denoise_input mcp_denoise_input_of(const mcp_dump *dump);
+
+/* One entry per built-in kind, found by name (estimate/denoisers.c holds the table). */
+typedef struct mcp_denoiser_kind {
+    const char *name;
+    const char *summary;
+    const char *const *keys; /* settings keys besides `name`, NULL-terminated */
+    int (*create)(const mcp_node *settings, const char *base_dir, mcp_denoiser **out);
+} mcp_denoiser_kind;
+
+/* The table of kinds (NULL-terminated), for --help and `mcpost denoise --list`. */
+MCP_API const mcp_denoiser_kind *const *mcp_denoiser_kinds(void);
+
+#ifdef __cplusplus
+}
+#endif
+#endif
