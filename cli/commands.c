@@ -2,10 +2,12 @@
 #include "cli.h"
 
 extern const mcp_command mcp_command_info, mcp_command_convert, mcp_command_run;
+extern const mcp_command mcp_command_metrics;
 
 const mcp_command *const mcp_commands[] = {
     &mcp_command_info,
     &mcp_command_convert,
     &mcp_command_run,
+    &mcp_command_metrics,
     NULL,
 };

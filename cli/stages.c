@@ -2,9 +2,11 @@
 #include "cli.h"
 
 extern const mcp_stage mcp_stage_info, mcp_stage_convert;
+extern const mcp_stage mcp_stage_metrics;
 
 const mcp_stage *const mcp_stages[] = {
     &mcp_stage_info,
     &mcp_stage_convert,
+    &mcp_stage_metrics,
     NULL,
 };

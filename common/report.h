@@ -2,12 +2,25 @@
  *
  * A report is a JSON document (report.json: every figure) plus a self-contained HTML
  * page (report.html) built from the same content: sections, each with tables, images
- * and plots. Stages add one section each. */
+ * and plots. Stages add one section each.
+ *
+ * A section is a JSON object. Besides "title" and "stage" it may hold:
+ *   any other members      key figures: numbers, strings, booleans, nested objects
+ *                          (shown flattened as a.b) and lists of numbers
+ *   "tables": [{"title", "columns": [names], "rows": [[number|string|null, ...]]}]
+ *   "images": [{"path" (relative to the report's folder), "caption"}]
+ *   "plots":  [{"title", "x": {"label", "scale"}, "y": {...},
+ *               "series": [{"name", "style", "dashed", "x": [...], "y": [...]}]}]
+ * report.html renders every section generically from that, so a stage only fills
+ * the JSON. The page needs no network: CSS is inline, images are embedded as base64
+ * data URIs (PNG, JPEG, GIF, SVG, WebP; other files are listed by name), and plots
+ * are inline SVG drawn by plot.h. */
 #ifndef MCP_REPORT_H
 #define MCP_REPORT_H
 
 #include <cjson/cJSON.h>
 #include <mcpost/error.h>
+#include <mcpost/plot.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -29,6 +42,35 @@ MCP_API cJSON *mcp_report_section(mcp_report *r, const char *stage, const char *
  * "images" list. */
 MCP_API int mcp_report_add_image(cJSON *section, const char *rel_path,
                                  const char *caption);
+
+/* Adds a table to a section's "tables" list and returns it (owned by the section),
+ * or NULL on failure. */
+MCP_API cJSON *mcp_report_add_table(cJSON *section, const char *title,
+                                    const char *const *columns, int n_columns);
+
+/* Appends a row to a table. fmt has one letter per column: 'd' a double (NaN is
+ * written as null, +-inf as the strings "inf" / "-inf"), 'i' an int, 's' a string
+ * (NULL: null). Fails when fmt does not have one letter per column. */
+MCP_API int mcp_report_table_add_row(cJSON *table, const char *fmt, ...);
+
+/* Adds a plot to a section's "plots" list and returns it (owned by the section), or
+ * NULL on failure. Labels may be NULL. */
+MCP_API cJSON *mcp_report_add_plot(cJSON *section, const char *title, const char *x_label,
+                                   mcp_axis_scale x_scale, const char *y_label,
+                                   mcp_axis_scale y_scale);
+
+/* Adds a named series of n points (x[i], y[i]) to a plot and returns it, or NULL on
+ * failure. Values an axis cannot show (NaN, <= 0 on log) are kept in the JSON and
+ * skipped in the drawing. */
+MCP_API cJSON *mcp_report_plot_add_series(cJSON *plot, const char *name,
+                                          mcp_series_style style, const double *x,
+                                          const double *y, int n);
+
+/* Draws the series dashed (e.g. an estimate beside the truth). */
+MCP_API int mcp_report_series_set_dashed(cJSON *series, int dashed);
+
+/* The HTML page of the report (malloc'd); image paths are read relative to dir. */
+MCP_API int mcp_report_html(mcp_report *r, const char *dir, char **html);
 
 /* Writes report.json and report.html into dir (atomically). */
 MCP_API int mcp_report_write(mcp_report *r, const char *dir);

@@ -1,0 +1,365 @@
+/* stage_metrics.c: the `metrics` job stage -- the figures of `mcpost metrics` for an
+ * input against a reference, with maps, previews and the error-percentile plot
+ * (Firmino et al. 2024) in the report, and error-vs-spp curves for a series.
+ * Job keys are the flags of `mcpost metrics` with '_' for '-'. */
+#include "cli.h"
+
+#include <mcpost/metrics.h>
+#include <mcpost/progress.h>
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const char *const metrics_keys[] = {"input",
+                                           "reference",
+                                           "series",
+                                           "estimate",
+                                           "title",
+                                           "output",
+                                           "maps",
+                                           "ppd",
+                                           "distance_m",
+                                           "display_width_m",
+                                           "display_width_px",
+                                           "tone_mapper",
+                                           "start_exposure",
+                                           "stop_exposure",
+                                           "num_exposures",
+                                           "flip",
+                                           "percentiles",
+                                           "eps_rel",
+                                           "pmse_kernel",
+                                           "pmse_dpi",
+                                           "pmse_distance_in",
+                                           "pmse_filter_reference",
+                                           "pmse_tone_map",
+                                           "spectra",
+                                           "spectra_tile_size",
+                                           "spectra_cutoff",
+                                           NULL};
+
+/* ---- settings ---- */
+
+static int
+opt_enum(const mcp_node *settings, const char *key, int (*parse)(const char *, void *),
+         void *out)
+{
+    const char *s = NULL;
+    if (mcp_node_opt_string(settings, key, &s)) return -1;
+    if (s && parse(s, out))
+        return mcp_node_error(mcp_node_get(settings, key), "%s", mcp_error_message());
+    return 0;
+}
+
+static int
+parse_tonemap(const char *s, void *out)
+{
+    return mcp_tonemap_from_name(s, out);
+}
+
+static int
+parse_pkernel(const char *s, void *out)
+{
+    return mcp_pkernel_kind_from_name(s, out);
+}
+
+/* flip: [ldr, hdr] | ldr | none */
+static int
+read_flip(const mcp_node *settings, mcp_metrics_options *o)
+{
+    const mcp_node *n = mcp_node_get(settings, "flip");
+    if (!n) return 0;
+    if (n->kind == MCP_NODE_MAP)
+        return mcp_node_error(n, "flip must be ldr, hdr, none or a list of them");
+    o->flip_ldr = o->flip_hdr = 0;
+    int m = n->kind == MCP_NODE_SEQ ? n->count : 1;
+    for (int i = 0; i < m; i++) {
+        const mcp_node *item = n->kind == MCP_NODE_SEQ ? n->items[i] : n;
+        const char *s = NULL;
+        if (mcp_node_string(item, "flip", &s)) return -1;
+        if (!strcmp(s, "ldr"))
+            o->flip_ldr = 1;
+        else if (!strcmp(s, "hdr"))
+            o->flip_hdr = 1;
+        else if (strcmp(s, "none"))
+            return mcp_node_error(item, "flip: unknown '%s' (use ldr, hdr or none)", s);
+    }
+    return 0;
+}
+
+/* A bad value found by the library is reported at the stage's line. */
+static int
+at_line(const mcp_node *settings, const char *key)
+{
+    const mcp_node *n = mcp_node_get(settings, key);
+    return n ? mcp_node_error(n, "%s", mcp_error_message()) : -1;
+}
+
+static int
+read_options(const mcp_node *s, mcp_metrics_options *o)
+{
+    double *p = NULL;
+    int np = 0, rc = -1;
+    int spectra = o->spectra, filt = o->pmse.filter_reference;
+    if (mcp_node_opt_double(s, "ppd", &o->flip.ppd) ||
+        mcp_node_opt_double(s, "distance_m", &o->flip.distance_m) ||
+        mcp_node_opt_double(s, "display_width_m", &o->flip.display_width_m) ||
+        mcp_node_opt_double(s, "display_width_px", &o->flip.display_width_px) ||
+        opt_enum(s, "tone_mapper", parse_tonemap, &o->flip.tone_mapper) ||
+        mcp_node_opt_double(s, "start_exposure", &o->flip.start_exposure) ||
+        mcp_node_opt_double(s, "stop_exposure", &o->flip.stop_exposure) ||
+        mcp_node_opt_int(s, "num_exposures", &o->flip.num_exposures) || read_flip(s, o) ||
+        mcp_node_opt_doubles(s, "percentiles", &p, &np) ||
+        mcp_node_opt_double(s, "eps_rel", &o->eps_rel) ||
+        opt_enum(s, "pmse_kernel", parse_pkernel, &o->pmse.kernel.kind) ||
+        mcp_node_opt_double(s, "pmse_dpi", &o->pmse.kernel.dpi) ||
+        mcp_node_opt_double(s, "pmse_distance_in", &o->pmse.kernel.distance_in) ||
+        mcp_node_opt_bool(s, "pmse_filter_reference", &filt) ||
+        opt_enum(s, "pmse_tone_map", parse_tonemap, &o->pmse.tone_map) ||
+        mcp_node_opt_bool(s, "spectra", &spectra) ||
+        mcp_node_opt_int(s, "spectra_tile_size", &o->spectra_opt.tile_size) ||
+        mcp_node_opt_double(s, "spectra_cutoff", &o->spectra_opt.cutoff))
+        goto done;
+    o->spectra = spectra;
+    o->pmse.filter_reference = filt;
+    if (p && mcp_metrics_set_percentiles(o, p, np)) {
+        at_line(s, "percentiles");
+        goto done;
+    }
+    if (o->flip_hdr &&
+        mcp_tonemap_flip_coefficients(o->flip.tone_mapper, (float[6]){0})) {
+        at_line(s, "tone_mapper");
+        goto done;
+    }
+    rc = 0;
+done:
+    free(p);
+    return rc;
+}
+
+/* ---- report pieces ---- */
+
+/* Firmino et al. 2024's error-percentile plot: the sorted per-value RelSE against the
+ * percentile on a logit axis, log error; an estimate (a per-value estimated RelSE map,
+ * e.g. SURE^r) beside it when given. */
+static int
+percentile_plot(cJSON *section, const mcp_image *relse, const mcp_image *estimate,
+                const char *estimate_name)
+{
+    enum { N = 48 };
+    double p[N], truth[N], est[N];
+    double n = (double)relse->width * relse->height * relse->channels;
+    double p_hi = 1.0 - 1.0 / n < 0.9999 ? 1.0 - 1.0 / n : 0.9999, p_lo = 0.5;
+    if (!(p_hi > p_lo)) return 0; /* too few values for a curve */
+    double z0 = mcp_logit(p_lo), z1 = mcp_logit(p_hi);
+    for (int i = 0; i < N; i++)
+        p[i] = mcp_logistic(z0 + (z1 - z0) * i / (N - 1));
+    if (mcp_image_percentiles(relse, p, N, truth)) return -1;
+    cJSON *plot = mcp_report_add_plot(section, "error percentiles (Firmino et al. 2024)",
+                                      "percentile", MCP_AXIS_LOGIT,
+                                      "relative squared error", MCP_AXIS_LOG);
+    if (!plot ||
+        !mcp_report_plot_add_series(plot, "true RelSE", MCP_SERIES_LINE, p, truth, N))
+        return -1;
+    if (estimate) {
+        cJSON *s;
+        if (mcp_image_percentiles(estimate, p, N, est) ||
+            !(s = mcp_report_plot_add_series(plot, estimate_name, MCP_SERIES_LINE, p, est,
+                                             N)) ||
+            mcp_report_series_set_dashed(s, 1))
+            return -1;
+    }
+    return 0;
+}
+
+static int
+write_preview(mcp_job *job, const mcp_image *img, const char *rel, cJSON *section,
+              const char *caption)
+{
+    char path[4096];
+    int rgb[3];
+    mcp_image *view = NULL;
+    if (mcp_rgb_channels(img, rgb) || mcp_job_output_path(job, rel, path, sizeof path) ||
+        mcp_image_copy_channels(img, rgb, 3, &view))
+        return -1;
+    /* Displayed as the PNG writer shows linear values: clamped and sRGB-encoded. */
+    mcp_image *shown = NULL;
+    int rc = mcp_tonemap_apply(view, MCP_TONEMAP_CLAMP, &shown) ||
+             mcp_image_write(shown, path, NULL) ||
+             mcp_report_add_image(section, rel, caption);
+    mcp_image_free(shown);
+    mcp_image_free(view);
+    return rc ? -1 : 0;
+}
+
+/* Error-vs-spp curves: every member of a series against the reference. */
+static int
+series_curves(mcp_job *job, const mcp_node *settings, const mcp_series *series,
+              const mcp_image *ref, const mcp_metrics_options *opt, cJSON *section)
+{
+    int n = series->count, rc = -1;
+    mcp_metrics_options o = *opt;
+    o.n_percentiles = 0;
+    o.spectra = 0;
+    double *v = mcp_calloc((size_t)n * 8, sizeof *v);
+    if (!v) return -1;
+    double *spp = v, *mse = v + n, *rmse = v + 2 * n, *rel = v + 3 * n, *psnr = v + 4 * n,
+           *pmse = v + 5 * n, *fl = v + 6 * n, *fh = v + 7 * n;
+    cJSON *table =
+        mcp_report_add_table(section, "error against the reference per sample count",
+                             (const char *const[]){"spp", "MSE", "RMSE", "relMSE", "PSNR",
+                                                   "pMSE", "LDR-FLIP", "HDR-FLIP"},
+                             8);
+    if (!table) goto done;
+    mcp_progress prog;
+    mcp_progress_begin(&prog, "metrics: series", n);
+    for (int i = 0; i < n; i++) {
+        mcp_dump *d = NULL;
+        mcp_metrics m;
+        if (mcp_series_load(series, i, &d)) {
+            mcp_progress_end(&prog);
+            at_line(settings, "series");
+            goto done;
+        }
+        spp[i] = series->spp && series->spp[i] > 0 ? series->spp[i] : d->spp;
+        int failed = mcp_metrics_compute(d->color, ref, &o, &m, NULL);
+        mcp_dump_free(d);
+        if (failed) {
+            mcp_progress_end(&prog);
+            goto done;
+        }
+        mse[i] = m.mse;
+        rmse[i] = m.rmse;
+        rel[i] = m.relmse;
+        psnr[i] = m.psnr;
+        pmse[i] = m.pmse;
+        fl[i] = m.has_flip_ldr ? m.flip_ldr.mean : NAN;
+        fh[i] = m.has_flip_hdr ? m.flip_hdr.mean : NAN;
+        if (mcp_report_table_add_row(table, "dddddddd", spp[i], mse[i], rmse[i], rel[i],
+                                     psnr[i], pmse[i], fl[i], fh[i])) {
+            mcp_progress_end(&prog);
+            goto done;
+        }
+        mcp_progress_update(&prog, i + 1);
+    }
+    mcp_progress_end(&prog);
+    cJSON *plot = mcp_report_add_plot(section, "error against samples per pixel", "spp",
+                                      MCP_AXIS_LOG, "error", MCP_AXIS_LOG);
+    if (!plot ||
+        !mcp_report_plot_add_series(plot, "MSE", MCP_SERIES_LINE_POINTS, spp, mse, n) ||
+        !mcp_report_plot_add_series(plot, "relMSE", MCP_SERIES_LINE_POINTS, spp, rel,
+                                    n) ||
+        !mcp_report_plot_add_series(plot, "pMSE", MCP_SERIES_LINE_POINTS, spp, pmse, n))
+        goto done;
+    /* An unbiased estimator's MSE falls as 1/spp: a guide through the first point. */
+    if (n > 1 && spp[0] > 0 && mse[0] > 0) {
+        double gx[2] = {spp[0], spp[n - 1]},
+               gy[2] = {mse[0], mse[0] * spp[0] / spp[n - 1]};
+        cJSON *g = mcp_report_plot_add_series(plot, "1/spp", MCP_SERIES_LINE, gx, gy, 2);
+        if (!g || mcp_report_series_set_dashed(g, 1)) goto done;
+    }
+    if (o.flip_ldr || o.flip_hdr) {
+        cJSON *fp = mcp_report_add_plot(section, "FLIP against samples per pixel", "spp",
+                                        MCP_AXIS_LOG, "mean FLIP", MCP_AXIS_LOG);
+        if (!fp ||
+            (o.flip_ldr && !mcp_report_plot_add_series(
+                               fp, "LDR-FLIP", MCP_SERIES_LINE_POINTS, spp, fl, n)) ||
+            (o.flip_hdr && !mcp_report_plot_add_series(
+                               fp, "HDR-FLIP", MCP_SERIES_LINE_POINTS, spp, fh, n)))
+            goto done;
+    }
+    (void)job;
+    rc = 0;
+done:
+    free(v);
+    return rc;
+}
+
+/* ---- the stage ---- */
+
+static int
+stage_metrics(mcp_job *job, const mcp_node *settings)
+{
+    mcp_metrics_options o = mcp_metrics_defaults();
+    const char *input = NULL, *reference = NULL, *title = NULL, *output = NULL,
+               *series_name = NULL, *estimate_name = NULL;
+    int want_maps = 1;
+    if (mcp_node_opt_string(settings, "input", &input) ||
+        mcp_node_opt_string(settings, "reference", &reference) ||
+        mcp_node_opt_string(settings, "series", &series_name) ||
+        mcp_node_opt_string(settings, "estimate", &estimate_name) ||
+        mcp_node_opt_string(settings, "title", &title) ||
+        mcp_node_opt_string(settings, "output", &output) ||
+        mcp_node_opt_bool(settings, "maps", &want_maps) || read_options(settings, &o))
+        return -1;
+    if (!reference) {
+        const mcp_node *n = NULL;
+        return mcp_node_require(settings, "reference", "stage 'metrics'", &n);
+    }
+    if (!input && !series_name)
+        return mcp_node_error(settings,
+                              "stage 'metrics' needs 'input' or 'series' (or both)");
+    if (estimate_name && !input)
+        return mcp_node_error(mcp_node_get(settings, "estimate"),
+                              "'estimate' needs 'input' (the image it estimates)");
+
+    const mcp_image *ref = NULL, *test = NULL, *estimate = NULL;
+    const mcp_series *series = NULL;
+    if (mcp_job_image(job, settings, "reference", &ref) ||
+        (input && mcp_job_image(job, settings, "input", &test)) ||
+        (estimate_name && mcp_job_image(job, settings, "estimate", &estimate)) ||
+        (series_name && mcp_job_series(job, settings, "series", &series)))
+        return -1;
+
+    char default_title[512], prefix[1024];
+    snprintf(default_title, sizeof default_title, "metrics: %s against %s",
+             input ? input : series_name, reference);
+    snprintf(prefix, sizeof prefix, "%s/", output ? output : input ? input : series_name);
+    cJSON *section =
+        mcp_report_section(mcp_job_report(job), "metrics", title ? title : default_title);
+    if (!section) return -1;
+    cJSON_AddStringToObject(section, "reference", reference);
+    cJSON_AddNumberToObject(section, "width", ref->width);
+    cJSON_AddNumberToObject(section, "height", ref->height);
+
+    int rc = -1;
+    mcp_metrics_maps maps = {0};
+    if (test) {
+        mcp_metrics m;
+        cJSON_AddStringToObject(section, "input", input);
+        if (estimate && !mcp_image_same_size(estimate, test)) {
+            at_line(settings, "estimate");
+            goto done;
+        }
+        mcp_note("metrics: %s against %s", input, reference);
+        if (mcp_metrics_compute(test, ref, &o, &m, &maps) ||
+            mcp_metrics_json(&m, &o, section))
+            goto done;
+        if (percentile_plot(section, maps.relse, estimate, estimate_name)) goto done;
+        if (want_maps) {
+            char rel_t[1200], rel_r[1200], path[4096];
+            snprintf(rel_t, sizeof rel_t, "%stest.png", prefix);
+            snprintf(rel_r, sizeof rel_r, "%sreference.png", prefix);
+            /* mcp_job_output_path creates the folders of prefix */
+            if (mcp_job_output_path(job, rel_t, path, sizeof path) ||
+                write_preview(job, test, rel_t, section, input) ||
+                write_preview(job, ref, rel_r, section, reference) ||
+                mcp_metrics_write_maps(&maps, mcp_job_output_dir(job), prefix, section))
+                goto done;
+        }
+    }
+    if (series && series_curves(job, settings, series, ref, &o, section)) goto done;
+    rc = 0;
+done:
+    mcp_metrics_maps_free(&maps);
+    return rc;
+}
+
+const mcp_stage mcp_stage_metrics = {"metrics",
+                                     "compare an input and/or a series with a "
+                                     "reference (MSE, relMSE, PSNR, pMSE, FLIP, "
+                                     "RelSE percentiles, blue noise) with maps and "
+                                     "plots",
+                                     metrics_keys, stage_metrics};

@@ -1,0 +1,131 @@
+/* flip.h: LDR-FLIP and HDR-FLIP (Andersson et al. 2020, 2021), as NVIDIA's reference
+ * implementation (NVlabs/flip v1.6, src/cpp/FLIP.h) computes them, and FLIP's spatial
+ * contrast-sensitivity filter as a linear operator M for SURE_M.
+ *
+ * Everything runs in float32 with FLIP's order of operations: separable x-then-y
+ * passes with clamp-to-edge borders, tap sums taken sequentially from -r to r, and the
+ * mean as a float running sum in row-major order (notes/flip.md §3, §8). Where libm's
+ * expf/powf agree with the reference build's, the numbers are the reference's own
+ * (e.g. 0.169141844 for flat grey 128 vs 140, float artefacts included); SPEC asks
+ * for 1e-5 on means and 1e-4 per pixel. Per-pixel results depend neither on the thread
+ * count nor on the SIMD width (AVX2 or not).
+ *
+ * Two deliberate departures from v1.6 (SPEC "FLIP"):
+ *  - HDR-FLIP clamps a zero median (and maximum) reference luminance to FLT_EPSILON
+ *    before choosing exposures (v1.6 silently returns 0; v1.7 has the same fix);
+ *  - HDR-FLIP clamps negative input values to 0 before anything else (v1.6 tone-maps
+ *    large negative values to white).
+ * Inputs must be finite: NaN or Inf fails, naming the file and pixel.
+ *
+ * Inputs are linear RGB images; channels are found by mcp_rgb_channels() (R, G, B by
+ * name, else a 3-channel image in order, else a grey 1-channel image). The first image
+ * is the test image and the second the reference, as everywhere in mcpost. */
+#ifndef MCP_FLIP_H
+#define MCP_FLIP_H
+
+#include <mcpost/image.h>
+#include <mcpost/tonemap.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* FLIP's constants (FLIP.h FLIPConstants) and defaults. */
+#define MCP_FLIP_QC 0.7f
+#define MCP_FLIP_QF 0.5f
+#define MCP_FLIP_PC 0.4f
+#define MCP_FLIP_PT 0.95f
+#define MCP_FLIP_W 0.082f         /* feature-detector width in degrees */
+#define MCP_FLIP_EXPOSURE_T 0.85f /* tone-mapped value that picks exposures */
+
+typedef struct mcp_flip_options {
+    /* Pixels per degree of visual angle; 0 computes it from the viewing condition
+     * below as distance_m * (display_width_px / display_width_m) * pi / 180 [0]. */
+    double ppd;
+    double distance_m;       /* observer to screen [0.7] */
+    double display_width_m;  /* [0.7] */
+    double display_width_px; /* [3840]; the defaults give ppd 67.0206451 */
+    /* HDR-FLIP only. */
+    mcp_tonemap tone_mapper; /* aces, hable or reinhard [aces] */
+    double start_exposure;   /* stops; NAN: automatic from the reference [NAN] */
+    double stop_exposure;    /* stops; NAN: automatic [NAN] */
+    int num_exposures;       /* >= 2; 0: max(2, ceil(stop - start)) [0] */
+} mcp_flip_options;
+
+MCP_API mcp_flip_options mcp_flip_defaults(void);
+
+/* The pixels per degree that opt selects, in float as FLIP computes it. Fails naming
+ * the field when it is not positive and finite. */
+MCP_API int mcp_flip_ppd(const mcp_flip_options *opt, float *ppd);
+
+typedef struct mcp_flip_result {
+    double mean; /* the FLIP value: arithmetic mean of the per-pixel map */
+    float ppd;   /* pixels per degree used */
+    /* HDR-FLIP only (0 for LDR-FLIP): the exposures used, in stops. */
+    float start_exposure, stop_exposure;
+    int num_exposures;
+} mcp_flip_result;
+
+/* LDR-FLIP of test against ref. Both are clamped to [0, 1] first, as the reference
+ * does. map (may be NULL) receives one channel "FLIP" in [0, 1]. opt may be NULL. */
+MCP_API int mcp_flip_ldr(const mcp_image *test, const mcp_image *ref,
+                         const mcp_flip_options *opt, mcp_flip_result *res,
+                         mcp_image **map);
+
+/* HDR-FLIP: LDR-FLIP of the tone-mapped, clamped pair at each exposure
+ * start + i (stop - start)/(N - 1), keeping the per-pixel maximum. map (may be NULL)
+ * receives "FLIP"; exposure_map (may be NULL) receives "exposure", i/(N - 1) of the
+ * exposure that gave the maximum (0 where every exposure gave 0). */
+MCP_API int mcp_flip_hdr(const mcp_image *test, const mcp_image *ref,
+                         const mcp_flip_options *opt, mcp_flip_result *res,
+                         mcp_image **map, mcp_image **exposure_map);
+
+/* ---- FLIP's parts, for tests and for other modules ---- */
+
+/* The 1D filters at a given ppd (FLIP.h setSpatialFilters, setFeatureFilter).
+ * spatial: 2 * spatial_radius + 1 taps of y, cx (each sums to 1) and cz1, cz2 (the
+ * GaussianSqrt split of the blue-yellow sum of Gaussians: cz1 x cz1 + cz2 x cz2 sums
+ * to 1). feature: 2 * feature_radius + 1 taps of the Gaussian g and its first and
+ * second derivatives dg, ddg (positive taps sum to 1, negative to -1). */
+typedef struct mcp_flip_filters {
+    float ppd;
+    int spatial_radius;
+    float *y, *cx, *cz1, *cz2;
+    int feature_radius;
+    float *g, *dg, *ddg;
+} mcp_flip_filters;
+
+MCP_API int mcp_flip_filters_new(float ppd, mcp_flip_filters **out);
+MCP_API void mcp_flip_filters_free(mcp_flip_filters *f);
+
+/* cmax = HyAB(Hunt(Lab(green)), Hunt(Lab(blue)))^qc = 41.2760963 (FLIP.h
+ * computeMaxDistance, in float). */
+MCP_API float mcp_flip_cmax(void);
+
+/* The larger root x of tm(x) = 0.85 for FLIP's tone curve (FLIP.h computeExposures):
+ * 2.1188723 (aces), 3.1277493 (hable), 5.6666667 (reinhard). */
+MCP_API int mcp_flip_exposure_xmax(mcp_tonemap tm, float *xmax);
+
+/* The automatic exposure range of a reference: start = log2(xmax / Ymax),
+ * stop = log2(xmax / Ymedian) with Y the Rec. 709 luminance of max(ref, 0), Ymedian
+ * element n/2 of the sorted luminances (zeros included) and both clamped to
+ * FLT_EPSILON (our departure). */
+MCP_API int mcp_flip_auto_exposures(const mcp_image *ref, mcp_tonemap tm, float *start,
+                                    float *stop);
+
+/* ---- the CSF operator M of SURE_M (SPEC "Perceptual SURE_M", notes/flip.md §4) ----
+ *
+ * M = T^-1 blkdiag(K_Y, K_Cx, K_Cz) T: linear RGB -> YCxCz (without FLIP's -16 offset,
+ * which the unit-DC filters pass through, so M is exactly linear) -> FLIP's CSF filter
+ * per opponent channel with replicate borders -> linear RGB, without FLIP's clamp.
+ * M preserves constants. With replicate borders M is not symmetric; the transpose
+ * scatter-adds the taps that the borders fold. ppd <= 0 means FLIP's default 67.02.
+ * Input channels as for FLIP; output channels R, G, B. */
+MCP_API int mcp_flip_csf_apply(const mcp_image *rgb, double ppd, mcp_image **out);
+MCP_API int mcp_flip_csf_apply_transpose(const mcp_image *rgb, double ppd,
+                                         mcp_image **out);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,652 @@
+/* metrics.c: MSE, RMSE, relMSE, PSNR, pMSE, RelSE percentiles and both FLIPs of a
+ * test image against a reference (SPEC "metrics", "perceptual", estimate "Error
+ * distribution"; definitions in metrics.h). */
+#define _POSIX_C_SOURCE 200809L /* mkdir */
+#include <mcpost/metrics.h>
+#include <mcpost/filter.h>
+#include <mcpost/imageio.h>
+#include <mcpost/report.h>
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+#define PARALLEL_MIN_PIXELS 16384
+
+static const char *
+src_name(const mcp_image *img)
+{
+    return img->source ? img->source : "image";
+}
+
+/* Sorts floats ascending (no NaN). */
+static int
+cmp_float(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
+/* Nearest-rank index of p in n sorted values. */
+static size_t
+rank_index(double p, size_t n)
+{
+    double k = ceil(p * (double)n) - 1.0;
+    if (k < 0.0) k = 0.0;
+    if (k > (double)(n - 1)) k = (double)(n - 1);
+    return (size_t)k;
+}
+
+/* ---- options ---- */
+
+mcp_pmse_options
+mcp_pmse_defaults(void)
+{
+    return (mcp_pmse_options){.kernel = mcp_pkernel_defaults(),
+                              .filter_reference = 0,
+                              .tone_map = MCP_TONEMAP_CLAMP};
+}
+
+mcp_metrics_options
+mcp_metrics_defaults(void)
+{
+    mcp_metrics_options o;
+    memset(&o, 0, sizeof o);
+    o.eps_rel = MCP_EPS_REL;
+    o.n_percentiles = 3;
+    o.percentiles[0] = 0.5;
+    o.percentiles[1] = 0.9;
+    o.percentiles[2] = 0.99;
+    o.pmse = mcp_pmse_defaults();
+    o.flip = mcp_flip_defaults();
+    o.flip_ldr = 1;
+    o.flip_hdr = 1;
+    o.spectra = 1;
+    o.spectra_opt = mcp_spectra_defaults();
+    return o;
+}
+
+int
+mcp_metrics_set_percentiles(mcp_metrics_options *opt, const double *p, int n_p)
+{
+    if (n_p < 1 || n_p > MCP_METRICS_MAX_PERCENTILES)
+        return mcp_error("percentiles: give 1 to %d values (got %d)",
+                         MCP_METRICS_MAX_PERCENTILES, n_p);
+    for (int i = 0; i < n_p; i++)
+        if (!(p[i] >= 0.0 && p[i] <= 1.0))
+            return mcp_error("percentiles: each p must be in [0, 1] (got %g)", p[i]);
+    opt->n_percentiles = n_p;
+    memcpy(opt->percentiles, p, (size_t)n_p * sizeof *p);
+    return 0;
+}
+
+/* ---- checks ---- */
+
+int
+mcp_metrics_check_pair(const mcp_image *test, const mcp_image *ref, int rgb_test[3],
+                       int rgb_ref[3])
+{
+    if (!test || !ref) return mcp_error("metrics: missing image");
+    if (mcp_rgb_channels(test, rgb_test) || mcp_rgb_channels(ref, rgb_ref)) return -1;
+    if (!mcp_image_same_size(test, ref)) return -1;
+    if (test->width < 1 || test->height < 1)
+        return mcp_error("%s: empty image", src_name(test));
+    const mcp_image *imgs[2] = {test, ref};
+    const int *idx[2] = {rgb_test, rgb_ref};
+    for (int i = 0; i < 2; i++)
+        for (int y = 0; y < imgs[i]->height; y++)
+            for (int x = 0; x < imgs[i]->width; x++) {
+                const float *p = mcp_image_px(imgs[i], x, y);
+                for (int c = 0; c < 3; c++)
+                    if (!isfinite(p[idx[i][c]]))
+                        return mcp_error("%s: non-finite value %g at pixel (%d, %d) "
+                                         "channel %s",
+                                         src_name(imgs[i]), (double)p[idx[i][c]], x, y,
+                                         imgs[i]->names[idx[i][c]]);
+            }
+    return 0;
+}
+
+/* ---- sums over pixels x channels ---- */
+
+typedef enum { SUM_SQ, SUM_REL, SUM_SRGB } sum_kind;
+
+static float
+display(float v)
+{
+    v = v > 0.0f ? (v < 1.0f ? v : 1.0f) : 0.0f;
+    return mcp_linear_to_srgb(v);
+}
+
+/* Mean over pixels x 3 of a per-value error; rows summed in double, then in order. */
+static double
+mean_error(const mcp_image *t, const int *it, const mcp_image *r, const int *ir,
+           sum_kind kind, double eps)
+{
+    int w = t->width, h = t->height;
+    double *rows = malloc((size_t)h * sizeof *rows), total = 0.0;
+    if (!rows) return NAN;
+#pragma omp parallel for if ((size_t)w * h >= PARALLEL_MIN_PIXELS)
+    for (int y = 0; y < h; y++) {
+        double s = 0.0;
+        for (int x = 0; x < w; x++) {
+            const float *pt = mcp_image_px(t, x, y), *pr = mcp_image_px(r, x, y);
+            for (int c = 0; c < 3; c++) {
+                double a = pt[it[c]], b = pr[ir[c]], d;
+                if (kind == SUM_SRGB) {
+                    d = (double)display(pt[it[c]]) - display(pr[ir[c]]);
+                    s += d * d;
+                } else {
+                    d = a - b;
+                    s += kind == SUM_REL ? d * d / (b * b + eps) : d * d;
+                }
+            }
+        }
+        rows[y] = s;
+    }
+    for (int y = 0; y < h; y++)
+        total += rows[y];
+    free(rows);
+    return total / ((double)w * h * 3.0);
+}
+
+static int
+mean_checked(const mcp_image *test, const mcp_image *ref, sum_kind kind, double eps,
+             double *out)
+{
+    int it[3], ir[3];
+    if (mcp_metrics_check_pair(test, ref, it, ir)) return -1;
+    double m = mean_error(test, it, ref, ir, kind, eps);
+    if (isnan(m))
+        return mcp_error("metrics: out of memory (%dx%d)", test->width, test->height);
+    *out = m;
+    return 0;
+}
+
+int
+mcp_mse(const mcp_image *test, const mcp_image *ref, double *mse)
+{
+    return mean_checked(test, ref, SUM_SQ, 0.0, mse);
+}
+
+int
+mcp_relmse(const mcp_image *test, const mcp_image *ref, double eps_rel, double *relmse)
+{
+    if (!(eps_rel > 0.0) || !isfinite(eps_rel))
+        return mcp_error("metrics: eps_rel must be > 0 (got %g)", eps_rel);
+    return mean_checked(test, ref, SUM_REL, eps_rel, relmse);
+}
+
+static double
+psnr_of(double mse_display)
+{
+    return mse_display > 0.0 ? 10.0 * log10(1.0 / mse_display) : INFINITY;
+}
+
+int
+mcp_psnr(const mcp_image *test, const mcp_image *ref, double *psnr)
+{
+    double m;
+    if (mean_checked(test, ref, SUM_SRGB, 0.0, &m)) return -1;
+    *psnr = psnr_of(m);
+    return 0;
+}
+
+/* ---- pMSE ---- */
+
+/* T applied to the RGB channels, as a packed 3-channel image. */
+static int
+tone_rgb(const mcp_image *img, const int *idx, mcp_tonemap tm, mcp_image **out)
+{
+    mcp_image *o = NULL;
+    if (mcp_image_new(img->width, img->height, 3, (const char *const[]){"R", "G", "B"},
+                      &o))
+        return -1;
+    for (int y = 0; y < img->height; y++)
+        for (int x = 0; x < img->width; x++) {
+            const float *p = mcp_image_px(img, x, y);
+            float *q = mcp_image_px(o, x, y);
+            for (int c = 0; c < 3; c++)
+                q[c] = mcp_tonemap_value(tm, p[idx[c]]);
+        }
+    *out = o;
+    return 0;
+}
+
+static int
+pmse_checked(const mcp_image *test, const int *it, const mcp_image *ref, const int *ir,
+             const mcp_pmse_options *opt, double *out)
+{
+    mcp_pmse_options d = mcp_pmse_defaults();
+    if (!opt) opt = &d;
+    if ((unsigned)opt->tone_map > MCP_TONEMAP_REINHARD)
+        return mcp_error("pmse: unknown tone map %d", (int)opt->tone_map);
+    double *taps = NULL;
+    int radius, rc = -1;
+    mcp_image *tt = NULL, *tr = NULL, *gt = NULL, *hr = NULL;
+    if (mcp_pkernel_taps(&opt->kernel, &taps, &radius)) return -1;
+    /* E = sum_c |g * T(O_c) - h * T(I_c)|^2 with replicate borders (SPEC perceptual;
+     * the borders are our choice, stated there). */
+    if (tone_rgb(test, it, opt->tone_map, &tt) || tone_rgb(ref, ir, opt->tone_map, &tr) ||
+        mcp_pkernel_filter(tt, taps, radius, &gt))
+        goto done;
+    if (opt->filter_reference && mcp_pkernel_filter(tr, taps, radius, &hr)) goto done;
+    const mcp_image *h_ref = opt->filter_reference ? hr : tr;
+    int w = test->width, h = test->height;
+    double *rows = mcp_malloc((size_t)h * sizeof *rows), e = 0.0;
+    if (!rows) goto done;
+#pragma omp parallel for if ((size_t)w * h >= PARALLEL_MIN_PIXELS)
+    for (int y = 0; y < h; y++) {
+        double s = 0.0;
+        const float *a = gt->data + (size_t)y * w * 3,
+                    *b = h_ref->data + (size_t)y * w * 3;
+        for (int i = 0; i < 3 * w; i++) {
+            double dv = (double)a[i] - b[i];
+            s += dv * dv;
+        }
+        rows[y] = s;
+    }
+    for (int y = 0; y < h; y++)
+        e += rows[y];
+    free(rows);
+    *out = e / ((double)w * h * 3.0);
+    rc = 0;
+done:
+    free(taps);
+    mcp_image_free(hr);
+    mcp_image_free(gt);
+    mcp_image_free(tr);
+    mcp_image_free(tt);
+    return rc;
+}
+
+int
+mcp_pmse(const mcp_image *test, const mcp_image *ref, const mcp_pmse_options *opt,
+         double *pmse)
+{
+    int it[3], ir[3];
+    if (mcp_metrics_check_pair(test, ref, it, ir)) return -1;
+    return pmse_checked(test, it, ref, ir, opt, pmse);
+}
+
+/* ---- RelSE ---- */
+
+static int
+relse_checked(const mcp_image *test, const int *it, const mcp_image *ref, const int *ir,
+              double eps, mcp_image **out)
+{
+    mcp_image *o = NULL;
+    if (mcp_image_new(test->width, test->height, 3, (const char *const[]){"R", "G", "B"},
+                      &o))
+        return -1;
+#pragma omp parallel for if ((size_t)test->width * test->height >= PARALLEL_MIN_PIXELS)
+    for (int y = 0; y < test->height; y++)
+        for (int x = 0; x < test->width; x++) {
+            const float *pt = mcp_image_px(test, x, y), *pr = mcp_image_px(ref, x, y);
+            double m = pt[it[0]];
+            m = pt[it[1]] > m ? pt[it[1]] : m;
+            m = pt[it[2]] > m ? pt[it[2]] : m;
+            float *q = mcp_image_px(o, x, y);
+            for (int c = 0; c < 3; c++) {
+                double d = (double)pt[it[c]] - pr[ir[c]];
+                q[c] = (float)(d * d / (m * m + eps));
+            }
+        }
+    mcp_image_set_source(o, "RelSE");
+    *out = o;
+    return 0;
+}
+
+int
+mcp_relse_map(const mcp_image *test, const mcp_image *ref, double eps_rel,
+              mcp_image **out)
+{
+    *out = NULL;
+    int it[3], ir[3];
+    if (!(eps_rel > 0.0) || !isfinite(eps_rel))
+        return mcp_error("metrics: eps_rel must be > 0 (got %g)", eps_rel);
+    if (mcp_metrics_check_pair(test, ref, it, ir)) return -1;
+    return relse_checked(test, it, ref, ir, eps_rel, out);
+}
+
+int
+mcp_image_percentiles(const mcp_image *img, const double *p, int n_p, double *out)
+{
+    size_t n;
+    if (mcp_size_mul3((size_t)img->width, (size_t)img->height, (size_t)img->channels,
+                      &n) ||
+        n == 0)
+        return mcp_error("%s: no values for percentiles", src_name(img));
+    for (int k = 0; k < n_p; k++)
+        if (!(p[k] >= 0.0 && p[k] <= 1.0))
+            return mcp_error("percentiles: each p must be in [0, 1] (got %g)", p[k]);
+    float *v = mcp_malloc(n * sizeof *v);
+    if (!v) return -1;
+    size_t i = 0;
+    for (int y = 0; y < img->height; y++)
+        for (int x = 0; x < img->width; x++) {
+            const float *q = mcp_image_px(img, x, y);
+            for (int c = 0; c < img->channels; c++)
+                v[i++] = q[c];
+        }
+    for (i = 0; i < n; i++)
+        if (isnan(v[i])) {
+            free(v);
+            return mcp_error("%s: NaN value among the percentiles' values",
+                             src_name(img));
+        }
+    qsort(v, n, sizeof *v, cmp_float);
+    for (int k = 0; k < n_p; k++)
+        out[k] = v[rank_index(p[k], n)];
+    free(v);
+    return 0;
+}
+
+/* ---- everything ---- */
+
+void
+mcp_metrics_maps_free(mcp_metrics_maps *maps)
+{
+    if (!maps) return;
+    mcp_image_free(maps->sq_error);
+    mcp_image_free(maps->relse);
+    mcp_image_free(maps->flip_ldr);
+    mcp_image_free(maps->flip_hdr);
+    mcp_image_free(maps->flip_hdr_exposure);
+    mcp_image_free(maps->spectra);
+    memset(maps, 0, sizeof *maps);
+}
+
+static int
+sq_error_map(const mcp_image *test, const int *it, const mcp_image *ref, const int *ir,
+             mcp_image **out)
+{
+    mcp_image *o = NULL;
+    if (mcp_image_new(test->width, test->height, 3, (const char *const[]){"R", "G", "B"},
+                      &o))
+        return -1;
+    for (int y = 0; y < test->height; y++)
+        for (int x = 0; x < test->width; x++) {
+            const float *pt = mcp_image_px(test, x, y), *pr = mcp_image_px(ref, x, y);
+            float *q = mcp_image_px(o, x, y);
+            for (int c = 0; c < 3; c++) {
+                double d = (double)pt[it[c]] - pr[ir[c]];
+                q[c] = (float)(d * d);
+            }
+        }
+    mcp_image_set_source(o, "squared error");
+    *out = o;
+    return 0;
+}
+
+int
+mcp_metrics_compute(const mcp_image *test, const mcp_image *ref,
+                    const mcp_metrics_options *opt, mcp_metrics *out,
+                    mcp_metrics_maps *maps)
+{
+    mcp_metrics_options d = mcp_metrics_defaults();
+    if (!opt) opt = &d;
+    if (maps) memset(maps, 0, sizeof *maps);
+    memset(out, 0, sizeof *out);
+    if (!(opt->eps_rel > 0.0) || !isfinite(opt->eps_rel))
+        return mcp_error("metrics: eps_rel must be > 0 (got %g)", opt->eps_rel);
+    if (opt->n_percentiles < 0 || opt->n_percentiles > MCP_METRICS_MAX_PERCENTILES)
+        return mcp_error("metrics: n_percentiles must be in [0, %d] (got %d)",
+                         MCP_METRICS_MAX_PERCENTILES, opt->n_percentiles);
+    for (int k = 0; k < opt->n_percentiles; k++)
+        if (!(opt->percentiles[k] >= 0.0 && opt->percentiles[k] <= 1.0))
+            return mcp_error("percentiles: each p must be in [0, 1] (got %g)",
+                             opt->percentiles[k]);
+    int it[3], ir[3];
+    if (mcp_metrics_check_pair(test, ref, it, ir)) return -1;
+    mcp_image *relse = NULL;
+    int rc = -1;
+    out->n_values = (long)test->width * test->height * 3;
+    out->mse = mean_error(test, it, ref, ir, SUM_SQ, 0.0);
+    out->relmse = mean_error(test, it, ref, ir, SUM_REL, opt->eps_rel);
+    double display_mse = mean_error(test, it, ref, ir, SUM_SRGB, 0.0);
+    if (isnan(out->mse) || isnan(out->relmse) || isnan(display_mse))
+        return mcp_error("metrics: out of memory (%dx%d)", test->width, test->height);
+    out->rmse = sqrt(out->mse);
+    out->psnr = psnr_of(display_mse);
+    if (pmse_checked(test, it, ref, ir, &opt->pmse, &out->pmse) ||
+        relse_checked(test, it, ref, ir, opt->eps_rel, &relse))
+        goto done;
+    out->n_percentiles = opt->n_percentiles;
+    memcpy(out->percentiles, opt->percentiles, sizeof opt->percentiles);
+    if (opt->n_percentiles &&
+        mcp_image_percentiles(relse, opt->percentiles, opt->n_percentiles, out->relse))
+        goto done;
+    if (opt->flip_ldr) {
+        if (mcp_flip_ldr(test, ref, &opt->flip, &out->flip_ldr,
+                         maps ? &maps->flip_ldr : NULL))
+            goto done;
+        out->has_flip_ldr = 1;
+    }
+    if (opt->flip_hdr) {
+        if (mcp_flip_hdr(test, ref, &opt->flip, &out->flip_hdr,
+                         maps ? &maps->flip_hdr : NULL,
+                         maps ? &maps->flip_hdr_exposure : NULL))
+            goto done;
+        out->has_flip_hdr = 1;
+    }
+    if (opt->spectra && test->width >= opt->spectra_opt.tile_size &&
+        test->height >= opt->spectra_opt.tile_size) {
+        if (mcp_spectra_blue_noise(test, ref, &opt->spectra_opt, &out->spectra,
+                                   maps ? &maps->spectra : NULL))
+            goto done;
+        out->has_spectra = 1;
+    }
+    if (maps) {
+        if (sq_error_map(test, it, ref, ir, &maps->sq_error)) goto done;
+        maps->relse = relse;
+        relse = NULL;
+    }
+    rc = 0;
+done:
+    mcp_image_free(relse);
+    if (rc && maps) mcp_metrics_maps_free(maps);
+    return rc;
+}
+
+/* ---- output ---- */
+
+static int
+add_number(cJSON *obj, const char *key, double v)
+{
+    cJSON *item = isnan(v)   ? cJSON_CreateNull()
+                  : isinf(v) ? cJSON_CreateString(v > 0 ? "inf" : "-inf")
+                             : cJSON_CreateNumber(v);
+    if (!item) return mcp_error("out of memory for the report");
+    cJSON_AddItemToObject(obj, key, item);
+    return 0;
+}
+
+int
+mcp_metrics_json(const mcp_metrics *m, const mcp_metrics_options *opt, cJSON *obj)
+{
+    mcp_metrics_options d = mcp_metrics_defaults();
+    if (!opt) opt = &d;
+    if (add_number(obj, "mse", m->mse) || add_number(obj, "rmse", m->rmse) ||
+        add_number(obj, "relmse", m->relmse) || add_number(obj, "psnr", m->psnr) ||
+        add_number(obj, "pmse", m->pmse))
+        return -1;
+    cJSON *pm = cJSON_AddObjectToObject(obj, "pmse_settings");
+    if (!pm) return mcp_error("out of memory for the report");
+    cJSON_AddStringToObject(pm, "kernel", mcp_pkernel_kind_name(opt->pmse.kernel.kind));
+    if (opt->pmse.kernel.kind == MCP_PKERNEL_GAUSSIAN) {
+        cJSON_AddNumberToObject(pm, "dpi", opt->pmse.kernel.dpi);
+        cJSON_AddNumberToObject(pm, "distance_in", opt->pmse.kernel.distance_in);
+        cJSON_AddNumberToObject(
+            pm, "sigma_px",
+            mcp_pkernel_sigma_px(opt->pmse.kernel.dpi, opt->pmse.kernel.distance_in));
+    }
+    cJSON_AddStringToObject(pm, "reference_filter",
+                            opt->pmse.filter_reference ? "g" : "delta");
+    cJSON_AddStringToObject(pm, "tone_map", mcp_tonemap_name(opt->pmse.tone_map));
+    if (m->n_percentiles) {
+        cJSON *rp = cJSON_AddObjectToObject(obj, "relse_percentiles");
+        cJSON *ps = rp ? cJSON_AddArrayToObject(rp, "p") : NULL;
+        cJSON *vs = rp ? cJSON_AddArrayToObject(rp, "value") : NULL;
+        if (!vs) return mcp_error("out of memory for the report");
+        for (int k = 0; k < m->n_percentiles; k++) {
+            cJSON_AddItemToArray(ps, cJSON_CreateNumber(m->percentiles[k]));
+            cJSON_AddItemToArray(vs, cJSON_CreateNumber(m->relse[k]));
+        }
+    }
+    if (m->has_flip_ldr) {
+        cJSON *f = cJSON_AddObjectToObject(obj, "flip_ldr");
+        if (!f) return mcp_error("out of memory for the report");
+        cJSON_AddNumberToObject(f, "mean", m->flip_ldr.mean);
+        cJSON_AddNumberToObject(f, "ppd", m->flip_ldr.ppd);
+    }
+    if (m->has_flip_hdr) {
+        cJSON *f = cJSON_AddObjectToObject(obj, "flip_hdr");
+        if (!f) return mcp_error("out of memory for the report");
+        cJSON_AddNumberToObject(f, "mean", m->flip_hdr.mean);
+        cJSON_AddNumberToObject(f, "ppd", m->flip_hdr.ppd);
+        cJSON_AddStringToObject(f, "tone_mapper",
+                                mcp_tonemap_name(opt->flip.tone_mapper));
+        cJSON_AddNumberToObject(f, "start_exposure", m->flip_hdr.start_exposure);
+        cJSON_AddNumberToObject(f, "stop_exposure", m->flip_hdr.stop_exposure);
+        cJSON_AddNumberToObject(f, "num_exposures", m->flip_hdr.num_exposures);
+    }
+    if (m->has_spectra) {
+        cJSON *b = cJSON_AddObjectToObject(obj, "blue_noise");
+        if (!b) return mcp_error("out of memory for the report");
+        cJSON_AddNumberToObject(b, "low_fraction", m->spectra.low_fraction);
+        cJSON_AddNumberToObject(b, "white_fraction", m->spectra.white_fraction);
+        cJSON_AddNumberToObject(b, "energy", m->spectra.energy);
+        cJSON_AddNumberToObject(b, "tile_size", m->spectra.tile_size);
+        cJSON_AddNumberToObject(b, "cutoff", opt->spectra_opt.cutoff);
+        cJSON_AddStringToObject(b, "tone_map",
+                                mcp_tonemap_name(opt->spectra_opt.tone_map));
+    }
+    return 0;
+}
+
+/* mkdir -p */
+static int
+make_dirs(const char *path)
+{
+    char buf[4096];
+    int n = snprintf(buf, sizeof buf, "%s", path);
+    if (n < 0 || (size_t)n >= sizeof buf) return mcp_error("path too long: %s", path);
+    for (char *p = buf + 1;; p++) {
+        if (*p == '/' || *p == '\0') {
+            char c = *p;
+            *p = '\0';
+            if (mkdir(buf, 0777) && errno != EEXIST)
+                return mcp_error("%s: cannot create folder: %s", buf, strerror(errno));
+            *p = c;
+            if (!c) break;
+        }
+    }
+    return 0;
+}
+
+/* One channel of img through a colour map into an 8-bit PNG. */
+static int
+write_png(const mcp_image *img, int channel, double lo, double hi, mcp_colormap map,
+          const char *path)
+{
+    size_t n;
+    if (mcp_size_mul3((size_t)img->width, (size_t)img->height, 3, &n))
+        return mcp_error("%s: image too large", path);
+    unsigned char *rgb = mcp_malloc(n);
+    if (!rgb) return -1;
+    int rc = mcp_colormap_apply(img, channel, lo, hi, map, rgb) ||
+             mcp_write_rgb8(rgb, img->width, img->height, path);
+    free(rgb);
+    return rc ? -1 : 0;
+}
+
+typedef struct {
+    const char *dir, *prefix;
+    cJSON *section;
+} map_out;
+
+static int
+out_path(const map_out *o, const char *name, const char *ext, char *path, size_t cap,
+         char *rel, size_t rel_cap)
+{
+    int a = snprintf(rel, rel_cap, "%s%s.%s", o->prefix, name, ext);
+    int b = snprintf(path, cap, "%s/%s", o->dir, rel);
+    if (a < 0 || b < 0 || (size_t)a >= rel_cap || (size_t)b >= cap)
+        return mcp_error("output path too long: %s/%s%s.%s", o->dir, o->prefix, name,
+                         ext);
+    return 0;
+}
+
+static int
+emit(const map_out *o, const mcp_image *img, const char *name, int exr, int png_channel,
+     double lo, double hi, mcp_colormap map, const char *caption)
+{
+    char path[4096], rel[2048];
+    if (exr && (out_path(o, name, "exr", path, sizeof path, rel, sizeof rel) ||
+                mcp_image_write(img, path, NULL)))
+        return -1;
+    if (png_channel < 0) return 0;
+    if (out_path(o, name, "png", path, sizeof path, rel, sizeof rel) ||
+        write_png(img, png_channel, lo, hi, map, path))
+        return -1;
+    return o->section ? mcp_report_add_image(o->section, rel, caption) : 0;
+}
+
+int
+mcp_metrics_write_maps(const mcp_metrics_maps *maps, const char *dir, const char *prefix,
+                       cJSON *section)
+{
+    map_out o = {dir, prefix ? prefix : "", section};
+    char sub[4096];
+    /* The prefix may name a sub-folder ("maps/"): create it with the folder. */
+    const char *slash = strrchr(o.prefix, '/');
+    int n = snprintf(sub, sizeof sub, "%s/%.*s", dir, slash ? (int)(slash - o.prefix) : 0,
+                     o.prefix);
+    if (n < 0 || (size_t)n >= sizeof sub)
+        return mcp_error("output path too long: %s/%s", dir, o.prefix);
+    if (make_dirs(sub)) return -1;
+    if (maps->flip_ldr && emit(&o, maps->flip_ldr, "flip_ldr", 1, 0, 0.0, 1.0,
+                               MCP_COLORMAP_MAGMA, "LDR-FLIP (magma, 0 to 1)"))
+        return -1;
+    if (maps->flip_hdr && emit(&o, maps->flip_hdr, "flip_hdr", 1, 0, 0.0, 1.0,
+                               MCP_COLORMAP_MAGMA, "HDR-FLIP (magma, 0 to 1)"))
+        return -1;
+    if (maps->flip_hdr_exposure &&
+        emit(&o, maps->flip_hdr_exposure, "flip_hdr_exposure", 1, 0, 0.0, 1.0,
+             MCP_COLORMAP_VIRIDIS,
+             "HDR-FLIP exposure of the maximum (viridis, start to stop)"))
+        return -1;
+    if (maps->sq_error && emit(&o, maps->sq_error, "sq_error", 1, -1, 0, 0, 0, NULL))
+        return -1;
+    if (maps->relse) {
+        if (emit(&o, maps->relse, "relse", 1, -1, 0, 0, 0, NULL)) return -1;
+        mcp_image *lg = NULL;
+        if (mcp_image_new(maps->relse->width, maps->relse->height, 1,
+                          (const char *const[]){"log10_relse"}, &lg))
+            return -1;
+        for (int y = 0; y < lg->height; y++)
+            for (int x = 0; x < lg->width; x++) {
+                const float *p = mcp_image_px(maps->relse, x, y);
+                double mean = 0.0;
+                for (int c = 0; c < maps->relse->channels; c++)
+                    mean += p[c];
+                mean /= maps->relse->channels;
+                mcp_image_px(lg, x, y)[0] = (float)(mean > 1e-30 ? log10(mean) : -30.0);
+            }
+        mcp_image_set_source(lg, "RelSE");
+        int rc = emit(&o, lg, "relse", 0, 0, -5.0, 0.0, MCP_COLORMAP_INFERNO,
+                      "relative squared error, log10 from -5 to 0 (inferno)");
+        mcp_image_free(lg);
+        if (rc) return -1;
+    }
+    if (maps->spectra &&
+        emit(&o, maps->spectra, "spectra", 0, 0, 0.0, 1.0, MCP_COLORMAP_GRAY,
+             "error power spectra per tile, c ln(1 + |e|), DC at the "
+             "centre"))
+        return -1;
+    return 0;
+}

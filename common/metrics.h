@@ -1,0 +1,136 @@
+/* metrics.h: how far a test image is from a reference (SPEC "metrics").
+ *
+ * Over pixels x channels (R, G, B; see mcp_rgb_channels):
+ *   MSE     mean (t - r)^2                RMSE sqrt(MSE)
+ *   relMSE  mean (t - r)^2 / (r^2 + eps)  eps = EPS_REL = 1e-2
+ *   PSNR    10 log10(1 / MSE) of the displayed images: clamped to [0, 1] and
+ *           sRGB-encoded, so that for 8-bit files it is the usual PSNR of the file
+ *           values (peak 1 = 255); +inf for identical images
+ *   pMSE    E / (N C), E = sum_c |g * T(t_c) - h * T(r_c)|^2 (SPEC "perceptual":
+ *           kernel g, h = delta or g, tone map T, replicate borders)
+ *   RelSE percentiles  RelSE_i = (t_i - r_i)^2 / (maxc(t)^2 + eps), maxc(t) the
+ *           largest of the test image's three channels at the pixel (SPEC estimate:
+ *           maxc of the denoised image F, the image under test); the value at p is
+ *           element ceil(p n) - 1 of the ascending sort (nearest rank)
+ *   LDR-FLIP, HDR-FLIP (flip.h)
+ *   blue noise  the low-frequency energy fraction of the error (spectra.h)
+ * The first image is the test image, the second the reference. Sums run in double,
+ * per row and then over rows in order, so results do not depend on the thread count.
+ * Inputs must have the same size, R, G and B, and finite values; otherwise the call
+ * fails with one line naming the file. */
+#ifndef MCP_METRICS_H
+#define MCP_METRICS_H
+
+#include <cjson/cJSON.h>
+#include <mcpost/flip.h>
+#include <mcpost/spectra.h>
+#include <mcpost/tonemap.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define MCP_EPS_REL 1e-2
+#define MCP_METRICS_MAX_PERCENTILES 64
+
+typedef struct mcp_pmse_options {
+    mcp_pkernel kernel;   /* g [tap3] */
+    int filter_reference; /* h = g instead of h = delta [0] */
+    mcp_tonemap tone_map; /* T [clamp] */
+} mcp_pmse_options;
+
+MCP_API mcp_pmse_options mcp_pmse_defaults(void);
+
+typedef struct mcp_metrics_options {
+    double eps_rel;                                  /* [1e-2] */
+    int n_percentiles;                               /* [3] */
+    double percentiles[MCP_METRICS_MAX_PERCENTILES]; /* in [0, 1] [0.5, 0.9, 0.99] */
+    mcp_pmse_options pmse;
+    mcp_flip_options flip;
+    int flip_ldr, flip_hdr; /* compute them [1, 1] */
+    /* Blue-noise analysis [1]; skipped (has_spectra 0) when the image is smaller
+     * than one tile. */
+    int spectra;
+    mcp_spectra_options spectra_opt;
+} mcp_metrics_options;
+
+MCP_API mcp_metrics_options mcp_metrics_defaults(void);
+
+typedef struct mcp_metrics {
+    long n_values; /* pixels x 3 */
+    double mse, rmse, relmse, psnr, pmse;
+    int n_percentiles;
+    double percentiles[MCP_METRICS_MAX_PERCENTILES]; /* the p values */
+    double relse[MCP_METRICS_MAX_PERCENTILES];       /* RelSE at each p */
+    int has_flip_ldr, has_flip_hdr;
+    mcp_flip_result flip_ldr, flip_hdr;
+    int has_spectra;
+    mcp_spectra_result spectra;
+} mcp_metrics;
+
+/* Per-pixel maps that mcp_metrics_compute returns when given the struct (FLIP maps
+ * stay NULL when that FLIP is not computed). */
+typedef struct mcp_metrics_maps {
+    mcp_image *sq_error;          /* R, G, B: (t - r)^2 */
+    mcp_image *relse;             /* R, G, B: RelSE */
+    mcp_image *flip_ldr;          /* FLIP */
+    mcp_image *flip_hdr;          /* FLIP */
+    mcp_image *flip_hdr_exposure; /* exposure */
+    mcp_image *spectra;           /* spectrum (the blue-noise picture) */
+} mcp_metrics_maps;
+
+MCP_API void mcp_metrics_maps_free(mcp_metrics_maps *maps);
+
+/* Every metric that opt selects (opt may be NULL). maps may be NULL. */
+MCP_API int mcp_metrics_compute(const mcp_image *test, const mcp_image *ref,
+                                const mcp_metrics_options *opt, mcp_metrics *out,
+                                mcp_metrics_maps *maps);
+
+/* The single metrics. */
+MCP_API int mcp_mse(const mcp_image *test, const mcp_image *ref, double *mse);
+MCP_API int mcp_relmse(const mcp_image *test, const mcp_image *ref, double eps_rel,
+                       double *relmse);
+MCP_API int mcp_psnr(const mcp_image *test, const mcp_image *ref, double *psnr);
+MCP_API int mcp_pmse(const mcp_image *test, const mcp_image *ref,
+                     const mcp_pmse_options *opt, double *pmse);
+
+/* RelSE per value (R, G, B channels). */
+MCP_API int mcp_relse_map(const mcp_image *test, const mcp_image *ref, double eps_rel,
+                          mcp_image **out);
+
+/* Percentiles of all the values of the given channels of img (all channels when
+ * channels is NULL), by the nearest rank: out[k] = element ceil(p[k] n) - 1 of the
+ * ascending sort (the smallest value at p = 0). NaN values fail. */
+MCP_API int mcp_image_percentiles(const mcp_image *img, const double *p, int n_p,
+                                  double *out);
+
+/* Checks a test/reference pair: same size, R, G, B present, every RGB value finite.
+ * Fills the channel indices. */
+MCP_API int mcp_metrics_check_pair(const mcp_image *test, const mcp_image *ref,
+                                   int rgb_test[3], int rgb_ref[3]);
+
+/* The figures as members of obj (a JSON object): mse, rmse, relmse, psnr (the
+ * string "inf" for identical displays), pmse (with its settings), relse_percentiles
+ * {p: [...], value: [...]}, flip_ldr {mean, ppd}, flip_hdr {mean, ppd, tone_mapper,
+ * start_exposure, stop_exposure, num_exposures}, blue_noise {low_fraction,
+ * white_fraction, energy, tile_size, cutoff}. */
+MCP_API int mcp_metrics_json(const mcp_metrics *m, const mcp_metrics_options *opt,
+                             cJSON *obj);
+
+/* Writes the maps that are present into dir (created if needed) as
+ * <prefix>NAME.exr (float) and false-colour <prefix>NAME.png: flip_ldr, flip_hdr
+ * (magma over [0, 1], as FLIP's tool shows them), flip_hdr_exposure (viridis over
+ * [0, 1]), relse (EXR; PNG: inferno of log10 of the channel mean over [-5, 0]),
+ * sq_error (EXR only) and spectra (PNG: grey). When section is not NULL each PNG is
+ * added to its images as "<prefix>NAME.png". */
+MCP_API int mcp_metrics_write_maps(const mcp_metrics_maps *maps, const char *dir,
+                                   const char *prefix, cJSON *section);
+
+/* Sets opt->percentiles (1 to MCP_METRICS_MAX_PERCENTILES values, each in [0, 1]). */
+MCP_API int mcp_metrics_set_percentiles(mcp_metrics_options *opt, const double *p,
+                                        int n_p);
+
+#ifdef __cplusplus
+}
+#endif
+#endif
