@@ -4,16 +4,28 @@
 #include "cli.h"
 
 #include <mcpost/progress.h>
+#include <mcpost/tonemap.h>
 
 #include <getopt.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-/* The channels of img named in `names` (all when count is 0), as a new image. */
+/* The channels of img named in `names`, as a new image. With no names: all channels,
+ * except that an 8-bit or RGBE output of a many-channel file (a render dump) gets its
+ * colour, which is what a person converting to PNG means. */
 static int
-pick_channels(const mcp_image *img, char **names, int count, mcp_image **out)
+pick_channels(const mcp_image *img, char **names, int count, const char *out_path,
+              mcp_image **out)
 {
+    mcp_format f = mcp_format_from_path(out_path);
+    int ldr = f == MCP_FORMAT_PNG || f == MCP_FORMAT_JPEG || f == MCP_FORMAT_HDR;
+    if (count == 0 && ldr && img->channels != 1 && img->channels != 3 &&
+        img->channels != 4) {
+        int rgb[3];
+        if (mcp_rgb_channels(img, rgb) == 0)
+            return mcp_image_copy_channels(img, rgb, 3, out);
+    }
     if (count == 0)
         return mcp_image_copy(img, out);
     int *idx = mcp_calloc((size_t)count, sizeof *idx);
@@ -89,7 +101,7 @@ cmd_convert(int argc, char **argv)
             !mcp_dump_write(dump, out, conv, &wo))
             status = 0;
     } else if (!mcp_image_read(in, NULL, &img) &&
-               !pick_channels(img, channels, n_channels, &picked) &&
+               !pick_channels(img, channels, n_channels, out, &picked) &&
                !mcp_image_write(picked, out, &wo)) {
         status = 0;
     }
@@ -150,7 +162,7 @@ stage_convert(mcp_job *job, const mcp_node *settings)
     char path[4096];
     mcp_image *picked = NULL;
     int rc = mcp_job_output_path(job, out, path, sizeof path) ||
-             pick_channels(img, (char **)names, count, &picked) ||
+             pick_channels(img, (char **)names, count, path, &picked) ||
              mcp_image_write(picked, path, &wo);
     free(names);
     mcp_image_free(picked);

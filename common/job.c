@@ -1,7 +1,7 @@
 /* job.c: running a job file -- inputs, output folder, stages from a registry, the
  * report (see job.h). Everything is checked before the first stage runs, so a typo
  * on the last line fails in a second, not after an hour of work. */
-#define _POSIX_C_SOURCE 200809L
+#define _XOPEN_SOURCE 700 /* realpath */
 #include <mcpost/job.h>
 #include <mcpost/imageio.h>
 #include <mcpost/progress.h>
@@ -87,20 +87,36 @@ mcp_job_path(const mcp_job *job)
     return job->path;
 }
 
+/* Creates the output folder once, and from then on names it by its real path (no
+ * "jobs/../../out" in messages). */
+static int
+make_output_dir(mcp_job *job)
+{
+    if (job->output_made)
+        return 0;
+    if (make_dirs(job->output_dir))
+        return -1;
+    char *real = realpath(job->output_dir, NULL);
+    if (real) {
+        free(job->output_dir);
+        job->output_dir = real;
+    }
+    job->output_made = 1;
+    return 0;
+}
+
 const char *
 mcp_job_output_dir(mcp_job *job)
 {
-    if (!job->output_made && !make_dirs(job->output_dir))
-        job->output_made = 1;
+    make_output_dir(job);
     return job->output_dir;
 }
 
 int
 mcp_job_output_path(mcp_job *job, const char *name, char *buf, size_t cap)
 {
-    if (!job->output_made && make_dirs(job->output_dir))
+    if (make_output_dir(job))
         return -1;
-    job->output_made = 1;
     int n = snprintf(buf, cap, "%s/%s", job->output_dir, name);
     if (n < 0 || (size_t)n >= cap)
         return mcp_error("%s: output path too long: %s", job->path, name);
