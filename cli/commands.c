@@ -3,11 +3,19 @@
 
 extern const mcp_command mcp_command_info, mcp_command_convert, mcp_command_run;
 extern const mcp_command mcp_command_metrics;
+extern const mcp_command mcp_command_denoise;
 
+extern const mcp_command mcp_command_perceptual;
+extern const mcp_command mcp_command_estimate;
+extern const mcp_command mcp_command_blend;
 const mcp_command *const mcp_commands[] = {
     &mcp_command_info,
     &mcp_command_convert,
     &mcp_command_run,
     &mcp_command_metrics,
+    &mcp_command_denoise,
+    &mcp_command_perceptual,
+    &mcp_command_estimate,
+    &mcp_command_blend,
     NULL,
 };

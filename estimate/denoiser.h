@@ -17,12 +17,17 @@
 extern "C" {
 #endif
 
-/* What a denoiser reads: colour (3 channels), optional albedo and normal (3 each),
- * all the same size. */
+/* What a denoiser reads: colour (3 channels), optional albedo, normal and colour
+ * variance (3 each), all the same size. Zero-initialise it so that fields added later
+ * stay NULL. */
 typedef struct mcp_denoise_input {
     const mcp_image *color;
     const mcp_image *albedo; /* NULL: not given */
     const mcp_image *normal; /* NULL: not given */
+    /* Variance of the colour mean, R,G,B (NULL: not given). Denoisers that weigh
+     * colour differences by the noise level read it (nlm); it is a constant of F, not
+     * an input that tangents move. */
+    const mcp_image *variance;
 } mcp_denoise_input;
 
 /* A direction in input space. The colour part is required; feature parts may be NULL
@@ -63,7 +68,8 @@ MCP_API int mcp_denoiser_create_from_args(const char *name, const char *const *o
 
 MCP_API void mcp_denoiser_free(mcp_denoiser *d);
 
-/* The denoiser input of a dump (borrowed views of its parts). */
+/* The denoiser input of a dump: borrowed pointers to its colour, albedo, normal and
+ * var_of_mean (each NULL where the dump has none). */
 MCP_API mcp_denoise_input mcp_denoise_input_of(const mcp_dump *dump);
 
 /* One entry per built-in kind, found by name (estimate/denoisers.c holds the table). */

@@ -1,0 +1,174 @@
+/* bench_denoise.c: timings of every built-in denoiser (estimate/denoise_*.c; no
+ * pass/fail): apply, and apply + JVP with 1 and with 4 tangents in one pass, on a
+ * 1024x1024 render-like input (noisy colour with its variance, albedo with edges,
+ * normals of two planes). Each figure is the median of `repeats` runs after one
+ * warm-up: wall-clock ms and ms per megapixel with the default OpenMP team (set
+ * OMP_NUM_THREADS to change it), and the CPU time of all threads per megapixel, which
+ * shows the work when other jobs share the machine.
+ * Usage: bench_denoise [repeats (default 5)] [side (default 1024)] */
+#include <mcpost/denoiser.h>
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <time.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+#define MAX_TANGENTS 4
+
+static double
+now_ms(clockid_t clock)
+{
+    struct timespec ts;
+    clock_gettime(clock, &ts);
+    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+static int
+cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+/* splitmix64 -> uniform in [0, 1) */
+static double
+uniform(uint64_t *s)
+{
+    uint64_t z = (*s += 0x9e3779b97f4a7c15ULL);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+    return (double)((z ^ (z >> 31)) >> 11) / 9007199254740992.0;
+}
+
+static mcp_image *
+rgb(int side)
+{
+    static const char *const names[] = {"R", "G", "B"};
+    mcp_image *img = NULL;
+    if (mcp_image_new(side, side, 3, names, &img)) {
+        fprintf(stderr, "bench_denoise: %s\n", mcp_error_message());
+        exit(1);
+    }
+    return img;
+}
+
+/* Albedo cells of 16 px, a smooth light, noise of 20 % with its variance given. */
+static void
+make_input(int side, mcp_image **color, mcp_image **albedo, mcp_image **normal,
+           mcp_image **variance)
+{
+    *color = rgb(side), *albedo = rgb(side), *normal = rgb(side), *variance = rgb(side);
+    uint64_t st = 1;
+    for (int y = 0; y < side; y++)
+        for (int x = 0; x < side; x++) {
+            size_t i = ((size_t)y * side + x) * 3;
+            int cell = (x / 16 + y / 16) % 3;
+            for (int c = 0; c < 3; c++) {
+                double a = 0.2 + 0.3 * ((cell + c) % 3),
+                       t = a * (1 + 0.5 * sin(0.01 * x));
+                double sd = 0.2 * t, u = uniform(&st) + uniform(&st) + uniform(&st) - 1.5;
+                (*albedo)->data[i + c] = (float)a;
+                (*normal)->data[i + c] = (float)(c == (y < side / 3 ? 2 : 1));
+                (*variance)->data[i + c] = (float)(sd * sd);
+                (*color)->data[i + c] = (float)(t + 2 * sd * u);
+            }
+        }
+}
+
+/* The median wall-clock time of `repeats` calls of apply (n = -1) or jvp with n
+ * tangents, and in *cpu_ms the median CPU time of all threads together (which other
+ * load on the machine changes less). */
+static double
+median_ms(const mcp_denoiser *d, const mcp_denoise_input *in,
+          const mcp_denoise_tangent *t, int n, int repeats, double *cpu_ms)
+{
+    double *times = malloc(2 * (size_t)repeats * sizeof *times), med = -1;
+    if (!times)
+        return -1;
+    double *cpu = times + repeats;
+    for (int r = -1; r < repeats; r++) {
+        mcp_image *out = NULL, *jt[MAX_TANGENTS] = {NULL};
+        double t0 = now_ms(CLOCK_MONOTONIC), c0 = now_ms(CLOCK_PROCESS_CPUTIME_ID);
+        int rc = n < 0 ? d->apply(d, in, &out) : d->jvp(d, in, t, n, &out, jt);
+        double dt = now_ms(CLOCK_MONOTONIC) - t0;
+        double dc = now_ms(CLOCK_PROCESS_CPUTIME_ID) - c0;
+        mcp_image_free(out);
+        for (int k = 0; k < MAX_TANGENTS; k++)
+            mcp_image_free(jt[k]);
+        if (rc) {
+            fprintf(stderr, "bench_denoise: %s\n", mcp_error_message());
+            free(times);
+            return -1;
+        }
+        if (r >= 0) {
+            times[r] = dt;
+            cpu[r] = dc;
+        }
+    }
+    qsort(times, (size_t)repeats, sizeof *times, cmp_double);
+    qsort(cpu, (size_t)repeats, sizeof *cpu, cmp_double);
+    med = times[repeats / 2];
+    *cpu_ms = cpu[repeats / 2];
+    free(times);
+    return med;
+}
+
+int
+main(int argc, char **argv)
+{
+    int repeats = argc > 1 ? atoi(argv[1]) : 5, side = argc > 2 ? atoi(argv[2]) : 1024;
+    if (repeats < 1 || side < 8 || side > 8192) {
+        fprintf(stderr, "usage: bench_denoise [repeats >= 1] [side in 8..8192]\n");
+        return 2;
+    }
+    mcp_image *color, *albedo, *normal, *variance, *tan[MAX_TANGENTS];
+    make_input(side, &color, &albedo, &normal, &variance);
+    mcp_denoise_tangent t[MAX_TANGENTS];
+    for (int k = 0; k < MAX_TANGENTS; k++) {
+        tan[k] = rgb(side);
+        uint64_t st = 100 + k;
+        for (size_t i = 0; i < (size_t)side * side * 3; i++)
+            tan[k]->data[i] = (float)((uniform(&st) - 0.5) * sqrt(variance->data[i]));
+        t[k] = (mcp_denoise_tangent){tan[k], NULL, NULL};
+    }
+    mcp_denoise_input in = {color, albedo, normal, variance};
+    int threads = 1;
+#ifdef _OPENMP
+    threads = omp_get_max_threads();
+#endif
+    double mp = (double)side * side / 1e6;
+    printf("denoisers at %dx%d, %d thread(s), median of %d\n", side, side, threads,
+           repeats);
+    printf("%-10s %-24s %10s %10s %12s\n", "kind", "call", "ms", "ms/MP", "CPU ms/MP");
+    int status = 0;
+    for (const mcp_denoiser_kind *const *k = mcp_denoiser_kinds(); *k; k++) {
+        mcp_denoiser *d = NULL;
+        if (mcp_denoiser_create_from_args((*k)->name, NULL, 0, &d)) {
+            fprintf(stderr, "bench_denoise: %s\n", mcp_error_message());
+            status = 1;
+            continue;
+        }
+        const char *labels[] = {"apply", "apply + JVP, 1 tangent",
+                                "apply + JVP, 4 tangents"};
+        const int counts[] = {-1, 1, 4};
+        for (int c = 0; c < 3; c++) {
+            double cpu = 0, ms = median_ms(d, &in, t, counts[c], repeats, &cpu);
+            if (ms < 0)
+                status = 1;
+            else
+                printf("%-10s %-24s %10.1f %10.1f %12.1f\n", (*k)->name, labels[c], ms,
+                       ms / mp, cpu / mp);
+        }
+        mcp_denoiser_free(d);
+    }
+    for (int k = 0; k < MAX_TANGENTS; k++)
+        mcp_image_free(tan[k]);
+    mcp_image_free(color);
+    mcp_image_free(albedo);
+    mcp_image_free(normal);
+    mcp_image_free(variance);
+    return status;
+}

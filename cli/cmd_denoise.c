@@ -1,0 +1,296 @@
+/* cmd_denoise.c: `mcpost denoise` -- runs one denoiser alone on a render dump or on
+ * separate colour/albedo/normal files, and with --tangent also writes its
+ * Jacobian-vector product J·T: the way to check a denoiser and its derivative from
+ * outside (SPEC estimate, "Denoisers"). */
+#include "cli.h"
+
+#include <mcpost/denoiser.h>
+
+#include <getopt.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define PATH_CAP 4096
+
+static const char usage[] =
+    "usage: mcpost denoise DUMP --denoiser NAME [options]\n"
+    "       mcpost denoise --color FILE [--albedo FILE] [--normal FILE]\n"
+    "                      [--variance-of-mean FILE] --denoiser NAME [options]\n"
+    "       mcpost denoise --list\n"
+    "  Runs one denoiser on a render dump (colour, and the albedo, normal and variance\n"
+    "  it holds) or on separate files, and writes the denoised colour as R,G,B.\n"
+    "  --denoiser NAME         which denoiser (see --list)\n"
+    "  --denoiser-opt KEY=VAL  one of its settings; repeat for more (e.g. sigma=3)\n"
+    "  -o, --output FILE       the denoised image [<input stem>_<NAME>.exr, here]\n"
+    "  --tangent FILE          also write J·T, the Jacobian-vector product of the\n"
+    "                          denoiser at the input in direction T (channels R,G,B,\n"
+    "                          or 3 channels), computed in the same pass\n"
+    "  --tangent-out FILE      where J·T goes [<output stem>_jvp.exr]\n"
+    "  --color, --albedo, --normal FILE   separate inputs (R,G,B / X,Y,Z channels, or\n"
+    "                          exactly 3 channels) instead of DUMP\n"
+    "  --variance-of-mean FILE the variance of the colour mean, R,G,B (separate inputs)\n"
+    "  --no-albedo, --no-normal, --no-variance   ignore that part of the input\n"
+    "  --spp N, --convention NAME, --variance KIND   how to read DUMP, as for info\n"
+    "  --list                  print the denoisers and their settings\n";
+
+static void
+print_kinds(void)
+{
+    for (const mcp_denoiser_kind *const *k = mcp_denoiser_kinds(); *k; k++) {
+        printf("%-10s %s\n", (*k)->name, (*k)->summary);
+        printf("%-10s settings:", "");
+        for (const char *const *key = (*k)->keys; key && *key; key++)
+            printf(" %s", *key);
+        printf("\n");
+    }
+}
+
+/* The 3 channels of an image file: the first of the name triples it has, or all of
+ * them when it has exactly 3. */
+static int
+read_rgb(const char *path, const char *what, mcp_image **out)
+{
+    static const char *const triples[][3] = {{"R", "G", "B"}, {"X", "Y", "Z"}};
+    mcp_image *img = NULL;
+    *out = NULL;
+    if (mcp_image_read(path, NULL, &img))
+        return -1;
+    int idx[3], found = 0;
+    for (int t = 0; t < 2 && !found; t++) {
+        found = 1;
+        for (int c = 0; c < 3 && found; c++)
+            found = (idx[c] = mcp_image_channel(img, triples[t][c])) >= 0;
+    }
+    if (!found && img->channels == 3) {
+        found = 1;
+        for (int c = 0; c < 3; c++)
+            idx[c] = c;
+    }
+    int rc = -1;
+    if (!found)
+        mcp_error("%s: the %s needs channels R,G,B or X,Y,Z, or exactly 3 channels "
+                  "(it has %d)",
+                  path, what, img->channels);
+    else
+        rc = mcp_image_copy_channels(img, idx, 3, out);
+    mcp_image_free(img);
+    return rc;
+}
+
+/* path without its extension (and, when strip_dir, without its folder) into buf. */
+static void
+stem_of(const char *path, int strip_dir, char *buf, size_t cap)
+{
+    const char *base = path, *slash = strrchr(path, '/');
+    if (strip_dir && slash)
+        base = slash + 1;
+    snprintf(buf, cap, "%s", base);
+    char *dot = strrchr(buf, '.'), *sep = strrchr(buf, '/');
+    if (dot && dot != buf && (!sep || dot > sep + 1))
+        *dot = '\0';
+}
+
+typedef struct {
+    const char *dump, *color, *albedo, *normal, *variance;
+    const char *spp, *convention, *variance_kind;
+    int no_albedo, no_normal, no_variance;
+} inputs;
+
+/* Loads the input (a dump, or separate files) into *dump. */
+static int
+load_input(const inputs *in, mcp_dump **out)
+{
+    *out = NULL;
+    if (in->dump)
+        return mcp_cli_read_dump(in->dump, in->spp, in->convention, in->variance_kind,
+                                 out);
+    mcp_dump *d = mcp_calloc(1, sizeof *d);
+    if (!d)
+        return -1;
+    int rc = read_rgb(in->color, "colour", &d->color) ||
+             (in->albedo && read_rgb(in->albedo, "albedo", &d->albedo)) ||
+             (in->normal && read_rgb(in->normal, "normal", &d->normal)) ||
+             (in->variance && read_rgb(in->variance, "variance", &d->var_of_mean));
+    const mcp_image *parts[] = {d->albedo, d->normal, d->var_of_mean};
+    for (int i = 0; i < 3 && !rc; i++)
+        if (parts[i] && !mcp_image_same_size(parts[i], d->color))
+            rc = -1;
+    if (!rc && !(d->source = mcp_strdup(in->color)))
+        rc = -1;
+    if (rc) {
+        mcp_dump_free(d);
+        return -1;
+    }
+    *out = d;
+    return 0;
+}
+
+/* Denoises (and differentiates) and writes the outputs. */
+static int
+run(const mcp_denoiser *den, const mcp_dump *dump, const inputs *ins, const char *out,
+    const char *tangent_path, const char *tangent_out)
+{
+    mcp_denoise_input in = mcp_denoise_input_of(dump);
+    if (ins->no_albedo)
+        in.albedo = NULL;
+    if (ins->no_normal)
+        in.normal = NULL;
+    if (ins->no_variance)
+        in.variance = NULL;
+    mcp_image *t = NULL, *den_img = NULL, *jt = NULL;
+    int rc = -1;
+    if (tangent_path) {
+        if (read_rgb(tangent_path, "tangent", &t))
+            goto done;
+        if (!mcp_image_same_size(t, in.color))
+            goto done;
+        mcp_denoise_tangent tan = {t, NULL, NULL};
+        if (den->jvp(den, &in, &tan, 1, &den_img, &jt))
+            goto done;
+    } else if (den->apply(den, &in, &den_img)) {
+        goto done;
+    }
+    if (mcp_attrs_set_string(&den_img->attrs, "mcpost.denoiser", den->name) ||
+        mcp_image_write(den_img, out, NULL))
+        goto done;
+    if (jt && (mcp_attrs_set_string(&jt->attrs, "mcpost.denoiser", den->name) ||
+               mcp_attrs_set_string(&jt->attrs, "mcpost.jvp_tangent", tangent_path) ||
+               mcp_image_write(jt, tangent_out, NULL)))
+        goto done;
+    rc = 0;
+done:
+    mcp_image_free(jt);
+    mcp_image_free(den_img);
+    mcp_image_free(t);
+    return rc;
+}
+
+static int
+cmd_denoise(int argc, char **argv)
+{
+    enum {
+        O_DENOISER = 256,
+        O_OPT,
+        O_TANGENT,
+        O_TANGENT_OUT,
+        O_COLOR,
+        O_ALBEDO,
+        O_NORMAL,
+        O_VAR_FILE,
+        O_NO_ALBEDO,
+        O_NO_NORMAL,
+        O_NO_VARIANCE,
+        O_SPP,
+        O_CONVENTION,
+        O_VARIANCE,
+        O_LIST
+    };
+    static const struct option longs[] = {
+        {"denoiser", required_argument, 0, O_DENOISER},
+        {"denoiser-opt", required_argument, 0, O_OPT},
+        {"output", required_argument, 0, 'o'},
+        {"tangent", required_argument, 0, O_TANGENT},
+        {"tangent-out", required_argument, 0, O_TANGENT_OUT},
+        {"color", required_argument, 0, O_COLOR},
+        {"albedo", required_argument, 0, O_ALBEDO},
+        {"normal", required_argument, 0, O_NORMAL},
+        {"variance-of-mean", required_argument, 0, O_VAR_FILE},
+        {"no-albedo", no_argument, 0, O_NO_ALBEDO},
+        {"no-normal", no_argument, 0, O_NO_NORMAL},
+        {"no-variance", no_argument, 0, O_NO_VARIANCE},
+        {"spp", required_argument, 0, O_SPP},
+        {"convention", required_argument, 0, O_CONVENTION},
+        {"variance", required_argument, 0, O_VARIANCE},
+        {"list", no_argument, 0, O_LIST},
+        {"help", no_argument, 0, 'h'},
+        {0, 0, 0, 0}};
+    inputs in = {0};
+    const char *name = NULL, *out = NULL, *tangent = NULL, *tangent_out = NULL;
+    const char **opts = mcp_calloc((size_t)argc + 1, sizeof *opts);
+    int n_opts = 0, opt, list = 0;
+    if (!opts)
+        return mcp_cli_fail();
+    optind = 1;
+    while ((opt = getopt_long(argc, argv, "ho:", longs, NULL)) != -1) {
+        switch (opt) {
+        case O_DENOISER: name = optarg; break;
+        case O_OPT: opts[n_opts++] = optarg; break;
+        case 'o': out = optarg; break;
+        case O_TANGENT: tangent = optarg; break;
+        case O_TANGENT_OUT: tangent_out = optarg; break;
+        case O_COLOR: in.color = optarg; break;
+        case O_ALBEDO: in.albedo = optarg; break;
+        case O_NORMAL: in.normal = optarg; break;
+        case O_VAR_FILE: in.variance = optarg; break;
+        case O_NO_ALBEDO: in.no_albedo = 1; break;
+        case O_NO_NORMAL: in.no_normal = 1; break;
+        case O_NO_VARIANCE: in.no_variance = 1; break;
+        case O_SPP: in.spp = optarg; break;
+        case O_CONVENTION: in.convention = optarg; break;
+        case O_VARIANCE: in.variance_kind = optarg; break;
+        case O_LIST: list = 1; break;
+        case 'h':
+            free(opts);
+            fputs(usage, stdout);
+            return 0;
+        default: free(opts); return mcp_cli_usage("denoise", "bad option");
+        }
+    }
+    int status = 2;
+    if (list) {
+        print_kinds();
+        free(opts);
+        return 0;
+    }
+    if (argc - optind > 1)
+        mcp_cli_usage("denoise", "give one DUMP (got %d inputs)", argc - optind);
+    else if (argc - optind == 1 && in.color)
+        mcp_cli_usage("denoise", "give either DUMP or --color, not both");
+    else if (argc - optind == 0 && !in.color)
+        mcp_cli_usage("denoise", "no input: give DUMP or --color FILE");
+    else if (!in.color && (in.albedo || in.normal || in.variance))
+        mcp_cli_usage("denoise", "--albedo, --normal and --variance-of-mean go with "
+                                 "--color; a DUMP carries its own");
+    else if (in.color && (in.spp || in.convention || in.variance_kind))
+        mcp_cli_usage("denoise", "--spp, --convention and --variance go with DUMP");
+    else if (!name)
+        mcp_cli_usage("denoise", "no denoiser: give --denoiser NAME (see --list)");
+    else if (tangent_out && !tangent)
+        mcp_cli_usage("denoise", "--tangent-out needs --tangent");
+    else
+        status = 1;
+    if (status == 2) {
+        free(opts);
+        return 2;
+    }
+    if (argc - optind == 1)
+        in.dump = argv[optind];
+    char out_buf[PATH_CAP], jvp_buf[PATH_CAP], stem[PATH_CAP];
+    if (!out) {
+        stem_of(in.dump ? in.dump : in.color, 1, stem, sizeof stem);
+        snprintf(out_buf, sizeof out_buf, "%s_%s.exr", stem, name);
+        out = out_buf;
+    }
+    if (tangent && !tangent_out) {
+        stem_of(out, 0, stem, sizeof stem);
+        snprintf(jvp_buf, sizeof jvp_buf, "%s_jvp.exr", stem);
+        tangent_out = jvp_buf;
+    }
+    mcp_denoiser *den = NULL;
+    mcp_dump *dump = NULL;
+    if (!mcp_denoiser_create_from_args(name, opts, n_opts, &den) &&
+        !load_input(&in, &dump) && !run(den, dump, &in, out, tangent, tangent_out))
+        status = 0;
+    else
+        mcp_cli_fail();
+    mcp_dump_free(dump);
+    mcp_denoiser_free(den);
+    free(opts);
+    return status;
+}
+
+const mcp_command mcp_command_denoise = {"denoise",
+                                         "run one denoiser (and its "
+                                         "Jacobian-vector product) alone",
+                                         cmd_denoise};

@@ -1,0 +1,536 @@
+/* estimate.c: the whole error-estimation pipeline on one dump and over a progressive
+ * series (SPEC "estimate"; Firmino 2024 Alg. 2 and Table 1, Firmino 2023 Eq. 3).
+ *
+ * One dump: probes -> denoiser with J·ε (one call, all probes) -> SURE, Var, Σ̂ maps
+ * -> sampling map and counts -> blocks (Alg. 1) -> λ, s² (Eq. 14) -> F(τ), the stop
+ * decision (Eq. 16) and the estimated percentile curve.
+ * A series: the same per member, the first spp at which F(τ) >= p for each τ, and,
+ * with a reference, the truth beside it: the nearest-rank percentile of the true
+ * error at p, and whether it is <= τ. */
+#include "estimate.h"
+#include "internal.h"
+
+#include <mcpost/flip.h>
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+mcp_estimate_options
+mcp_estimate_defaults(void)
+{
+    static const double pct[] = {0.5, 0.9, 0.99, 0.999, 0.9999};
+    mcp_estimate_options o;
+    memset(&o, 0, sizeof o);
+    o.sure = mcp_sure_defaults();
+    o.variance_rademacher = 0;
+    o.blocks = mcp_block_defaults();
+    o.tau = 0.01;
+    o.p = 0.999;
+    o.n_percentiles = (int)(sizeof pct / sizeof *pct);
+    memcpy(o.percentiles, pct, sizeof pct);
+    o.sampling = mcp_sampling_defaults();
+    o.budget = 0;
+    return o;
+}
+
+int
+mcp_estimate_check(const mcp_estimate_options *o)
+{
+    const mcp_sure_options *s = &o->sure;
+    if ((unsigned)s->metric > MCP_METRIC_SE)
+        return mcp_error(
+            "estimate: metric must be relse, relse-perceptual or se (got %d)",
+            (int)s->metric);
+    if (s->n_probes < 1 || s->n_probes > 1024)
+        return mcp_error("estimate: probes must be in [1, 1024] (got %d)", s->n_probes);
+    if (!(s->fd_delta > 0.0) || !isfinite(s->fd_delta))
+        return mcp_error("estimate: delta must be > 0 (got %g)", s->fd_delta);
+    if (!(s->ppd >= 0.0) || !isfinite(s->ppd))
+        return mcp_error("estimate: ppd must be >= 0 (got %g)", s->ppd);
+    if (!(o->tau > 0.0) || !isfinite(o->tau))
+        return mcp_error("estimate: tau must be > 0 (got %g)", o->tau);
+    if (!(o->p > 0.0 && o->p < 1.0))
+        return mcp_error("estimate: percentile must be in (0, 1) (got %g)", o->p);
+    if (o->n_percentiles < 0 || o->n_percentiles > MCP_ESTIMATE_MAX_PERCENTILES)
+        return mcp_error("estimate: at most %d percentiles (got %d)",
+                         MCP_ESTIMATE_MAX_PERCENTILES, o->n_percentiles);
+    for (int i = 0; i < o->n_percentiles; i++)
+        if (!(o->percentiles[i] >= 0.0 && o->percentiles[i] < 1.0))
+            return mcp_error("estimate: percentiles must be in [0, 1) (got %g)",
+                             o->percentiles[i]);
+    if (o->blocks.tile_size < 0)
+        return mcp_error("estimate: tile must be >= 0 (got %d)", o->blocks.tile_size);
+    if (o->budget < 0)
+        return mcp_error("estimate: budget must be >= 0 (got %lld)",
+                         (long long)o->budget);
+    if ((unsigned)o->sampling.kind > MCP_SAMPLING_MC_SURE)
+        return mcp_error("estimate: unknown sampling map kind %d", (int)o->sampling.kind);
+    return 0;
+}
+
+void
+mcp_estimate_free(mcp_estimate *e)
+{
+    if (!e) return;
+    mcp_error_maps_free(&e->maps);
+    mcp_blocks_free(e->blocks);
+    mcp_error_dist_free(e->dist);
+    mcp_image_free(e->sampling_map);
+    mcp_image_free(e->sample_counts);
+    free(e);
+}
+
+/* Probes, then one denoiser call for F and J·t of every probe: K Gaussian probes
+ * first, then (variance_rademacher) K Rademacher ones. */
+typedef struct evaluation {
+    int k, n;          /* Gaussian probes, all tangents */
+    mcp_probe *probes; /* k */
+    mcp_image **rad;   /* k Rademacher probes or NULL */
+    mcp_image **jv;    /* n */
+    mcp_image *f;
+} evaluation;
+
+static void
+evaluation_free(evaluation *ev)
+{
+    for (int j = 0; ev->probes && j < ev->k; j++)
+        mcp_probe_clear(&ev->probes[j]);
+    for (int j = 0; ev->rad && j < ev->k; j++)
+        mcp_image_free(ev->rad[j]);
+    for (int j = 0; ev->jv && j < ev->n; j++)
+        mcp_image_free(ev->jv[j]);
+    free(ev->probes);
+    free(ev->rad);
+    free(ev->jv);
+    mcp_image_free(ev->f);
+    memset(ev, 0, sizeof *ev);
+}
+
+static int
+evaluate(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_options *o,
+         evaluation *ev)
+{
+    memset(ev, 0, sizeof *ev);
+    ev->k = o->sure.n_probes;
+    ev->n = ev->k * (o->variance_rademacher ? 2 : 1);
+    ev->probes = mcp_calloc((size_t)ev->k, sizeof *ev->probes);
+    ev->jv = mcp_calloc((size_t)ev->n, sizeof *ev->jv);
+    mcp_denoise_tangent *t = mcp_calloc((size_t)ev->n, sizeof *t);
+    if (o->variance_rademacher) ev->rad = mcp_calloc((size_t)ev->k, sizeof *ev->rad);
+    int rc = -1;
+    if (!ev->probes || !ev->jv || !t || (o->variance_rademacher && !ev->rad)) goto done;
+    for (int j = 0; j < ev->k; j++) {
+        if (mcp_probe_gaussian(dump, o->sure.features, o->sure.seed, j, &ev->probes[j]))
+            goto done;
+        t[j].color = ev->probes[j].color;
+        t[j].albedo = ev->probes[j].albedo;
+        t[j].normal = ev->probes[j].normal;
+        if (o->variance_rademacher) {
+            if (mcp_probe_rademacher(dump, o->sure.seed, j, &ev->rad[j])) goto done;
+            t[ev->k + j].color = ev->rad[j];
+        }
+    }
+    mcp_denoise_input in = mcp_denoise_input_of(dump);
+    if (mcp__jvp(den, &in, t, ev->n, o->sure.mc_sure, o->sure.fd_delta, &ev->f, ev->jv))
+        goto done;
+    if (!ev->f && den->apply(den, &in, &ev->f)) {
+        mcp_error_prefix("%s: ", den->name);
+        goto done;
+    }
+    rc = 0;
+done:
+    free(t);
+    if (rc) evaluation_free(ev);
+    return rc;
+}
+
+/* The numerator of the sampling map: Var[F] of the denoiser output (not through M),
+ * or the metric's SURE for the MC-SURE map. */
+static int
+sampling_outputs(const mcp_dump *dump, const mcp_estimate_options *o,
+                 const evaluation *ev, mcp_estimate *e)
+{
+    const mcp_image *num = e->maps.sure;
+    mcp_image *plain = NULL;
+    if (o->sampling.kind != MCP_SAMPLING_MC_SURE) {
+        num = e->maps.var;
+        if (o->sure.metric == MCP_METRIC_RELSE_PERCEPTUAL || o->variance_rademacher) {
+            int first = o->variance_rademacher ? ev->k : 0;
+            if (mcp__variance_from_jvps((const mcp_image *const *)ev->jv + first, ev->k,
+                                        MCP_METRIC_SE, 0.0, NULL, &plain, NULL))
+                return -1;
+            num = plain;
+        }
+    }
+    int rc =
+        mcp_sampling_map(dump, e->maps.denoised, num, &o->sampling, &e->sampling_map) ||
+        (o->budget > 0 &&
+         mcp_sample_counts(e->sampling_map, o->budget, &e->sample_counts));
+    mcp_image_free(plain);
+    return rc ? -1 : 0;
+}
+
+/* 1 when some pixel has a positive variance of the mean. Our departure from the
+ * paper: with none at all the model has s_i = 0 everywhere and would stop at once. */
+static int
+has_variance(const mcp_dump *d)
+{
+    const mcp_image *v = d->var_of_mean;
+    for (int y = 0; y < v->height; y++)
+        for (int x = 0; x < v->width; x++) {
+            const float *p = mcp_image_px(v, x, y);
+            if (p[0] > 0.0f || p[1] > 0.0f || p[2] > 0.0f) return 1;
+        }
+    return 0;
+}
+
+int
+mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,
+                     const mcp_estimate_options *opt, mcp_estimate **out)
+{
+    *out = NULL;
+    mcp_estimate_options o = opt ? *opt : mcp_estimate_defaults();
+    if (mcp_estimate_check(&o) || mcp__check_dump("estimate", dump)) return -1;
+    if (!den) return mcp_error("estimate: missing denoiser");
+    mcp_estimate *e = mcp_calloc(1, sizeof *e);
+    if (!e) return -1;
+    evaluation ev;
+    double t0 = mcp__now_ms();
+    if (evaluate(dump, den, &o, &ev)) {
+        free(e);
+        return -1;
+    }
+    double t1 = mcp__now_ms();
+    int rc = -1;
+    {
+        const mcp_image **eps = (const mcp_image **)mcp_calloc((size_t)ev.k, sizeof *eps);
+        if (!eps) goto done;
+        for (int j = 0; j < ev.k; j++)
+            eps[j] = ev.probes[j].color;
+        int bad = mcp_error_maps_from_probes(
+            dump, ev.f, eps, (const mcp_image *const *)ev.jv, ev.k, &o.sure, &e->maps);
+        free((void *)eps);
+        if (bad) goto done;
+    }
+    if (o.variance_rademacher) { /* Var from the Rademacher probes (Firmino 2023) */
+        mcp_image *v = NULL, *vr = NULL;
+        if (mcp__variance_from_jvps((const mcp_image *const *)ev.jv + ev.k, ev.k,
+                                    o.sure.metric, o.sure.ppd, e->maps.denominator, &v,
+                                    &vr))
+            goto done;
+        mcp_image_free(e->maps.var);
+        mcp_image_free(e->maps.var_rel);
+        e->maps.var = v;
+        e->maps.var_rel = vr;
+    }
+    double t2 = mcp__now_ms();
+    if (mcp_block_average(e->maps.sure_rel, e->maps.sigma_rel, &o.blocks, &e->blocks))
+        goto done;
+    double t3 = mcp__now_ms();
+    if (mcp_error_distribution(e->blocks, e->maps.var_rel, &e->dist)) goto done;
+    e->tau = o.tau;
+    e->p = o.p;
+    e->no_variance = !has_variance(dump);
+    e->stop =
+        mcp_error_should_stop(e->dist, o.tau, o.p, &e->cdf_at_tau) && !e->no_variance;
+    double t4 = mcp__now_ms();
+    e->n_percentiles = o.n_percentiles;
+    memcpy(e->percentiles, o.percentiles, sizeof o.percentiles);
+    if (mcp_error_percentiles(e->dist, e->percentiles, e->n_percentiles,
+                              e->percentile_tau) ||
+        sampling_outputs(dump, &o, &ev, e))
+        goto done;
+    e->ms_denoise = t1 - t0;
+    e->ms_error_terms = t2 - t1;
+    e->ms_blocks = t3 - t2;
+    e->ms_stopping = t4 - t3;
+    rc = 0;
+done:
+    evaluation_free(&ev);
+    if (rc)
+        mcp_estimate_free(e);
+    else
+        *out = e;
+    return rc;
+}
+
+/* ---- the truth, for evaluation ---- */
+
+int
+mcp_true_error(const mcp_image *denoised, const mcp_image *reference,
+               mcp_error_metric metric, double ppd, mcp_image **out)
+{
+    *out = NULL;
+    int rf[3], rr[3];
+    if (!denoised || !reference) return mcp_error("true error: missing image");
+    if (mcp_rgb_channels(denoised, rf) || mcp_rgb_channels(reference, rr)) return -1;
+    if (denoised->width != reference->width || denoised->height != reference->height)
+        return mcp_error("true error: %s is %dx%d but the reference %s is %dx%d",
+                         denoised->source ? denoised->source : "the image",
+                         denoised->width, denoised->height,
+                         reference->source ? reference->source : "", reference->width,
+                         reference->height);
+    int w = denoised->width, h = denoised->height, rc = -1;
+    mcp_image *f = NULL, *d = NULL, *mf = NULL, *md = NULL;
+    if (mcp__image_new(w, h, 3, NULL, "denoised", &f) ||
+        mcp__image_new(w, h, 3, NULL, "true error", &d))
+        goto done;
+#pragma omp parallel for schedule(static)
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            const float *pf = mcp_image_px(denoised, x, y),
+                        *pr = mcp_image_px(reference, x, y);
+            float *of = mcp_image_px(f, x, y), *od = mcp_image_px(d, x, y);
+            for (int c = 0; c < 3; c++) {
+                of[c] = pf[rf[c]];
+                od[c] = (float)((double)pf[rf[c]] - pr[rr[c]]);
+            }
+        }
+    const mcp_image *ef = f, *ed = d;
+    if (metric == MCP_METRIC_RELSE_PERCEPTUAL) {
+        if (mcp_flip_csf_apply(f, ppd, &mf) || mcp_flip_csf_apply(d, ppd, &md)) goto done;
+        ef = mf;
+        ed = md;
+    }
+#pragma omp parallel for schedule(static)
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            const float *pf = mcp_image_px(ef, x, y), *pd = mcp_image_px(ed, x, y);
+            double m = fmax(fmax(pf[0], pf[1]), pf[2]);
+            double den = metric == MCP_METRIC_SE ? 1.0 : m * m + MCP_EPS_REL;
+            float *o = mcp_image_px(d, x, y);
+            for (int c = 0; c < 3; c++)
+                o[c] = (float)((double)pd[c] * pd[c] / den);
+        }
+    *out = d;
+    d = NULL;
+    rc = 0;
+done:
+    mcp_image_free(f);
+    mcp_image_free(d);
+    mcp_image_free(mf);
+    mcp_image_free(md);
+    return rc;
+}
+
+static int
+cmp_float(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
+/* The values of a 3-channel image, sorted ascending (malloc'd). */
+static int
+sorted_values(const mcp_image *err, float **out, size_t *n_out)
+{
+    *out = NULL;
+    if (!err || err->channels < 3)
+        return mcp_error("percentiles: missing 3-channel error image");
+    size_t n = (size_t)err->width * err->height * 3, k = 0;
+    float *v = mcp_calloc(n ? n : 1, sizeof *v);
+    if (!v) return -1;
+    for (int y = 0; y < err->height; y++)
+        for (int x = 0; x < err->width; x++)
+            for (int c = 0; c < 3; c++) {
+                float e = mcp_image_px(err, x, y)[c];
+                if (isnan(e)) {
+                    free(v);
+                    return mcp_error("percentiles: %s has NaN at pixel (%d, %d)",
+                                     err->source ? err->source : "the error image", x, y);
+                }
+                v[k++] = e;
+            }
+    qsort(v, n, sizeof *v, cmp_float);
+    *out = v;
+    *n_out = n;
+    return 0;
+}
+
+static double
+nearest_rank(const float *v, size_t n, double p)
+{
+    double r = ceil(p * (double)n) - 1.0;
+    size_t i = r < 0.0 ? 0 : (size_t)r;
+    return v[i < n ? i : n - 1];
+}
+
+int
+mcp_true_percentiles(const mcp_image *err, const double *p, int n, double *out)
+{
+    float *v;
+    size_t m;
+    if (sorted_values(err, &v, &m)) return -1;
+    for (int k = 0; k < n; k++)
+        out[k] = nearest_rank(v, m, p[k]);
+    free(v);
+    return 0;
+}
+
+/* ---- series ---- */
+
+mcp_series_estimate_options
+mcp_series_estimate_defaults(void)
+{
+    static const double taus[] = {0.05, 0.02, 0.01};
+    mcp_series_estimate_options o;
+    memset(&o, 0, sizeof o);
+    o.est = mcp_estimate_defaults();
+    o.n_taus = 3;
+    memcpy(o.taus, taus, sizeof taus);
+    return o;
+}
+
+void
+mcp_series_estimate_free(mcp_series_estimate *s)
+{
+    if (!s) return;
+    free(s->points);
+    free(s);
+}
+
+int
+mcp_stop_agrees(double est_spp, double true_spp, const double *spps, int n)
+{
+    if (est_spp <= 0.0 || true_spp <= 0.0) return est_spp <= 0.0 && true_spp <= 0.0;
+    if (est_spp == true_spp || fabs(est_spp - true_spp) <= true_spp / 3.0) return 1;
+    int ie = -1, it = -1;
+    for (int i = 0; i < n; i++) {
+        if (spps[i] == est_spp) ie = i;
+        if (spps[i] == true_spp) it = i;
+    }
+    return ie >= 0 && it >= 0 && abs(ie - it) <= 1;
+}
+
+static double
+mean_spp(const mcp_dump *d)
+{
+    if (!d->spp_map) return d->spp;
+    double s = 0.0;
+    for (int y = 0; y < d->spp_map->height; y++)
+        for (int x = 0; x < d->spp_map->width; x++)
+            s += mcp_image_px(d->spp_map, x, y)[0];
+    return s / ((double)d->spp_map->width * d->spp_map->height);
+}
+
+/* Fills the truth of one member from its denoised image. */
+static int
+member_truth(const mcp_estimate *e, const mcp_image *reference,
+             const mcp_series_estimate_options *o, mcp_series_point *pt)
+{
+    mcp_image *err = NULL;
+    float *v = NULL;
+    size_t n = 0;
+    if (mcp_true_error(e->maps.denoised, reference, o->est.sure.metric, o->est.sure.ppd,
+                       &err) ||
+        sorted_values(err, &v, &n)) {
+        mcp_image_free(err);
+        return -1;
+    }
+    double sum = 0.0;
+    for (size_t i = 0; i < n; i++)
+        sum += v[i];
+    pt->true_mean_error = sum / (double)n;
+    double at_p = nearest_rank(v, n, o->est.p);
+    for (int j = 0; j < o->n_taus; j++) {
+        /* fraction of values <= τ: binary search for the first value > τ */
+        size_t lo = 0, hi = n;
+        while (lo < hi) {
+            size_t mid = lo + (hi - lo) / 2;
+            if (v[mid] <= o->taus[j])
+                lo = mid + 1;
+            else
+                hi = mid;
+        }
+        pt->true_cdf[j] = (double)lo / (double)n;
+        pt->true_stop[j] = at_p <= o->taus[j];
+    }
+    for (int k = 0; k < o->est.n_percentiles; k++)
+        pt->true_percentile[k] = nearest_rank(v, n, o->est.percentiles[k]);
+    free(v);
+    mcp_image_free(err);
+    return 0;
+}
+
+int
+mcp_estimate_series(const mcp_series *series, const mcp_denoiser *den,
+                    const mcp_series_estimate_options *opt, const mcp_image *reference,
+                    void (*progress)(int done, int total, void *ctx), void *ctx,
+                    mcp_series_estimate **out)
+{
+    *out = NULL;
+    mcp_series_estimate_options o = opt ? *opt : mcp_series_estimate_defaults();
+    if (!series || series->count < 1)
+        return mcp_error("estimate: the series has no members");
+    if (o.n_taus < 1 || o.n_taus > MCP_ESTIMATE_MAX_TAUS)
+        return mcp_error("estimate: taus needs 1 to %d values (got %d)",
+                         MCP_ESTIMATE_MAX_TAUS, o.n_taus);
+    for (int j = 0; j < o.n_taus; j++)
+        if (!(o.taus[j] > 0.0) || !isfinite(o.taus[j]))
+            return mcp_error("estimate: taus must be > 0 (got %g)", o.taus[j]);
+    o.est.tau = o.taus[0];
+    if (mcp_estimate_check(&o.est)) return -1;
+    mcp_series_estimate *s = mcp_calloc(1, sizeof *s);
+    if (!s) return -1;
+    s->points = mcp_calloc((size_t)series->count, sizeof *s->points);
+    if (!s->points) {
+        free(s);
+        return -1;
+    }
+    s->count = series->count;
+    s->n_taus = o.n_taus;
+    memcpy(s->taus, o.taus, sizeof o.taus);
+    s->p = o.est.p;
+    s->n_percentiles = o.est.n_percentiles;
+    memcpy(s->percentiles, o.est.percentiles, sizeof o.est.percentiles);
+    s->has_reference = reference != NULL;
+    for (int i = 0; i < series->count; i++) {
+        mcp_dump *d = NULL;
+        mcp_estimate *e = NULL;
+        mcp_series_point *pt = &s->points[i];
+        if (mcp_series_load(series, i, &d) || mcp_estimate_compute(d, den, &o.est, &e)) {
+            mcp_error_prefix("%s: ", series->paths[i]);
+            mcp_dump_free(d);
+            mcp_series_estimate_free(s);
+            return -1;
+        }
+        pt->spp = series->spp && series->spp[i] > 0 ? series->spp[i] : mean_spp(d);
+        for (int j = 0; j < o.n_taus; j++)
+            pt->stop[j] =
+                mcp_error_should_stop(e->dist, o.taus[j], o.est.p, &pt->cdf[j]) &&
+                !e->no_variance;
+        memcpy(pt->est_percentile, e->percentile_tau, sizeof e->percentile_tau);
+        pt->est_mean_error = mcp_error_dist_mean(e->dist);
+        pt->true_mean_error = NAN;
+        int bad = reference && member_truth(e, reference, &o, pt);
+        mcp_estimate_free(e);
+        mcp_dump_free(d);
+        if (bad) {
+            mcp_error_prefix("%s: ", series->paths[i]);
+            mcp_series_estimate_free(s);
+            return -1;
+        }
+        if (progress) progress(i + 1, series->count, ctx);
+    }
+    double *spps = mcp_calloc((size_t)s->count, sizeof *spps);
+    if (!spps) {
+        mcp_series_estimate_free(s);
+        return -1;
+    }
+    for (int i = 0; i < s->count; i++)
+        spps[i] = s->points[i].spp;
+    for (int j = 0; j < o.n_taus; j++) {
+        for (int i = s->count - 1; i >= 0; i--) { /* the first member that stops */
+            if (s->points[i].stop[j]) s->first_spp[j] = s->points[i].spp;
+            if (reference && s->points[i].true_stop[j])
+                s->true_first_spp[j] = s->points[i].spp;
+        }
+        s->agree[j] = reference ? mcp_stop_agrees(s->first_spp[j], s->true_first_spp[j],
+                                                  spps, s->count)
+                                : 0;
+    }
+    free(spps);
+    *out = s;
+    return 0;
+}

@@ -1,0 +1,410 @@
+/* estimate.h: how wrong a denoised render still is, where to put the next samples, and
+ * when to stop rendering (SPEC "estimate"; Firmino et al. 2023 and 2024, Li 2017).
+ *
+ * The pieces, in the order the pipeline (mcp_estimate_compute) runs them:
+ *   probes        ε ~ N(0, Σ̂) per pixel (3x3 colour covariance, or the joint
+ *                 colour-feature covariance for joint SURE), Rademacher v = L r
+ *   error maps    F(X), SURE, Var[F] = (Jε)² and Σ̂, each also divided by the metric's
+ *                 denominator (maxc² + EPS_REL; FLIP's CSF operator M for SURE_M)
+ *   sampling map  Firmino 2023 Eq. 3 (and its tone-mapped and MC-SURE variants), and
+ *                 integer sample counts that sum exactly to a budget
+ *   blocks        Firmino 2024 Alg. 1 over summed-area tables
+ *   distribution  λ_i and s_i² (Eq. 14), the image error CDF F(τ), the stopping
+ *                 predicate F(τ) >= p and percentiles by bisection in log τ
+ *
+ * Every random stream is seeded from (seed, pixel index) and every image-wide sum runs
+ * in double per row with the rows added in order, so results do not depend on the
+ * number of threads. Functions return 0, or -1 with mcp_error_message() set; results
+ * come back through out-pointers that stay NULL on failure. */
+#ifndef MCP_ESTIMATE_H
+#define MCP_ESTIMATE_H
+
+#include <stdint.h>
+#include <mcpost/denoiser.h>
+#include <mcpost/dump.h>
+#include <mcpost/tonemap.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Relative quantities divide by maxc(p)² + EPS_REL (SPEC "Notation"). metrics.h
+ * defines the same constant. */
+#ifndef MCP_EPS_REL
+#define MCP_EPS_REL 1e-2
+#endif
+
+#define MCP_ESTIMATE_MAX_PERCENTILES 32
+#define MCP_ESTIMATE_MAX_TAUS 32
+
+/* The error a run estimates and stops on. */
+typedef enum {
+    MCP_METRIC_RELSE = 0,        /* (F - μ)² / (maxc(F)² + EPS_REL)     "relse" */
+    MCP_METRIC_RELSE_PERCEPTUAL, /* (M(F - μ))² / (maxc(MF)² + EPS_REL) "relse-perceptual"
+                                  */
+    MCP_METRIC_SE                /* (F - μ)²                            "se" */
+} mcp_error_metric;
+
+/* "relse", "relse-perceptual", "se"; fails with "unknown metric 'X' (known: ...)". */
+MCP_API int mcp_error_metric_from_name(const char *name, mcp_error_metric *out);
+MCP_API const char *mcp_error_metric_name(mcp_error_metric metric);
+
+/* ---- probes (estimate/probes.c) ---- */
+
+/* Noisy features for joint SURE (Li 2017). Render dumps carry no colour-feature
+ * covariance yet; a caller that has it passes it here. Every image has the dump's
+ * size; NULL parts are zero (no correlation) or, for the feature variances, filled
+ * with the smallest values that make the joint covariance positive semi-definite,
+ * Σ_yx Σ_xx⁺ Σ_xy (only the cross-covariance enters SURE's expectation). A part is
+ * used only when the dump has that feature and the denoiser reads it. */
+typedef struct mcp_feature_covariance {
+    /* Cov(colour_c, albedo_d) of the pixel means: 9 channels in the order
+     * RR, RG, RB, GR, GG, GB, BR, BG, BB (colour channel first). */
+    const mcp_image *color_albedo;
+    /* Cov(colour_c, normal_d): 9 channels RX, RY, RZ, GX, ..., BZ. */
+    const mcp_image *color_normal;
+    const mcp_image *albedo_var; /* variance of the albedo mean, 3 channels, or NULL */
+    const mcp_image *normal_var; /* variance of the normal mean, 3 channels, or NULL */
+} mcp_feature_covariance;
+
+/* One probe: a colour part and, for joint SURE, feature parts (NULL when absent).
+ * All are 3-channel images of the dump's size. */
+typedef struct mcp_probe {
+    mcp_image *color;
+    mcp_image *albedo;
+    mcp_image *normal;
+} mcp_probe;
+
+MCP_API void mcp_probe_clear(mcp_probe *p); /* frees the parts, sets them to NULL */
+
+/* Probe k of a Gaussian stream: ε ~ N(0, Σ̂_p) per pixel from the dump's variance of
+ * the mean and, when present, its colour covariance (and from features when given,
+ * drawing colour and features jointly). Negative eigenvalues of Σ̂_p are clamped to 0
+ * (SPEC "SURE"). Deterministic in (seed, k, pixel). */
+MCP_API int mcp_probe_gaussian(const mcp_dump *dump,
+                               const mcp_feature_covariance *features, uint64_t seed,
+                               int k, mcp_probe *out);
+
+/* Probe k of a Rademacher stream: v_p = L_p r_p with L_p L_pᵀ = Σ̂_p (clamped) and
+ * r_p a vector of independent ±1 (SPEC "Variance", Firmino 2023 Eq. 2). Colour only. */
+MCP_API int mcp_probe_rademacher(const mcp_dump *dump, uint64_t seed, int k,
+                                 mcp_image **out);
+
+/* ---- SURE and variance (estimate/sure.c, estimate/variance.c) ---- */
+
+typedef struct mcp_sure_options {
+    mcp_error_metric metric; /* [relse] */
+    int n_probes;            /* K >= 1: probes averaged in the Jε terms [1] */
+    uint64_t seed;           /* [0] */
+    double ppd;      /* relse-perceptual: pixels per degree, 0 = FLIP's 67.02 [0] */
+    int mc_sure;     /* 1: Jε by finite differences (Ramani 2008), even when the
+                        denoiser has an exact jvp [0] */
+    double fd_delta; /* δ of the finite differences, unitless: the probe already
+                        carries the noise scale (SPEC "Denoisers") [0.1] */
+    const mcp_feature_covariance *features; /* joint SURE; NULL: plain SURE [NULL] */
+} mcp_sure_options;
+
+MCP_API mcp_sure_options mcp_sure_defaults(void);
+
+/* Everything one denoiser evaluation with probes gives, per value (3 channels R, G, B
+ * unless said otherwise). "Scaled" maps are divided by the metric's denominator:
+ * maxc(F)² + EPS_REL (relse), maxc(MF)² + EPS_REL (relse-perceptual) or 1 (se). */
+typedef struct mcp_error_maps {
+    mcp_error_metric metric;
+    mcp_image *denoised; /* F(X) */
+    mcp_image *sure;     /* SURE_i, or SURE_M,i for relse-perceptual */
+    mcp_image *sure_rel; /* sure, scaled */
+    mcp_image *var;     /* Var[F_i] ≈ mean_k (Jε_k)_i² (relse-perceptual: (MJε)²) */
+    mcp_image *var_rel; /* var, scaled: s_i² of the error distribution */
+    mcp_image *sigma_rel;   /* Σ̂_ii scaled (relse-perceptual: mean_k (Mε_k)_i² as the
+                               estimate of (MΣ̂Mᵀ)_ii), for block splitting */
+    mcp_image *denominator; /* 1 channel "denominator" (all 1 for se) */
+} mcp_error_maps;
+
+MCP_API void mcp_error_maps_free(mcp_error_maps *maps); /* frees the images, not maps */
+
+/* Runs the denoiser once with opt->n_probes Gaussian probes (jvp, or finite
+ * differences) and computes every map. opt may be NULL. */
+MCP_API int mcp_error_maps_compute(const mcp_dump *dump, const mcp_denoiser *den,
+                                   const mcp_sure_options *opt, mcp_error_maps *out);
+
+/* The same from an evaluation the caller made (e.g. on a GPU): F(X), K probes ε_k
+ * (colour parts) and J ε_k. Takes ownership of nothing; copies `denoised`. */
+MCP_API int mcp_error_maps_from_probes(const mcp_dump *dump, const mcp_image *denoised,
+                                       const mcp_image *const *probes,
+                                       const mcp_image *const *jvps, int k,
+                                       const mcp_sure_options *opt, mcp_error_maps *out);
+
+/* Per-value SURE of den on dump, scaled as opt->metric says (se: plain SURE,
+ * relse: SURE^r, relse-perceptual: SURE^r_M). One channel per colour, R, G, B. */
+MCP_API int mcp_sure(const mcp_dump *dump, const mcp_denoiser *den,
+                     const mcp_sure_options *opt, mcp_image **out);
+
+typedef struct mcp_variance_options {
+    int n_probes;    /* K >= 1 Rademacher probes [1] */
+    uint64_t seed;   /* [0] */
+    int relative;    /* divide by maxc(F)² + EPS_REL [0] */
+    int mc;          /* finite differences instead of the jvp [0] */
+    double fd_delta; /* [0.1] */
+} mcp_variance_options;
+
+MCP_API mcp_variance_options mcp_variance_defaults(void);
+
+/* Var[F_i] ≈ mean_k (J v_k)_i² with Rademacher probes v (Firmino 2023 Eqs. 1-2).
+ * denoised (may be NULL) receives F(X). */
+MCP_API int mcp_variance(const mcp_dump *dump, const mcp_denoiser *den,
+                         const mcp_variance_options *opt, mcp_image **var,
+                         mcp_image **denoised);
+
+/* J t_k for k < n by finite differences, (F(X + δ t) - F(X)) / δ, with the colour
+ * and feature parts of t moved together; primal (may be NULL) receives F(X). The
+ * black-box route of SPEC "Denoisers", usable with any denoiser. */
+MCP_API int mcp_jvp_finite_difference(const mcp_denoiser *den,
+                                      const mcp_denoise_input *at,
+                                      const mcp_denoise_tangent *t, int n, double delta,
+                                      mcp_image **primal, mcp_image **out);
+
+/* ---- sampling map (estimate/sampling_map.c) ---- */
+
+typedef enum {
+    MCP_SAMPLING_VARIANCE = 0, /* Var[F] / ((n+1)(F² + EPS_REL)), Eq. 3     "variance" */
+    MCP_SAMPLING_TONEMAPPED, /* T'(F)² Var[F] / (n+1), T = ACES          "tonemapped" */
+    MCP_SAMPLING_MC_SURE     /* SURE / ((n+1)(F² + EPS_REL)), wider blur  "mc-sure" */
+} mcp_sampling_kind;
+
+MCP_API int mcp_sampling_kind_from_name(const char *name, mcp_sampling_kind *out);
+MCP_API const char *mcp_sampling_kind_name(mcp_sampling_kind kind);
+
+typedef struct mcp_sampling_options {
+    mcp_sampling_kind kind; /* [variance] */
+    double blur_sigma_px;   /* 0: 0.5, or 4 for mc-sure [0] */
+    int blur_window;        /* odd; 0: 5, or 17 for mc-sure [0] */
+    mcp_tonemap tone_map;   /* tonemapped: T [aces] */
+} mcp_sampling_options;
+
+MCP_API mcp_sampling_options mcp_sampling_defaults(void);
+
+/* The per-pixel sampling density for the next iteration: s_p = mean_c of the kind's
+ * term, clipped at 0, blurred, normalised to sum 1 (uniform when every s_p is 0).
+ * numerator: Var[F] (variance, tonemapped; absolute, not relative) or SURE (mc-sure),
+ * 3 channels; denoised: F; dump: for n_p. *map has one channel "weight". */
+MCP_API int mcp_sampling_map(const mcp_dump *dump, const mcp_image *denoised,
+                             const mcp_image *numerator, const mcp_sampling_options *opt,
+                             mcp_image **map);
+
+/* Integer per-pixel sample counts for `budget` samples in all, proportional to a map
+ * (any non-negative weights), by largest remainders: floor(budget w_p / Σw) each, and
+ * one more to the pixels with the largest fractional parts (ties to the lower pixel
+ * index), so they sum exactly to budget. *counts has one channel "SampleCount" (the
+ * mcpost dump convention's per-pixel count); every count must fit a float exactly
+ * (<= 2^24). */
+MCP_API int mcp_sample_counts(const mcp_image *map, int64_t budget, mcp_image **counts);
+
+/* The variance of the post-correction combiner (Firmino 2023 Eq. 4):
+ * ρ²(α² Var[F(x0)] + (1 - α)² Var[F(x1)]) + (1 - ρ)² Var[x], per value. alpha and rho
+ * have 1 channel or 3; the variances 3. The result can be the numerator of a
+ * sampling map. */
+MCP_API int mcp_postcorrection_variance(const mcp_image *var_f0, const mcp_image *var_f1,
+                                        const mcp_image *var_x, const mcp_image *alpha,
+                                        const mcp_image *rho, mcp_image **out);
+
+/* ---- block averaging (estimate/blockavg.c) ---- */
+
+typedef struct mcp_block {
+    int x, y, w, h;
+    double sure_sum[3]; /* Σ SURE^r over the block, per channel */
+    double var_sum[3];  /* Σ Var^r, filled by mcp_error_distribution */
+} mcp_block;
+
+typedef struct mcp_blocks {
+    int width, height;
+    int count;
+    mcp_block *items; /* disjoint, covering the image, in depth-first order */
+} mcp_blocks;
+
+MCP_API void mcp_blocks_free(mcp_blocks *blocks);
+
+typedef struct mcp_block_options {
+    int tile_size; /* pre-split into tiles of this side before Alg. 1; 0: none [0] */
+} mcp_block_options;
+
+MCP_API mcp_block_options mcp_block_defaults(void);
+
+/* Firmino 2024 Alg. 1: starting from the image (or its tiles), cut a block with
+ * longest side > 1 at the middle of its longest side (the width on ties) and keep the
+ * cut when both halves pass, for every channel k,
+ *     Σ sigma_rel / sqrt(|B_j ∩ C_k|) < Σ sure_rel.
+ * Both inputs have 3 channels; sums run in double, from a summed-area table over
+ * 4x4-pixel cells plus the pixels of the partial cells at a block's edges, so each
+ * test costs O(perimeter) at most. opt may be NULL. */
+MCP_API int mcp_block_average(const mcp_image *sure_rel, const mcp_image *sigma_rel,
+                              const mcp_block_options *opt, mcp_blocks **out);
+
+/* Each value replaced by its block ∩ channel mean (block-averaged SURE, Fig. 5). */
+MCP_API int mcp_blocks_mean_image(const mcp_blocks *blocks, const mcp_image *values,
+                                  mcp_image **out);
+
+/* The block of every pixel: *label receives width * height indices, row-major
+ * (malloc'd; free() it). */
+MCP_API int mcp_blocks_label(const mcp_blocks *blocks, int32_t **label);
+
+/* A false-colour picture of the blocks (turbo colours hashed from the block index,
+ * so neighbours differ): rgb8 receives width * height * 3 bytes. */
+MCP_API int mcp_blocks_picture(const mcp_blocks *blocks, unsigned char *rgb8);
+
+/* ---- error distribution and stopping (estimate/stopping.c) ---- */
+
+/* P((Z + sqrt(λ))² <= x), Z ~ N(0, 1): the CDF of the noncentral χ² with one degree of
+ * freedom, Φ(√x - √λ) - Φ(-√x - √λ). x <= 0 gives 0. */
+MCP_API double mcp_ncx2_cdf(double x, double lambda);
+
+/* The per-value error model s_i² (Z + √λ_i)² (Eq. 14): s_i² = Var^r_i, λ_i constant
+ * over block ∩ channel. It refers to the blocks and the variance it was made from
+ * (like a view): both must outlive it. */
+typedef struct mcp_error_dist mcp_error_dist;
+
+MCP_API void mcp_error_dist_free(mcp_error_dist *dist);
+
+/* λ_i = max(Σ_{B∩C} SURE^r / (Σ_{B∩C} Var^r + 1e-6), 1) - 1 and s_i² = Var^r_i.
+ * Fills blocks->items[].var_sum. */
+MCP_API int mcp_error_distribution(mcp_blocks *blocks, const mcp_image *var_rel,
+                                   mcp_error_dist **out);
+
+/* λ of block b, channel c. */
+MCP_API double mcp_error_dist_lambda(const mcp_error_dist *dist, int block, int c);
+
+/* mean_i s_i² (λ_i + 1): the mean scaled error the model expects. */
+MCP_API double mcp_error_dist_mean(const mcp_error_dist *dist);
+
+/* λ and s² as images (3 channels each: "lambda.R", ..., "s2.R", ...; 6 in all). */
+MCP_API int mcp_error_dist_image(const mcp_error_dist *dist, mcp_image **out);
+
+/* The image error CDF F(τ) = mean_i F_i(τ) (Eq. 15), in float with a vectorised
+ * normal tail (Abramowitz & Stegun 26.2.17): each F_i is within 2e-7 of
+ * mcp_ncx2_cdf, far below the 1 - p = 1e-3 that the stopping decision resolves.
+ * Sums in double per block row, blocks added in order. */
+MCP_API double mcp_error_cdf(const mcp_error_dist *dist, double tau);
+
+/* The stopping predicate F(τ) >= p (Eq. 16): 1 to stop, 0 to go on. cdf (may be NULL)
+ * receives F(τ). */
+MCP_API int mcp_error_should_stop(const mcp_error_dist *dist, double tau, double p,
+                                  double *cdf);
+
+/* The estimated error at percentile p[k] (in [0, 1)): the τ with F(τ) = p by bisection
+ * in log τ (relative precision 1e-4); 0 when F is already >= p for every τ > 0, +inf
+ * when no finite τ reaches p. */
+MCP_API int mcp_error_percentiles(const mcp_error_dist *dist, const double *p, int n,
+                                  double *tau);
+
+/* ---- the pipeline (estimate/estimate.c) ---- */
+
+typedef struct mcp_estimate_options {
+    mcp_sure_options sure;
+    int variance_rademacher; /* 1: Var from K separate Rademacher probes (Firmino 2023);
+                                0: reuse the SURE probes, Var = (Jε)² (Firmino 2024) [0]
+                              */
+    mcp_block_options blocks;
+    double tau;        /* the error threshold [0.01] */
+    double p;          /* the fraction of values that must be below it [0.999] */
+    int n_percentiles; /* the estimated percentile curve [5] */
+    double
+        percentiles[MCP_ESTIMATE_MAX_PERCENTILES]; /* [0.5, 0.9, 0.99, 0.999, 0.9999] */
+    mcp_sampling_options sampling;
+    int64_t budget; /* samples for the next iteration; 0: no counts [0] */
+} mcp_estimate_options;
+
+MCP_API mcp_estimate_options mcp_estimate_defaults(void);
+
+/* Checks every field, naming it ("estimate: tau must be > 0 (got -1)"). */
+MCP_API int mcp_estimate_check(const mcp_estimate_options *opt);
+
+typedef struct mcp_estimate {
+    mcp_error_maps maps;
+    mcp_blocks *blocks;
+    mcp_error_dist *dist;
+    mcp_image *sampling_map;  /* "weight", sums to 1 */
+    mcp_image *sample_counts; /* "SampleCount", sums to budget; NULL when budget is 0 */
+    double tau, p;
+    double cdf_at_tau; /* F(τ) */
+    int stop;          /* F(τ) >= p, and the dump has variance somewhere */
+    int no_variance;   /* the dump's variance is 0 everywhere (e.g. at 1 spp, where
+                          a per-sample variance is undefined): every s_i is 0, so
+                          the model would claim no error; stop is forced to 0 */
+    int n_percentiles;
+    double percentiles[MCP_ESTIMATE_MAX_PERCENTILES];    /* the p values */
+    double percentile_tau[MCP_ESTIMATE_MAX_PERCENTILES]; /* estimated error at each */
+    double ms_denoise, ms_error_terms, ms_blocks, ms_stopping; /* wall-clock times */
+} mcp_estimate;
+
+MCP_API int mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,
+                                 const mcp_estimate_options *opt, mcp_estimate **out);
+MCP_API void mcp_estimate_free(mcp_estimate *est);
+
+/* The true per-value error of a denoised image against the reference μ in a metric
+ * (SPEC "Ground truth for evaluation"): (F - μ)², scaled by maxc(F)² + EPS_REL for
+ * relse, or (M(F - μ))² / (maxc(MF)² + EPS_REL) for relse-perceptual. */
+MCP_API int mcp_true_error(const mcp_image *denoised, const mcp_image *reference,
+                           mcp_error_metric metric, double ppd, mcp_image **out);
+
+/* Nearest-rank percentiles of every value of a 3-channel image: element
+ * ceil(p n) - 1 of the ascending sort (p = 0: the smallest), as metrics.h. */
+MCP_API int mcp_true_percentiles(const mcp_image *err, const double *p, int n,
+                                 double *out);
+
+/* ---- a progressive render: when is each τ reached? (Firmino 2024 Table 1) ---- */
+
+typedef struct mcp_series_point {
+    double spp;
+    double cdf[MCP_ESTIMATE_MAX_TAUS];      /* estimated F(τ_j) */
+    int stop[MCP_ESTIMATE_MAX_TAUS];        /* F(τ_j) >= p */
+    double true_cdf[MCP_ESTIMATE_MAX_TAUS]; /* fraction of true errors <= τ_j */
+    int true_stop[MCP_ESTIMATE_MAX_TAUS];   /* true percentile at p <= τ_j */
+    double est_percentile[MCP_ESTIMATE_MAX_PERCENTILES];
+    double true_percentile[MCP_ESTIMATE_MAX_PERCENTILES];
+    double true_mean_error; /* mean true error (NAN without reference) */
+    double est_mean_error;  /* mean s²(λ + 1) */
+} mcp_series_point;
+
+typedef struct mcp_series_estimate {
+    int count; /* members */
+    mcp_series_point *points;
+    int n_taus;
+    double taus[MCP_ESTIMATE_MAX_TAUS];
+    double p;
+    int n_percentiles;
+    double percentiles[MCP_ESTIMATE_MAX_PERCENTILES];
+    int has_reference;
+    /* first spp at which F(τ_j) >= p (estimated) and at which the true percentile
+     * is <= τ_j; 0 when never within the series */
+    double first_spp[MCP_ESTIMATE_MAX_TAUS];
+    double true_first_spp[MCP_ESTIMATE_MAX_TAUS];
+    int agree[MCP_ESTIMATE_MAX_TAUS]; /* mcp_stop_agrees (with a reference) */
+} mcp_series_estimate;
+
+typedef struct mcp_series_estimate_options {
+    mcp_estimate_options est;           /* est.tau is ignored: taus are used */
+    int n_taus;                         /* [3] */
+    double taus[MCP_ESTIMATE_MAX_TAUS]; /* [0.05, 0.02, 0.01] */
+} mcp_series_estimate_options;
+
+MCP_API mcp_series_estimate_options mcp_series_estimate_defaults(void);
+
+/* Runs the estimate on every member of a series (loaded one at a time), and, with a
+ * reference (may be NULL), the truth beside it. progress (may be NULL) is called
+ * after each member. */
+MCP_API int mcp_estimate_series(const mcp_series *series, const mcp_denoiser *den,
+                                const mcp_series_estimate_options *opt,
+                                const mcp_image *reference,
+                                void (*progress)(int done, int total, void *ctx),
+                                void *ctx, mcp_series_estimate **out);
+MCP_API void mcp_series_estimate_free(mcp_series_estimate *s);
+
+/* Agreement of a stopping spp with the true one (Firmino 2024 §5): equal, within one
+ * step of the series (adjacent members), or within a third of the true count; both 0
+ * (never reached) also agree. spps: the series' counts, ascending. */
+MCP_API int mcp_stop_agrees(double est_spp, double true_spp, const double *spps, int n);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

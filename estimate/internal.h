@@ -1,0 +1,114 @@
+/* internal.h: helpers shared inside estimate/ (not installed; no other module includes
+ * it). One section per concern; add new sections at the end. */
+#ifndef MCP_ESTIMATE_INTERNAL_H
+#define MCP_ESTIMATE_INTERNAL_H
+
+#include <mcpost/denoiser.h>
+
+#include <stddef.h>
+
+/* ---- denoisers (denoisers.c, denoise_*.c; SPEC estimate/Denoisers) ---- */
+
+/* The built-in kinds; denoisers.c lists them in its table. */
+extern const mcp_denoiser_kind mcp__denoiser_gauss;
+extern const mcp_denoiser_kind mcp__denoiser_nlm;
+
+/* Checks an input for denoiser `who`: colour present with 3 channels; albedo, normal
+ * and variance, when given, 3 channels and the colour's size. */
+int mcp__denoise_check_input(const char *who, const mcp_denoise_input *in);
+
+/* Checks n >= 0 tangents against the input `at`: each colour part present, 3 channels,
+ * same size; feature parts optional, checked the same way when given. */
+int mcp__denoise_check_tangents(const char *who, const mcp_denoise_input *at,
+                                const mcp_denoise_tangent *t, int n);
+
+/* A new zero-filled packed image with channels R, G, B labelled `source`. */
+int mcp__rgb_new(int width, int height, const char *source, mcp_image **out);
+
+/* A new denoiser with the common fields set, a zeroed state block of state_size bytes
+ * (freed with it) and a destroy that frees both; NULL with an error on failure. */
+mcp_denoiser *mcp__denoiser_new(const char *name, size_t state_size);
+
+/* ---- error estimation (probes.c, sure.c, variance.c, sampling_map.c, blockavg.c,
+ *      stopping.c, estimate.c; SPEC estimate/SURE to estimate/Error distribution) ---- */
+
+#include <stdint.h>
+#include <mcpost/estimate.h>
+
+/* A counter-based random stream (splitmix64) keyed by (seed, stream kind, probe,
+ * pixel index): the same numbers whatever the thread count (probes.c). */
+typedef struct mcp__rng {
+    uint64_t state;
+    double spare; /* the second Box-Muller normal */
+    int has_spare;
+} mcp__rng;
+
+uint64_t mcp__mix64(uint64_t z);
+void mcp__rng_init(mcp__rng *r, uint64_t seed, uint64_t stream, uint64_t k, uint64_t index);
+uint64_t mcp__rng_u64(mcp__rng *r);
+double mcp__rng_normal(mcp__rng *r);
+
+/* Fails naming `who` when the dump lacks colour or the variance of the mean. */
+int mcp__check_dump(const char *who, const mcp_dump *dump);
+
+/* A new zero-filled packed image of n channels (names NULL: R, G, B), labelled source
+ * (sure.c). */
+int mcp__image_new(int width, int height, int n, const char *const *names,
+                   const char *source, mcp_image **out);
+
+/* J t_k by the denoiser's jvp, or by finite differences (step delta) when fd is set or
+ * the denoiser has no jvp (sure.c). */
+int mcp__jvp(const mcp_denoiser *den, const mcp_denoise_input *at,
+             const mcp_denoise_tangent *t, int n, int fd, double delta,
+             mcp_image **primal, mcp_image **out);
+
+/* Per-value variance maps from n jvp images: mean_k (J v_k)² (through the CSF operator
+ * for relse-perceptual), and divided by the denominator (1 channel) (variance.c). */
+int mcp__variance_from_jvps(const mcp_image *const *jv, int n, mcp_error_metric metric,
+                            double ppd, const mcp_image *denominator, mcp_image **var,
+                            mcp_image **var_rel);
+
+/* Wall-clock milliseconds (for the timings the pipeline reports). */
+double mcp__now_ms(void);
+
+/* ---- denoisers, continued (denoise_nlm.c) ---- */
+
+extern const mcp_denoiser_kind mcp__denoiser_bilateral;
+
+/* ---- denoisers, continued (denoise_nlm.c) ---- */
+
+extern const mcp_denoiser_kind mcp__denoiser_bilateral;
+
+/* ---- denoisers, continued (denoise_nlm.c) ---- */
+
+extern const mcp_denoiser_kind mcp__denoiser_bilateral;
+
+/* ---- denoisers, continued (denoise_nlm.c) ---- */
+
+extern const mcp_denoiser_kind mcp__denoiser_bilateral;
+
+/* ---- denoisers, continued (denoise_nlm.c) ---- */
+
+extern const mcp_denoiser_kind mcp__denoiser_bilateral;
+
+/* ---- denoisers, continued (denoise_nlm.c) ---- */
+
+extern const mcp_denoiser_kind mcp__denoiser_bilateral;
+
+/* ---- denoisers, continued (denoise_nlm.c) ---- */
+
+extern const mcp_denoiser_kind mcp__denoiser_bilateral;
+
+/* ---- denoisers, continued (denoise_nlm.c) ---- */
+
+extern const mcp_denoiser_kind mcp__denoiser_bilateral;
+
+/* ---- denoisers, continued (denoise_nlm.c) ---- */
+
+extern const mcp_denoiser_kind mcp__denoiser_bilateral;
+
+/* ---- denoisers, continued (denoise_nlm.c) ---- */
+
+extern const mcp_denoiser_kind mcp__denoiser_bilateral;
+
+#endif

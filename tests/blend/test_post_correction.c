@@ -1,0 +1,132 @@
+/* test_post_correction.c: blend/post_correction.c -- the James-Stein combiner against
+ * its closed form on constant images and a naive window loop on random ones, and its
+ * rho in estimate's post-correction variance (SPEC "blend" Post-correction). */
+#include "blend_testing.h"
+
+#include <math.h>
+
+/* The naive combiner: every window summed directly, in double. */
+static double
+naive_js(const mcp_image *n, const mcp_image *d, const mcp_image *v, int window, int x,
+         int y, int k)
+{
+    int r = window / 2;
+    double p = 0, sv = 0, sq = 0;
+    for (int j = y - r; j <= y + r; j++)
+        for (int i = x - r; i <= x + r; i++) {
+            if (i < 0 || j < 0 || i >= n->width || j >= n->height) continue;
+            double e = (double)mcp_image_px(n, i, j)[k] - mcp_image_px(d, i, j)[k];
+            p++;
+            sv += mcp_image_px(v, i, j)[k];
+            sq += e * e;
+        }
+    double s = sq > 0 ? fmax(0, 1 - (p - 2) * (sv / p) / sq) : 0;
+    double dv = mcp_image_px(d, x, y)[k];
+    return dv + s * (mcp_image_px(n, x, y)[k] - dv);
+}
+
+static void
+test_closed_form(void **state)
+{
+    (void)state;
+    /* n - d = delta everywhere, v = sigma2: s = 1 - (p - 2) sigma2 / (p delta^2), with
+     * p = 49 inside a 7x7 window and 16 at a corner (4x4 clipped). */
+    const double delta = 0.5, sigma2 = 0.1;
+    mcp_image *n = rgb_constant(20, 20, 1.5f), *d = rgb_constant(20, 20, 1.0f);
+    mcp_image *v = rgb_constant(20, 20, (float)sigma2), *r = NULL, *rho = NULL;
+    assert_int_equal(mcp_blend_james_stein(n, d, v, 7, &r, &rho), 0);
+    double s_in = 1 - 47 * sigma2 / (49 * delta * delta);
+    double s_corner = 1 - 14 * sigma2 / (16 * delta * delta);
+    for (int k = 0; k < 3; k++) {
+        assert_close(mcp_image_px(r, 10, 10)[k], 1.0 + s_in * delta, 1e-6, 0);
+        assert_close(mcp_image_px(rho, 10, 10)[k], 1 - s_in, 1e-6, 0);
+        assert_close(mcp_image_px(r, 0, 0)[k], 1.0 + s_corner * delta, 1e-6, 0);
+    }
+    mcp_image_free(r);
+    mcp_image_free(rho);
+    /* large noise: s clamps at 0, r = d; no noise: s = 1, r = n; n = d: r = d */
+    mcp_image *big = rgb_constant(20, 20, 10.0f), *zero = rgb_constant(20, 20, 0);
+    assert_int_equal(mcp_blend_james_stein(n, d, big, 7, &r, NULL), 0);
+    assert_true(r->data[0] == 1.0f && r->data[600] == 1.0f);
+    mcp_image_free(r);
+    assert_int_equal(mcp_blend_james_stein(n, d, zero, 7, &r, NULL), 0);
+    assert_true(r->data[0] == 1.5f && r->data[600] == 1.5f);
+    mcp_image_free(r);
+    assert_int_equal(mcp_blend_james_stein(d, d, v, 7, &r, NULL), 0);
+    assert_true(r->data[0] == 1.0f);
+    mcp_image_free(r);
+    mcp_image_free(big);
+    mcp_image_free(zero);
+    mcp_image_free(n);
+    mcp_image_free(d);
+    mcp_image_free(v);
+}
+
+static void
+test_matches_naive(void **state)
+{
+    (void)state;
+    const int w = 37, h = 23;
+    mcp_image *n = mcp_test_random(w, h, 3, 0, 2, 21, RGB);
+    mcp_image *d = mcp_test_random(w, h, 3, 0.5f, 1.5f, 22, RGB);
+    mcp_image *v = mcp_test_random(w, h, 3, 0, 0.2f, 23, RGB), *r = NULL;
+    const int windows[3] = {3, 5, 9};
+    for (int t = 0; t < 3; t++) {
+        assert_int_equal(mcp_blend_james_stein(n, d, v, windows[t], &r, NULL), 0);
+        for (int y = 0; y < h; y++)
+            for (int x = 0; x < w; x++)
+                for (int k = 0; k < 3; k++)
+                    /* summed-area differences lose ~1e-13 of sums up to ~2000; the
+                     * result is rounded to float (values <= 2: 2.4e-7) */
+                    assert_close(mcp_image_px(r, x, y)[k],
+                                 naive_js(n, d, v, windows[t], x, y, k), 0, 5e-7);
+        mcp_image_free(r);
+    }
+    assert_error_contains(mcp_blend_james_stein(n, d, v, 4, &r, NULL),
+                          "window must be odd and >= 3 (got 4)");
+    assert_null(r);
+    mcp_image *small = rgb_constant(3, 3, 0);
+    assert_error_contains(mcp_blend_james_stein(n, small, v, 7, &r, NULL),
+                          "does not match");
+    mcp_image_free(small);
+    mcp_image_free(n);
+    mcp_image_free(d);
+    mcp_image_free(v);
+}
+
+static void
+test_variance_for_sampling_maps(void **state)
+{
+    (void)state;
+    /* rho from the combiner into Firmino 2023 Eq. 4 with one denoised input:
+     * Var[r] = rho^2 Var[d] + (1 - rho)^2 v. Closed-form case as above: rho = 1 - s. */
+    const double delta = 0.5, sigma2 = 0.1, var_d = 0.004;
+    mcp_image *n = rgb_constant(20, 20, 1.5f), *d = rgb_constant(20, 20, 1.0f);
+    mcp_image *v = rgb_constant(20, 20, (float)sigma2),
+              *vd = rgb_constant(20, 20, (float)var_d);
+    mcp_image *r = NULL, *rho = NULL, *var = NULL;
+    assert_int_equal(mcp_blend_james_stein(n, d, v, 7, &r, &rho), 0);
+    assert_int_equal(mcp_blend_james_stein_variance(rho, vd, v, &var), 0);
+    double s = 1 - 47 * sigma2 / (49 * delta * delta), p = 1 - s;
+    assert_close(mcp_image_px(var, 10, 10)[1], p * p * var_d + s * s * sigma2, 1e-6, 0);
+    mcp_image_free(var);
+    assert_error_contains(mcp_blend_james_stein_variance(rho, vd, NULL, &var),
+                          "needs rho, Var[d] and v");
+    mcp_image_free(rho);
+    mcp_image_free(r);
+    mcp_image_free(n);
+    mcp_image_free(d);
+    mcp_image_free(v);
+    mcp_image_free(vd);
+}
+
+int
+main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_closed_form),
+        cmocka_unit_test(test_matches_naive),
+        cmocka_unit_test(test_variance_for_sampling_maps),
+    };
+    return cmocka_run_group_tests_name("blend/post_correction", tests, NULL, NULL);
+}

@@ -1,0 +1,506 @@
+/* test_estimate_fixtures.c: estimate/estimate.c end to end -- the pipeline on one dump,
+ * stopping over progressive series against the ground-truth stopping spp (Firmino 2024
+ * Table 1), the `estimate` subcommand and job stage.
+ *
+ * Three sources of series:
+ *  - synthetic, written here: smooth scenes with Gaussian noise of known per-pixel
+ *    variance σ²/n at n = 1, 2, 4, ..., 1024 spp and the exact mean as the reference,
+ *    denoised by a 3x3 box filter defined here (its bias on smooth scenes is far below
+ *    the thresholds, so τ is reached by variance alone, as the paper assumes);
+ *  - the committed fixtures samples/fixtures/{cornell,texture}, with the built-in
+ *    `bilateral` denoiser; skipped with a message while their reference or the
+ *    denoiser is missing.
+ * Agreement follows Firmino 2024 §5: the estimated stopping spp is within one step
+ * (adjacent member) or a third of the true one. The paper reaches 87% on 60 cases; the
+ * synthetic cases must never stop early and agree in half the cases with one probe and
+ * in 11 of 12 with four; the fixtures must agree in half the cases. */
+#include "testing.h"
+
+#include <cjson/cJSON.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+#include <mcpost/estimate.h>
+#include <mcpost/imageio.h>
+
+static const char *const RGB[] = {"R", "G", "B"};
+
+static mcp_image *
+new_rgb(int w, int h)
+{
+    mcp_image *img = NULL;
+    assert_int_equal(mcp_image_new(w, h, 3, RGB, &img), 0);
+    return img;
+}
+
+/* ---- the 3x3 box denoiser ---- */
+
+static void
+box3(const mcp_image *in, mcp_image *out)
+{
+    for (int y = 0; y < in->height; y++)
+        for (int x = 0; x < in->width; x++)
+            for (int c = 0; c < 3; c++) {
+                double s = 0.0;
+                for (int dy = -1; dy <= 1; dy++)
+                    for (int dx = -1; dx <= 1; dx++) {
+                        int xx = x + dx < 0            ? 0
+                                 : x + dx >= in->width ? in->width - 1
+                                                       : x + dx;
+                        int yy = y + dy < 0             ? 0
+                                 : y + dy >= in->height ? in->height - 1
+                                                        : y + dy;
+                        s += mcp_image_px(in, xx, yy)[c];
+                    }
+                mcp_image_px(out, x, y)[c] = (float)(s / 9.0);
+            }
+}
+
+static int
+box_apply(const mcp_denoiser *self, const mcp_denoise_input *in, mcp_image **out)
+{
+    (void)self;
+    *out = new_rgb(in->color->width, in->color->height);
+    box3(in->color, *out);
+    return 0;
+}
+
+static int
+box_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
+        const mcp_denoise_tangent *t, int n, mcp_image **primal, mcp_image **out)
+{
+    if (primal) box_apply(self, at, primal);
+    for (int k = 0; k < n; k++) {
+        out[k] = new_rgb(at->color->width, at->color->height);
+        box3(t[k].color, out[k]);
+    }
+    return 0;
+}
+
+static const mcp_denoiser box_denoiser = {
+    .name = "box3", .exact = 1, .apply = box_apply, .jvp = box_jvp};
+
+/* ---- synthetic scenes ---- */
+
+#define S 64
+
+typedef struct scene {
+    double freq, amp, sigma_lo, sigma_hi;
+} scene;
+
+static double
+scene_mu(const scene *s, int x, int y, int c)
+{
+    return 0.4 + 0.2 * c + s->amp * sin(s->freq * x) * cos(0.7 * s->freq * y);
+}
+
+static double
+scene_sigma(const scene *s, int x, int y, int c)
+{
+    (void)y;
+    return (x > 40 ? s->sigma_hi : s->sigma_lo) * (1.0 + 0.1 * c);
+}
+
+static mcp_dump *
+scene_dump(const scene *s, int spp, uint64_t *rng)
+{
+    mcp_dump *d = calloc(1, sizeof *d);
+    d->color = new_rgb(S, S);
+    d->var_of_mean = new_rgb(S, S);
+    d->spp = spp;
+    d->source = strdup("synthetic");
+    for (int y = 0; y < S; y++)
+        for (int x = 0; x < S; x++)
+            for (int c = 0; c < 3; c++) {
+                double sg = scene_sigma(s, x, y, c) / sqrt((double)spp);
+                mcp_image_px(d->color, x, y)[c] =
+                    (float)(scene_mu(s, x, y, c) + sg * mcp_test_rand_normal(rng));
+                mcp_image_px(d->var_of_mean, x, y)[c] = (float)(sg * sg);
+            }
+    return d;
+}
+
+static mcp_image *
+scene_reference(const scene *s)
+{
+    mcp_image *m = new_rgb(S, S);
+    for (int y = 0; y < S; y++)
+        for (int x = 0; x < S; x++)
+            for (int c = 0; c < 3; c++)
+                mcp_image_px(m, x, y)[c] = (float)scene_mu(s, x, y, c);
+    return m;
+}
+
+/* ---- one dump ---- */
+
+static void
+test_pipeline_one_dump(void **state)
+{
+    (void)state;
+    scene sc = {0.1, 0.15, 0.3, 0.9};
+    uint64_t rng = 1;
+    mcp_dump *d = scene_dump(&sc, 16, &rng);
+    mcp_estimate_options o = mcp_estimate_defaults();
+    o.budget = 12345;
+    o.blocks.tile_size = 32;
+    mcp_estimate *e = NULL;
+    assert_int_equal(mcp_estimate_compute(d, &box_denoiser, &o, &e), 0);
+    assert_true(e->cdf_at_tau >= 0.0 && e->cdf_at_tau <= 1.0);
+    assert_int_equal(e->stop, e->cdf_at_tau >= 0.999);
+    double sum = 0.0, wsum = 0.0;
+    for (int i = 0; i < S * S; i++) {
+        sum += e->sample_counts->data[i];
+        wsum += e->sampling_map->data[i];
+    }
+    assert_true(sum == 12345.0);
+    assert_close(wsum, 1.0, 1e-5, 0);
+    for (int k = 0; k < e->n_percentiles; k++) {
+        if (k) assert_true(e->percentile_tau[k] >= e->percentile_tau[k - 1]);
+        if (e->percentile_tau[k] > 0)
+            assert_true(mcp_error_cdf(e->dist, e->percentile_tau[k]) >=
+                        e->percentiles[k]);
+    }
+    for (int i = 0; i < e->blocks->count; i++) /* pre-split: no block crosses a tile */
+        assert_true(e->blocks->items[i].x / 32 ==
+                    (e->blocks->items[i].x + e->blocks->items[i].w - 1) / 32);
+    print_message("16 spp: F(0.01) = %.5f, %d blocks, p99.9 %.4g\n", e->cdf_at_tau,
+                  e->blocks->count, e->percentile_tau[3]);
+    mcp_estimate_free(e);
+    /* a dump without any variance (1 spp): never stop */
+    memset(d->var_of_mean->data, 0, (size_t)S * S * 3 * sizeof(float));
+    assert_int_equal(mcp_estimate_compute(d, &box_denoiser, &o, &e), 0);
+    assert_int_equal(e->no_variance, 1);
+    assert_int_equal(e->stop, 0);
+    mcp_estimate_free(e);
+    /* options are checked, naming the field */
+    o.tau = -1;
+    assert_error_contains(mcp_estimate_compute(d, &box_denoiser, &o, &e),
+                          "estimate: tau must be > 0 (got -1)");
+    o = mcp_estimate_defaults();
+    o.p = 1.0;
+    assert_error_contains(mcp_estimate_compute(d, &box_denoiser, &o, &e),
+                          "estimate: percentile must be in (0, 1) (got 1)");
+    mcp_dump_free(d);
+}
+
+static void
+test_pipeline_thread_count_independent(void **state)
+{
+    (void)state;
+#ifdef _OPENMP
+    scene sc = {0.2, 0.3, 0.2, 0.6};
+    uint64_t rng = 2;
+    mcp_dump *d = scene_dump(&sc, 8, &rng);
+    mcp_estimate_options o = mcp_estimate_defaults();
+    o.budget = 1000;
+    o.sure.n_probes = 2;
+    o.variance_rademacher = 1;
+    int saved = omp_get_max_threads();
+    mcp_estimate *a = NULL, *b = NULL;
+    omp_set_num_threads(1);
+    assert_int_equal(mcp_estimate_compute(d, &box_denoiser, &o, &a), 0);
+    omp_set_num_threads(3);
+    assert_int_equal(mcp_estimate_compute(d, &box_denoiser, &o, &b), 0);
+    omp_set_num_threads(saved);
+    assert_true(a->cdf_at_tau == b->cdf_at_tau);
+    assert_int_equal(a->blocks->count, b->blocks->count);
+    assert_memory_equal(a->blocks->items, b->blocks->items,
+                        (size_t)a->blocks->count * sizeof *a->blocks->items);
+    assert_memory_equal(a->percentile_tau, b->percentile_tau, sizeof a->percentile_tau);
+    assert_true(mcp_test_max_abs_diff(a->maps.sure_rel, b->maps.sure_rel) == 0.0);
+    assert_true(mcp_test_max_abs_diff(a->sample_counts, b->sample_counts) == 0.0);
+    mcp_estimate_free(a);
+    mcp_estimate_free(b);
+    mcp_dump_free(d);
+#endif
+}
+
+/* ---- series against the truth ---- */
+
+/* Runs a series with the truth; counts agreements, cases, and early stops that
+ * disagree (the dangerous kind: stopping before the threshold is met). */
+static int
+run_series(const mcp_series *series, const mcp_denoiser *den, const mcp_image *ref,
+           int probes, const char *label, int *agree, int *cases, int *early)
+{
+    mcp_series_estimate_options so = mcp_series_estimate_defaults();
+    so.est.sure.n_probes = probes;
+    mcp_series_estimate *s = NULL;
+    if (mcp_estimate_series(series, den, &so, ref, NULL, NULL, &s)) {
+        print_message("%s: %s\n", label, mcp_error_message());
+        return -1;
+    }
+    for (int j = 0; j < s->n_taus; j++) {
+        print_message("%-24s tau %-5g stop at %5g spp, true %5g spp: %s\n", label,
+                      s->taus[j], s->first_spp[j], s->true_first_spp[j],
+                      s->agree[j] ? "agree" : "DIFFER");
+        *agree += s->agree[j];
+        (*cases)++;
+        if (!s->agree[j] && s->first_spp[j] > 0 &&
+            (s->true_first_spp[j] == 0 || s->first_spp[j] < s->true_first_spp[j]))
+            (*early)++;
+    }
+    mcp_series_estimate_free(s);
+    return 0;
+}
+
+static void
+test_series_synthetic_agreement(void **state)
+{
+    (void)state;
+    const scene scenes[4] = {{0.1, 0.15, 0.3, 0.9},
+                             {0.05, 0.3, 0.5, 0.5},
+                             {0.15, 0.1, 0.2, 1.2},
+                             {0.08, 0.25, 0.6, 1.0}};
+    int agree = 0, cases = 0, early = 0, agree4 = 0, cases4 = 0, early4 = 0;
+    uint64_t rng = 2024;
+    for (int k = 0; k < 4; k++) {
+        int spps[11];
+        for (int i = 0; i < 11; i++) {
+            spps[i] = 1 << i;
+            char name[64];
+            snprintf(name, sizeof name, "syn%d_spp%04d.exr", k, spps[i]);
+            mcp_dump *d = scene_dump(&scenes[k], spps[i], &rng);
+            assert_int_equal(mcp_dump_write(d, mcp_test_path(name), MCP_CONV_PBRT, NULL),
+                             0);
+            mcp_dump_free(d);
+        }
+        char pattern[64], label[32];
+        snprintf(pattern, sizeof pattern, "syn%d_spp%%04d.exr", k);
+        mcp_series *series = NULL;
+        assert_int_equal(
+            mcp_series_from_pattern(mcp_test_path(pattern), spps, 11, &series), 0);
+        mcp_image *ref = scene_reference(&scenes[k]);
+        snprintf(label, sizeof label, "synthetic %d (box, K=1)", k);
+        assert_int_equal(
+            run_series(series, &box_denoiser, ref, 1, label, &agree, &cases, &early), 0);
+        snprintf(label, sizeof label, "synthetic %d (box, K=4)", k);
+        assert_int_equal(
+            run_series(series, &box_denoiser, ref, 4, label, &agree4, &cases4, &early4),
+            0);
+        mcp_image_free(ref);
+        mcp_series_free(series);
+    }
+    print_message("synthetic agreement, K=1: %d of %d (%.0f%%, %d early), K=4: %d of %d "
+                  "(%.0f%%, %d early); the paper: 87%%\n",
+                  agree, cases, 100.0 * agree / cases, early, agree4, cases4,
+                  100.0 * agree4 / cases4, early4);
+    /* K = 1 (SPEC's default) stops late rather than early: s_i² = (Jε)_i² from one
+     * probe is itself spread like χ²_1 around the true variance, which fattens the
+     * model's upper tail. So: no early misses, and at least half agree; K = 4
+     * tightens the tail: at most one miss in 12. */
+    assert_int_equal(early, 0);
+    assert_true(agree * 2 >= cases);
+    assert_int_equal(early4, 0);
+    assert_true(agree4 * 12 >= cases4 * 11);
+}
+
+static void
+test_fixtures_agreement(void **state)
+{
+    (void)state;
+    const char *scenes[2] = {"cornell", "texture"};
+    mcp_denoiser *den = NULL;
+    assert_int_equal(mcp_denoiser_create_from_args("bilateral", NULL, 0, &den), 0);
+    int agree = 0, cases = 0, early = 0, scenes_run = 0;
+    for (int k = 0; k < 2; k++) {
+        char ref_path[4096], pattern[4096];
+        snprintf(ref_path, sizeof ref_path, "%s/samples/fixtures/%s/%s_reference.exr",
+                 MCP_TEST_SOURCE_DIR, scenes[k], scenes[k]);
+        snprintf(pattern, sizeof pattern, "%s/samples/fixtures/%s/series/%s_spp%%04d.exr",
+                 MCP_TEST_SOURCE_DIR, scenes[k], scenes[k]);
+        if (access(ref_path, R_OK) != 0) {
+            print_message("skipped %s: no reference %s yet\n", scenes[k], ref_path);
+            continue;
+        }
+        int spps[11];
+        for (int i = 0; i < 11; i++)
+            spps[i] = 1 << i;
+        mcp_series *series = NULL;
+        mcp_image *ref = NULL;
+        assert_int_equal(mcp_series_from_pattern(pattern, spps, 11, &series), 0);
+        assert_int_equal(mcp_image_read(ref_path, NULL, &ref), 0);
+        char label[64];
+        snprintf(label, sizeof label, "%s (bilateral)", scenes[k]);
+        assert_int_equal(run_series(series, den, ref, 1, label, &agree, &cases, &early),
+                         0);
+        scenes_run++;
+        mcp_image_free(ref);
+        mcp_series_free(series);
+    }
+    mcp_denoiser_free(den);
+    if (!scenes_run) skip();
+    print_message("fixture agreement: %d of %d (%.0f%%, %d early; the paper: 87%%)\n",
+                  agree, cases, 100.0 * agree / cases, early);
+    assert_true(agree * 2 >= cases);
+}
+
+/* ---- the subcommand and the job stage ---- */
+
+static char out[1 << 16], err[1 << 16];
+
+static int
+run(const char *fmt, ...)
+{
+    char args[8192];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(args, sizeof args, fmt, ap);
+    va_end(ap);
+    return mcp_test_run_mcpost(args, out, sizeof out, err, sizeof err);
+}
+
+/* Skips while `mcpost estimate` or the `gauss` denoiser is not built in. */
+static void
+need_cli(int status)
+{
+    if (status != 0 && status != 10 &&
+        (strstr(err, "unknown command") || strstr(err, "unknown subcommand") ||
+         strstr(err, "unknown denoiser") || strstr(err, "unknown stage"))) {
+        print_message("skipped: %s", err);
+        skip();
+    }
+}
+
+static void
+test_cli_single_and_series(void **state)
+{
+    (void)state;
+    scene sc = {0.1, 0.15, 0.3, 0.9};
+    uint64_t rng = 5;
+    int spps[4] = {4, 16, 64, 256};
+    for (int i = 0; i < 4; i++) {
+        char name[64];
+        snprintf(name, sizeof name, "cli_spp%04d.exr", spps[i]);
+        mcp_dump *d = scene_dump(&sc, spps[i], &rng);
+        assert_int_equal(mcp_dump_write(d, mcp_test_path(name), MCP_CONV_PBRT, NULL), 0);
+        mcp_dump_free(d);
+    }
+    mcp_image *ref = scene_reference(&sc);
+    assert_int_equal(mcp_image_write(ref, mcp_test_path("cli_ref.exr"), NULL), 0);
+    mcp_image_free(ref);
+    int st =
+        run("estimate '%s' --denoiser gauss -o '%s' --budget 5000 --json --exit-status "
+            "--tau 0.05",
+            mcp_test_path("cli_spp0064.exr"), mcp_test_path("cli_out"));
+    need_cli(st);
+    if (st != 0 && st != 10) fail_msg("status %d: %s", st, err);
+    cJSON *j = cJSON_Parse(out);
+    assert_non_null(j);
+    int stop = cJSON_IsTrue(cJSON_GetObjectItem(j, "stop"));
+    assert_int_equal(st, stop ? 0 : 10);
+    assert_true(cJSON_GetObjectItem(j, "cdf_at_tau")->valuedouble >= 0.0);
+    cJSON_Delete(j);
+    const char *files[] = {"denoised.exr", "sure.exr",         "sure_rel.exr",
+                           "variance.exr", "sampling_map.exr", "sample_counts.exr",
+                           "blocks.png",   "distribution.exr", "estimate.json",
+                           "report.html"};
+    for (size_t i = 0; i < sizeof files / sizeof *files; i++) {
+        char p[256];
+        snprintf(p, sizeof p, "cli_out/%s", files[i]);
+        assert_int_equal(access(mcp_test_path(p), R_OK), 0);
+    }
+    mcp_image *counts = NULL;
+    assert_int_equal(
+        mcp_image_read(mcp_test_path("cli_out/sample_counts.exr"), NULL, &counts), 0);
+    double sum = 0.0;
+    for (int i = 0; i < counts->width * counts->height; i++)
+        sum += counts->data[i];
+    assert_true(sum == 5000.0);
+    mcp_image_free(counts);
+    /* a series with the truth */
+    st = run(
+        "estimate --series '%s' --spp 4,16,64,256 --denoiser gauss --ref '%s' -o '%s' "
+        "--taus 0.05,0.01",
+        mcp_test_path("cli_spp%04d.exr"), mcp_test_path("cli_ref.exr"),
+        mcp_test_path("cli_series"));
+    if (st != 0) fail_msg("status %d: %s", st, err);
+    assert_non_null(strstr(out, "agreement:"));
+    char *text = mcp_test_read_text(mcp_test_path("cli_series/estimate.json"));
+    j = cJSON_Parse(text);
+    assert_non_null(j);
+    assert_int_equal(cJSON_GetArraySize(cJSON_GetObjectItem(j, "members")), 4);
+    assert_non_null(cJSON_GetObjectItem(j, "agreement_rate"));
+    cJSON_Delete(j);
+    free(text);
+    /* usage and bad values */
+    st = run("estimate '%s'", mcp_test_path("cli_spp0064.exr"));
+    assert_int_equal(st, 2);
+    assert_non_null(strstr(err, "--denoiser is required"));
+    st = run("estimate '%s' --denoiser gauss --metric mse",
+             mcp_test_path("cli_spp0064.exr"));
+    assert_int_equal(st, 1);
+    assert_non_null(strstr(err, "mcpost: unknown metric 'mse'"));
+    st = run("estimate '%s' --denoiser gauss --probes 0",
+             mcp_test_path("cli_spp0064.exr"));
+    assert_int_equal(st, 1);
+    assert_non_null(strstr(err, "probes must be in [1, 1024] (got 0)"));
+}
+
+static void
+test_job_stage(void **state)
+{
+    (void)state;
+    scene sc = {0.1, 0.15, 0.3, 0.9};
+    uint64_t rng = 6;
+    for (int i = 0; i < 3; i++) {
+        char name[64];
+        snprintf(name, sizeof name, "job_spp%04d.exr", 8 << (2 * i));
+        mcp_dump *d = scene_dump(&sc, 8 << (2 * i), &rng);
+        assert_int_equal(mcp_dump_write(d, mcp_test_path(name), MCP_CONV_PBRT, NULL), 0);
+        mcp_dump_free(d);
+    }
+    mcp_image *ref = scene_reference(&sc);
+    assert_int_equal(mcp_image_write(ref, mcp_test_path("job_ref.exr"), NULL), 0);
+    mcp_image_free(ref);
+    mcp_test_write_text(
+        mcp_test_path("estimate.yaml"),
+        "inputs:\n"
+        "  noisy: {dump: job_spp0032.exr}\n"
+        "  progress: {series: job_spp%04d.exr, spp: [8, 32, 128]}\n"
+        "  truth: {image: job_ref.exr}\n"
+        "output: job_out\n"
+        "stages:\n"
+        "  - estimate: {input: noisy, denoiser: {name: gauss}, tau: 0.02,\n"
+        "               budget: 4096, probes: 2, output: one}\n"
+        "  - estimate: {input: progress, denoiser: gauss, reference: truth,\n"
+        "               taus: [0.05, 0.02], output: series}\n");
+    int st = run("run '%s' --quiet", mcp_test_path("estimate.yaml"));
+    need_cli(st);
+    if (st != 0) fail_msg("status %d: %s", st, err);
+    assert_int_equal(access(mcp_test_path("job_out/one/sample_counts.exr"), R_OK), 0);
+    assert_int_equal(access(mcp_test_path("job_out/series/estimate.json"), R_OK), 0);
+    char *report = mcp_test_read_text(mcp_test_path("job_out/report.json"));
+    assert_non_null(strstr(report, "\"stage\":\t\"estimate\""));
+    free(report);
+    /* an unknown key names the line */
+    mcp_test_write_text(mcp_test_path("bad.yaml"),
+                        "inputs:\n"
+                        "  noisy: {dump: job_spp0032.exr}\n"
+                        "stages:\n"
+                        "  - estimate: {input: noisy, denoiser: gauss, probs: 2}\n");
+    st = run("run '%s' --quiet", mcp_test_path("bad.yaml"));
+    assert_int_equal(st, 1);
+    assert_non_null(strstr(err, "bad.yaml:4"));
+    assert_non_null(strstr(err, "probs"));
+}
+
+int
+main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_pipeline_one_dump),
+        cmocka_unit_test(test_pipeline_thread_count_independent),
+        cmocka_unit_test(test_series_synthetic_agreement),
+        cmocka_unit_test(test_fixtures_agreement),
+        cmocka_unit_test(test_cli_single_and_series),
+        cmocka_unit_test(test_job_stage),
+    };
+    return cmocka_run_group_tests_name("estimate/estimate", tests, NULL, NULL);
+}

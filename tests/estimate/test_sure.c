@@ -1,0 +1,792 @@
+/* test_sure.c: estimate/sure.c and estimate/probes.c against independent truths.
+ *
+ * The denoisers here are linear filters written in this file (a 3x3 box with
+ * replicate borders, and a joint colour + albedo filter), so the expected squared
+ * error has a closed form, E[(F_i - μ_i)²] = ((A - I)μ)_i² + (A Σ Aᵀ)_ii, and noise
+ * with a known covariance can be drawn as often as we like. Statistical checks use
+ * fixed seeds and compare a mean over R realizations with the truth within 3 standard
+ * errors (a false alarm about 0.3% of the time for a fixed seed, so they are
+ * deterministic, and 3 SE still catches a bias of a few percent at R = 200). When the
+ * built-in `bilateral` denoiser exists, it is checked against the empirical MSE the
+ * same way. */
+#include "testing.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+#include <mcpost/estimate.h>
+#include <mcpost/flip.h>
+
+#define W 32
+#define H 24
+#define R_REALIZATIONS 200
+
+static const char *const RGB[] = {"R", "G", "B"};
+
+/* ---- linear test denoisers ---- */
+
+/* out = 3x3 box of in (replicate borders), every channel. */
+static void
+box3(const mcp_image *in, mcp_image *out)
+{
+    for (int y = 0; y < in->height; y++)
+        for (int x = 0; x < in->width; x++)
+            for (int c = 0; c < 3; c++) {
+                double s = 0.0;
+                for (int dy = -1; dy <= 1; dy++)
+                    for (int dx = -1; dx <= 1; dx++) {
+                        int xx = x + dx < 0            ? 0
+                                 : x + dx >= in->width ? in->width - 1
+                                                       : x + dx;
+                        int yy = y + dy < 0             ? 0
+                                 : y + dy >= in->height ? in->height - 1
+                                                        : y + dy;
+                        s += mcp_image_px(in, xx, yy)[c];
+                    }
+                mcp_image_px(out, x, y)[c] = (float)(s / 9.0);
+            }
+}
+
+static mcp_image *
+new_rgb(int w, int h)
+{
+    mcp_image *img = NULL;
+    assert_int_equal(mcp_image_new(w, h, 3, RGB, &img), 0);
+    return img;
+}
+
+static int
+box_apply(const mcp_denoiser *self, const mcp_denoise_input *in, mcp_image **out)
+{
+    (void)self;
+    *out = new_rgb(in->color->width, in->color->height);
+    box3(in->color, *out);
+    return 0;
+}
+
+static int
+box_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
+        const mcp_denoise_tangent *t, int n, mcp_image **primal, mcp_image **out)
+{
+    if (primal) box_apply(self, at, primal);
+    for (int k = 0; k < n; k++) {
+        out[k] = new_rgb(at->color->width, at->color->height);
+        box3(t[k].color, out[k]);
+    }
+    return 0;
+}
+
+static const mcp_denoiser box_denoiser = {
+    .name = "box3", .exact = 1, .apply = box_apply, .jvp = box_jvp};
+
+/* Joint: F = box(x) + BETA (a - box(a)) with a the albedo, linear in both. */
+#define BETA 0.5
+
+static void
+joint_eval(const mcp_image *x, const mcp_image *a, mcp_image *out)
+{
+    mcp_image *ba = new_rgb(x->width, x->height);
+    box3(x, out);
+    if (a) {
+        box3(a, ba);
+        for (int y = 0; y < x->height; y++)
+            for (int i = 0; i < x->width; i++)
+                for (int c = 0; c < 3; c++)
+                    mcp_image_px(out, i, y)[c] +=
+                        (float)(BETA *
+                                (mcp_image_px(a, i, y)[c] - mcp_image_px(ba, i, y)[c]));
+    }
+    mcp_image_free(ba);
+}
+
+static int
+joint_apply(const mcp_denoiser *self, const mcp_denoise_input *in, mcp_image **out)
+{
+    (void)self;
+    *out = new_rgb(in->color->width, in->color->height);
+    joint_eval(in->color, in->albedo, *out);
+    return 0;
+}
+
+static int
+joint_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
+          const mcp_denoise_tangent *t, int n, mcp_image **primal, mcp_image **out)
+{
+    if (primal) joint_apply(self, at, primal);
+    for (int k = 0; k < n; k++) {
+        out[k] = new_rgb(at->color->width, at->color->height);
+        joint_eval(t[k].color, t[k].albedo, out[k]);
+    }
+    return 0;
+}
+
+static const mcp_denoiser joint_denoiser = {.name = "joint",
+                                            .exact = 1,
+                                            .uses_albedo = 1,
+                                            .apply = joint_apply,
+                                            .jvp = joint_jvp};
+
+/* ---- a scene with known mean and covariance ---- */
+
+static double
+mu_at(int x, int y, int c)
+{
+    double v = 0.3 + 0.2 * c + 0.02 * x + 0.01 * y;
+    if (x >= 8 && x < 16 && y >= 6 && y < 14) v += 1.5;
+    return v;
+}
+
+static double
+sigma_at(int x, int y, int c)
+{
+    (void)y;
+    return 0.1 + 0.2 * x / (double)W + 0.05 * c;
+}
+
+#define RHO 0.4 /* correlation between colour channels */
+
+static void
+cov_at(int x, int y, double s[9])
+{
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            s[3 * i + j] = (i == j ? 1.0 : RHO) * sigma_at(x, y, i) * sigma_at(x, y, j);
+}
+
+static void
+chol3(const double a[9], double l[9])
+{
+    memset(l, 0, 9 * sizeof *l);
+    for (int j = 0; j < 3; j++) {
+        double d = a[3 * j + j];
+        for (int k = 0; k < j; k++)
+            d -= l[3 * j + k] * l[3 * j + k];
+        l[3 * j + j] = sqrt(d);
+        for (int i = j + 1; i < 3; i++) {
+            double s = a[3 * i + j];
+            for (int k = 0; k < j; k++)
+                s -= l[3 * i + k] * l[3 * j + k];
+            l[3 * i + j] = s / l[3 * j + j];
+        }
+    }
+}
+
+static mcp_image *
+mean_image(void)
+{
+    mcp_image *m = new_rgb(W, H);
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++)
+            for (int c = 0; c < 3; c++)
+                mcp_image_px(m, x, y)[c] = (float)mu_at(x, y, c);
+    return m;
+}
+
+/* A dump with colour μ + L z (z from *rng), the exact variance and covariance. */
+static mcp_dump *
+realization(uint64_t *rng, int with_cov)
+{
+    mcp_dump *d = calloc(1, sizeof *d);
+    assert_non_null(d);
+    static const char *const cov_names[] = {"RG", "RB", "GB"};
+    d->color = new_rgb(W, H);
+    d->var_of_mean = new_rgb(W, H);
+    if (with_cov) assert_int_equal(mcp_image_new(W, H, 3, cov_names, &d->cov_of_mean), 0);
+    d->spp = 16;
+    d->source = strdup("synthetic");
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            double s[9], l[9], z[3];
+            cov_at(x, y, s);
+            if (!with_cov) s[1] = s[2] = s[3] = s[5] = s[6] = s[7] = 0.0;
+            chol3(s, l);
+            for (int c = 0; c < 3; c++)
+                z[c] = mcp_test_rand_normal(rng);
+            for (int c = 0; c < 3; c++) {
+                double e = l[3 * c] * z[0] + l[3 * c + 1] * z[1] + l[3 * c + 2] * z[2];
+                mcp_image_px(d->color, x, y)[c] = (float)(mu_at(x, y, c) + e);
+                mcp_image_px(d->var_of_mean, x, y)[c] = (float)s[4 * c];
+            }
+            if (with_cov) {
+                float *o = mcp_image_px(d->cov_of_mean, x, y);
+                o[0] = (float)s[1];
+                o[1] = (float)s[2];
+                o[2] = (float)s[5];
+            }
+        }
+    return d;
+}
+
+/* The mean over values of E[(box(X) - μ)²]: ((A - I)μ)² + Σ_q A_pq² Σ_q,cc. */
+static double
+box_expected_mse(int with_cov)
+{
+    (void)with_cov; /* A acts per channel, so only the diagonal of Σ enters */
+    double total = 0.0;
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            double wgt[W * H] = {0}; /* A_pq for this p (replicate borders fold taps) */
+            for (int dy = -1; dy <= 1; dy++)
+                for (int dx = -1; dx <= 1; dx++) {
+                    int xx = x + dx < 0 ? 0 : x + dx >= W ? W - 1 : x + dx;
+                    int yy = y + dy < 0 ? 0 : y + dy >= H ? H - 1 : y + dy;
+                    wgt[yy * W + xx] += 1.0 / 9.0;
+                }
+            for (int c = 0; c < 3; c++) {
+                double am = 0.0, var = 0.0;
+                for (int q = 0; q < W * H; q++)
+                    if (wgt[q] != 0.0) {
+                        am += wgt[q] * mu_at(q % W, q / W, c);
+                        double sg = sigma_at(q % W, q / W, c);
+                        var += wgt[q] * wgt[q] * sg * sg;
+                    }
+                double bias = am - mu_at(x, y, c);
+                total += bias * bias + var;
+            }
+        }
+    return total / (W * H * 3);
+}
+
+static double
+image_mean(const mcp_image *img)
+{
+    double s = 0.0;
+    for (int y = 0; y < img->height; y++)
+        for (int x = 0; x < img->width; x++)
+            for (int c = 0; c < 3; c++)
+                s += mcp_image_px(img, x, y)[c];
+    return s / ((double)img->width * img->height * 3);
+}
+
+/* mean over values of (F - μ)², F from the denoiser on d. */
+static double
+true_mse(const mcp_denoiser *den, const mcp_dump *d, const mcp_image *mu)
+{
+    mcp_denoise_input in = {0};
+    in.color = d->color;
+    in.albedo = d->albedo;
+    mcp_image *f = NULL;
+    assert_int_equal(den->apply(den, &in, &f), 0);
+    double s = 0.0;
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++)
+            for (int c = 0; c < 3; c++) {
+                double e = (double)mcp_image_px(f, x, y)[c] - mcp_image_px(mu, x, y)[c];
+                s += e * e;
+            }
+    mcp_image_free(f);
+    return s / (W * H * 3);
+}
+
+typedef struct running {
+    double n, mean, m2;
+} running;
+
+static void
+push(running *r, double v)
+{
+    r->n += 1;
+    double d = v - r->mean;
+    r->mean += d / r->n;
+    r->m2 += d * (v - r->mean);
+}
+
+static double
+std_error(const running *r)
+{
+    return sqrt(r->m2 / (r->n - 1) / r->n);
+}
+
+/* ---- the estimator formula itself ---- */
+
+static void
+test_formula_is_alg2(void **state)
+{
+    (void)state;
+    uint64_t rng = 11;
+    mcp_dump *d = realization(&rng, 1);
+    mcp_sure_options o = mcp_sure_defaults();
+    o.n_probes = 2;
+    o.seed = 5;
+    mcp_error_maps m;
+    assert_int_equal(mcp_error_maps_compute(d, &box_denoiser, &o, &m), 0);
+    mcp_probe p[2];
+    mcp_image *jp[2], *f = new_rgb(W, H);
+    box3(d->color, f);
+    for (int k = 0; k < 2; k++) {
+        assert_int_equal(mcp_probe_gaussian(d, NULL, 5, k, &p[k]), 0);
+        jp[k] = new_rgb(W, H);
+        box3(p[k].color, jp[k]);
+    }
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            const float *pf = mcp_image_px(f, x, y);
+            double mc = fmax(fmax(pf[0], pf[1]), pf[2]), den = mc * mc + 1e-2;
+            for (int c = 0; c < 3; c++) {
+                double diff = pf[c] - mcp_image_px(d->color, x, y)[c], t = 0.0, v = 0.0;
+                for (int k = 0; k < 2; k++) {
+                    double e = mcp_image_px(p[k].color, x, y)[c];
+                    double je = mcp_image_px(jp[k], x, y)[c];
+                    t += e * (2 * je - e);
+                    v += je * je;
+                }
+                double sure = diff * diff + t / 2, var = v / 2;
+                assert_close(mcp_image_px(m.sure, x, y)[c], sure, 1e-5, 1e-7);
+                assert_close(mcp_image_px(m.sure_rel, x, y)[c], sure / den, 1e-5, 1e-7);
+                assert_close(mcp_image_px(m.var, x, y)[c], var, 1e-5, 1e-9);
+                assert_close(mcp_image_px(m.var_rel, x, y)[c], var / den, 1e-5, 1e-9);
+                assert_close(mcp_image_px(m.sigma_rel, x, y)[c],
+                             mcp_image_px(d->var_of_mean, x, y)[c] / den, 1e-5, 1e-9);
+            }
+            assert_close(mcp_image_px(m.denominator, x, y)[0], den, 1e-6, 0);
+        }
+    /* mcp_sure gives the scaled map of the metric */
+    mcp_image *s = NULL;
+    assert_int_equal(mcp_sure(d, &box_denoiser, &o, &s), 0);
+    assert_true(mcp_test_max_abs_diff(s, m.sure_rel) == 0.0);
+    mcp_image_free(s);
+    o.metric = MCP_METRIC_SE;
+    assert_int_equal(mcp_sure(d, &box_denoiser, &o, &s), 0);
+    assert_true(mcp_test_max_abs_diff(s, m.sure) == 0.0);
+    mcp_image_free(s);
+    for (int k = 0; k < 2; k++) {
+        mcp_probe_clear(&p[k]);
+        mcp_image_free(jp[k]);
+    }
+    mcp_image_free(f);
+    mcp_error_maps_free(&m);
+    mcp_dump_free(d);
+}
+
+/* ---- unbiasedness ---- */
+
+static void
+test_unbiased_linear_closed_form(void **state)
+{
+    (void)state;
+    const double truth = box_expected_mse(1);
+    mcp_image *mu = mean_image();
+    running sure = {0}, emp = {0}, diff = {0};
+    uint64_t rng = 2024;
+    for (int r = 0; r < R_REALIZATIONS; r++) {
+        mcp_dump *d = realization(&rng, 1);
+        mcp_sure_options o = mcp_sure_defaults();
+        o.metric = MCP_METRIC_SE;
+        o.seed = 1000 + r;
+        mcp_image *s = NULL;
+        assert_int_equal(mcp_sure(d, &box_denoiser, &o, &s), 0);
+        double ms = image_mean(s), me = true_mse(&box_denoiser, d, mu);
+        push(&sure, ms);
+        push(&emp, me);
+        push(&diff, ms - me);
+        mcp_image_free(s);
+        mcp_dump_free(d);
+    }
+    print_message(
+        "SURE (box, K=1, colour covariance): mean %.6g +- %.2g, closed form %.6g "
+        "(%.2f SE); empirical MSE %.6g +- %.2g\n",
+        sure.mean, std_error(&sure), truth, (sure.mean - truth) / std_error(&sure),
+        emp.mean, std_error(&emp));
+    assert_true(fabs(sure.mean - truth) <= 3 * std_error(&sure));
+    assert_true(fabs(emp.mean - truth) <= 3 * std_error(&emp)); /* the scene is right */
+    assert_true(fabs(diff.mean) <= 3 * std_error(&diff));
+    mcp_image_free(mu);
+}
+
+/* SURE_M against the empirical perceptual error, paired per realization. */
+static void
+test_unbiased_perceptual(void **state)
+{
+    (void)state;
+    const double ppd = 8.0; /* small kernels for a 32 x 24 image */
+    mcp_image *mu = mean_image();
+    running diff = {0}, sure = {0};
+    uint64_t rng = 77;
+    for (int r = 0; r < R_REALIZATIONS; r++) {
+        mcp_dump *d = realization(&rng, 1);
+        mcp_sure_options o = mcp_sure_defaults();
+        o.metric = MCP_METRIC_RELSE_PERCEPTUAL;
+        o.ppd = ppd;
+        o.seed = 5000 + r;
+        mcp_error_maps m;
+        assert_int_equal(mcp_error_maps_compute(d, &box_denoiser, &o, &m), 0);
+        /* truth: (M(F - μ))² in the same units (sure is not divided) */
+        mcp_image *e = new_rgb(W, H), *me = NULL;
+        for (int y = 0; y < H; y++)
+            for (int x = 0; x < W; x++)
+                for (int c = 0; c < 3; c++)
+                    mcp_image_px(e, x, y)[c] =
+                        mcp_image_px(m.denoised, x, y)[c] - mcp_image_px(mu, x, y)[c];
+        assert_int_equal(mcp_flip_csf_apply(e, ppd, &me), 0);
+        double t = 0.0;
+        for (size_t i = 0; i < (size_t)W * H * 3; i++)
+            t += (double)me->data[i] * me->data[i];
+        t /= W * H * 3;
+        double s = image_mean(m.sure);
+        push(&diff, s - t);
+        push(&sure, s);
+        mcp_image_free(e);
+        mcp_image_free(me);
+        mcp_error_maps_free(&m);
+        mcp_dump_free(d);
+    }
+    print_message("SURE_M (box, ppd 8): mean %.6g; SURE_M - (M(F-mu))^2 = %.3g +- %.2g "
+                  "(%.2f SE)\n",
+                  sure.mean, diff.mean, std_error(&diff), diff.mean / std_error(&diff));
+    assert_true(fabs(diff.mean) <= 3 * std_error(&diff));
+    mcp_image_free(mu);
+}
+
+/* Joint SURE: colour and albedo noise correlated; the joint estimate is unbiased and
+ * plain SURE (which ignores Cov(x, a)) is not. */
+#define SIGMA_A 0.2
+#define RHO_XA 0.6
+
+static void
+add_albedo(mcp_dump *d, uint64_t *rng, const double *zx_scale)
+{
+    (void)zx_scale;
+    d->albedo = new_rgb(W, H);
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++)
+            for (int c = 0; c < 3; c++) {
+                /* a = ν + ρ σ_a (x - μ)/σ_x + sqrt(1 - ρ²) σ_a z: Cov(x, a) = ρ σ_x σ_a
+                 */
+                double sx = sigma_at(x, y, c);
+                double ex = mcp_image_px(d->color, x, y)[c] - mu_at(x, y, c);
+                double a =
+                    0.5 + RHO_XA * SIGMA_A * ex / sx +
+                    sqrt(1 - RHO_XA * RHO_XA) * SIGMA_A * mcp_test_rand_normal(rng);
+                mcp_image_px(d->albedo, x, y)[c] = (float)a;
+            }
+}
+
+static void
+test_joint_sure(void **state)
+{
+    (void)state;
+    mcp_image *cross = NULL, *avar = new_rgb(W, H);
+    assert_int_equal(mcp_image_new(W, H, 9, NULL, &cross), 0);
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++)
+            for (int c = 0; c < 3; c++) {
+                mcp_image_px(cross, x, y)[4 * c] =
+                    (float)(RHO_XA * sigma_at(x, y, c) * SIGMA_A);
+                mcp_image_px(avar, x, y)[c] = (float)(SIGMA_A * SIGMA_A);
+            }
+    /* the albedo mean ν = 0.5 is flat, so the truth is that of box(x) plus the
+     * noise that BETA (a - box(a)) adds */
+    mcp_image *mu = mean_image();
+    running joint = {0}, joint_novar = {0}, plain = {0};
+    uint64_t rng = 99;
+    for (int r = 0; r < R_REALIZATIONS; r++) {
+        mcp_dump *d = realization(&rng, 0);
+        add_albedo(d, &rng, NULL);
+        double t = true_mse(&joint_denoiser, d, mu);
+        mcp_feature_covariance fc = {0};
+        fc.color_albedo = cross;
+        fc.albedo_var = avar;
+        mcp_sure_options o = mcp_sure_defaults();
+        o.metric = MCP_METRIC_SE;
+        o.seed = 300 + r;
+        o.features = &fc;
+        mcp_image *s = NULL;
+        assert_int_equal(mcp_sure(d, &joint_denoiser, &o, &s), 0);
+        push(&joint, image_mean(s) - t);
+        mcp_image_free(s);
+        fc.albedo_var = NULL; /* the smallest consistent feature covariance */
+        assert_int_equal(mcp_sure(d, &joint_denoiser, &o, &s), 0);
+        push(&joint_novar, image_mean(s) - t);
+        mcp_image_free(s);
+        o.features = NULL;
+        assert_int_equal(mcp_sure(d, &joint_denoiser, &o, &s), 0);
+        push(&plain, image_mean(s) - t);
+        mcp_image_free(s);
+        mcp_dump_free(d);
+    }
+    print_message("joint SURE - MSE: %.3g +- %.2g (%.2f SE); without feature variance "
+                  "%.3g +- %.2g; plain SURE - MSE: %.3g +- %.2g (%.1f SE, biased)\n",
+                  joint.mean, std_error(&joint), joint.mean / std_error(&joint),
+                  joint_novar.mean, std_error(&joint_novar), plain.mean,
+                  std_error(&plain), plain.mean / std_error(&plain));
+    assert_true(fabs(joint.mean) <= 3 * std_error(&joint));
+    assert_true(fabs(joint_novar.mean) <= 3 * std_error(&joint_novar));
+    assert_true(fabs(plain.mean) > 10 * std_error(&plain));
+    mcp_image_free(cross);
+    mcp_image_free(avar);
+    mcp_image_free(mu);
+}
+
+/* ---- MC-SURE and K ---- */
+
+static void
+test_mc_sure_equals_exact_for_linear(void **state)
+{
+    (void)state;
+    uint64_t rng = 3;
+    mcp_dump *d = realization(&rng, 1);
+    mcp_sure_options o = mcp_sure_defaults();
+    o.metric = MCP_METRIC_SE;
+    o.n_probes = 3;
+    mcp_image *exact = NULL, *fd = NULL;
+    assert_int_equal(mcp_sure(d, &box_denoiser, &o, &exact), 0);
+    const double deltas[] = {1e-2, 0.1, 1.0};
+    for (int i = 0; i < 3; i++) {
+        o.mc_sure = 1;
+        o.fd_delta = deltas[i];
+        assert_int_equal(mcp_sure(d, &box_denoiser, &o, &fd), 0);
+        /* a linear F has exact finite differences; what is left is float rounding of
+         * F(X + δε) - F(X) (values ~2, steps ~δσ), about 1e-7 * 2 / δ relative to σ² */
+        double tol = 4e-6 / deltas[i];
+        double err = mcp_test_max_abs_diff(fd, exact);
+        print_message("MC-SURE delta %g: max |MC-SURE - SURE| = %.3g\n", deltas[i], err);
+        assert_true(err <= tol);
+        mcp_image_free(fd);
+    }
+    mcp_image_free(exact);
+    mcp_dump_free(d);
+}
+
+/* The probe term's variance falls as 1/K. */
+static void
+test_more_probes_less_noise(void **state)
+{
+    (void)state;
+    uint64_t rng = 8;
+    mcp_dump *d = realization(&rng, 1);
+    running v[2];
+    memset(v, 0, sizeof v);
+    const int ks[2] = {1, 4};
+    for (int i = 0; i < 2; i++)
+        for (int s = 0; s < 60; s++) {
+            mcp_sure_options o = mcp_sure_defaults();
+            o.metric = MCP_METRIC_SE;
+            o.n_probes = ks[i];
+            o.seed = 7000 + s;
+            mcp_image *m = NULL;
+            assert_int_equal(mcp_sure(d, &box_denoiser, &o, &m), 0);
+            push(&v[i], image_mean(m));
+            mcp_image_free(m);
+        }
+    double ratio = (v[1].m2 / (v[1].n - 1)) / (v[0].m2 / (v[0].n - 1));
+    print_message("variance of SURE over probe seeds, K=4 / K=1: %.3f (expect 0.25)\n",
+                  ratio);
+    /* 60 seeds: the ratio of two sample variances has a spread of about +-40% */
+    assert_true(ratio > 0.1 && ratio < 0.5);
+    mcp_dump_free(d);
+}
+
+/* ---- probes ---- */
+
+static void
+probe_moments(const mcp_dump *d, int rademacher, int n, int px, int py, double cov[9])
+{
+    memset(cov, 0, 9 * sizeof *cov);
+    for (int k = 0; k < n; k++) {
+        mcp_probe p = {0};
+        mcp_image *v = NULL;
+        if (rademacher)
+            assert_int_equal(mcp_probe_rademacher(d, 42, k, &v), 0);
+        else
+            assert_int_equal(mcp_probe_gaussian(d, NULL, 42, k, &p), 0);
+        const float *e = mcp_image_px(rademacher ? v : p.color, px, py);
+        for (int i = 0; i < 3; i++)
+            for (int j = 0; j < 3; j++)
+                cov[3 * i + j] += (double)e[i] * e[j] / n;
+        mcp_probe_clear(&p);
+        mcp_image_free(v);
+    }
+}
+
+static void
+test_probe_covariance(void **state)
+{
+    (void)state;
+    uint64_t rng = 1;
+    mcp_dump *d = realization(&rng, 1);
+    const int n = 4000;
+    for (int rad = 0; rad < 2; rad++) {
+        double cov[9], s[9];
+        probe_moments(d, rad, n, 20, 7, cov);
+        cov_at(20, 7, s);
+        for (int i = 0; i < 9; i++) /* sample covariance: sd about s_ii s_jj sqrt(2/n) */
+            assert_close(cov[i], s[i], 0,
+                         5 * sqrt(2.0 / n) * sqrt(s[4 * (i / 3)] * s[4 * (i % 3)]));
+    }
+    /* diagonal only: Rademacher entries are exactly +-sigma */
+    mcp_image_free(d->cov_of_mean);
+    d->cov_of_mean = NULL;
+    mcp_image *v = NULL;
+    assert_int_equal(mcp_probe_rademacher(d, 3, 0, &v), 0);
+    for (int c = 0; c < 3; c++)
+        assert_close(fabs(mcp_image_px(v, 5, 5)[c]), sigma_at(5, 5, c), 1e-6, 0);
+    mcp_image_free(v);
+    mcp_dump_free(d);
+}
+
+/* Σ̂ with a negative eigenvalue: the probe covariance is Σ̂ with it clamped to 0. */
+static void
+test_probe_clamps_negative_eigenvalues(void **state)
+{
+    (void)state;
+    uint64_t rng = 4;
+    mcp_dump *d = realization(&rng, 1);
+    /* at one pixel: variances 1, 1, 1 and covariances 0.9, 0.9, -0.9 (not PSD:
+     * eigenvalues 1.9, 1.9, -0.8) */
+    for (int c = 0; c < 3; c++)
+        mcp_image_px(d->var_of_mean, 3, 3)[c] = 1.0f;
+    float *o = mcp_image_px(d->cov_of_mean, 3, 3);
+    o[0] = 0.9f, o[1] = 0.9f, o[2] = -0.9f;
+    /* clamped: Σ + 0.8 v vᵀ with v the unit eigenvector of -0.8, (1, -1, -1)/√3 */
+    const double vv[3] = {1 / sqrt(3.0), -1 / sqrt(3.0), -1 / sqrt(3.0)};
+    const double s[9] = {1, 0.9, 0.9, 0.9, 1, -0.9, 0.9, -0.9, 1};
+    const int n = 6000;
+    double cov[9];
+    probe_moments(d, 0, n, 3, 3, cov);
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) {
+            double want = s[3 * i + j] + 0.8 * vv[i] * vv[j];
+            assert_close(cov[3 * i + j], want, 0, 5 * sqrt(2.0 / n) * 1.9);
+        }
+    mcp_dump_free(d);
+}
+
+static void
+test_probes_do_not_depend_on_threads(void **state)
+{
+    (void)state;
+#ifdef _OPENMP
+    uint64_t rng = 6;
+    mcp_dump *d = realization(&rng, 1);
+    mcp_image *a = NULL, *b = NULL;
+    int saved = omp_get_max_threads();
+    omp_set_num_threads(1);
+    mcp_sure_options o = mcp_sure_defaults();
+    o.n_probes = 2;
+    assert_int_equal(mcp_sure(d, &box_denoiser, &o, &a), 0);
+    omp_set_num_threads(3);
+    assert_int_equal(mcp_sure(d, &box_denoiser, &o, &b), 0);
+    omp_set_num_threads(saved);
+    assert_true(mcp_test_max_abs_diff(a, b) == 0.0);
+    mcp_image_free(a);
+    mcp_image_free(b);
+    mcp_dump_free(d);
+#endif
+}
+
+/* ---- the built-in bilateral denoiser (non-linear), when it exists ---- */
+
+static void
+test_unbiased_bilateral(void **state)
+{
+    (void)state;
+    mcp_denoiser *den = NULL;
+    assert_int_equal(mcp_denoiser_create_from_args("bilateral", NULL, 0, &den), 0);
+    mcp_image *mu = mean_image();
+    running diff = {0}, emp = {0};
+    uint64_t rng = 515;
+    for (int r = 0; r < R_REALIZATIONS; r++) {
+        mcp_dump *d = realization(&rng, 0);
+        mcp_sure_options o = mcp_sure_defaults();
+        o.metric = MCP_METRIC_SE;
+        o.seed = 9000 + r;
+        mcp_error_maps m;
+        assert_int_equal(mcp_error_maps_compute(d, den, &o, &m), 0);
+        double t = 0.0;
+        for (int y = 0; y < H; y++)
+            for (int x = 0; x < W; x++)
+                for (int c = 0; c < 3; c++) {
+                    double e = (double)mcp_image_px(m.denoised, x, y)[c] - mu_at(x, y, c);
+                    t += e * e;
+                }
+        t /= W * H * 3;
+        push(&diff, image_mean(m.sure) - t);
+        push(&emp, t);
+        mcp_error_maps_free(&m);
+        mcp_dump_free(d);
+    }
+    print_message("bilateral: SURE - empirical MSE = %.3g +- %.2g (%.2f SE; MSE %.4g)\n",
+                  diff.mean, std_error(&diff), diff.mean / std_error(&diff), emp.mean);
+    assert_true(fabs(diff.mean) <= 3 * std_error(&diff));
+    mcp_image_free(mu);
+    mcp_denoiser_free(den);
+}
+
+/* ---- errors ---- */
+
+static void
+test_errors(void **state)
+{
+    (void)state;
+    uint64_t rng = 1;
+    mcp_dump *d = realization(&rng, 1);
+    mcp_sure_options o = mcp_sure_defaults();
+    mcp_image *s = NULL;
+    o.n_probes = 0;
+    assert_error_contains(mcp_sure(d, &box_denoiser, &o, &s),
+                          "sure: n_probes must be in [1, 1024] (got 0)");
+    assert_null(s);
+    o = mcp_sure_defaults();
+    o.fd_delta = 0.0;
+    assert_error_contains(mcp_sure(d, &box_denoiser, &o, &s),
+                          "fd_delta must be > 0 (got 0)");
+    o = mcp_sure_defaults();
+    o.ppd = -1;
+    assert_error_contains(mcp_sure(d, &box_denoiser, &o, &s),
+                          "ppd must be >= 0 (got -1)");
+    assert_error_contains(mcp_sure(d, NULL, NULL, &s), "sure: missing denoiser");
+    mcp_error_metric m;
+    assert_error_contains(mcp_error_metric_from_name("mse", &m),
+                          "unknown metric 'mse' (known: relse, relse-perceptual, se)");
+    assert_int_equal(mcp_error_metric_from_name("RelSE-Perceptual", &m), 0);
+    assert_int_equal(m, MCP_METRIC_RELSE_PERCEPTUAL);
+    assert_string_equal(mcp_error_metric_name(MCP_METRIC_SE), "se");
+    /* joint SURE without albedo in the dump */
+    mcp_image *cross = NULL;
+    assert_int_equal(mcp_image_new(W, H, 9, NULL, &cross), 0);
+    mcp_feature_covariance fc = {0};
+    fc.color_albedo = cross;
+    o = mcp_sure_defaults();
+    o.features = &fc;
+    assert_error_contains(mcp_sure(d, &box_denoiser, &o, &s),
+                          "colour-albedo covariance given but synthetic has no albedo");
+    mcp_image_free(cross);
+    /* from_probes with a wrong-size jvp */
+    mcp_image *f = new_rgb(W, H), *small = new_rgb(4, 4);
+    const mcp_image *pp[1] = {f}, *jj[1] = {small};
+    mcp_error_maps maps;
+    assert_error_contains(mcp_error_maps_from_probes(d, f, pp, jj, 1, NULL, &maps),
+                          "sure: jvp 0 must have 3 channels and the dump's size");
+    mcp_image_free(f);
+    mcp_image_free(small);
+    /* no variance */
+    mcp_image_free(d->var_of_mean);
+    d->var_of_mean = NULL;
+    assert_error_contains(mcp_sure(d, &box_denoiser, NULL, &s),
+                          "sure: synthetic has no variance");
+    mcp_dump_free(d);
+}
+
+int
+main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_formula_is_alg2),
+        cmocka_unit_test(test_unbiased_linear_closed_form),
+        cmocka_unit_test(test_unbiased_perceptual),
+        cmocka_unit_test(test_joint_sure),
+        cmocka_unit_test(test_mc_sure_equals_exact_for_linear),
+        cmocka_unit_test(test_more_probes_less_noise),
+        cmocka_unit_test(test_probe_covariance),
+        cmocka_unit_test(test_probe_clamps_negative_eigenvalues),
+        cmocka_unit_test(test_probes_do_not_depend_on_threads),
+        cmocka_unit_test(test_unbiased_bilateral),
+        cmocka_unit_test(test_errors),
+    };
+    return cmocka_run_group_tests_name("estimate/sure", tests, NULL, NULL);
+}
