@@ -75,40 +75,4 @@ double mcp__now_ms(void);
 
 extern const mcp_denoiser_kind mcp__denoiser_bilateral;
 
-/* ---- denoisers, continued (denoise_nlm.c) ---- */
-
-extern const mcp_denoiser_kind mcp__denoiser_bilateral;
-
-/* ---- denoisers, continued (denoise_nlm.c) ---- */
-
-extern const mcp_denoiser_kind mcp__denoiser_bilateral;
-
-/* ---- denoisers, continued (denoise_nlm.c) ---- */
-
-extern const mcp_denoiser_kind mcp__denoiser_bilateral;
-
-/* ---- denoisers, continued (denoise_nlm.c) ---- */
-
-extern const mcp_denoiser_kind mcp__denoiser_bilateral;
-
-/* ---- denoisers, continued (denoise_nlm.c) ---- */
-
-extern const mcp_denoiser_kind mcp__denoiser_bilateral;
-
-/* ---- denoisers, continued (denoise_nlm.c) ---- */
-
-extern const mcp_denoiser_kind mcp__denoiser_bilateral;
-
-/* ---- denoisers, continued (denoise_nlm.c) ---- */
-
-extern const mcp_denoiser_kind mcp__denoiser_bilateral;
-
-/* ---- denoisers, continued (denoise_nlm.c) ---- */
-
-extern const mcp_denoiser_kind mcp__denoiser_bilateral;
-
-/* ---- denoisers, continued (denoise_nlm.c) ---- */
-
-extern const mcp_denoiser_kind mcp__denoiser_bilateral;
-
 #endif
