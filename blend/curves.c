@@ -2,6 +2,13 @@
  * the weight they give a denoised value (SPEC "blend"; Denisova & Bocchi 2024 Eqs. 7,
  * 11, 14, Sections 2.4-2.5).
  *
+ * On the fly, SPEC departs from the paper: SPEC takes the newest point and the Eq. 11
+ * point; the paper (Section 2.5: "we accept only the last variance value ... [then] we
+ * need to calculate the second point") and the authors' code take the last two points
+ * that the retrospective selection keeps, and Eq. 11 only where one survives. SPEC's
+ * is the default (MCP_CURVE_FIT_ON_THE_FLY), the paper's an option
+ * (MCP_CURVE_FIT_LAST_TWO).
+ *
  * Log curve: log v = a log I + b. On the fly the second point comes from Eq. 11,
  * (N - K, v_K / (N/K - 1)^2); since N/K - 1 = (N - K)/K, that line always has slope
  * a = -2 and b = ln v_K + 2 ln K, so W = K sqrt(v_K / SURE). We still fit the two

@@ -213,7 +213,8 @@ mcp__blend_prepare(const mcp_image *var_of_mean, const mcp_image *sure,
                          out->mean_var, out->mean_sure);
     /* The one rule behind both switches: the noisy image has become better than the
      * denoised one on average. An all-zero v (one sample per pixel: no variance
-     * estimate yet) cannot tell, and must not end filtering for the whole series. */
+     * estimate yet) cannot tell, and must not end filtering for the whole series (our
+     * addition: SPEC does not say). */
     int crossed = out->mean_var > 0 && out->mean_var < out->mean_sure;
     if (state && crossed) {
         state->filtering_stopped = 1;

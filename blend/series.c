@@ -120,7 +120,7 @@ prepare_member(run *r, int i, const mcp_dump *dump)
         mcp_sure_options so = r->o->sure;
         so.metric = MCP_METRIC_SE; /* blending compares SURE with v: absolute units */
         if (mcp_error_maps_compute(dump, r->den, &so, &maps))
-            return mcp_error_prefix("blend: %s: ", dump->source);
+            return mcp_error_prefix("%s: ", dump->source);
         r->pairs[i].denoised = maps.denoised;
         r->pairs[i].sure = maps.sure;
         maps.denoised = maps.sure = NULL;
@@ -136,7 +136,7 @@ prepare_member(run *r, int i, const mcp_dump *dump)
     const mcp_blend_estimates *e = &r->est[i];
     if (mcp_blend_prepare(dump->var_of_mean, r->pairs[r->pair_of[i]].sure, &r->o->blend,
                           r->den, &r->state, &r->est[i]))
-        return mcp_error_prefix("blend: %s: ", dump->source);
+        return mcp_error_prefix("%s: ", dump->source);
     row->mean_var = e->mean_var;
     row->mean_sure = e->mean_sure;
     row->filtered = e->filtered;
@@ -225,7 +225,7 @@ finish_member(run *r, int i, const mcp_dump *dump, const mcp_image *curves,
     }
     goto done;
 fail:
-    mcp_error_prefix("blend: %s: ", dump->source);
+    mcp_error_prefix("%s: ", dump->source);
 done:
     mcp_image_free(weights);
     mcp_image_free(ideal_w);

@@ -141,8 +141,9 @@ mcp_blend_ideal(const mcp_image *noisy, double spp, const mcp_image *denoised,
             for (int k = 0; k < 3; k++) {
                 double nv = mcp__rgb_at(&n, x, y, k), dv = mcp__rgb_at(&d, x, y, k);
                 double rv = mcp__rgb_at(&r, x, y, k);
-                /* Eq. 4, W = I (R - n) / (d - R); SPEC clamps it at 0 (R not between n
-                 * and d: keep n), and d = R needs W = inf. */
+                /* Eq. 4, W = I (R - n) / (d - R). SPEC clamps it at 0 where the paper
+                 * does not: where R is not between n and d we keep n, even where R lies
+                 * beyond d and W = inf (d) would be closer. d = R needs W = inf. */
                 double wt = dv == rv ? INFINITY : fmax(0.0, spp * (rv - nv) / (dv - rv));
                 wd[3 * x + k] = (float)wt;
                 dst[3 * x + k] = (float)mix(spp, nv, dv, wt);

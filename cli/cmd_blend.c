@@ -233,7 +233,10 @@ run_blend(const mcp_series *series, const mcp_denoiser *den, const mcp_image *re
     s->members = cJSON_CreateArray();
     mcp_progress_begin(&s->prog, "blend", series->count);
     int rc = mcp_blend_series(series, den, ref, o, on_point, s, &r);
-    mcp_progress_end(&s->prog);
+    if (rc == 0)
+        mcp_progress_end(&s->prog);
+    else if (s->prog.tty && !mcp_progress_quiet())
+        fputc('\n', stderr); /* no "100%" for a run that failed */
     if (!rc) rc = fill_section(section, r, o, denoiser_name, s);
     cJSON_Delete(s->members);
     s->members = NULL;
