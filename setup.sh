@@ -54,7 +54,7 @@ test)
     run_tests build
     if [ -z "${MCPOST_NO_ASAN:-}" ]; then
         build build-asan -DMCPOST_SANITIZE=ON -DMCPOST_BENCH=OFF
-        ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 \
+        ASAN_OPTIONS=detect_leaks=1:abort_on_error=1:intercept_tls_get_addr=0 \
             LSAN_OPTIONS=suppressions=$PWD/tests/lsan.supp:print_suppressions=0 \
             UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
             run_tests build-asan

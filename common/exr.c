@@ -264,9 +264,42 @@ write_attributes(exr_context_t f, const mcp_attrs *attrs)
     return 0;
 }
 
+/* OpenEXR Core 3.1.5 writes a corrupt chunk when ZIP/ZIPS output is not smaller than
+ * the raw data (the file must then hold the raw bytes; Core stores something else, and
+ * both Core and the C++ library read garbage back). Wrap the compressor: keep the raw
+ * packed bytes, and where compression did not pay, put exactly those bytes out. */
+typedef struct raw_copy {
+    exr_result_t (*compress)(exr_encode_pipeline_t *);
+    void *bytes;
+    size_t cap;
+} raw_copy;
+
+static exr_result_t
+compress_or_store_raw(exr_encode_pipeline_t *enc)
+{
+    raw_copy *raw = enc->encoding_user_data;
+    if (raw->cap < enc->packed_bytes) {
+        void *grown = realloc(raw->bytes, enc->packed_bytes);
+        if (!grown)
+            return EXR_ERR_OUT_OF_MEMORY;
+        raw->bytes = grown;
+        raw->cap = enc->packed_bytes;
+    }
+    memcpy(raw->bytes, enc->packed_buffer, enc->packed_bytes);
+    exr_result_t rc = raw->compress(enc);
+    if (rc == EXR_ERR_SUCCESS && enc->compressed_bytes >= enc->packed_bytes) {
+        if (enc->compressed_alloc_size < enc->packed_bytes)
+            return EXR_ERR_CORRUPT_CHUNK;
+        memcpy(enc->compressed_buffer, raw->bytes, enc->packed_bytes);
+        enc->compressed_bytes = enc->packed_bytes;
+    }
+    return rc;
+}
+
 static int
 encode_chunk(exr_context_t f, const exr_chunk_info_t *ci, exr_encode_pipeline_t *enc,
-             int *initialised, const mcp_image *img, int x0, int y0, const char *path)
+             int *initialised, raw_copy *raw, const mcp_image *img, int x0, int y0,
+             const char *path)
 {
     exr_result_t rc = *initialised ? exr_encoding_update(f, 0, ci, enc)
                                    : exr_encoding_initialize(f, 0, ci, enc);
@@ -286,8 +319,13 @@ encode_chunk(exr_context_t f, const exr_chunk_info_t *ci, exr_encode_pipeline_t 
     if (!*initialised) {
         if ((rc = exr_encoding_choose_default_routines(f, 0, enc)) != EXR_ERR_SUCCESS)
             return exr_fail(path, "cannot encode", rc);
+        if (enc->compress_fn && raw) {
+            raw->compress = enc->compress_fn;
+            enc->compress_fn = compress_or_store_raw;
+        }
         *initialised = 1;
     }
+    enc->encoding_user_data = raw;
     if ((rc = exr_encoding_run(f, 0, enc)) != EXR_ERR_SUCCESS)
         return exr_fail(path, "cannot write pixel data", rc);
     return 0;
@@ -299,6 +337,7 @@ write_pixels(exr_context_t f, const mcp_image *img, const mcp_write_options *opt
 {
     exr_encode_pipeline_t enc = EXR_ENCODE_PIPELINE_INITIALIZER;
     exr_chunk_info_t ci;
+    raw_copy raw = {NULL, NULL, 0};
     int initialised = 0, rc = 0;
     if (!opt->exr_tiled) {
         int32_t lines = 1;
@@ -306,8 +345,8 @@ write_pixels(exr_context_t f, const mcp_image *img, const mcp_write_options *opt
         for (int y = 0; y < img->height && !rc; y += lines) {
             exr_result_t r = exr_write_scanline_chunk_info(f, 0, y + opt->exr_data_y, &ci);
             rc = r != EXR_ERR_SUCCESS ? exr_fail(path, "cannot write", r)
-                                      : encode_chunk(f, &ci, &enc, &initialised, img, 0, y,
-                                                     path);
+                                      : encode_chunk(f, &ci, &enc, &initialised, &raw, img,
+                                                     0, y, path);
         }
     } else {
         int t = opt->exr_tile_size;
@@ -315,12 +354,13 @@ write_pixels(exr_context_t f, const mcp_image *img, const mcp_write_options *opt
             for (int tx = 0; tx * t < img->width && !rc; tx++) {
                 exr_result_t r = exr_write_tile_chunk_info(f, 0, tx, ty, 0, 0, &ci);
                 rc = r != EXR_ERR_SUCCESS ? exr_fail(path, "cannot write", r)
-                                          : encode_chunk(f, &ci, &enc, &initialised, img,
-                                                         tx * t, ty * t, path);
+                                          : encode_chunk(f, &ci, &enc, &initialised, &raw,
+                                                         img, tx * t, ty * t, path);
             }
     }
     if (initialised)
         exr_encoding_destroy(f, &enc);
+    free(raw.bytes);
     return rc;
 }
 
