@@ -233,9 +233,10 @@ main(int argc, char **argv)
     print_row(&r, "23 s");
 
     printf("\ntargets (512x512 on 2 cores): vertical-iterative %.1f ms <= 250 ms: %s; "
-           "error-diffusion %.2f ms, dither %.2f ms <= 5 ms: %s\n",
-           vertical_ms, vertical_ms <= 250.0 ? "met" : "MISSED", ed_ms, dither_ms,
-           ed_ms <= 5.0 && dither_ms <= 5.0 ? "met" : "MISSED");
+           "error-diffusion %.2f ms <= 5 ms: %s; dither %.2f ms <= 5 ms: %s\n",
+           vertical_ms, vertical_ms <= 250.0 ? "met" : "MISSED", ed_ms,
+           ed_ms <= 5.0 ? "met" : "MISSED", dither_ms,
+           dither_ms <= 5.0 ? "met" : "MISSED");
     free(cand), free(subsets), free(surr), free(out);
     for (int j = 0; j < M; j++)
         mcp_image_free(c[j]);

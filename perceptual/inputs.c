@@ -229,8 +229,11 @@ mcp__index_image(int w, int h, const int *choice, mcp_image **out)
 {
     static const char *const names[] = {"index"};
     if (mcp_image_new(w, h, 1, names, out)) return -1;
-    for (size_t p = 0; p < (size_t)w * h; p++)
-        (*out)->data[p] = (float)choice[p];
+    float *d = (*out)->data;
+#pragma omp parallel for if ((size_t)w * h >= 65536)
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++)
+            d[(size_t)y * w + x] = (float)choice[(size_t)y * w + x];
     return 0;
 }
 

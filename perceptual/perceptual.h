@@ -136,8 +136,9 @@ typedef struct mcp_perc_result {
                                whose seed each pixel uses; else NULL */
     int passes;             /* passes run (iterative methods; 1 for one-pass methods) */
     long changes;           /* accepted changes (or swaps) over all passes */
-    double energy_initial;  /* E_C at the start (iterative methods; else 0) */
-    double energy_final;    /* E_C of the result */
+    double energy_initial;  /* E_C at the start (iterative methods; else NaN) */
+    double energy_final;    /* E_C of the result (iterative methods; else NaN:
+                               mcp_perc_energy or mcp_perc_score compute it) */
     double seconds;         /* wall time of the optimisation itself */
 } mcp_perc_result;
 
