@@ -22,35 +22,14 @@
 #endif
 #ifdef __GLIBC__
 #include <malloc.h>
+
+#include "bench.h"
 #endif
 
 #define W 1920
 #define H 1080
 
 typedef int (*bench_fn)(void *ctx);
-
-static double
-now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
-
-static int
-cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-static double
-cpu_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
 
 /* Medians of wall-clock and process CPU time (all threads) over `repeats` runs after
  * two warm-ups; CPU time is the steadier figure on a shared machine. -1 on failure. */

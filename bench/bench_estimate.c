@@ -19,24 +19,11 @@
 #include <time.h>
 #ifdef _OPENMP
 #include <omp.h>
+
+#include "bench.h"
 #endif
 
 static int side = 1024;
-
-static double
-now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
-
-static int
-cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
 
 static double
 median(double *t, int n)

@@ -14,6 +14,8 @@
 #include <time.h>
 #ifdef _OPENMP
 #include <omp.h>
+
+#include "bench.h"
 #endif
 
 #define SIDE 1024
@@ -28,21 +30,6 @@ typedef struct {
     const float *kernel; /* naive: window x window, row-major */
     mcp_image *out;
 } blur_ctx;
-
-static double
-now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
-
-static int
-cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
 
 /* The median time of fn over `repeats` runs after two warm-ups, or -1 on failure. */
 static double

@@ -10,26 +10,12 @@
 #include <time.h>
 #ifdef _OPENMP
 #include <omp.h>
-#endif
 
-static double
-now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
+#include "bench.h"
+#endif
 
 /* CPU time of the whole process (all threads): on a machine shared with other work,
  * CPU time / threads estimates the wall time the call would take alone. */
-static double
-cpu_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
-
 static uint64_t
 next(uint64_t *s)
 {

@@ -18,17 +18,11 @@
 #include <time.h>
 #ifdef _OPENMP
 #include <omp.h>
+
+#include "bench.h"
 #endif
 
 #define M 4
-
-static double
-now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
 
 static double
 uniform(uint64_t *s)
