@@ -17,6 +17,7 @@ static const mcp_denoiser_kind *const kinds[] = {
     &mcp__denoiser_gauss,
     &mcp__denoiser_nlm,
     &mcp__denoiser_bilateral,
+    &mcp__denoiser_external,
     NULL,
 };
 

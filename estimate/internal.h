@@ -75,4 +75,8 @@ double mcp__now_ms(void);
 
 extern const mcp_denoiser_kind mcp__denoiser_bilateral;
 
+/* ---- denoisers, continued (denoise_external.c) ---- */
+
+extern const mcp_denoiser_kind mcp__denoiser_external;
+
 #endif

@@ -14,6 +14,7 @@
  * (adjacent member) or a third of the true one. The paper reaches 87% on 60 cases; the
  * synthetic cases must never stop early and agree in half the cases with one probe and
  * in 11 of 12 with four; the fixtures must agree in half the cases. */
+#include "box_denoiser.h"
 #include "testing.h"
 
 #include <cjson/cJSON.h>
@@ -28,63 +29,6 @@
 
 #include <mcpost/estimate.h>
 #include <mcpost/imageio.h>
-
-static const char *const RGB[] = {"R", "G", "B"};
-
-static mcp_image *
-new_rgb(int w, int h)
-{
-    mcp_image *img = NULL;
-    assert_int_equal(mcp_image_new(w, h, 3, RGB, &img), 0);
-    return img;
-}
-
-/* ---- the 3x3 box denoiser ---- */
-
-static void
-box3(const mcp_image *in, mcp_image *out)
-{
-    for (int y = 0; y < in->height; y++)
-        for (int x = 0; x < in->width; x++)
-            for (int c = 0; c < 3; c++) {
-                double s = 0.0;
-                for (int dy = -1; dy <= 1; dy++)
-                    for (int dx = -1; dx <= 1; dx++) {
-                        int xx = x + dx < 0            ? 0
-                                 : x + dx >= in->width ? in->width - 1
-                                                       : x + dx;
-                        int yy = y + dy < 0             ? 0
-                                 : y + dy >= in->height ? in->height - 1
-                                                        : y + dy;
-                        s += mcp_image_px(in, xx, yy)[c];
-                    }
-                mcp_image_px(out, x, y)[c] = (float)(s / 9.0);
-            }
-}
-
-static int
-box_apply(const mcp_denoiser *self, const mcp_denoise_input *in, mcp_image **out)
-{
-    (void)self;
-    *out = new_rgb(in->color->width, in->color->height);
-    box3(in->color, *out);
-    return 0;
-}
-
-static int
-box_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
-        const mcp_denoise_tangent *t, int n, mcp_image **primal, mcp_image **out)
-{
-    if (primal) box_apply(self, at, primal);
-    for (int k = 0; k < n; k++) {
-        out[k] = new_rgb(at->color->width, at->color->height);
-        box3(t[k].color, out[k]);
-    }
-    return 0;
-}
-
-static const mcp_denoiser box_denoiser = {
-    .name = "box3", .exact = 1, .apply = box_apply, .jvp = box_jvp};
 
 /* ---- synthetic scenes ---- */
 
@@ -111,8 +55,8 @@ static mcp_dump *
 scene_dump(const scene *s, int spp, uint64_t *rng)
 {
     mcp_dump *d = calloc(1, sizeof *d);
-    d->color = new_rgb(S, S);
-    d->var_of_mean = new_rgb(S, S);
+    d->color = mcp_test_rgb(S, S);
+    d->var_of_mean = mcp_test_rgb(S, S);
     d->spp = spp;
     d->source = strdup("synthetic");
     for (int y = 0; y < S; y++)
@@ -129,7 +73,7 @@ scene_dump(const scene *s, int spp, uint64_t *rng)
 static mcp_image *
 scene_reference(const scene *s)
 {
-    mcp_image *m = new_rgb(S, S);
+    mcp_image *m = mcp_test_rgb(S, S);
     for (int y = 0; y < S; y++)
         for (int x = 0; x < S; x++)
             for (int c = 0; c < 3; c++)
@@ -150,7 +94,7 @@ test_pipeline_one_dump(void **state)
     o.budget = 12345;
     o.blocks.tile_size = 32;
     mcp_estimate *e = NULL;
-    assert_int_equal(mcp_estimate_compute(d, &box_denoiser, &o, &e), 0);
+    assert_int_equal(mcp_estimate_compute(d, &mcp_test_box_denoiser, &o, &e), 0);
     assert_true(e->cdf_at_tau >= 0.0 && e->cdf_at_tau <= 1.0);
     assert_int_equal(e->stop, e->cdf_at_tau >= 0.999);
     double sum = 0.0, wsum = 0.0;
@@ -174,17 +118,17 @@ test_pipeline_one_dump(void **state)
     mcp_estimate_free(e);
     /* a dump without any variance (1 spp): never stop */
     memset(d->var_of_mean->data, 0, (size_t)S * S * 3 * sizeof(float));
-    assert_int_equal(mcp_estimate_compute(d, &box_denoiser, &o, &e), 0);
+    assert_int_equal(mcp_estimate_compute(d, &mcp_test_box_denoiser, &o, &e), 0);
     assert_int_equal(e->no_variance, 1);
     assert_int_equal(e->stop, 0);
     mcp_estimate_free(e);
     /* options are checked, naming the field */
     o.tau = -1;
-    assert_error_contains(mcp_estimate_compute(d, &box_denoiser, &o, &e),
+    assert_error_contains(mcp_estimate_compute(d, &mcp_test_box_denoiser, &o, &e),
                           "estimate: tau must be > 0 (got -1)");
     o = mcp_estimate_defaults();
     o.p = 1.0;
-    assert_error_contains(mcp_estimate_compute(d, &box_denoiser, &o, &e),
+    assert_error_contains(mcp_estimate_compute(d, &mcp_test_box_denoiser, &o, &e),
                           "estimate: percentile must be in (0, 1) (got 1)");
     mcp_dump_free(d);
 }
@@ -204,9 +148,9 @@ test_pipeline_thread_count_independent(void **state)
     int saved = omp_get_max_threads();
     mcp_estimate *a = NULL, *b = NULL;
     omp_set_num_threads(1);
-    assert_int_equal(mcp_estimate_compute(d, &box_denoiser, &o, &a), 0);
+    assert_int_equal(mcp_estimate_compute(d, &mcp_test_box_denoiser, &o, &a), 0);
     omp_set_num_threads(3);
-    assert_int_equal(mcp_estimate_compute(d, &box_denoiser, &o, &b), 0);
+    assert_int_equal(mcp_estimate_compute(d, &mcp_test_box_denoiser, &o, &b), 0);
     omp_set_num_threads(saved);
     assert_true(a->cdf_at_tau == b->cdf_at_tau);
     assert_int_equal(a->blocks->count, b->blocks->count);
@@ -279,10 +223,10 @@ test_series_synthetic_agreement(void **state)
         mcp_image *ref = scene_reference(&scenes[k]);
         snprintf(label, sizeof label, "synthetic %d (box, K=1)", k);
         assert_int_equal(
-            run_series(series, &box_denoiser, ref, 1, label, &agree, &cases, &early), 0);
+            run_series(series, &mcp_test_box_denoiser, ref, 1, label, &agree, &cases, &early), 0);
         snprintf(label, sizeof label, "synthetic %d (box, K=4)", k);
         assert_int_equal(
-            run_series(series, &box_denoiser, ref, 4, label, &agree4, &cases4, &early4),
+            run_series(series, &mcp_test_box_denoiser, ref, 4, label, &agree4, &cases4, &early4),
             0);
         mcp_image_free(ref);
         mcp_series_free(series);

@@ -9,6 +9,7 @@
  * deterministic, and 3 SE still catches a bias of a few percent at R = 200). When the
  * built-in `bilateral` denoiser exists, it is checked against the empirical MSE the
  * same way. */
+#include "box_denoiser.h"
 #include "testing.h"
 
 #include <math.h>
@@ -26,74 +27,19 @@
 #define H 24
 #define R_REALIZATIONS 200
 
-static const char *const RGB[] = {"R", "G", "B"};
-
 /* ---- linear test denoisers ---- */
 
 /* out = 3x3 box of in (replicate borders), every channel. */
-static void
-box3(const mcp_image *in, mcp_image *out)
-{
-    for (int y = 0; y < in->height; y++)
-        for (int x = 0; x < in->width; x++)
-            for (int c = 0; c < 3; c++) {
-                double s = 0.0;
-                for (int dy = -1; dy <= 1; dy++)
-                    for (int dx = -1; dx <= 1; dx++) {
-                        int xx = x + dx < 0            ? 0
-                                 : x + dx >= in->width ? in->width - 1
-                                                       : x + dx;
-                        int yy = y + dy < 0             ? 0
-                                 : y + dy >= in->height ? in->height - 1
-                                                        : y + dy;
-                        s += mcp_image_px(in, xx, yy)[c];
-                    }
-                mcp_image_px(out, x, y)[c] = (float)(s / 9.0);
-            }
-}
-
-static mcp_image *
-new_rgb(int w, int h)
-{
-    mcp_image *img = NULL;
-    assert_int_equal(mcp_image_new(w, h, 3, RGB, &img), 0);
-    return img;
-}
-
-static int
-box_apply(const mcp_denoiser *self, const mcp_denoise_input *in, mcp_image **out)
-{
-    (void)self;
-    *out = new_rgb(in->color->width, in->color->height);
-    box3(in->color, *out);
-    return 0;
-}
-
-static int
-box_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
-        const mcp_denoise_tangent *t, int n, mcp_image **primal, mcp_image **out)
-{
-    if (primal) box_apply(self, at, primal);
-    for (int k = 0; k < n; k++) {
-        out[k] = new_rgb(at->color->width, at->color->height);
-        box3(t[k].color, out[k]);
-    }
-    return 0;
-}
-
-static const mcp_denoiser box_denoiser = {
-    .name = "box3", .exact = 1, .apply = box_apply, .jvp = box_jvp};
-
 /* Joint: F = box(x) + BETA (a - box(a)) with a the albedo, linear in both. */
 #define BETA 0.5
 
 static void
 joint_eval(const mcp_image *x, const mcp_image *a, mcp_image *out)
 {
-    mcp_image *ba = new_rgb(x->width, x->height);
-    box3(x, out);
+    mcp_image *ba = mcp_test_rgb(x->width, x->height);
+    mcp_test_box3(x, out);
     if (a) {
-        box3(a, ba);
+        mcp_test_box3(a, ba);
         for (int y = 0; y < x->height; y++)
             for (int i = 0; i < x->width; i++)
                 for (int c = 0; c < 3; c++)
@@ -108,7 +54,7 @@ static int
 joint_apply(const mcp_denoiser *self, const mcp_denoise_input *in, mcp_image **out)
 {
     (void)self;
-    *out = new_rgb(in->color->width, in->color->height);
+    *out = mcp_test_rgb(in->color->width, in->color->height);
     joint_eval(in->color, in->albedo, *out);
     return 0;
 }
@@ -119,7 +65,7 @@ joint_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
 {
     if (primal) joint_apply(self, at, primal);
     for (int k = 0; k < n; k++) {
-        out[k] = new_rgb(at->color->width, at->color->height);
+        out[k] = mcp_test_rgb(at->color->width, at->color->height);
         joint_eval(t[k].color, t[k].albedo, out[k]);
     }
     return 0;
@@ -179,7 +125,7 @@ chol3(const double a[9], double l[9])
 static mcp_image *
 mean_image(void)
 {
-    mcp_image *m = new_rgb(W, H);
+    mcp_image *m = mcp_test_rgb(W, H);
     for (int y = 0; y < H; y++)
         for (int x = 0; x < W; x++)
             for (int c = 0; c < 3; c++)
@@ -194,8 +140,8 @@ realization(uint64_t *rng, int with_cov)
     mcp_dump *d = calloc(1, sizeof *d);
     assert_non_null(d);
     static const char *const cov_names[] = {"RG", "RB", "GB"};
-    d->color = new_rgb(W, H);
-    d->var_of_mean = new_rgb(W, H);
+    d->color = mcp_test_rgb(W, H);
+    d->var_of_mean = mcp_test_rgb(W, H);
     if (with_cov) assert_int_equal(mcp_image_new(W, H, 3, cov_names, &d->cov_of_mean), 0);
     d->spp = 16;
     d->source = strdup("synthetic");
@@ -314,14 +260,14 @@ test_formula_is_alg2(void **state)
     o.n_probes = 2;
     o.seed = 5;
     mcp_error_maps m;
-    assert_int_equal(mcp_error_maps_compute(d, &box_denoiser, &o, &m), 0);
+    assert_int_equal(mcp_error_maps_compute(d, &mcp_test_box_denoiser, &o, &m), 0);
     mcp_probe p[2];
-    mcp_image *jp[2], *f = new_rgb(W, H);
-    box3(d->color, f);
+    mcp_image *jp[2], *f = mcp_test_rgb(W, H);
+    mcp_test_box3(d->color, f);
     for (int k = 0; k < 2; k++) {
         assert_int_equal(mcp_probe_gaussian(d, NULL, 5, k, &p[k]), 0);
-        jp[k] = new_rgb(W, H);
-        box3(p[k].color, jp[k]);
+        jp[k] = mcp_test_rgb(W, H);
+        mcp_test_box3(p[k].color, jp[k]);
     }
     for (int y = 0; y < H; y++)
         for (int x = 0; x < W; x++) {
@@ -347,11 +293,11 @@ test_formula_is_alg2(void **state)
         }
     /* mcp_sure gives the scaled map of the metric */
     mcp_image *s = NULL;
-    assert_int_equal(mcp_sure(d, &box_denoiser, &o, &s), 0);
+    assert_int_equal(mcp_sure(d, &mcp_test_box_denoiser, &o, &s), 0);
     assert_true(mcp_test_max_abs_diff(s, m.sure_rel) == 0.0);
     mcp_image_free(s);
     o.metric = MCP_METRIC_SE;
-    assert_int_equal(mcp_sure(d, &box_denoiser, &o, &s), 0);
+    assert_int_equal(mcp_sure(d, &mcp_test_box_denoiser, &o, &s), 0);
     assert_true(mcp_test_max_abs_diff(s, m.sure) == 0.0);
     mcp_image_free(s);
     for (int k = 0; k < 2; k++) {
@@ -379,8 +325,8 @@ test_unbiased_linear_closed_form(void **state)
         o.metric = MCP_METRIC_SE;
         o.seed = 1000 + r;
         mcp_image *s = NULL;
-        assert_int_equal(mcp_sure(d, &box_denoiser, &o, &s), 0);
-        double ms = image_mean(s), me = true_mse(&box_denoiser, d, mu);
+        assert_int_equal(mcp_sure(d, &mcp_test_box_denoiser, &o, &s), 0);
+        double ms = image_mean(s), me = true_mse(&mcp_test_box_denoiser, d, mu);
         push(&sure, ms);
         push(&emp, me);
         push(&diff, ms - me);
@@ -414,9 +360,9 @@ test_unbiased_perceptual(void **state)
         o.ppd = ppd;
         o.seed = 5000 + r;
         mcp_error_maps m;
-        assert_int_equal(mcp_error_maps_compute(d, &box_denoiser, &o, &m), 0);
+        assert_int_equal(mcp_error_maps_compute(d, &mcp_test_box_denoiser, &o, &m), 0);
         /* truth: (M(F - μ))² in the same units (sure is not divided) */
-        mcp_image *e = new_rgb(W, H), *me = NULL;
+        mcp_image *e = mcp_test_rgb(W, H), *me = NULL;
         for (int y = 0; y < H; y++)
             for (int x = 0; x < W; x++)
                 for (int c = 0; c < 3; c++)
@@ -451,7 +397,7 @@ static void
 add_albedo(mcp_dump *d, uint64_t *rng, const double *zx_scale)
 {
     (void)zx_scale;
-    d->albedo = new_rgb(W, H);
+    d->albedo = mcp_test_rgb(W, H);
     for (int y = 0; y < H; y++)
         for (int x = 0; x < W; x++)
             for (int c = 0; c < 3; c++) {
@@ -470,7 +416,7 @@ static void
 test_joint_sure(void **state)
 {
     (void)state;
-    mcp_image *cross = NULL, *avar = new_rgb(W, H);
+    mcp_image *cross = NULL, *avar = mcp_test_rgb(W, H);
     assert_int_equal(mcp_image_new(W, H, 9, NULL, &cross), 0);
     for (int y = 0; y < H; y++)
         for (int x = 0; x < W; x++)
@@ -534,12 +480,12 @@ test_mc_sure_equals_exact_for_linear(void **state)
     o.metric = MCP_METRIC_SE;
     o.n_probes = 3;
     mcp_image *exact = NULL, *fd = NULL;
-    assert_int_equal(mcp_sure(d, &box_denoiser, &o, &exact), 0);
+    assert_int_equal(mcp_sure(d, &mcp_test_box_denoiser, &o, &exact), 0);
     const double deltas[] = {1e-2, 0.1, 1.0};
     for (int i = 0; i < 3; i++) {
         o.mc_sure = 1;
         o.fd_delta = deltas[i];
-        assert_int_equal(mcp_sure(d, &box_denoiser, &o, &fd), 0);
+        assert_int_equal(mcp_sure(d, &mcp_test_box_denoiser, &o, &fd), 0);
         /* a linear F has exact finite differences; what is left is float rounding of
          * F(X + δε) - F(X) (values ~2, steps ~δσ), about 1e-7 * 2 / δ relative to σ² */
         double tol = 4e-6 / deltas[i];
@@ -569,7 +515,7 @@ test_more_probes_less_noise(void **state)
             o.n_probes = ks[i];
             o.seed = 7000 + s;
             mcp_image *m = NULL;
-            assert_int_equal(mcp_sure(d, &box_denoiser, &o, &m), 0);
+            assert_int_equal(mcp_sure(d, &mcp_test_box_denoiser, &o, &m), 0);
             push(&v[i], image_mean(m));
             mcp_image_free(m);
         }
@@ -668,9 +614,9 @@ test_probes_do_not_depend_on_threads(void **state)
     omp_set_num_threads(1);
     mcp_sure_options o = mcp_sure_defaults();
     o.n_probes = 2;
-    assert_int_equal(mcp_sure(d, &box_denoiser, &o, &a), 0);
+    assert_int_equal(mcp_sure(d, &mcp_test_box_denoiser, &o, &a), 0);
     omp_set_num_threads(3);
-    assert_int_equal(mcp_sure(d, &box_denoiser, &o, &b), 0);
+    assert_int_equal(mcp_sure(d, &mcp_test_box_denoiser, &o, &b), 0);
     omp_set_num_threads(saved);
     assert_true(mcp_test_max_abs_diff(a, b) == 0.0);
     mcp_image_free(a);
@@ -728,16 +674,16 @@ test_errors(void **state)
     mcp_sure_options o = mcp_sure_defaults();
     mcp_image *s = NULL;
     o.n_probes = 0;
-    assert_error_contains(mcp_sure(d, &box_denoiser, &o, &s),
+    assert_error_contains(mcp_sure(d, &mcp_test_box_denoiser, &o, &s),
                           "sure: n_probes must be in [1, 1024] (got 0)");
     assert_null(s);
     o = mcp_sure_defaults();
     o.fd_delta = 0.0;
-    assert_error_contains(mcp_sure(d, &box_denoiser, &o, &s),
+    assert_error_contains(mcp_sure(d, &mcp_test_box_denoiser, &o, &s),
                           "fd_delta must be > 0 (got 0)");
     o = mcp_sure_defaults();
     o.ppd = -1;
-    assert_error_contains(mcp_sure(d, &box_denoiser, &o, &s),
+    assert_error_contains(mcp_sure(d, &mcp_test_box_denoiser, &o, &s),
                           "ppd must be >= 0 (got -1)");
     assert_error_contains(mcp_sure(d, NULL, NULL, &s), "sure: missing denoiser");
     mcp_error_metric m;
@@ -753,11 +699,11 @@ test_errors(void **state)
     fc.color_albedo = cross;
     o = mcp_sure_defaults();
     o.features = &fc;
-    assert_error_contains(mcp_sure(d, &box_denoiser, &o, &s),
+    assert_error_contains(mcp_sure(d, &mcp_test_box_denoiser, &o, &s),
                           "colour-albedo covariance given but synthetic has no albedo");
     mcp_image_free(cross);
     /* from_probes with a wrong-size jvp */
-    mcp_image *f = new_rgb(W, H), *small = new_rgb(4, 4);
+    mcp_image *f = mcp_test_rgb(W, H), *small = mcp_test_rgb(4, 4);
     const mcp_image *pp[1] = {f}, *jj[1] = {small};
     mcp_error_maps maps;
     assert_error_contains(mcp_error_maps_from_probes(d, f, pp, jj, 1, NULL, &maps),
@@ -767,7 +713,7 @@ test_errors(void **state)
     /* no variance */
     mcp_image_free(d->var_of_mean);
     d->var_of_mean = NULL;
-    assert_error_contains(mcp_sure(d, &box_denoiser, NULL, &s),
+    assert_error_contains(mcp_sure(d, &mcp_test_box_denoiser, NULL, &s),
                           "sure: synthetic has no variance");
     mcp_dump_free(d);
 }

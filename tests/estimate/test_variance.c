@@ -6,6 +6,7 @@
  * realizations of the noise (SPEC asks for an image-mean ratio within [0.8, 1.25]).
  * The sampling map is checked against Eq. 3 computed by hand, and the counts must sum
  * exactly to the budget and stay within one sample of budget × weight. */
+#include "box_denoiser.h"
 #include "testing.h"
 
 #include <math.h>
@@ -20,60 +21,6 @@
 #define H 20
 
 static const char *const RGB[] = {"R", "G", "B"};
-
-static mcp_image *
-new_rgb(int w, int h)
-{
-    mcp_image *img = NULL;
-    assert_int_equal(mcp_image_new(w, h, 3, RGB, &img), 0);
-    return img;
-}
-
-/* out = 3x3 box of in, replicate borders */
-static void
-box3(const mcp_image *in, mcp_image *out)
-{
-    for (int y = 0; y < in->height; y++)
-        for (int x = 0; x < in->width; x++)
-            for (int c = 0; c < 3; c++) {
-                double s = 0.0;
-                for (int dy = -1; dy <= 1; dy++)
-                    for (int dx = -1; dx <= 1; dx++) {
-                        int xx = x + dx < 0            ? 0
-                                 : x + dx >= in->width ? in->width - 1
-                                                       : x + dx;
-                        int yy = y + dy < 0             ? 0
-                                 : y + dy >= in->height ? in->height - 1
-                                                        : y + dy;
-                        s += mcp_image_px(in, xx, yy)[c];
-                    }
-                mcp_image_px(out, x, y)[c] = (float)(s / 9.0);
-            }
-}
-
-static int
-box_apply(const mcp_denoiser *self, const mcp_denoise_input *in, mcp_image **out)
-{
-    (void)self;
-    *out = new_rgb(in->color->width, in->color->height);
-    box3(in->color, *out);
-    return 0;
-}
-
-static int
-box_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
-        const mcp_denoise_tangent *t, int n, mcp_image **primal, mcp_image **out)
-{
-    if (primal) box_apply(self, at, primal);
-    for (int k = 0; k < n; k++) {
-        out[k] = new_rgb(at->color->width, at->color->height);
-        box3(t[k].color, out[k]);
-    }
-    return 0;
-}
-
-static const mcp_denoiser box_denoiser = {
-    .name = "box3", .exact = 1, .apply = box_apply, .jvp = box_jvp};
 
 static double
 mu_at(int x, int y, int c)
@@ -92,8 +39,8 @@ realization(uint64_t *rng)
 {
     mcp_dump *d = calloc(1, sizeof *d);
     assert_non_null(d);
-    d->color = new_rgb(W, H);
-    d->var_of_mean = new_rgb(W, H);
+    d->color = mcp_test_rgb(W, H);
+    d->var_of_mean = mcp_test_rgb(W, H);
     d->spp = 8;
     d->source = strdup("synthetic");
     for (int y = 0; y < H; y++)
@@ -150,8 +97,8 @@ test_jvp_variance_vs_empirical(void **state)
     uint64_t rng = 31;
     for (int r = 0; r < R; r++) {
         mcp_dump *d = realization(&rng);
-        mcp_image *f = new_rgb(W, H);
-        box3(d->color, f);
+        mcp_image *f = mcp_test_rgb(W, H);
+        mcp_test_box3(d->color, f);
         for (int i = 0; i < W * H * 3; i++) {
             double v = f->data[i], dlt = v - mean[i];
             mean[i] += dlt / (r + 1);
@@ -161,7 +108,7 @@ test_jvp_variance_vs_empirical(void **state)
         mcp_variance_options o = mcp_variance_defaults();
         o.seed = 100 + r;
         mcp_image *v = NULL;
-        assert_int_equal(mcp_variance(d, &box_denoiser, &o, &v, NULL), 0);
+        assert_int_equal(mcp_variance(d, &mcp_test_box_denoiser, &o, &v, NULL), 0);
         jvp_mean += image_mean(v, 3) / R;
         mcp_image_free(v);
         mcp_image_free(f);
@@ -197,7 +144,7 @@ test_jvp_variance_per_value(void **state)
     mcp_variance_options o = mcp_variance_defaults();
     o.n_probes = 400;
     mcp_image *v = NULL, *f = NULL;
-    assert_int_equal(mcp_variance(d, &box_denoiser, &o, &v, &f), 0);
+    assert_int_equal(mcp_variance(d, &mcp_test_box_denoiser, &o, &v, &f), 0);
     double worst = 0.0;
     for (int y = 0; y < H; y++)
         for (int x = 0; x < W; x++)
@@ -212,7 +159,7 @@ test_jvp_variance_per_value(void **state)
     /* relative: divided by maxc(F)² + 1e-2 */
     mcp_image *vr = NULL;
     o.relative = 1;
-    assert_int_equal(mcp_variance(d, &box_denoiser, &o, &vr, NULL), 0);
+    assert_int_equal(mcp_variance(d, &mcp_test_box_denoiser, &o, &vr, NULL), 0);
     for (int c = 0; c < 3; c++) {
         const float *pf = mcp_image_px(f, 7, 9);
         double m = fmax(fmax(pf[0], pf[1]), pf[2]);
@@ -225,9 +172,9 @@ test_jvp_variance_per_value(void **state)
     o.n_probes = 3;
     o.mc = 1;
     mcp_image *vex = NULL;
-    assert_int_equal(mcp_variance(d, &box_denoiser, &o, &vfd, NULL), 0);
+    assert_int_equal(mcp_variance(d, &mcp_test_box_denoiser, &o, &vfd, NULL), 0);
     o.mc = 0;
-    assert_int_equal(mcp_variance(d, &box_denoiser, &o, &vex, NULL), 0);
+    assert_int_equal(mcp_variance(d, &mcp_test_box_denoiser, &o, &vex, NULL), 0);
     assert_true(mcp_test_max_abs_diff(vfd, vex) < 1e-6);
     mcp_image_free(vfd);
     mcp_image_free(vex);
@@ -246,8 +193,8 @@ test_sampling_map_eq3(void **state)
     uint64_t rng = 9;
     mcp_dump *d = realization(&rng);
     d->spp = 15;
-    mcp_image *f = new_rgb(W, H), *var = new_rgb(W, H);
-    box3(d->color, f);
+    mcp_image *f = mcp_test_rgb(W, H), *var = mcp_test_rgb(W, H);
+    mcp_test_box3(d->color, f);
     for (int i = 0; i < W * H * 3; i++)
         var->data[i] = (float)(0.01 + 0.001 * (i % 17));
     var->data[5] = -3.0f; /* a negative numerator (SURE can be): clipped per pixel */
@@ -301,10 +248,10 @@ test_sampling_map_blur(void **state)
     (void)state;
     const int s = 41;
     mcp_dump *d = calloc(1, sizeof *d);
-    d->color = new_rgb(s, s);
+    d->color = mcp_test_rgb(s, s);
     d->spp = 1;
     d->source = strdup("impulse");
-    mcp_image *f = new_rgb(s, s), *num = new_rgb(s, s);
+    mcp_image *f = mcp_test_rgb(s, s), *num = mcp_test_rgb(s, s);
     for (int c = 0; c < 3; c++)
         mcp_image_px(num, 20, 20)[c] = 1.0f;
     const mcp_sampling_kind kinds[2] = {MCP_SAMPLING_VARIANCE, MCP_SAMPLING_MC_SURE};
@@ -324,7 +271,7 @@ test_sampling_map_blur(void **state)
         mcp_image_free(map);
     }
     /* all zero: uniform */
-    mcp_image *zero = new_rgb(s, s), *map = NULL;
+    mcp_image *zero = mcp_test_rgb(s, s), *map = NULL;
     assert_int_equal(mcp_sampling_map(d, f, zero, NULL, &map), 0);
     assert_close(map->data[0], 1.0 / (s * s), 1e-6, 0);
     assert_close(map->data[s * s - 1], 1.0 / (s * s), 1e-6, 0);
@@ -436,19 +383,19 @@ test_errors(void **state)
     mcp_variance_options o = mcp_variance_defaults();
     o.n_probes = 0;
     mcp_image *v = NULL;
-    assert_error_contains(mcp_variance(d, &box_denoiser, &o, &v, NULL),
+    assert_error_contains(mcp_variance(d, &mcp_test_box_denoiser, &o, &v, NULL),
                           "variance: n_probes must be in [1, 1024] (got 0)");
     mcp_sampling_options so = mcp_sampling_defaults();
     so.blur_window = 4;
     assert_error_contains(mcp_sampling_map(d, d->color, d->color, &so, &v),
                           "blur_window must be odd");
-    mcp_image *small = new_rgb(3, 3);
+    mcp_image *small = mcp_test_rgb(3, 3);
     assert_error_contains(mcp_sampling_map(d, small, d->color, NULL, &v),
                           "sampling map: denoised image: size 3x3 does not match 24x20");
     mcp_image_free(small);
     mcp_image_free(d->var_of_mean);
     d->var_of_mean = NULL;
-    assert_error_contains(mcp_variance(d, &box_denoiser, NULL, &v, NULL),
+    assert_error_contains(mcp_variance(d, &mcp_test_box_denoiser, NULL, &v, NULL),
                           "variance: synthetic has no variance");
     mcp_dump_free(d);
 }

@@ -1,0 +1,403 @@
+/* denoise_external.c: the `external` denoiser -- any command that reads image files and
+ * writes one, e.g. Open Image Denoise's oidnDenoise (SPEC estimate, "Denoisers";
+ * notes/oidn.md section 5). It is a black box, so its Jacobian-vector product is the
+ * finite difference (F(X + delta t) - F(X)) / delta, where t already carries the noise
+ * scale and delta is unitless (exact = 0).
+ *
+ * Settings: command (required; a /bin/sh template with {color}, {albedo}, {normal} and
+ * {output}, each replaced by a single-quoted path), format [pfm] (pfm or exr: the files
+ * written and read), delta [0.1] (> 0), workdir [$TMPDIR or /tmp] (where the private
+ * temporary folder of each run goes). Every run writes its inputs into a fresh
+ * mkdtemp() folder, runs the command, reads {output} and removes the folder. */
+#ifndef _POSIX_C_SOURCE
+#define _POSIX_C_SOURCE 200809L /* mkdtemp */
+#endif
+#include <mcpost/denoiser.h>
+
+#include "internal.h"
+
+#include <mcpost/imageio.h>
+
+#include <dirent.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#define PATH_CAP 4096
+
+typedef struct {
+    char *command; /* the template */
+    const char *ext; /* "pfm" or "exr" */
+    double delta;  /* unitless finite-difference step */
+    char *workdir; /* NULL: $TMPDIR or /tmp */
+    int needs_albedo, needs_normal;
+} external_state;
+
+static const char *const external_keys[] = {"command", "format", "delta", "workdir",
+                                             NULL};
+
+/* ---- running the command ---- */
+
+/* Appends s to the growing buffer *buf (length *len, capacity *cap), single-quoted for
+ * /bin/sh when quote is set ('\'' for each quote inside). */
+static int
+append(char **buf, size_t *len, size_t *cap, const char *s, size_t n, int quote)
+{
+    size_t need = *len + (quote ? 4 * n + 3 : n) + 1;
+    if (need > *cap) {
+        size_t c = need * 2;
+        char *b = realloc(*buf, c);
+        if (!b)
+            return mcp_error("out of memory (%zu bytes)", c);
+        *buf = b;
+        *cap = c;
+    }
+    char *p = *buf + *len;
+    if (quote)
+        *p++ = '\'';
+    for (size_t i = 0; i < n; i++) {
+        if (quote && s[i] == '\'') {
+            memcpy(p, "'\\''", 4);
+            p += 4;
+        } else {
+            *p++ = s[i];
+        }
+    }
+    if (quote)
+        *p++ = '\'';
+    *p = '\0';
+    *len = (size_t)(p - *buf);
+    return 0;
+}
+
+/* The command line: the template with each {color}, {albedo}, {normal}, {output}
+ * replaced by the quoted path (paths[i], in that order); other text is kept. */
+static int
+substitute(const char *tmpl, const char *const paths[4], char **out)
+{
+    static const char *const names[4] = {"{color}", "{albedo}", "{normal}", "{output}"};
+    char *buf = NULL;
+    size_t len = 0, cap = 0;
+    const char *p = tmpl;
+    while (*p) {
+        int hit = -1;
+        for (int i = 0; i < 4 && hit < 0; i++)
+            if (strncmp(p, names[i], strlen(names[i])) == 0)
+                hit = i;
+        int rc = hit >= 0 ? append(&buf, &len, &cap, paths[hit], strlen(paths[hit]), 1)
+                          : append(&buf, &len, &cap, p, 1, 0);
+        if (rc) {
+            free(buf);
+            return -1;
+        }
+        p += hit >= 0 ? strlen(names[hit]) : 1;
+    }
+    if (!buf && append(&buf, &len, &cap, "", 0, 0))
+        return -1;
+    *out = buf;
+    return 0;
+}
+
+/* Removes every file in dir and then dir (best effort; the command may have left
+ * files of its own there). */
+static void
+remove_dir(const char *dir)
+{
+    DIR *d = opendir(dir);
+    if (d) {
+        struct dirent *e;
+        char path[PATH_CAP];
+        while ((e = readdir(d))) {
+            if (strcmp(e->d_name, ".") == 0 || strcmp(e->d_name, "..") == 0)
+                continue;
+            snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
+            unlink(path);
+        }
+        closedir(d);
+    }
+    rmdir(dir);
+}
+
+/* The 3 channels of the command's output: R,G,B, or all of them when exactly 3. */
+static int
+read_output(const external_state *s, const char *path, const mcp_image *color,
+            mcp_image **out)
+{
+    static const char *const rgb[] = {"R", "G", "B"};
+    mcp_image *img = NULL, *o = NULL;
+    if (mcp_image_read(path, NULL, &img))
+        return mcp_error_prefix("external: command '%s': output: ", s->command);
+    int idx[3] = {0, 1, 2};
+    int found = 1;
+    for (int c = 0; c < 3 && found; c++)
+        found = (idx[c] = mcp_image_channel(img, rgb[c])) >= 0;
+    if (!found && img->channels == 3) {
+        found = 1;
+        for (int c = 0; c < 3; c++)
+            idx[c] = c;
+    }
+    int rc = -1;
+    if (!found)
+        mcp_error("external: command '%s': output needs channels R,G,B or exactly 3 "
+                  "channels (it has %d)",
+                  s->command, img->channels);
+    else if (img->width != color->width || img->height != color->height)
+        mcp_error("external: command '%s': output is %dx%d, the input %dx%d", s->command,
+                  img->width, img->height, color->width, color->height);
+    else if (!mcp_image_copy_channels(img, idx, 3, &o)) {
+        rc = 0;
+        for (int c = 0; c < 3 && !rc; c++)
+            rc = mcp_image_set_channel_name(o, c, rgb[c]);
+        mcp_attrs_clear(&o->attrs);
+        if (!rc)
+            rc = mcp_image_set_source(o, "external");
+    }
+    mcp_image_free(img);
+    if (rc) {
+        mcp_image_free(o);
+        return -1;
+    }
+    *out = o;
+    return 0;
+}
+
+/* F(in): writes the inputs, runs the command, reads the output, cleans up. */
+static int
+run_external(const external_state *s, const mcp_denoise_input *in, mcp_image **out)
+{
+    *out = NULL;
+    if (s->needs_albedo && !in->albedo)
+        return mcp_error("external: command '%s' needs {albedo}, but the input has no "
+                         "albedo",
+                         s->command);
+    if (s->needs_normal && !in->normal)
+        return mcp_error("external: command '%s' needs {normal}, but the input has no "
+                         "normal",
+                         s->command);
+    const char *base = s->workdir;
+    if (!base || !*base)
+        base = getenv("TMPDIR");
+    if (!base || !*base)
+        base = "/tmp";
+    char dir[PATH_CAP];
+    if ((size_t)snprintf(dir, sizeof dir, "%s/mcpost-external-XXXXXX", base) >=
+        sizeof dir - 32)
+        return mcp_error("external: workdir '%s': path too long", base);
+    if (!mkdtemp(dir))
+        return mcp_error("external: cannot make a temporary folder in '%s'", base);
+    static const char *const stems[4] = {"color", "albedo", "normal", "output"};
+    char paths[4][PATH_CAP];
+    for (int i = 0; i < 4; i++)
+        snprintf(paths[i], sizeof paths[i], "%s/%s.%s", dir, stems[i], s->ext);
+    const char *const path_ptrs[4] = {paths[0], paths[1], paths[2], paths[3]};
+    char *line = NULL;
+    int rc = -1;
+    if (mcp_image_write(in->color, paths[0], NULL) ||
+        (s->needs_albedo && mcp_image_write(in->albedo, paths[1], NULL)) ||
+        (s->needs_normal && mcp_image_write(in->normal, paths[2], NULL))) {
+        mcp_error_prefix("external: ");
+        goto done;
+    }
+    if (substitute(s->command, path_ptrs, &line))
+        goto done;
+    fflush(NULL); /* the child shares stdout and stderr */
+    int status = system(line);
+    if (status == -1) {
+        mcp_error("external: command '%s': cannot start /bin/sh", s->command);
+        goto done;
+    }
+    if (WIFSIGNALED(status)) {
+        mcp_error("external: command '%s' was killed by signal %d", s->command,
+                  WTERMSIG(status));
+        goto done;
+    }
+    if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
+        mcp_error("external: command '%s' failed (exit status %d)", s->command,
+                  WIFEXITED(status) ? WEXITSTATUS(status) : status);
+        goto done;
+    }
+    if (access(paths[3], F_OK) != 0) {
+        mcp_error("external: command '%s' wrote no {output} file", s->command);
+        goto done;
+    }
+    rc = read_output(s, paths[3], in->color, out);
+done:
+    free(line);
+    remove_dir(dir);
+    return rc;
+}
+
+/* ---- the denoiser ---- */
+
+static int
+external_apply(const mcp_denoiser *self, const mcp_denoise_input *in, mcp_image **out)
+{
+    *out = NULL;
+    if (mcp__denoise_check_input("external", in))
+        return -1;
+    return run_external(self->state, in, out);
+}
+
+/* base + delta * t as a new packed R,G,B image. */
+static int
+axpy(const mcp_image *base, const mcp_image *t, double delta, mcp_image **out)
+{
+    mcp_image *o = NULL;
+    if (mcp__rgb_new(base->width, base->height, "external", &o))
+        return -1;
+    for (int y = 0; y < base->height; y++)
+        for (int x = 0; x < base->width; x++) {
+            const float *b = mcp_image_px(base, x, y), *v = mcp_image_px(t, x, y);
+            float *p = mcp_image_px(o, x, y);
+            for (int c = 0; c < 3; c++)
+                p[c] = (float)((double)b[c] + delta * v[c]);
+        }
+    *out = o;
+    return 0;
+}
+
+static int
+external_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
+             const mcp_denoise_tangent *t, int n, mcp_image **primal, mcp_image **out)
+{
+    const external_state *s = self->state;
+    if (primal)
+        *primal = NULL;
+    for (int k = 0; k < n && out; k++)
+        out[k] = NULL;
+    if (mcp__denoise_check_input("external", at) ||
+        mcp__denoise_check_tangents("external", at, t, n))
+        return -1;
+    if (n > 0 && !out)
+        return mcp_error("external: no room for %d tangent outputs", n);
+    mcp_image *f0 = NULL;
+    if (run_external(s, at, &f0))
+        return -1;
+    for (int k = 0; k < n; k++) {
+        mcp_denoise_input moved = *at;
+        mcp_image *c = NULL, *a = NULL, *nn = NULL, *f1 = NULL;
+        int rc = axpy(at->color, t[k].color, s->delta, &c);
+        if (!rc && at->albedo && t[k].albedo)
+            rc = axpy(at->albedo, t[k].albedo, s->delta, &a);
+        if (!rc && at->normal && t[k].normal)
+            rc = axpy(at->normal, t[k].normal, s->delta, &nn);
+        moved.color = c;
+        if (a)
+            moved.albedo = a;
+        if (nn)
+            moved.normal = nn;
+        if (!rc)
+            rc = run_external(s, &moved, &f1);
+        mcp_image_free(c);
+        mcp_image_free(a);
+        mcp_image_free(nn);
+        if (rc) {
+            mcp_image_free(f0);
+            for (int j = 0; j < k; j++) {
+                mcp_image_free(out[j]);
+                out[j] = NULL;
+            }
+            return -1;
+        }
+        /* f1 becomes (f1 - f0) / delta in place (both packed, same size) */
+        for (int y = 0; y < f1->height; y++)
+            for (int x = 0; x < f1->width; x++) {
+                float *p1 = mcp_image_px(f1, x, y);
+                const float *p0 = mcp_image_px(f0, x, y);
+                for (int ch = 0; ch < 3; ch++)
+                    p1[ch] = (float)(((double)p1[ch] - p0[ch]) / s->delta);
+            }
+        out[k] = f1;
+    }
+    if (primal)
+        *primal = f0;
+    else
+        mcp_image_free(f0);
+    return 0;
+}
+
+static void
+external_destroy(mcp_denoiser *self)
+{
+    external_state *s = self->state;
+    free(s->command);
+    free(s->workdir);
+    free(self);
+}
+
+static int
+external_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
+{
+    *out = NULL;
+    const mcp_node *cmd_node = NULL;
+    const char *command = NULL, *format = "pfm", *workdir = NULL;
+    double delta = 0.1;
+    if (settings->kind != MCP_NODE_MAP)
+        return mcp_node_error(settings, "external: needs settings: a map with 'command' "
+                                        "(e.g. --denoiser-opt 'command=...')");
+    if (mcp_node_require(settings, "command", "denoiser 'external'", &cmd_node) ||
+        mcp_node_string(cmd_node, "command", &command) ||
+        mcp_node_opt_string(settings, "format", &format) ||
+        mcp_node_opt_double(settings, "delta", &delta) ||
+        mcp_node_opt_string(settings, "workdir", &workdir))
+        return -1;
+    if (!strstr(command, "{color}") || !strstr(command, "{output}"))
+        return mcp_node_error(cmd_node,
+                              "external: command '%s' must name {color} and {output}",
+                              command);
+    const char *ext = NULL;
+    if (strcmp(format, "pfm") == 0)
+        ext = "pfm";
+    else if (strcmp(format, "exr") == 0)
+        ext = "exr";
+    else
+        return mcp_node_error(mcp_node_get(settings, "format"),
+                              "external: format must be pfm or exr (got '%s')", format);
+    if (!(delta > 0) || !isfinite(delta))
+        return mcp_node_error(mcp_node_get(settings, "delta"),
+                              "external: delta must be > 0 (got %g)", delta);
+    mcp_denoiser *d = mcp__denoiser_new("external", sizeof(external_state));
+    if (!d)
+        return -1;
+    external_state *s = d->state;
+    d->destroy = external_destroy;
+    d->exact = 0;
+    s->ext = ext;
+    s->delta = delta;
+    s->needs_albedo = strstr(command, "{albedo}") != NULL;
+    s->needs_normal = strstr(command, "{normal}") != NULL;
+    d->uses_albedo = s->needs_albedo;
+    d->uses_normal = s->needs_normal;
+    s->command = mcp_strdup(command);
+    if (!s->command) {
+        mcp_denoiser_free(d);
+        return -1;
+    }
+    if (workdir && *workdir) {
+        char buf[PATH_CAP];
+        if (workdir[0] != '/' && base_dir && *base_dir)
+            snprintf(buf, sizeof buf, "%s/%s", base_dir, workdir);
+        else
+            snprintf(buf, sizeof buf, "%s", workdir);
+        if (!(s->workdir = mcp_strdup(buf))) {
+            mcp_denoiser_free(d);
+            return -1;
+        }
+    }
+    d->apply = external_apply;
+    d->jvp = external_jvp;
+    *out = d;
+    return 0;
+}
+
+const mcp_denoiser_kind mcp__denoiser_external = {
+    "external",
+    "any command that reads and writes image files, e.g. oidnDenoise; "
+    "finite-difference JVP (command with {color} {albedo} {normal} {output}, "
+    "format [pfm], delta [0.1], workdir [$TMPDIR])",
+    external_keys,
+    external_create,
+};

@@ -1,0 +1,88 @@
+/* unet_internal.h: OIDN's RT U-Net in plain C -- the .tza weight archive (tza.c) and
+ * the network's forward pass with OIDN's HDR pre-/post-processing (unet.c).
+ * Not installed; see notes/oidn.md for the format, the layer list and the transfer
+ * function. The denoiser kind `unet` over them is denoise_unet.c. */
+#ifndef MCP_ESTIMATE_UNET_INTERNAL_H
+#define MCP_ESTIMATE_UNET_INTERNAL_H
+
+#include <mcpost/denoiser.h>
+#include <mcpost/image.h>
+
+#include <stddef.h>
+
+/* ---- .tza archive (tza.c; notes/oidn.md section 2) ---- */
+
+typedef struct mcp__tza_tensor {
+    char *name;
+    int ndims;      /* 1..4 */
+    int dims[4];
+    char layout[5]; /* "oihw" or "x" */
+    char dtype;     /* 'f' (float32) or 'h' (float16) as stored */
+    size_t count;   /* number of values */
+    float *data;    /* converted to float32, owned */
+} mcp__tza_tensor;
+
+typedef struct mcp__tza {
+    int count;
+    mcp__tza_tensor *tensors;
+} mcp__tza;
+
+/* Parses a whole archive held in memory; source names it in messages. */
+int mcp__tza_parse(const unsigned char *bytes, size_t size, const char *source,
+                   mcp__tza **out);
+/* Reads and parses a file. */
+int mcp__tza_read(const char *path, mcp__tza **out);
+/* The tensor called name, or NULL (no error set). */
+const mcp__tza_tensor *mcp__tza_find(const mcp__tza *tza, const char *name);
+void mcp__tza_free(mcp__tza *tza);
+
+/* float16 bits to float (exact; subnormals, infinities and NaN included). */
+float mcp__half_to_float(unsigned short h);
+
+/* ---- the U-Net (unet.c; notes/oidn.md sections 1 and 3) ---- */
+
+#define MCP__UNET_NCONV 16
+
+typedef struct mcp__unet_conv {
+    int cin, cout;
+    float *weight; /* [cout][cin][3][3], owned */
+    float *bias;   /* [cout], owned */
+} mcp__unet_conv;
+
+typedef struct mcp__unet {
+    int ic;       /* input channels: 3 colour, 6 + albedo, 9 + albedo + normal */
+    int v2;       /* 1 for float16 (OIDN 2.x) files: autoexposure bins by ceil */
+    mcp__unet_conv conv[MCP__UNET_NCONV]; /* enc_conv0 ... dec_conv0 in order */
+} mcp__unet;
+
+/* Loads the base (or small) RT U-Net from a .tza file; channel counts are read from
+ * the tensors and checked for consistency. `_large` weights are refused. */
+int mcp__unet_load(const char *path, mcp__unet **out);
+/* The same from a parsed archive. */
+int mcp__unet_from_tza(const mcp__tza *tza, const char *source, mcp__unet **out);
+void mcp__unet_free(mcp__unet *net);
+
+/* OIDN's autoexposure scale of an RGB image (notes 3.3; v2 selects 2.x bins). */
+double mcp__unet_autoexposure(const mcp_image *color, int v2);
+
+/* HDR denoise of colour (3 channels) with albedo and normal as the net needs them
+ * (NULL when the net does not read them). input_scale <= 0: autoexposure. The whole
+ * image is one tile, padded at the bottom/right to a multiple of 16. *out is a new
+ * RGB image. */
+int mcp__unet_forward(const mcp__unet *net, const mcp_image *color,
+                      const mcp_image *albedo, const mcp_image *normal,
+                      double input_scale, mcp_image **out);
+
+/* The same, and for k < n the exact Jacobian-vector product jt[k] = J t[k] in the
+ * same pass (forward mode: t[k].color is required, its albedo and normal parts may be
+ * NULL, meaning zero; they count only where the net reads those inputs). The input
+ * scale is held constant for the JVP. out may be NULL. */
+int mcp__unet_run(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
+                  const mcp_image *normal, double input_scale, const mcp_denoise_tangent *t,
+                  int n, mcp_image **out, mcp_image **jt);
+
+/* OIDN's PU transfer function (normalised: x = PU(y)/PU(65504)) and its inverse. */
+float mcp__pu_forward(float y);
+float mcp__pu_inverse(float x);
+
+#endif
