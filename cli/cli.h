@@ -4,6 +4,7 @@
 
 #include <mcpost/job.h>
 #include <mcpost/imageio.h>
+#include <mcpost/denoiser.h>
 #include <cjson/cJSON.h>
 
 typedef struct mcp_command {
@@ -36,5 +37,62 @@ void mcp_cli_print_json(cJSON *json);
  * --variance); any may be NULL. */
 int mcp_cli_read_dump(const char *path, const char *spp, const char *convention,
                       const char *variance, mcp_dump **out);
+
+/* cli/denoiser_flags.c: the denoiser flags of every subcommand that takes one
+ * (denoise, estimate, blend, perceptual), parsed in one place so that they read the
+ * same everywhere. --denoiser-opt KEY=VALUE is one key of the job file's denoiser map;
+ * the shorthands are the same words as those keys:
+ *   --weights PATH           --denoiser-opt weights=PATH      (unet)
+ *   --input-scale auto|N     --denoiser-opt input_scale=...   (unet)
+ *   --denoiser-command CMD   --denoiser-opt command=CMD       (external)
+ * A key given twice, by either spelling, fails when the denoiser is created
+ * (mcp_denoiser_create_from_args: "key 'weights' given twice"). */
+typedef struct mcp_cli_denoiser_flags {
+    const char *name; /* --denoiser, borrowed from argv; a command may preset a default */
+    char **opts;      /* "key=value", owned, in command-line order */
+    int n_opts, cap;
+} mcp_cli_denoiser_flags;
+
+/* getopt_long values of the denoiser flags: above any command's own. */
+enum {
+    MCP_CLI_OPT_DENOISER = 0x4000,
+    MCP_CLI_OPT_DENOISER_OPT,
+    MCP_CLI_OPT_WEIGHTS,
+    MCP_CLI_OPT_INPUT_SCALE,
+    MCP_CLI_OPT_DENOISER_COMMAND
+};
+
+/* The struct option entries, for a command's longs[] (needs <getopt.h>). */
+#define MCP_CLI_DENOISER_LONGOPTS                                                        \
+    {"denoiser", required_argument, 0, MCP_CLI_OPT_DENOISER},                            \
+        {"denoiser-opt", required_argument, 0, MCP_CLI_OPT_DENOISER_OPT},                \
+        {"weights", required_argument, 0, MCP_CLI_OPT_WEIGHTS},                          \
+        {"input-scale", required_argument, 0, MCP_CLI_OPT_INPUT_SCALE},                  \
+        {"denoiser-command", required_argument, 0, MCP_CLI_OPT_DENOISER_COMMAND}
+
+/* Help lines for the flags besides --denoiser NAME (whose default each command tells
+ * itself). The descriptions start in column 26 + strlen(PAD): PAD is a string literal
+ * of spaces that lines them up with the command's own. */
+#define MCP_CLI_DENOISER_USAGE(PAD)                                                      \
+    "  --denoiser-opt KEY=VAL  " PAD                                                     \
+    "a denoiser setting, a key of the job file's denoiser\n"                             \
+    "                          " PAD                                                     \
+    "map (repeatable; e.g. sigma=3). Shorthands for keys:\n"                             \
+    "  --weights PATH          " PAD "unet: OIDN weights, a .tza (weights=PATH)\n"       \
+    "                          " PAD "[$MCPOST_OIDN_WEIGHTS]\n"                          \
+    "  --input-scale auto|N    " PAD                                                     \
+    "unet: N maps the colour to 1 = 100 cd/m^2; auto is\n"                               \
+    "                          " PAD "OIDN's autoexposure (input_scale=N) [auto]\n"      \
+    "  --denoiser-command CMD  " PAD                                                     \
+    "external: a /bin/sh command with {color} {albedo}\n"                                \
+    "                          " PAD "{normal} {output} for its files (command=CMD)\n"
+
+/* Takes one getopt_long result: 1 when opt is a denoiser flag (taken), 0 when it is
+ * not, -1 on failure (out of memory; mcp_error is set). */
+int mcp_cli_denoiser_flag(mcp_cli_denoiser_flags *f, int opt, const char *arg);
+/* Creates the denoiser named by the flags (mcp_denoiser_create_from_args). */
+int mcp_cli_denoiser_create(const mcp_cli_denoiser_flags *f, mcp_denoiser **out);
+/* Frees the options (the name is borrowed); safe on a zeroed struct, and twice. */
+void mcp_cli_denoiser_flags_free(mcp_cli_denoiser_flags *f);
 
 #endif

@@ -257,7 +257,7 @@ static const char usage[] =
     "  (report.json, report.html) into the output folder.\n"
     "\n"
     "  --denoiser NAME           the denoiser (required; see 'mcpost run --list')\n"
-    "  --denoiser-opt KEY=VALUE  one of its settings (repeatable)\n"
+    MCP_CLI_DENOISER_USAGE("  ")
     "  --spp LIST                the pattern's sample counts, e.g. 1,2,4,8\n"
     "  --stop-denoising-at SPP   denoise up to this spp; later members reuse d and SURE\n"
     "  --ref, --reference REF    reference: errors of every method, ideal blending,\n"
@@ -290,9 +290,7 @@ static const char usage[] =
     "  --no-flip                 skip HDR-FLIP\n";
 
 enum {
-    OPT_DENOISER = 256,
-    OPT_DENOISER_OPT,
-    OPT_SPP,
+    OPT_SPP = 256,
     OPT_STOP,
     OPT_REF,
     OPT_ALL,
@@ -350,8 +348,7 @@ static int
 cmd_blend(int argc, char **argv)
 {
     static const struct option longs[] = {
-        {"denoiser", required_argument, 0, OPT_DENOISER},
-        {"denoiser-opt", required_argument, 0, OPT_DENOISER_OPT},
+        MCP_CLI_DENOISER_LONGOPTS,
         {"spp", required_argument, 0, OPT_SPP},
         {"stop-denoising-at", required_argument, 0, OPT_STOP},
         {"ref", required_argument, 0, OPT_REF},
@@ -378,25 +375,20 @@ cmd_blend(int argc, char **argv)
         {0, 0, 0, 0}};
     mcp_blend_series_options o = mcp_blend_series_defaults();
     mcp_blend_options *b = &o.blend;
-    const char *denoiser = NULL, *ref_path = NULL, *out_dir = "blend-out";
-    const char **dopts = mcp_calloc((size_t)argc + 1, sizeof *dopts);
-    int n_dopts = 0, json = 0, all_images = 0, opt, status = 1;
+    const char *ref_path = NULL, *out_dir = "blend-out";
+    mcp_cli_denoiser_flags df = {0};
+    int json = 0, all_images = 0, opt, status = 1;
     int *spps = NULL, n_spps = 0;
     mcp_series *series = NULL;
     mcp_denoiser *den = NULL;
     mcp_image *ref = NULL;
     mcp_report *report = NULL;
-    if (!dopts) return mcp_cli_fail();
     optind = 1;
     while ((opt = getopt_long(argc, argv, "ho:", longs, NULL)) != -1) {
-        int rc = 0;
+        int rc = mcp_cli_denoiser_flag(&df, opt, optarg);
+        if (rc < 0) goto fail;
+        if (rc) continue;
         switch (opt) {
-        case OPT_DENOISER:
-            denoiser = optarg;
-            break;
-        case OPT_DENOISER_OPT:
-            dopts[n_dopts++] = optarg;
-            break;
         case OPT_SPP:
             free(spps);
             spps = NULL;
@@ -477,7 +469,7 @@ cmd_blend(int argc, char **argv)
         status = mcp_cli_usage("blend", "no series given");
         goto done;
     }
-    if (!denoiser) {
+    if (!df.name) {
         status = mcp_cli_usage("blend", "--denoiser is required");
         goto done;
     }
@@ -490,7 +482,7 @@ cmd_blend(int argc, char **argv)
         (spps ? mcp_series_from_pattern(argv[optind], spps, n_spps, &series)
               : mcp_series_from_paths((const char *const *)argv + optind, NULL, n_files,
                                       &series)) ||
-        mcp_denoiser_create_from_args(denoiser, dopts, n_dopts, &den) ||
+        mcp_cli_denoiser_create(&df, &den) ||
         (ref_path && mcp_image_read(ref_path, NULL, &ref)) || make_dirs(out_dir) ||
         mcp_report_new("mcpost blend", &report))
         goto fail;
@@ -500,9 +492,9 @@ cmd_blend(int argc, char **argv)
     sink.rel = "";
     sink.all_images = all_images;
     char title[600];
-    snprintf(title, sizeof title, "blend: %s with %s", argv[optind], denoiser);
+    snprintf(title, sizeof title, "blend: %s with %s", argv[optind], df.name);
     cJSON *section = mcp_report_section(report, "blend", title);
-    if (!section || run_blend(series, den, ref, &o, denoiser, &sink, section)) goto fail;
+    if (!section || run_blend(series, den, ref, &o, df.name, &sink, section)) goto fail;
     char *text = cJSON_Print(section), path[4200];
     snprintf(path, sizeof path, "%s/blend.json", out_dir);
     int wrc = !text || mcp_write_file_atomic(path, text, strlen(text));
@@ -520,7 +512,7 @@ done:
     mcp_denoiser_free(den);
     mcp_series_free(series);
     free(spps);
-    free(dopts);
+    mcp_cli_denoiser_flags_free(&df);
     return status;
 }
 

@@ -21,7 +21,7 @@ static const char usage[] =
     "  Runs one denoiser on a render dump (colour, and the albedo, normal and variance\n"
     "  it holds) or on separate files, and writes the denoised colour as R,G,B.\n"
     "  --denoiser NAME         which denoiser (see --list)\n"
-    "  --denoiser-opt KEY=VAL  one of its settings; repeat for more (e.g. sigma=3)\n"
+    MCP_CLI_DENOISER_USAGE("")
     "  -o, --output FILE       the denoised image [<input stem>_<NAME>.exr, here]\n"
     "  --tangent FILE          also write J·T, the Jacobian-vector product of the\n"
     "                          denoiser at the input in direction T (channels R,G,B,\n"
@@ -170,9 +170,7 @@ static int
 cmd_denoise(int argc, char **argv)
 {
     enum {
-        O_DENOISER = 256,
-        O_OPT,
-        O_TANGENT,
+        O_TANGENT = 256,
         O_TANGENT_OUT,
         O_COLOR,
         O_ALBEDO,
@@ -187,8 +185,7 @@ cmd_denoise(int argc, char **argv)
         O_LIST
     };
     static const struct option longs[] = {
-        {"denoiser", required_argument, 0, O_DENOISER},
-        {"denoiser-opt", required_argument, 0, O_OPT},
+        MCP_CLI_DENOISER_LONGOPTS,
         {"output", required_argument, 0, 'o'},
         {"tangent", required_argument, 0, O_TANGENT},
         {"tangent-out", required_argument, 0, O_TANGENT_OUT},
@@ -206,16 +203,19 @@ cmd_denoise(int argc, char **argv)
         {"help", no_argument, 0, 'h'},
         {0, 0, 0, 0}};
     inputs in = {0};
-    const char *name = NULL, *out = NULL, *tangent = NULL, *tangent_out = NULL;
-    const char **opts = mcp_calloc((size_t)argc + 1, sizeof *opts);
-    int n_opts = 0, opt, list = 0;
-    if (!opts)
-        return mcp_cli_fail();
+    const char *out = NULL, *tangent = NULL, *tangent_out = NULL;
+    mcp_cli_denoiser_flags df = {0};
+    int opt, list = 0;
     optind = 1;
     while ((opt = getopt_long(argc, argv, "ho:", longs, NULL)) != -1) {
+        int taken = mcp_cli_denoiser_flag(&df, opt, optarg);
+        if (taken < 0) {
+            mcp_cli_denoiser_flags_free(&df);
+            return mcp_cli_fail();
+        }
+        if (taken)
+            continue;
         switch (opt) {
-        case O_DENOISER: name = optarg; break;
-        case O_OPT: opts[n_opts++] = optarg; break;
         case 'o': out = optarg; break;
         case O_TANGENT: tangent = optarg; break;
         case O_TANGENT_OUT: tangent_out = optarg; break;
@@ -231,16 +231,18 @@ cmd_denoise(int argc, char **argv)
         case O_VARIANCE: in.variance_kind = optarg; break;
         case O_LIST: list = 1; break;
         case 'h':
-            free(opts);
+            mcp_cli_denoiser_flags_free(&df);
             fputs(usage, stdout);
             return 0;
-        default: free(opts); return mcp_cli_usage("denoise", "bad option");
+        default:
+            mcp_cli_denoiser_flags_free(&df);
+            return mcp_cli_usage("denoise", "bad option");
         }
     }
     int status = 2;
     if (list) {
         print_kinds();
-        free(opts);
+        mcp_cli_denoiser_flags_free(&df);
         return 0;
     }
     if (argc - optind > 1)
@@ -254,14 +256,14 @@ cmd_denoise(int argc, char **argv)
                                  "--color; a DUMP carries its own");
     else if (in.color && (in.spp || in.convention || in.variance_kind))
         mcp_cli_usage("denoise", "--spp, --convention and --variance go with DUMP");
-    else if (!name)
+    else if (!df.name)
         mcp_cli_usage("denoise", "no denoiser: give --denoiser NAME (see --list)");
     else if (tangent_out && !tangent)
         mcp_cli_usage("denoise", "--tangent-out needs --tangent");
     else
         status = 1;
     if (status == 2) {
-        free(opts);
+        mcp_cli_denoiser_flags_free(&df);
         return 2;
     }
     if (argc - optind == 1)
@@ -269,7 +271,7 @@ cmd_denoise(int argc, char **argv)
     char out_buf[PATH_CAP], jvp_buf[PATH_CAP], stem[PATH_CAP];
     if (!out) {
         stem_of(in.dump ? in.dump : in.color, 1, stem, sizeof stem);
-        snprintf(out_buf, sizeof out_buf, "%s_%s.exr", stem, name);
+        snprintf(out_buf, sizeof out_buf, "%s_%s.exr", stem, df.name);
         out = out_buf;
     }
     if (tangent && !tangent_out) {
@@ -279,14 +281,14 @@ cmd_denoise(int argc, char **argv)
     }
     mcp_denoiser *den = NULL;
     mcp_dump *dump = NULL;
-    if (!mcp_denoiser_create_from_args(name, opts, n_opts, &den) &&
+    if (!mcp_cli_denoiser_create(&df, &den) &&
         !load_input(&in, &dump) && !run(den, dump, &in, out, tangent, tangent_out))
         status = 0;
     else
         mcp_cli_fail();
     mcp_dump_free(dump);
     mcp_denoiser_free(den);
-    free(opts);
+    mcp_cli_denoiser_flags_free(&df);
     return status;
 }
 

@@ -459,7 +459,7 @@ static const char usage[] =
     "  the first spp at which each tau is reached (and the true one with --ref).\n"
     "\n"
     "  --denoiser NAME          a built-in denoiser (see `mcpost denoise --list`)\n"
-    "  --denoiser-opt KEY=VAL   a denoiser setting (repeatable)\n"
+    MCP_CLI_DENOISER_USAGE(" ")
     "  --metric NAME            relse, relse-perceptual or se [relse]\n"
     "  --tau T                  error threshold [0.01]\n"
     "  --percentile P           fraction of values that must be below tau [0.999]\n"
@@ -489,9 +489,7 @@ static const char usage[] =
     "  --variance KIND          per-sample or of-mean [per convention]\n";
 
 enum {
-    OPT_DENOISER = 256,
-    OPT_DOPT,
-    OPT_METRIC,
+    OPT_METRIC = 256,
     OPT_TAU,
     OPT_PERCENTILE,
     OPT_PERCENTILES,
@@ -542,8 +540,7 @@ static int
 cmd_estimate(int argc, char **argv)
 {
     static const struct option longs[] = {
-        {"denoiser", required_argument, 0, OPT_DENOISER},
-        {"denoiser-opt", required_argument, 0, OPT_DOPT},
+        MCP_CLI_DENOISER_LONGOPTS,
         {"metric", required_argument, 0, OPT_METRIC},
         {"tau", required_argument, 0, OPT_TAU},
         {"percentile", required_argument, 0, OPT_PERCENTILE},
@@ -570,22 +567,21 @@ cmd_estimate(int argc, char **argv)
         {0, 0, 0, 0}};
     mcp_series_estimate_options so = mcp_series_estimate_defaults();
     mcp_estimate_options *eo = &so.est;
-    const char *denoiser = NULL, *outdir = NULL, *pattern = NULL, *spp_text = NULL,
+    const char *outdir = NULL, *pattern = NULL, *spp_text = NULL,
                *ref_path = NULL, *convention = NULL, *variance = NULL;
-    const char **dopts = mcp_calloc((size_t)argc + 1, sizeof *dopts);
-    int n_dopts = 0, json = 0, exit_status = 0, have_taus = 0, have_tau = 0, opt;
-    if (!dopts) return mcp_cli_fail();
+    mcp_cli_denoiser_flags df = {0};
+    int json = 0, exit_status = 0, have_taus = 0, have_tau = 0, opt;
     optind = 1;
     while ((opt = getopt_long(argc, argv, "ho:", longs, NULL)) != -1) {
         int rc = 0;
         double b = 0;
+        int taken = mcp_cli_denoiser_flag(&df, opt, optarg);
+        if (taken < 0) {
+            mcp_cli_denoiser_flags_free(&df);
+            return mcp_cli_fail();
+        }
+        if (taken) continue;
         switch (opt) {
-        case OPT_DENOISER:
-            denoiser = optarg;
-            break;
-        case OPT_DOPT:
-            dopts[n_dopts++] = optarg;
-            break;
         case OPT_METRIC:
             rc = mcp_error_metric_from_name(optarg, &eo->sure.metric);
             break;
@@ -661,28 +657,28 @@ cmd_estimate(int argc, char **argv)
             break;
         case 'h':
             fputs(usage, stdout);
-            free(dopts);
+            mcp_cli_denoiser_flags_free(&df);
             return 0;
         default:
-            free(dopts);
+            mcp_cli_denoiser_flags_free(&df);
             return mcp_cli_usage("estimate", "bad option");
         }
         if (rc) {
-            free(dopts);
+            mcp_cli_denoiser_flags_free(&df);
             return mcp_cli_fail();
         }
     }
     int n_files = argc - optind;
-    if (!denoiser) {
-        free(dopts);
+    if (!df.name) {
+        mcp_cli_denoiser_flags_free(&df);
         return mcp_cli_usage("estimate", "--denoiser is required");
     }
     if (!n_files && !pattern) {
-        free(dopts);
+        mcp_cli_denoiser_flags_free(&df);
         return mcp_cli_usage("estimate", "no dump given");
     }
     if (pattern && (n_files || !spp_text)) {
-        free(dopts);
+        mcp_cli_denoiser_flags_free(&df);
         return mcp_cli_usage("estimate", "--series needs --spp and no other dumps");
     }
     if (have_tau && !have_taus) { /* a series checks the one --tau */
@@ -702,7 +698,7 @@ cmd_estimate(int argc, char **argv)
     memset(&od, 0, sizeof od);
     if (outdir) snprintf(od.dir, sizeof od.dir, "%s", outdir);
     if (mcp_estimate_check(eo) ||
-        mcp_denoiser_create_from_args(denoiser, dopts, n_dopts, &den) ||
+        mcp_cli_denoiser_create(&df, &den) ||
         (ref_path && mcp_image_read(ref_path, NULL, &ref)))
         goto done;
     if (outdir && (mcp_report_new("mcpost estimate", &report) ||
@@ -785,7 +781,7 @@ done:
     mcp_series_free(series);
     mcp_dump_free(dump);
     mcp_denoiser_free(den);
-    free(dopts);
+    mcp_cli_denoiser_flags_free(&df);
     return status;
 }
 

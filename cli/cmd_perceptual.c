@@ -693,7 +693,8 @@ static const char usage[] =
     "  --surrogate S       denoise [default: the denoiser on the candidates' mean],\n"
     "                      reference (the ground truth: best case), or an image FILE\n"
     "  --denoiser NAME     the surrogate's denoiser [nlm, guided by the candidates'\n"
-    "                      albedo and normal when they have them]; --denoiser-opt K=V\n"
+    "                      albedo and normal when they have them]; its settings:\n"
+    MCP_CLI_DENOISER_USAGE("")
     "  --ref FILE          ground truth: pMSE, MSE and the error spectrum\n"
     "  --confidence C      trust in the surrogate, in [0, 1] [1], or a per-pixel FILE\n"
     "  --group N           average N consecutive files into one candidate [1]\n"
@@ -752,7 +753,7 @@ read_rgb(const char *path, mcp_image **out)
 static int
 cmd_perceptual(int argc, char **argv)
 {
-    enum { O_JSON = 1000, O_DEN, O_DENOPT, O_FILTER, O_NOCACHE, O_COMPARE };
+    enum { O_JSON = 1000, O_FILTER, O_NOCACHE, O_COMPARE };
     static const struct option longs[] = {
         {"method", required_argument, 0, 'm'},
         {"surrogate", required_argument, 0, 's'},
@@ -760,8 +761,7 @@ cmd_perceptual(int argc, char **argv)
         {"reference", required_argument, 0, 'r'},
         {"output", required_argument, 0, 'o'},
         {"json", no_argument, 0, O_JSON},
-        {"denoiser", required_argument, 0, O_DEN},
-        {"denoiser-opt", required_argument, 0, O_DENOPT},
+        MCP_CLI_DENOISER_LONGOPTS,
         {"filter-surrogate", no_argument, 0, O_FILTER},
         {"no-cache", no_argument, 0, O_NOCACHE},
         {"compare", no_argument, 0, O_COMPARE},
@@ -789,16 +789,17 @@ cmd_perceptual(int argc, char **argv)
     perc_run r;
     args_init(&a);
     memset(&r, 0, sizeof r);
-    const char *out_dir = "perceptual", *ref_path = NULL, *den_name = "nlm";
-    const char **den_opts = mcp_calloc((size_t)argc + 1, sizeof *den_opts);
-    int json = 0, n_den_opts = 0, opt, idx = 0, status = 1;
+    const char *out_dir = "perceptual", *ref_path = NULL;
+    mcp_cli_denoiser_flags df = {.name = "nlm"};
+    int json = 0, opt, idx = 0, status = 1;
     mcp_image *ref = NULL, *surr = NULL, *conf = NULL, *kern = NULL;
     mcp_report *report = NULL;
     cJSON *summary = NULL;
-    if (!den_opts) return mcp_cli_fail();
     optind = 1;
     while ((opt = getopt_long(argc, argv, "m:s:r:o:h", longs, &idx)) != -1) {
-        int rc = 0;
+        int rc = mcp_cli_denoiser_flag(&df, opt, optarg);
+        if (rc < 0) goto fail;
+        if (rc) continue;
         switch (opt) {
         case 'm':
             rc = set_word(&a, "method", optarg);
@@ -814,12 +815,6 @@ cmd_perceptual(int argc, char **argv)
             break;
         case O_JSON:
             json = 1;
-            break;
-        case O_DEN:
-            den_name = optarg;
-            break;
-        case O_DENOPT:
-            den_opts[n_den_opts++] = optarg;
             break;
         case O_FILTER:
             a.opt.model.filter_surrogate = 1;
@@ -879,7 +874,7 @@ cmd_perceptual(int argc, char **argv)
         r.kernel_img = kern;
     }
     if (!strcmp(a.surrogate, "denoise") &&
-        mcp_denoiser_create_from_args(den_name, den_opts, n_den_opts, &r.den))
+        mcp_cli_denoiser_create(&df, &r.den))
         goto fail;
     if (mkdirs(out_dir) || mcp_report_new("mcpost perceptual", &report)) goto fail;
     snprintf(r.out_dir, sizeof r.out_dir, "%s", out_dir);
@@ -906,7 +901,7 @@ done:
     mcp_image_free(ref), mcp_image_free(surr), mcp_image_free(conf), mcp_image_free(kern);
     run_free(&r);
     args_free(&a);
-    free(den_opts);
+    mcp_cli_denoiser_flags_free(&df);
     return status;
 }
 

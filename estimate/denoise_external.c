@@ -26,8 +26,6 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#define PATH_CAP 4096
-
 typedef struct {
     char *command; /* the template */
     const char *ext; /* "pfm" or "exr" */

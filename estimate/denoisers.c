@@ -18,6 +18,7 @@ static const mcp_denoiser_kind *const kinds[] = {
     &mcp__denoiser_nlm,
     &mcp__denoiser_bilateral,
     &mcp__denoiser_external,
+    &mcp__denoiser_unet,
     NULL,
 };
 

@@ -75,8 +75,12 @@ double mcp__now_ms(void);
 
 extern const mcp_denoiser_kind mcp__denoiser_bilateral;
 
-/* ---- denoisers, continued (denoise_external.c) ---- */
+/* ---- denoisers, continued (denoise_external.c, denoise_unet.c) ---- */
 
 extern const mcp_denoiser_kind mcp__denoiser_external;
+extern const mcp_denoiser_kind mcp__denoiser_unet;
+
+/* Room for a path built from settings (a folder and a file name). */
+#define PATH_CAP 4096
 
 #endif

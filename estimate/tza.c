@@ -169,8 +169,9 @@ mcp__tza_parse(const unsigned char *bytes, size_t size, const char *source,
         return mcp_error("%s: truncated .tza file (table at offset %llu, file is %zu bytes)",
                          src, (unsigned long long)table, size);
     reader r = {bytes, size, (size_t)table};
-    const unsigned char *at;
-    (void)take(&r, 4, &at);
+    const unsigned char *at = NULL;
+    if (take(&r, 4, &at)) /* cannot fail after the size check above */
+        return mcp_error("%s: truncated tensor table", src);
     uint64_t n = le(at, 4);
     if (n < 1 || n > 4096)
         return mcp_error("%s: bad tensor count %llu", src, (unsigned long long)n);

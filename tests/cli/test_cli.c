@@ -1,8 +1,10 @@
 /* test_cli.c: the mcpost executable -- info on pbrt-v4, Mitsuba 3 and Blender files,
- * convert, run, and the one-line error with a non-zero exit for every bad-input class. */
+ * convert, run, the one-line error with a non-zero exit for every bad-input class, and
+ * the denoiser flags every denoising subcommand shares. */
 #include "testing.h"
 
 #include <cjson/cJSON.h>
+#include <mcpost/denoiser.h>
 #include <mcpost/dump.h>
 #include <mcpost/imageio.h>
 #include <math.h>
@@ -234,6 +236,115 @@ test_run_job_with_info_and_convert(void **state)
     mcp_dump_free(d);
 }
 
+/* An image file's R, G, B channels in that order (EXR keeps channels sorted: B, G, R). */
+static mcp_image *
+rgb_of(const char *path)
+{
+    static const char *const rgb[] = {"R", "G", "B"};
+    mcp_image *img = NULL, *out = NULL;
+    int idx[3];
+    if (mcp_image_read(path, NULL, &img))
+        fail_msg("%s", mcp_error_message());
+    for (int c = 0; c < 3; c++)
+        assert_true((idx[c] = mcp_image_channel(img, rgb[c])) >= 0);
+    assert_int_equal(mcp_image_copy_channels(img, idx, 3, &out), 0);
+    mcp_image_free(img);
+    return out;
+}
+
+/* --denoiser, --denoiser-opt and the shorthands (--weights, --input-scale,
+ * --denoiser-command) are one parser (cli/denoiser_flags.c): a shorthand is exactly
+ * --denoiser-opt KEY=VALUE, so a key the denoiser lacks and a key given twice fail alike
+ * in every command. Only built-in kinds here (gauss): unet's weights are not needed. */
+static void
+test_denoiser_flags(void **state)
+{
+    (void)state;
+    mcp_dump *d = sample_dump();
+    char color[4096], dump[4096], w[4096];
+    snprintf(color, sizeof color, "%s", mcp_test_path("dn_color.exr"));
+    snprintf(dump, sizeof dump, "%s", mcp_test_path("dn_dump.exr"));
+    snprintf(w, sizeof w, "%s", mcp_test_path("w.tza"));
+    assert_int_equal(mcp_image_write(d->color, color, NULL), 0);
+    assert_int_equal(mcp_dump_write(d, dump, MCP_CONV_PBRT, NULL), 0);
+    mcp_test_write_text(w, "not read: gauss refuses the key first");
+
+    /* a shorthand's key, unknown to gauss, is named like --denoiser-opt's */
+    int st = run("denoise --color '%s' --denoiser gauss --weights '%s' -o '%s'", color, w,
+                 mcp_test_path("dn_w.exr"));
+    assert_int_equal(st, 1);
+    assert_one_line_error(st, "unknown key 'weights' in denoiser 'gauss'");
+    assert_int_equal(access(mcp_test_path("dn_w.exr"), F_OK), -1);
+    st = run("denoise --color '%s' --denoiser gauss --denoiser-opt weights='%s'", color, w);
+    assert_int_equal(st, 1);
+    assert_one_line_error(st, "unknown key 'weights' in denoiser 'gauss'");
+    assert_one_line_error(run("denoise --color '%s' --denoiser gauss --input-scale auto", color),
+                          "unknown key 'input_scale' in denoiser 'gauss'");
+    assert_one_line_error(run("denoise --color '%s' --denoiser gauss --denoiser-command 'cp "
+                              "{color} {output}'",
+                              color),
+                          "unknown key 'command' in denoiser 'gauss'");
+
+    /* a shorthand and --denoiser-opt naming one key, in either order, or twice */
+    const char *twice[][2] = {
+        {"--weights a.tza --denoiser-opt weights=b.tza", "key 'weights' given twice"},
+        {"--denoiser-opt weights=b.tza --weights a.tza", "key 'weights' given twice"},
+        {"--weights a.tza --weights b.tza", "key 'weights' given twice"},
+        {"--input-scale 2 --denoiser-opt input_scale=auto", "key 'input_scale' given twice"},
+        {"--denoiser-command true --denoiser-opt command=false", "key 'command' given twice"},
+    };
+    for (size_t i = 0; i < sizeof twice / sizeof twice[0]; i++)
+        assert_one_line_error(run("denoise --color '%s' --denoiser gauss %s", color, twice[i][0]),
+                              twice[i][1]);
+
+    /* --denoiser-opt still sets the denoiser: the output is the library's gauss with sigma 3
+     * (not its default 2) */
+    assert_int_equal(run("denoise --color '%s' --denoiser gauss --denoiser-opt sigma=3 -o '%s'",
+                         color, mcp_test_path("dn_s3.exr")),
+                     0);
+    mcp_image *in = rgb_of(color), *got = rgb_of(mcp_test_path("dn_s3.exr")), *want = NULL;
+    mcp_denoiser *den = NULL;
+    const char *sigma[] = {"sigma=3"};
+    assert_int_equal(mcp_denoiser_create_from_args("gauss", sigma, 1, &den), 0);
+    mcp_denoise_input din = {.color = in};
+    assert_int_equal(den->apply(den, &din, &want), 0);
+    assert_close(mcp_test_max_abs_diff(got, want), 0, 0, 1e-6);
+    mcp_image_free(got), mcp_image_free(want), mcp_image_free(in);
+    mcp_denoiser_free(den);
+
+    /* the same flags in the other commands */
+    assert_int_equal(run("estimate '%s' --denoiser gauss --denoiser-opt sigma=2 --json", dump), 0);
+    cJSON *j = cJSON_Parse(out);
+    assert_non_null(j);
+    assert_string_equal(cJSON_GetObjectItem(j, "denoiser")->valuestring, "gauss");
+    cJSON_Delete(j);
+    assert_one_line_error(run("estimate '%s' --denoiser gauss --weights '%s'", dump, w),
+                          "unknown key 'weights' in denoiser 'gauss'");
+    assert_one_line_error(
+        run("estimate '%s' --denoiser gauss --denoiser-opt sigma=2 --denoiser-opt sigma=3", dump),
+        "key 'sigma' given twice");
+    assert_one_line_error(run("blend --quiet '%s' -o '%s' --denoiser gauss --weights '%s'", dump,
+                              mcp_test_path("dn_blend"), w),
+                          "unknown key 'weights' in denoiser 'gauss'");
+    assert_one_line_error(run("perceptual '%s' '%s' -o '%s' --denoiser gauss --weights '%s'", color,
+                              color, mcp_test_path("dn_perc"), w),
+                          "unknown key 'weights' in denoiser 'gauss'");
+    assert_one_line_error(run("perceptual '%s' '%s' -o '%s' --weights a --denoiser-opt weights=b",
+                              color, color, mcp_test_path("dn_perc")),
+                          "key 'weights' given twice");
+
+    /* every one of them lists the shorthands */
+    const char *cmds[] = {"denoise", "estimate", "blend", "perceptual"};
+    for (int i = 0; i < 4; i++) {
+        assert_int_equal(run("%s --help", cmds[i]), 0);
+        assert_non_null(strstr(out, "--denoiser-opt KEY=VAL"));
+        assert_non_null(strstr(out, "--weights PATH"));
+        assert_non_null(strstr(out, "--input-scale auto|N"));
+        assert_non_null(strstr(out, "--denoiser-command CMD"));
+    }
+    mcp_dump_free(d);
+}
+
 static void
 test_help_and_version(void **state)
 {
@@ -256,6 +367,7 @@ main(void)
         cmocka_unit_test(test_convert),
         cmocka_unit_test(test_every_bad_input_class),
         cmocka_unit_test(test_run_job_with_info_and_convert),
+        cmocka_unit_test(test_denoiser_flags),
         cmocka_unit_test(test_help_and_version),
     };
     return cmocka_run_group_tests_name("cli", tests, NULL, NULL);

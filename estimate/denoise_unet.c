@@ -1,0 +1,143 @@
+/* denoise_unet.c: the `unet` denoiser -- OIDN's RT U-Net (unet.c) with weights from a
+ * .tza file, and its exact forward-mode Jacobian-vector product through the same
+ * network, several tangents batched with one primal pass (issue 6; Firmino et al. 2023
+ * did this in PyTorch).
+ *
+ * Settings: weights (path to a .tza; default $MCPOST_OIDN_WEIGHTS), input_scale (auto
+ * [default]: OIDN's autoexposure on the colour, or a number: the scale that maps the
+ * colour to 1 = 100 cd/m^2). The autoexposure scale is computed on the primal colour
+ * and held constant in the JVP (unet_internal.h). Weights for colour + albedo + normal
+ * need both features; colour + albedo weights need the albedo. */
+#include <mcpost/denoiser.h>
+
+#include "internal.h"
+#include "unet_internal.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define WEIGHTS_ENV "MCPOST_OIDN_WEIGHTS"
+
+typedef struct {
+    mcp__unet *net;
+    double input_scale; /* <= 0: autoexposure */
+} unet_state;
+
+static const char *const unet_keys[] = {"weights", "input_scale", NULL};
+
+/* The features the net reads must be there; they are not optional for these weights. */
+static int
+check_features(const mcp__unet *net, const mcp_denoise_input *in)
+{
+    if (net->ic >= 6 && !in->albedo)
+        return mcp_error("unet: these weights (%d input channels) need the albedo",
+                         net->ic);
+    if (net->ic >= 9 && !in->normal)
+        return mcp_error("unet: these weights (%d input channels) need the normal",
+                         net->ic);
+    return 0;
+}
+
+static int
+unet_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
+         const mcp_denoise_tangent *t, int n, mcp_image **primal, mcp_image **out)
+{
+    const unet_state *s = self->state;
+    if (primal)
+        *primal = NULL;
+    for (int k = 0; k < n && out; k++)
+        out[k] = NULL;
+    if (mcp__denoise_check_input("unet", at) || mcp__denoise_check_tangents("unet", at, t, n) ||
+        check_features(s->net, at))
+        return -1;
+    if (n > 0 && !out)
+        return mcp_error("unet: no room for %d tangent outputs", n);
+    return mcp__unet_run(s->net, at->color, at->albedo, at->normal, s->input_scale, t, n,
+                         primal, out);
+}
+
+static int
+unet_apply(const mcp_denoiser *self, const mcp_denoise_input *in, mcp_image **out)
+{
+    *out = NULL;
+    return unet_jvp(self, in, NULL, 0, out, NULL);
+}
+
+static void
+unet_destroy(mcp_denoiser *self)
+{
+    unet_state *s = self->state;
+    mcp__unet_free(s->net);
+    free(self);
+}
+
+/* input_scale: "auto" (returns 0) or a positive number. */
+static int
+read_input_scale(const mcp_node *settings, double *scale)
+{
+    *scale = 0.0;
+    const mcp_node *n = mcp_node_get(settings, "input_scale");
+    if (!n)
+        return 0;
+    if (n->kind == MCP_NODE_SCALAR && strcmp(n->value, "auto") == 0)
+        return 0;
+    if (mcp_node_double(n, "input_scale", scale))
+        return -1;
+    if (!(*scale > 0) || !isfinite(*scale))
+        return mcp_node_error(n, "unet: input_scale must be auto or a number > 0 (got %g)",
+                              *scale);
+    return 0;
+}
+
+static int
+unet_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
+{
+    *out = NULL;
+    const char *weights = NULL;
+    double scale = 0.0;
+    if (mcp_node_opt_string(settings, "weights", &weights) ||
+        read_input_scale(settings, &scale))
+        return -1;
+    if (!weights || !*weights) {
+        weights = getenv(WEIGHTS_ENV);
+        if (!weights || !*weights)
+            return mcp_node_error(settings,
+                                  "unet: no weights: give weights: PATH (--weights PATH) "
+                                  "or set " WEIGHTS_ENV " to an OIDN .tza file");
+    }
+    char path[PATH_CAP];
+    if (weights[0] != '/' && base_dir && *base_dir)
+        snprintf(path, sizeof path, "%s/%s", base_dir, weights);
+    else
+        snprintf(path, sizeof path, "%s", weights);
+    mcp__unet *net = NULL;
+    if (mcp__unet_load(path, &net)) {
+        const mcp_node *w = mcp_node_get(settings, "weights");
+        return w ? mcp_error_prefix("%s:%d: ", w->file, w->line) : -1;
+    }
+    mcp_denoiser *d = mcp__denoiser_new("unet", sizeof(unet_state));
+    if (!d) {
+        mcp__unet_free(net);
+        return -1;
+    }
+    unet_state *s = d->state;
+    s->net = net;
+    s->input_scale = scale;
+    d->destroy = unet_destroy;
+    d->uses_albedo = net->ic >= 6;
+    d->uses_normal = net->ic >= 9;
+    d->apply = unet_apply;
+    d->jvp = unet_jvp;
+    *out = d;
+    return 0;
+}
+
+const mcp_denoiser_kind mcp__denoiser_unet = {
+    "unet",
+    "OIDN's RT U-Net with .tza weights (1.4 float32 or 2.x float16, base or small), "
+    "exact JVP (weights [$" WEIGHTS_ENV "], input_scale [auto] or a number)",
+    unet_keys,
+    unet_create,
+};
