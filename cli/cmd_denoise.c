@@ -56,19 +56,8 @@ read_rgb(const char *path, const char *what, mcp_image **out)
     *out = NULL;
     if (mcp_image_read(path, NULL, &img))
         return -1;
-    int idx[3], found = 0;
-    for (int t = 0; t < 2 && !found; t++) {
-        found = 1;
-        for (int c = 0; c < 3 && found; c++)
-            found = (idx[c] = mcp_image_channel(img, triples[t][c])) >= 0;
-    }
-    if (!found && img->channels == 3) {
-        found = 1;
-        for (int c = 0; c < 3; c++)
-            idx[c] = c;
-    }
-    int rc = -1;
-    if (!found)
+    int idx[3], rc = -1;
+    if (mcp_image_find_triple(img, triples, 2, idx))
         mcp_error("%s: the %s needs channels R,G,B or X,Y,Z, or exactly 3 channels "
                   "(it has %d)",
                   path, what, img->channels);

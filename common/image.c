@@ -167,6 +167,24 @@ mcp_image_channels(const mcp_image *img, const char *const *names, int count, in
 }
 
 int
+mcp_image_find_triple(const mcp_image *img, const char *const (*triples)[3], int n,
+                      int index[3])
+{
+    for (int t = 0; t < n; t++) {
+        int found = 1;
+        for (int c = 0; c < 3 && found; c++)
+            found = (index[c] = mcp_image_channel(img, triples[t][c])) >= 0;
+        if (found)
+            return 0;
+    }
+    if (img->channels != 3)
+        return -1;
+    for (int c = 0; c < 3; c++)
+        index[c] = c;
+    return 0;
+}
+
+int
 mcp_image_copy_channels(const mcp_image *img, const int *index, int count,
                         mcp_image **out)
 {

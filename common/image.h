@@ -77,6 +77,12 @@ MCP_API int mcp_image_channel(const mcp_image *img, const char *name);
 MCP_API int mcp_image_channels(const mcp_image *img, const char *const *names,
                                int count, int *index);
 
+/* The three channels that make up a colour (or a vector): the first of the n name
+ * triples that img has all of (e.g. {R,G,B}, {X,Y,Z}), else 0, 1, 2 when img has
+ * exactly 3 channels. Returns -1 (no error is set) when neither holds. */
+MCP_API int mcp_image_find_triple(const mcp_image *img, const char *const (*triples)[3],
+                                  int n, int index[3]);
+
 /* A new packed image holding the listed channels (by index), in that order. */
 MCP_API int mcp_image_copy_channels(const mcp_image *img, const int *index, int count,
                                     mcp_image **out);

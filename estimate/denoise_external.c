@@ -128,17 +128,8 @@ read_output(const external_state *s, const char *path, const mcp_image *color,
     mcp_image *img = NULL, *o = NULL;
     if (mcp_image_read(path, NULL, &img))
         return mcp_error_prefix("external: command '%s': output: ", s->command);
-    int idx[3] = {0, 1, 2};
-    int found = 1;
-    for (int c = 0; c < 3 && found; c++)
-        found = (idx[c] = mcp_image_channel(img, rgb[c])) >= 0;
-    if (!found && img->channels == 3) {
-        found = 1;
-        for (int c = 0; c < 3; c++)
-            idx[c] = c;
-    }
-    int rc = -1;
-    if (!found)
+    int idx[3], rc = -1;
+    if (mcp_image_find_triple(img, &rgb, 1, idx))
         mcp_error("external: command '%s': output needs channels R,G,B or exactly 3 "
                   "channels (it has %d)",
                   s->command, img->channels);
@@ -239,24 +230,8 @@ external_apply(const mcp_denoiser *self, const mcp_denoise_input *in, mcp_image 
     return run_external(self->state, in, out);
 }
 
-/* base + delta * t as a new packed R,G,B image. */
-static int
-axpy(const mcp_image *base, const mcp_image *t, double delta, mcp_image **out)
-{
-    mcp_image *o = NULL;
-    if (mcp__rgb_new(base->width, base->height, "external", &o))
-        return -1;
-    for (int y = 0; y < base->height; y++)
-        for (int x = 0; x < base->width; x++) {
-            const float *b = mcp_image_px(base, x, y), *v = mcp_image_px(t, x, y);
-            float *p = mcp_image_px(o, x, y);
-            for (int c = 0; c < 3; c++)
-                p[c] = (float)((double)b[c] + delta * v[c]);
-        }
-    *out = o;
-    return 0;
-}
-
+/* A black box: (F(X + delta t) - F(X)) / delta, one more run of the command per
+ * tangent (estimate.h's finite-difference JVP over external_apply). */
 static int
 external_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
              const mcp_denoise_tangent *t, int n, mcp_image **primal, mcp_image **out)
@@ -271,50 +246,7 @@ external_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
         return -1;
     if (n > 0 && !out)
         return mcp_error("external: no room for %d tangent outputs", n);
-    mcp_image *f0 = NULL;
-    if (run_external(s, at, &f0))
-        return -1;
-    for (int k = 0; k < n; k++) {
-        mcp_denoise_input moved = *at;
-        mcp_image *c = NULL, *a = NULL, *nn = NULL, *f1 = NULL;
-        int rc = axpy(at->color, t[k].color, s->delta, &c);
-        if (!rc && at->albedo && t[k].albedo)
-            rc = axpy(at->albedo, t[k].albedo, s->delta, &a);
-        if (!rc && at->normal && t[k].normal)
-            rc = axpy(at->normal, t[k].normal, s->delta, &nn);
-        moved.color = c;
-        if (a)
-            moved.albedo = a;
-        if (nn)
-            moved.normal = nn;
-        if (!rc)
-            rc = run_external(s, &moved, &f1);
-        mcp_image_free(c);
-        mcp_image_free(a);
-        mcp_image_free(nn);
-        if (rc) {
-            mcp_image_free(f0);
-            for (int j = 0; j < k; j++) {
-                mcp_image_free(out[j]);
-                out[j] = NULL;
-            }
-            return -1;
-        }
-        /* f1 becomes (f1 - f0) / delta in place (both packed, same size) */
-        for (int y = 0; y < f1->height; y++)
-            for (int x = 0; x < f1->width; x++) {
-                float *p1 = mcp_image_px(f1, x, y);
-                const float *p0 = mcp_image_px(f0, x, y);
-                for (int ch = 0; ch < 3; ch++)
-                    p1[ch] = (float)(((double)p1[ch] - p0[ch]) / s->delta);
-            }
-        out[k] = f1;
-    }
-    if (primal)
-        *primal = f0;
-    else
-        mcp_image_free(f0);
-    return 0;
+    return mcp_jvp_finite_difference(self, at, t, n, s->delta, primal, out);
 }
 
 static void

@@ -116,6 +116,18 @@ axpy(const mcp_image *a, const mcp_image *t, double delta, mcp_image **out)
     return 0;
 }
 
+/* Puts "NAME: " before the current error unless it already starts so (the external
+ * command's messages do). */
+static int
+name_denoiser(const mcp_denoiser *den)
+{
+    const char *msg = mcp_error_message();
+    size_t n = strlen(den->name);
+    if (strncmp(msg, den->name, n) == 0 && msg[n] == ':')
+        return -1;
+    return mcp_error_prefix("%s: ", den->name);
+}
+
 int
 mcp_jvp_finite_difference(const mcp_denoiser *den, const mcp_denoise_input *at,
                           const mcp_denoise_tangent *t, int n, double delta,
@@ -133,7 +145,7 @@ mcp_jvp_finite_difference(const mcp_denoiser *den, const mcp_denoise_input *at,
             return mcp_error(
                 "jvp: tangent %d must be a 3-channel image of the input's size", k);
     mcp_image *f0 = NULL;
-    if (den->apply(den, at, &f0)) return mcp_error_prefix("%s: ", den->name);
+    if (den->apply(den, at, &f0)) return name_denoiser(den);
     for (int k = 0; k < n; k++) {
         mcp_denoise_input moved = *at;
         mcp_image *c = NULL, *a = NULL, *nn = NULL, *f1 = NULL;
@@ -145,7 +157,7 @@ mcp_jvp_finite_difference(const mcp_denoiser *den, const mcp_denoise_input *at,
         moved.color = c;
         if (a) moved.albedo = a;
         if (nn) moved.normal = nn;
-        if (!rc && den->apply(den, &moved, &f1)) rc = mcp_error_prefix("%s: ", den->name);
+        if (!rc && den->apply(den, &moved, &f1)) rc = name_denoiser(den);
         mcp_image_free(c);
         mcp_image_free(a);
         mcp_image_free(nn);

@@ -108,6 +108,36 @@ test_same_size_message(void **state)
     mcp_image_free(b);
 }
 
+/* A colour triple: the first name triple present, in the triple's order whatever the
+ * file's channel order; else exactly 3 channels in order; else none. */
+static void
+test_find_triple(void **state)
+{
+    (void)state;
+    static const char *const triples[][3] = {{"R", "G", "B"}, {"X", "Y", "Z"}};
+    static const char *const sorted[] = {"A", "B", "G", "R", "Z"};
+    static const char *const xyz[] = {"Z", "Y", "X", "W"};
+    static const char *const three[] = {"u", "v", "w"};
+    mcp_image *a = NULL, *b = NULL, *c = NULL, *d = NULL;
+    assert_int_equal(mcp_image_new(2, 2, 5, sorted, &a), 0);
+    assert_int_equal(mcp_image_new(2, 2, 4, xyz, &b), 0);
+    assert_int_equal(mcp_image_new(2, 2, 3, three, &c), 0);
+    assert_int_equal(mcp_image_new(2, 2, 2, NULL, &d), 0);
+    int idx[3];
+    assert_int_equal(mcp_image_find_triple(a, triples, 2, idx), 0);
+    assert_int_equal(idx[0], 3);
+    assert_int_equal(idx[1], 2);
+    assert_int_equal(idx[2], 1);
+    assert_int_equal(mcp_image_find_triple(b, triples, 2, idx), 0);
+    assert_int_equal(idx[0], 2);
+    assert_int_equal(idx[2], 0);
+    assert_int_equal(mcp_image_find_triple(b, triples, 1, idx), -1); /* R,G,B only */
+    assert_int_equal(mcp_image_find_triple(c, triples, 2, idx), 0);
+    assert_int_equal(idx[0] + 10 * idx[1] + 100 * idx[2], 210);
+    assert_int_equal(mcp_image_find_triple(d, triples, 2, idx), -1);
+    mcp_image_free(a), mcp_image_free(b), mcp_image_free(c), mcp_image_free(d);
+}
+
 int
 main(void)
 {
@@ -118,6 +148,7 @@ main(void)
         cmocka_unit_test(test_channel_view_and_subset),
         cmocka_unit_test(test_attributes),
         cmocka_unit_test(test_same_size_message),
+        cmocka_unit_test(test_find_triple),
     };
     return cmocka_run_group_tests_name("common/image", tests, NULL, NULL);
 }

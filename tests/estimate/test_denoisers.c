@@ -8,6 +8,7 @@
  * known noise-free image. Also: several tangents in one call equal separate calls,
  * results do not depend on the thread count, errors name what is wrong, and the
  * `mcpost denoise` command. */
+#include "denoiser_settings.h"
 #include "testing.h"
 
 #include <mcpost/denoiser.h>
@@ -35,31 +36,6 @@ self_contained(const mcp_denoiser_kind *k)
 #define FOR_EACH_BUILTIN(k)                                                              \
     for (const mcp_denoiser_kind *const *k = mcp_denoiser_kinds(); *k; k++)              \
         if (self_contained(*k))
-
-static mcp_denoiser *
-create(const char *yaml)
-{
-    mcp_node *node = NULL;
-    mcp_denoiser *d = NULL;
-    if (mcp_yaml_parse_string(yaml, "test.yaml", &node) ||
-        mcp_denoiser_create(node, NULL, &d))
-        fail_msg("%s: %s", yaml, mcp_error_message());
-    mcp_node_free(node);
-    return d;
-}
-
-/* Asserts that creating from yaml fails with an error containing needle. */
-static void
-create_fails(const char *yaml, const char *needle)
-{
-    mcp_node *node = NULL;
-    mcp_denoiser *d = (mcp_denoiser *)&d; /* must come back NULL */
-    if (mcp_yaml_parse_string(yaml, "job.yaml", &node))
-        fail_msg("%s: %s", yaml, mcp_error_message());
-    assert_error_contains(mcp_denoiser_create(node, NULL, &d), needle);
-    assert_null(d);
-    mcp_node_free(node);
-}
 
 static mcp_image *
 rgb(int w, int h)
@@ -247,7 +223,7 @@ test_kinds_table(void **state)
         /* every kind is created from its bare name, and is exact (built in) */
         char yaml[64];
         snprintf(yaml, sizeof yaml, "%s", k[n]->name);
-        mcp_denoiser *d = create(yaml);
+        mcp_denoiser *d = mcp_test_denoiser(yaml);
         assert_string_equal(d->name, k[n]->name);
         assert_int_equal(d->exact, 1);
         assert_non_null(d->apply);
@@ -263,11 +239,11 @@ static void
 test_create_forms(void **state)
 {
     (void)state;
-    mcp_denoiser *d = create("{name: gauss, sigma: 1.5, radius: 3}");
+    mcp_denoiser *d = mcp_test_denoiser("{name: gauss, sigma: 1.5, radius: 3}");
     assert_string_equal(d->name, "gauss");
     assert_int_equal(d->uses_albedo, 0);
     mcp_denoiser_free(d);
-    d = create("name: nlm\nradius: 2\nuse_variance: false\nsigma_albedo: 0\n");
+    d = mcp_test_denoiser("name: nlm\nradius: 2\nuse_variance: false\nsigma_albedo: 0\n");
     assert_int_equal(d->uses_albedo, 0);
     assert_int_equal(d->uses_normal, 1);
     mcp_denoiser_free(d);
@@ -289,34 +265,34 @@ static void
 test_create_errors(void **state)
 {
     (void)state;
-    create_fails("blur",
+    mcp_test_denoiser_fails("blur",
                  "job.yaml:1: unknown denoiser 'blur' (known: gauss, nlm, bilateral");
-    create_fails("{name: blur}", "job.yaml:1: unknown denoiser 'blur'");
-    create_fails("[gauss]", "job.yaml:1: denoiser must be a name or a map");
-    create_fails("{sigma: 2}", "job.yaml:1: missing key 'name' in denoiser settings");
-    create_fails("name: gauss\nsigma: 2\nsigmaa: 3\n",
+    mcp_test_denoiser_fails("{name: blur}", "job.yaml:1: unknown denoiser 'blur'");
+    mcp_test_denoiser_fails("[gauss]", "job.yaml:1: denoiser must be a name or a map");
+    mcp_test_denoiser_fails("{sigma: 2}", "job.yaml:1: missing key 'name' in denoiser settings");
+    mcp_test_denoiser_fails("name: gauss\nsigma: 2\nsigmaa: 3\n",
                  "job.yaml:3: unknown key 'sigmaa' in denoiser 'gauss' (known: name, "
                  "sigma, radius)");
-    create_fails("name: nlm\nradus: 3\n", "job.yaml:2: unknown key 'radus' in denoiser "
+    mcp_test_denoiser_fails("name: nlm\nradus: 3\n", "job.yaml:2: unknown key 'radus' in denoiser "
                                           "'nlm'");
-    create_fails("{name: gauss, sigma: -1}", "job.yaml:1: gauss: sigma must be > 0");
-    create_fails("{name: gauss, sigma: 0}", "sigma must be > 0");
-    create_fails("{name: gauss, sigma: abc}", "job.yaml:1: sigma must be a number (got "
+    mcp_test_denoiser_fails("{name: gauss, sigma: -1}", "job.yaml:1: gauss: sigma must be > 0");
+    mcp_test_denoiser_fails("{name: gauss, sigma: 0}", "sigma must be > 0");
+    mcp_test_denoiser_fails("{name: gauss, sigma: abc}", "job.yaml:1: sigma must be a number (got "
                                               "'abc')");
-    create_fails("{name: gauss, radius: -2}", "gauss: radius must be in [0, 65536] px "
+    mcp_test_denoiser_fails("{name: gauss, radius: -2}", "gauss: radius must be in [0, 65536] px "
                                               "(got -2)");
-    create_fails("{name: gauss, radius: 2.5}", "radius must be an integer (got '2.5')");
-    create_fails("{name: nlm, radius: 100}", "nlm: radius must be in [0, 64] (got 100)");
-    create_fails("{name: nlm, patch_radius: -1}", "nlm: patch_radius must be in [0, 16]");
-    create_fails("{name: nlm, k_color: 0}", "nlm: k_color must be > 0");
-    create_fails("{name: nlm, epsilon: 0}", "nlm: epsilon must be > 0");
-    create_fails("{name: nlm, alpha: -1}", "nlm: alpha must be >= 0");
-    create_fails("{name: nlm, sigma_albedo: -0.1}", "nlm: sigma_albedo must be >= 0");
-    create_fails("{name: bilateral, sigma_spatial: -1}",
+    mcp_test_denoiser_fails("{name: gauss, radius: 2.5}", "radius must be an integer (got '2.5')");
+    mcp_test_denoiser_fails("{name: nlm, radius: 100}", "nlm: radius must be in [0, 64] (got 100)");
+    mcp_test_denoiser_fails("{name: nlm, patch_radius: -1}", "nlm: patch_radius must be in [0, 16]");
+    mcp_test_denoiser_fails("{name: nlm, k_color: 0}", "nlm: k_color must be > 0");
+    mcp_test_denoiser_fails("{name: nlm, epsilon: 0}", "nlm: epsilon must be > 0");
+    mcp_test_denoiser_fails("{name: nlm, alpha: -1}", "nlm: alpha must be >= 0");
+    mcp_test_denoiser_fails("{name: nlm, sigma_albedo: -0.1}", "nlm: sigma_albedo must be >= 0");
+    mcp_test_denoiser_fails("{name: bilateral, sigma_spatial: -1}",
                  "job.yaml:1: bilateral: sigma_spatial must be >= 0");
-    create_fails("{name: nlm, use_variance: maybe}", "use_variance must be true or "
+    mcp_test_denoiser_fails("{name: nlm, use_variance: maybe}", "use_variance must be true or "
                                                      "false (got 'maybe')");
-    create_fails("{name: nlm, radius: [1, 2]}", "radius must be an integer, not a list");
+    mcp_test_denoiser_fails("{name: nlm, radius: [1, 2]}", "radius must be an integer, not a list");
 
     mcp_denoiser *d = (mcp_denoiser *)&d;
     assert_error_contains(mcp_denoiser_create_from_args("blur", NULL, 0, &d),
@@ -377,7 +353,7 @@ test_input_errors(void **state)
     assert_int_equal(mcp_image_new(12, 10, 4, NULL, &four), 0);
     FOR_EACH_BUILTIN(kind) {
         const char *name = (*kind)->name;
-        mcp_denoiser *d = create(name);
+        mcp_denoiser *d = mcp_test_denoiser(name);
         mcp_denoise_input in = {0};
         char msg[128];
         snprintf(msg, sizeof msg, "%s: no colour given", name);
@@ -438,7 +414,7 @@ test_nasty_values(void **state)
     mcp_image *t0 = probe(s.color, NULL, 4);
     mcp_denoise_tangent t = {t0, NULL, NULL};
     FOR_EACH_BUILTIN(k) {
-        mcp_denoiser *d = create((*k)->name);
+        mcp_denoiser *d = mcp_test_denoiser((*k)->name);
         mcp_denoise_input in = input_of(&s);
         mcp_image *prim = NULL, *jt = NULL;
         assert_int_equal(d->jvp(d, &in, &t, 1, &prim, &jt), 0);
@@ -473,7 +449,7 @@ test_gauss_is_direct_convolution(void **state)
     int w = 37, h = 23, r = 4;
     double sigma = 1.3;
     mcp_image *x = mcp_test_random(w, h, 3, -1, 2, 7, NULL);
-    mcp_denoiser *d = create("{name: gauss, sigma: 1.3, radius: 4}");
+    mcp_denoiser *d = mcp_test_denoiser("{name: gauss, sigma: 1.3, radius: 4}");
     mcp_denoise_input in = {x, NULL, NULL, NULL};
     mcp_image *out = apply(d, &in);
     assert_string_equal(out->names[0], "R");
@@ -513,7 +489,7 @@ test_gauss_is_linear(void **state)
     double a = 0.7, b = -1.9;
     for (size_t i = 0; i < n_values(mix); i++)
         mix->data[i] = (float)(a * x->data[i] + b * y->data[i]);
-    mcp_denoiser *d = create("gauss");
+    mcp_denoiser *d = mcp_test_denoiser("gauss");
     mcp_denoise_input ix = {x, NULL, NULL, NULL}, iy = {y, NULL, NULL, NULL};
     mcp_denoise_input im = {mix, NULL, NULL, NULL};
     mcp_image *fx = apply(d, &ix), *fy = apply(d, &iy), *fm = apply(d, &im);
@@ -627,7 +603,7 @@ check_against_naive(const naive_params *p)
 {
     int w = 21, h = 17;
     scene s = make_scene(w, h, 0.2, 5);
-    mcp_denoiser *d = create(p->yaml);
+    mcp_denoiser *d = mcp_test_denoiser(p->yaml);
     mcp_denoise_input in = input_of(&s);
     mcp_image *tc = probe(s.color, s.variance, 11);
     mcp_image *ta = mcp_test_random(w, h, 3, -0.05, 0.05, 12, NULL);
@@ -726,7 +702,7 @@ static void
 check_jvp_fd(const char *yaml, const scene *s, const mcp_denoise_tangent *t, double delta,
              double tol)
 {
-    mcp_denoiser *d = create(yaml);
+    mcp_denoiser *d = mcp_test_denoiser(yaml);
     mcp_denoise_input in = input_of(s);
     mcp_image *jt = NULL;
     assert_int_equal(d->jvp(d, &in, t, 1, NULL, &jt), 0);
@@ -782,7 +758,7 @@ test_jvp_of_constant_shift(void **state)
     mcp_image *one = mcp_test_constant(40, 36, 3, 1.0f, NULL);
     mcp_denoise_tangent t = {one, NULL, NULL};
     FOR_EACH_BUILTIN(k) {
-        mcp_denoiser *d = create((*k)->name);
+        mcp_denoiser *d = mcp_test_denoiser((*k)->name);
         mcp_denoise_input in = input_of(&s);
         mcp_image *jt = NULL;
         assert_int_equal(d->jvp(d, &in, &t, 1, NULL, &jt), 0);
@@ -807,7 +783,7 @@ test_tangents_in_one_pass(void **state)
               *ta = mcp_test_random(45, 38, 3, -.1, .1, 4, NULL);
     mcp_denoise_tangent t[3] = {{t0, NULL, NULL}, {t1, ta, NULL}, {t2, NULL, ta}};
     FOR_EACH_BUILTIN(k) {
-        mcp_denoiser *d = create((*k)->name);
+        mcp_denoiser *d = mcp_test_denoiser((*k)->name);
         mcp_denoise_input in = input_of(&s);
         mcp_image *prim = NULL, *all[3] = {NULL, NULL, NULL};
         assert_int_equal(d->jvp(d, &in, t, 3, &prim, all), 0);
@@ -844,7 +820,7 @@ test_thread_count_independence(void **state)
     mcp_denoise_tangent t = {t0, s.albedo, NULL};
     int saved = omp_get_max_threads();
     FOR_EACH_BUILTIN(k) {
-        mcp_denoiser *d = create((*k)->name);
+        mcp_denoiser *d = mcp_test_denoiser((*k)->name);
         mcp_denoise_input in = input_of(&s);
         mcp_image *ref_p = NULL, *ref_j = NULL;
         omp_set_num_threads(1);
@@ -889,7 +865,7 @@ test_nlm_denoises(void **state)
     (void)state;
     scene s = make_scene(96, 80, 0.25, 6);
     mcp_denoise_input in = input_of(&s);
-    mcp_denoiser *d = create("nlm");
+    mcp_denoiser *d = mcp_test_denoiser("nlm");
     mcp_image *out = apply(d, &in);
     double before = mse(s.color, s.truth), after = mse(out, s.truth);
     print_message("nlm on the synthetic scene: MSE %.3g -> %.3g (%.1fx)\n", before, after,
@@ -898,7 +874,7 @@ test_nlm_denoises(void **state)
     mcp_image_free(out);
 
     /* the albedo keeps edges: without features the same filter does worse */
-    mcp_denoiser *plain = create("{name: nlm, sigma_albedo: 0, sigma_normal: 0}");
+    mcp_denoiser *plain = mcp_test_denoiser("{name: nlm, sigma_albedo: 0, sigma_normal: 0}");
     out = apply(plain, &in);
     double plain_mse = mse(out, s.truth);
     print_message("  without albedo and normal: MSE %.3g\n", plain_mse);
@@ -906,7 +882,7 @@ test_nlm_denoises(void **state)
     mcp_image_free(out);
 
     /* the cross-bilateral variant */
-    mcp_denoiser *bil = create("bilateral");
+    mcp_denoiser *bil = mcp_test_denoiser("bilateral");
     out = apply(bil, &in);
     double bil_mse = mse(out, s.truth);
     print_message("  bilateral: MSE %.3g (%.1fx)\n", bil_mse, before / bil_mse);
@@ -915,7 +891,7 @@ test_nlm_denoises(void **state)
     mcp_denoiser_free(bil);
 
     /* without variance, a fixed noise level of the right size works too */
-    mcp_denoiser *novar = create("{name: nlm, use_variance: false, sigma_color: 0.3}");
+    mcp_denoiser *novar = mcp_test_denoiser("{name: nlm, use_variance: false, sigma_color: 0.3}");
     out = apply(novar, &in);
     double novar_mse = mse(out, s.truth);
     print_message("  with sigma_color instead of the variance: MSE %.3g\n", novar_mse);
@@ -1055,7 +1031,7 @@ test_command_on_dump(void **state)
     assert_int_equal(mcp_test_run_mcpost(args, out, sizeof out, err, sizeof err), 0);
     mcp_dump *back = NULL;
     assert_int_equal(mcp_dump_read(path, &back), 0);
-    mcp_denoiser *d = create("nlm");
+    mcp_denoiser *d = mcp_test_denoiser("nlm");
     mcp_denoise_input in = mcp_denoise_input_of(back);
     assert_non_null(in.variance);
     mcp_image *want = apply(d, &in), *got = read_or_fail(mcp_test_path("dump_nlm.exr"));

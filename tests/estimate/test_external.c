@@ -5,6 +5,7 @@
  * exact JVP (gauss is linear, so only float rounding divided by delta separates them).
  * Also: failing commands, missing albedo, unknown keys, and no temporary files left. */
 #define _POSIX_C_SOURCE 200809L
+#include "denoiser_settings.h"
 #include "testing.h"
 
 #include <mcpost/denoiser.h>
@@ -16,18 +17,6 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
-
-static mcp_denoiser *
-create(const char *yaml)
-{
-    mcp_node *node = NULL;
-    mcp_denoiser *d = NULL;
-    if (mcp_yaml_parse_string(yaml, "test.yaml", &node) ||
-        mcp_denoiser_create(node, NULL, &d))
-        fail_msg("%s: %s", yaml, mcp_error_message());
-    mcp_node_free(node);
-    return d;
-}
 
 /* A fresh (empty) working folder whose name has a space in it. */
 static const char *
@@ -62,7 +51,7 @@ external_gauss(const char *dir, const char *extra)
              "{name: external, command: \"sh '%s/tests/estimate/external_gauss.sh' "
              "{color} {output}\", workdir: \"%s\"%s}",
              MCP_TEST_SOURCE_DIR, dir, extra);
-    return create(yaml);
+    return mcp_test_denoiser(yaml);
 }
 
 static void
@@ -73,7 +62,7 @@ test_apply_equals_gauss(void **state)
     const char *dir = workdir("apply dir");
     mcp_image *color = mcp_test_random(23, 17, 3, 0.0f, 1.0f, 7, rgb);
     mcp_denoise_input in = {color, NULL, NULL, NULL};
-    mcp_denoiser *ext = external_gauss(dir, ""), *gauss = create("gauss");
+    mcp_denoiser *ext = external_gauss(dir, ""), *gauss = mcp_test_denoiser("gauss");
     assert_int_equal(ext->exact, 0);
     mcp_image *a = NULL, *b = NULL;
     if (ext->apply(ext, &in, &a))
@@ -105,7 +94,7 @@ test_jvp_matches_exact(void **state)
     mcp_image *t1 = mcp_test_random(20, 16, 3, -0.05f, 0.05f, 13, rgb);
     mcp_denoise_input in = {color, NULL, NULL, NULL};
     mcp_denoise_tangent t[2] = {{t0, NULL, NULL}, {t1, NULL, NULL}};
-    mcp_denoiser *ext = external_gauss(dir, ", delta: 0.1"), *gauss = create("gauss");
+    mcp_denoiser *ext = external_gauss(dir, ", delta: 0.1"), *gauss = mcp_test_denoiser("gauss");
     mcp_image *fe = NULL, *fg = NULL, *je[2] = {0}, *jg[2] = {0};
     if (ext->jvp(ext, &in, t, 2, &fe, je))
         fail_msg("%s", mcp_error_message());
@@ -145,7 +134,7 @@ test_errors(void **state)
     /* a failing command: one line naming it and its status */
     snprintf(yaml, sizeof yaml,
              "{name: external, command: \"false {color} {output}\", workdir: \"%s\"}", dir);
-    mcp_denoiser *d = create(yaml);
+    mcp_denoiser *d = mcp_test_denoiser(yaml);
     assert_error_contains(d->apply(d, &in, &out), "command 'false {color} {output}'");
     assert_error_contains(-1, "exit status 1");
     assert_null(strchr(mcp_error_message(), '\n'));
@@ -156,7 +145,7 @@ test_errors(void **state)
     /* a command that succeeds but writes nothing */
     snprintf(yaml, sizeof yaml,
              "{name: external, command: \"true {color} {output}\", workdir: \"%s\"}", dir);
-    d = create(yaml);
+    d = mcp_test_denoiser(yaml);
     assert_error_contains(d->apply(d, &in, &out), "wrote no {output}");
     assert_int_equal(count_entries(dir), 0);
     mcp_denoiser_free(d);
@@ -166,7 +155,7 @@ test_errors(void **state)
              "{name: external, command: \"cp {albedo} {output} # {color}\", "
              "workdir: \"%s\"}",
              dir);
-    d = create(yaml);
+    d = mcp_test_denoiser(yaml);
     assert_int_equal(d->uses_albedo, 1);
     assert_error_contains(d->apply(d, &in, &out), "no albedo");
     assert_null(out);

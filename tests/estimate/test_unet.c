@@ -18,6 +18,7 @@
 #include <mcpost/imageio.h>
 
 #include "../../estimate/unet_internal.h"
+#include "denoiser_settings.h"
 #include "testing.h"
 #include "tza_writer.h"
 
@@ -661,29 +662,6 @@ test_jvp_batched(void **state)
 
 /* ---- the `unet` denoiser kind ---- */
 
-static mcp_denoiser *
-create(const char *yaml)
-{
-    mcp_node *node = NULL;
-    mcp_denoiser *d = NULL;
-    if (mcp_yaml_parse_string(yaml, "job.yaml", &node) || mcp_denoiser_create(node, NULL, &d))
-        fail_msg("%s: %s", yaml, mcp_error_message());
-    mcp_node_free(node);
-    return d;
-}
-
-static void
-create_fails(const char *yaml, const char *needle)
-{
-    mcp_node *node = NULL;
-    mcp_denoiser *d = (mcp_denoiser *)&d;
-    if (mcp_yaml_parse_string(yaml, "job.yaml", &node))
-        fail_msg("%s: %s", yaml, mcp_error_message());
-    assert_error_contains(mcp_denoiser_create(node, NULL, &d), needle);
-    assert_null(d);
-    mcp_node_free(node);
-}
-
 static void
 test_denoiser_kind(void **state)
 {
@@ -693,7 +671,7 @@ test_denoiser_kind(void **state)
     const char *path = mcp_test_path("tiny_jvp.tza");
     char yaml[8192];
     snprintf(yaml, sizeof yaml, "{name: unet, weights: '%s', input_scale: 0.5}", path);
-    mcp_denoiser *d = create(yaml);
+    mcp_denoiser *d = mcp_test_denoiser(yaml);
     assert_string_equal(d->name, "unet");
     assert_int_equal(d->exact, 1);
     assert_true(d->uses_albedo && d->uses_normal);
@@ -724,7 +702,7 @@ test_denoiser_kind(void **state)
     mcp_denoiser_free(d);
     /* auto is autoexposure */
     snprintf(yaml, sizeof yaml, "{name: unet, weights: '%s', input_scale: auto}", path);
-    d = create(yaml);
+    d = mcp_test_denoiser(yaml);
     mcp_image *c = NULL, *e = NULL;
     assert_int_equal(d->apply(d, &at, &c), 0);
     assert_int_equal(mcp__unet_forward(net, in.col, in.alb, in.nrm, 0.0, &e), 0);
@@ -732,18 +710,18 @@ test_denoiser_kind(void **state)
     mcp_denoiser_free(d);
     /* the weights from the environment, relative paths from base_dir */
     setenv("MCPOST_OIDN_WEIGHTS", path, 1);
-    d = create("unet");
+    d = mcp_test_denoiser("unet");
     assert_int_equal(d->uses_normal, 1);
     mcp_denoiser_free(d);
     unsetenv("MCPOST_OIDN_WEIGHTS");
-    create_fails("unet", "job.yaml:1: unet: no weights: give weights: PATH (--weights "
+    mcp_test_denoiser_fails("unet", "job.yaml:1: unet: no weights: give weights: PATH (--weights "
                          "PATH) or set MCPOST_OIDN_WEIGHTS");
-    create_fails("{name: unet, weights: absent.tza}", "job.yaml:1: absent.tza");
+    mcp_test_denoiser_fails("{name: unet, weights: absent.tza}", "job.yaml:1: absent.tza");
     snprintf(yaml, sizeof yaml, "{name: unet, weights: '%s',\n input_scale: -2}", path);
-    create_fails(yaml, "job.yaml:2: unet: input_scale must be auto or a number > 0 (got -2)");
+    mcp_test_denoiser_fails(yaml, "job.yaml:2: unet: input_scale must be auto or a number > 0 (got -2)");
     snprintf(yaml, sizeof yaml, "{name: unet, weights: '%s', input_scale: bright}", path);
-    create_fails(yaml, "input_scale");
-    create_fails("{name: unet, weight: x.tza}", "weight");
+    mcp_test_denoiser_fails(yaml, "input_scale");
+    mcp_test_denoiser_fails("{name: unet, weight: x.tza}", "weight");
     mcp_node *node = NULL;
     assert_int_equal(mcp_yaml_parse_string("{name: unet, weights: tiny_jvp.tza}", "job.yaml",
                                            &node),
@@ -924,7 +902,7 @@ test_real_weights_jvp(void **state)
     SKIP_WITHOUT_WEIGHTS(path);
     char yaml[4200];
     snprintf(yaml, sizeof yaml, "{name: unet, weights: '%s'}", path);
-    mcp_denoiser *d = create(yaml);
+    mcp_denoiser *d = mcp_test_denoiser(yaml);
     mcp__unet *net = NULL;
     assert_int_equal(mcp__unet_load(path, &net), 0);
     rnet n;
