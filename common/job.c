@@ -161,19 +161,26 @@ dump_spec_from(mcp_job *job, const mcp_node *def, mcp_dump_spec *spec, char stor
 {
     *spec = mcp_dump_spec_defaults();
     const char *s = NULL;
-    if (mcp_node_opt_string(def, "convention", &s) ||
-        (s && mcp_convention_from_name(s, &spec->convention)))
+    /* a wrong type already names the line (mcp_node_opt_string); only a bad name,
+     * reported without a location, gets the key's line added */
+    if (mcp_node_opt_string(def, "convention", &s))
+        return -1;
+    if (s && mcp_convention_from_name(s, &spec->convention))
         return mcp_node_error(mcp_node_get(def, "convention"), "%s", mcp_error_message());
     s = NULL;
-    if (mcp_node_opt_string(def, "variance", &s) ||
-        (s && mcp_variance_kind_from_name(s, &spec->variance)))
+    if (mcp_node_opt_string(def, "variance", &s))
+        return -1;
+    if (s && mcp_variance_kind_from_name(s, &spec->variance))
         return mcp_node_error(mcp_node_get(def, "variance"), "%s", mcp_error_message());
     s = NULL;
-    if (mcp_node_opt_string(def, "bad_values", &s) ||
-        (s && mcp_badval_policy_from_name(s, &spec->bad_values)))
+    if (mcp_node_opt_string(def, "bad_values", &s))
+        return -1;
+    if (s && mcp_badval_policy_from_name(s, &spec->bad_values))
         return mcp_node_error(mcp_node_get(def, "bad_values"), "%s", mcp_error_message());
+    /* a series' spp list belongs to series_from(), which checks it; anywhere else spp
+     * must be one number (mcp_node_double names the line of a list or map) */
     const mcp_node *spp = mcp_node_get(def, "spp");
-    if (spp && spp->kind == MCP_NODE_SCALAR) {
+    if (spp && (spp->kind == MCP_NODE_SCALAR || !mcp_node_get(def, "series"))) {
         if (mcp_node_double(spp, "spp", &spec->spp))
             return -1;
         if (spec->spp <= 0)

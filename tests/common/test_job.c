@@ -189,6 +189,16 @@ test_runner_checks_everything_first(void **state)
          "bad.yaml:2: input file"},
         {"inputs:\n  noisy: {dump: in.exr, convention: povray}\nstages:\n  - probe: {input: noisy}\n",
          "bad.yaml:2: unknown convention 'povray'"},
+        /* spp of a dump is one number: a list or a map is an error, not ignored */
+        {"inputs:\n  noisy: {dump: in.exr, spp: [1]}\nstages:\n  - probe: {input: noisy}\n",
+         "bad.yaml:2: spp must be a number, not a list"},
+        {"inputs:\n  noisy:\n    dump: in.exr\n    spp: {a: 1}\nstages:\n  - probe: {input: noisy}\n",
+         "bad.yaml:4: spp must be a number, not a map"},
+        {"inputs:\n  noisy: {dump: in.exr, spp: 0}\nstages:\n  - probe: {input: noisy}\n",
+         "bad.yaml:2: spp must be > 0 (got 0)"},
+        /* a series' spp is its list of counts: a map is an error there too */
+        {"inputs:\n  s: {series: [in.exr], spp: {a: 1}}\nstages:\n  - probe: {input: s}\n",
+         "bad.yaml:2: spp must be a number or a list of numbers"},
     };
     for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
         calls = 0;
@@ -197,6 +207,137 @@ test_runner_checks_everything_first(void **state)
         /* nothing ran: the failing line could be the last one */
         assert_int_equal(calls, 0);
     }
+}
+
+/* Counts the occurrences of needle in the last error message. */
+static int
+count_in_error(const char *needle)
+{
+    int n = 0;
+    for (const char *p = mcp_error_message(); (p = strstr(p, needle)); p += strlen(needle))
+        n++;
+    return n;
+}
+
+static void
+test_wrong_types_name_the_line_once(void **state)
+{
+    (void)state;
+    setup_input();
+    mcp_progress_set_quiet(1);
+    static const char *const keys[] = {"convention", "variance", "bad_values"};
+    for (int k = 0; k < 3; k++) {
+        char text[512], want[128];
+        /* a wrong type (a list) and a wrong name: both carry "bad.yaml:3:" once */
+        snprintf(text, sizeof text,
+                 "inputs:\n  noisy:\n    %s: [pbrt]\n    dump: in.exr\n"
+                 "stages:\n  - probe: {input: noisy}\n",
+                 keys[k]);
+        snprintf(want, sizeof want, "bad.yaml:3: %s must be a string, not a list", keys[k]);
+        assert_error_contains(mcp_job_run_file(write_job("bad.yaml", text), table, NULL), want);
+        assert_int_equal(count_in_error("bad.yaml:"), 1);
+        snprintf(text, sizeof text,
+                 "inputs:\n  noisy:\n    %s: nonsense\n    dump: in.exr\n"
+                 "stages:\n  - probe: {input: noisy}\n",
+                 keys[k]);
+        assert_error_contains(mcp_job_run_file(write_job("bad.yaml", text), table, NULL),
+                              "bad.yaml:3: unknown ");
+        assert_int_equal(count_in_error("bad.yaml:"), 1);
+    }
+}
+
+/* ---- explicit channel mapping of a dump ---- */
+
+static void
+check_mapped(const mcp_image *part, int first, const char *a, const char *b, const char *c)
+{
+    assert_non_null(part);
+    assert_int_equal(part->channels, 3);
+    assert_string_equal(part->names[0], a);
+    assert_string_equal(part->names[1], b);
+    assert_string_equal(part->names[2], c);
+    /* the ramp's value is x + 10 y + 100 channel, in the file's channel order */
+    for (int y = 0; y < part->height; y++)
+        for (int x = 0; x < part->width; x++)
+            for (int k = 0; k < 3; k++)
+                assert_true(mcp_image_px(part, x, y)[k] ==
+                            (float)(x + 10 * y + 100 * (first + k)));
+}
+
+/* The dump lives as long as the job: a stage checks it. */
+static int
+stage_mapped(mcp_job *job, const mcp_node *settings)
+{
+    const mcp_dump *d = NULL;
+    if (mcp_job_dump(job, settings, "input", &d))
+        return -1;
+    calls++;
+    assert_int_equal(d->color->width, 5);
+    assert_int_equal(d->color->height, 4);
+    check_mapped(d->color, 3, "R", "G", "B");       /* beauty.*, not the decoy R,G,B */
+    check_mapped(d->var_of_mean, 6, "R", "G", "B"); /* of-mean: kept as written */
+    check_mapped(d->albedo, 9, "R", "G", "B");
+    check_mapped(d->normal, 12, "X", "Y", "Z");
+    assert_true(d->spp == 16);
+    return 0;
+}
+
+static void
+test_channel_mapping_overrides_detection(void **state)
+{
+    (void)state;
+    mcp_progress_set_quiet(1);
+    /* names no convention knows, and a decoy R,G,B that detection would pick */
+    const char *names[] = {"R",     "G",     "B",     "beauty.x", "beauty.y",
+                           "beauty.z", "v.0", "v.1",  "v.2",      "alb.a",
+                           "alb.b", "alb.c", "nrm.u", "nrm.v",    "nrm.w"};
+    mcp_image *img = mcp_test_ramp(5, 4, 15, names);
+    mcp_attrs_set_int(&img->attrs, "samplesPerPixel", 16);
+    assert_int_equal(mcp_image_write(img, mcp_test_path("odd.exr"), NULL), 0);
+    mcp_image_free(img);
+    static const mcp_stage mapped = {"mapped", "test stage", probe_keys, stage_mapped};
+    static const mcp_stage *const mapped_table[] = {&mapped, NULL};
+    const char *job = write_job("map.yaml", "inputs:\n"
+                                            "  d:\n"
+                                            "    dump: odd.exr\n"
+                                            "    variance: of-mean\n"
+                                            "    channels:\n"
+                                            "      color: [beauty.x, beauty.y, beauty.z]\n"
+                                            "      variance: [v.0, v.1, v.2]\n"
+                                            "      albedo: [alb.a, alb.b, alb.c]\n"
+                                            "      normal: [nrm.u, nrm.v, nrm.w]\n"
+                                            "output: out/map\n"
+                                            "stages:\n"
+                                            "  - mapped: {input: d}\n");
+    calls = 0;
+    assert_int_equal(mcp_job_run_file(job, mapped_table, NULL), 0);
+    assert_int_equal(calls, 1);
+
+    /* a channel the file lacks: the error names the job line that uses the input
+     * (the dump is read there, not while checking) and the missing channel */
+    job = write_job("map.yaml", "inputs:\n"
+                                "  d:\n"
+                                "    dump: odd.exr\n"
+                                "    channels:\n"
+                                "      albedo: [alb.a, alb.b, alb.z]\n"
+                                "output: out/map\n"
+                                "stages:\n"
+                                "  - mapped: {input: d}\n");
+    calls = 0;
+    assert_error_contains(mcp_job_run_file(job, mapped_table, NULL), "map.yaml:8: ");
+    assert_non_null(strstr(mcp_error_message(), "alb.z"));
+    assert_int_equal(count_in_error("map.yaml:"), 1);
+    assert_int_equal(calls, 0);
+    /* a mapping that is not 3 names is caught while checking, at its own line */
+    job = write_job("map.yaml", "inputs:\n"
+                                "  d:\n"
+                                "    dump: odd.exr\n"
+                                "    channels:\n"
+                                "      normal: [nrm.u, nrm.v]\n"
+                                "stages:\n"
+                                "  - mapped: {input: d}\n");
+    assert_error_contains(mcp_job_run_file(job, mapped_table, NULL),
+                          "map.yaml:5: channels.normal must list 3 channel names");
 }
 
 int
@@ -208,6 +349,8 @@ main(void)
         cmocka_unit_test(test_yaml_errors_name_the_line),
         cmocka_unit_test(test_runner_runs_stages_in_order),
         cmocka_unit_test(test_runner_checks_everything_first),
+        cmocka_unit_test(test_wrong_types_name_the_line_once),
+        cmocka_unit_test(test_channel_mapping_overrides_detection),
     };
     return cmocka_run_group_tests_name("common/job", tests, NULL, NULL);
 }
