@@ -4,7 +4,8 @@
  * the same run. Prints ms (best of several runs for the library; one run of the naive
  * version), passes, pMSE against the truth for both (they run the same algorithm, so
  * the figures should agree), and the targets.
- * Usage: bench_perceptual [size [runs]] */
+ * Usage: bench_perceptual [size [runs [methods]]], methods a comma-separated list of
+ * method names (e.g. error-diffusion,dither; default: all). */
 #include <mcpost/metrics.h>
 #include <mcpost/perceptual.h>
 
@@ -123,12 +124,34 @@ run_lib(const mcp_image *const *c, int m, const mcp_image *surr, const mcp_image
     }
 }
 
+static const char *
+verdict(double ms, double target)
+{
+    return isnan(ms) ? "not run" : ms <= target ? "met" : "MISSED";
+}
+
+/* Whether method is in the comma-separated list (NULL: every method). */
+static int
+wanted(const char *list, const char *method)
+{
+    if (!list) return 1;
+    size_t n = strlen(method);
+    for (const char *p = list; *p;) {
+        const char *end = strchr(p, ',');
+        size_t len = end ? (size_t)(end - p) : strlen(p);
+        if (len == n && strncmp(p, method, n) == 0) return 1;
+        p += len + (end != NULL);
+    }
+    return 0;
+}
+
 int
 main(int argc, char **argv)
 {
     int s = argc > 1 ? atoi(argv[1]) : 512, runs = argc > 2 ? atoi(argv[2]) : 5;
+    const char *methods = argc > 3 ? argv[3] : NULL;
     if (s < 32 || runs < 1) {
-        fprintf(stderr, "usage: bench_perceptual [size >= 32 [runs >= 1]]\n");
+        fprintf(stderr, "usage: bench_perceptual [size >= 32 [runs >= 1 [methods]]]\n");
         return 2;
     }
     int threads = 1;
@@ -181,56 +204,67 @@ main(int argc, char **argv)
                 subsets[((size_t)j * n + p) * 3 + ch] = (float)(sum / cnt);
             }
 
-    row r = {.name = "vertical-iterative"};
-    run_lib(cands, M, truth, truth, MCP_PERC_VERTICAL_ITERATIVE, runs, &r);
-    t0 = now_ms();
-    r.naive_passes = naive_vertical(&in, cand, M, 100, out);
-    r.naive_ms = now_ms() - t0;
-    r.naive_pmse = pmse_of_rgb(out, s, truth);
-    print_row(&r, "18.4 s (to convergence; target <= 250 ms)");
-    double vertical_ms = r.ms;
+    row r;
+    double vertical_ms = NAN, ed_ms = NAN, dither_ms = NAN;
+    if (wanted(methods, "vertical-iterative")) {
+        r = (row){.name = "vertical-iterative"};
+        run_lib(cands, M, truth, truth, MCP_PERC_VERTICAL_ITERATIVE, runs, &r);
+        t0 = now_ms();
+        r.naive_passes = naive_vertical(&in, cand, M, 100, out);
+        r.naive_ms = now_ms() - t0;
+        r.naive_pmse = pmse_of_rgb(out, s, truth);
+        print_row(&r, "18.4 s (to convergence; target <= 250 ms)");
+        vertical_ms = r.ms;
+    }
 
-    r = (row){.name = "power-set (15)"};
-    run_lib(cands, M, truth, truth, MCP_PERC_POWER_SET, runs > 3 ? 3 : runs, &r);
-    t0 = now_ms();
-    r.naive_passes = naive_vertical(&in, subsets, k, 100, out);
-    r.naive_ms = now_ms() - t0;
-    r.naive_pmse = pmse_of_rgb(out, s, truth);
-    print_row(&r, "95 s");
+    if (wanted(methods, "power-set")) {
+        r = (row){.name = "power-set (15)"};
+        run_lib(cands, M, truth, truth, MCP_PERC_POWER_SET, runs > 3 ? 3 : runs, &r);
+        t0 = now_ms();
+        r.naive_passes = naive_vertical(&in, subsets, k, 100, out);
+        r.naive_ms = now_ms() - t0;
+        r.naive_pmse = pmse_of_rgb(out, s, truth);
+        print_row(&r, "95 s");
+    }
 
-    r = (row){.name = "error-diffusion"};
-    run_lib(cands, M, truth, truth, MCP_PERC_ERROR_DIFFUSION, runs * 4, &r);
-    t0 = now_ms();
-    naive_error_diffusion(&in, out);
-    r.naive_ms = now_ms() - t0;
-    r.naive_passes = 1;
-    r.naive_pmse = pmse_of_rgb(out, s, truth);
-    print_row(&r, "0.04 s (target <= 5 ms)");
-    double ed_ms = r.ms;
+    if (wanted(methods, "error-diffusion")) {
+        r = (row){.name = "error-diffusion"};
+        run_lib(cands, M, truth, truth, MCP_PERC_ERROR_DIFFUSION, runs * 4, &r);
+        t0 = now_ms();
+        naive_error_diffusion(&in, out);
+        r.naive_ms = now_ms() - t0;
+        r.naive_passes = 1;
+        r.naive_pmse = pmse_of_rgb(out, s, truth);
+        print_row(&r, "0.04 s (target <= 5 ms)");
+        ed_ms = r.ms;
+    }
 
-    r = (row){.name = "dither"};
-    run_lib(cands, M, truth, truth, MCP_PERC_DITHER, runs * 4, &r);
-    t0 = now_ms();
-    naive_dither(&in, out);
-    r.naive_ms = now_ms() - t0;
-    r.naive_passes = 1;
-    r.naive_pmse = pmse_of_rgb(out, s, truth);
-    print_row(&r, "0.04 s (target <= 5 ms)");
-    double dither_ms = r.ms;
+    if (wanted(methods, "dither")) {
+        r = (row){.name = "dither"};
+        run_lib(cands, M, truth, truth, MCP_PERC_DITHER, runs * 4, &r);
+        t0 = now_ms();
+        naive_dither(&in, out);
+        r.naive_ms = now_ms() - t0;
+        r.naive_passes = 1;
+        r.naive_pmse = pmse_of_rgb(out, s, truth);
+        print_row(&r, "0.04 s (target <= 5 ms)");
+        dither_ms = r.ms;
+    }
 
-    r = (row){.name = "horizontal (10)"};
-    run_lib(cands, M, truth, truth, MCP_PERC_HORIZONTAL, runs > 3 ? 3 : runs, &r);
-    t0 = now_ms();
-    r.naive_passes = naive_horizontal(&in, mean->data, 10, out);
-    r.naive_ms = now_ms() - t0;
-    r.naive_pmse = pmse_of_rgb(out, s, truth);
-    print_row(&r, "23 s");
+    if (wanted(methods, "horizontal")) {
+        r = (row){.name = "horizontal (10)"};
+        run_lib(cands, M, truth, truth, MCP_PERC_HORIZONTAL, runs > 3 ? 3 : runs, &r);
+        t0 = now_ms();
+        r.naive_passes = naive_horizontal(&in, mean->data, 10, out);
+        r.naive_ms = now_ms() - t0;
+        r.naive_pmse = pmse_of_rgb(out, s, truth);
+        print_row(&r, "23 s");
+    }
 
     printf("\ntargets (512x512 on 2 cores): vertical-iterative %.1f ms <= 250 ms: %s; "
            "error-diffusion %.2f ms <= 5 ms: %s; dither %.2f ms <= 5 ms: %s\n",
-           vertical_ms, vertical_ms <= 250.0 ? "met" : "MISSED", ed_ms,
-           ed_ms <= 5.0 ? "met" : "MISSED", dither_ms,
-           dither_ms <= 5.0 ? "met" : "MISSED");
+           vertical_ms, verdict(vertical_ms, 250.0), ed_ms, verdict(ed_ms, 5.0), dither_ms,
+           verdict(dither_ms, 5.0));
     free(cand), free(subsets), free(surr), free(out);
     for (int j = 0; j < M; j++)
         mcp_image_free(c[j]);
