@@ -3,8 +3,8 @@
  * 3x3 convolutions with ReLU, 2x2 max pools, nearest 2x upsampling and skip concats,
  * then the inverse transfer function. Whole image as one tile, padded to 16.
  * Activations are planar (CHW) float32; each is freed as soon as it is consumed.
- * Convolutions are direct loops, blocked over output channels and x, OpenMP over
- * (channel block, row); a GEMM path is issue 6 follow-up work. */
+ * Convolutions are direct loops, register-blocked over output channels and columns,
+ * OpenMP over (image, row, column chunk). */
 #include "unet_internal.h"
 #include "internal.h"
 
@@ -14,6 +14,9 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 
 static const char *const conv_names[MCP__UNET_NCONV] = {
     "enc_conv0",  "enc_conv1",  "enc_conv2",  "enc_conv3",  "enc_conv4",  "enc_conv5a",
@@ -208,9 +211,6 @@ typedef struct batch {
     float *d; /* image k, channel i: d + ((size_t)k * c + i) * h * w */
 } batch;
 
-#define OB 8  /* output channels per block */
-#define XT 64 /* columns per block */
-
 static size_t
 plane_size(const batch *b)
 {
@@ -238,70 +238,206 @@ batch_free(batch *b)
     b->d = NULL;
 }
 
+/* Convolution blocking. Each output pixel's sum runs over input channel i, then row
+ * ky, then column kx, in that order, starting at the bias for image 0 and at 0 for a
+ * tangent, whatever the blocking and the thread count; taps outside the image add 0 *
+ * weight, which leaves the sum as it is (up to the sign of a zero sum). The kernel holds
+ * OB output channels x XB columns (two 4-float vectors each) in registers, so each input
+ * vector loaded serves OB channels and each weight vector XB / 4 column vectors.
+ * Weights are repacked per layer as [block][i][ky][kx][OB][WL], each repeated over WL
+ * lanes so that it loads as a vector without a shuffle. A task is one row of up to XC
+ * columns of one image, every output channel (all the primal's tasks before the
+ * tangents'): its input rows are copied, zero-padded, into a per-thread buffer; the
+ * sums run in passes of at most IC input channels (whose weights stay in the L1 cache
+ * across the row), partial sums kept in the output between passes, and the last pass
+ * stores with the ReLU mask. */
+#define OB 4   /* output channels per register block */
+#define XB 8   /* columns per register block */
+#define WL 4   /* lanes of each repacked weight */
+#define XC 256 /* columns per task */
+#define IC 32  /* input channels per pass at most */
+
+/* d[0 .. m) = acc as it is (relu 0 or 3), its ReLU (1), or where p0 > 0 and 0 elsewhere
+ * (2). */
+static inline void
+store_block(float *restrict d, const float *restrict acc, const float *restrict p0, int m,
+            int relu)
+{
+    if (relu == 0 || relu == 3)
+        memcpy(d, acc, (size_t)m * sizeof(float));
+    else if (relu == 1) {
+#pragma omp simd
+        for (int v = 0; v < m; v++) {
+            const float t = acc[v];
+            d[v] = t > 0.0f ? t : 0.0f;
+        }
+    } else {
+#pragma omp simd
+        for (int v = 0; v < m; v++) {
+            const float t = acc[v];
+            d[v] = p0[v] > 0.0f ? t : 0.0f;
+        }
+    }
+}
+
+/* Output channels o0 + o < o0 + on, columns [0, m) of a row, at dst + o * hw: acc[o][v]
+ * = init[o] (or, init NULL, the partial sum stored at dst) + the sum over i0 <= i < i1,
+ * ky0 <= ky < ky1, kx < 3 of weight(o, i, ky, kx) * input(i, ky, v + kx), with input
+ * row (i, ky) at rows + (i * 3 + ky) * rs (its element 0 the column left of the block)
+ * and wb the block's repacked weights; then stored as store_block does (relu < 3) or as
+ * a partial sum (relu 3). p0, read with relu 2 only, is then another image's plane. */
+static void
+conv_block(const float *restrict rows, int rs, int i0, int i1, int ky0, int ky1,
+           const float *restrict wb, const float *restrict init, float *restrict dst,
+           const float *restrict p0, size_t hw, int on, int m, int relu)
+{
+    float acc[OB][XB];
+    if (init)
+        for (int o = 0; o < OB; o++)
+            for (int v = 0; v < XB; v++)
+                acc[o][v] = init[o];
+    else if (on == OB && m == XB)
+        for (int o = 0; o < OB; o++)
+            memcpy(acc[o], dst + o * hw, XB * sizeof(float));
+    else
+        for (int o = 0; o < OB; o++)
+            for (int v = 0; v < XB; v++)
+                acc[o][v] = o < on && v < m ? dst[o * hw + v] : 0.0f;
+    for (int i = i0; i < i1; i++)
+        for (int ky = ky0; ky < ky1; ky++) {
+            const float *restrict r = rows + ((size_t)i * 3 + ky) * rs;
+            const float *restrict wk = wb + ((size_t)i * 9 + ky * 3) * OB * WL;
+#pragma GCC unroll 3
+            for (int kx = 0; kx < 3; kx++)
+#pragma GCC unroll 8
+                for (int o = 0; o < OB; o++) {
+                    const float *restrict wq = wk + (kx * OB + o) * WL;
+#pragma GCC unroll 4
+                    for (int vv = 0; vv < XB; vv += WL)
+#pragma omp simd
+                        for (int v = 0; v < WL; v++)
+                            acc[o][vv + v] += wq[v] * r[kx + vv + v];
+                }
+        }
+    for (int o = 0; o < on; o++)
+        if (m == XB)
+            store_block(dst + o * hw, acc[o], p0 + o * hw, XB, relu);
+        else
+            store_block(dst + o * hw, acc[o], p0 + o * hw, m, relu);
+}
+
+/* A layer's convolution, as conv_into sets it up for conv_task. */
+typedef struct conv_layer {
+    const batch *a, *b; /* the input: concat(a, b), b may be NULL */
+    batch *out;
+    const float *wb, *bias; /* repacked weights (nob blocks of block_floats), bias */
+    size_t block_floats;
+    int cin, cout, nob, nic, xc, rs, relu;
+} conv_layer;
+
+/* Image k, row y, columns [c * XC, c * XC + xc) of the output, every channel. With relu,
+ * image 0 of the row must be done before the others (they take its mask). */
+static void
+conv_task(const conv_layer *l, int k, int y, int c, float *rows)
+{
+    const batch *a = l->a, *b = l->b;
+    const int h = a->h, w = a->w, ca = a->c, cin = l->cin, cout = l->cout, rs = l->rs;
+    const int xc = l->xc, nic = l->nic, x0 = c * XC, xn = w - x0 < xc ? w - x0 : xc;
+    const int ky0 = y > 0 ? 0 : 1, ky1 = y < h - 1 ? 3 : 2;
+    const int lo = x0 > 0 ? -1 : 0, hi = x0 + xc < w ? xc + 1 : w - x0;
+    static const float zeros[OB];
+    /* columns x0 - 1 .. x0 + xc of input rows y - 1 .. y + 1, 0 outside the image */
+    for (int i = 0; i < cin; i++) {
+        const float *src = i < ca ? plane(a, k, i) : plane(b, k, i - ca);
+        for (int ky = ky0; ky < ky1; ky++) {
+            float *d = rows + ((size_t)i * 3 + ky) * rs + 1;
+            if (lo == 0)
+                d[-1] = 0.0f;
+            memcpy(d + lo, src + (size_t)(y + ky - 1) * w + x0 + lo,
+                   (size_t)(hi - lo) * sizeof(float));
+            for (int j = hi; j < rs - 1; j++)
+                d[j] = 0.0f;
+        }
+    }
+    const size_t hw = plane_size(l->out), at = (size_t)y * w + x0;
+    for (int ob = 0; ob < l->nob; ob++) {
+        const int o0 = ob * OB, on = cout - o0 < OB ? cout - o0 : OB;
+        float *dst = plane(l->out, k, o0) + at;
+        const float *p0 = plane(l->out, 0, o0) + at; /* the primal, ReLU'd */
+        const float *wo = l->wb + (size_t)ob * l->block_floats;
+        for (int j = 0; j < nic; j++) {
+            const int i0 = cin * j / nic, i1 = cin * (j + 1) / nic;
+            const int mode = i1 < cin ? 3 : l->relu ? k == 0 ? 1 : 2 : 0;
+            const float *init = i0 > 0 ? NULL : k == 0 ? l->bias + o0 : zeros;
+            for (int xs = 0; xs < xn; xs += XB)
+                conv_block(rows + xs, rs, i0, i1, ky0, ky1, wo, init, dst + xs, p0 + xs,
+                           hw, on, xn - xs < XB ? xn - xs : XB, mode);
+        }
+    }
+}
+
 /* out = conv3x3(concat(a, b)) (b may be NULL), the bias on image 0 only; then, with
- * relu, every image is zeroed where image 0's pre-activation is not > 0. */
+ * relu, every image is zeroed where image 0's pre-activation is not > 0 (as it is
+ * stored: the primal is done first, and its ReLU is > 0 where it was). */
 static int
 conv_into(const mcp__unet_conv *L, const batch *a, const batch *b, int relu, batch *out)
 {
-    const int n = a->n, h = a->h, w = a->w, ca = a->c, cb = b ? b->c : 0;
-    const int cin = ca + cb, cout = L->cout, nob = (cout + OB - 1) / OB;
+    const int n = a->n, h = a->h, w = a->w, cb = b ? b->c : 0;
+    const int cin = a->c + cb, cout = L->cout, nob = (cout + OB - 1) / OB;
     if (cin != L->cin)
         return mcp_error("unet: layer of %d input channels given %d", L->cin, cin);
-    if (batch_new(out, n, cout, h, w))
+    /* tasks of xc columns (the last may have fewer), nxc of them per row */
+    const int xc = w < XC ? (w + XB - 1) / XB * XB : XC, nxc = (w + XC - 1) / XC;
+    const int rs = (xc + 2 + 3) / 4 * 4; /* a buffered row: columns -1 .. xc */
+    const size_t block_floats = (size_t)cin * 9 * OB * WL;
+    const size_t rows_floats = (size_t)cin * 3 * rs;
+    int n_threads = 1;
+#ifdef _OPENMP
+    n_threads = omp_get_max_threads();
+#endif
+    float *wb = mcp_calloc((size_t)nob * block_floats + (size_t)nob * OB, sizeof(float));
+    float *scratch =
+        wb ? mcp_malloc((size_t)n_threads * rows_floats * sizeof(float)) : NULL;
+    if (!scratch || batch_new(out, n, cout, h, w)) {
+        free(wb), free(scratch);
         return -1;
-#pragma omp parallel for collapse(3) schedule(dynamic, 4)
-    for (int k = 0; k < n; k++) {
-        for (int ob = 0; ob < nob; ob++) {
-            for (int y = 0; y < h; y++) {
-                float acc[OB][XT];
-                const int o0 = ob * OB, on = cout - o0 < OB ? cout - o0 : OB;
-                for (int x0 = 0; x0 < w; x0 += XT) {
-                    const int xn = w - x0 < XT ? w - x0 : XT;
-                    for (int o = 0; o < on; o++)
-                        for (int x = 0; x < xn; x++)
-                            acc[o][x] = k == 0 ? L->bias[o0 + o] : 0.0f;
-                    for (int i = 0; i < cin; i++) {
-                        const float *src = i < ca ? plane(a, k, i) : plane(b, k, i - ca);
-                        for (int ky = 0; ky < 3; ky++) {
-                            const int yy = y + ky - 1;
-                            if (yy < 0 || yy >= h)
-                                continue;
-                            const float *row = src + (size_t)yy * (size_t)w;
-                            for (int kx = 0; kx < 3; kx++) {
-                                const int dx = kx - 1;
-                                /* x + dx inside [0, w) */
-                                const int xs = x0 > -dx ? x0 : -dx;
-                                const int xe = x0 + xn < w - dx ? x0 + xn : w - dx;
-                                const float *r = row + dx;
-                                for (int o = 0; o < on; o++) {
-                                    const float wt =
-                                        L->weight[((size_t)(o0 + o) * cin + i) * 9 + ky * 3 + kx];
-                                    float *ac = acc[o] - x0;
-#pragma omp simd
-                                    for (int x = xs; x < xe; x++)
-                                        ac[x] += wt * r[x];
-                                }
-                            }
-                        }
-                    }
-                    for (int o = 0; o < on; o++)
-                        memcpy(plane(out, k, o0 + o) + (size_t)y * w + x0, acc[o],
-                               (size_t)xn * sizeof(float));
+    }
+    float *bias = wb + (size_t)nob * block_floats; /* 0 past cout, as the weights */
+    memcpy(bias, L->bias, (size_t)cout * sizeof(float));
+#pragma omp parallel for schedule(static) num_threads(n_threads)
+    for (int ob = 0; ob < nob; ob++)
+        for (int i = 0; i < cin; i++)
+            for (int t = 0; t < 9; t++)
+                for (int o = ob * OB; o < ob * OB + OB && o < cout; o++) {
+                    const float wt = L->weight[((size_t)o * cin + i) * 9 + t];
+                    float *dst = wb + (size_t)ob * block_floats +
+                                 (((size_t)i * 9 + t) * OB + o - ob * OB) * WL;
+                    for (int lane = 0; lane < WL; lane++)
+                        dst[lane] = wt;
                 }
-            }
-        }
+    const conv_layer l = {.a = a, .b = b, .out = out, .wb = wb, .bias = bias,
+                          .block_floats = block_floats, .cin = cin, .cout = cout,
+                          .nob = nob, .nic = (cin + IC - 1) / IC, .xc = xc, .rs = rs,
+                          .relu = relu};
+#pragma omp parallel num_threads(n_threads)
+    {
+        int thread = 0;
+#ifdef _OPENMP
+        thread = omp_get_thread_num();
+#endif
+        float *rows = scratch + (size_t)thread * rows_floats;
+        /* the primal, then (after the loop's barrier) the tangents */
+#pragma omp for collapse(2) schedule(dynamic, 1)
+        for (int y = 0; y < h; y++)
+            for (int c = 0; c < nxc; c++)
+                conv_task(&l, 0, y, c, rows);
+#pragma omp for collapse(3) schedule(dynamic, 1)
+        for (int k = 1; k < n; k++)
+            for (int y = 0; y < h; y++)
+                for (int c = 0; c < nxc; c++)
+                    conv_task(&l, k, y, c, rows);
     }
-    if (!relu)
-        return 0;
-    const size_t hw = plane_size(out);
-#pragma omp parallel for schedule(static)
-    for (int o = 0; o < cout; o++) {
-        float *p0 = plane(out, 0, o);
-        for (size_t j = 0; j < hw; j++)
-            if (!(p0[j] > 0.0f))
-                for (int k = 0; k < n; k++)
-                    plane(out, k, o)[j] = 0.0f;
-    }
+    free(wb), free(scratch);
     return 0;
 }
 

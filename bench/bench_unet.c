@@ -1,0 +1,191 @@
+/* bench_unet.c: timings of the `unet` denoiser (OIDN's RT U-Net, estimate/unet.c; no
+ * pass/fail): apply, and apply + JVP with 1 and with 4 tangents in one pass, on a
+ * render-like input (noisy colour, albedo with edges, normals of two planes, as
+ * bench_denoise), with the official colour + albedo + normal weights from
+ * $MCPOST_OIDN_WEIGHTS, else ../shared/oidn-weights/rt_hdr_alb_nrm.tza beside the
+ * source tree; without them it prints a skip line and exits 0.
+ * Each figure is the median of `repeats` runs after one warm-up: wall-clock ms and ms
+ * per megapixel with the default OpenMP team (set OMP_NUM_THREADS to change it), the
+ * CPU time of all threads per megapixel (the work, which other jobs on the machine
+ * change less), and the convolution rate: 125406 multiply-adds per pixel of the input
+ * padded to a multiple of 16, per image of the batch (the primal and each tangent),
+ * per wall-clock second and per CPU second.
+ * Usage: bench_unet [repeats (default 3)] [side (default 512)] */
+#include <mcpost/denoiser.h>
+
+#include "bench.h"
+
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+#define MAX_TANGENTS 4
+#define MAC_PER_PIXEL 125406.0 /* the RT U-Net's 3x3 convolutions, 9 input channels */
+
+/* splitmix64 -> uniform in [0, 1) */
+static double
+uniform(uint64_t *s)
+{
+    uint64_t z = (*s += 0x9e3779b97f4a7c15ULL);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+    return (double)((z ^ (z >> 31)) >> 11) / 9007199254740992.0;
+}
+
+static mcp_image *
+rgb(int side)
+{
+    static const char *const names[] = {"R", "G", "B"};
+    mcp_image *img = NULL;
+    if (mcp_image_new(side, side, 3, names, &img)) {
+        fprintf(stderr, "bench_unet: %s\n", mcp_error_message());
+        exit(1);
+    }
+    return img;
+}
+
+/* Albedo cells of 16 px, a smooth light, noise of 20 % with its variance given. */
+static void
+make_input(int side, mcp_image **color, mcp_image **albedo, mcp_image **normal,
+           mcp_image **variance)
+{
+    *color = rgb(side), *albedo = rgb(side), *normal = rgb(side), *variance = rgb(side);
+    uint64_t st = 1;
+    for (int y = 0; y < side; y++)
+        for (int x = 0; x < side; x++) {
+            size_t i = ((size_t)y * side + x) * 3;
+            int cell = (x / 16 + y / 16) % 3;
+            for (int c = 0; c < 3; c++) {
+                double a = 0.2 + 0.3 * ((cell + c) % 3),
+                       t = a * (1 + 0.5 * sin(0.01 * x));
+                double sd = 0.2 * t, u = uniform(&st) + uniform(&st) + uniform(&st) - 1.5;
+                (*albedo)->data[i + c] = (float)a;
+                (*normal)->data[i + c] = (float)(c == (y < side / 3 ? 2 : 1));
+                (*variance)->data[i + c] = (float)(sd * sd);
+                (*color)->data[i + c] = (float)(t + 2 * sd * u);
+            }
+        }
+}
+
+/* The weights: $MCPOST_OIDN_WEIGHTS, else ../shared/oidn-weights/ next to the source
+ * tree this file was compiled from (CMake passes absolute source paths). */
+static const char *
+weights_path(void)
+{
+    static char buf[4096];
+    const char *env = getenv("MCPOST_OIDN_WEIGHTS");
+    if (env && *env)
+        return env;
+    const char *file = __FILE__, *tail = strstr(file, "bench/bench_unet.c");
+    if (!tail || tail == file)
+        return NULL;
+    snprintf(buf, sizeof buf, "%.*s../shared/oidn-weights/rt_hdr_alb_nrm.tza",
+             (int)(tail - file), file);
+    return buf;
+}
+
+/* The median wall-clock time of `repeats` calls of apply (n = -1) or jvp with n
+ * tangents, and in *cpu the median CPU time of all threads together. */
+static double
+median_ms(const mcp_denoiser *d, const mcp_denoise_input *in,
+          const mcp_denoise_tangent *t, int n, int repeats, double *cpu)
+{
+    double *times = malloc(2 * (size_t)repeats * sizeof *times), med = -1;
+    if (!times)
+        return -1;
+    double *cpus = times + repeats;
+    for (int r = -1; r < repeats; r++) {
+        mcp_image *out = NULL, *jt[MAX_TANGENTS] = {NULL};
+        double t0 = now_ms(), c0 = cpu_ms();
+        int rc = n < 0 ? d->apply(d, in, &out) : d->jvp(d, in, t, n, &out, jt);
+        double dt = now_ms() - t0, dc = cpu_ms() - c0;
+        mcp_image_free(out);
+        for (int k = 0; k < MAX_TANGENTS; k++)
+            mcp_image_free(jt[k]);
+        if (rc) {
+            fprintf(stderr, "bench_unet: %s\n", mcp_error_message());
+            free(times);
+            return -1;
+        }
+        if (r >= 0) {
+            times[r] = dt;
+            cpus[r] = dc;
+        }
+    }
+    qsort(times, (size_t)repeats, sizeof *times, cmp_double);
+    qsort(cpus, (size_t)repeats, sizeof *cpus, cmp_double);
+    med = times[repeats / 2];
+    *cpu = cpus[repeats / 2];
+    free(times);
+    return med;
+}
+
+int
+main(int argc, char **argv)
+{
+    int repeats = argc > 1 ? atoi(argv[1]) : 3, side = argc > 2 ? atoi(argv[2]) : 512;
+    if (repeats < 1 || side < 8 || side > 8192) {
+        fprintf(stderr, "usage: bench_unet [repeats >= 1] [side in 8..8192]\n");
+        return 2;
+    }
+    const char *path = weights_path();
+    if (!path || access(path, R_OK) != 0) {
+        printf("bench_unet: skipped: no OIDN weights at %s (set MCPOST_OIDN_WEIGHTS)\n",
+               path ? path : "(unknown)");
+        return 0;
+    }
+    char opt[4200];
+    snprintf(opt, sizeof opt, "weights=%s", path);
+    mcp_denoiser *d = NULL;
+    if (mcp_denoiser_create_from_args("unet", (const char *[]){opt}, 1, &d)) {
+        fprintf(stderr, "bench_unet: %s\n", mcp_error_message());
+        return 1;
+    }
+    mcp_image *color, *albedo, *normal, *variance, *tan[MAX_TANGENTS];
+    make_input(side, &color, &albedo, &normal, &variance);
+    mcp_denoise_tangent t[MAX_TANGENTS];
+    for (int k = 0; k < MAX_TANGENTS; k++) {
+        tan[k] = rgb(side);
+        uint64_t st = 100 + k;
+        for (size_t i = 0; i < (size_t)side * side * 3; i++)
+            tan[k]->data[i] = (float)((uniform(&st) - 0.5) * sqrt(variance->data[i]));
+        t[k] = (mcp_denoise_tangent){tan[k], NULL, NULL};
+    }
+    mcp_denoise_input in = {color, albedo, normal, variance};
+    int threads = 1;
+#ifdef _OPENMP
+    threads = omp_get_max_threads();
+#endif
+    const double mp = (double)side * side / 1e6, padded = (double)((side + 15) / 16 * 16);
+    printf("unet at %dx%d, %d thread(s), median of %d\n", side, side, threads, repeats);
+    printf("%-24s %10s %10s %12s %10s %12s\n", "call", "ms", "ms/MP", "CPU ms/MP",
+           "GMAC/s", "GMAC/CPU-s");
+    const char *labels[] = {"apply", "apply + JVP, 1 tangent", "apply + JVP, 4 tangents"};
+    const int counts[] = {-1, 1, 4};
+    int status = 0;
+    for (int c = 0; c < 3; c++) {
+        double cpu = 0, ms = median_ms(d, &in, t, counts[c], repeats, &cpu);
+        if (ms < 0) {
+            status = 1;
+            continue;
+        }
+        const double gmac =
+            MAC_PER_PIXEL * padded * padded * (counts[c] < 0 ? 1 : 1 + counts[c]) * 1e-9;
+        printf("%-24s %10.1f %10.1f %12.1f %10.2f %12.2f\n", labels[c], ms, ms / mp,
+               cpu / mp, gmac / (ms * 1e-3), gmac / (cpu * 1e-3));
+    }
+    for (int k = 0; k < MAX_TANGENTS; k++)
+        mcp_image_free(tan[k]);
+    mcp_image_free(color);
+    mcp_image_free(albedo);
+    mcp_image_free(normal);
+    mcp_image_free(variance);
+    mcp_denoiser_free(d);
+    return status;
+}
