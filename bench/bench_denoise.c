@@ -9,6 +9,8 @@
  * Usage: bench_denoise [repeats (default 5)] [side (default 1024)] */
 #include <mcpost/denoiser.h>
 
+#include "render_like.h"
+
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -33,51 +35,6 @@ cmp_double(const void *a, const void *b)
 {
     double x = *(const double *)a, y = *(const double *)b;
     return (x > y) - (x < y);
-}
-
-/* splitmix64 -> uniform in [0, 1) */
-static double
-uniform(uint64_t *s)
-{
-    uint64_t z = (*s += 0x9e3779b97f4a7c15ULL);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-    return (double)((z ^ (z >> 31)) >> 11) / 9007199254740992.0;
-}
-
-static mcp_image *
-rgb(int side)
-{
-    static const char *const names[] = {"R", "G", "B"};
-    mcp_image *img = NULL;
-    if (mcp_image_new(side, side, 3, names, &img)) {
-        fprintf(stderr, "bench_denoise: %s\n", mcp_error_message());
-        exit(1);
-    }
-    return img;
-}
-
-/* Albedo cells of 16 px, a smooth light, noise of 20 % with its variance given. */
-static void
-make_input(int side, mcp_image **color, mcp_image **albedo, mcp_image **normal,
-           mcp_image **variance)
-{
-    *color = rgb(side), *albedo = rgb(side), *normal = rgb(side), *variance = rgb(side);
-    uint64_t st = 1;
-    for (int y = 0; y < side; y++)
-        for (int x = 0; x < side; x++) {
-            size_t i = ((size_t)y * side + x) * 3;
-            int cell = (x / 16 + y / 16) % 3;
-            for (int c = 0; c < 3; c++) {
-                double a = 0.2 + 0.3 * ((cell + c) % 3),
-                       t = a * (1 + 0.5 * sin(0.01 * x));
-                double sd = 0.2 * t, u = uniform(&st) + uniform(&st) + uniform(&st) - 1.5;
-                (*albedo)->data[i + c] = (float)a;
-                (*normal)->data[i + c] = (float)(c == (y < side / 3 ? 2 : 1));
-                (*variance)->data[i + c] = (float)(sd * sd);
-                (*color)->data[i + c] = (float)(t + 2 * sd * u);
-            }
-        }
 }
 
 /* The median wall-clock time of `repeats` calls of apply (n = -1) or jvp with n
@@ -127,13 +84,13 @@ main(int argc, char **argv)
         return 2;
     }
     mcp_image *color, *albedo, *normal, *variance, *tan[MAX_TANGENTS];
-    make_input(side, &color, &albedo, &normal, &variance);
+    bench_render_like(side, &color, &albedo, &normal, &variance);
     mcp_denoise_tangent t[MAX_TANGENTS];
     for (int k = 0; k < MAX_TANGENTS; k++) {
-        tan[k] = rgb(side);
+        tan[k] = bench_rgb(side);
         uint64_t st = 100 + k;
         for (size_t i = 0; i < (size_t)side * side * 3; i++)
-            tan[k]->data[i] = (float)((uniform(&st) - 0.5) * sqrt(variance->data[i]));
+            tan[k]->data[i] = (float)((bench_uniform(&st) - 0.5) * sqrt(variance->data[i]));
         t[k] = (mcp_denoise_tangent){tan[k], NULL, NULL};
     }
     mcp_denoise_input in = {color, albedo, normal, variance};
