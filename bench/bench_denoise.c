@@ -9,7 +9,7 @@
  * Usage: bench_denoise [repeats (default 5)] [side (default 1024)] */
 #include <mcpost/denoiser.h>
 
-#include "render_like.h"
+#include "denoiser_bench.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -20,60 +20,6 @@
 #include <omp.h>
 #endif
 
-#define MAX_TANGENTS 4
-
-static double
-now_ms(clockid_t clock)
-{
-    struct timespec ts;
-    clock_gettime(clock, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
-
-static int
-cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-/* The median wall-clock time of `repeats` calls of apply (n = -1) or jvp with n
- * tangents, and in *cpu_ms the median CPU time of all threads together (which other
- * load on the machine changes less). */
-static double
-median_ms(const mcp_denoiser *d, const mcp_denoise_input *in,
-          const mcp_denoise_tangent *t, int n, int repeats, double *cpu_ms)
-{
-    double *times = malloc(2 * (size_t)repeats * sizeof *times), med = -1;
-    if (!times)
-        return -1;
-    double *cpu = times + repeats;
-    for (int r = -1; r < repeats; r++) {
-        mcp_image *out = NULL, *jt[MAX_TANGENTS] = {NULL};
-        double t0 = now_ms(CLOCK_MONOTONIC), c0 = now_ms(CLOCK_PROCESS_CPUTIME_ID);
-        int rc = n < 0 ? d->apply(d, in, &out) : d->jvp(d, in, t, n, &out, jt);
-        double dt = now_ms(CLOCK_MONOTONIC) - t0;
-        double dc = now_ms(CLOCK_PROCESS_CPUTIME_ID) - c0;
-        mcp_image_free(out);
-        for (int k = 0; k < MAX_TANGENTS; k++)
-            mcp_image_free(jt[k]);
-        if (rc) {
-            fprintf(stderr, "bench_denoise: %s\n", mcp_error_message());
-            free(times);
-            return -1;
-        }
-        if (r >= 0) {
-            times[r] = dt;
-            cpu[r] = dc;
-        }
-    }
-    qsort(times, (size_t)repeats, sizeof *times, cmp_double);
-    qsort(cpu, (size_t)repeats, sizeof *cpu, cmp_double);
-    med = times[repeats / 2];
-    *cpu_ms = cpu[repeats / 2];
-    free(times);
-    return med;
-}
 
 int
 main(int argc, char **argv)
@@ -86,13 +32,7 @@ main(int argc, char **argv)
     mcp_image *color, *albedo, *normal, *variance, *tan[MAX_TANGENTS];
     bench_render_like(side, &color, &albedo, &normal, &variance);
     mcp_denoise_tangent t[MAX_TANGENTS];
-    for (int k = 0; k < MAX_TANGENTS; k++) {
-        tan[k] = bench_rgb(side);
-        uint64_t st = 100 + k;
-        for (size_t i = 0; i < (size_t)side * side * 3; i++)
-            tan[k]->data[i] = (float)((bench_uniform(&st) - 0.5) * sqrt(variance->data[i]));
-        t[k] = (mcp_denoise_tangent){tan[k], NULL, NULL};
-    }
+    bench_tangents(side, variance, tan, t);
     mcp_denoise_input in = {color, albedo, normal, variance};
     int threads = 1;
 #ifdef _OPENMP
@@ -120,7 +60,7 @@ main(int argc, char **argv)
                                 "apply + JVP, 4 tangents"};
         const int counts[] = {-1, 1, 4};
         for (int c = 0; c < 3; c++) {
-            double cpu = 0, ms = median_ms(d, &in, t, counts[c], repeats, &cpu);
+            double cpu = 0, ms = bench_denoiser_median_ms(d, &in, t, counts[c], repeats, &cpu);
             if (ms < 0)
                 status = 1;
             else

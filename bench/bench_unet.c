@@ -13,9 +13,8 @@
  * Usage: bench_unet [repeats (default 3)] [side (default 512)] */
 #include <mcpost/denoiser.h>
 
-#include "render_like.h"
+#include "denoiser_bench.h"
 
-#include "bench.h"
 
 #include <math.h>
 #include <stdint.h>
@@ -27,7 +26,6 @@
 #include <omp.h>
 #endif
 
-#define MAX_TANGENTS 4
 #define MAC_PER_PIXEL 125406.0 /* the RT U-Net's 3x3 convolutions, 9 input channels */
 
 /* The weights: $MCPOST_OIDN_WEIGHTS, else ../shared/oidn-weights/ next to the source
@@ -45,42 +43,6 @@ weights_path(void)
     snprintf(buf, sizeof buf, "%.*s../shared/oidn-weights/rt_hdr_alb_nrm.tza",
              (int)(tail - file), file);
     return buf;
-}
-
-/* The median wall-clock time of `repeats` calls of apply (n = -1) or jvp with n
- * tangents, and in *cpu the median CPU time of all threads together. */
-static double
-median_ms(const mcp_denoiser *d, const mcp_denoise_input *in,
-          const mcp_denoise_tangent *t, int n, int repeats, double *cpu)
-{
-    double *times = malloc(2 * (size_t)repeats * sizeof *times), med = -1;
-    if (!times)
-        return -1;
-    double *cpus = times + repeats;
-    for (int r = -1; r < repeats; r++) {
-        mcp_image *out = NULL, *jt[MAX_TANGENTS] = {NULL};
-        double t0 = now_ms(), c0 = cpu_ms();
-        int rc = n < 0 ? d->apply(d, in, &out) : d->jvp(d, in, t, n, &out, jt);
-        double dt = now_ms() - t0, dc = cpu_ms() - c0;
-        mcp_image_free(out);
-        for (int k = 0; k < MAX_TANGENTS; k++)
-            mcp_image_free(jt[k]);
-        if (rc) {
-            fprintf(stderr, "bench_unet: %s\n", mcp_error_message());
-            free(times);
-            return -1;
-        }
-        if (r >= 0) {
-            times[r] = dt;
-            cpus[r] = dc;
-        }
-    }
-    qsort(times, (size_t)repeats, sizeof *times, cmp_double);
-    qsort(cpus, (size_t)repeats, sizeof *cpus, cmp_double);
-    med = times[repeats / 2];
-    *cpu = cpus[repeats / 2];
-    free(times);
-    return med;
 }
 
 int
@@ -107,13 +69,7 @@ main(int argc, char **argv)
     mcp_image *color, *albedo, *normal, *variance, *tan[MAX_TANGENTS];
     bench_render_like(side, &color, &albedo, &normal, &variance);
     mcp_denoise_tangent t[MAX_TANGENTS];
-    for (int k = 0; k < MAX_TANGENTS; k++) {
-        tan[k] = bench_rgb(side);
-        uint64_t st = 100 + k;
-        for (size_t i = 0; i < (size_t)side * side * 3; i++)
-            tan[k]->data[i] = (float)((bench_uniform(&st) - 0.5) * sqrt(variance->data[i]));
-        t[k] = (mcp_denoise_tangent){tan[k], NULL, NULL};
-    }
+    bench_tangents(side, variance, tan, t);
     mcp_denoise_input in = {color, albedo, normal, variance};
     int threads = 1;
 #ifdef _OPENMP
@@ -127,7 +83,7 @@ main(int argc, char **argv)
     const int counts[] = {-1, 1, 4};
     int status = 0;
     for (int c = 0; c < 3; c++) {
-        double cpu = 0, ms = median_ms(d, &in, t, counts[c], repeats, &cpu);
+        double cpu = 0, ms = bench_denoiser_median_ms(d, &in, t, counts[c], repeats, &cpu);
         if (ms < 0) {
             status = 1;
             continue;
