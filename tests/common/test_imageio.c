@@ -48,6 +48,38 @@ test_exr_float_roundtrip_all_compressions(void **state)
     mcp_image_free(img);
 }
 
+/* PXR24 stores float32 as 24-bit floats (8-bit exponent, 15-bit mantissa, rounded to
+ * nearest): every value comes back within 2^-16 of itself, relatively; it is lossless
+ * for the half channels it also accepts. */
+static void
+test_exr_pxr24_roundtrip(void **state)
+{
+    (void)state;
+    mcp_image *img = mcp_test_random(37, 45, 6, -2.0f, 5.0f, 8, names6);
+    mcp_write_options o = mcp_write_defaults();
+    assert_int_equal(mcp_exr_compression_from_name("pxr24", &o.compression), 0);
+    const char *path = mcp_test_path("pxr24.exr");
+    assert_int_equal(mcp_image_write(img, path, &o), 0);
+    mcp_image *back = NULL;
+    assert_int_equal(mcp_image_read(path, NULL, &back), 0);
+    double worst = 0;
+    int exact = 0;
+    for (int c = 0; c < 6; c++) {
+        int b = mcp_image_channel(back, names6[c]);
+        assert_true(b >= 0);
+        for (int y = 0; y < 45; y++)
+            for (int x = 0; x < 37; x++) {
+                double v = mcp_image_px(img, x, y)[c], r = mcp_image_px(back, x, y)[b];
+                worst = fmax(worst, fabs(r - v) / fabs(v));
+                exact += r == v;
+            }
+    }
+    assert_true(worst <= ldexp(1.0, -16));
+    assert_true(exact < 6 * 37 * 45); /* lossy: the test sees the 24-bit rounding */
+    mcp_image_free(back);
+    mcp_image_free(img);
+}
+
 /* Smooth data whose ZIP output is no smaller than the raw bytes: the file must then
  * hold the raw bytes. OpenEXR Core 3.1.5 wrote garbage here (exr.c works around it);
  * sizes and seeds vary so that some chunks compress and some do not. */
@@ -384,6 +416,7 @@ main(void)
         cmocka_unit_test(test_exr_only_does_not_load_oiio),
         cmocka_unit_test(test_exr_float_roundtrip_all_compressions),
         cmocka_unit_test(test_exr_incompressible_chunks),
+        cmocka_unit_test(test_exr_pxr24_roundtrip),
         cmocka_unit_test(test_exr_half_tiled_and_data_window),
         cmocka_unit_test(test_exr_write_view),
         cmocka_unit_test(test_pfm_roundtrip),
