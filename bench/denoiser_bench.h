@@ -50,9 +50,10 @@ bench_render_like(int side, mcp_image **color, mcp_image **albedo, mcp_image **n
             size_t i = ((size_t)y * side + x) * 3;
             int cell = (x / 16 + y / 16) % 3;
             for (int c = 0; c < 3; c++) {
-                double a = 0.2 + 0.3 * ((cell + c) % 3), t = a * (1 + 0.5 * sin(0.01 * x));
-                double sd = 0.2 * t,
-                       u = bench_uniform(&st) + bench_uniform(&st) + bench_uniform(&st) - 1.5;
+                double a = 0.2 + 0.3 * ((cell + c) % 3),
+                       t = a * (1 + 0.5 * sin(0.01 * x));
+                double sd = 0.2 * t, u = bench_uniform(&st) + bench_uniform(&st) +
+                                         bench_uniform(&st) - 1.5;
                 (*albedo)->data[i + c] = (float)a;
                 (*normal)->data[i + c] = (float)(c == (y < side / 3 ? 2 : 1));
                 (*variance)->data[i + c] = (float)(sd * sd);
@@ -67,13 +68,15 @@ bench_render_like(int side, mcp_image **color, mcp_image **albedo, mcp_image **n
 /* MAX_TANGENTS colour tangents of the noise's scale (uniform, times the standard
  * deviation), as images tan[k] and tangents t[k]. */
 static inline void
-bench_tangents(int side, const mcp_image *variance, mcp_image **tan, mcp_denoise_tangent *t)
+bench_tangents(int side, const mcp_image *variance, mcp_image **tan,
+               mcp_denoise_tangent *t)
 {
     for (int k = 0; k < MAX_TANGENTS; k++) {
         tan[k] = bench_rgb(side);
         uint64_t st = 100 + k;
         for (size_t i = 0; i < (size_t)side * side * 3; i++)
-            tan[k]->data[i] = (float)((bench_uniform(&st) - 0.5) * sqrt(variance->data[i]));
+            tan[k]->data[i] =
+                (float)((bench_uniform(&st) - 0.5) * sqrt(variance->data[i]));
         t[k] = (mcp_denoise_tangent){tan[k], NULL, NULL};
     }
 }
@@ -85,8 +88,7 @@ bench_denoiser_median_ms(const mcp_denoiser *d, const mcp_denoise_input *in,
                          const mcp_denoise_tangent *t, int n, int repeats, double *cpu)
 {
     double *times = malloc(2 * (size_t)repeats * sizeof *times), med = -1;
-    if (!times)
-        return -1;
+    if (!times) return -1;
     double *cpus = times + repeats;
     for (int r = -1; r < repeats; r++) {
         mcp_image *out = NULL, *jt[MAX_TANGENTS] = {NULL};

@@ -45,15 +45,13 @@ unet_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
          const mcp_denoise_tangent *t, int n, mcp_image **primal, mcp_image **out)
 {
     const unet_state *s = self->state;
-    if (primal)
-        *primal = NULL;
+    if (primal) *primal = NULL;
     for (int k = 0; k < n && out; k++)
         out[k] = NULL;
-    if (mcp__denoise_check_input("unet", at) || mcp__denoise_check_tangents("unet", at, t, n) ||
-        check_features(s->net, at))
+    if (mcp__denoise_check_input("unet", at) ||
+        mcp__denoise_check_tangents("unet", at, t, n) || check_features(s->net, at))
         return -1;
-    if (n > 0 && !out)
-        return mcp_error("unet: no room for %d tangent outputs", n);
+    if (n > 0 && !out) return mcp_error("unet: no room for %d tangent outputs", n);
     return mcp__unet_run(s->net, at->color, at->albedo, at->normal, s->input_scale, t, n,
                          primal, out);
 }
@@ -79,15 +77,12 @@ read_input_scale(const mcp_node *settings, double *scale)
 {
     *scale = 0.0;
     const mcp_node *n = mcp_node_get(settings, "input_scale");
-    if (!n)
-        return 0;
-    if (n->kind == MCP_NODE_SCALAR && strcmp(n->value, "auto") == 0)
-        return 0;
-    if (mcp_node_double(n, "input_scale", scale))
-        return -1;
+    if (!n) return 0;
+    if (n->kind == MCP_NODE_SCALAR && strcmp(n->value, "auto") == 0) return 0;
+    if (mcp_node_double(n, "input_scale", scale)) return -1;
     if (!(*scale > 0) || !isfinite(*scale))
-        return mcp_node_error(n, "unet: input_scale must be auto or a number > 0 (got %g)",
-                              *scale);
+        return mcp_node_error(
+            n, "unet: input_scale must be auto or a number > 0 (got %g)", *scale);
     return 0;
 }
 

@@ -265,38 +265,51 @@ static void
 test_create_errors(void **state)
 {
     (void)state;
-    mcp_test_denoiser_fails("blur",
-                 "job.yaml:1: unknown denoiser 'blur' (known: gauss, nlm, bilateral");
+    mcp_test_denoiser_fails(
+        "blur", "job.yaml:1: unknown denoiser 'blur' (known: gauss, nlm, bilateral");
     mcp_test_denoiser_fails("{name: blur}", "job.yaml:1: unknown denoiser 'blur'");
     mcp_test_denoiser_fails("[gauss]", "job.yaml:1: denoiser must be a name or a map");
-    mcp_test_denoiser_fails("{sigma: 2}", "job.yaml:1: missing key 'name' in denoiser settings");
-    mcp_test_denoiser_fails("name: gauss\nsigma: 2\nsigmaa: 3\n",
-                 "job.yaml:3: unknown key 'sigmaa' in denoiser 'gauss' (known: name, "
-                 "sigma, radius)");
-    mcp_test_denoiser_fails("name: nlm\nradus: 3\n", "job.yaml:2: unknown key 'radus' in denoiser "
-                                          "'nlm'");
-    mcp_test_denoiser_fails("{name: gauss, sigma: -1}", "job.yaml:1: gauss: sigma must be > 0");
+    mcp_test_denoiser_fails("{sigma: 2}",
+                            "job.yaml:1: missing key 'name' in denoiser settings");
+    mcp_test_denoiser_fails(
+        "name: gauss\nsigma: 2\nsigmaa: 3\n",
+        "job.yaml:3: unknown key 'sigmaa' in denoiser 'gauss' (known: name, "
+        "sigma, radius)");
+    mcp_test_denoiser_fails("name: nlm\nradus: 3\n",
+                            "job.yaml:2: unknown key 'radus' in denoiser "
+                            "'nlm'");
+    mcp_test_denoiser_fails("{name: gauss, sigma: -1}",
+                            "job.yaml:1: gauss: sigma must be > 0");
     mcp_test_denoiser_fails("{name: gauss, sigma: 0}", "sigma must be > 0");
-    mcp_test_denoiser_fails("{name: gauss, sigma: abc}", "job.yaml:1: sigma must be a number (got "
-                                              "'abc')");
-    mcp_test_denoiser_fails("{name: gauss, radius: -2}", "gauss: radius must be in [0, 65536] px "
-                                              "(got -2)");
-    mcp_test_denoiser_fails("{name: gauss, radius: 2.5}", "radius must be an integer (got '2.5')");
-    mcp_test_denoiser_fails("{name: nlm, radius: 100}", "nlm: radius must be in [0, 64] (got 100)");
-    mcp_test_denoiser_fails("{name: nlm, patch_radius: -1}", "nlm: patch_radius must be in [0, 16]");
+    mcp_test_denoiser_fails("{name: gauss, sigma: abc}",
+                            "job.yaml:1: sigma must be a number (got "
+                            "'abc')");
+    mcp_test_denoiser_fails("{name: gauss, radius: -2}",
+                            "gauss: radius must be in [0, 65536] px "
+                            "(got -2)");
+    mcp_test_denoiser_fails("{name: gauss, radius: 2.5}",
+                            "radius must be an integer (got '2.5')");
+    mcp_test_denoiser_fails("{name: nlm, radius: 100}",
+                            "nlm: radius must be in [0, 64] (got 100)");
+    mcp_test_denoiser_fails("{name: nlm, patch_radius: -1}",
+                            "nlm: patch_radius must be in [0, 16]");
     mcp_test_denoiser_fails("{name: nlm, k_color: 0}", "nlm: k_color must be > 0");
     mcp_test_denoiser_fails("{name: nlm, epsilon: 0}", "nlm: epsilon must be > 0");
     mcp_test_denoiser_fails("{name: nlm, alpha: -1}", "nlm: alpha must be >= 0");
-    mcp_test_denoiser_fails("{name: nlm, sigma_albedo: -0.1}", "nlm: sigma_albedo must be >= 0");
+    mcp_test_denoiser_fails("{name: nlm, sigma_albedo: -0.1}",
+                            "nlm: sigma_albedo must be >= 0");
     mcp_test_denoiser_fails("{name: bilateral, sigma_spatial: -1}",
-                 "job.yaml:1: bilateral: sigma_spatial must be >= 0");
-    mcp_test_denoiser_fails("{name: nlm, use_variance: maybe}", "use_variance must be true or "
-                                                     "false (got 'maybe')");
-    mcp_test_denoiser_fails("{name: nlm, radius: [1, 2]}", "radius must be an integer, not a list");
+                            "job.yaml:1: bilateral: sigma_spatial must be >= 0");
+    mcp_test_denoiser_fails("{name: nlm, use_variance: maybe}",
+                            "use_variance must be true or "
+                            "false (got 'maybe')");
+    mcp_test_denoiser_fails("{name: nlm, radius: [1, 2]}",
+                            "radius must be an integer, not a list");
 
     mcp_denoiser *d = (mcp_denoiser *)&d;
-    assert_error_contains(mcp_denoiser_create_from_args("blur", NULL, 0, &d),
-                          "unknown denoiser 'blur' (known: gauss, nlm, bilateral, external");
+    assert_error_contains(
+        mcp_denoiser_create_from_args("blur", NULL, 0, &d),
+        "unknown denoiser 'blur' (known: gauss, nlm, bilateral, external");
     assert_null(d);
     assert_error_contains(mcp_denoiser_create_from_args(NULL, NULL, 0, &d),
                           "no denoiser named");

@@ -709,23 +709,30 @@ test_denoiser_kind(void **state)
     assert_memory_equal(c->data, e->data, (size_t)w * h * 3 * sizeof(float));
     mcp_denoiser_free(d);
     /* the weights from the environment, relative paths from base_dir */
+    const char *env = getenv("MCPOST_OIDN_WEIGHTS");
+    char *saved = env ? strdup(env) : NULL; /* the later tests read it */
     setenv("MCPOST_OIDN_WEIGHTS", path, 1);
     d = mcp_test_denoiser("unet");
     assert_int_equal(d->uses_normal, 1);
     mcp_denoiser_free(d);
     unsetenv("MCPOST_OIDN_WEIGHTS");
-    mcp_test_denoiser_fails("unet", "job.yaml:1: unet: no weights: give weights: PATH (--weights "
-                         "PATH) or set MCPOST_OIDN_WEIGHTS");
-    mcp_test_denoiser_fails("{name: unet, weights: absent.tza}", "job.yaml:1: absent.tza");
+    mcp_test_denoiser_fails("unet",
+                            "job.yaml:1: unet: no weights: give weights: PATH (--weights "
+                            "PATH) or set MCPOST_OIDN_WEIGHTS");
+    if (saved) setenv("MCPOST_OIDN_WEIGHTS", saved, 1);
+    free(saved);
+    mcp_test_denoiser_fails("{name: unet, weights: absent.tza}",
+                            "job.yaml:1: absent.tza");
     snprintf(yaml, sizeof yaml, "{name: unet, weights: '%s',\n input_scale: -2}", path);
-    mcp_test_denoiser_fails(yaml, "job.yaml:2: unet: input_scale must be auto or a number > 0 (got -2)");
+    mcp_test_denoiser_fails(
+        yaml, "job.yaml:2: unet: input_scale must be auto or a number > 0 (got -2)");
     snprintf(yaml, sizeof yaml, "{name: unet, weights: '%s', input_scale: bright}", path);
     mcp_test_denoiser_fails(yaml, "input_scale");
     mcp_test_denoiser_fails("{name: unet, weight: x.tza}", "weight");
     mcp_node *node = NULL;
-    assert_int_equal(mcp_yaml_parse_string("{name: unet, weights: tiny_jvp.tza}", "job.yaml",
-                                           &node),
-                     0);
+    assert_int_equal(
+        mcp_yaml_parse_string("{name: unet, weights: tiny_jvp.tza}", "job.yaml", &node),
+        0);
     char dir[4096];
     snprintf(dir, sizeof dir, "%s", path);
     *strrchr(dir, '/') = '\0';

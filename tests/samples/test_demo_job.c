@@ -18,8 +18,7 @@ static const cJSON *
 item(const cJSON *o, const char *key)
 {
     const cJSON *v = cJSON_GetObjectItemCaseSensitive(o, key);
-    if (!v)
-        fail_msg("report.json: no '%s'", key);
+    if (!v) fail_msg("report.json: no '%s'", key);
     return v;
 }
 
@@ -46,7 +45,8 @@ mse_of_files(const char *dump_path, const char *ref_path)
     for (int y = 0; y < c->height; y++)
         for (int x = 0; x < c->width; x++)
             for (int k = 0; k < 3; k++) {
-                double d = (double)mcp_image_px(c, x, y)[k] - mcp_image_px(ref, x, y)[ri[k]];
+                double d =
+                    (double)mcp_image_px(c, x, y)[k] - mcp_image_px(ref, x, y)[ri[k]];
                 s += d * d;
             }
     double n = 3.0 * c->width * c->height;
@@ -64,8 +64,7 @@ test_demo_job(void **state)
     snprintf(args, sizeof args, "run '%s/samples/jobs/demo.yaml' --quiet --output '%s'",
              MCP_TEST_SOURCE_DIR, dir);
     int rc = mcp_test_run_mcpost(args, out, sizeof out, err, sizeof err);
-    if (rc != 0)
-        fail_msg("mcpost %s: exit %d: %s", args, rc, err);
+    if (rc != 0) fail_msg("mcpost %s: exit %d: %s", args, rc, err);
     snprintf(report, sizeof report, "%s/report.json", dir);
     char *text = mcp_test_read_text(report);
     cJSON *json = cJSON_Parse(text);
@@ -82,10 +81,9 @@ test_demo_job(void **state)
 
     /* metrics: the 64-spp render against the reference */
     const cJSON *metrics = cJSON_GetArrayItem(sections, 3);
-    double want = mse_of_files(MCP_TEST_SOURCE_DIR
-                               "/samples/fixtures/cornell/series/cornell_spp0064.exr",
-                               MCP_TEST_SOURCE_DIR
-                               "/samples/fixtures/cornell/cornell_reference.exr");
+    double want = mse_of_files(
+        MCP_TEST_SOURCE_DIR "/samples/fixtures/cornell/series/cornell_spp0064.exr",
+        MCP_TEST_SOURCE_DIR "/samples/fixtures/cornell/cornell_reference.exr");
     assert_close(number(metrics, "mse"), want, 1e-9, 0);
 
     /* estimate: a decision and an error CDF value */
@@ -99,7 +97,8 @@ test_demo_job(void **state)
     assert_int_equal((int)number(final, "spp"), 1024);
     double noisy = number(item(final, "noisy"), "mse"),
            curves = number(item(final, "curves"), "mse");
-    print_message("demo: blend at 1024 spp: curves MSE %.3g, noisy %.3g\n", curves, noisy);
+    print_message("demo: blend at 1024 spp: curves MSE %.3g, noisy %.3g\n", curves,
+                  noisy);
     assert_true(curves <= noisy);
 
     /* perceptual: lower pMSE than the candidates' mean, energy falling */
