@@ -27,19 +27,6 @@ typedef struct {
 
 static const char *const unet_keys[] = {"weights", "input_scale", NULL};
 
-/* The features the net reads must be there; they are not optional for these weights. */
-static int
-check_features(const mcp__unet *net, const mcp_denoise_input *in)
-{
-    if (net->ic >= 6 && !in->albedo)
-        return mcp_error("unet: these weights (%d input channels) need the albedo",
-                         net->ic);
-    if (net->ic >= 9 && !in->normal)
-        return mcp_error("unet: these weights (%d input channels) need the normal",
-                         net->ic);
-    return 0;
-}
-
 static int
 unet_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
          const mcp_denoise_tangent *t, int n, mcp_image **primal, mcp_image **out)
@@ -48,9 +35,8 @@ unet_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
     if (primal) *primal = NULL;
     for (int k = 0; k < n && out; k++)
         out[k] = NULL;
-    if (mcp__denoise_check_input("unet", at) ||
-        mcp__denoise_check_tangents("unet", at, t, n) || check_features(s->net, at))
-        return -1;
+    /* the features these weights need, and the tangents, mcp__unet_run checks */
+    if (mcp__denoise_check_input("unet", at)) return -1;
     if (n > 0 && !out) return mcp_error("unet: no room for %d tangent outputs", n);
     return mcp__unet_run(s->net, at->color, at->albedo, at->normal, s->input_scale, t, n,
                          primal, out);

@@ -595,13 +595,16 @@ mcp__unet_autoexposure(const mcp_image *color, int v2)
     return kept ? 0.18 / exp2(log_sum / kept) : 1.0;
 }
 
+/* The features the weights read must be given: they are not optional for them. */
 static int
-check_aux(const char *what, const mcp_image *color, const mcp_image *aux, int needed)
+check_aux(const mcp__unet *net, const char *what, const mcp_image *color,
+          const mcp_image *aux, int needed)
 {
     if (!needed)
         return 0;
     if (!aux)
-        return mcp_error("unet: these weights need the %s", what);
+        return mcp_error("unet: these weights (%d input channels) need the %s", net->ic,
+                         what);
     if (aux->channels < 3)
         return mcp_error("%s: unet %s needs 3 channels (got %d)", aux->source, what,
                          aux->channels);
@@ -700,21 +703,11 @@ mcp__unet_run(const mcp__unet *net, const mcp_image *color, const mcp_image *alb
         jt[k] = NULL;
     if (!color || color->channels < 3)
         return mcp_error("unet: colour needs 3 channels");
-    if (check_aux("albedo", color, albedo, net->ic >= 6) ||
-        check_aux("normal", color, normal, net->ic >= 9))
+    const mcp_denoise_input at = {color, albedo, normal, NULL};
+    if (check_aux(net, "albedo", color, albedo, net->ic >= 6) ||
+        check_aux(net, "normal", color, normal, net->ic >= 9) ||
+        mcp__denoise_check_tangents("unet", &at, t, n))
         return -1;
-    for (int k = 0; k < n; k++) {
-        if (!t[k].color)
-            return mcp_error("unet: tangent %d has no colour part", k);
-        const mcp_image *parts[3] = {t[k].color, t[k].albedo, t[k].normal};
-        for (int i = 0; i < 3; i++)
-            if (parts[i] && (parts[i]->channels < 3 ? mcp_error("%s: has %d channels, "
-                                                                "not 3",
-                                                                parts[i]->source,
-                                                                parts[i]->channels)
-                                                    : !mcp_image_same_size(color, parts[i])))
-                return mcp_error_prefix("unet: tangent %d: ", k);
-    }
     /* The exposure is a constant of F, also for its JVP: it is computed once on the
      * primal colour, as a renderer fixes the exposure of a frame (notes 3.7). */
     const double scale_in =
