@@ -44,15 +44,8 @@ static const char *const external_keys[] = {"command", "format", "delta", "workd
 static int
 append(char **buf, size_t *len, size_t *cap, const char *s, size_t n, int quote)
 {
-    size_t need = *len + (quote ? 4 * n + 3 : n) + 1;
-    if (need > *cap) {
-        size_t c = need * 2;
-        char *b = realloc(*buf, c);
-        if (!b)
-            return mcp_error("out of memory (%zu bytes)", c);
-        *buf = b;
-        *cap = c;
-    }
+    if (mcp__buf_reserve(buf, cap, *len + (quote ? 4 * n + 3 : n) + 1))
+        return -1;
     char *p = *buf + *len;
     if (quote)
         *p++ = '\'';

@@ -86,15 +86,7 @@ is_key(const char *s, size_t len)
 static int
 append_quoted(char **buf, size_t *len, size_t *cap, const char *s)
 {
-    size_t need = *len + 2 * strlen(s) + 3;
-    if (need > *cap) {
-        size_t c = need * 2;
-        char *b = realloc(*buf, c);
-        if (!b)
-            return mcp_error("out of memory (%zu bytes)", c);
-        *buf = b;
-        *cap = c;
-    }
+    if (mcp__buf_reserve(buf, cap, *len + 2 * strlen(s) + 3)) return -1;
     char *p = *buf + *len;
     *p++ = '"';
     for (; *s; s++) {
@@ -111,14 +103,7 @@ append_quoted(char **buf, size_t *len, size_t *cap, const char *s)
 static int
 append_text(char **buf, size_t *len, size_t *cap, const char *s, size_t n)
 {
-    if (*len + n + 1 > *cap) {
-        size_t c = (*len + n + 1) * 2;
-        char *b = realloc(*buf, c);
-        if (!b)
-            return mcp_error("out of memory (%zu bytes)", c);
-        *buf = b;
-        *cap = c;
-    }
+    if (mcp__buf_reserve(buf, cap, *len + n + 1)) return -1;
     memcpy(*buf + *len, s, n);
     *len += n;
     (*buf)[*len] = '\0';
@@ -178,6 +163,18 @@ destroy_plain(mcp_denoiser *self)
 }
 
 /* ---- helpers for the kinds (internal.h) ---- */
+
+int
+mcp__buf_reserve(char **buf, size_t *cap, size_t need)
+{
+    if (need <= *cap) return 0;
+    size_t c = need * 2;
+    char *b = realloc(*buf, c);
+    if (!b) return mcp_error("out of memory (%zu bytes)", c);
+    *buf = b;
+    *cap = c;
+    return 0;
+}
 
 int
 mcp__denoise_check_input(const char *who, const mcp_denoise_input *in)
