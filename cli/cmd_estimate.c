@@ -458,7 +458,7 @@ static const char usage[] =
     "  error. Several DUMPs, or --series, make a progressive series: then it reports\n"
     "  the first spp at which each tau is reached (and the true one with --ref).\n"
     "\n"
-    "  --denoiser NAME          a built-in denoiser (see `mcpost denoise --list`)\n"
+    "  --denoiser NAME          the denoiser (see `mcpost denoise --list`)\n"
     MCP_CLI_DENOISER_USAGE(" ")
     "  --metric NAME            relse, relse-perceptual or se [relse]\n"
     "  --tau T                  error threshold [0.01]\n"
