@@ -11,6 +11,81 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
+
+/* The pick at one pixel: lo, the candidate with the largest luminance <= s, and hi,
+ * the one with the smallest > s (the first on ties); lo when s - l_lo < B (l_hi -
+ * l_lo), else hi; where only one exists, it; 0 when none does (NaNs: reported by the
+ * caller). l[j * stride] are the candidates' luminances, B the threshold. */
+static int
+pick_one(const float *l, size_t stride, int m, float s, float threshold)
+{
+    int lo = -1, hi = -1;
+    float l_lo = -INFINITY, l_hi = INFINITY;
+    for (int j = 0; j < m; j++) {
+        float v = l[(size_t)j * stride];
+        int le = v <= s, a = le & (v > l_lo), b = !le & (v < l_hi);
+        lo = a ? j : lo, l_lo = a ? v : l_lo;
+        hi = b ? j : hi, l_hi = b ? v : l_hi;
+    }
+    if (lo < 0) return hi < 0 ? 0 : hi;
+    if (hi < 0) return lo;
+    return s - l_lo < threshold * (l_hi - l_lo) ? lo : hi;
+}
+
+#ifdef __SSE2__
+static inline __m128
+select_ps(__m128 mask, __m128 a, __m128 b)
+{
+    return _mm_or_ps(_mm_and_ps(mask, a), _mm_andnot_ps(mask, b));
+}
+
+static inline __m128i
+select_epi32(__m128i mask, __m128i a, __m128i b)
+{
+    return _mm_or_si128(_mm_and_si128(mask, a), _mm_andnot_si128(mask, b));
+}
+#endif
+
+/* pick_one for a row: ls[x] the surrogate's luminances, thr[x] the thresholds. Four
+ * pixels at a time in SSE2, with masks for the comparisons (which candidates bracket
+ * s, and the threshold test, are coin tosses a branch would mispredict), the same
+ * float operations as pick_one. */
+static void
+pick_row(const float *lum, size_t stride, int m, const float *ls, const float *thr, int w,
+         int *pick)
+{
+    int x = 0;
+#ifdef __SSE2__
+    const __m128i none = _mm_set1_epi32(-1), zero = _mm_setzero_si128();
+    for (; x + 4 <= w; x += 4) {
+        __m128 s = _mm_loadu_ps(ls + x), l_lo = _mm_set1_ps(-INFINITY),
+               l_hi = _mm_set1_ps(INFINITY);
+        __m128i lo = none, hi = none;
+        for (int j = 0; j < m; j++) {
+            __m128 v = _mm_loadu_ps(lum + (size_t)j * stride + x);
+            __m128 le = _mm_cmple_ps(v, s);
+            __m128 a = _mm_and_ps(le, _mm_cmpgt_ps(v, l_lo));
+            __m128 b = _mm_andnot_ps(le, _mm_cmplt_ps(v, l_hi));
+            __m128i jv = _mm_set1_epi32(j);
+            l_lo = select_ps(a, v, l_lo), l_hi = select_ps(b, v, l_hi);
+            lo = select_epi32(_mm_castps_si128(a), jv, lo);
+            hi = select_epi32(_mm_castps_si128(b), jv, hi);
+        }
+        __m128 below = _mm_cmplt_ps(_mm_sub_ps(s, l_lo),
+                                    _mm_mul_ps(_mm_loadu_ps(thr + x), _mm_sub_ps(l_hi, l_lo)));
+        __m128i has_lo = _mm_cmpgt_epi32(lo, none), no_hi = _mm_cmplt_epi32(hi, zero);
+        __m128i take_lo =
+            _mm_and_si128(has_lo, _mm_or_si128(no_hi, _mm_castps_si128(below)));
+        __m128i upper = _mm_andnot_si128(no_hi, hi); /* hi, or 0 without one */
+        _mm_storeu_si128((__m128i *)(pick + x), select_epi32(take_lo, lo, upper));
+    }
+#endif
+    for (; x < w; x++)
+        pick[x] = pick_one(lum + x, stride, m, ls[x], thr[x]);
+}
 
 int
 mcp_perc_dither(const mcp_image *const *cands, int m, const mcp_image *surrogate,
@@ -39,52 +114,42 @@ mcp_perc_dither(const mcp_image *const *cands, int m, const mcp_image *surrogate
     int failed = 0;
 #pragma omp parallel reduction(+ : n_bad, failed) if ((size_t)w * h >= 16384)
     {
-        /* luminances, with sentinels -inf (no lower yet) at m and +inf at m + 1 */
-        float *lum = malloc(((size_t)m + 2) * sizeof *lum);
-        failed += !lum;
-#pragma omp for
-        for (int y = 0; y < h; y++)
-            for (int x = 0; x < w && lum; x++) {
-                const float *sp = mcp_image_px(surrogate, x, y);
-                n_bad += !isfinite(sp[srgb[0]]) + !isfinite(sp[srgb[1]]) +
-                         !isfinite(sp[srgb[2]]);
-                float s =
-                    mcp_luminance(mcp__tone(tm, sp[srgb[0]]), mcp__tone(tm, sp[srgb[1]]),
-                                  mcp__tone(tm, sp[srgb[2]]));
-                lum[m] = -INFINITY, lum[m + 1] = INFINITY;
-                int lo = m, hi = m + 1;
-                /* index updates by masks, not branches: which candidate brackets s is
-                 * data-dependent, and mispredictions would dominate the scan */
-                for (int j = 0; j < m; j++) {
-                    const float *cp = mcp_image_px(cands[j], x, y);
-                    const int *k = rgb + 3 * j;
-                    n_bad +=
-                        !isfinite(cp[k[0]]) + !isfinite(cp[k[1]]) + !isfinite(cp[k[2]]);
-                    float l =
-                        mcp_luminance(mcp__tone(tm, cp[k[0]]), mcp__tone(tm, cp[k[1]]),
-                                      mcp__tone(tm, cp[k[2]]));
-                    lum[j] = l;
-                    int le = l <= s, a = le & (l > lum[lo]), b = !le & (l < lum[hi]);
-                    lo += (j - lo) & -a;
-                    hi += (j - hi) & -b;
-                }
-                int pick;
-                if (lo == m) /* only an upper one (or NaNs everywhere: reported below) */
-                    pick = hi == m + 1 ? 0 : hi;
-                else if (hi == m + 1)
-                    pick = lo;
-                else {
-                    int take_lo =
-                        s - lum[lo] < mcp__mask_at(mask, x, y) * (lum[hi] - lum[lo]);
-                    pick = hi + ((lo - hi) & -take_lo);
-                }
-                const float *cp = mcp_image_px(cands[pick], x, y);
-                float *o = r.image->data + ((size_t)y * w + x) * 3;
-                o[0] = cp[rgb[3 * pick]], o[1] = cp[rgb[3 * pick + 1]];
-                o[2] = cp[rgb[3 * pick + 2]];
-                r.index->data[(size_t)y * w + x] = (float)pick;
+        /* a row at a time: T and luminance of the surrogate (lum[m]) and of every
+         * candidate (lum[j]) in contiguous loops, then the selection per pixel */
+        float *tone = malloc((size_t)w * 3 * sizeof *tone);
+        /* rows apart by an odd number of cache lines: at a power-of-two distance the
+         * loads of one pixel's luminances would contend for the same cache set */
+        size_t lstride = ((size_t)w + 15) / 16 * 16 + 16;
+        float *lum = malloc(((size_t)m + 1) * lstride * sizeof *lum);
+        float *thr = malloc((size_t)w * sizeof *thr);
+        int *pick = malloc((size_t)w * sizeof *pick);
+        int ok = tone && lum && thr && pick;
+        failed += !ok;
+#pragma omp for schedule(static)
+        for (int y = 0; y < h; y++) {
+            if (!ok) continue;
+            for (int j = 0; j <= m; j++) {
+                const mcp_image *img = j < m ? cands[j] : surrogate;
+                n_bad += mcp__tone_row(img, j < m ? rgb + 3 * j : srgb, y, tm, tone);
+                float *l = lum + (size_t)j * lstride;
+                for (int x = 0; x < w; x++)
+                    l[x] = mcp_luminance(tone[3 * x], tone[3 * x + 1], tone[3 * x + 2]);
             }
-        free(lum);
+            /* the mask's row, tiled across the image */
+            const float *brow = mcp_image_px(mask, 0, y % mask->height);
+            for (int x = 0, mx = 0; x < w; x++, mx = mx + 1 == mask->width ? 0 : mx + 1)
+                thr[x] = brow[mx * mask->pixel_stride];
+            pick_row(lum, lstride, m, lum + (size_t)m * lstride, thr, w, pick);
+            float *o = r.image->data + (size_t)y * w * 3;
+            float *idx = r.index->data + (size_t)y * w;
+            for (int x = 0; x < w; x++) {
+                const float *cp = mcp_image_px(cands[pick[x]], x, y);
+                const int *k = rgb + 3 * pick[x];
+                o[3 * x] = cp[k[0]], o[3 * x + 1] = cp[k[1]], o[3 * x + 2] = cp[k[2]];
+                idx[x] = (float)pick[x];
+            }
+        }
+        free(tone), free(lum), free(thr), free(pick);
     }
     if (failed) {
         mcp_error("dither: out of memory");

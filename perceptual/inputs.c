@@ -4,6 +4,7 @@
  * outputs (the chosen candidates, the index map). */
 #include "internal.h"
 
+#include <float.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -235,6 +236,38 @@ mcp__index_image(int w, int h, const int *choice, mcp_image **out)
         for (int x = 0; x < w; x++)
             d[(size_t)y * w + x] = (float)choice[(size_t)y * w + x];
     return 0;
+}
+
+/* Packed RGB rows, the common case, are one contiguous (vectorised) loop. */
+long
+mcp__tone_row(const mcp_image *img, const int ch[3], int y, mcp_tonemap tm, float *dst)
+{
+    int w = img->width;
+    long bad = 0;
+    const float *src = mcp_image_px(img, 0, y);
+    if (img->pixel_stride == 3 && ch[0] == 0 && ch[1] == 1 && ch[2] == 2) {
+        /* omp simd: -O2's cheap vectoriser leaves these scalar */
+#pragma omp simd reduction(+ : bad)
+        for (int i = 0; i < 3 * w; i++)
+            bad += !(fabsf(src[i]) <= FLT_MAX);
+        if (tm == MCP_TONEMAP_CLAMP) /* unswitched, so that it vectorises */
+#pragma omp simd
+            for (int i = 0; i < 3 * w; i++)
+                dst[i] = src[i] > 0.0f ? (src[i] < 1.0f ? src[i] : 1.0f) : 0.0f;
+        else if (tm == MCP_TONEMAP_NONE)
+            memcpy(dst, src, (size_t)w * 3 * sizeof *dst);
+        else
+            for (int i = 0; i < 3 * w; i++)
+                dst[i] = mcp__tone(tm, src[i]);
+        return bad;
+    }
+    for (int x = 0; x < w; x++)
+        for (int c = 0; c < 3; c++) {
+            float v = src[x * img->pixel_stride + ch[c]];
+            bad += !isfinite(v);
+            dst[x * 3 + c] = mcp__tone(tm, v);
+        }
+    return bad;
 }
 
 int

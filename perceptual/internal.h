@@ -207,6 +207,11 @@ double mcp__state_swap_delta(const mcp__perc_state *s, int xi, int yi, int xj, i
 /* T of packed linear [n][3] values into a new float buffer. */
 int mcp__tone_rgb(const float *rgb, size_t n, mcp_tonemap tm, float **out);
 
+/* T of row y of img's channels ch (R, G, B) into dst[x][3]; returns the count of
+ * non-finite values. */
+long mcp__tone_row(const mcp_image *img, const int ch[3], int y, mcp_tonemap tm,
+                   float *dst);
+
 /* A one-channel image "index" holding choice[n]. */
 int mcp__index_image(int w, int h, const int *choice, mcp_image **out);
 

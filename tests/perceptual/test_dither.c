@@ -1,10 +1,12 @@
 /* test_dither.c: perceptual/dither.c -- threshold dithering against results worked by
  * hand on a tiny image with a given mask (lower/upper choice by the threshold, only a
  * lower or only an upper candidate, ties, the mask tiled), the generated blue-noise
- * mask in use, and the error paths. */
+ * mask in use, the same as a plain reimplementation for 1-6 candidates with every
+ * thread count, and the error paths. */
 #include "perc_testing.h"
 
 #include <math.h>
+#include <omp.h>
 
 static mcp_image *
 grey_row(int w, const float *v)
@@ -80,6 +82,67 @@ test_generated_mask(void **state)
     perc_case_free(&c);
 }
 
+/* A plain per-pixel reimplementation (sort-free bracket, tiled mask) on a 45x45
+ * procedural input for 1 to 6 candidates and a 7x5 mask (so that neither the rows
+ * nor the mask are multiples of the library's four-pixel groups), indices compared
+ * exactly, with one and two threads. */
+static void
+test_against_plain(void **state)
+{
+    (void)state;
+    int w = 45, h = 45, mw = 7, mh = 5;
+    mcp_image *mask = mcp_test_constant(mw, mh, 1, 0.0f, NULL);
+    for (int i = 0; i < mw * mh; i++)
+        mask->data[i] = (float)((i * 37 % 35) / 35.0);
+    int threads = omp_get_max_threads();
+    for (int m = 1; m <= 6; m++) {
+        perc_case c;
+        perc_procedural(w, m, 1, 40 + m, 1, &c);
+        mcp_perc_options o = mcp_perc_defaults();
+        o.mask_image = mask;
+        for (int nt = 1; nt <= 2; nt++) {
+            omp_set_num_threads(nt);
+            mcp_perc_result r;
+            assert_int_equal(mcp_perc_dither(perc_cands(&c), m, c.truth, &o, &r), 0);
+            for (int y = 0; y < h; y++)
+                for (int x = 0; x < w; x++) {
+                    const float *sp = mcp_image_px(c.truth, x, y);
+                    float s = mcp_luminance(mcp_tonemap_value(MCP_TONEMAP_CLAMP, sp[0]),
+                                            mcp_tonemap_value(MCP_TONEMAP_CLAMP, sp[1]),
+                                            mcp_tonemap_value(MCP_TONEMAP_CLAMP, sp[2]));
+                    int lo = -1, hi = -1;
+                    float l[6];
+                    for (int j = 0; j < m; j++) {
+                        const float *cp = mcp_image_px(c.cand[j], x, y);
+                        l[j] = mcp_luminance(mcp_tonemap_value(MCP_TONEMAP_CLAMP, cp[0]),
+                                             mcp_tonemap_value(MCP_TONEMAP_CLAMP, cp[1]),
+                                             mcp_tonemap_value(MCP_TONEMAP_CLAMP, cp[2]));
+                        if (l[j] <= s && (lo < 0 || l[j] > l[lo])) lo = j;
+                        if (l[j] > s && (hi < 0 || l[j] < l[hi])) hi = j;
+                    }
+                    int want;
+                    if (lo < 0)
+                        want = hi < 0 ? 0 : hi;
+                    else if (hi < 0)
+                        want = lo;
+                    else
+                        want = s - l[lo] < mask->data[(y % mh) * mw + x % mw] *
+                                               (l[hi] - l[lo])
+                                   ? lo
+                                   : hi;
+                    if ((int)r.index->data[(size_t)y * w + x] != want)
+                        fail_msg("M = %d, %d threads, pixel %d, %d: %d, plain %d", m, nt,
+                                 x, y, (int)r.index->data[(size_t)y * w + x], want);
+                }
+            perc_assert_from_candidates(r.image, r.index, perc_cands(&c), m);
+            mcp_perc_result_free(&r);
+        }
+        perc_case_free(&c);
+    }
+    omp_set_num_threads(threads);
+    mcp_image_free(mask);
+}
+
 static void
 test_errors(void **state)
 {
@@ -111,6 +174,7 @@ main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_hand),
         cmocka_unit_test(test_generated_mask),
+        cmocka_unit_test(test_against_plain),
         cmocka_unit_test(test_errors),
     };
     return cmocka_run_group_tests_name("perceptual/dither", tests, NULL, NULL);
