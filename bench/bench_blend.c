@@ -197,7 +197,7 @@ main(int argc, char **argv)
     struct {
         const char *name;
         bench_fn fn;
-    } runs[] = {{"step: filtering + curves + weights + blend", run_step},
+    } runs[] = {{"step, fresh memory each call (default malloc)", run_step},
                 {"  filtering of v and SURE (Gaussian 11x11)", run_prepare},
                 {"curve image on the fly (mcp_blend_curves)", run_curves},
                 {"weights from a curve image", run_weights},
@@ -216,15 +216,18 @@ main(int argc, char **argv)
     }
 #ifdef __GLIBC__
     /* Each step allocates four 1080p images (~25 MB each): by default glibc maps them
-     * fresh and returns them on free, so every call pays ~25k page faults. A renderer
-     * that blends every iteration sees the steady state below once the allocator keeps
-     * freed memory (the same as reusing buffers). */
+     * fresh and returns them on free, so every call pays ~25k page faults. mcpost keeps
+     * freed memory (cli/main.c), as a renderer that blends every iteration would reuse
+     * its buffers: that steady state is the figure the target is for. */
     if (rc == 0 && mallopt(M_MMAP_THRESHOLD, 1 << 30) &&
         mallopt(M_TRIM_THRESHOLD, INT32_MAX)) {
         double wall, cpu;
-        if (median_ms(run_step, &c, repeats, &wall, &cpu) == 0)
-            printf("  %-46s %9.2f %9.2f\n", "step, freed memory kept (no page faults)",
+        if (median_ms(run_step, &c, repeats, &wall, &cpu) == 0) {
+            printf("  %-46s %9.2f %9.2f\n", "step, freed memory kept (as mcpost runs)",
                    wall, cpu);
+            printf("\ntarget (1920x1080, 2 cores): step %.1f ms <= 50 ms: %s\n", wall,
+                   wall <= 50.0 ? "met" : "MISSED");
+        }
     }
 #endif
     mcp_blend_estimates_free(&c.est);

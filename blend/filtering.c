@@ -26,6 +26,9 @@
 #include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 static const char *const RGB_NAMES[3] = {"R", "G", "B"};
 
@@ -79,6 +82,16 @@ mcp__blend_mean(const mcp__rgb *in, double *mean)
         if (flat) {
             const float *p = mcp_image_px(img, 0, y);
             int n = 3 * w, i = 0;
+#ifdef __SSE2__
+            /* the same four sums, two per register */
+            __m128d s01 = _mm_setzero_pd(), s23 = _mm_setzero_pd();
+            for (; i + 4 <= n; i += 4) {
+                __m128 v = _mm_loadu_ps(p + i);
+                s01 = _mm_add_pd(s01, _mm_cvtps_pd(v));
+                s23 = _mm_add_pd(s23, _mm_cvtps_pd(_mm_movehl_ps(v, v)));
+            }
+            _mm_storeu_pd(s, s01), _mm_storeu_pd(s + 2, s23);
+#endif
             for (; i + 4 <= n; i += 4)
                 for (int j = 0; j < 4; j++)
                     s[j] += p[i + j];

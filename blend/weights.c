@@ -9,6 +9,9 @@
 
 #include <math.h>
 #include <string.h>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 static double
 mix(double spp, double n, double d, double w)
@@ -168,29 +171,75 @@ mcp_blend_result_free(mcp_blend_result *r)
     mcp_blend_estimates_free(&r->est);
 }
 
-/* One row of the default on-the-fly blend, in float (the images are float):
+/* One value of the default on-the-fly blend, in float (the images are float):
  * W = K sqrt(v / SURE) capped, and r = n + rho (d - n) with rho = W / (K + W)
- * = 1 / (1 + K / W), which also gives d at W = inf and n at W = 0. */
+ * = 1 / (1 + K / W), which also gives d at W = inf and n at W = 0. *s gets the
+ * negative-SURE rule (fused here to save a pass). */
+static inline void
+sqrt_form_value(float spp, float cap, float zero_w, int magnitude, float v, float *s,
+                float nv, float dv, float *wd, float *rd)
+{
+    float sv = *s;
+    if (sv < 0) *s = sv = magnitude ? -sv : 0.0f;
+    float wt = sv > 0 ? spp * sqrtf(v / sv) : INFINITY;
+    wt = wt < cap ? wt : cap;
+    if (!(v > 0) || !(v < INFINITY)) wt = zero_w; /* no curve: an all-black value */
+    float rho = 1.0f / (1.0f + spp / wt);
+    *wd = wt;
+    *rd = rho == 1.0f ? dv : nv + rho * (dv - nv);
+}
+
+/* A row of sqrt_form_value. Where the noisy and denoised rows are packed R, G, B (as
+ * the estimates are), four values at a time in SSE with the same float operations
+ * (sqrtps and divps round as sqrtf and / do; minps and the masks keep the scalar
+ * code's NaN cases), so the figures do not depend on the path. */
 static void
 sqrt_form_row(const mcp__otf *otf, double black, const float *vr, float *sr,
               int magnitude, const mcp_image *noisy, const int *nc, const mcp_image *den,
               const int *dc, int y, float *wd, float *rd)
 {
     const float spp = (float)otf->spp, cap = (float)otf->cap, zero_w = (float)black;
-    for (int x = 0; x < noisy->width; x++) {
-        const float *np = mcp_image_px(noisy, x, y), *dp = mcp_image_px(den, x, y);
-        for (int k = 0; k < 3; k++) {
-            float v = vr[3 * x + k], s = sr[3 * x + k];
-            if (s < 0) /* the negative-SURE rule, fused here to save a pass */
-                sr[3 * x + k] = s = magnitude ? -s : 0.0f;
-            float wt = s > 0 ? spp * sqrtf(v / s) : INFINITY;
-            wt = wt < cap ? wt : cap;
-            if (!(v > 0) || !(v < INFINITY))
-                wt = zero_w; /* no curve: an all-black value */
-            float rho = 1.0f / (1.0f + spp / wt), nv = np[nc[k]], dv = dp[dc[k]];
-            wd[3 * x + k] = wt;
-            rd[3 * x + k] = rho == 1.0f ? dv : nv + rho * (dv - nv);
+    int w = noisy->width, i = 0, n3 = 3 * w;
+    int packed = noisy->pixel_stride == 3 && den->pixel_stride == 3 && nc[0] == 0 &&
+                 nc[1] == 1 && nc[2] == 2 && dc[0] == 0 && dc[1] == 1 && dc[2] == 2;
+    if (packed) {
+        const float *np = mcp_image_px(noisy, 0, y), *dp = mcp_image_px(den, 0, y);
+#ifdef __SSE2__
+        const __m128 k = _mm_set1_ps(spp), kcap = _mm_set1_ps(cap),
+                     kzero = _mm_set1_ps(zero_w), one = _mm_set1_ps(1.0f),
+                     inf = _mm_set1_ps(INFINITY), zero = _mm_setzero_ps();
+        for (; i + 4 <= n3; i += 4) {
+            __m128 v = _mm_loadu_ps(vr + i), sv = _mm_loadu_ps(sr + i);
+            __m128 neg = _mm_cmplt_ps(sv, zero);
+            if (_mm_movemask_ps(neg)) {
+                __m128 fixed = magnitude ? _mm_sub_ps(zero, sv) : zero;
+                sv = _mm_or_ps(_mm_and_ps(neg, fixed), _mm_andnot_ps(neg, sv));
+                _mm_storeu_ps(sr + i, sv);
+            }
+            __m128 pos = _mm_cmpgt_ps(sv, zero);
+            __m128 wt = _mm_mul_ps(k, _mm_sqrt_ps(_mm_div_ps(v, sv)));
+            wt = _mm_or_ps(_mm_and_ps(pos, wt), _mm_andnot_ps(pos, inf));
+            wt = _mm_min_ps(wt, kcap); /* wt < cap ? wt : cap, NaN -> cap */
+            __m128 curve = _mm_and_ps(_mm_cmpgt_ps(v, zero), _mm_cmplt_ps(v, inf));
+            wt = _mm_or_ps(_mm_and_ps(curve, wt), _mm_andnot_ps(curve, kzero));
+            __m128 rho = _mm_div_ps(one, _mm_add_ps(one, _mm_div_ps(k, wt)));
+            __m128 nv = _mm_loadu_ps(np + i), dv = _mm_loadu_ps(dp + i);
+            __m128 mixed = _mm_add_ps(nv, _mm_mul_ps(rho, _mm_sub_ps(dv, nv)));
+            __m128 all_d = _mm_cmpeq_ps(rho, one);
+            _mm_storeu_ps(wd + i, wt);
+            _mm_storeu_ps(rd + i, _mm_or_ps(_mm_and_ps(all_d, dv), _mm_andnot_ps(all_d, mixed)));
         }
+#endif
+        for (; i < n3; i++)
+            sqrt_form_value(spp, cap, zero_w, magnitude, vr[i], sr + i, np[i], dp[i], wd + i,
+                            rd + i);
+        return;
+    }
+    for (int x = 0; x < w; x++) {
+        const float *np = mcp_image_px(noisy, x, y), *dp = mcp_image_px(den, x, y);
+        for (int k = 0; k < 3; k++)
+            sqrt_form_value(spp, cap, zero_w, magnitude, vr[3 * x + k], sr + 3 * x + k,
+                            np[nc[k]], dp[dc[k]], wd + 3 * x + k, rd + 3 * x + k);
     }
 }
 
