@@ -41,7 +41,7 @@ typedef struct {
     float *ring;       /* RING slots of ring_row */
     double *below;     /* the scan's: error pushed down to this row */
     double *e;         /* the row's errors, a zero pixel at each end */
-    int *choice;       /* [h][w] */
+    int *choice;       /* RING rows of the scan's choices, [RING][w] */
     mcp_image *image, *index;
     long n_bad;
     atomic_int prepared, scanned; /* rows done by each side */
@@ -123,7 +123,7 @@ scan_row_m(diffusion_run *r, int y, int m)
     int w = r->w;
     size_t row3 = (size_t)w * 3;
     const float *slot = ring_row(r, y), *ts = slot + m * row3;
-    int *choice = r->choice + (size_t)y * w;
+    int *choice = r->choice + (size_t)(y % RING) * w;
     double *below = r->below, *e = r->e + 3; /* e[-1] and e[w] stay zero */
     int x0 = y % 2 ? w - 1 : 0, dx = y % 2 ? -1 : 1;
 #ifdef __SSE2__
@@ -203,7 +203,7 @@ static void
 write_row(diffusion_run *r, int y)
 {
     int w = r->w;
-    const int *choice = r->choice + (size_t)y * w;
+    const int *choice = r->choice + (size_t)(y % RING) * w;
     float *img = r->image->data + (size_t)y * w * 3, *idx = r->index->data + (size_t)y * w;
     for (int x = 0; x < w; x++) {
         int j = choice[x];
@@ -233,14 +233,15 @@ run_preparer(diffusion_run *r)
 {
     int written = 0;
     for (int y = 0; y < r->h; y++) {
-        /* slot y % RING is free once the scan has finished row y - RING */
-        while (atomic_load_explicit(&r->scanned, memory_order_acquire) < y - RING + 1) {
-            int done = atomic_load_explicit(&r->scanned, memory_order_acquire);
-            if (written < done)
-                write_row(r, written++);
-            else
-                wait_for(&r->scanned, y - RING + 1);
+        /* slot y % RING is free once the scan has finished row y - RING and that row
+         * is written out (the scan reuses its choices' slot for row y) */
+        while (written < y - RING + 1) {
+            wait_for(&r->scanned, written + 1);
+            write_row(r, written++);
         }
+        /* meanwhile, what the scan has finished */
+        while (written < atomic_load_explicit(&r->scanned, memory_order_acquire))
+            write_row(r, written++);
         prepare_row(r, y);
         atomic_store_explicit(&r->prepared, y + 1, memory_order_release);
     }
@@ -293,7 +294,7 @@ mcp_perc_error_diffusion(const mcp_image *const *cands, int m, const mcp_image *
     r.ring = mcp_malloc((size_t)RING * (m + 1) * row3 * sizeof *r.ring);
     r.below = mcp_calloc(row3, sizeof *r.below);
     r.e = mcp_calloc(row3 + 6, sizeof *r.e);
-    r.choice = mcp_malloc((size_t)w * h * sizeof *r.choice);
+    r.choice = mcp_malloc((size_t)RING * w * sizeof *r.choice);
     mcp_perc_result res = {0};
     if (!rgb || !r.ring || !r.below || !r.e || !r.choice ||
         mcp__check_candidates(cands, m, NULL, rgb) || mcp_rgb_channels(surrogate, srgb) ||
