@@ -2,11 +2,13 @@
 # setup.sh: everything from a fresh Debian 12 machine to results.
 #
 #   ./setup.sh demo    install what is missing, build, run samples/jobs/demo.yaml
-#   ./setup.sh test    install what is missing, build (plain and ASan+UBSan), run all tests
+#   ./setup.sh test    install what is missing, build (plain and ASan+UBSan), run all tests,
+#                      and the SIMD modules' tests once more with their scalar code
 #   ./setup.sh build   install what is missing and build only
 #
-# Builds go to build/ (and build-asan/ for the sanitizer build). Set MCPOST_NO_ASAN=1
-# to skip the sanitizer build in `test`, MCPOST_JOBS to change the parallelism.
+# Builds go to build/ (build-asan/ for the sanitizer build, build-scalar/ for the one
+# with MCP_NO_SIMD, whose SSE2 loops fall back to their plain C). Set MCPOST_NO_ASAN=1
+# or MCPOST_NO_SCALAR=1 to skip those in `test`, MCPOST_JOBS to change the parallelism.
 set -euo pipefail
 cd "$(dirname "$0")"
 
@@ -58,6 +60,12 @@ test)
             LSAN_OPTIONS=suppressions=$PWD/tests/lsan.supp:print_suppressions=0 \
             UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
             run_tests build-asan
+    fi
+    if [ -z "${MCPOST_NO_SCALAR:-}" ]; then
+        # the portable code behind the SSE2 loops (blend, perceptual) gives the same
+        # results: their tests compare with plain reimplementations value for value
+        build build-scalar -DCMAKE_C_FLAGS=-DMCP_NO_SIMD -DMCPOST_BENCH=OFF
+        ctest --test-dir build-scalar --output-on-failure -j "$JOBS" -R '^(blend|perceptual)/'
     fi
     ;;
 build)

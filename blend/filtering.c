@@ -26,7 +26,7 @@
 #include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
-#ifdef __SSE2__
+#if defined(__SSE2__) && !defined(MCP_NO_SIMD)
 #include <emmintrin.h>
 #endif
 
@@ -82,7 +82,7 @@ mcp__blend_mean(const mcp__rgb *in, double *mean)
         if (flat) {
             const float *p = mcp_image_px(img, 0, y);
             int n = 3 * w, i = 0;
-#ifdef __SSE2__
+#if defined(__SSE2__) && !defined(MCP_NO_SIMD)
             /* the same four sums, two per register */
             __m128d s01 = _mm_setzero_pd(), s23 = _mm_setzero_pd();
             for (; i + 4 <= n; i += 4) {

@@ -9,7 +9,7 @@
 
 #include <math.h>
 #include <string.h>
-#ifdef __SSE2__
+#if defined(__SSE2__) && !defined(MCP_NO_SIMD)
 #include <emmintrin.h>
 #endif
 
@@ -204,7 +204,7 @@ sqrt_form_row(const mcp__otf *otf, double black, const float *vr, float *sr,
                  nc[1] == 1 && nc[2] == 2 && dc[0] == 0 && dc[1] == 1 && dc[2] == 2;
     if (packed) {
         const float *np = mcp_image_px(noisy, 0, y), *dp = mcp_image_px(den, 0, y);
-#ifdef __SSE2__
+#if defined(__SSE2__) && !defined(MCP_NO_SIMD)
         const __m128 k = _mm_set1_ps(spp), kcap = _mm_set1_ps(cap),
                      kzero = _mm_set1_ps(zero_w), one = _mm_set1_ps(1.0f),
                      inf = _mm_set1_ps(INFINITY), zero = _mm_setzero_ps();

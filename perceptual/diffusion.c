@@ -47,7 +47,7 @@ typedef struct {
     atomic_int prepared, scanned; /* rows done by each side */
 } diffusion_run;
 
-#ifdef __SSE2__
+#if defined(__SSE2__) && !defined(MCP_NO_SIMD)
 #include <emmintrin.h>
 
 /* two floats (any alignment) as doubles */
@@ -126,7 +126,7 @@ scan_row_m(diffusion_run *r, int y, int m)
     int *choice = r->choice + (size_t)(y % RING) * w;
     double *below = r->below, *e = r->e + 3; /* e[-1] and e[w] stay zero */
     int x0 = y % 2 ? w - 1 : 0, dx = y % 2 ? -1 : 1;
-#ifdef __SSE2__
+#if defined(__SSE2__) && !defined(MCP_NO_SIMD)
     /* SSE2 (every x86-64): channels 0-1 in one register, 2 in another; the selects
      * are masks, which the compiler would otherwise turn back into branches */
     const __m128d k716 = _mm_set1_pd(7.0 / 16.0);

@@ -11,7 +11,7 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
-#ifdef __SSE2__
+#if defined(__SSE2__) && !defined(MCP_NO_SIMD)
 #include <emmintrin.h>
 #endif
 
@@ -35,7 +35,7 @@ pick_one(const float *l, size_t stride, int m, float s, float threshold)
     return s - l_lo < threshold * (l_hi - l_lo) ? lo : hi;
 }
 
-#ifdef __SSE2__
+#if defined(__SSE2__) && !defined(MCP_NO_SIMD)
 static inline __m128
 select_ps(__m128 mask, __m128 a, __m128 b)
 {
@@ -58,7 +58,7 @@ pick_row(const float *lum, size_t stride, int m, const float *ls, const float *t
          int *pick)
 {
     int x = 0;
-#ifdef __SSE2__
+#if defined(__SSE2__) && !defined(MCP_NO_SIMD)
     const __m128i none = _mm_set1_epi32(-1), zero = _mm_setzero_si128();
     for (; x + 4 <= w; x += 4) {
         __m128 s = _mm_loadu_ps(ls + x), l_lo = _mm_set1_ps(-INFINITY),
