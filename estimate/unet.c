@@ -771,6 +771,45 @@ postprocess(const batch *t, int k, int W, int H, float s_out, mcp_image **out)
     return 0;
 }
 
+/* Bytes per padded pixel and batch image at the network's peak (full resolution at
+ * dec_conv1a: 73 channels in, 64 out, with what the lower levels hold; measured ~550),
+ * with a margin. */
+#define PEAK_BYTES_PER_PIXEL 600.0
+
+/* The memory the system can give without swapping, in bytes (MemAvailable; the tests
+ * set MCPOST_MEMORY_AVAILABLE_MB); 0 where it cannot tell. */
+static double
+memory_available(void)
+{
+    const char *forced = getenv("MCPOST_MEMORY_AVAILABLE_MB");
+    if (forced && *forced) return atof(forced) * 1048576.0;
+    FILE *f = fopen("/proc/meminfo", "r");
+    if (!f) return 0;
+    char line[256];
+    double kb = 0;
+    while (fgets(line, sizeof line, f))
+        if (sscanf(line, "MemAvailable: %lf kB", &kb) == 1) break;
+    fclose(f);
+    return kb * 1024.0;
+}
+
+/* Refuses a batch that would not fit in memory, before the first allocation: on Linux
+ * a too large allocation succeeds and the process is killed later, when it touches
+ * the pages. */
+static int
+check_memory(int w, int h, int n_images)
+{
+    double need = PEAK_BYTES_PER_PIXEL * ((w + 15) / 16 * 16) * ((h + 15) / 16 * 16) *
+                  n_images;
+    double have = memory_available();
+    if (have > 0 && need > have)
+        return mcp_error("unet: a %dx%d image with %d tangent(s) needs about %.0f MB and "
+                         "%.0f MB are available (use fewer SURE probes or a smaller "
+                         "image; tiling is not implemented yet)",
+                         w, h, n_images - 1, need / 1048576.0, have / 1048576.0);
+    return 0;
+}
+
 int
 mcp__unet_run(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
               const mcp_image *normal, double input_scale, const mcp_denoise_tangent *t,
@@ -785,7 +824,8 @@ mcp__unet_run(const mcp__unet *net, const mcp_image *color, const mcp_image *alb
     const mcp_denoise_input at = {color, albedo, normal, NULL};
     if (check_aux(net, "albedo", color, albedo, net->ic >= 6) ||
         check_aux(net, "normal", color, normal, net->ic >= 9) ||
-        mcp__denoise_check_tangents("unet", &at, t, n))
+        mcp__denoise_check_tangents("unet", &at, t, n) ||
+        check_memory(color->width, color->height, 1 + n))
         return -1;
     /* The exposure is a constant of F, also for its JVP: it is computed once on the
      * primal colour, as a renderer fixes the exposure of a frame (notes 3.7). */

@@ -676,6 +676,33 @@ test_jvp_batched(void **state)
     rnet_free(&n);
 }
 
+/* A batch that does not fit in the memory available is refused before it is
+ * allocated, with the figures; one that fits runs. */
+static void
+test_memory_check(void **state)
+{
+    (void)state;
+    rnet n;
+    mcp__unet *net = tiny_net(&n, 9, 78);
+    inputs in = make_inputs(40, 29, 32);
+    mcp_image *tc = mcp_test_random(40, 29, 3, -1, 1, 50, NULL), *out = NULL, *jt = NULL;
+    mcp_denoise_tangent t = {tc, NULL, NULL};
+    /* 600 bytes x 48 x 32 padded pixels x 2 images = 1.8 MB */
+    setenv("MCPOST_MEMORY_AVAILABLE_MB", "1", 1);
+    assert_error_contains(
+        mcp__unet_run(net, in.col, in.alb, in.nrm, 1.0, &t, 1, &out, &jt),
+        "unet: a 40x29 image with 1 tangent(s) needs about 2 MB and 1 MB are available");
+    assert_null(out);
+    assert_null(jt);
+    setenv("MCPOST_MEMORY_AVAILABLE_MB", "2", 1);
+    assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, 1.0, &t, 1, &out, &jt), 0);
+    unsetenv("MCPOST_MEMORY_AVAILABLE_MB");
+    mcp_image_free(out), mcp_image_free(jt), mcp_image_free(tc);
+    free_inputs(&in);
+    mcp__unet_free(net);
+    rnet_free(&n);
+}
+
 /* ---- the `unet` denoiser kind ---- */
 
 static void
@@ -1072,6 +1099,7 @@ main(void)
         cmocka_unit_test(test_bad_files),
         cmocka_unit_test(test_jvp_finite_differences),
         cmocka_unit_test(test_jvp_batched),
+        cmocka_unit_test(test_memory_check),
         cmocka_unit_test(test_denoiser_kind),
         cmocka_unit_test(test_real_weights_load),
         cmocka_unit_test(test_real_weights_fixtures),
