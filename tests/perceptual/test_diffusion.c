@@ -89,17 +89,17 @@ test_hand_column(void **state)
     run_grey(1, 3, surr, levels, 2, want);
 }
 
-/* A plain reimplementation on a 45x45 procedural input with the default clamp tone
+/* A plain reimplementation on procedural inputs (45x45, 100x100) with the default clamp tone
  * map: a full-image buffer of the error pushed to the next rows, the 7/16 share carried
  * to the next pixel, one candidate after another, summed in the same order as the
  * library (so that no near-tie can round differently); then the library with one and
  * two threads. */
 static void
-against_plain(int m)
+against_plain(int m, int size)
 {
     perc_case c;
-    perc_procedural(45, m, 1, 17, 1, &c);
-    int w = 45, h = 45;
+    perc_procedural(size, m, 1, 17, 1, &c);
+    int w = size, h = size;
     double *err = calloc((size_t)w * h * 3, sizeof *err);
     int *want = malloc((size_t)w * h * sizeof *want);
     for (int y = 0; y < h; y++) {
@@ -151,9 +151,9 @@ against_plain(int m)
         perc_assert_from_candidates(r.image, r.index, perc_cands(&c), c.m);
         double ours = perc_pmse(r.image, c.truth), mean = perc_mean_pmse(&c);
         if (nt == 1)
-            print_message("error diffusion, M = %d, reference surrogate: pMSE %.5f vs "
-                          "mean %.5f (ratio %.3f)\n",
-                          m, ours, mean, ours / mean);
+            print_message("error diffusion, %dx%d, M = %d, reference surrogate: pMSE %.5f "
+                          "vs mean %.5f (ratio %.3f)\n",
+                          size, size, m, ours, mean, ours / mean);
         mcp_perc_result_free(&r);
     }
     omp_set_num_threads(threads);
@@ -162,13 +162,15 @@ against_plain(int m)
 }
 
 /* every path of the scan: one candidate, pairs, a pair and a single one, and the
- * general count */
+ * general count; rows of at least 256 candidate values run the two-thread pipeline
+ * (with two threads): M = 6 here, and M = 4 on 100x100 (the ring wraps many times) */
 static void
 test_against_plain(void **state)
 {
     (void)state;
     for (int m = 1; m <= 6; m++)
-        against_plain(m);
+        against_plain(m, 45);
+    against_plain(4, 100);
 }
 
 static void
