@@ -5,9 +5,12 @@
  *
  * Settings: weights (path to a .tza; default $MCPOST_OIDN_WEIGHTS), input_scale (auto
  * [default]: OIDN's autoexposure on the colour, or a number: the scale that maps the
- * colour to 1 = 100 cd/m^2). The autoexposure scale is computed on the primal colour
- * and held constant in the JVP (unet_internal.h). Weights for colour + albedo + normal
- * need both features; colour + albedo weights need the albedo. */
+ * colour to 1 = 100 cd/m^2), tile (0 [default]: the whole image where it fits in the
+ * memory available, else the largest tiles that fit; or a multiple of 16: tiles of that
+ * size; tiles give the same bits as the whole image). The autoexposure scale is
+ * computed on the primal colour and held constant in the JVP (unet_internal.h).
+ * Weights for colour + albedo + normal need both features; colour + albedo weights
+ * need the albedo. */
 #include <mcpost/denoiser.h>
 
 #include "internal.h"
@@ -23,9 +26,10 @@
 typedef struct {
     mcp__unet *net;
     double input_scale; /* <= 0: autoexposure */
+    int tile;           /* 0: as memory allows */
 } unet_state;
 
-static const char *const unet_keys[] = {"weights", "input_scale", NULL};
+static const char *const unet_keys[] = {"weights", "input_scale", "tile", NULL};
 
 static int
 unet_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
@@ -38,8 +42,8 @@ unet_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
     /* the features these weights need, and the tangents, mcp__unet_run checks */
     if (mcp__denoise_check_input("unet", at)) return -1;
     if (n > 0 && !out) return mcp_error("unet: no room for %d tangent outputs", n);
-    return mcp__unet_run(s->net, at->color, at->albedo, at->normal, s->input_scale, t, n,
-                         primal, out);
+    return mcp__unet_run_tiled(s->net, at->color, at->albedo, at->normal, s->input_scale,
+                               t, n, s->tile, primal, out);
 }
 
 static int
@@ -78,9 +82,15 @@ unet_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
     *out = NULL;
     const char *weights = NULL;
     double scale = 0.0;
+    int tile = 0;
     if (mcp_node_opt_string(settings, "weights", &weights) ||
-        read_input_scale(settings, &scale))
+        read_input_scale(settings, &scale) || mcp_node_opt_int(settings, "tile", &tile))
         return -1;
+    if (tile < 0 || tile % 16)
+        return mcp_node_error(mcp_node_get(settings, "tile"),
+                              "unet: tile must be 0 (as memory allows) or a multiple of 16 "
+                              "(got %d)",
+                              tile);
     if (!weights || !*weights) {
         weights = getenv(WEIGHTS_ENV);
         if (!weights || !*weights)
@@ -106,6 +116,7 @@ unet_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
     unet_state *s = d->state;
     s->net = net;
     s->input_scale = scale;
+    s->tile = tile;
     d->destroy = unet_destroy;
     d->uses_albedo = net->ic >= 6;
     d->uses_normal = net->ic >= 9;
@@ -118,7 +129,8 @@ unet_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
 const mcp_denoiser_kind mcp__denoiser_unet = {
     "unet",
     "OIDN's RT U-Net with .tza weights (1.4 float32 or 2.x float16, base or small), "
-    "exact JVP (weights [$" WEIGHTS_ENV "], input_scale [auto] or a number)",
+    "exact JVP (weights [$" WEIGHTS_ENV "], input_scale [auto] or a number, tile [0: as "
+    "memory allows] or a multiple of 16)",
     unet_keys,
     unet_create,
 };

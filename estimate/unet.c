@@ -773,7 +773,7 @@ postprocess(const batch *t, int k, int W, int H, float s_out, mcp_image **out)
 
 /* Bytes per padded pixel and batch image at the network's peak (full resolution at
  * dec_conv1a: 73 channels in, 64 out, with what the lower levels hold; measured ~550),
- * with a margin. */
+ * with a margin: beyond what is available, the image is run in tiles. */
 #define PEAK_BYTES_PER_PIXEL 600.0
 
 /* The memory the system can give without swapping, in bytes (MemAvailable; the tests
@@ -793,46 +793,19 @@ memory_available(void)
     return kb * 1024.0;
 }
 
-/* Refuses a batch that would not fit in memory, before the first allocation: on Linux
- * a too large allocation succeeds and the process is killed later, when it touches
- * the pages. */
-static int
-check_memory(int w, int h, int n_images)
+/* The bytes a batch of n_images needs for a w x h image (padded to 16). */
+static double
+batch_bytes(int w, int h, int n_images)
 {
-    double need = PEAK_BYTES_PER_PIXEL * ((w + 15) / 16 * 16) * ((h + 15) / 16 * 16) *
-                  n_images;
-    double have = memory_available();
-    if (have > 0 && need > have)
-        return mcp_error("unet: a %dx%d image with %d tangent(s) needs about %.0f MB and "
-                         "%.0f MB are available (use fewer SURE probes or a smaller "
-                         "image; tiling is not implemented yet)",
-                         w, h, n_images - 1, need / 1048576.0, have / 1048576.0);
-    return 0;
+    return PEAK_BYTES_PER_PIXEL * ((w + 15) / 16 * 16) * ((h + 15) / 16 * 16) * n_images;
 }
 
-int
-mcp__unet_run(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
-              const mcp_image *normal, double input_scale, const mcp_denoise_tangent *t,
-              int n, mcp_image **out, mcp_image **jt)
+/* The whole image in one pass: the inputs are checked and the scale is set. */
+static int
+run_whole(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
+          const mcp_image *normal, double scale_in, const mcp_denoise_tangent *t, int n,
+          mcp_image **out, mcp_image **jt)
 {
-    if (out)
-        *out = NULL;
-    for (int k = 0; k < n; k++)
-        jt[k] = NULL;
-    if (!color || color->channels < 3)
-        return mcp_error("unet: colour needs 3 channels");
-    const mcp_denoise_input at = {color, albedo, normal, NULL};
-    if (check_aux(net, "albedo", color, albedo, net->ic >= 6) ||
-        check_aux(net, "normal", color, normal, net->ic >= 9) ||
-        mcp__denoise_check_tangents("unet", &at, t, n) ||
-        check_memory(color->width, color->height, 1 + n))
-        return -1;
-    /* The exposure is a constant of F, also for its JVP: it is computed once on the
-     * primal colour, as a renderer fixes the exposure of a frame (notes 3.7). */
-    const double scale_in =
-        input_scale > 0 ? input_scale : mcp__unet_autoexposure(color, net->v2);
-    if (!(scale_in > 0 && scale_in < 1e30))
-        return mcp_error("unet: bad input scale %g", scale_in);
     const float s_in = (float)scale_in, s_out = 1.0f / s_in;
     batch x, y;
     if (preprocess(net, color, albedo, normal, s_in, t, n, &x) || network(net, &x, &y))
@@ -843,6 +816,126 @@ mcp__unet_run(const mcp__unet *net, const mcp_image *color, const mcp_image *alb
     for (int k = 0; k < n && !rc; k++)
         rc = postprocess(&y, 1 + k, color->width, color->height, s_out, &jt[k]);
     batch_free(&y);
+    return rc;
+}
+
+/* rows [y0, y0 + h) x columns [x0, x0 + w) of src (a tile's result, whose pixel (0, 0)
+ * is dst's (ox, oy)) into dst */
+static void
+paste(const mcp_image *src, int ox, int oy, int x0, int y0, int w, int h, mcp_image *dst)
+{
+    for (int y = y0; y < y0 + h; y++)
+        memcpy(mcp_image_px(dst, x0, y), mcp_image_px(src, x0 - ox, y - oy),
+               (size_t)w * 3 * sizeof(float));
+}
+
+/* Tiles of tile x tile pixels, each run on a crop that extends it by TILE_OVERLAP on
+ * every side (within the image). The crops start on multiples of 16, so that the
+ * pooling grid is the whole image's, and the overlap covers the network's receptive
+ * field (a radius of ~110 pixels: 3x3 convolutions and 2x2 pooling over five levels):
+ * a tile's pixels then see what they see in the whole image, and the result is the
+ * same bits (the tests compare). */
+#define TILE_OVERLAP 128
+
+static int
+run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
+          const mcp_image *normal, double scale_in, const mcp_denoise_tangent *t, int n,
+          int tile, mcp_image **out, mcp_image **jt)
+{
+    const int W = color->width, H = color->height;
+    int rc = 0;
+    if (out) rc = mcp__rgb_new(W, H, "unet", out);
+    for (int k = 0; k < n && !rc; k++)
+        rc = mcp__rgb_new(W, H, "unet", &jt[k]);
+    mcp_denoise_tangent *tt = n ? mcp_calloc((size_t)n, sizeof *tt) : NULL;
+    mcp_image **views = mcp_calloc((size_t)3 * (n + 1), sizeof *views);
+    mcp_image **res = mcp_calloc((size_t)n + 1, sizeof *res);
+    if (!views || !res || (n && !tt)) rc = -1;
+    for (int ty = 0; ty < H && !rc; ty += tile)
+        for (int tx = 0; tx < W && !rc; tx += tile) {
+            const int x0 = tx > TILE_OVERLAP ? tx - TILE_OVERLAP : 0;
+            const int y0 = ty > TILE_OVERLAP ? ty - TILE_OVERLAP : 0;
+            const int x1 = tx + tile + TILE_OVERLAP < W ? tx + tile + TILE_OVERLAP : W;
+            const int y1 = ty + tile + TILE_OVERLAP < H ? ty + tile + TILE_OVERLAP : H;
+            const mcp_image *src[3] = {color, albedo, normal};
+            int nv = 0;
+            for (int k = 0; k <= n && !rc; k++) {
+                if (k > 0) src[0] = t[k - 1].color, src[1] = t[k - 1].albedo,
+                           src[2] = t[k - 1].normal;
+                for (int c = 0; c < 3 && !rc; c++)
+                    if (src[c])
+                        rc = mcp_image_crop_view(src[c], x0, y0, x1 - x0, y1 - y0,
+                                                 &views[3 * k + c]);
+                nv = 3 * (k + 1);
+            }
+            for (int k = 0; k < n; k++)
+                tt[k] = (mcp_denoise_tangent){views[3 * (k + 1)], views[3 * (k + 1) + 1],
+                                              views[3 * (k + 1) + 2]};
+            if (!rc)
+                rc = run_whole(net, views[0], views[1], views[2], scale_in, tt, n,
+                               out ? &res[0] : NULL, res + 1);
+            const int w = tx + tile < W ? tile : W - tx, h = ty + tile < H ? tile : H - ty;
+            if (!rc && out) paste(res[0], x0, y0, tx, ty, w, h, *out);
+            for (int k = 0; k < n && !rc; k++)
+                paste(res[1 + k], x0, y0, tx, ty, w, h, jt[k]);
+            for (int i = 0; i < nv; i++) {
+                mcp_image_free(views[i]);
+                views[i] = NULL;
+            }
+            for (int k = 0; k <= n; k++) {
+                mcp_image_free(res[k]);
+                res[k] = NULL;
+            }
+        }
+    free(tt), free(views), free(res);
+    return rc;
+}
+
+int
+mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
+                    const mcp_image *normal, double input_scale,
+                    const mcp_denoise_tangent *t, int n, int tile, mcp_image **out,
+                    mcp_image **jt)
+{
+    if (out)
+        *out = NULL;
+    for (int k = 0; k < n; k++)
+        jt[k] = NULL;
+    if (!color || color->channels < 3)
+        return mcp_error("unet: colour needs 3 channels");
+    const mcp_denoise_input at = {color, albedo, normal, NULL};
+    if (check_aux(net, "albedo", color, albedo, net->ic >= 6) ||
+        check_aux(net, "normal", color, normal, net->ic >= 9) ||
+        mcp__denoise_check_tangents("unet", &at, t, n))
+        return -1;
+    if (tile < 0 || tile % 16)
+        return mcp_error("unet: tile must be 0 (as memory allows) or a multiple of 16 "
+                         "(got %d)",
+                         tile);
+    const int W = color->width, H = color->height;
+    const double have = memory_available();
+    if (tile == 0 && have > 0 && batch_bytes(W, H, 1 + n) > have) {
+        /* the largest tile whose crop fits in half of what is available (the
+         * results and the inputs take the rest) */
+        for (tile = (W > H ? W : H) / 16 * 16; tile >= 16; tile -= 16)
+            if (batch_bytes(tile + 2 * TILE_OVERLAP, tile + 2 * TILE_OVERLAP, 1 + n) <=
+                have / 2)
+                break;
+        if (tile < 16)
+            return mcp_error("unet: a %dx%d image with %d tangent(s) does not fit even in "
+                             "16x16 tiles: %.0f MB are available",
+                             W, H, n, have / 1048576.0);
+    }
+    if (tile >= W && tile >= H) tile = 0;
+    /* The exposure is a constant of F, also for its JVP: it is computed once on the
+     * primal colour, as a renderer fixes the exposure of a frame (notes 3.7); the
+     * tiles share it. */
+    const double scale_in =
+        input_scale > 0 ? input_scale : mcp__unet_autoexposure(color, net->v2);
+    if (!(scale_in > 0 && scale_in < 1e30))
+        return mcp_error("unet: bad input scale %g", scale_in);
+    int rc = tile ? run_tiled(net, color, albedo, normal, scale_in, t, n, tile, out, jt)
+                  : run_whole(net, color, albedo, normal, scale_in, t, n, out, jt);
     if (rc) {
         if (out) {
             mcp_image_free(*out);
@@ -854,6 +947,14 @@ mcp__unet_run(const mcp__unet *net, const mcp_image *color, const mcp_image *alb
         }
     }
     return rc;
+}
+
+int
+mcp__unet_run(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
+              const mcp_image *normal, double input_scale, const mcp_denoise_tangent *t,
+              int n, mcp_image **out, mcp_image **jt)
+{
+    return mcp__unet_run_tiled(net, color, albedo, normal, input_scale, t, n, 0, out, jt);
 }
 
 int

@@ -81,6 +81,15 @@ int mcp__unet_run(const mcp__unet *net, const mcp_image *color, const mcp_image 
                   const mcp_image *normal, double input_scale, const mcp_denoise_tangent *t,
                   int n, mcp_image **out, mcp_image **jt);
 
+/* mcp__unet_run in tiles of tile x tile pixels (a multiple of 16), each run on a crop
+ * 128 pixels larger on every side, which gives the same bits as the whole image; tile
+ * 0 runs the whole image when it fits in the memory available, else the largest tiles
+ * that fit (mcp__unet_run does that). */
+int mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color,
+                        const mcp_image *albedo, const mcp_image *normal,
+                        double input_scale, const mcp_denoise_tangent *t, int n, int tile,
+                        mcp_image **out, mcp_image **jt);
+
 /* OIDN's PU transfer function (normalised: x = PU(y)/PU(65504)) and its inverse. */
 float mcp__pu_forward(float y);
 float mcp__pu_inverse(float x);

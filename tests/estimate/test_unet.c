@@ -676,28 +676,85 @@ test_jvp_batched(void **state)
     rnet_free(&n);
 }
 
-/* A batch that does not fit in the memory available is refused before it is
- * allocated, with the figures; one that fits runs. */
+/* Tiles give the same bits as the whole image (the crops' overlap covers the
+ * receptive field and keeps the pooling grid): the output and two JVPs, tiles of 64
+ * and 48 on a 300x211 image (partial tiles at the right and bottom), with and without
+ * the features' tangents. */
 static void
-test_memory_check(void **state)
+test_tiles_same_bits(void **state)
+{
+    (void)state;
+    rnet n;
+    mcp__unet *net = tiny_net(&n, 9, 79);
+    const int w = 300, h = 211;
+    inputs in = make_inputs(w, h, 33);
+    mcp_image *tc[2], *ta = mcp_test_random(w, h, 3, -1, 1, 52, NULL);
+    for (int k = 0; k < 2; k++)
+        tc[k] = mcp_test_random(w, h, 3, -1, 1, 53 + k, NULL);
+    mcp_denoise_tangent t[2] = {{tc[0], NULL, NULL}, {tc[1], ta, NULL}};
+    mcp_image *whole = NULL, *wj[2] = {NULL, NULL};
+    assert_int_equal(mcp__unet_run_tiled(net, in.col, in.alb, in.nrm, 0.0, t, 2, 0, &whole,
+                                         wj),
+                     0);
+    const size_t bytes = (size_t)w * h * 3 * sizeof(float);
+    int varied = 0; /* the comparison is not vacuous */
+    for (size_t i = 1; i < (size_t)w * h * 3; i++)
+        varied += whole->data[i] != whole->data[i - 1] && wj[1]->data[i] != 0.0f;
+    assert_true(varied > w * h);
+    for (int tile = 48; tile <= 64; tile += 16) {
+        mcp_image *tiled = NULL, *tj[2] = {NULL, NULL};
+        assert_int_equal(mcp__unet_run_tiled(net, in.col, in.alb, in.nrm, 0.0, t, 2, tile,
+                                             &tiled, tj),
+                         0);
+        assert_memory_equal(whole->data, tiled->data, bytes);
+        for (int k = 0; k < 2; k++) {
+            assert_memory_equal(wj[k]->data, tj[k]->data, bytes);
+            mcp_image_free(tj[k]);
+        }
+        mcp_image_free(tiled);
+    }
+    assert_error_contains(
+        mcp__unet_run_tiled(net, in.col, in.alb, in.nrm, 0.0, t, 2, 40, &whole, wj),
+        "tile must be 0 (as memory allows) or a multiple of 16 (got 40)");
+    assert_null(whole);
+    for (int k = 0; k < 2; k++)
+        mcp_image_free(tc[k]);
+    mcp_image_free(ta);
+    free_inputs(&in);
+    mcp__unet_free(net);
+    rnet_free(&n);
+}
+
+/* Beyond the memory available the image runs in the largest tiles that fit (the same
+ * bits again); where not even 16x16 tiles fit, a clear error before any allocation. */
+static void
+test_memory_tiles(void **state)
 {
     (void)state;
     rnet n;
     mcp__unet *net = tiny_net(&n, 9, 78);
-    inputs in = make_inputs(40, 29, 32);
-    mcp_image *tc = mcp_test_random(40, 29, 3, -1, 1, 50, NULL), *out = NULL, *jt = NULL;
-    mcp_denoise_tangent t = {tc, NULL, NULL};
-    /* 600 bytes x 48 x 32 padded pixels x 2 images = 1.8 MB */
-    setenv("MCPOST_MEMORY_AVAILABLE_MB", "1", 1);
+    const int w = 1200, h = 800;
+    inputs in = make_inputs(w, h, 32);
+    mcp_image *whole = NULL, *auto_tiled = NULL;
+    assert_int_equal(mcp__unet_run_tiled(net, in.col, in.alb, in.nrm, 1.0, NULL, 0, 0,
+                                         &whole, NULL),
+                     0);
+    /* the whole needs 600 x 1200 x 800 bytes = 549 MB; 400 MB available: tiles whose
+     * crops take at most 200 MB (576 x 576 crops: tiles of 320) */
+    setenv("MCPOST_MEMORY_AVAILABLE_MB", "400", 1);
+    assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, 1.0, NULL, 0, &auto_tiled,
+                                   NULL),
+                     0);
+    assert_memory_equal(whole->data, auto_tiled->data, (size_t)w * h * 3 * sizeof(float));
+    setenv("MCPOST_MEMORY_AVAILABLE_MB", "10", 1);
+    mcp_image *out = NULL;
     assert_error_contains(
-        mcp__unet_run(net, in.col, in.alb, in.nrm, 1.0, &t, 1, &out, &jt),
-        "unet: a 40x29 image with 1 tangent(s) needs about 2 MB and 1 MB are available");
+        mcp__unet_run(net, in.col, in.alb, in.nrm, 1.0, NULL, 0, &out, NULL),
+        "unet: a 1200x800 image with 0 tangent(s) does not fit even in 16x16 tiles: 10 MB "
+        "are available");
     assert_null(out);
-    assert_null(jt);
-    setenv("MCPOST_MEMORY_AVAILABLE_MB", "2", 1);
-    assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, 1.0, &t, 1, &out, &jt), 0);
     unsetenv("MCPOST_MEMORY_AVAILABLE_MB");
-    mcp_image_free(out), mcp_image_free(jt), mcp_image_free(tc);
+    mcp_image_free(whole), mcp_image_free(auto_tiled);
     free_inputs(&in);
     mcp__unet_free(net);
     rnet_free(&n);
@@ -771,6 +828,19 @@ test_denoiser_kind(void **state)
         yaml, "job.yaml:2: unet: input_scale must be auto or a number > 0 (got -2)");
     snprintf(yaml, sizeof yaml, "{name: unet, weights: '%s', input_scale: bright}", path);
     mcp_test_denoiser_fails(yaml, "input_scale");
+    /* tiles: the same bits; a size that is not a multiple of 16, an error at its line */
+    snprintf(yaml, sizeof yaml, "{name: unet, weights: '%s', input_scale: 0.5, tile: 16}",
+             path);
+    d = mcp_test_denoiser(yaml);
+    mcp_image *tiled = NULL;
+    assert_int_equal(d->apply(d, &at, &tiled), 0);
+    assert_memory_equal(tiled->data, a->data, (size_t)w * h * 3 * sizeof(float));
+    mcp_image_free(tiled);
+    mcp_denoiser_free(d);
+    snprintf(yaml, sizeof yaml, "{name: unet, weights: '%s',\n tile: 40}", path);
+    mcp_test_denoiser_fails(
+        yaml, "job.yaml:2: unet: tile must be 0 (as memory allows) or a multiple of 16 "
+              "(got 40)");
     mcp_test_denoiser_fails("{name: unet, weight: x.tza}", "weight");
     mcp_node *node = NULL;
     assert_int_equal(
@@ -1099,7 +1169,8 @@ main(void)
         cmocka_unit_test(test_bad_files),
         cmocka_unit_test(test_jvp_finite_differences),
         cmocka_unit_test(test_jvp_batched),
-        cmocka_unit_test(test_memory_check),
+        cmocka_unit_test(test_tiles_same_bits),
+        cmocka_unit_test(test_memory_tiles),
         cmocka_unit_test(test_denoiser_kind),
         cmocka_unit_test(test_real_weights_load),
         cmocka_unit_test(test_real_weights_fixtures),
