@@ -713,6 +713,7 @@ test_tiles_same_bits(void **state)
         }
         mcp_image_free(tiled);
     }
+    mcp_image_free(whole), mcp_image_free(wj[0]), mcp_image_free(wj[1]);
     assert_error_contains(
         mcp__unet_run_tiled(net, in.col, in.alb, in.nrm, 0.0, t, 2, 40, &whole, wj),
         "tile must be 0 (as memory allows) or a multiple of 16 (got 40)");
