@@ -857,16 +857,15 @@ run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
             const int y0 = ty > TILE_OVERLAP ? ty - TILE_OVERLAP : 0;
             const int x1 = tx + tile + TILE_OVERLAP < W ? tx + tile + TILE_OVERLAP : W;
             const int y1 = ty + tile + TILE_OVERLAP < H ? ty + tile + TILE_OVERLAP : H;
-            const mcp_image *src[3] = {color, albedo, normal};
-            int nv = 0;
+            /* views of the crop: the inputs (k = 0), then each tangent's parts */
             for (int k = 0; k <= n && !rc; k++) {
-                if (k > 0) src[0] = t[k - 1].color, src[1] = t[k - 1].albedo,
-                           src[2] = t[k - 1].normal;
+                const mcp_image *src[3] = {k ? t[k - 1].color : color,
+                                           k ? t[k - 1].albedo : albedo,
+                                           k ? t[k - 1].normal : normal};
                 for (int c = 0; c < 3 && !rc; c++)
                     if (src[c])
                         rc = mcp_image_crop_view(src[c], x0, y0, x1 - x0, y1 - y0,
                                                  &views[3 * k + c]);
-                nv = 3 * (k + 1);
             }
             for (int k = 0; k < n; k++)
                 tt[k] = (mcp_denoise_tangent){views[3 * (k + 1)], views[3 * (k + 1) + 1],
@@ -878,7 +877,7 @@ run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
             if (!rc && out) paste(res[0], x0, y0, tx, ty, w, h, *out);
             for (int k = 0; k < n && !rc; k++)
                 paste(res[1 + k], x0, y0, tx, ty, w, h, jt[k]);
-            for (int i = 0; i < nv; i++) {
+            for (int i = 0; i < 3 * (n + 1); i++) {
                 mcp_image_free(views[i]);
                 views[i] = NULL;
             }
@@ -913,8 +912,8 @@ mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_imag
                          "(got %d)",
                          tile);
     const int W = color->width, H = color->height;
-    const double have = memory_available();
-    if (tile == 0 && have > 0 && batch_bytes(W, H, 1 + n) > have) {
+    const double have = tile == 0 ? memory_available() : 0; /* asked only when needed */
+    if (have > 0 && batch_bytes(W, H, 1 + n) > have) {
         /* the largest tile whose crop fits in half of what is available (the
          * results and the inputs take the rest) */
         for (tile = (W > H ? W : H) / 16 * 16; tile >= 16; tile -= 16)
