@@ -20,7 +20,6 @@
 #include <omp.h>
 #endif
 
-
 int
 main(int argc, char **argv)
 {
@@ -29,11 +28,8 @@ main(int argc, char **argv)
         fprintf(stderr, "usage: bench_denoise [repeats >= 1] [side in 8..8192]\n");
         return 2;
     }
-    mcp_image *color, *albedo, *normal, *variance, *tan[MAX_TANGENTS];
-    bench_render_like(side, &color, &albedo, &normal, &variance);
-    mcp_denoise_tangent t[MAX_TANGENTS];
-    bench_tangents(side, variance, tan, t);
-    mcp_denoise_input in = {color, albedo, normal, variance};
+    bench_scene sc;
+    bench_scene_make(side, &sc);
     int threads = 1;
 #ifdef _OPENMP
     threads = omp_get_max_threads();
@@ -56,24 +52,17 @@ main(int argc, char **argv)
             status = 1;
             continue;
         }
-        const char *labels[] = {"apply", "apply + JVP, 1 tangent",
-                                "apply + JVP, 4 tangents"};
-        const int counts[] = {-1, 1, 4};
-        for (int c = 0; c < 3; c++) {
-            double cpu = 0, ms = bench_denoiser_median_ms(d, &in, t, counts[c], repeats, &cpu);
+        for (int c = 0; c < BENCH_N_CALLS; c++) {
+            double cpu = 0, ms = bench_denoiser_median_ms(
+                                d, &sc.in, sc.t, bench_call_tangents[c], repeats, &cpu);
             if (ms < 0)
                 status = 1;
             else
-                printf("%-10s %-24s %10.1f %10.1f %12.1f\n", (*k)->name, labels[c], ms,
-                       ms / mp, cpu / mp);
+                printf("%-10s %-24s %10.1f %10.1f %12.1f\n", (*k)->name,
+                       bench_call_labels[c], ms, ms / mp, cpu / mp);
         }
         mcp_denoiser_free(d);
     }
-    for (int k = 0; k < MAX_TANGENTS; k++)
-        mcp_image_free(tan[k]);
-    mcp_image_free(color);
-    mcp_image_free(albedo);
-    mcp_image_free(normal);
-    mcp_image_free(variance);
+    bench_scene_free(&sc);
     return status;
 }

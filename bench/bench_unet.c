@@ -15,7 +15,6 @@
 
 #include "denoiser_bench.h"
 
-
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -35,11 +34,9 @@ weights_path(void)
 {
     static char buf[4096];
     const char *env = getenv("MCPOST_OIDN_WEIGHTS");
-    if (env && *env)
-        return env;
+    if (env && *env) return env;
     const char *file = __FILE__, *tail = strstr(file, "bench/bench_unet.c");
-    if (!tail || tail == file)
-        return NULL;
+    if (!tail || tail == file) return NULL;
     snprintf(buf, sizeof buf, "%.*s../shared/oidn-weights/rt_hdr_alb_nrm.tza",
              (int)(tail - file), file);
     return buf;
@@ -66,11 +63,8 @@ main(int argc, char **argv)
         fprintf(stderr, "bench_unet: %s\n", mcp_error_message());
         return 1;
     }
-    mcp_image *color, *albedo, *normal, *variance, *tan[MAX_TANGENTS];
-    bench_render_like(side, &color, &albedo, &normal, &variance);
-    mcp_denoise_tangent t[MAX_TANGENTS];
-    bench_tangents(side, variance, tan, t);
-    mcp_denoise_input in = {color, albedo, normal, variance};
+    bench_scene sc;
+    bench_scene_make(side, &sc);
     int threads = 1;
 #ifdef _OPENMP
     threads = omp_get_max_threads();
@@ -79,26 +73,20 @@ main(int argc, char **argv)
     printf("unet at %dx%d, %d thread(s), median of %d\n", side, side, threads, repeats);
     printf("%-24s %10s %10s %12s %10s %12s\n", "call", "ms", "ms/MP", "CPU ms/MP",
            "GMAC/s", "GMAC/CPU-s");
-    const char *labels[] = {"apply", "apply + JVP, 1 tangent", "apply + JVP, 4 tangents"};
-    const int counts[] = {-1, 1, 4};
     int status = 0;
-    for (int c = 0; c < 3; c++) {
-        double cpu = 0, ms = bench_denoiser_median_ms(d, &in, t, counts[c], repeats, &cpu);
+    for (int c = 0; c < BENCH_N_CALLS; c++) {
+        const int nt = bench_call_tangents[c];
+        double cpu = 0, ms = bench_denoiser_median_ms(d, &sc.in, sc.t, nt, repeats, &cpu);
         if (ms < 0) {
             status = 1;
             continue;
         }
         const double gmac =
-            MAC_PER_PIXEL * padded * padded * (counts[c] < 0 ? 1 : 1 + counts[c]) * 1e-9;
-        printf("%-24s %10.1f %10.1f %12.1f %10.2f %12.2f\n", labels[c], ms, ms / mp,
-               cpu / mp, gmac / (ms * 1e-3), gmac / (cpu * 1e-3));
+            MAC_PER_PIXEL * padded * padded * (nt < 0 ? 1 : 1 + nt) * 1e-9;
+        printf("%-24s %10.1f %10.1f %12.1f %10.2f %12.2f\n", bench_call_labels[c], ms,
+               ms / mp, cpu / mp, gmac / (ms * 1e-3), gmac / (cpu * 1e-3));
     }
-    for (int k = 0; k < MAX_TANGENTS; k++)
-        mcp_image_free(tan[k]);
-    mcp_image_free(color);
-    mcp_image_free(albedo);
-    mcp_image_free(normal);
-    mcp_image_free(variance);
+    bench_scene_free(&sc);
     mcp_denoiser_free(d);
     return status;
 }

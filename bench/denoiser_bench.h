@@ -81,6 +81,38 @@ bench_tangents(int side, const mcp_image *variance, mcp_image **tan,
     }
 }
 
+/* The render-like input and its tangents, as both benchmarks time them. */
+typedef struct {
+    mcp_image *color, *albedo, *normal, *variance, *tan[MAX_TANGENTS];
+    mcp_denoise_tangent t[MAX_TANGENTS];
+    mcp_denoise_input in;
+} bench_scene;
+
+static inline void
+bench_scene_make(int side, bench_scene *s)
+{
+    bench_render_like(side, &s->color, &s->albedo, &s->normal, &s->variance);
+    bench_tangents(side, s->variance, s->tan, s->t);
+    s->in = (mcp_denoise_input){s->color, s->albedo, s->normal, s->variance};
+}
+
+static inline void
+bench_scene_free(bench_scene *s)
+{
+    for (int k = 0; k < MAX_TANGENTS; k++)
+        mcp_image_free(s->tan[k]);
+    mcp_image_free(s->color);
+    mcp_image_free(s->albedo);
+    mcp_image_free(s->normal);
+    mcp_image_free(s->variance);
+}
+
+/* The calls each benchmark times: apply (n = -1), and jvp with 1 and 4 tangents. */
+#define BENCH_N_CALLS 3
+static const char *const bench_call_labels[BENCH_N_CALLS] = {
+    "apply", "apply + JVP, 1 tangent", "apply + JVP, 4 tangents"};
+static const int bench_call_tangents[BENCH_N_CALLS] = {-1, 1, 4};
+
 /* The median wall-clock time of `repeats` calls of apply (n = -1) or jvp with n
  * tangents, and in *cpu the median CPU time of all threads together. */
 static inline double
