@@ -125,6 +125,20 @@ test_ideal_reproduces_reference(void **state)
     mcp_image_free(ref);
 }
 
+/* The four inputs of one step, w x h R, G, B: noisy and denoised in [0, 2], v in
+ * [0, 0.02] with `blacks` zeros (black values), SURE in [-0.005, 0.02] with `blacks`
+ * zeros (a perfect d); img = {n, d, v, s}. */
+static void
+step_inputs(int w, int h, int blacks, uint64_t seed, mcp_image *img[4])
+{
+    img[0] = mcp_test_random(w, h, 3, 0, 2, seed, RGB);
+    img[1] = mcp_test_random(w, h, 3, 0, 2, seed + 1, RGB);
+    img[2] = mcp_test_random(w, h, 3, 0, 0.02f, seed + 2, RGB);
+    img[3] = mcp_test_random(w, h, 3, -0.005f, 0.02f, seed + 3, RGB);
+    for (int i = 0; i < blacks; i++)
+        img[2]->data[i * 17] = 0, img[3]->data[i * 13] = 0;
+}
+
 /* mcp_blend_step's fused on-the-fly pass (closed form, float) against the separate
  * steps (curve image, weights, mix), for both curves, with zeros, negative SURE and
  * black values. */
@@ -133,14 +147,9 @@ test_step_matches_parts(void **state)
 {
     (void)state;
     const int w = 40, h = 30;
-    mcp_image *n = mcp_test_random(w, h, 3, 0, 2, 31, RGB);
-    mcp_image *d = mcp_test_random(w, h, 3, 0, 2, 32, RGB);
-    mcp_image *v = mcp_test_random(w, h, 3, 0, 0.02f, 33, RGB);
-    mcp_image *s = mcp_test_random(w, h, 3, -0.005f, 0.02f, 34, RGB);
-    for (int i = 0; i < 40; i++) {
-        v->data[i * 17] = 0; /* black values */
-        s->data[i * 13] = 0; /* perfect d */
-    }
+    mcp_image *img[4];
+    step_inputs(w, h, 40, 31, img);
+    mcp_image *n = img[0], *d = img[1], *v = img[2], *s = img[3];
     for (int c = 0; c < 2; c++) {
         mcp_blend_options o = mcp_blend_defaults();
         o.curve = c ? MCP_CURVE_POWERLAW : MCP_CURVE_LOG;
@@ -202,12 +211,9 @@ test_step_vector_is_scalar(void **state)
 {
     (void)state;
     const int w = 41, h = 7;
-    mcp_image *n = mcp_test_random(w, h, 3, 0, 2, 41, RGB);
-    mcp_image *d = mcp_test_random(w, h, 3, 0, 2, 42, RGB);
-    mcp_image *v = mcp_test_random(w, h, 3, 0, 0.02f, 43, RGB);
-    mcp_image *s = mcp_test_random(w, h, 3, -0.005f, 0.02f, 44, RGB);
-    for (int i = 0; i < 20; i++)
-        v->data[i * 17] = 0, s->data[i * 13] = 0;
+    mcp_image *img[4];
+    step_inputs(w, h, 20, 41, img);
+    mcp_image *n = img[0], *d = img[1], *v = img[2], *s = img[3];
     mcp_image *n4 = with_alpha(n), *d4 = with_alpha(d);
     for (int magnitude = 0; magnitude < 2; magnitude++) {
         mcp_blend_options o = mcp_blend_defaults();

@@ -270,6 +270,25 @@ make_inputs(int w, int h, uint64_t seed)
     return in;
 }
 
+/* An environment variable's value, to put back with env_restore (NULL: it was not
+ * set): a test that sets one must not change what the later tests see. */
+static char *
+env_save(const char *name)
+{
+    const char *v = getenv(name);
+    return v ? strdup(v) : NULL;
+}
+
+static void
+env_restore(const char *name, char *saved)
+{
+    if (saved)
+        setenv(name, saved, 1);
+    else
+        unsetenv(name);
+    free(saved);
+}
+
 static void
 free_inputs(inputs *in)
 {
@@ -652,16 +671,11 @@ test_jvp_batched(void **state)
 #endif
     /* the baseline convolution kernel gives the same bits as the AVX2 one (where the
      * CPU has it; else this compares the baseline with itself) */
-    const char *was = getenv("MCPOST_NO_AVX2");
-    char *saved_flag = was ? strdup(was) : NULL;
+    char *saved_flag = env_save("MCPOST_NO_AVX2");
     setenv("MCPOST_NO_AVX2", "1", 1);
     mcp_image *base[3] = {NULL, NULL, NULL};
     assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, 0.0, t, 3, NULL, base), 0);
-    if (saved_flag)
-        setenv("MCPOST_NO_AVX2", saved_flag, 1);
-    else
-        unsetenv("MCPOST_NO_AVX2");
-    free(saved_flag);
+    env_restore("MCPOST_NO_AVX2", saved_flag);
     for (int k = 0; k < 3; k++) {
         assert_memory_equal(all[k]->data, base[k]->data, bytes);
         mcp_image_free(base[k]);
@@ -742,6 +756,7 @@ test_memory_tiles(void **state)
                      0);
     /* the whole needs 600 x 1200 x 800 bytes = 549 MB; 400 MB available: tiles whose
      * crops take at most 200 MB (576 x 576 crops: tiles of 320) */
+    char *saved_mb = env_save("MCPOST_MEMORY_AVAILABLE_MB");
     setenv("MCPOST_MEMORY_AVAILABLE_MB", "400", 1);
     assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, 1.0, NULL, 0, &auto_tiled,
                                    NULL),
@@ -754,7 +769,7 @@ test_memory_tiles(void **state)
         "unet: a 1200x800 image with 0 tangent(s) does not fit even in 16x16 tiles: 10 MB "
         "are available");
     assert_null(out);
-    unsetenv("MCPOST_MEMORY_AVAILABLE_MB");
+    env_restore("MCPOST_MEMORY_AVAILABLE_MB", saved_mb);
     mcp_image_free(whole), mcp_image_free(auto_tiled);
     free_inputs(&in);
     mcp__unet_free(net);
@@ -810,8 +825,7 @@ test_denoiser_kind(void **state)
     assert_memory_equal(c->data, e->data, (size_t)w * h * 3 * sizeof(float));
     mcp_denoiser_free(d);
     /* the weights from the environment, relative paths from base_dir */
-    const char *env = getenv("MCPOST_OIDN_WEIGHTS");
-    char *saved = env ? strdup(env) : NULL; /* the later tests read it */
+    char *saved = env_save("MCPOST_OIDN_WEIGHTS"); /* the later tests read it */
     setenv("MCPOST_OIDN_WEIGHTS", path, 1);
     d = mcp_test_denoiser("unet");
     assert_int_equal(d->uses_normal, 1);
@@ -820,8 +834,7 @@ test_denoiser_kind(void **state)
     mcp_test_denoiser_fails("unet",
                             "job.yaml:1: unet: no weights: give weights: PATH (--weights "
                             "PATH) or set MCPOST_OIDN_WEIGHTS");
-    if (saved) setenv("MCPOST_OIDN_WEIGHTS", saved, 1);
-    free(saved);
+    env_restore("MCPOST_OIDN_WEIGHTS", saved);
     mcp_test_denoiser_fails("{name: unet, weights: absent.tza}",
                             "job.yaml:1: absent.tza");
     snprintf(yaml, sizeof yaml, "{name: unet, weights: '%s',\n input_scale: -2}", path);
