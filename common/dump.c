@@ -48,6 +48,67 @@ mcp_variance_kind_from_name(const char *name, mcp_variance_kind *out)
     return 0;
 }
 
+static const char *const variance_source_names[] = {"none", "per-sample", "of-mean",
+                                                     "replicates", "increments"};
+
+const char *
+mcp_variance_source_name(mcp_variance_source s)
+{
+    return (unsigned)s < sizeof variance_source_names / sizeof *variance_source_names
+               ? variance_source_names[s]
+               : "?";
+}
+
+int
+mcp_variance_source_from_name(const char *name, mcp_variance_source *out)
+{
+    for (int i = 0; i < (int)(sizeof variance_source_names / sizeof *variance_source_names);
+         i++)
+        if (strcmp(name, variance_source_names[i]) == 0) {
+            *out = (mcp_variance_source)i;
+            return 0;
+        }
+    return mcp_error("unknown variance source '%s' (known: none, per-sample, of-mean, "
+                     "replicates, increments)",
+                     name);
+}
+
+/* The header attributes that carry a dump's variance source through a file. */
+#define ATTR_VARIANCE_SOURCE "mcpost:varianceSource"
+#define ATTR_VARIANCE_DOF "mcpost:varianceDof"
+#define ATTR_REPLICATES "mcpost:replicates"
+#define ATTR_VARIANCE_POOL "mcpost:variancePool"
+
+static double
+attr_number(const mcp_attrs *attrs, const char *name)
+{
+    const mcp_attr *a = mcp_attrs_find(attrs, name);
+    if (!a)
+        return 0;
+    return a->type == MCP_ATTR_INT ? (double)a->i : a->type == MCP_ATTR_STRING ? 0 : a->f;
+}
+
+/* Where the variance came from: the header's word when mcpost wrote the file (and
+ * the file has a variance), else what the convention stored. */
+static void
+read_variance_source(mcp_dump *d)
+{
+    d->variance_source = !d->var_of_mean                            ? MCP_VARSRC_NONE
+                         : d->variance_in_file == MCP_VAR_PER_SAMPLE ? MCP_VARSRC_PER_SAMPLE
+                                                                      : MCP_VARSRC_OF_MEAN;
+    const mcp_attr *a = mcp_attrs_find(&d->attrs, ATTR_VARIANCE_SOURCE);
+    mcp_variance_source s;
+    if (!d->var_of_mean || !a || a->type != MCP_ATTR_STRING ||
+        mcp_variance_source_from_name(a->s, &s)) {
+        mcp_error_clear();
+        return;
+    }
+    d->variance_source = s;
+    d->variance_dof = attr_number(&d->attrs, ATTR_VARIANCE_DOF);
+    d->replicates = (int)attr_number(&d->attrs, ATTR_REPLICATES);
+    d->variance_pool = attr_number(&d->attrs, ATTR_VARIANCE_POOL);
+}
+
 int
 mcp_badval_policy_from_name(const char *name, mcp_badval_policy *out)
 {
@@ -488,6 +549,7 @@ mcp_dump_from_image(const mcp_image *img, const mcp_dump_spec *spec, mcp_dump **
         goto fail;
     if (d->variance_in_file == MCP_VAR_PER_SAMPLE)
         to_variance_of_mean(d);
+    read_variance_source(d);
     *out = d;
     return 0;
 fail:
@@ -634,6 +696,18 @@ mcp_dump_write(const mcp_dump *d, const char *path, mcp_convention conv,
                 mcp_image_px(img, x, y)[at_spp] = mcp_image_px(d->spp_map, x, y)[0];
     if (mcp_attrs_copy(&d->attrs, &img->attrs))
         goto done;
+    /* a variance that is not the renderer's own says where it came from, so that a
+       later run does not take it for a per-sample variance */
+    if (d->var_of_mean && (d->variance_source == MCP_VARSRC_REPLICATES ||
+                           d->variance_source == MCP_VARSRC_INCREMENTS ||
+                           d->variance_pool > 0)) {
+        if (mcp_attrs_set_string(&img->attrs, ATTR_VARIANCE_SOURCE,
+                                 mcp_variance_source_name(d->variance_source)) ||
+            mcp_attrs_set_double(&img->attrs, ATTR_VARIANCE_DOF, d->variance_dof) ||
+            mcp_attrs_set_int(&img->attrs, ATTR_REPLICATES, d->replicates) ||
+            mcp_attrs_set_double(&img->attrs, ATTR_VARIANCE_POOL, d->variance_pool))
+            goto done;
+    }
     if (d->spp > 0) {
         char text[64];
         snprintf(text, sizeof text, "%.0f", d->spp);

@@ -58,6 +58,23 @@ typedef enum {
 
 MCP_API int mcp_badval_policy_from_name(const char *name, mcp_badval_policy *out);
 
+/* Where a dump's variance of the mean came from. It decides how far the estimates can
+ * trust it (docs: "Variance sources"). A renderer's per-sample variance divided by n is
+ * right only when the n samples are independent; stratified samplers (Cycles'
+ * Sobol-Burley and PMJ, pbrt-v4's ZSobol) make it an overstatement. */
+typedef enum {
+    MCP_VARSRC_NONE = 0,   /* no variance */
+    MCP_VARSRC_PER_SAMPLE, /* per-sample variance / n: assumes independent samples */
+    MCP_VARSRC_OF_MEAN,    /* the file stored a variance of the mean, origin unknown */
+    MCP_VARSRC_REPLICATES, /* the spread between K independent renders (mcp_dump_merge) */
+    MCP_VARSRC_INCREMENTS  /* the spread between the increments of one progressive
+                              render (mcp_series_increment_variance) */
+} mcp_variance_source;
+
+/* "none", "per-sample", "of-mean", "replicates", "increments". */
+MCP_API const char *mcp_variance_source_name(mcp_variance_source s);
+MCP_API int mcp_variance_source_from_name(const char *name, mcp_variance_source *out);
+
 /* How to load a dump. Zero-initialise (or use mcp_dump_spec_defaults()); set only what
  * detection should not decide. Paths in the *_path fields name separate files. */
 typedef struct mcp_dump_spec {
@@ -93,6 +110,13 @@ typedef struct mcp_dump {
     mcp_attrs attrs;         /* the main file's header */
     char *source;            /* the main file's path */
     long n_bad_values;       /* NaN/Inf/negative-variance values replaced (policy zero) */
+    /* What var_of_mean rests on. Files that mcpost wrote carry it in the header
+     * (mcpost:varianceSource, mcpost:varianceDof, mcpost:replicates). */
+    mcp_variance_source variance_source;
+    double variance_dof;  /* degrees of freedom of each variance value before any
+                             pooling: K - 1 for K replicates; 0 when unknown or large */
+    int replicates;       /* K for MCP_VARSRC_REPLICATES / INCREMENTS (blocks), else 0 */
+    double variance_pool; /* pixels pooled per value by mcp_dump_pool_variance, 0: none */
 } mcp_dump;
 
 /* Loads a dump by spec. Checks: colour present; every part the same size; sample
@@ -139,6 +163,75 @@ MCP_API int mcp_series_from_paths(const char *const *paths, const double *spps,
                                   int count, mcp_series **out);
 MCP_API int mcp_series_load(const mcp_series *s, int i, mcp_dump **out);
 MCP_API void mcp_series_free(mcp_series *s);
+
+/* ---- variance from replicates (common/replicates.c; docs "Variance sources") ---- */
+
+typedef enum {
+    MCP_MERGE_REPLICATES = 0, /* the parts are independent renders of the frame (other
+                                 seeds): variance of the mean from their spread */
+    MCP_MERGE_POOLED          /* the parts are passes of one render: their per-sample
+                                 variances and means combined exactly (Chan et al.) */
+} mcp_merge_variance;
+
+MCP_API int mcp_merge_variance_from_name(const char *name, mcp_merge_variance *out);
+
+typedef struct mcp_merge_options {
+    mcp_merge_variance variance; /* [replicates] */
+    int pool_radius;             /* > 0: mcp_dump_pool_variance with this radius [0] */
+} mcp_merge_options;
+
+MCP_API mcp_merge_options mcp_merge_defaults(void);
+
+/* Combines count dumps of one frame into one. Per pixel and channel, with n_k the
+ * part's sample count there (scalar or map) and N = Σ n_k:
+ *   mean      X = Σ n_k X_k / N (albedo and normal the same way)
+ *   replicates  var of mean = Σ n_k (X_k - X)² / ((K - 1) N), covariance alike;
+ *             unbiased when Var X_k = σ²/n_k, with K - 1 degrees of freedom
+ *   pooled    per-sample variance M2 / (N - 1), M2 = Σ (n_k - 1) s_k² + n_k (X_k - X)²,
+ *             divided by N: what one render of all N samples would report
+ * The result's spp is N (a map when any part has one), its source REPLICATES (dof
+ * K - 1, replicates K) or the parts' own; its header is the first part's. Parts must
+ * have one size; replicates need count >= 2, pooled needs every part's variance.
+ * opt may be NULL. */
+MCP_API int mcp_dump_merge(const mcp_dump *const *parts, int count,
+                           const mcp_merge_options *opt, mcp_dump **out);
+
+/* Pools a low-dof variance over a (2 radius + 1)² window (clipped at the borders), in
+ * place: with shape (3 channels, e.g. the renderer's per-sample variance / n, whose
+ * spatial pattern is right but whose level a stratified sampler biases) each value
+ * becomes shape_i Σ_W V / Σ_W shape, a ratio estimate with about dof·|W| degrees of
+ * freedom; without it (or where Σ_W shape is 0) the window mean of V. The covariance,
+ * when present, is pooled by the same factors (ratio) or window mean. Sets
+ * dump->variance_pool to the window's pixel count. */
+MCP_API int mcp_dump_pool_variance(mcp_dump *dump, const mcp_image *shape, int radius);
+
+/* The radius whose window gives a pooled variance at least min_dof degrees of freedom
+ * from values of dof each (0 when dof alone is enough or unknown). */
+MCP_API int mcp_variance_pool_radius(double dof, double min_dof);
+
+typedef struct mcp_increment_options {
+    double first_spp; /* members below this count are merged into the first block;
+                         0: n / 64 of the member estimated [0] */
+    int pool_radius;  /* < 0: automatic (mcp_variance_pool_radius(dof, 100)), 0: none
+                         [-1] */
+} mcp_increment_options;
+
+MCP_API mcp_increment_options mcp_increment_defaults(void);
+
+/* What the increments say about the variance of member i of a progressive series. The
+ * samples between consecutive members are blocks (the first block: every sample up to
+ * the first member >= first_spp) with means Y_b of sizes n_b; when the blocks behave
+ * like independent renders (docs "Variance sources" measures where they do),
+ * σ̂² = Σ n_b (Y_b - X)² / (B - 1) and the variance of the member's mean is σ̂² / n.
+ * *out is member i with that variance (and covariance), pooled per opt; where the
+ * member has its own per-sample variance, its pattern is the pooling's shape.
+ * *ratio (may be NULL) receives Σ(the member's own variance) / Σ(the increments'),
+ * over the image: how far the renderer's Variance/n overstates (> 1) or understates
+ * the spread it shows; 0 when it has none. Needs B >= 2 blocks: fails otherwise.
+ * opt may be NULL. */
+MCP_API int mcp_series_increment_variance(const mcp_series *s, int i,
+                                          const mcp_increment_options *opt,
+                                          mcp_dump **out, double *ratio);
 
 #ifdef __cplusplus
 }

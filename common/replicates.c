@@ -1,0 +1,497 @@
+/* replicates.c: a variance of the mean that rests on what the renders show, not on
+ * the renderer's per-sample variance: the spread between independent renders of a
+ * frame (mcp_dump_merge), between the increments of one progressive render
+ * (mcp_series_increment_variance), and the pooling that gives such a few-dof
+ * estimate enough degrees of freedom (mcp_dump_pool_variance). The derivations are
+ * in docs "Variance sources". */
+#include "internal.h"
+
+#include <mcpost/dump.h>
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+int
+mcp_merge_variance_from_name(const char *name, mcp_merge_variance *out)
+{
+    if (strcmp(name, "replicates") == 0)
+        *out = MCP_MERGE_REPLICATES;
+    else if (strcmp(name, "pooled") == 0)
+        *out = MCP_MERGE_POOLED;
+    else
+        return mcp_error("unknown merge variance '%s' (known: replicates, pooled)", name);
+    return 0;
+}
+
+mcp_merge_options
+mcp_merge_defaults(void)
+{
+    mcp_merge_options o = {MCP_MERGE_REPLICATES, 0};
+    return o;
+}
+
+mcp_increment_options
+mcp_increment_defaults(void)
+{
+    mcp_increment_options o = {0, -1};
+    return o;
+}
+
+int
+mcp_variance_pool_radius(double dof, double min_dof)
+{
+    if (!(dof > 0) || dof >= min_dof)
+        return 0;
+    /* the smallest odd window side 2r + 1 with dof (2r + 1)² >= min_dof */
+    int side = (int)ceil(sqrt(min_dof / dof));
+    return side / 2;
+}
+
+static int
+new3(const mcp_image *like, const char *a, const char *b, const char *c, mcp_image **out)
+{
+    return mcp_image_new(like->width, like->height, 3, (const char *const[]){a, b, c}, out);
+}
+
+/* ---- merging ---- */
+
+/* Per-pixel weights n_k of every part, and their sum. */
+static double
+part_spp(const mcp_dump *d, int x, int y)
+{
+    return mcp_dump_spp_at(d, x, y);
+}
+
+static int
+check_parts(const mcp_dump *const *parts, int count, const mcp_merge_options *opt)
+{
+    if (count < 1)
+        return mcp_error("merge: no dumps given");
+    if (opt->variance == MCP_MERGE_REPLICATES && count < 2)
+        return mcp_error("merge: replicates need at least 2 dumps (got 1): the spread "
+                         "of one render says nothing");
+    const mcp_image *c0 = parts[0]->color;
+    for (int k = 0; k < count; k++) {
+        const mcp_dump *d = parts[k];
+        if (d->color->width != c0->width || d->color->height != c0->height)
+            return mcp_error("merge: %s is %dx%d, but %s is %dx%d", d->source,
+                             d->color->width, d->color->height, parts[0]->source,
+                             c0->width, c0->height);
+        if (!d->spp_map && !(d->spp > 0))
+            return mcp_error("merge: %s has no sample count (give it with spp)", d->source);
+        if (opt->variance == MCP_MERGE_POOLED && !d->var_of_mean)
+            return mcp_error("merge: %s has no variance, which pooling needs (merge it "
+                             "as replicates instead)",
+                             d->source);
+    }
+    return 0;
+}
+
+/* The weighted mean of one 3-channel part over all dumps (albedo, normal, colour),
+ * or NULL when some dump lacks it (features) -- colour is always there. */
+static int
+merge_mean(const mcp_dump *const *parts, int count, size_t offset, const char *const *names,
+           mcp_image **out)
+{
+    *out = NULL;
+    for (int k = 0; k < count; k++)
+        if (!*(mcp_image *const *)((const char *)parts[k] + offset))
+            return 0;
+    const mcp_image *c0 = parts[0]->color;
+    if (new3(c0, names[0], names[1], names[2], out))
+        return -1;
+    mcp_image *m = *out;
+#pragma omp parallel for schedule(static)
+    for (int y = 0; y < c0->height; y++)
+        for (int x = 0; x < c0->width; x++) {
+            double sum[3] = {0, 0, 0}, n = 0;
+            for (int k = 0; k < count; k++) {
+                const mcp_image *part = *(mcp_image *const *)((const char *)parts[k] + offset);
+                double nk = part_spp(parts[k], x, y);
+                const float *v = mcp_image_px(part, x, y);
+                for (int c = 0; c < 3; c++)
+                    sum[c] += nk * v[c];
+                n += nk;
+            }
+            float *o = mcp_image_px(m, x, y);
+            for (int c = 0; c < 3; c++)
+                o[c] = n > 0 ? (float)(sum[c] / n) : 0.0f;
+        }
+    return 0;
+}
+
+/* The variance and covariance of the merged mean, per opt->variance. */
+static void
+merge_variance(const mcp_dump *const *parts, int count, const mcp_merge_options *opt,
+               const mcp_image *mean, mcp_image *var, mcp_image *cov)
+{
+    static const int pair[3][2] = {{0, 1}, {0, 2}, {1, 2}};
+#pragma omp parallel for schedule(static)
+    for (int y = 0; y < mean->height; y++)
+        for (int x = 0; x < mean->width; x++) {
+            const float *m = mcp_image_px(mean, x, y);
+            double ss[3] = {0, 0, 0}, sc[3] = {0, 0, 0}, n = 0;
+            int k_used = 0;
+            for (int k = 0; k < count; k++) {
+                const mcp_dump *d = parts[k];
+                double nk = part_spp(d, x, y);
+                if (!(nk > 0))
+                    continue;
+                k_used++;
+                n += nk;
+                const float *v = mcp_image_px(d->color, x, y);
+                double dev[3];
+                for (int c = 0; c < 3; c++) {
+                    dev[c] = (double)v[c] - m[c];
+                    ss[c] += nk * dev[c] * dev[c];
+                }
+                for (int j = 0; j < 3; j++)
+                    sc[j] += nk * dev[pair[j][0]] * dev[pair[j][1]];
+                if (opt->variance == MCP_MERGE_POOLED) {
+                    /* the part's own sum of squared deviations, (n_k - 1) s_k² with
+                       s_k² = n_k × its variance of the mean */
+                    const float *vk = mcp_image_px(d->var_of_mean, x, y);
+                    for (int c = 0; c < 3; c++)
+                        ss[c] += (nk - 1) * nk * vk[c];
+                    if (d->cov_of_mean) {
+                        const float *ck = mcp_image_px(d->cov_of_mean, x, y);
+                        for (int j = 0; j < 3; j++)
+                            sc[j] += (nk - 1) * nk * ck[j];
+                    }
+                }
+            }
+            /* replicates: Σ n_k dev² / (K - 1) estimates σ², the variance of the mean
+               is σ² / N; pooled: M2 / (N - 1) is the per-sample variance, / N again */
+            double denom = opt->variance == MCP_MERGE_REPLICATES ? (double)(k_used - 1) * n
+                                                                 : (n - 1) * n;
+            float *o = mcp_image_px(var, x, y);
+            float *oc = cov ? mcp_image_px(cov, x, y) : NULL;
+            for (int c = 0; c < 3; c++)
+                o[c] = denom > 0 ? (float)(ss[c] / denom) : 0.0f;
+            for (int j = 0; oc && j < 3; j++)
+                oc[j] = denom > 0 ? (float)(sc[j] / denom) : 0.0f;
+        }
+}
+
+/* A per-pixel count map as the sum of the parts' counts, or NULL when all are scalar. */
+static int
+merge_spp(const mcp_dump *const *parts, int count, mcp_dump *out)
+{
+    int any_map = 0;
+    out->spp = 0;
+    for (int k = 0; k < count; k++) {
+        any_map |= parts[k]->spp_map != NULL;
+        out->spp += parts[k]->spp;
+    }
+    if (!any_map)
+        return 0;
+    out->spp = 0;
+    const mcp_image *c0 = parts[0]->color;
+    if (mcp_image_new(c0->width, c0->height, 1, (const char *const[]){"SampleCount"},
+                      &out->spp_map))
+        return -1;
+    for (int y = 0; y < c0->height; y++)
+        for (int x = 0; x < c0->width; x++) {
+            double n = 0;
+            for (int k = 0; k < count; k++)
+                n += part_spp(parts[k], x, y);
+            mcp_image_px(out->spp_map, x, y)[0] = (float)n;
+        }
+    return 0;
+}
+
+int
+mcp_dump_merge(const mcp_dump *const *parts, int count, const mcp_merge_options *opt,
+               mcp_dump **out)
+{
+    mcp_merge_options defaults = mcp_merge_defaults();
+    if (!opt)
+        opt = &defaults;
+    *out = NULL;
+    if (check_parts(parts, count, opt))
+        return -1;
+    mcp_dump *d = mcp_calloc(1, sizeof *d);
+    if (!d)
+        return -1;
+    static const char *const rgb[3] = {"R", "G", "B"}, *const xyz[3] = {"X", "Y", "Z"};
+    int want_cov = opt->variance == MCP_MERGE_REPLICATES;
+    for (int k = 0; k < count && !want_cov; k++)
+        want_cov = parts[k]->cov_of_mean != NULL;
+    if (merge_mean(parts, count, offsetof(mcp_dump, color), rgb, &d->color) ||
+        merge_mean(parts, count, offsetof(mcp_dump, albedo), rgb, &d->albedo) ||
+        merge_mean(parts, count, offsetof(mcp_dump, normal), xyz, &d->normal) ||
+        new3(d->color, "R", "G", "B", &d->var_of_mean) ||
+        (want_cov && new3(d->color, "RG", "RB", "GB", &d->cov_of_mean)) ||
+        merge_spp(parts, count, d) || !(d->source = mcp_strdup(parts[0]->source)) ||
+        mcp_attrs_copy(&parts[0]->attrs, &d->attrs))
+        goto fail;
+    merge_variance(parts, count, opt, d->color, d->var_of_mean, d->cov_of_mean);
+    d->convention = MCP_CONV_MCPOST;
+    d->variance_in_file = MCP_VAR_OF_MEAN;
+    if (opt->variance == MCP_MERGE_REPLICATES) {
+        d->variance_source = MCP_VARSRC_REPLICATES;
+        d->variance_dof = count - 1;
+        d->replicates = count;
+    } else {
+        /* passes of one render: the per-sample variance keeps its meaning */
+        d->variance_source = parts[0]->variance_source;
+        d->variance_dof = parts[0]->variance_dof;
+        d->replicates = parts[0]->replicates;
+    }
+    if (opt->pool_radius > 0) {
+        /* the renderers' own per-sample variances, pooled exactly, are the shape */
+        mcp_merge_options pooled = {MCP_MERGE_POOLED, 0};
+        mcp_dump *shape = NULL;
+        int have_shape = opt->variance == MCP_MERGE_REPLICATES;
+        for (int k = 0; k < count; k++)
+            have_shape &= parts[k]->var_of_mean != NULL &&
+                          parts[k]->variance_source == MCP_VARSRC_PER_SAMPLE;
+        if (have_shape && mcp_dump_merge(parts, count, &pooled, &shape))
+            goto fail;
+        int rc = mcp_dump_pool_variance(d, shape ? shape->var_of_mean : NULL,
+                                        opt->pool_radius);
+        mcp_dump_free(shape);
+        if (rc)
+            goto fail;
+    }
+    *out = d;
+    return 0;
+fail:
+    mcp_dump_free(d);
+    return -1;
+}
+
+/* ---- pooling ---- */
+
+/* Window sums of a 3-channel image over (2r+1)² clipped at the borders, in double:
+ * a summed-area table of (width+1) x (height+1) x 3. */
+static double *
+window_table(const mcp_image *img)
+{
+    int w = img->width, h = img->height;
+    double *t = mcp_calloc((size_t)(w + 1) * (h + 1) * 3, sizeof *t);
+    if (!t)
+        return NULL;
+    for (int y = 0; y < h; y++) {
+        double row[3] = {0, 0, 0};
+        for (int x = 0; x < w; x++) {
+            const float *v = mcp_image_px(img, x, y);
+            double *o = t + ((size_t)(y + 1) * (w + 1) + x + 1) * 3;
+            const double *up = o - (size_t)(w + 1) * 3;
+            for (int c = 0; c < 3; c++) {
+                row[c] += v[c];
+                o[c] = up[c] + row[c];
+            }
+        }
+    }
+    return t;
+}
+
+static void
+window_sum(const double *t, int w, int h, int x, int y, int r, double out[3], int *count)
+{
+    int x0 = x - r < 0 ? 0 : x - r, x1 = x + r + 1 > w ? w : x + r + 1;
+    int y0 = y - r < 0 ? 0 : y - r, y1 = y + r + 1 > h ? h : y + r + 1;
+    size_t W = (size_t)w + 1;
+    for (int c = 0; c < 3; c++)
+        out[c] = t[(y1 * W + x1) * 3 + c] - t[(y0 * W + x1) * 3 + c] -
+                 t[(y1 * W + x0) * 3 + c] + t[(y0 * W + x0) * 3 + c];
+    *count = (x1 - x0) * (y1 - y0);
+}
+
+int
+mcp_dump_pool_variance(mcp_dump *d, const mcp_image *shape, int radius)
+{
+    if (!d->var_of_mean)
+        return mcp_error("%s: no variance to pool", d->source);
+    if (radius < 0)
+        return mcp_error("variance pooling: radius must be >= 0 (got %d)", radius);
+    if (radius == 0)
+        return 0;
+    int w = d->var_of_mean->width, h = d->var_of_mean->height;
+    if (shape && (shape->width != w || shape->height != h || shape->channels < 3))
+        return mcp_error("variance pooling: the shape is %dx%d with %d channels, the "
+                         "variance %dx%d with 3",
+                         shape->width, shape->height, shape->channels, w, h);
+    mcp_image *parts[2] = {d->var_of_mean, d->cov_of_mean};
+    double *tv = window_table(d->var_of_mean);
+    double *ts = shape ? window_table(shape) : NULL;
+    double *tc = d->cov_of_mean ? window_table(d->cov_of_mean) : NULL;
+    int rc = 0;
+    if (!tv || (shape && !ts) || (d->cov_of_mean && !tc)) {
+        rc = -1;
+        goto done;
+    }
+    double *tables[2] = {tv, tc};
+    /* the window sums come from the tables, so values can be overwritten in place */
+#pragma omp parallel for schedule(static)
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            double sv[3], ss[3] = {0, 0, 0};
+            int n;
+            window_sum(tv, w, h, x, y, radius, sv, &n);
+            if (ts)
+                window_sum(ts, w, h, x, y, radius, ss, &n);
+            /* the factor that turns the shape into the pooled level, per channel */
+            double ratio[3];
+            const float *sh = shape ? mcp_image_px(shape, x, y) : NULL;
+            for (int c = 0; c < 3; c++)
+                ratio[c] = ss[c] > 0 ? sv[c] / ss[c] : -1;
+            for (int p = 0; p < 2; p++) {
+                if (!parts[p])
+                    continue;
+                double s[3];
+                window_sum(tables[p], w, h, x, y, radius, s, &n);
+                float *v = mcp_image_px(parts[p], x, y);
+                for (int c = 0; c < 3; c++) {
+                    if (p == 0 && sh && ratio[c] >= 0) {
+                        v[c] = (float)(sh[c] * ratio[c]);
+                    } else if (p == 1 && sh) {
+                        /* the covariance RG scales with sqrt(ratio_R ratio_G) */
+                        static const int pair[3][2] = {{0, 1}, {0, 2}, {1, 2}};
+                        double a = ratio[pair[c][0]], b = ratio[pair[c][1]];
+                        v[c] = a >= 0 && b >= 0 ? (float)(v[c] * sqrt(a * b))
+                                                : (float)(s[c] / n);
+                    } else {
+                        v[c] = (float)(s[c] / n);
+                    }
+                }
+            }
+        }
+    d->variance_pool = (double)(2 * radius + 1) * (2 * radius + 1);
+done:
+    free(tv);
+    free(ts);
+    free(tc);
+    return rc;
+}
+
+/* ---- increments of a progressive series ---- */
+
+/* One loaded member and its sample count. */
+typedef struct member {
+    mcp_dump *d;
+    double n;
+} member;
+
+int
+mcp_series_increment_variance(const mcp_series *s, int i, const mcp_increment_options *opt,
+                              mcp_dump **out, double *ratio)
+{
+    mcp_increment_options defaults = mcp_increment_defaults();
+    if (!opt)
+        opt = &defaults;
+    *out = NULL;
+    if (ratio)
+        *ratio = 0;
+    if (i < 0 || i >= s->count)
+        return mcp_error("series: no member %d (it has %d)", i, s->count);
+    member *m = mcp_calloc((size_t)i + 1, sizeof *m);
+    if (!m)
+        return -1;
+    int rc = -1, first = 0;
+    mcp_image *shape = NULL;
+    mcp_dump *d = NULL;
+    for (int k = 0; k <= i; k++) {
+        if (mcp_series_load(s, k, &m[k].d))
+            goto done;
+        if (m[k].d->spp_map || !(m[k].d->spp > 0)) {
+            mcp_error("%s: increments need one sample count per member (a scalar spp)",
+                      m[k].d->source);
+            goto done;
+        }
+        m[k].n = m[k].d->spp;
+        if (k > 0 && !(m[k].n > m[k - 1].n)) {
+            mcp_error("%s: series members must have increasing sample counts (%g after "
+                      "%g)",
+                      m[k].d->source, m[k].n, m[k - 1].n);
+            goto done;
+        }
+        if (m[k].d->color->width != m[0].d->color->width ||
+            m[k].d->color->height != m[0].d->color->height) {
+            mcp_error("%s: not the size of %s", m[k].d->source, m[0].d->source);
+            goto done;
+        }
+    }
+    double n = m[i].n;
+    double first_spp = opt->first_spp > 0 ? opt->first_spp : n / 64;
+    /* the first block ends at the first member with at least first_spp samples:
+       smaller blocks sit where a stratified sampler's variance does not scale as 1/n */
+    while (first < i && m[first].n < first_spp)
+        first++;
+    int blocks = i - first + 1;
+    if (blocks < 2) {
+        mcp_error("%s: the variance from increments needs two blocks of samples before "
+                  "%g spp (members from %g spp on); this member is the first",
+                  m[i].d->source, n, first_spp);
+        goto done;
+    }
+    d = m[i].d;
+    m[i].d = NULL;
+    const mcp_image *X = d->color;
+    if (d->var_of_mean && d->variance_source == MCP_VARSRC_PER_SAMPLE &&
+        mcp_image_copy(d->var_of_mean, &shape))
+        goto done;
+    mcp_image_free(d->var_of_mean);
+    mcp_image_free(d->cov_of_mean);
+    d->var_of_mean = d->cov_of_mean = NULL;
+    if (new3(X, "R", "G", "B", &d->var_of_mean) || new3(X, "RG", "RB", "GB", &d->cov_of_mean))
+        goto done;
+    static const int pair[3][2] = {{0, 1}, {0, 2}, {1, 2}};
+#pragma omp parallel for schedule(static)
+    for (int y = 0; y < X->height; y++)
+        for (int x = 0; x < X->width; x++) {
+            const float *xm = mcp_image_px(X, x, y);
+            double ss[3] = {0, 0, 0}, sc[3] = {0, 0, 0};
+            for (int b = first; b <= i; b++) {
+                /* block b: the samples from member b-1's count to member b's (all of
+                   member `first` for the first block); its mean from the two running
+                   means */
+                const float *xb = b == i ? xm : mcp_image_px(m[b].d->color, x, y);
+                double nb = m[b].n, np = b == first ? 0 : m[b - 1].n;
+                const float *xp = b == first ? NULL : mcp_image_px(m[b - 1].d->color, x, y);
+                double size = nb - np, dev[3];
+                for (int c = 0; c < 3; c++) {
+                    double yb = xp ? (nb * xb[c] - np * xp[c]) / size : xb[c];
+                    dev[c] = yb - xm[c];
+                    ss[c] += size * dev[c] * dev[c];
+                }
+                for (int j = 0; j < 3; j++)
+                    sc[j] += size * dev[pair[j][0]] * dev[pair[j][1]];
+            }
+            float *v = mcp_image_px(d->var_of_mean, x, y), *cv = mcp_image_px(d->cov_of_mean, x, y);
+            for (int c = 0; c < 3; c++)
+                v[c] = (float)(ss[c] / ((blocks - 1) * n));
+            for (int j = 0; j < 3; j++)
+                cv[j] = (float)(sc[j] / ((blocks - 1) * n));
+        }
+    if (ratio && shape) {
+        double sum_shape = 0, sum_incr = 0;
+        for (int y = 0; y < X->height; y++)
+            for (int x = 0; x < X->width; x++)
+                for (int c = 0; c < 3; c++) {
+                    sum_shape += mcp_image_px(shape, x, y)[c];
+                    sum_incr += mcp_image_px(d->var_of_mean, x, y)[c];
+                }
+        *ratio = sum_incr > 0 ? sum_shape / sum_incr : 0;
+    }
+    d->variance_source = MCP_VARSRC_INCREMENTS;
+    d->variance_dof = blocks - 1;
+    d->replicates = blocks;
+    d->variance_in_file = MCP_VAR_OF_MEAN;
+    int radius = opt->pool_radius >= 0 ? opt->pool_radius
+                                       : mcp_variance_pool_radius(blocks - 1, 100);
+    if (mcp_dump_pool_variance(d, shape, radius))
+        goto done;
+    *out = d;
+    d = NULL;
+    rc = 0;
+done:
+    for (int k = 0; k <= i; k++)
+        mcp_dump_free(m[k].d);
+    free(m);
+    mcp_image_free(shape);
+    mcp_dump_free(d);
+    return rc;
+}

@@ -1,0 +1,320 @@
+/* test_replicates.c: variance of the mean from replicates, from the increments of a
+ * progressive series, and its pooling -- against closed forms, against one render of
+ * all the samples, and (Monte Carlo, fixed seeds) against the procedural renderer's
+ * exact per-sample variance. */
+#include "testing.h"
+
+#include <mcpost/dump.h>
+#include <math.h>
+#include <procedural.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+static const char *const rgb[3] = {"R", "G", "B"};
+
+/* A dump of constant colour (r, g, b) with spp samples and no variance. */
+static mcp_dump *
+constant_dump(int w, int h, const float v[3], double spp)
+{
+    mcp_dump *d = calloc(1, sizeof *d);
+    d->color = mcp_test_constant(w, h, 3, 0, rgb);
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++)
+            memcpy(mcp_image_px(d->color, x, y), v, 3 * sizeof(float));
+    d->spp = spp;
+    d->source = strdup("made");
+    return d;
+}
+
+/* Three replicates of unequal sizes: mean Σ n_k X_k / N and the spread
+ * Σ n_k (X_k - X)² / ((K - 1) N), worked by hand. */
+static void
+test_merge_replicates_closed_form(void **state)
+{
+    (void)state;
+    const float v[3][3] = {{1, 0, 2}, {2, 1, 2}, {4, 3, 2}};
+    const double n[3] = {10, 10, 20};
+    mcp_dump *parts[3];
+    for (int k = 0; k < 3; k++)
+        parts[k] = constant_dump(5, 4, v[k], n[k]);
+    mcp_dump *m = NULL;
+    assert_int_equal(mcp_dump_merge((const mcp_dump *const *)parts, 3, NULL, &m), 0);
+    assert_true(m->spp == 40);
+    assert_int_equal(m->variance_source, MCP_VARSRC_REPLICATES);
+    assert_true(m->variance_dof == 2);
+    assert_int_equal(m->replicates, 3);
+    const float *x = mcp_image_px(m->color, 2, 3), *var = mcp_image_px(m->var_of_mean, 2, 3),
+                *cov = mcp_image_px(m->cov_of_mean, 2, 3);
+    /* R: mean (10 + 20 + 80) / 40 = 2.75; spread (10·1.75² + 10·0.75² + 20·1.25²) / 80 */
+    assert_close(x[0], 2.75, 1e-7, 0);
+    assert_close(var[0], 67.5 / 80, 1e-7, 0);
+    /* G: mean (0 + 10 + 60) / 40 = 1.75; deviations -1.75, -0.75, 1.25 */
+    assert_close(x[1], 1.75, 1e-7, 0);
+    assert_close(var[1], 67.5 / 80, 1e-7, 0);
+    /* B is the same everywhere: no spread; RG: the same deviations as RR */
+    assert_close(var[2], 0, 0, 1e-12);
+    assert_close(cov[0], 67.5 / 80, 1e-7, 0);
+    assert_close(cov[1], 0, 0, 1e-12);
+    mcp_dump_free(m);
+    for (int k = 0; k < 3; k++)
+        mcp_dump_free(parts[k]);
+}
+
+/* Passes of one render merged with `pooled` give what one render of all the samples
+ * reports: the mean and the unbiased per-sample variance over all of them, / N. */
+static void
+test_merge_pooled_is_one_render(void **state)
+{
+    (void)state;
+    enum { W = 7, H = 3, PASSES = 4 };
+    const int n[PASSES] = {1, 5, 8, 18};
+    double sum[W * H * 3] = {0}, sum2[W * H * 3] = {0};
+    mcp_dump *parts[PASSES];
+    uint64_t rng = 42;
+    for (int k = 0; k < PASSES; k++) {
+        mcp_dump *d = calloc(1, sizeof *d);
+        d->color = mcp_test_constant(W, H, 3, 0, rgb);
+        d->var_of_mean = mcp_test_constant(W, H, 3, 0, rgb);
+        d->spp = n[k];
+        d->source = strdup("pass");
+        d->variance_source = MCP_VARSRC_PER_SAMPLE;
+        for (int i = 0; i < W * H * 3; i++) {
+            double s = 0, s2 = 0;
+            for (int j = 0; j < n[k]; j++) {
+                double t = 1 + (i % 3) + (1 + i % 5) * mcp_test_rand_normal(&rng);
+                s += t, s2 += t * t;
+            }
+            sum[i] += s, sum2[i] += s2;
+            double mean = s / n[k];
+            d->color->data[i] = (float)mean;
+            d->var_of_mean->data[i] =
+                n[k] > 1 ? (float)((s2 - n[k] * mean * mean) / (n[k] - 1) / n[k]) : 0.0f;
+        }
+        parts[k] = d;
+    }
+    mcp_merge_options opt = mcp_merge_defaults();
+    opt.variance = MCP_MERGE_POOLED;
+    mcp_dump *m = NULL;
+    assert_int_equal(mcp_dump_merge((const mcp_dump *const *)parts, PASSES, &opt, &m), 0);
+    assert_true(m->spp == 32);
+    assert_int_equal(m->variance_source, MCP_VARSRC_PER_SAMPLE);
+    for (int i = 0; i < W * H * 3; i++) {
+        double N = 32, mean = sum[i] / N;
+        double var = (sum2[i] - N * mean * mean) / (N - 1) / N;
+        /* float parts: a few ulp of the values */
+        assert_close(m->color->data[i], mean, 2e-6, 1e-6);
+        assert_close(m->var_of_mean->data[i], var, 2e-5, 1e-7);
+    }
+    mcp_dump_free(m);
+    for (int k = 0; k < PASSES; k++)
+        mcp_dump_free(parts[k]);
+}
+
+/* Monte Carlo over fixed seeds on the procedural renderer (independent sampler, no
+ * fireflies): the replicates' variance of the mean is unbiased for the exact
+ * per-sample variance / N, at K = 2, 4 and 8. */
+static void
+test_merge_replicates_unbiased(void **state)
+{
+    (void)state;
+    mcp_proc_scene scene = mcp_proc_scene_defaults();
+    scene.width = scene.height = 24;
+    scene.firefly_probability = 0;
+    mcp_image *truth_mean = NULL, *truth_var = NULL;
+    assert_int_equal(mcp_proc_truth(&scene, &truth_mean, &truth_var), 0);
+    const int ks[3] = {2, 4, 8};
+    for (int t = 0; t < 3; t++) {
+        int K = ks[t], spp = 4, trials = 96 / K;
+        double est = 0, truth = 0;
+        for (int trial = 0; trial < trials; trial++) {
+            mcp_dump *parts[8];
+            for (int k = 0; k < K; k++)
+                assert_int_equal(mcp_proc_render(&scene, spp,
+                                                 mcp_proc_realization_seed(7 + 1000 * trial,
+                                                                           k + 1),
+                                                 NULL, &parts[k]),
+                                 0);
+            mcp_dump *m = NULL;
+            assert_int_equal(mcp_dump_merge((const mcp_dump *const *)parts, K, NULL, &m), 0);
+            for (int i = 0; i < scene.width * scene.height * 3; i++) {
+                est += m->var_of_mean->data[i];
+                truth += truth_var->data[i] / (K * spp);
+            }
+            mcp_dump_free(m);
+            for (int k = 0; k < K; k++)
+                mcp_dump_free(parts[k]);
+        }
+        /* 96 / K trials x 1728 values with K - 1 dof each: the image-mean ratio has a
+           relative standard error near sqrt(2 / (96 / K (K - 1) 1728)) × (spread of
+           the variances) < 1.5%; 5% is > 3 SE */
+        assert_close(est / truth, 1.0, 0.05, 0);
+    }
+    mcp_image_free(truth_mean);
+    mcp_image_free(truth_var);
+}
+
+/* Pooling: a variance that is c times the shape comes back exactly; without a shape,
+ * the window mean clipped at the borders. */
+static void
+test_pool_variance(void **state)
+{
+    (void)state;
+    mcp_dump *d = calloc(1, sizeof *d);
+    d->source = strdup("made");
+    d->color = mcp_test_constant(9, 6, 3, 1, rgb);
+    mcp_image *shape = mcp_test_random(9, 6, 3, 0.1f, 2.0f, 5, rgb);
+    assert_int_equal(mcp_image_copy(shape, &d->var_of_mean), 0);
+    for (int i = 0; i < 9 * 6 * 3; i++)
+        d->var_of_mean->data[i] *= (i % 3 + 1) * 0.5f;
+    assert_int_equal(mcp_dump_pool_variance(d, shape, 2), 0);
+    for (int i = 0; i < 9 * 6 * 3; i++)
+        assert_close(d->var_of_mean->data[i], shape->data[i] * (i % 3 + 1) * 0.5, 1e-6, 0);
+    assert_true(d->variance_pool == 25);
+    /* no shape: one value of 25 at (0, 0) spreads over the 3x3 window cells that
+       see it, each window clipped at the corner */
+    memset(d->var_of_mean->data, 0, 9 * 6 * 3 * sizeof(float));
+    mcp_image_px(d->var_of_mean, 0, 0)[1] = 36;
+    assert_int_equal(mcp_dump_pool_variance(d, NULL, 1), 0);
+    assert_close(mcp_image_px(d->var_of_mean, 0, 0)[1], 36.0 / 4, 1e-7, 0);
+    assert_close(mcp_image_px(d->var_of_mean, 1, 0)[1], 36.0 / 6, 1e-7, 0);
+    assert_close(mcp_image_px(d->var_of_mean, 1, 1)[1], 36.0 / 9, 1e-7, 0);
+    assert_close(mcp_image_px(d->var_of_mean, 2, 0)[1], 0, 0, 0);
+    assert_int_equal(mcp_variance_pool_radius(3, 100), 3); /* 7x7: 147 >= 100 */
+    assert_int_equal(mcp_variance_pool_radius(200, 100), 0);
+    assert_int_equal(mcp_variance_pool_radius(1, 100), 5); /* 11x11 */
+    mcp_image_free(shape);
+    mcp_dump_free(d);
+}
+
+/* Writes the nested series spp[0..count) of one procedural render to files. */
+static mcp_series *
+procedural_series(const mcp_proc_scene *scene, const int *spp, int count, uint64_t seed,
+                  const char *stem)
+{
+    char **paths = calloc((size_t)count, sizeof *paths);
+    for (int i = 0; i < count; i++) {
+        mcp_dump *d = NULL;
+        assert_int_equal(mcp_proc_render(scene, spp[i], seed, NULL, &d), 0);
+        char name[64];
+        snprintf(name, sizeof name, "%s_%04d.exr", stem, spp[i]);
+        paths[i] = strdup(mcp_test_path(name));
+        assert_int_equal(mcp_dump_write(d, paths[i], MCP_CONV_PBRT, NULL), 0);
+        mcp_dump_free(d);
+    }
+    mcp_series *s = NULL;
+    assert_int_equal(mcp_series_from_paths((const char *const *)paths, NULL, count, &s), 0);
+    for (int i = 0; i < count; i++)
+        free(paths[i]);
+    free(paths);
+    return s;
+}
+
+/* Increments of an independent-sample render: unbiased for the exact variance of the
+ * mean (Monte Carlo over seeds), and the renderer's own Variance/n agrees with them
+ * (ratio near 1). */
+static void
+test_increments_independent(void **state)
+{
+    (void)state;
+    mcp_proc_scene scene = mcp_proc_scene_defaults();
+    scene.width = scene.height = 24;
+    scene.firefly_probability = 0;
+    mcp_image *truth_mean = NULL, *truth_var = NULL;
+    assert_int_equal(mcp_proc_truth(&scene, &truth_mean, &truth_var), 0);
+    const int spp[5] = {4, 8, 12, 16, 20};
+    double est = 0, truth = 0, ratio_sum = 0;
+    const int trials = 12;
+    mcp_increment_options opt = mcp_increment_defaults();
+    opt.pool_radius = 0; /* the raw estimate: unbiased per value */
+    for (int trial = 0; trial < trials; trial++) {
+        mcp_series *s = procedural_series(&scene, spp, 5, 100 + trial, "inc");
+        mcp_dump *d = NULL;
+        double ratio = 0;
+        assert_int_equal(mcp_series_increment_variance(s, 4, &opt, &d, &ratio), 0);
+        assert_int_equal(d->variance_source, MCP_VARSRC_INCREMENTS);
+        assert_true(d->variance_dof == 4);
+        for (int i = 0; i < scene.width * scene.height * 3; i++) {
+            est += d->var_of_mean->data[i];
+            truth += truth_var->data[i] / 20;
+        }
+        ratio_sum += ratio;
+        mcp_dump_free(d);
+        mcp_series_free(s);
+    }
+    /* 12 trials x 1728 values x 4 dof: a few percent at most */
+    assert_close(est / truth, 1.0, 0.05, 0);
+    assert_close(ratio_sum / trials, 1.0, 0.05, 0);
+    /* the member with the fewest blocks that still has two: member 1 (4 and 4 more) */
+    mcp_series *s = procedural_series(&scene, spp, 2, 5, "inc2");
+    mcp_dump *d = NULL;
+    opt.first_spp = 1;
+    assert_int_equal(mcp_series_increment_variance(s, 1, &opt, &d, NULL), 0);
+    assert_true(d->variance_dof == 1);
+    mcp_dump_free(d);
+    assert_error_contains(mcp_series_increment_variance(s, 0, &opt, &d, NULL),
+                          "needs two blocks");
+    assert_null(d);
+    mcp_series_free(s);
+    mcp_image_free(truth_mean);
+    mcp_image_free(truth_var);
+}
+
+/* The source travels through a file: merged, written, read back. */
+static void
+test_source_roundtrip(void **state)
+{
+    (void)state;
+    const float v[2][3] = {{1, 2, 3}, {2, 2, 5}};
+    mcp_dump *parts[2] = {constant_dump(4, 4, v[0], 8), constant_dump(4, 4, v[1], 8)};
+    mcp_dump *m = NULL, *back = NULL;
+    assert_int_equal(mcp_dump_merge((const mcp_dump *const *)parts, 2, NULL, &m), 0);
+    const char *path = mcp_test_path("merged.exr");
+    assert_int_equal(mcp_dump_write(m, path, MCP_CONV_AUTO, NULL), 0);
+    assert_int_equal(mcp_dump_read(path, &back), 0);
+    assert_int_equal(back->variance_source, MCP_VARSRC_REPLICATES);
+    assert_true(back->variance_dof == 1);
+    assert_int_equal(back->replicates, 2);
+    assert_true(back->spp == 16);
+    /* (8·0.5² + 8·0.5²) / (1 · 16) = 0.25 */
+    assert_close(mcp_image_px(back->var_of_mean, 1, 1)[0], 0.25, 1e-6, 0);
+    assert_close(mcp_image_px(back->var_of_mean, 1, 1)[2], 1.0, 1e-6, 0);
+    assert_string_equal(mcp_variance_source_name(back->variance_source), "replicates");
+    mcp_dump_free(back);
+    mcp_dump_free(m);
+    for (int k = 0; k < 2; k++)
+        mcp_dump_free(parts[k]);
+}
+
+static void
+test_merge_errors(void **state)
+{
+    (void)state;
+    const float v[3] = {1, 1, 1};
+    mcp_dump *a = constant_dump(4, 4, v, 8), *b = constant_dump(5, 4, v, 8), *m = NULL;
+    const mcp_dump *one[1] = {a}, *two[2] = {a, b}, *same[2] = {a, a};
+    assert_error_contains(mcp_dump_merge(one, 1, NULL, &m), "at least 2");
+    assert_error_contains(mcp_dump_merge(two, 2, NULL, &m), "is 5x4");
+    mcp_merge_options pooled = {MCP_MERGE_POOLED, 0};
+    assert_error_contains(mcp_dump_merge(same, 2, &pooled, &m), "no variance");
+    assert_null(m);
+    mcp_merge_variance kind;
+    assert_error_contains(mcp_merge_variance_from_name("spread", &kind), "unknown");
+    mcp_dump_free(a);
+    mcp_dump_free(b);
+}
+
+int
+main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_merge_replicates_closed_form),
+        cmocka_unit_test(test_merge_pooled_is_one_render),
+        cmocka_unit_test(test_merge_replicates_unbiased),
+        cmocka_unit_test(test_pool_variance),
+        cmocka_unit_test(test_increments_independent),
+        cmocka_unit_test(test_source_roundtrip),
+        cmocka_unit_test(test_merge_errors),
+    };
+    return cmocka_run_group_tests(tests, NULL, NULL);
+}
