@@ -48,6 +48,13 @@ add_dump(cJSON *o, const mcp_dump *d)
                             : d->variance_in_file == MCP_VAR_PER_SAMPLE
                                 ? "per-sample in the file (divided by spp)"
                                 : "of the mean in the file");
+    cJSON_AddStringToObject(o, "variance_source", mcp_variance_source_name(d->variance_source));
+    if (d->variance_dof > 0)
+        cJSON_AddNumberToObject(o, "variance_dof", d->variance_dof);
+    if (d->replicates > 0)
+        cJSON_AddNumberToObject(o, "replicates", d->replicates);
+    if (d->variance_pool > 0)
+        cJSON_AddNumberToObject(o, "variance_pool", d->variance_pool);
     cJSON_AddBoolToObject(o, "covariance", d->cov_of_mean != NULL);
     cJSON_AddBoolToObject(o, "albedo", d->albedo != NULL);
     cJSON_AddBoolToObject(o, "normal", d->normal != NULL);
@@ -92,6 +99,30 @@ describe_file(const char *path, const mcp_image *img, const mcp_dump_spec *spec)
     return o;
 }
 
+/* What the variance rests on, in words: a per-sample variance is an assumption. */
+static void
+print_variance_source(const cJSON *o)
+{
+    const cJSON *src = cJSON_GetObjectItem(o, "variance_source");
+    if (!cJSON_IsString(src) || strcmp(src->valuestring, "none") == 0)
+        return;
+    const cJSON *dof = cJSON_GetObjectItem(o, "variance_dof"),
+                *k = cJSON_GetObjectItem(o, "replicates"),
+                *pool = cJSON_GetObjectItem(o, "variance_pool");
+    if (strcmp(src->valuestring, "per-sample") == 0)
+        printf("  source:    per-sample / n (assumes independent samples; a stratified "
+               "sampler\n             makes it an overstatement: see mcpost merge)\n");
+    else if (strcmp(src->valuestring, "of-mean") == 0)
+        printf("  source:    of the mean, as the file stores it (origin not recorded)\n");
+    else
+        printf("  source:    %s: the spread of %d %s (%g degrees of freedom)\n",
+               src->valuestring, k ? k->valueint : 0,
+               strcmp(src->valuestring, "replicates") == 0 ? "renders" : "blocks",
+               dof ? dof->valuedouble : 0);
+    if (pool)
+        printf("  pooled:    over %g pixels\n", pool->valuedouble);
+}
+
 static void
 print_text(const cJSON *o)
 {
@@ -111,6 +142,7 @@ print_text(const cJSON *o)
     const cJSON *var = cJSON_GetObjectItem(o, "variance");
     if (var)
         printf("variance:    %s\n", var->valuestring);
+    print_variance_source(o);
     const cJSON *err = cJSON_GetObjectItem(o, "dump_error");
     if (err)
         printf("as a dump:   %s\n", err->valuestring);

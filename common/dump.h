@@ -233,6 +233,12 @@ MCP_API int mcp_series_increment_variance(const mcp_series *s, int i,
                                           const mcp_increment_options *opt,
                                           mcp_dump **out, double *ratio);
 
+/* The same from members already in memory: members[0..count) are the series up to
+ * the member estimated, members[count - 1]. */
+MCP_API int mcp_dump_increment_variance(const mcp_dump *const *members, int count,
+                                        const mcp_increment_options *opt, mcp_dump **out,
+                                        double *ratio);
+
 #ifdef __cplusplus
 }
 #endif

@@ -12,6 +12,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <glob.h>
 #include <unistd.h>
 
 typedef enum { ENTRY_DUMP, ENTRY_IMAGE, ENTRY_SERIES } entry_kind;
@@ -42,6 +43,7 @@ static const char *const root_keys[] = {"title", "inputs", "output", "stages", N
         "normal_file", "spp_map_file", "channels"
 static const char *const dump_keys[] = {"dump", DUMP_KEYS, NULL};
 static const char *const series_keys[] = {"series", DUMP_KEYS, NULL};
+static const char *const replicates_keys[] = {"replicates", "merge", "pool", DUMP_KEYS, NULL};
 static const char *const image_keys[] = {"image", NULL};
 static const char *const channel_keys[] = {"color", "variance", "albedo", "normal", NULL};
 
@@ -312,6 +314,108 @@ series_from(mcp_job *job, const mcp_node *def, mcp_series **out)
     return 0;
 }
 
+/* The files of a replicates input: a list, or a glob pattern (sorted matches). */
+static int
+replicate_paths(mcp_job *job, const mcp_node *def, char ***out, int *count)
+{
+    const mcp_node *src = mcp_node_get(def, "replicates");
+    char path[4096];
+    *out = NULL, *count = 0;
+    char **paths = NULL;
+    int n = 0, rc = 0;
+    if (src->kind == MCP_NODE_SCALAR) {
+        glob_t g;
+        if (mcp_job_resolve(job, src->value, path, sizeof path))
+            return mcp_node_error(src, "%s", mcp_error_message());
+        int grc = glob(path, 0, NULL, &g);
+        if (grc == GLOB_NOMATCH)
+            return mcp_node_error(src, "replicates: no file matches %s", path);
+        if (grc != 0)
+            return mcp_node_error(src, "replicates: cannot expand %s", path);
+        n = (int)g.gl_pathc;
+        if (!(paths = mcp_calloc((size_t)n, sizeof *paths)))
+            rc = -1;
+        for (int i = 0; i < n && !rc; i++)
+            rc = !(paths[i] = mcp_strdup(g.gl_pathv[i]));
+        globfree(&g);
+    } else if (src->kind == MCP_NODE_SEQ) {
+        n = src->count;
+        if (!(paths = mcp_calloc((size_t)n + 1, sizeof *paths)))
+            return -1;
+        for (int i = 0; i < n && !rc; i++) {
+            const char *f;
+            rc = mcp_node_string(src->items[i], "replicates", &f) ||
+                 mcp_job_resolve(job, f, path, sizeof path) ||
+                 !(paths[i] = mcp_strdup(path)) || file_exists(src->items[i], path);
+        }
+    } else {
+        return mcp_node_error(src, "replicates must be a list of files or a pattern");
+    }
+    if (!rc && n < 2)
+        rc = mcp_node_error(src, "replicates: %d file%s; the spread needs at least 2", n,
+                            n == 1 ? "" : "s");
+    if (rc) {
+        for (int i = 0; i < n && paths; i++)
+            free(paths[i]);
+        free(paths);
+        return -1;
+    }
+    *out = paths, *count = n;
+    return 0;
+}
+
+static void
+free_paths(char **paths, int n)
+{
+    for (int i = 0; i < n; i++)
+        free(paths[i]);
+    free(paths);
+}
+
+/* The merge settings of a replicates input (merge: replicates|pooled, pool: R). */
+static int
+merge_options_from(const mcp_node *def, mcp_merge_options *opt)
+{
+    *opt = mcp_merge_defaults();
+    const char *kind = NULL;
+    if (mcp_node_opt_string(def, "merge", &kind) || mcp_node_opt_int(def, "pool", &opt->pool_radius))
+        return -1;
+    if (kind && mcp_merge_variance_from_name(kind, &opt->variance))
+        return mcp_node_error(mcp_node_get(def, "merge"), "%s", mcp_error_message());
+    if (opt->pool_radius < 0)
+        return mcp_node_error(mcp_node_get(def, "pool"), "pool must be >= 0 (got %d)",
+                              opt->pool_radius);
+    return 0;
+}
+
+/* Loads every replicate with the input's dump settings and merges them. */
+static int
+load_replicates(mcp_job *job, const mcp_node *def, mcp_dump **out)
+{
+    char **paths = NULL, store[6][4096];
+    int n = 0, rc = -1;
+    mcp_dump_spec spec;
+    mcp_merge_options mo;
+    if (merge_options_from(def, &mo) || replicate_paths(job, def, &paths, &n) ||
+        dump_spec_from(job, def, &spec, store))
+        return -1;
+    mcp_dump **parts = mcp_calloc((size_t)n, sizeof *parts);
+    if (!parts)
+        goto done;
+    for (int i = 0; i < n; i++) {
+        spec.path = paths[i];
+        if (mcp_dump_load(&spec, &parts[i]))
+            goto done;
+    }
+    rc = mcp_dump_merge((const mcp_dump *const *)parts, n, &mo, out);
+done:
+    for (int i = 0; parts && i < n; i++)
+        mcp_dump_free(parts[i]);
+    free(parts);
+    free_paths(paths, n);
+    return rc;
+}
+
 /* Checks every input definition (keys, types, files present) without loading. */
 static int
 check_inputs(mcp_job *job)
@@ -327,7 +431,8 @@ check_inputs(mcp_job *job)
         char what[256];
         snprintf(what, sizeof what, "input '%s'", name);
         if (def->kind != MCP_NODE_MAP)
-            return mcp_node_error(def, "input '%s' must be a map (dump:, image: or series:)",
+            return mcp_node_error(def, "input '%s' must be a map (dump:, image:, series: or "
+                                  "replicates:)",
                                   name);
         entry *e = add_entry(job, name);
         if (!e)
@@ -344,6 +449,17 @@ check_inputs(mcp_job *job)
                 file_exists(mcp_node_get(def, "dump"), path) ||
                 dump_spec_from(job, def, &spec, store))
                 return -1;
+        } else if (mcp_node_get(def, "replicates")) {
+            /* K renders of the frame with other seeds, merged into one dump */
+            e->kind = ENTRY_DUMP;
+            char **paths = NULL;
+            int n = 0;
+            mcp_merge_options mo;
+            if (mcp_node_check_keys(def, replicates_keys, what) ||
+                merge_options_from(def, &mo) || replicate_paths(job, def, &paths, &n) ||
+                dump_spec_from(job, def, &spec, store))
+                return -1;
+            free_paths(paths, n);
         } else if (mcp_node_get(def, "image")) {
             e->kind = ENTRY_IMAGE;
             if (mcp_node_check_keys(def, image_keys, what) ||
@@ -361,7 +477,9 @@ check_inputs(mcp_job *job)
             }
             mcp_series_free(s);
         } else {
-            return mcp_node_error(def, "input '%s' needs one of dump:, image: or series:",
+            return mcp_node_error(def,
+                                  "input '%s' needs one of dump:, image:, series: or "
+                                  "replicates:",
                                   name);
         }
     }
@@ -378,6 +496,8 @@ load_entry(mcp_job *job, entry *e)
     case ENTRY_DUMP:
         if (e->dump)
             return 0;
+        if (mcp_node_get(e->def, "replicates"))
+            return load_replicates(job, e->def, &e->dump);
         mcp_node_string(mcp_node_get(e->def, "dump"), "dump", &file);
         if (mcp_job_resolve(job, file, path, sizeof path) ||
             dump_spec_from(job, e->def, &spec, store))

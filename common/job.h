@@ -6,6 +6,9 @@
  *     noisy:     {dump: renders/frame_0064.exr}          # a render dump
  *     progress:  {series: renders/frame_%04d.exr, spp: [1, 2, 4, 8]}
  *     reference: {image: renders/reference.exr}
+ *     merged:    {replicates: renders/frame_seed*.exr}      # K renders, other seeds:
+ *                                                          # one dump, variance from
+ *                                                          # their spread (or a list)
  *   output: out/frame                                     # relative to the job file
  *   stages:
  *     - info: {input: noisy}

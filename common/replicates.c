@@ -369,15 +369,9 @@ done:
 
 /* ---- increments of a progressive series ---- */
 
-/* One loaded member and its sample count. */
-typedef struct member {
-    mcp_dump *d;
-    double n;
-} member;
-
 int
-mcp_series_increment_variance(const mcp_series *s, int i, const mcp_increment_options *opt,
-                              mcp_dump **out, double *ratio)
+mcp_dump_increment_variance(const mcp_dump *const *members, int count,
+                            const mcp_increment_options *opt, mcp_dump **out, double *ratio)
 {
     mcp_increment_options defaults = mcp_increment_defaults();
     if (!opt)
@@ -385,59 +379,52 @@ mcp_series_increment_variance(const mcp_series *s, int i, const mcp_increment_op
     *out = NULL;
     if (ratio)
         *ratio = 0;
-    if (i < 0 || i >= s->count)
-        return mcp_error("series: no member %d (it has %d)", i, s->count);
-    member *m = mcp_calloc((size_t)i + 1, sizeof *m);
-    if (!m)
-        return -1;
-    int rc = -1, first = 0;
-    mcp_image *shape = NULL;
-    mcp_dump *d = NULL;
-    for (int k = 0; k <= i; k++) {
-        if (mcp_series_load(s, k, &m[k].d))
-            goto done;
-        if (m[k].d->spp_map || !(m[k].d->spp > 0)) {
-            mcp_error("%s: increments need one sample count per member (a scalar spp)",
-                      m[k].d->source);
-            goto done;
-        }
-        m[k].n = m[k].d->spp;
-        if (k > 0 && !(m[k].n > m[k - 1].n)) {
-            mcp_error("%s: series members must have increasing sample counts (%g after "
-                      "%g)",
-                      m[k].d->source, m[k].n, m[k - 1].n);
-            goto done;
-        }
-        if (m[k].d->color->width != m[0].d->color->width ||
-            m[k].d->color->height != m[0].d->color->height) {
-            mcp_error("%s: not the size of %s", m[k].d->source, m[0].d->source);
-            goto done;
-        }
+    if (count < 1)
+        return mcp_error("increments: no members given");
+    for (int k = 0; k < count; k++) {
+        const mcp_dump *d = members[k];
+        if (d->spp_map || !(d->spp > 0))
+            return mcp_error("%s: increments need one sample count per member (a scalar "
+                             "spp)",
+                             d->source);
+        if (k > 0 && !(d->spp > members[k - 1]->spp))
+            return mcp_error("%s: series members must have increasing sample counts (%g "
+                             "after %g)",
+                             d->source, d->spp, members[k - 1]->spp);
+        if (d->color->width != members[0]->color->width ||
+            d->color->height != members[0]->color->height)
+            return mcp_error("%s: not the size of %s", d->source, members[0]->source);
     }
-    double n = m[i].n;
+    int i = count - 1, first = 0;
+    double n = members[i]->spp;
     double first_spp = opt->first_spp > 0 ? opt->first_spp : n / 64;
     /* the first block ends at the first member with at least first_spp samples:
        smaller blocks sit where a stratified sampler's variance does not scale as 1/n */
-    while (first < i && m[first].n < first_spp)
+    while (first < i && members[first]->spp < first_spp)
         first++;
     int blocks = i - first + 1;
-    if (blocks < 2) {
-        mcp_error("%s: the variance from increments needs two blocks of samples before "
-                  "%g spp (members from %g spp on); this member is the first",
-                  m[i].d->source, n, first_spp);
-        goto done;
-    }
-    d = m[i].d;
-    m[i].d = NULL;
-    const mcp_image *X = d->color;
-    if (d->var_of_mean && d->variance_source == MCP_VARSRC_PER_SAMPLE &&
-        mcp_image_copy(d->var_of_mean, &shape))
-        goto done;
-    mcp_image_free(d->var_of_mean);
-    mcp_image_free(d->cov_of_mean);
-    d->var_of_mean = d->cov_of_mean = NULL;
-    if (new3(X, "R", "G", "B", &d->var_of_mean) || new3(X, "RG", "RB", "GB", &d->cov_of_mean))
-        goto done;
+    if (blocks < 2)
+        return mcp_error("%s: the variance from increments needs two blocks of samples "
+                         "(members from %g spp on); this member is the first",
+                         members[i]->source, first_spp);
+    const mcp_dump *last = members[i];
+    const mcp_image *X = last->color;
+    mcp_image *shape = NULL;
+    mcp_dump *d = mcp_calloc(1, sizeof *d);
+    if (!d)
+        return -1;
+    /* the member itself, with the variance replaced */
+    if (mcp_image_copy(last->color, &d->color) ||
+        (last->albedo && mcp_image_copy(last->albedo, &d->albedo)) ||
+        (last->normal && mcp_image_copy(last->normal, &d->normal)) ||
+        !(d->source = mcp_strdup(last->source)) || mcp_attrs_copy(&last->attrs, &d->attrs) ||
+        new3(X, "R", "G", "B", &d->var_of_mean) || new3(X, "RG", "RB", "GB", &d->cov_of_mean))
+        goto fail;
+    d->spp = n;
+    d->convention = last->convention;
+    if (last->var_of_mean && last->variance_source == MCP_VARSRC_PER_SAMPLE &&
+        mcp_image_copy(last->var_of_mean, &shape))
+        goto fail;
     static const int pair[3][2] = {{0, 1}, {0, 2}, {1, 2}};
 #pragma omp parallel for schedule(static)
     for (int y = 0; y < X->height; y++)
@@ -448,9 +435,9 @@ mcp_series_increment_variance(const mcp_series *s, int i, const mcp_increment_op
                 /* block b: the samples from member b-1's count to member b's (all of
                    member `first` for the first block); its mean from the two running
                    means */
-                const float *xb = b == i ? xm : mcp_image_px(m[b].d->color, x, y);
-                double nb = m[b].n, np = b == first ? 0 : m[b - 1].n;
-                const float *xp = b == first ? NULL : mcp_image_px(m[b - 1].d->color, x, y);
+                const float *xb = mcp_image_px(members[b]->color, x, y);
+                double nb = members[b]->spp, np = b == first ? 0 : members[b - 1]->spp;
+                const float *xp = b == first ? NULL : mcp_image_px(members[b - 1]->color, x, y);
                 double size = nb - np, dev[3];
                 for (int c = 0; c < 3; c++) {
                     double yb = xp ? (nb * xb[c] - np * xp[c]) / size : xb[c];
@@ -460,7 +447,8 @@ mcp_series_increment_variance(const mcp_series *s, int i, const mcp_increment_op
                 for (int j = 0; j < 3; j++)
                     sc[j] += size * dev[pair[j][0]] * dev[pair[j][1]];
             }
-            float *v = mcp_image_px(d->var_of_mean, x, y), *cv = mcp_image_px(d->cov_of_mean, x, y);
+            float *v = mcp_image_px(d->var_of_mean, x, y),
+                  *cv = mcp_image_px(d->cov_of_mean, x, y);
             for (int c = 0; c < 3; c++)
                 v[c] = (float)(ss[c] / ((blocks - 1) * n));
             for (int j = 0; j < 3; j++)
@@ -483,15 +471,32 @@ mcp_series_increment_variance(const mcp_series *s, int i, const mcp_increment_op
     int radius = opt->pool_radius >= 0 ? opt->pool_radius
                                        : mcp_variance_pool_radius(blocks - 1, 100);
     if (mcp_dump_pool_variance(d, shape, radius))
-        goto done;
+        goto fail;
+    mcp_image_free(shape);
     *out = d;
-    d = NULL;
-    rc = 0;
-done:
-    for (int k = 0; k <= i; k++)
-        mcp_dump_free(m[k].d);
-    free(m);
+    return 0;
+fail:
     mcp_image_free(shape);
     mcp_dump_free(d);
-    return rc;
+    return -1;
+}
+
+int
+mcp_series_increment_variance(const mcp_series *s, int i, const mcp_increment_options *opt,
+                              mcp_dump **out, double *ratio)
+{
+    *out = NULL;
+    if (i < 0 || i >= s->count)
+        return mcp_error("series: no member %d (it has %d)", i, s->count);
+    mcp_dump **m = mcp_calloc((size_t)i + 1, sizeof *m);
+    if (!m)
+        return -1;
+    int rc = 0;
+    for (int k = 0; k <= i && !rc; k++)
+        rc = mcp_series_load(s, k, &m[k]);
+    rc = rc || mcp_dump_increment_variance((const mcp_dump *const *)m, i + 1, opt, out, ratio);
+    for (int k = 0; k <= i; k++)
+        mcp_dump_free(m[k]);
+    free(m);
+    return rc ? -1 : 0;
 }
