@@ -21,6 +21,7 @@ mcp__proc_lin_at(const mcp__proc_lin *l, double px, double py)
 /* The scene fixed for one image size. */
 typedef struct mcp__proc_geom {
     int width, height;
+    int strata; /* k of the jittered sampler; 1 for the independent one (the same) */
     double firefly_probability, firefly_value;
     double d0[3], dx[3], dy[3]; /* ray direction d0 + px dx + py dy (not normalised) */
     /* Homogeneous coordinates of where the ray meets the ground (height 0) and the
@@ -49,6 +50,10 @@ void mcp__proc_shade_sample(const mcp__proc_geom *g, const mcp__proc_hit *h,
 /* The first and second moments of mcp__proc_shade_sample over u, in closed form. */
 void mcp__proc_shade_moments(const mcp__proc_geom *g, const mcp__proc_hit *h,
                              double mean[3], double m2[3]);
+/* 0 when n (a sample count or index, named what) is a whole number of passes of g's
+ * sampler; otherwise sets the error and returns -1. The jittered estimate is unbiased
+ * only over whole passes (a partial pass leaves cells out). */
+int mcp__proc_check_passes(const mcp__proc_geom *g, const char *what, uint64_t n);
 /* The lines (in pixel coordinates) crossing the interior of pixel (x, y) across which
  * the moments are discontinuous or kinked. Returns their number, or -1 when there are
  * more than cap (out then holds the first cap). */

@@ -23,9 +23,15 @@ static const char USAGE[] =
     "                             each (samples k*n .. k*n+n-1 of seed S's\n"
     "                             streams) as OUT_PREFIX_single_0000.exr ...\n"
     "  --single-spp N             samples per single image [1]\n"
-    "  --truth                    also write the exact expectation and per-sample\n"
-    "                             variance: OUT_PREFIX_truth.exr and\n"
-    "                             OUT_PREFIX_truth_variance.exr\n"
+    "  --sampler NAME             footprint sampler: independent [default] or\n"
+    "                             jittered (stratified; --spp and --single-spp\n"
+    "                             must then be multiples of K*K)\n"
+    "  --strata K                 cells per side of the jittered sampler [4]\n"
+    "  --truth                    also write the exact expectation, per-sample\n"
+    "                             variance and variance of the --spp-sample mean\n"
+    "                             under the sampler: OUT_PREFIX_truth.exr,\n"
+    "                             OUT_PREFIX_truth_variance.exr and\n"
+    "                             OUT_PREFIX_truth_var_of_mean.exr\n"
     "  --truth-order N            quadrature points per triangle side [8]\n"
     "  --firefly-probability P    chance of a firefly per ground sample [1e-3]\n"
     "  --firefly-value V          a firefly's brightness [100]\n";
@@ -74,6 +80,20 @@ parse_u64(const char *flag, const char *s, uint64_t *out)
     return 0;
 }
 
+/* The sampler names of --sampler, in the order of mcp_proc_sampler. */
+static const char *const SAMPLERS[] = {"independent", "jittered"};
+
+static int
+parse_sampler(const char *flag, const char *s, mcp_proc_sampler *out)
+{
+    for (size_t i = 0; s && i < sizeof SAMPLERS / sizeof *SAMPLERS; i++)
+        if (!strcmp(s, SAMPLERS[i])) {
+            *out = (mcp_proc_sampler)i;
+            return 0;
+        }
+    return mcp_error("%s must be independent or jittered (got '%s')", flag, s ? s : "");
+}
+
 typedef struct {
     mcp_proc_scene scene;
     int spp, realizations, singles, single_spp, truth;
@@ -105,6 +125,10 @@ parse(int argc, char **argv, options *o)
             rc = parse_int(a, v, 1, &o->scene.truth_order);
         else if (!strcmp(a, "--firefly-probability"))
             rc = parse_double(a, v, &o->scene.firefly_probability);
+        else if (!strcmp(a, "--sampler"))
+            rc = parse_sampler(a, v, &o->scene.sampler);
+        else if (!strcmp(a, "--strata"))
+            rc = parse_int(a, v, 1, &o->scene.strata);
         else if (!strcmp(a, "--firefly-value"))
             rc = parse_double(a, v, &o->scene.firefly_value);
         else if (!strcmp(a, "--permutation") && v)
@@ -119,7 +143,19 @@ parse(int argc, char **argv, options *o)
         i += takes;
     }
     if (!o->prefix) return mcp_error("no output prefix (-o OUT_PREFIX)");
-    return mcp_proc_scene_check(&o->scene);
+    if (mcp_proc_scene_check(&o->scene)) return -1;
+    /* The library refuses partial passes too, but only once some files are written. */
+    int pass = o->scene.strata * o->scene.strata;
+    if (o->scene.sampler == MCP_PROC_SAMPLER_JITTERED && o->spp % pass)
+        return mcp_error("--spp must be a multiple of --strata^2 = %d with the jittered "
+                         "sampler (got %d)",
+                         pass, o->spp);
+    if (o->scene.sampler == MCP_PROC_SAMPLER_JITTERED && o->singles > 0 &&
+        o->single_spp % pass)
+        return mcp_error("--single-spp must be a multiple of --strata^2 = %d with the "
+                         "jittered sampler (got %d)",
+                         pass, o->single_spp);
+    return 0;
 }
 
 static int
@@ -143,14 +179,18 @@ write_singles(const options *o, const mcp_image *perm)
 static int
 write_truth(const options *o)
 {
-    mcp_image *mean = NULL, *var = NULL;
-    char path[4096], vpath[4096];
+    mcp_image *mean = NULL, *var = NULL, *var_of_mean = NULL;
+    char path[4096], vpath[4096], mpath[4096];
     snprintf(path, sizeof path, "%s_truth.exr", o->prefix);
     snprintf(vpath, sizeof vpath, "%s_truth_variance.exr", o->prefix);
+    snprintf(mpath, sizeof mpath, "%s_truth_var_of_mean.exr", o->prefix);
     int rc = mcp_proc_truth(&o->scene, &mean, &var) ||
-             mcp_image_write(mean, path, NULL) || mcp_image_write(var, vpath, NULL);
+             mcp_image_write(mean, path, NULL) || mcp_image_write(var, vpath, NULL) ||
+             mcp_proc_truth_var_of_mean(&o->scene, o->spp, &var_of_mean) ||
+             mcp_image_write(var_of_mean, mpath, NULL);
     mcp_image_free(mean);
     mcp_image_free(var);
+    mcp_image_free(var_of_mean);
     return rc ? -1 : 0;
 }
 

@@ -1,10 +1,12 @@
 /* render.c: Monte Carlo rendering of the procedural scene from per-pixel random
  * streams, optionally with permuted seeds (SPEC perceptual, "horizontal search space":
- * a renderer re-renders pixel p with pixel pi(p)'s seed).
+ * a renderer re-renders pixel p with pixel pi(p)'s seed), with independent or
+ * jittered (stratified) footprint points.
  *
  * Every random number is a hash of (seed, source pixel, sample index, dimension), so a
  * pixel's estimate depends on nothing else: not on the other pixels, the order of
- * work or the thread count. */
+ * work or the thread count. The jittered sampler only moves the footprint point into
+ * the cell that the sample index names, so it needs no state either. */
 #include "internal.h"
 
 #include <math.h>
@@ -49,12 +51,22 @@ static void
 render_into(const mcp__proc_geom *g, int x, int y, uint64_t key, uint64_t first, long n,
             accum *a)
 {
+    const int k = g->strata;
+    const uint64_t pass = (uint64_t)k * (uint64_t)k;
     *a = (accum){0};
     for (long i = 0; i < n; i++) {
         uint64_t s = first + (uint64_t)i;
         double u[DIMS];
         for (int d = 0; d < DIMS; d++)
             u[d] = stream_uniform(key, s, d);
+        if (k > 1) {
+            /* Jittered: sample s is number s mod k^2 of its pass and lies in that cell
+             * (row-major) of the k x k grid, at the same uniforms scaled into it. The
+             * independent sampler (k = 1) keeps u[0], u[1] untouched, bit for bit. */
+            uint64_t cell = s % pass;
+            u[0] = ((double)(cell % (uint64_t)k) + u[0]) / k;
+            u[1] = ((double)(cell / (uint64_t)k) + u[1]) / k;
+        }
         mcp__proc_hit h;
         double rgb[3], alb[3];
         mcp__proc_hit_at(g, x + u[0], y + u[1], &h);
@@ -149,6 +161,7 @@ mcp_proc_render(const mcp_proc_scene *scene, int spp, uint64_t seed,
     *out = NULL;
     if (mcp__proc_geom_init(scene, &g)) return -1;
     if (spp < 1) return mcp_error("procedural: spp must be >= 1 (got %d)", spp);
+    if (mcp__proc_check_passes(&g, "spp", (uint64_t)spp)) return -1;
     snprintf(label, sizeof label, "procedural(seed %llu, %d spp)",
              (unsigned long long)seed, spp);
     if (source_indices(&g, permutation, &src) || !(d = mcp_calloc(1, sizeof *d)) ||
@@ -160,6 +173,12 @@ mcp_proc_render(const mcp_proc_scene *scene, int spp, uint64_t seed,
     char text[32];
     snprintf(text, sizeof text, "%llu", (unsigned long long)seed);
     if (mcp_attrs_set_string(&d->attrs, "mcpost.procedural.seed", text)) goto fail;
+    /* Tells a reader of the file that its variance overstates the variance of the
+     * mean; left out for the independent sampler, whose files stay as they were. */
+    snprintf(text, sizeof text, "jittered %dx%d", g.strata, g.strata);
+    if (scene->sampler == MCP_PROC_SAMPLER_JITTERED &&
+        mcp_attrs_set_string(&d->attrs, "mcpost.procedural.sampler", text))
+        goto fail;
     d->spp = spp;
     d->convention = MCP_CONV_PBRT;
     d->variance_in_file = MCP_VAR_PER_SAMPLE; /* as it will be written */
@@ -203,7 +222,9 @@ mcp_proc_render_samples(const mcp_proc_scene *scene, int count, int spp, uint64_
         out[k] = NULL;
     if (mcp__proc_geom_init(scene, &g)) return -1;
     if (spp < 1) return mcp_error("procedural: spp must be >= 1 (got %d)", spp);
-    if (source_indices(&g, permutation, &src)) return -1;
+    if (mcp__proc_check_passes(&g, "spp", (uint64_t)spp) ||
+        source_indices(&g, permutation, &src))
+        return -1;
     for (int k = 0; k < count; k++) {
         char label[96];
         snprintf(label, sizeof label, "procedural(seed %llu, samples %d of %d spp)",
@@ -245,6 +266,9 @@ mcp_proc_render_pixel(const mcp_proc_scene *scene, int x, int y, int src_x, int 
         return mcp_error("procedural: pixel (%d, %d) or source (%d, %d) outside the "
                          "%dx%d image",
                          x, y, src_x, src_y, g.width, g.height);
+    if (mcp__proc_check_passes(&g, "spp", (uint64_t)spp) ||
+        mcp__proc_check_passes(&g, "first_sample", first_sample))
+        return -1;
     accum a;
     uint64_t src = (uint64_t)src_y * g.width + (uint64_t)src_x;
     render_into(&g, x, y, stream_key(seed, src), first_sample, spp, &a);

@@ -197,6 +197,7 @@ mcp__proc_geom_init(const mcp_proc_scene *scene, mcp__proc_geom *g)
     g->height = scene->height;
     g->firefly_probability = scene->firefly_probability;
     g->firefly_value = scene->firefly_value;
+    g->strata = scene->sampler == MCP_PROC_SAMPLER_JITTERED ? scene->strata : 1;
 
     double f[3], r[3] = {1.0, 0.0, 0.0}, u[3];
     for (int k = 0; k < 3; k++)
@@ -337,6 +338,17 @@ mcp__proc_edges(const mcp__proc_geom *g, int x, int y, mcp__proc_lin *out, int c
     return overflow ? -1 : n;
 }
 
+int
+mcp__proc_check_passes(const mcp__proc_geom *g, const char *what, uint64_t n)
+{
+    uint64_t pass = (uint64_t)g->strata * (uint64_t)g->strata;
+    if (n % pass == 0) return 0;
+    return mcp_error("procedural: the jittered sampler takes whole passes of strata^2 = "
+                     "%llu samples; %s must be a multiple of %llu (got %llu)",
+                     (unsigned long long)pass, what, (unsigned long long)pass,
+                     (unsigned long long)n);
+}
+
 /* ---- public ---- */
 
 mcp_proc_scene
@@ -346,7 +358,9 @@ mcp_proc_scene_defaults(void)
                             .height = 64,
                             .firefly_probability = 1e-3,
                             .firefly_value = 100.0,
-                            .truth_order = 8};
+                            .truth_order = 8,
+                            .sampler = MCP_PROC_SAMPLER_INDEPENDENT,
+                            .strata = 4};
 }
 
 int
@@ -368,5 +382,15 @@ mcp_proc_scene_check(const mcp_proc_scene *s)
     if (s->truth_order < 1 || s->truth_order > 32)
         return mcp_error("procedural: truth_order must be in 1..32 (got %d)",
                          s->truth_order);
+    if (s->sampler != MCP_PROC_SAMPLER_INDEPENDENT &&
+        s->sampler != MCP_PROC_SAMPLER_JITTERED)
+        return mcp_error("procedural: sampler must be MCP_PROC_SAMPLER_INDEPENDENT or "
+                         "MCP_PROC_SAMPLER_JITTERED (got %d)",
+                         (int)s->sampler);
+    /* checked for both samplers, so that switching to jittered cannot fail later; 64
+     * (4096 samples per pass) is far more than a stratified render needs */
+    if (s->strata < 1 || s->strata > MCP_PROC_MAX_STRATA)
+        return mcp_error("procedural: strata must be in 1..%d (got %d)",
+                         MCP_PROC_MAX_STRATA, s->strata);
     return 0;
 }

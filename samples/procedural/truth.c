@@ -7,10 +7,18 @@
  * the pixel square is cut along those lines into convex pieces on which it is smooth
  * (analytic), and each piece is integrated with a collapsed tensor Gauss-Legendre rule
  * per triangle of its fan. The error then falls exponentially with the order: 8 points
- * per side give about 1e-12 (tests/samples/test_procedural.c compares orders). */
+ * per side give about 1e-12 (tests/samples/test_procedural.c compares orders).
+ *
+ * The variance of the pixel mean under the jittered sampler needs the moments of each
+ * cell of the k x k grid instead of the whole pixel's. The camera maps continuous
+ * pixel coordinates to rays independently of the image size (only the scale of the
+ * coordinates changes), so cell (i, j) of pixel (x, y) is pixel (k x + i, k y + j)
+ * of the same scene k times finer (up to the rounding of the ray directions, ~1e-16),
+ * and the cutting and quadrature serve unchanged. */
 #include "internal.h"
 
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 
 /* A pixel's pieces have at most 4 + (number of lines) vertices; pixels of reasonable
@@ -188,6 +196,52 @@ mcp_proc_truth_pixel(const mcp_proc_scene *scene, int x, int y, double mean[3],
     return 0;
 }
 
+/* The variance of the mean of `passes` jittered passes at pixel (x, y), from the k^2
+ * cells of fine, the k-times-finer scene: the samples are independent, one per cell
+ * per pass, so the variance is (1 / passes) sum_cells var_cell / k^4. With k = 1 this
+ * is the per-sample variance / passes, the independent sampler's. */
+static int
+var_of_mean_pixel(const mcp__proc_geom *fine, int k, int passes, int x, int y, int order,
+                  const double *node, const double *weight, scratch *s, double out[3])
+{
+    double sum[3] = {0.0, 0.0, 0.0};
+    for (int j = 0; j < k; j++)
+        for (int i = 0; i < k; i++) {
+            double m[3], m2[3];
+            if (truth_pixel(fine, k * x + i, k * y + j, order, node, weight, s, m, m2))
+                return -1;
+            for (int c = 0; c < 3; c++)
+                sum[c] += fmax(0.0, m2[c] - m[c] * m[c]);
+        }
+    double scale = (double)k * k * k * k * passes;
+    for (int c = 0; c < 3; c++)
+        out[c] = sum[c] / scale;
+    return 0;
+}
+
+/* The k-times-finer scene whose pixels are the cells of the jittered sampler (k = 1
+ * for the independent sampler: the scene itself), and the number of passes in spp. */
+static int
+fine_geom(const mcp_proc_scene *scene, int spp, mcp__proc_geom *fine, int *k, int *passes)
+{
+    mcp__proc_geom g;
+    if (mcp__proc_geom_init(scene, &g)) return -1;
+    if (spp < 1) return mcp_error("procedural: spp must be >= 1 (got %d)", spp);
+    if (mcp__proc_check_passes(&g, "spp", (uint64_t)spp)) return -1;
+    *k = g.strata;
+    *passes = spp / (g.strata * g.strata);
+    if ((long)scene->width * *k > MCP_MAX_DIM || (long)scene->height * *k > MCP_MAX_DIM)
+        return mcp_error("procedural truth: the cells of %d strata of a %dx%d image "
+                         "would be pixels of a %ldx%ld one, more than %d a side",
+                         *k, scene->width, scene->height, (long)scene->width * *k,
+                         (long)scene->height * *k, MCP_MAX_DIM);
+    mcp_proc_scene f = *scene;
+    f.width *= *k;
+    f.height *= *k;
+    f.sampler = MCP_PROC_SAMPLER_INDEPENDENT;
+    return mcp__proc_geom_init(&f, fine);
+}
+
 int
 mcp_proc_truth(const mcp_proc_scene *scene, mcp_image **mean, mcp_image **var)
 {
@@ -244,6 +298,89 @@ mcp_proc_truth(const mcp_proc_scene *scene, mcp_image **mean, mcp_image **var)
     return 0;
 fail:
     mcp_image_free(m);
+    mcp_image_free(v);
+    return -1;
+}
+
+int
+mcp_proc_truth_pixel_var_of_mean(const mcp_proc_scene *scene, int x, int y, int spp,
+                                 double var_of_mean[3])
+{
+    mcp__proc_geom fine;
+    double node[32], weight[32];
+    int k, passes;
+    scratch s = {0};
+    if (fine_geom(scene, spp, &fine, &k, &passes)) return -1;
+    if (x < 0 || x >= scene->width || y < 0 || y >= scene->height)
+        return mcp_error("procedural truth: pixel (%d, %d) outside the %dx%d image", x, y,
+                         scene->width, scene->height);
+    gauss_legendre(scene->truth_order, node, weight);
+    int rc = var_of_mean_pixel(&fine, k, passes, x, y, scene->truth_order, node, weight,
+                               &s, var_of_mean);
+    free(s.a);
+    free(s.b);
+    if (rc)
+        return mcp_error("procedural truth: a cell of pixel (%d, %d) is crossed by more "
+                         "than %d edges (or memory ran out); use a larger image",
+                         x, y, MAX_LINES);
+    return 0;
+}
+
+int
+mcp_proc_truth_var_of_mean(const mcp_proc_scene *scene, int spp, mcp_image **var_of_mean)
+{
+    static const char *const rgb[3] = {"R", "G", "B"};
+    mcp__proc_geom fine;
+    double node[32], weight[32];
+    int k, passes;
+    char label[96];
+    mcp_image *v = NULL;
+    *var_of_mean = NULL;
+    if (fine_geom(scene, spp, &fine, &k, &passes)) return -1;
+    int order = scene->truth_order, w = scene->width, h = scene->height;
+    gauss_legendre(order, node, weight);
+    if (scene->sampler == MCP_PROC_SAMPLER_JITTERED)
+        snprintf(label, sizeof label,
+                 "procedural truth variance of the mean (%d spp, "
+                 "jittered %dx%d)",
+                 spp, k, k);
+    else
+        snprintf(label, sizeof label, "procedural truth variance of the mean (%d spp)",
+                 spp);
+    if (mcp_image_new(w, h, 3, rgb, &v) || mcp_image_set_source(v, label)) goto fail;
+
+    long failed = 0, fail_index = -1;
+#pragma omp parallel reduction(+ : failed)
+    {
+        scratch s = {0};
+#pragma omp for schedule(dynamic)
+        for (int y = 0; y < h; y++)
+            for (int x = 0; x < w; x++) {
+                double vm[3];
+                if (var_of_mean_pixel(&fine, k, passes, x, y, order, node, weight, &s,
+                                      vm)) {
+                    failed++;
+#pragma omp critical(mcp_proc_truth_var_fail)
+                    if (fail_index < 0 || (long)y * w + x < fail_index)
+                        fail_index = (long)y * w + x;
+                    continue;
+                }
+                float *out = mcp_image_px(v, x, y);
+                for (int c = 0; c < 3; c++)
+                    out[c] = (float)vm[c];
+            }
+        free(s.a);
+        free(s.b);
+    }
+    if (failed) {
+        mcp_error("procedural truth: a cell of pixel (%ld, %ld) is crossed by more than "
+                  "%d edges (or memory ran out); use a larger image",
+                  fail_index % w, fail_index / w, MAX_LINES);
+        goto fail;
+    }
+    *var_of_mean = v;
+    return 0;
+fail:
     mcp_image_free(v);
     return -1;
 }
