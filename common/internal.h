@@ -6,7 +6,14 @@
 
 #include "oiio_internal.h"
 
+#include <mcpost/image.h>
 
+/* Window sums over 3 channels (stats.c): a summed-area table of (width + 1) x
+ * (height + 1) x 3 doubles (malloc'd), and the sum over the (2r + 1)² window around
+ * (x, y) clipped at the borders, with its pixel count. */
+double *mcp__window_table(const mcp_image *img);
+void mcp__window_sum(const double *table, int w, int h, int x, int y, int r, double out[3],
+                     int *count);
 
 /* Format back ends behind mcp_image_read / mcp_image_write (imageio.c). The writers
  * write exactly `path` (imageio.c passes a temporary name and renames). */

@@ -264,42 +264,6 @@ fail:
 
 /* ---- pooling ---- */
 
-/* Window sums of a 3-channel image over (2r+1)² clipped at the borders, in double:
- * a summed-area table of (width+1) x (height+1) x 3. */
-static double *
-window_table(const mcp_image *img)
-{
-    int w = img->width, h = img->height;
-    double *t = mcp_calloc((size_t)(w + 1) * (h + 1) * 3, sizeof *t);
-    if (!t)
-        return NULL;
-    for (int y = 0; y < h; y++) {
-        double row[3] = {0, 0, 0};
-        for (int x = 0; x < w; x++) {
-            const float *v = mcp_image_px(img, x, y);
-            double *o = t + ((size_t)(y + 1) * (w + 1) + x + 1) * 3;
-            const double *up = o - (size_t)(w + 1) * 3;
-            for (int c = 0; c < 3; c++) {
-                row[c] += v[c];
-                o[c] = up[c] + row[c];
-            }
-        }
-    }
-    return t;
-}
-
-static void
-window_sum(const double *t, int w, int h, int x, int y, int r, double out[3], int *count)
-{
-    int x0 = x - r < 0 ? 0 : x - r, x1 = x + r + 1 > w ? w : x + r + 1;
-    int y0 = y - r < 0 ? 0 : y - r, y1 = y + r + 1 > h ? h : y + r + 1;
-    size_t W = (size_t)w + 1;
-    for (int c = 0; c < 3; c++)
-        out[c] = t[(y1 * W + x1) * 3 + c] - t[(y0 * W + x1) * 3 + c] -
-                 t[(y1 * W + x0) * 3 + c] + t[(y0 * W + x0) * 3 + c];
-    *count = (x1 - x0) * (y1 - y0);
-}
-
 int
 mcp_dump_pool_variance(mcp_dump *d, const mcp_image *shape, int radius)
 {
@@ -315,9 +279,9 @@ mcp_dump_pool_variance(mcp_dump *d, const mcp_image *shape, int radius)
                          "variance %dx%d with 3",
                          shape->width, shape->height, shape->channels, w, h);
     mcp_image *parts[2] = {d->var_of_mean, d->cov_of_mean};
-    double *tv = window_table(d->var_of_mean);
-    double *ts = shape ? window_table(shape) : NULL;
-    double *tc = d->cov_of_mean ? window_table(d->cov_of_mean) : NULL;
+    double *tv = mcp__window_table(d->var_of_mean);
+    double *ts = shape ? mcp__window_table(shape) : NULL;
+    double *tc = d->cov_of_mean ? mcp__window_table(d->cov_of_mean) : NULL;
     int rc = 0;
     if (!tv || (shape && !ts) || (d->cov_of_mean && !tc)) {
         rc = -1;
@@ -330,9 +294,9 @@ mcp_dump_pool_variance(mcp_dump *d, const mcp_image *shape, int radius)
         for (int x = 0; x < w; x++) {
             double sv[3], ss[3] = {0, 0, 0};
             int n;
-            window_sum(tv, w, h, x, y, radius, sv, &n);
+            mcp__window_sum(tv, w, h, x, y, radius, sv, &n);
             if (ts)
-                window_sum(ts, w, h, x, y, radius, ss, &n);
+                mcp__window_sum(ts, w, h, x, y, radius, ss, &n);
             /* the factor that turns the shape into the pooled level, per channel */
             double ratio[3];
             const float *sh = shape ? mcp_image_px(shape, x, y) : NULL;
@@ -342,7 +306,7 @@ mcp_dump_pool_variance(mcp_dump *d, const mcp_image *shape, int radius)
                 if (!parts[p])
                     continue;
                 double s[3];
-                window_sum(tables[p], w, h, x, y, radius, s, &n);
+                mcp__window_sum(tables[p], w, h, x, y, radius, s, &n);
                 float *v = mcp_image_px(parts[p], x, y);
                 for (int c = 0; c < 3; c++) {
                     if (p == 0 && sh && ratio[c] >= 0) {

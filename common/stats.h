@@ -17,6 +17,14 @@ typedef struct mcp_channel_stats {
  * result does not depend on the thread count. */
 MCP_API int mcp_channel_stats_compute(const mcp_image *img, int c, mcp_channel_stats *out);
 
+/* Pools the first 3 channels over a (2 radius + 1)² window clipped at the borders, in
+ * place: with a shape (3 channels, same size) each value becomes
+ * shape_i Σ_W values / Σ_W shape -- a ratio estimate that keeps the shape's pattern
+ * and takes its level from the whole window -- or, without one (or where Σ_W shape
+ * is 0), the window mean. Sums in double over a summed-area table. Used for
+ * few-degree-of-freedom variance estimates (docs "Variance sources"). */
+MCP_API int mcp_pool_window(mcp_image *values, const mcp_image *shape, int radius);
+
 #ifdef __cplusplus
 }
 #endif
