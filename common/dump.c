@@ -759,13 +759,20 @@ series_new(int count, mcp_series **out)
     return 0;
 }
 
-/* Accepts exactly one integer conversion (%d, %i, %u with flags/width) and no other
- * conversion but "%%", so a pattern can never read a missing argument. */
+/* The widest field a series pattern may ask for (an int needs 11 characters; more is
+ * only padding), and the longest path it may produce: an unbounded width would format
+ * paths of gigabytes, and one past INT_MAX makes snprintf fail. */
+#define SERIES_MAX_WIDTH 16
+#define SERIES_MAX_PATH 4096
+
+/* Accepts exactly one integer conversion (%d, %i, %u with flags and a width of at most
+ * SERIES_MAX_WIDTH) and no other conversion but "%%", so a pattern can never read a
+ * missing argument. */
 static int
-pattern_ok(const char *p)
+check_pattern(const char *pattern)
 {
     int conversions = 0;
-    for (; *p; p++) {
+    for (const char *p = pattern; *p; p++) {
         if (*p != '%')
             continue;
         if (p[1] == '%') {
@@ -775,21 +782,29 @@ pattern_ok(const char *p)
         p++;
         while (*p && strchr("0-+ #", *p))
             p++;
-        while (isdigit((unsigned char)*p))
-            p++;
-        if (!*p || !strchr("diu", *p))
-            return 0;
+        int width = 0;
+        for (; isdigit((unsigned char)*p); p++)
+            if ((width = width * 10 + (*p - '0')) > SERIES_MAX_WIDTH)
+                return mcp_error("series pattern '%s': field widths over %d are refused",
+                                 pattern, SERIES_MAX_WIDTH);
+        if (!*p || !strchr("diu", *p)) {
+            conversions = 0;
+            break;
+        }
         conversions++;
     }
-    return conversions == 1;
+    if (conversions != 1)
+        return mcp_error("series pattern '%s' must hold exactly one integer conversion "
+                         "such as %%04d",
+                         pattern);
+    return 0;
 }
 
 int
 mcp_series_from_pattern(const char *pattern, const int *spps, int count, mcp_series **out)
 {
-    if (!pattern_ok(pattern))
-        return mcp_error("series pattern '%s' must hold exactly one integer conversion "
-                         "such as %%04d", pattern);
+    if (check_pattern(pattern))
+        return -1;
     mcp_series *s;
     if (series_new(count, &s))
         return -1;
@@ -804,12 +819,19 @@ mcp_series_from_pattern(const char *pattern, const int *spps, int count, mcp_ser
             return mcp_error("series '%s': sample counts must increase (%d after %d)",
                              pattern, spps[i], spps[i - 1]);
         }
-        int n = snprintf(NULL, 0, pattern, spps[i]) + 1;
-        if (!(s->paths[i] = mcp_malloc((size_t)n))) {
+        int n = snprintf(NULL, 0, pattern, spps[i]);
+        if (n < 0 || n >= SERIES_MAX_PATH) {
+            mcp_series_free(s);
+            /* the pattern last: a long one is cut off at the end of the message */
+            return mcp_error("series: the path for %d spp is longer than %d characters "
+                             "(pattern '%s')",
+                             spps[i], SERIES_MAX_PATH - 1, pattern);
+        }
+        if (!(s->paths[i] = mcp_malloc((size_t)n + 1))) {
             mcp_series_free(s);
             return -1;
         }
-        snprintf(s->paths[i], (size_t)n, pattern, spps[i]);
+        snprintf(s->paths[i], (size_t)n + 1, pattern, spps[i]);
         s->spp[i] = spps[i];
     }
     *out = s;

@@ -11,6 +11,9 @@
 
 #include <openexr.h>
 
+#include <sys/stat.h>
+
+#include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -110,22 +113,27 @@ decode_chunk(exr_context_t f, const exr_chunk_info_t *ci, exr_decode_pipeline_t 
     return 0;
 }
 
+/* Called for each level-0 chunk with its info and its place (x0, y0) in the image. */
+typedef int (*chunk_visit)(exr_context_t f, const exr_chunk_info_t *ci, int x0, int y0,
+                           void *ctx);
+
+/* Visits every level-0 chunk of part 0 of a w x h data window, in order. */
 static int
-read_pixels(exr_context_t f, exr_storage_t storage, const exr_attr_box2i_t *dw,
-            mcp_image *img, const char *path)
+each_chunk(exr_context_t f, exr_storage_t storage, const exr_attr_box2i_t *dw, int w,
+           int h, const char *path, chunk_visit visit, void *ctx)
 {
-    exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
     exr_chunk_info_t ci;
-    int initialised = 0, rc = 0;
+    int rc = 0;
     if (storage == EXR_STORAGE_SCANLINE) {
         int32_t lines = 1;
-        exr_get_scanlines_per_chunk(f, 0, &lines);
-        for (int y = dw->min.y; y <= dw->max.y && !rc; y += lines) {
-            exr_result_t r = exr_read_scanline_chunk_info(f, 0, y, &ci);
+        if (exr_get_scanlines_per_chunk(f, 0, &lines) != EXR_ERR_SUCCESS || lines < 1)
+            lines = 1;
+        /* long long: max.y may be INT32_MAX, and y + lines must not overflow */
+        for (long long y = dw->min.y; y <= dw->max.y && !rc; y += lines) {
+            exr_result_t r = exr_read_scanline_chunk_info(f, 0, (int)y, &ci);
             rc = r != EXR_ERR_SUCCESS
                      ? exr_fail(path, "corrupt or truncated chunk table", r)
-                     : decode_chunk(f, &ci, &dec, &initialised, img, 0,
-                                    ci.start_y - dw->min.y, path);
+                     : visit(f, &ci, 0, ci.start_y - dw->min.y, ctx);
         }
     } else {
         uint32_t tw, th;
@@ -134,18 +142,102 @@ read_pixels(exr_context_t f, exr_storage_t storage, const exr_attr_box2i_t *dw,
         exr_result_t r = exr_get_tile_descriptor(f, 0, &tw, &th, &level, &round);
         if (r != EXR_ERR_SUCCESS)
             return exr_fail(path, "bad tile description", r);
-        int nx = (img->width + (int)tw - 1) / (int)tw, ny = (img->height + (int)th - 1) / (int)th;
+        if (tw < 1 || th < 1 || tw > (uint32_t)MCP_MAX_DIM || th > (uint32_t)MCP_MAX_DIM)
+            return mcp_error("%s: bad tile size %ux%u", path, tw, th);
+        int nx = (w + (int)tw - 1) / (int)tw, ny = (h + (int)th - 1) / (int)th;
         for (int ty = 0; ty < ny && !rc; ty++)
             for (int tx = 0; tx < nx && !rc; tx++) {
                 r = exr_read_tile_chunk_info(f, 0, tx, ty, 0, 0, &ci);
                 rc = r != EXR_ERR_SUCCESS
                          ? exr_fail(path, "corrupt or truncated tile table", r)
-                         : decode_chunk(f, &ci, &dec, &initialised, img, tx * (int)tw,
-                                        ty * (int)th, path);
+                         : visit(f, &ci, tx * (int)tw, ty * (int)th, ctx);
             }
     }
-    if (initialised)
-        exr_decoding_destroy(f, &dec);
+    return rc;
+}
+
+/* ---- what the file can hold, checked before the image is allocated ---- */
+
+typedef struct chunk_budget {
+    const char *path;
+    unsigned long long file_bytes;   /* the file's size */
+    unsigned long long packed_bytes; /* the chunks' stored bytes so far */
+    int uncompressed;
+} chunk_budget;
+
+static int
+chunk_fits(exr_context_t f, const exr_chunk_info_t *ci, int x0, int y0, void *ctx)
+{
+    (void)f;
+    (void)x0;
+    (void)y0;
+    chunk_budget *b = ctx;
+    unsigned long long at = ci->data_offset, n = ci->packed_size;
+    if (at > b->file_bytes || n > b->file_bytes - at)
+        return mcp_error("%s: chunk %d (%llu bytes at offset %llu) lies outside the file "
+                         "(%llu bytes)",
+                         b->path, ci->idx, n, at, b->file_bytes);
+    /* chunks do not overlap in a valid file, so together they fit in it; stored
+       uncompressed, each holds all its pixels */
+    b->packed_bytes += n;
+    if (b->packed_bytes > b->file_bytes)
+        return mcp_error("%s: the chunks hold more bytes than the file (%llu)", b->path,
+                         b->file_bytes);
+    if (b->uncompressed && n < ci->unpacked_size)
+        return mcp_error("%s: truncated chunk %d (%llu of %llu bytes)", b->path, ci->idx,
+                         n, (unsigned long long)ci->unpacked_size);
+    return 0;
+}
+
+/* Checks that the chunk table and every chunk of the w x h data window lie inside the
+ * file, so that a small file cannot make us allocate a large image. A compressed
+ * chunk can still expand a lot (zip about 1000 times): mcp_image_new's ceiling bounds
+ * that. */
+static int
+check_file_holds(exr_context_t f, exr_storage_t storage, exr_compression_t comp,
+                 const exr_attr_box2i_t *dw, int w, int h, const char *path)
+{
+    struct stat st;
+    int32_t chunks = 0;
+    if (stat(path, &st) || st.st_size < 0)
+        return mcp_error("%s: cannot stat: %s", path, strerror(errno));
+    chunk_budget b = {path, (unsigned long long)st.st_size, 0,
+                      comp == EXR_COMPRESSION_NONE};
+    exr_result_t r = exr_get_chunk_count(f, 0, &chunks);
+    if (r != EXR_ERR_SUCCESS) return exr_fail(path, "bad chunk count", r);
+    /* each chunk costs 8 bytes of table and at least 8 (scanline) or 20 (tile) bytes
+       of its own header */
+    unsigned long long per_chunk = storage == EXR_STORAGE_TILED ? 28 : 16;
+    if (chunks < 1 || (unsigned long long)chunks * per_chunk > b.file_bytes)
+        return mcp_error("%s: %d chunks of %lldx%lld pixels cannot fit in a file of %llu "
+                         "bytes (truncated or corrupt)",
+                         path, chunks, (long long)w, (long long)h, b.file_bytes);
+    return each_chunk(f, storage, dw, w, h, path, chunk_fits, &b);
+}
+
+/* ---- decoding ---- */
+
+typedef struct decoder {
+    exr_decode_pipeline_t dec;
+    int initialised;
+    mcp_image *img;
+    const char *path;
+} decoder;
+
+static int
+chunk_decode(exr_context_t f, const exr_chunk_info_t *ci, int x0, int y0, void *ctx)
+{
+    decoder *d = ctx;
+    return decode_chunk(f, ci, &d->dec, &d->initialised, d->img, x0, y0, d->path);
+}
+
+static int
+read_pixels(exr_context_t f, exr_storage_t storage, const exr_attr_box2i_t *dw,
+            mcp_image *img, const char *path)
+{
+    decoder d = {EXR_DECODE_PIPELINE_INITIALIZER, 0, img, path};
+    int rc = each_chunk(f, storage, dw, img->width, img->height, path, chunk_decode, &d);
+    if (d.initialised) exr_decoding_destroy(f, &d.dec);
     return rc;
 }
 
@@ -189,6 +281,12 @@ mcp__exr_read(const char *path, mcp_image **out)
                   chans->num_channels);
         goto done;
     }
+    /* the ceiling first (cheap), then what the file can hold, then the allocation */
+    if (mcp_image_check_size((int)w, (int)h, chans->num_channels)) {
+        mcp_error_prefix("%s: ", path);
+        goto done;
+    }
+    if (check_file_holds(f, storage, comp, &dw, (int)w, (int)h, path)) goto done;
     names = mcp_calloc((size_t)chans->num_channels, sizeof *names);
     if (!names)
         goto done;

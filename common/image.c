@@ -1,6 +1,9 @@
 /* image.c: the shared float32 interleaved image with named channels (see image.h). */
 #include <mcpost/image.h>
 
+#include <ctype.h>
+#include <errno.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -47,17 +50,54 @@ header_new(int width, int height, int channels, const char *const *names,
     return img;
 }
 
+/* The limit in environment variable `name`, else `fallback`. */
+static int
+env_limit(const char *name, unsigned long long fallback, unsigned long long *out)
+{
+    const char *s = getenv(name);
+    *out = fallback;
+    if (!s || !*s) return 0;
+    char *end;
+    errno = 0;
+    unsigned long long v = strtoull(s, &end, 10);
+    if (!isdigit((unsigned char)*s) || *end || errno || v == 0)
+        return mcp_error("%s must be a positive whole number (got '%s')", name, s);
+    *out = v;
+    return 0;
+}
+
+int
+mcp_image_check_size(int width, int height, int channels)
+{
+    if (width < 1 || height < 1 || channels < 1 || width > MCP_MAX_DIM ||
+        height > MCP_MAX_DIM || channels > 4096)
+        return mcp_error("bad image size %dx%dx%d", width, height, channels);
+    /* at most 2^16 x 2^16 x 2^12 x 4 = 2^46: no overflow in 64 bits */
+    unsigned long long pixels = (unsigned long long)width * (unsigned long long)height;
+    unsigned long long bytes = pixels * (unsigned long long)channels * sizeof(float);
+    unsigned long long max_pixels, max_bytes;
+    if (env_limit("MCPOST_MAX_PIXELS", MCP_MAX_PIXELS_DEFAULT, &max_pixels) ||
+        env_limit("MCPOST_MAX_BYTES", MCP_MAX_BYTES_DEFAULT, &max_bytes))
+        return -1;
+    if (pixels > max_pixels)
+        return mcp_error("image of %dx%d pixels is over the limit of %llu pixels "
+                         "(MCPOST_MAX_PIXELS raises it)",
+                         width, height, max_pixels);
+    if (bytes > max_bytes || bytes > SIZE_MAX)
+        return mcp_error(
+            "image of %dx%dx%d values (%llu bytes) is over the limit of %llu "
+            "bytes (MCPOST_MAX_BYTES raises it)",
+            width, height, channels, bytes, max_bytes);
+    return 0;
+}
+
 int
 mcp_image_new(int width, int height, int channels, const char *const *names,
               mcp_image **out)
 {
-    size_t n;
     *out = NULL;
-    if (width < 1 || height < 1 || channels < 1 || width > MCP_MAX_DIM ||
-        height > MCP_MAX_DIM || channels > 4096 ||
-        mcp_size_mul3((size_t)width, (size_t)height, (size_t)channels, &n) ||
-        mcp_size_mul(n, sizeof(float), &n))
-        return mcp_error("bad image size %dx%dx%d", width, height, channels);
+    if (mcp_image_check_size(width, height, channels)) return -1;
+    size_t n = (size_t)width * (size_t)height * (size_t)channels * sizeof(float);
     mcp_image *img = header_new(width, height, channels, names, NULL);
     if (!img)
         return -1;

@@ -51,8 +51,20 @@ typedef struct mcp_image {
     int owns_data;    /* 0 for views */
 } mcp_image;
 
-/* A new zero-filled packed image. names may be NULL (channels are then called
- * "C0", "C1", ...). */
+/* The ceiling on one image, so that a corrupt or hostile header fails with a message
+ * instead of a huge allocation: at most MCPOST_MAX_PIXELS pixels (width x height) and
+ * MCPOST_MAX_BYTES bytes of float32 values, read from the environment at each call,
+ * else these defaults (a 16384 x 16384 image; 16 channels of it). */
+#define MCP_MAX_PIXELS_DEFAULT (1ull << 28)
+#define MCP_MAX_BYTES_DEFAULT (1ull << 34)
+
+/* 0 when a width x height x channels image is within MCP_MAX_DIM per side, 4096
+ * channels and the ceiling above; else -1 with a message naming the size and the
+ * variable that raises the limit. Readers call it before they look at the data. */
+MCP_API int mcp_image_check_size(int width, int height, int channels);
+
+/* A new zero-filled packed image (within mcp_image_check_size). names may be NULL
+ * (channels are then called "C0", "C1", ...). */
 MCP_API int mcp_image_new(int width, int height, int channels,
                           const char *const *names, mcp_image **out);
 

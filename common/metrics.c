@@ -189,7 +189,8 @@ psnr_of(double mse_display)
 int
 mcp_psnr(const mcp_image *test, const mcp_image *ref, double *psnr)
 {
-    double m;
+    /* set: GCC -O3 cannot see that mean_checked() fills m whenever it returns 0 */
+    double m = 0.0;
     if (mean_checked(test, ref, SUM_SRGB, 0.0, &m)) return -1;
     *psnr = psnr_of(m);
     return 0;

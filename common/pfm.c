@@ -3,6 +3,8 @@
  * means little-endian. Colour files ("PF") hold R,G,B; grey files ("Pf") hold Y. */
 #include "internal.h"
 
+#include <ctype.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -24,6 +26,16 @@ swap_floats(float *v, size_t n)
     }
 }
 
+/* Bytes from the current position to the end of f, or -1. */
+static long
+bytes_left(FILE *f)
+{
+    long at = ftell(f), end;
+    if (at < 0 || fseek(f, 0, SEEK_END) || (end = ftell(f)) < 0 || fseek(f, at, SEEK_SET))
+        return -1;
+    return end - at;
+}
+
 int
 mcp__pfm_read(const char *path, mcp_image **out)
 {
@@ -35,15 +47,28 @@ mcp__pfm_read(const char *path, mcp_image **out)
     int w = 0, h = 0, rc = -1;
     double scale = 0;
     mcp_image *img = NULL;
-    if (fscanf(f, "%2s %d %d %lf", magic, &w, &h, &scale) != 4 ||
-        (strcmp(magic, "PF") && strcmp(magic, "Pf")) || scale == 0 || fgetc(f) == EOF) {
+    /* "PF" or "Pf", whitespace (so "PFx" or "Pf3 2" is no PFM), width, height, scale,
+       and exactly one whitespace character before the data */
+    if (fread(magic, 1, 2, f) != 2 || (strcmp(magic, "PF") && strcmp(magic, "Pf")) ||
+        !isspace(fgetc(f)) || fscanf(f, "%d %d %lf", &w, &h, &scale) != 3 || scale == 0 ||
+        !isfinite(scale) || !isspace(fgetc(f))) {
         mcp_error("%s: not a PFM file (bad header)", path);
         goto done;
     }
     int channels = magic[1] == 'F' ? 3 : 1;
     static const char *rgb[] = {"R", "G", "B"}, *grey[] = {"Y"};
-    if (w < 1 || h < 1 || w > MCP_MAX_DIM || h > MCP_MAX_DIM) {
-        mcp_error("%s: bad PFM size %dx%d", path, w, h);
+    if (mcp_image_check_size(w, h, channels)) {
+        mcp_error_prefix("%s: ", path);
+        goto done;
+    }
+    /* the file must hold the pixels before they are allocated: a 16-byte header can
+       claim gigabytes */
+    size_t bytes = (size_t)w * (size_t)h * (size_t)channels * sizeof(float);
+    long left = bytes_left(f);
+    if (left < 0 || (unsigned long)left < bytes) {
+        mcp_error(
+            "%s: truncated PFM data (%dx%d pixels need %zu bytes, the file holds %ld)",
+            path, w, h, bytes, left < 0 ? 0L : left);
         goto done;
     }
     if (mcp_image_new(w, h, channels, channels == 3 ? rgb : grey, &img) ||

@@ -17,6 +17,11 @@
 #include <string.h>
 #include <strings.h>
 
+/* Deeper nesting than this is refused: parse_node() recurses once per level (libyaml
+ * itself has no limit), and a job file needs about five levels, so a few thousand
+ * brackets would otherwise overflow the stack. */
+#define YAML_MAX_DEPTH 64
+
 typedef struct builder {
     yaml_parser_t parser;
     const char *file; /* shared by every node; owned by the root's `file` copy */
@@ -79,9 +84,10 @@ parse_error(builder *b)
                      p->context ? " " : "", p->context ? p->context : "");
 }
 
-/* Parses one node whose first event is *ev (consumed); recursion follows nesting. */
+/* Parses one node whose first event is *ev (consumed) at nesting level `depth` (the
+ * document's root is 0); recursion follows nesting. */
 static int
-parse_node(builder *b, yaml_event_t *ev, mcp_node **out)
+parse_node(builder *b, yaml_event_t *ev, int depth, mcp_node **out)
 {
     *out = NULL;
     switch (ev->type) {
@@ -102,6 +108,9 @@ parse_node(builder *b, yaml_event_t *ev, mcp_node **out)
     case YAML_SEQUENCE_START_EVENT:
     case YAML_MAPPING_START_EVENT: {
         int is_map = ev->type == YAML_MAPPING_START_EVENT;
+        if (depth >= YAML_MAX_DEPTH)
+            return mcp_error("%s:%d: lists and maps nested deeper than %d levels",
+                             b->file, (int)ev->start_mark.line + 1, YAML_MAX_DEPTH);
         mcp_node *n = node_new(is_map ? MCP_NODE_MAP : MCP_NODE_SEQ, &ev->start_mark,
                                b->file);
         if (!n)
@@ -117,7 +126,7 @@ parse_node(builder *b, yaml_event_t *ev, mcp_node **out)
                 break;
             }
             mcp_node *key = NULL, *value = NULL;
-            int rc = parse_node(b, &e, is_map ? &key : &value);
+            int rc = parse_node(b, &e, depth + 1, is_map ? &key : &value);
             yaml_event_delete(&e);
             if (!rc && is_map) {
                 if (key->kind != MCP_NODE_SCALAR)
@@ -131,7 +140,7 @@ parse_node(builder *b, yaml_event_t *ev, mcp_node **out)
                     if (!yaml_parser_parse(&b->parser, &v))
                         rc = parse_error(b);
                     else {
-                        rc = parse_node(b, &v, &value);
+                        rc = parse_node(b, &v, depth + 1, &value);
                         yaml_event_delete(&v);
                     }
                 }
@@ -192,7 +201,7 @@ parse(yaml_parser_t *parser, const char *label, mcp_node **out)
             yaml_event_delete(&ev);
             break;
         }
-        int r = parse_node(&b, &ev, &doc);
+        int r = parse_node(&b, &ev, 0, &doc);
         yaml_event_delete(&ev);
         if (r)
             break;

@@ -53,11 +53,18 @@
 
 /* The strip kernel is compiled twice, for AVX2 and for the baseline, and picked at
  * load time (1.7x faster with 8-wide vectors). The C11 mode keeps FMA contraction off,
- * so both give the same bits. */
-#if defined(__GNUC__) && defined(__x86_64__) && defined(__linux__)
+ * so both give the same bits. GCC needs flatten to pull the helpers into each clone;
+ * clang refuses flatten beside target_clones: there the two big helpers are marked
+ * always_inline (NLM_KERNEL_PART), and they inline theirs. */
+#if defined(__clang__) && defined(__x86_64__) && defined(__linux__)
+#define NLM_KERNEL __attribute__((target_clones("avx2", "default")))
+#define NLM_KERNEL_PART __attribute__((always_inline))
+#elif defined(__GNUC__) && defined(__x86_64__) && defined(__linux__)
 #define NLM_KERNEL __attribute__((target_clones("avx2", "default"), flatten))
+#define NLM_KERNEL_PART
 #else
 #define NLM_KERNEL
+#define NLM_KERNEL_PART
 #endif
 
 /* Rousselle's max(0, dc) is rounded off over |dc| < KINK into a parabola (C1, like
@@ -399,7 +406,7 @@ feature_tangent(const float *const planes[3], const float *const tplanes[3],
 
 /* The primal part of offset (ox, oy) for strip rows [y0, y0 + rows): distances,
  * coefficients for the tangents, weights, and the sums W and num. */
-static void
+NLM_KERNEL_PART static void
 strip_offset_primal(const nlm_params *p, const nlm_work *wk, nlm_scratch *s, int y0,
                     int rows, int ox, int oy)
 {
@@ -486,7 +493,7 @@ strip_offset_primal(const nlm_params *p, const nlm_work *wk, nlm_scratch *s, int
 
 /* The part of tangent k for offset (ox, oy): A += w t_q, B += w g (x_q - x_p),
  * G += w g, with g = d log w. */
-static void
+NLM_KERNEL_PART static void
 strip_offset_tangent(const nlm_params *p, const nlm_work *wk, nlm_scratch *s, int y0,
                      int rows, int ox, int oy, int k)
 {

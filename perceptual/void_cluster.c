@@ -307,8 +307,9 @@ mcp_blue_noise_mask(const mcp_blue_noise_options *opt, mcp_image **out)
     mcp_blue_noise_options d = mcp_blue_noise_defaults();
     if (!opt) opt = &d;
     *out = NULL;
-    const mcp_image *mask;
-    mcp_image *owned;
+    /* set: GCC -O3 cannot see that shared_mask() fills mask whenever it returns 0 */
+    const mcp_image *mask = NULL;
+    mcp_image *owned = NULL;
     if (shared_mask(opt, &mask, &owned)) return -1;
     if (owned) {
         *out = owned;

@@ -308,7 +308,7 @@ mcp_proc_truth_pixel_var_of_mean(const mcp_proc_scene *scene, int x, int y, int 
 {
     mcp__proc_geom fine;
     double node[32], weight[32];
-    int k, passes;
+    int k = 0, passes = 0; /* set by fine_geom; gcc -O3 cannot see that */
     scratch s = {0};
     if (fine_geom(scene, spp, &fine, &k, &passes)) return -1;
     if (x < 0 || x >= scene->width || y < 0 || y >= scene->height)

@@ -228,6 +228,29 @@ test_series_pattern(void **state)
                           "must increase");
     assert_error_contains(mcp_series_from_pattern("x_%d.exr", (int[]){0}, 1, &s),
                           "sample count 0");
+    /* regression (issue 15): widths are bounded (16 is the most), and so are paths */
+    assert_int_equal(mcp_series_from_pattern("x_%16d.exr", (int[]){7}, 1, &s), 0);
+    assert_string_equal(s->paths[0], "x_               7.exr");
+    mcp_series_free(s);
+    assert_error_contains(
+        mcp_series_from_pattern("x_%2147483640d.exr", (int[]){1}, 1, &s),
+        "series pattern 'x_%2147483640d.exr': field widths over 16 are "
+        "refused");
+    assert_error_contains(mcp_series_from_pattern("x_%017d.exr", (int[]){1}, 1, &s),
+                          "field widths over 16");
+    /* a bad conversion after a good one is still refused */
+    assert_error_contains(mcp_series_from_pattern("x_%d_%q", (int[]){1}, 1, &s),
+                          "exactly one integer conversion");
+    char *longest = malloc(4200);
+    assert_non_null(longest);
+    memset(longest, 'a', 4200);
+    strcpy(longest + 4091, "%d"); /* 4091 + 4 digits = 4095 characters: fits */
+    assert_int_equal(mcp_series_from_pattern(longest, (int[]){1000}, 1, &s), 0);
+    assert_int_equal(strlen(s->paths[0]), 4095);
+    mcp_series_free(s);
+    assert_error_contains(mcp_series_from_pattern(longest, (int[]){1000, 10000}, 2, &s),
+                          "the path for 10000 spp is longer than 4095 characters");
+    free(longest);
 }
 
 int

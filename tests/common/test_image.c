@@ -2,6 +2,7 @@
 #include "testing.h"
 
 #include <mcpost/image.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -28,6 +29,48 @@ test_bad_sizes_are_refused(void **state)
     assert_null(img);
     assert_error_contains(mcp_image_new(MCP_MAX_DIM + 1, 1, 1, NULL, &img), "bad image size");
     assert_error_contains(mcp_image_new(4, 4, -1, NULL, &img), "bad image size");
+}
+
+/* Regression (issue 15): every image is held under a ceiling on its pixels and bytes,
+ * 2^28 and 2^34 unless the environment says otherwise. */
+static void
+test_size_ceiling(void **state)
+{
+    (void)state;
+    mcp_image *img = NULL;
+    unsetenv("MCPOST_MAX_PIXELS");
+    unsetenv("MCPOST_MAX_BYTES");
+    assert_int_equal(mcp_image_check_size(16384, 16384, 16), 0);
+    assert_error_contains(
+        mcp_image_check_size(16385, 16384, 1),
+        "image of 16385x16384 pixels is over the limit of 268435456 pixels "
+        "(MCPOST_MAX_PIXELS raises it)");
+    assert_error_contains(
+        mcp_image_check_size(16384, 16384, 17),
+        "image of 16384x16384x17 values (18253611008 bytes) is over the "
+        "limit of 17179869184 bytes (MCPOST_MAX_BYTES raises it)");
+    setenv("MCPOST_MAX_PIXELS", "100", 1);
+    assert_int_equal(mcp_image_new(10, 10, 3, NULL, &img), 0);
+    mcp_image_free(img);
+    assert_error_contains(mcp_image_new(10, 11, 1, NULL, &img),
+                          "image of 10x11 pixels is over the limit of 100 pixels");
+    assert_null(img);
+    setenv("MCPOST_MAX_BYTES", "1200", 1); /* 10 x 10 x 3 floats exactly */
+    assert_int_equal(mcp_image_new(10, 10, 3, NULL, &img), 0);
+    mcp_image_free(img);
+    assert_error_contains(
+        mcp_image_new(10, 10, 4, NULL, &img),
+        "image of 10x10x4 values (1600 bytes) is over the limit of 1200 bytes");
+    static const char *const bad[] = {"lots", "0", "-5", "12k", " 7"};
+    for (int i = 0; i < 5; i++) {
+        char want[96];
+        setenv("MCPOST_MAX_PIXELS", bad[i], 1);
+        snprintf(want, sizeof want,
+                 "MCPOST_MAX_PIXELS must be a positive whole number (got '%s')", bad[i]);
+        assert_error_contains(mcp_image_new(1, 1, 1, NULL, &img), want);
+    }
+    unsetenv("MCPOST_MAX_PIXELS");
+    unsetenv("MCPOST_MAX_BYTES");
 }
 
 static void
@@ -144,6 +187,7 @@ main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_new_is_zeroed_and_packed),
         cmocka_unit_test(test_bad_sizes_are_refused),
+        cmocka_unit_test(test_size_ceiling),
         cmocka_unit_test(test_crop_view_shares_pixels),
         cmocka_unit_test(test_channel_view_and_subset),
         cmocka_unit_test(test_attributes),

@@ -391,6 +391,150 @@ test_bad_files(void **state)
     mcp_image_free(big);
 }
 
+/* ---- regression (issue 15): declared sizes are checked before allocating ---- */
+
+/* Raises (or, with NULL, restores) the image ceiling for the cases that get past it. */
+static void
+set_ceiling(const char *pixels, const char *bytes)
+{
+    if (pixels) {
+        setenv("MCPOST_MAX_PIXELS", pixels, 1);
+        setenv("MCPOST_MAX_BYTES", bytes, 1);
+    } else {
+        unsetenv("MCPOST_MAX_PIXELS");
+        unsetenv("MCPOST_MAX_BYTES");
+    }
+}
+
+static void
+test_pfm_header_checked_before_allocation(void **state)
+{
+    (void)state;
+    mcp_image *img = NULL;
+    const char *path = mcp_test_path("h.pfm");
+    /* the fuzzer's 16 bytes: no whitespace after the magic */
+    mcp_test_write_text(path, "Pf51110 31110 1\n");
+    assert_error_contains(mcp_image_read(path, NULL, &img),
+                          "h.pfm: not a PFM file (bad header)");
+    assert_null(img);
+    mcp_test_write_text(path, "PF\n2 2 0\n");
+    assert_error_contains(mcp_image_read(path, NULL, &img),
+                          "h.pfm: not a PFM file (bad header)");
+    mcp_test_write_text(path, "PF\n2 2 -1x");
+    assert_error_contains(mcp_image_read(path, NULL, &img),
+                          "h.pfm: not a PFM file (bad header)");
+    /* with the space: over the default ceiling of 2^28 pixels */
+    mcp_test_write_text(path, "Pf 51110 31110 1\n");
+    assert_error_contains(
+        mcp_image_read(path, NULL, &img),
+        "h.pfm: image of 51110x31110 pixels is over the limit of 268435456 "
+        "pixels (MCPOST_MAX_PIXELS raises it)");
+    /* under the ceiling, but none of the pixels are in the file: refused before the
+       allocation (after it, the message would be "row 1 of 8000 missing") */
+    mcp_test_write_text(path, "Pf\n8000 8000\n-1\n");
+    assert_error_contains(
+        mcp_image_read(path, NULL, &img),
+        "h.pfm: truncated PFM data (8000x8000 pixels need 256000000 bytes, "
+        "the file holds 0)");
+    /* the largest PFM there can be (48 GiB) declared in 18 bytes, the ceiling raised */
+    set_ceiling("4294967296", "60000000000");
+    mcp_test_write_text(path, "PF\n65536 65536\n1\n");
+    assert_error_contains(
+        mcp_image_read(path, NULL, &img),
+        "h.pfm: truncated PFM data (65536x65536 pixels need 51539607552 "
+        "bytes, the file holds 0)");
+    set_ceiling(NULL, NULL);
+    /* one byte short of 2x2 grey */
+    FILE *f = fopen(path, "wb");
+    assert_non_null(f);
+    fputs("Pf\n2 2\n-1\n", f);
+    fwrite((const float[]){1, 2, 3, 4}, 1, 15, f);
+    fclose(f);
+    assert_error_contains(mcp_image_read(path, NULL, &img),
+                          "h.pfm: truncated PFM data (2x2 pixels need 16 bytes, the file "
+                          "holds 15)");
+    /* and the ceiling, lowered, refuses a file that is whole */
+    mcp_image *small = mcp_test_constant(4, 4, 3, 0.5f, NULL);
+    assert_int_equal(mcp_image_write(small, path, NULL), 0);
+    set_ceiling("15", "1000000");
+    assert_error_contains(mcp_image_read(path, NULL, &img),
+                          "h.pfm: image of 4x4 pixels is over the limit of 15 pixels");
+    set_ceiling(NULL, NULL);
+    assert_int_equal(mcp_image_read(path, NULL, &img), 0);
+    mcp_image_free(img);
+    mcp_image_free(small);
+}
+
+/* Writes a 64x64 RGB EXR with `comp`, then makes its header claim a w x h data window
+ * (the chunks stay those of 64x64). */
+static const char *
+exr_claiming(const char *name, mcp_exr_compression comp, int w, int h)
+{
+    const char *path = mcp_test_path(name);
+    mcp_image *img = mcp_test_random(64, 64, 3, 0, 1, 1, NULL);
+    mcp_write_options o = mcp_write_defaults();
+    o.compression = comp;
+    assert_int_equal(mcp_image_write(img, path, &o), 0);
+    mcp_image_free(img);
+    long n = file_size(path);
+    char *bytes = mcp_test_read_text(path);
+    static const char key[] = "dataWindow\0box2i\0"; /* then size 16, then 4 int32 */
+    unsigned char *box = NULL;
+    for (long i = 0; i + (long)sizeof key + 20 < n && !box; i++)
+        if (memcmp(bytes + i, key, sizeof key - 1) == 0)
+            box = (unsigned char *)bytes + i + sizeof key - 1 + 4;
+    assert_non_null(box);
+    int32_t max[2] = {w - 1, h - 1};
+    for (int k = 0; k < 2; k++) /* xMax, yMax; little-endian in the file */
+        for (int b = 0; b < 4; b++)
+            box[8 + 4 * k + b] = (unsigned char)((uint32_t)max[k] >> (8 * b));
+    FILE *f = fopen(path, "wb");
+    assert_non_null(f);
+    assert_int_equal(fwrite(bytes, 1, (size_t)n, f), (size_t)n);
+    fclose(f);
+    free(bytes);
+    return path;
+}
+
+static void
+test_exr_size_checked_before_allocation(void **state)
+{
+    (void)state;
+    mcp_image *img = NULL;
+    /* the fuzzer's 30000x30000 window: over the ceiling before anything is read */
+    const char *path = exr_claiming("big.exr", MCP_EXR_ZIP, 30000, 30000);
+    assert_error_contains(mcp_image_read(path, NULL, &img),
+                          "big.exr: image of 30000x30000 pixels is over the limit of "
+                          "268435456 pixels (MCPOST_MAX_PIXELS raises it)");
+    assert_null(img);
+    /* with the ceiling raised (10.8 GB allowed), the chunk table is checked against the
+       file before the allocation: 1875 chunks fit in the bytes, but the offsets past
+       the real 4 do not point into the file */
+    set_ceiling("1000000000", "20000000000");
+    assert_error_contains(mcp_image_read(path, NULL, &img),
+                          "big.exr: corrupt or truncated chunk table: ");
+    assert_null(img);
+    /* uncompressed: 8000 one-line chunks need more than the file's bytes */
+    path = exr_claiming("tall.exr", MCP_EXR_NONE, 8000, 8000);
+    assert_error_contains(
+        mcp_image_read(path, NULL, &img),
+        "tall.exr: 8000 chunks of 8000x8000 pixels cannot fit in a file of ");
+    /* a window a little too wide: the chunks lie in the file but hold too little
+       (64 x 3 floats of 65) */
+    path = exr_claiming("wide.exr", MCP_EXR_NONE, 65, 64);
+    assert_error_contains(mcp_image_read(path, NULL, &img),
+                          "wide.exr: truncated chunk 0 (768 of 780 bytes)");
+    /* taller: the table's entries past the real 64 are pixel bytes */
+    path = exr_claiming("long.exr", MCP_EXR_NONE, 64, 200);
+    assert_error_contains(mcp_image_read(path, NULL, &img),
+                          "long.exr: corrupt or truncated chunk table: ");
+    set_ceiling(NULL, NULL);
+    /* the unpatched file still reads */
+    path = exr_claiming("same.exr", MCP_EXR_ZIP, 64, 64);
+    assert_int_equal(mcp_image_read(path, NULL, &img), 0);
+    mcp_image_free(img);
+}
+
 static void
 test_atomic_write_keeps_old_file_on_failure(void **state)
 {
@@ -422,6 +566,8 @@ main(void)
         cmocka_unit_test(test_pfm_roundtrip),
         cmocka_unit_test(test_srgb_transfer),
         cmocka_unit_test(test_bad_files),
+        cmocka_unit_test(test_pfm_header_checked_before_allocation),
+        cmocka_unit_test(test_exr_size_checked_before_allocation),
         cmocka_unit_test(test_atomic_write_keeps_old_file_on_failure),
         cmocka_unit_test(test_png_roundtrip_loads_plugin),
         cmocka_unit_test(test_jpeg_roundtrip),

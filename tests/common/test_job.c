@@ -78,6 +78,57 @@ test_yaml_errors_name_the_line(void **state)
                           "/nonexistent/job.yaml: cannot open");
 }
 
+/* "<prefix>" followed by `depth` '[' and as many ']' (malloc'd). */
+static char *
+nested_lists(const char *prefix, int depth)
+{
+    size_t n = strlen(prefix);
+    char *text = malloc(n + 2 * (size_t)depth + 2);
+    assert_non_null(text);
+    memcpy(text, prefix, n);
+    memset(text + n, '[', (size_t)depth);
+    memset(text + n + depth, ']', (size_t)depth);
+    strcpy(text + n + 2 * (size_t)depth, "\n");
+    return text;
+}
+
+/* Regression (issue 15): 50,000 nested lists overflowed the stack of the recursive
+ * parser (a segfault in `mcpost run`); nesting now stops at 64 levels, with the line. */
+static void
+test_yaml_nesting_is_bounded(void **state)
+{
+    (void)state;
+    mcp_node *root = NULL;
+    /* the root map is level 0: 63 lists below it are the most allowed */
+    char *text = nested_lists("a: ", 63);
+    assert_int_equal(mcp_yaml_parse_string(text, "ok.yaml", &root), 0);
+    mcp_node_free(root);
+    free(text);
+    root = NULL;
+    text = nested_lists("a: ", 64);
+    assert_error_contains(mcp_yaml_parse_string(text, "deep.yaml", &root),
+                          "deep.yaml:1: lists and maps nested deeper than 64 levels");
+    assert_null(root);
+    free(text);
+    text = nested_lists("stages: ", 50000);
+    assert_error_contains(mcp_yaml_parse_string(text, "deep.yaml", &root),
+                          "deep.yaml:1: lists and maps nested deeper than 64 levels");
+    free(text);
+    /* the fuzzer's input, through a file and through the tool */
+    text = nested_lists("stages:\n  ", 50000);
+    const char *path = mcp_test_path("deep.yaml");
+    mcp_test_write_text(path, text);
+    free(text);
+    assert_error_contains(mcp_yaml_parse_file(path, &root),
+                          "deep.yaml:2: lists and maps nested deeper than 64 levels");
+    char args[4200], out[4096], err[4096], want[4200];
+    snprintf(args, sizeof args, "run '%s'", path);
+    assert_int_equal(mcp_test_run_mcpost(args, out, sizeof out, err, sizeof err), 1);
+    snprintf(want, sizeof want,
+             "mcpost: %s:2: lists and maps nested deeper than 64 levels\n", path);
+    assert_string_equal(err, want);
+}
+
 /* ---- the runner, with stages defined here ---- */
 
 static int calls;
@@ -207,6 +258,37 @@ test_runner_checks_everything_first(void **state)
         /* nothing ran: the failing line could be the last one */
         assert_int_equal(calls, 0);
     }
+}
+
+/* Regression (issue 15): a field width of 2147483640 overflowed snprintf's int count,
+ * and the path buffer came out 1 byte long and unterminated. */
+static void
+test_series_pattern_is_bounded(void **state)
+{
+    (void)state;
+    setup_input();
+    mcp_progress_set_quiet(1);
+    const char *job =
+        write_job("series.yaml", "inputs:\n"
+                                 "  s: {series: 'renders/x_%2147483640d.exr', "
+                                 "spp: [1]}\n"
+                                 "stages:\n"
+                                 "  - probe: {input: s}\n");
+    calls = 0;
+    assert_error_contains(mcp_job_run_file(job, table, NULL),
+                          "series.yaml:2: series pattern '");
+    assert_non_null(
+        strstr(mcp_error_message(),
+               "/renders/x_%2147483640d.exr': field widths over 16 are refused"));
+    assert_null(strchr(mcp_error_message(), '\n'));
+    assert_int_equal(calls, 0);
+    /* the tool says the same in one line and exits 1 */
+    char args[4200], out[4096], err[4096];
+    snprintf(args, sizeof args, "run '%s'", job);
+    assert_int_equal(mcp_test_run_mcpost(args, out, sizeof out, err, sizeof err), 1);
+    assert_non_null(strstr(err, "series.yaml:2: series pattern '"));
+    assert_non_null(strstr(err, "field widths over 16 are refused\n"));
+    assert_int_equal(strchr(err, '\n') - err, (ptrdiff_t)strlen(err) - 1);
 }
 
 /* Counts the occurrences of needle in the last error message. */
@@ -347,9 +429,11 @@ main(void)
         cmocka_unit_test(test_yaml_tree_and_lines),
         cmocka_unit_test(test_json_parses_too),
         cmocka_unit_test(test_yaml_errors_name_the_line),
+        cmocka_unit_test(test_yaml_nesting_is_bounded),
         cmocka_unit_test(test_runner_runs_stages_in_order),
         cmocka_unit_test(test_runner_checks_everything_first),
         cmocka_unit_test(test_wrong_types_name_the_line_once),
+        cmocka_unit_test(test_series_pattern_is_bounded),
         cmocka_unit_test(test_channel_mapping_overrides_detection),
     };
     return cmocka_run_group_tests_name("common/job", tests, NULL, NULL);

@@ -171,8 +171,9 @@ test_compare_and_options(void **state)
         "--tone-map aces --kernel gaussian --dpi 200 --distance 20 --filter-surrogate",
         "--confidence '%s_confidence.exr' --init mean --passes 3",
         "--kernel 0.25,0.5,0.25 --method power-set --max-subsets 7",
-        "--group 2 --method dither --mask-size 32 --mask-sigma 1.9 --mask-seed 3 "
-        "--no-cache",
+        /* parenthesised: one element split over two lines, not a missing comma */
+        ("--group 2 --method dither --mask-size 32 --mask-sigma 1.9 --mask-seed 3 "
+         "--no-cache"),
         "--method horizontal --radius 2 --travel 3 --passes 2",
         "--method permutation --tile 4 --spectra-tile 16"};
     for (size_t i = 0; i < sizeof variants / sizeof *variants; i++) {
