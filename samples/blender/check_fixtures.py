@@ -144,6 +144,10 @@ def main():
     root = argv[0] if argv else os.path.join(os.path.dirname(os.path.abspath(__file__)),
                                              '..', 'fixtures')
     scenes = sorted(p for p in glob.glob(os.path.join(root, '*')) if os.path.isdir(p))
+    # strat/ (stratified block fixtures) has its own layout and checker
+    for p in [p for p in scenes if not os.path.isdir(os.path.join(p, 'series'))]:
+        print('skipping %s: no series/ folder (strat/ is checked by check_strat.py)' % p)
+    scenes = [p for p in scenes if os.path.isdir(os.path.join(p, 'series'))]
     if not scenes:
         print('no scene folders under %s' % root)
         return 1

@@ -1,0 +1,256 @@
+"""render_strat.py: render mcpost's *stratified* fixtures with Blender Cycles.
+
+Run (one Blender process per scene; see samples/README.md, section
+"Stratified fixtures (strat/)"):
+
+  blender -b --factory-startup --python samples/blender/render_strat.py -- \
+      --scene interior --out samples/fixtures/strat/interior
+
+Unlike render_dumps.py's default 'iid' mode, the samples here are those of an
+ordinary progressive Cycles render: one seed per replicate, sample_offset =
+sample index from 0, Cycles' default Sobol-Burley pattern, so the samples
+within a pixel are stratified. For every replicate r (own seed) the
+--blocks * --block-spp samples are stored as blocks of --block-spp
+consecutive samples (block b = samples block_spp*b .. block_spp*(b+1)-1):
+
+  blocks/<s>_r%d_b%02d.exr   R,G,B block mean (HALF); replicate 0 also has
+                             Variance.R/G/B, the unbiased per-sample variance
+                             S_b/(block_spp-1) within the block
+  <s>_features.exr           Albedo.R/G/B, N.X/Y/Z: mean over replicate 0's
+                             samples (Denoising Albedo / Normal passes)
+  <s>_reference.exr          --ref-spp samples (own seed), R,G,B FLOAT
+                             (plus Albedo/N HALF, as render_dumps.py writes it)
+
+Replicate 0 is rendered one sample per render call (samples=1,
+sample_offset=i, same seed) so that its per-sample variance can be
+accumulated (float64); replicates 1.. are one samples=block_spp render call
+per block at sample_offset=block_spp*b. --verify B,... first checks, for
+replicate 0's blocks B, that the single-sample calls average to the
+samples=block_spp call.
+
+The scene builders of cornell and texture are render_dumps.py's, unchanged;
+'interior' is built here.
+"""
+
+import argparse
+import os
+import shutil
+import sys
+import tempfile
+import time
+
+import bpy
+import numpy as np
+
+_HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, _HERE)
+import exr_min  # noqa: E402
+import render_dumps as rdm  # noqa: E402  (defines scenes, Renderer, sample_seed)
+
+
+def build_interior():
+    """A smooth, well-lit diffuse interior: the box with diffuse walls, two
+    diffuse spheres and a diffuse cube, a large ceiling light and a large
+    fill light on the left wall. No glass, no small light: converges
+    steadily."""
+    white = rdm._diffuse('white', (0.75, 0.75, 0.72))
+    warm = rdm._diffuse('warm', (0.7, 0.5, 0.3))
+    cool = rdm._diffuse('cool', (0.3, 0.45, 0.65))
+    rdm._box(white, warm, cool, floor=rdm._diffuse('floor', (0.55, 0.5, 0.45)))
+    rdm._sphere('ball_a', 0.35, (-0.4, 0.35, 0.35), rdm._diffuse('ball_a', (0.8, 0.75, 0.6)))
+    rdm._sphere('ball_b', 0.25, (0.4, -0.25, 0.25), rdm._diffuse('ball_b', (0.35, 0.6, 0.4)))
+    bpy.ops.mesh.primitive_cube_add(size=0.55, location=(0.35, 0.45, 0.275),
+                                    rotation=(0, 0, np.radians(25)))
+    cube = bpy.context.active_object
+    cube.name = 'cube'
+    cube.data.materials.append(rdm._diffuse('cube', (0.7, 0.7, 0.75)))
+    rdm._area_light('light', 1.2, (0.0, 0.0, 1.97), 30.0, (1.0, 0.95, 0.88))
+    fill = rdm._area_light('fill', 0.9, (-0.97, 0.1, 1.2), 10.0, (0.85, 0.9, 1.0))
+    fill.rotation_euler = (0.0, -np.pi / 2, 0.0)   # local -Z -> world +X
+    rdm._camera((0, -3.2, 1.0), (np.pi / 2, 0, 0), 40.0)
+    rdm._world(0.0)
+
+
+SCENES = {'cornell': rdm.build_cornell, 'texture': rdm.build_texture,
+          'interior': build_interior}
+
+
+def replicate_seed(stream, r):
+    """Cycles seed of replicate r: a hashed 31-bit seed (render_dumps'
+    sample_seed), so replicates' seeds differ in all bits."""
+    return rdm.sample_seed(stream + r, 0)
+
+
+def log(msg):
+    print('[render_strat %s] %s' % (time.strftime('%H:%M:%S'), msg), flush=True)
+
+
+def parse_args(argv):
+    ap = argparse.ArgumentParser(prog='render_strat.py',
+                                 description='Render mcpost stratified fixtures with Cycles.')
+    ap.add_argument('--scene', choices=sorted(SCENES), required=True)
+    ap.add_argument('--out', required=True, help='output folder for this scene')
+    ap.add_argument('--res', type=int, default=128)
+    ap.add_argument('--replicates', type=int, default=8)
+    ap.add_argument('--blocks', type=int, default=32)
+    ap.add_argument('--block-spp', type=int, default=32)
+    ap.add_argument('--seed-stream', type=int, default=3000,
+                    help='replicate r uses seed sample_seed(seed_stream + r, 0)')
+    ap.add_argument('--seed-ref', type=int, default=9001)
+    ap.add_argument('--ref-spp', type=int, default=16384)
+    ap.add_argument('--ref-batch', type=int, default=1024)
+    ap.add_argument('--pattern', default='SOBOL', choices=['SOBOL', 'PROGRESSIVE_MULTI_JITTER'])
+    ap.add_argument('--threads', type=int, default=2)
+    ap.add_argument('--verify', default='', help='comma list of blocks to verify first')
+    ap.add_argument('--verify-only', action='store_true')
+    ap.add_argument('--skip', default='', help='comma list of parts to skip: '
+                    'replicate0,replicates,reference')
+    return ap.parse_args(argv)
+
+
+def half(a, counter):
+    v, k = exr_min.clamp_half(a)
+    counter[0] += k
+    return v
+
+
+def main():
+    argv = sys.argv[sys.argv.index('--') + 1:] if '--' in sys.argv else []
+    a = parse_args(argv)
+    skip = set(s for s in a.skip.split(',') if s)
+    name = a.scene
+    B, m = a.blocks, a.block_spp
+    seeds = [replicate_seed(a.seed_stream, r) for r in range(a.replicates)]
+    if len(set(seeds + [a.seed_ref])) != len(seeds) + 1:
+        raise RuntimeError('seed collision; choose another --seed-stream')
+    t_start = time.time()
+
+    rdm._clear_scene()
+    SCENES[name]()
+    tmpdir = tempfile.mkdtemp(prefix='render_strat_',
+                              dir='/dev/shm' if os.path.isdir('/dev/shm') else None)
+    rd = rdm.Renderer(a.res, a.threads, a.pattern, tmpdir)
+    tag = 'Blender %s Cycles' % bpy.app.version_string.split()[0]
+    log('%s: %s, %dx%d, pattern %s, threads %d, %d replicates x %d blocks x %d spp, seeds %s'
+        % (name, tag, a.res, a.res, a.pattern, a.threads, a.replicates, B, m, seeds))
+    clamped = [0]
+    nbytes = [0]
+    times = {}
+
+    def write(path, ch, attrs, types=None):
+        at = {'renderer': tag, 'scene': name}
+        at.update(attrs)
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        nbytes[0] += exr_min.write(path, ch, at, pixel_type=exr_min.HALF,
+                                   compression=exr_min.COMP_ZIP, pixel_types=types)
+
+    def block_attrs(r, b):
+        return {'samplesPerPixel': m, 'replicate': r, 'block': b, 'seed': seeds[r],
+                'sampleOffset': m * b,
+                'sampling': '%s stratified, progressive: seed %d, samples %d..%d'
+                            % (a.pattern, seeds[r], m * b, m * b + m - 1)}
+
+    # --- verification: single-sample calls vs one multi-sample call
+    if a.verify:
+        for b in [int(x) for x in a.verify.split(',')]:
+            acc = rdm.Accum()
+            for i in range(m):
+                acc.add(rd.render(1, seeds[0], m * b + i))
+            one = rd.render(m, seeds[0], m * b)['rgb']
+            mean = acc.mean()[0]
+            d = np.abs(mean - one)
+            rel = d / np.maximum(np.abs(one), 1e-3)
+            log('verify block %d: %d x samples=1 vs samples=%d at offset %d: max abs diff '
+                '%.3g, max rel diff %.3g, mean abs diff %.3g, image mean %.6f vs %.6f, '
+                'pixels differing > 1e-5: %d'
+                % (b, m, m, m * b, d.max(), rel.max(), d.mean(), mean.mean(), one.mean(),
+                   int((d.max(axis=-1) > 1e-5).sum())))
+            # a second identical multi-sample call: run-to-run repeatability
+            two = rd.render(m, seeds[0], m * b)['rgb']
+            log('verify block %d: two identical samples=%d calls: max abs diff %.3g'
+                % (b, m, np.abs(two - one).max()))
+        if a.verify_only:
+            shutil.rmtree(tmpdir, ignore_errors=True)
+            return
+
+    # --- replicate 0: one render call per sample
+    if 'replicate0' not in skip:
+        t0 = time.time()
+        feat = rdm.Accum()
+        for b in range(B):
+            acc = rdm.Accum()
+            for i in range(m):
+                px = rd.render(1, seeds[0], m * b + i)
+                acc.add(px)
+                feat.add(px)
+            mean = acc.mean()[0]
+            var = acc.var_per_sample()
+            ch = {}
+            for k, c in enumerate('RGB'):
+                ch[c] = half(mean[..., k], clamped)
+                ch['Variance.' + c] = half(var[..., k], clamped)
+            write(os.path.join(a.out, 'blocks', '%s_r0_b%02d.exr' % (name, b)), ch,
+                  block_attrs(0, b))
+            el = time.time() - t0
+            log('r0 block %d written (%.1f s, %.3f s/render; mean %.4f, mean var %.4f)'
+                % (b, el, el / (m * (b + 1)), mean.mean(), var.mean()))
+        _, alb, nrm = feat.mean()
+        ch = {}
+        for k, c in enumerate('RGB'):
+            ch['Albedo.' + c] = half(alb[..., k], clamped)
+        for k, c in enumerate('XYZ'):
+            ch['N.' + c] = nrm[..., k]
+        write(os.path.join(a.out, '%s_features.exr' % name), ch,
+              {'samplesPerPixel': B * m, 'replicate': 0, 'seed': seeds[0],
+               'sampleOffset': 0,
+               'sampling': 'mean of replicate 0 samples 0..%d' % (B * m - 1)})
+        times['replicate0'] = time.time() - t0
+        log('replicate 0 done: %d renders in %.1f s' % (B * m, times['replicate0']))
+
+    # --- replicates 1..: one render call per block
+    if 'replicates' not in skip:
+        t0 = time.time()
+        for r in range(1, a.replicates):
+            for b in range(B):
+                rgb = rd.render(m, seeds[r], m * b)['rgb']
+                ch = {c: half(rgb[..., k], clamped) for k, c in enumerate('RGB')}
+                write(os.path.join(a.out, 'blocks', '%s_r%d_b%02d.exr' % (name, r, b)), ch,
+                      block_attrs(r, b))
+            log('replicate %d written (seed %d, %.1f s)' % (r, seeds[r], time.time() - t0))
+        times['replicates'] = time.time() - t0
+
+    # --- reference: batches of one seed at consecutive sample offsets
+    if 'reference' not in skip:
+        t0 = time.time()
+        acc = rdm.Accum()
+        while acc.n < a.ref_spp:
+            nb = min(a.ref_batch, a.ref_spp - acc.n)
+            acc.add(rd.render(nb, a.seed_ref, acc.n), nb)
+            log('reference %d/%d spp (%.1f s)' % (acc.n, a.ref_spp, time.time() - t0))
+        mean, alb, nrm = acc.mean()
+        wr = rdm.Writer(name, tag)
+        wr.write(os.path.join(a.out, '%s_reference.exr' % name), acc.n,
+                 mean, alb, nrm, rgb_float=True)
+        clamped[0] += wr.clamped
+        nbytes[0] += wr.bytes
+        times['reference'] = time.time() - t0
+        log('reference done in %.1f s' % times['reference'])
+
+    shutil.rmtree(tmpdir, ignore_errors=True)
+    log('%s finished: %d renders, %.1f s in render calls, %.1f s total (%s), %d values '
+        'clamped to the half range, %.2f MB written'
+        % (name, rd.renders, rd.seconds, time.time() - t_start,
+           ', '.join('%s %.0f s' % kv for kv in times.items()), clamped[0], nbytes[0] / 1e6))
+
+
+if __name__ == '__main__':
+    try:
+        main()
+    except SystemExit as e:
+        if e.code:
+            print('render_strat: failed (%s)' % e.code, file=sys.stderr)
+            sys.exit(e.code)
+    except Exception:
+        import traceback
+        traceback.print_exc()
+        sys.exit(1)
