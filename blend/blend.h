@@ -299,6 +299,7 @@ typedef struct mcp_blend_series_result {
     int count;
     int has_reference;
     int has_flip;
+    mcp_variance_source variance_source; /* what the members' variance rests on */
     mcp_blend_row *rows;
 } mcp_blend_series_result;
 

@@ -97,6 +97,7 @@ load_member(const run *r, int i, mcp_dump **out)
         mcp_dump_free(d);
         return -1;
     }
+    r->res->variance_source = d->variance_source; /* the last member's, in the end */
     if (i > 0 && !(d->spp > r->res->rows[i - 1].spp)) {
         mcp_error("blend: %s: spp %g does not increase (the member before has %g)",
                   d->source, d->spp, r->res->rows[i - 1].spp);

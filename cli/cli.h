@@ -30,6 +30,19 @@ int mcp_cli_int(const char *flag, const char *text, int *out);
 int mcp_cli_split(const char *text, char ***words, int *count);
 void mcp_cli_free_words(char **words, int count);
 
+/* cli/variance_source.c: how the commands tell what a variance rests on.
+ * "variance_source" (and "variance_dof" when known) into a JSON object, with a
+ * "variance_note" when the source is an assumption (per-sample). */
+void mcp_cli_add_variance_source(cJSON *j, mcp_variance_source src, double dof);
+/* The source in words, for the text output. */
+const char *mcp_cli_variance_source_words(mcp_variance_source src);
+/* --variance-from: "file" (the members' own) or "increments". */
+int mcp_cli_variance_from(const char *text, mcp_variance_source *out);
+/* Whether Variance/n over the increments' spread is off 1 by more than its noise
+ * allows ([0.8, 1.25] taken as agreement), and the one-line warning that says so. */
+int mcp_cli_variance_ratio_off(double ratio);
+const char *mcp_cli_variance_ratio_warning(double ratio);
+
 /* Prints JSON on stdout (pretty) and frees it. */
 void mcp_cli_print_json(cJSON *json);
 

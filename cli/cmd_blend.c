@@ -171,6 +171,7 @@ fill_section(cJSON *section, const mcp_blend_series_result *r,
 {
     const mcp_blend_options *b = &o->blend;
     cJSON_AddStringToObject(section, "denoiser", denoiser);
+    mcp_cli_add_variance_source(section, r->variance_source, 0);
     cJSON_AddStringToObject(section, "fit", mcp_curve_fit_name(b->fit));
     cJSON_AddStringToObject(section, "curve", mcp_curve_model_name(b->curve));
     cJSON_AddStringToObject(section, "filter", mcp_blend_filter_name(b->filter));
@@ -287,7 +288,10 @@ static const char usage[] =
     "  --n-probes K              SURE probes [1]\n"
     "  --seed S                  SURE probe seed [0]\n"
     "  --js-window N             James-Stein window [7]\n"
-    "  --no-flip                 skip HDR-FLIP\n";
+    "  --no-flip                 skip HDR-FLIP\n"
+    "  --variance-from KIND      file (each member's own variance) or increments (the\n"
+    "                            spread between the series' increments: right for\n"
+    "                            stratified samplers) [file]\n";
 
 enum {
     OPT_SPP = 256,
@@ -309,7 +313,8 @@ enum {
     OPT_PROBES,
     OPT_SEED,
     OPT_JS,
-    OPT_NO_FLIP
+    OPT_NO_FLIP,
+    OPT_VARIANCE_FROM
 };
 
 static int
@@ -371,6 +376,7 @@ cmd_blend(int argc, char **argv)
         {"seed", required_argument, 0, OPT_SEED},
         {"js-window", required_argument, 0, OPT_JS},
         {"no-flip", no_argument, 0, OPT_NO_FLIP},
+        {"variance-from", required_argument, 0, OPT_VARIANCE_FROM},
         {"help", no_argument, 0, 'h'},
         {0, 0, 0, 0}};
     mcp_blend_series_options o = mcp_blend_series_defaults();
@@ -379,6 +385,7 @@ cmd_blend(int argc, char **argv)
     mcp_cli_denoiser_flags df = {0};
     int json = 0, all_images = 0, opt, status = 1;
     int *spps = NULL, n_spps = 0;
+    mcp_variance_source variance_from = MCP_VARSRC_NONE;
     mcp_series *series = NULL;
     mcp_denoiser *den = NULL;
     mcp_image *ref = NULL;
@@ -454,6 +461,9 @@ cmd_blend(int argc, char **argv)
         case OPT_NO_FLIP:
             o.flip = 0;
             break;
+        case OPT_VARIANCE_FROM:
+            rc = mcp_cli_variance_from(optarg, &variance_from);
+            break;
         case 'h':
             fputs(usage, stdout);
             status = 0;
@@ -486,6 +496,7 @@ cmd_blend(int argc, char **argv)
         (ref_path && mcp_image_read(ref_path, NULL, &ref)) || make_dirs(out_dir) ||
         mcp_report_new("mcpost blend", &report))
         goto fail;
+    series->variance_from = variance_from;
     blend_sink sink;
     memset(&sink, 0, sizeof sink);
     snprintf(sink.dir, sizeof sink.dir, "%s", out_dir);

@@ -124,6 +124,8 @@ estimate_json(const mcp_estimate *e, const char *input, const char *denoiser,
         cJSON_AddStringToObject(j, "warning",
                                 "the dump has no variance (1 spp?): no estimate, "
                                 "stop forced to false");
+    mcp_cli_add_variance_source(j, e->variance_source, e->variance_dof);
+    cJSON_AddNumberToObject(j, "s2_pool", e->s2_pool);
     cJSON *pct = cJSON_AddArrayToObject(j, "percentiles");
     for (int k = 0; k < e->n_percentiles; k++) {
         cJSON *item = cJSON_CreateObject();
@@ -234,6 +236,7 @@ print_single(const mcp_estimate *e, const char *input, const char *denoiser,
     printf("F(tau):      %.6f -> %s%s\n", e->cdf_at_tau, e->stop ? "stop" : "continue",
            e->no_variance ? " (the dump has no variance: no estimate)" : "");
     printf("blocks:      %d\n", e->blocks->count);
+    printf("variance:    %s\n", mcp_cli_variance_source_words(e->variance_source));
     printf("estimated error at percentile:\n");
     for (int k = 0; k < e->n_percentiles; k++)
         printf("  %-10g %.6g\n", e->percentiles[k], e->percentile_tau[k]);
@@ -252,6 +255,13 @@ series_json(const mcp_series_estimate *s, const char *denoiser, mcp_error_metric
     cJSON_AddStringToObject(j, "metric", mcp_error_metric_name(metric));
     cJSON_AddNumberToObject(j, "p", s->p);
     cJSON_AddBoolToObject(j, "reference", s->has_reference);
+    mcp_cli_add_variance_source(j, s->variance_source, 0);
+    if (s->variance_ratio > 0) {
+        cJSON_AddNumberToObject(j, "variance_ratio", s->variance_ratio);
+        if (mcp_cli_variance_ratio_off(s->variance_ratio))
+            cJSON_AddStringToObject(j, "variance_warning",
+                                    mcp_cli_variance_ratio_warning(s->variance_ratio));
+    }
     cJSON *taus = cJSON_AddArrayToObject(j, "taus");
     int agree = 0;
     for (int t = 0; t < s->n_taus; t++) {
@@ -409,6 +419,7 @@ print_series(const mcp_series_estimate *s)
     }
     if (s->has_reference) printf("agreement: %d of %d\n", agree, s->n_taus);
     printf("(0: not reached within the series; * F(tau) >= p)\n");
+    printf("variance: %s\n", mcp_cli_variance_source_words(s->variance_source));
 }
 
 static void
@@ -475,6 +486,8 @@ static const char usage[] =
     "  --sampling KIND          sampling map: variance, tonemapped or mc-sure "
     "[variance]\n"
     "  --budget N               samples for the next iteration: write integer counts\n"
+    "  --s2-pool R|auto         pool s^2 = (J eps)^2 over (2R+1)^2 pixels; auto: 1 below\n"
+    "                           8 probes, else 0 [0]\n"
     "  -o, --output DIR         write images, blocks.png, estimate.json and a report\n"
     "  --json                   print estimate.json on stdout\n"
     "  --exit-status            exit 0 to stop, 10 to continue rendering (a series: the\n"
@@ -484,6 +497,9 @@ static const char usage[] =
     "  --spp LIST               sample counts for --series (e.g. 1,2,4,8)\n"
     "  --taus LIST              thresholds to report [0.05,0.02,0.01; or --tau]\n"
     "  --ref FILE               the reference image: true error and agreement\n"
+    "  --variance-from KIND     file (each member's own variance) or increments (the\n"
+    "                           spread between the series' increments: right for\n"
+    "                           stratified samplers) [file]\n"
     "  Reading dumps:\n"
     "  --convention NAME        pbrt, mitsuba, blender, mcpost, plain [auto]\n"
     "  --variance KIND          per-sample or of-mean [per convention]\n";
@@ -509,7 +525,9 @@ enum {
     OPT_TAUS,
     OPT_REF,
     OPT_CONVENTION,
-    OPT_VARIANCE
+    OPT_VARIANCE,
+    OPT_VARIANCE_FROM,
+    OPT_S2_POOL
 };
 
 static int
@@ -563,6 +581,8 @@ cmd_estimate(int argc, char **argv)
         {"ref", required_argument, 0, OPT_REF},
         {"convention", required_argument, 0, OPT_CONVENTION},
         {"variance", required_argument, 0, OPT_VARIANCE},
+        {"variance-from", required_argument, 0, OPT_VARIANCE_FROM},
+        {"s2-pool", required_argument, 0, OPT_S2_POOL},
         {"help", no_argument, 0, 'h'},
         {0, 0, 0, 0}};
     mcp_series_estimate_options so = mcp_series_estimate_defaults();
@@ -571,6 +591,7 @@ cmd_estimate(int argc, char **argv)
                *ref_path = NULL, *convention = NULL, *variance = NULL;
     mcp_cli_denoiser_flags df = {0};
     int json = 0, exit_status = 0, have_taus = 0, have_tau = 0, opt;
+    mcp_variance_source variance_from = MCP_VARSRC_NONE;
     optind = 1;
     while ((opt = getopt_long(argc, argv, "ho:", longs, NULL)) != -1) {
         int rc = 0;
@@ -655,6 +676,15 @@ cmd_estimate(int argc, char **argv)
         case OPT_VARIANCE:
             variance = optarg;
             break;
+        case OPT_VARIANCE_FROM:
+            rc = mcp_cli_variance_from(optarg, &variance_from);
+            break;
+        case OPT_S2_POOL:
+            if (!strcmp(optarg, "auto"))
+                eo->s2_pool = -1;
+            else
+                rc = mcp_cli_int("--s2-pool", optarg, &eo->s2_pool);
+            break;
         case 'h':
             fputs(usage, stdout);
             mcp_cli_denoiser_flags_free(&df);
@@ -721,9 +751,13 @@ cmd_estimate(int argc, char **argv)
              mcp_convention_from_name(convention, &series->spec.convention)) ||
             (variance && mcp_variance_kind_from_name(variance, &series->spec.variance)))
             goto done;
+        series->variance_from = variance_from;
         if (run_series(series, den, &so, ref, outdir ? &od : NULL, section, &summary, &s))
             goto done;
         if (!json) print_series(s);
+        if (mcp_cli_variance_ratio_off(s->variance_ratio))
+            fprintf(stderr, "mcpost estimate: warning: %s\n",
+                    mcp_cli_variance_ratio_warning(s->variance_ratio));
         status = 0;
         if (exit_status) {
             const mcp_series_point *last = &s->points[s->count - 1];
@@ -795,7 +829,7 @@ static const char *const estimate_keys[] = {
     "input",           "denoiser", "metric", "tau",      "percentile",
     "percentiles",     "probes",   "seed",   "mc_sure",  "delta",
     "variance_probes", "ppd",      "tile",   "sampling", "budget",
-    "reference",       "taus",     "output", NULL};
+    "reference",       "taus",     "output", "s2_pool",  NULL};
 
 static int
 at_line(const mcp_node *settings, const char *key)
@@ -851,6 +885,7 @@ read_settings(const mcp_node *s, mcp_series_estimate_options *so)
         mcp_node_opt_int(s, "tile", &o->blocks.tile_size) ||
         opt_enum(s, "sampling", parse_sampling, &o->sampling.kind) ||
         mcp_node_opt_double(s, "budget", &budget) ||
+        mcp_node_opt_int(s, "s2_pool", &o->s2_pool) ||
         mcp_node_opt_doubles(s, "taus", &taus, &nt))
         goto done;
     if (seed < 0 || seed != floor(seed) || seed > 9007199254740992.0) {

@@ -2,6 +2,8 @@
  * writing them (see dump.h; the conventions are in notes/libraries.md §4). */
 #define _POSIX_C_SOURCE 200809L
 #include <mcpost/dump.h>
+
+#include "internal.h"
 #include <mcpost/imageio.h>
 
 #include <ctype.h>
@@ -862,6 +864,22 @@ mcp_series_load(const mcp_series *s, int i, mcp_dump **out)
     *out = NULL;
     if (i < 0 || i >= s->count)
         return mcp_error("series member %d of %d does not exist", i, s->count);
+    if (s->variance_from == MCP_VARSRC_INCREMENTS && i > 0) {
+        /* the increments need two blocks; a member before that keeps its own */
+        double ratio;
+        if (mcp_series_increment_variance(s, i, &s->increments, out, &ratio) == 0)
+            return 0;
+        if (!strstr(mcp_error_message(), "needs two blocks"))
+            return -1;
+        mcp_error_clear();
+    }
+    return mcp__series_load_file(s, i, out);
+}
+
+int
+mcp__series_load_file(const mcp_series *s, int i, mcp_dump **out)
+{
+    *out = NULL;
     mcp_dump_spec spec = s->spec;
     spec.path = s->paths[i];
     if (s->spp[i] > 0)

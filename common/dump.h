@@ -147,11 +147,24 @@ MCP_API mcp_convention mcp_dump_detect(const mcp_image *img);
 
 /* ---- series: a progressive render ---- */
 
+typedef struct mcp_increment_options {
+    double first_spp; /* members below this count are merged into the first block;
+                         0: n / 64 of the member estimated [0] */
+    int pool_radius;  /* 0: automatic (mcp_variance_pool_radius(dof, 100)), < 0: none
+                         [0] */
+} mcp_increment_options;
+
 typedef struct mcp_series {
     int count;
     char **paths;   /* dump files, in increasing spp */
     double *spp;    /* their sample counts (0: read from the file) */
     mcp_dump_spec spec; /* applied to every member; .path and .spp are per member */
+    /* Where mcp_series_load takes a member's variance from: the file's own [NONE,
+     * the default], or MCP_VARSRC_INCREMENTS, the spread between the increments
+     * before it (mcp_series_increment_variance; a member with fewer than two blocks
+     * keeps its own) */
+    mcp_variance_source variance_from;
+    mcp_increment_options increments;
 } mcp_series;
 
 /* A series from a printf-style pattern with one integer conversion (e.g.
@@ -208,13 +221,6 @@ MCP_API int mcp_dump_pool_variance(mcp_dump *dump, const mcp_image *shape, int r
 /* The radius whose window gives a pooled variance at least min_dof degrees of freedom
  * from values of dof each (0 when dof alone is enough or unknown). */
 MCP_API int mcp_variance_pool_radius(double dof, double min_dof);
-
-typedef struct mcp_increment_options {
-    double first_spp; /* members below this count are merged into the first block;
-                         0: n / 64 of the member estimated [0] */
-    int pool_radius;  /* < 0: automatic (mcp_variance_pool_radius(dof, 100)), 0: none
-                         [-1] */
-} mcp_increment_options;
 
 MCP_API mcp_increment_options mcp_increment_defaults(void);
 

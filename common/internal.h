@@ -15,6 +15,10 @@ double *mcp__window_table(const mcp_image *img);
 void mcp__window_sum(const double *table, int w, int h, int x, int y, int r, double out[3],
                      int *count);
 
+/* A series member as its file holds it, whatever the series' variance_from (dump.c). */
+#include <mcpost/dump.h>
+int mcp__series_load_file(const mcp_series *s, int i, mcp_dump **out);
+
 /* Format back ends behind mcp_image_read / mcp_image_write (imageio.c). The writers
  * write exactly `path` (imageio.c passes a temporary name and renames). */
 #include <mcpost/imageio.h>

@@ -42,7 +42,7 @@ static const char *const root_keys[] = {"title", "inputs", "output", "stages", N
     "convention", "variance", "spp", "bad_values", "variance_file", "albedo_file",       \
         "normal_file", "spp_map_file", "channels"
 static const char *const dump_keys[] = {"dump", DUMP_KEYS, NULL};
-static const char *const series_keys[] = {"series", DUMP_KEYS, NULL};
+static const char *const series_keys[] = {"series", "variance_from", DUMP_KEYS, NULL};
 static const char *const replicates_keys[] = {"replicates", "merge", "pool", DUMP_KEYS, NULL};
 static const char *const image_keys[] = {"image", NULL};
 static const char *const channel_keys[] = {"color", "variance", "albedo", "normal", NULL};
@@ -305,6 +305,19 @@ series_from(mcp_job *job, const mcp_node *def, mcp_series **out)
     }
     if (rc)
         return -1;
+    const char *from = NULL;
+    if (mcp_node_opt_string(def, "variance_from", &from))
+        rc = -1;
+    else if (from && !strcmp(from, "increments"))
+        (*out)->variance_from = MCP_VARSRC_INCREMENTS;
+    else if (from && strcmp(from, "file") != 0)
+        rc = mcp_node_error(mcp_node_get(def, "variance_from"),
+                            "variance_from must be file or increments (got '%s')", from);
+    if (rc) {
+        mcp_series_free(*out);
+        *out = NULL;
+        return -1;
+    }
     for (int i = 0; i < (*out)->count; i++)
         if (file_exists(src, (*out)->paths[i])) {
             mcp_series_free(*out);

@@ -34,7 +34,7 @@ mcp_merge_defaults(void)
 mcp_increment_options
 mcp_increment_defaults(void)
 {
-    mcp_increment_options o = {0, -1};
+    mcp_increment_options o = {0, 0};
     return o;
 }
 
@@ -432,8 +432,9 @@ mcp_dump_increment_variance(const mcp_dump *const *members, int count,
     d->variance_dof = blocks - 1;
     d->replicates = blocks;
     d->variance_in_file = MCP_VAR_OF_MEAN;
-    int radius = opt->pool_radius >= 0 ? opt->pool_radius
-                                       : mcp_variance_pool_radius(blocks - 1, 100);
+    int radius = opt->pool_radius > 0    ? opt->pool_radius
+                 : opt->pool_radius == 0 ? mcp_variance_pool_radius(blocks - 1, 100)
+                                         : 0;
     if (mcp_dump_pool_variance(d, shape, radius))
         goto fail;
     mcp_image_free(shape);
@@ -457,7 +458,7 @@ mcp_series_increment_variance(const mcp_series *s, int i, const mcp_increment_op
         return -1;
     int rc = 0;
     for (int k = 0; k <= i && !rc; k++)
-        rc = mcp_series_load(s, k, &m[k]);
+        rc = mcp__series_load_file(s, k, &m[k]);
     rc = rc || mcp_dump_increment_variance((const mcp_dump *const *)m, i + 1, opt, out, ratio);
     for (int k = 0; k <= i; k++)
         mcp_dump_free(m[k]);

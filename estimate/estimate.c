@@ -11,6 +11,7 @@
 #include "internal.h"
 
 #include <mcpost/flip.h>
+#include <mcpost/stats.h>
 
 #include <math.h>
 #include <stdlib.h>
@@ -31,6 +32,7 @@ mcp_estimate_defaults(void)
     memcpy(o.percentiles, pct, sizeof pct);
     o.sampling = mcp_sampling_defaults();
     o.budget = 0;
+    o.s2_pool = 0;
     return o;
 }
 
@@ -66,6 +68,9 @@ mcp_estimate_check(const mcp_estimate_options *o)
                          (long long)o->budget);
     if ((unsigned)o->sampling.kind > MCP_SAMPLING_MC_SURE)
         return mcp_error("estimate: unknown sampling map kind %d", (int)o->sampling.kind);
+    if (o->s2_pool < -1 || o->s2_pool > 16)
+        return mcp_error("estimate: s2_pool must be -1 (automatic) or 0 to 16 (got %d)",
+                         o->s2_pool);
     return 0;
 }
 
@@ -224,6 +229,13 @@ mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,
         e->maps.var = v;
         e->maps.var_rel = vr;
     }
+    /* s² from few probes: pooled so that its χ² spread does not fatten the tail */
+    e->s2_pool = o.s2_pool >= 0 ? o.s2_pool : o.sure.n_probes < 8;
+    if (mcp_pool_window(e->maps.var_rel, NULL, e->s2_pool) ||
+        mcp_pool_window(e->maps.var, NULL, e->s2_pool))
+        goto done;
+    e->variance_source = dump->variance_source;
+    e->variance_dof = dump->variance_dof;
     double t2 = mcp__now_ms();
     if (mcp_block_average(e->maps.sure_rel, e->maps.sigma_rel, &o.blocks, &e->blocks))
         goto done;
@@ -453,6 +465,33 @@ member_truth(const mcp_estimate *e, const mcp_image *reference,
     return 0;
 }
 
+/* The last member's variance source, and whether the renderer's Variance/n tracks
+ * the spread of the series' own increments (a stratified sampler makes it an
+ * overstatement: docs "Variance sources"). */
+static int
+series_variance_check(const mcp_series *series, mcp_series_estimate *s)
+{
+    mcp_dump *last = NULL, *incr = NULL;
+    if (mcp_series_load(series, series->count - 1, &last))
+        return -1;
+    s->variance_source = last->variance_source;
+    mcp_dump_free(last);
+    if (series->count < 2)
+        return 0;
+    mcp_series plain = *series;
+    plain.variance_from = MCP_VARSRC_NONE; /* the files' own variance is the shape */
+    mcp_increment_options io = series->increments;
+    io.pool_radius = -1; /* the ratio is image-wide: no pooling needed */
+    if (mcp_series_increment_variance(&plain, series->count - 1, &io, &incr,
+                                      &s->variance_ratio)) {
+        /* too few blocks, or members without a scalar count: nothing to measure */
+        mcp_error_clear();
+        s->variance_ratio = 0;
+    }
+    mcp_dump_free(incr);
+    return 0;
+}
+
 int
 mcp_estimate_series(const mcp_series *series, const mcp_denoiser *den,
                     const mcp_series_estimate_options *opt, const mcp_image *reference,
@@ -512,6 +551,10 @@ mcp_estimate_series(const mcp_series *series, const mcp_denoiser *den,
             return -1;
         }
         if (progress) progress(i + 1, series->count, ctx);
+    }
+    if (series_variance_check(series, s)) {
+        mcp_series_estimate_free(s);
+        return -1;
     }
     double *spps = mcp_calloc((size_t)s->count, sizeof *spps);
     if (!spps) {

@@ -311,6 +311,11 @@ typedef struct mcp_estimate_options {
         percentiles[MCP_ESTIMATE_MAX_PERCENTILES]; /* [0.5, 0.9, 0.99, 0.999, 0.9999] */
     mcp_sampling_options sampling;
     int64_t budget; /* samples for the next iteration; 0: no counts [0] */
+    /* s² = (Jε)² from K probes is Var[F] times a χ²_K / K draw; its spread fattens the
+     * upper tail of the error distribution, so s² is pooled over a (2r + 1)² window
+     * (docs "Variance sources"): -1 automatic (r = 1 below 8 probes, else 0), 0 none,
+     * or r [0: SPEC's per-value s², see the docs for what pooling changes] */
+    int s2_pool;
 } mcp_estimate_options;
 
 MCP_API mcp_estimate_options mcp_estimate_defaults(void);
@@ -334,6 +339,9 @@ typedef struct mcp_estimate {
     double percentiles[MCP_ESTIMATE_MAX_PERCENTILES];    /* the p values */
     double percentile_tau[MCP_ESTIMATE_MAX_PERCENTILES]; /* estimated error at each */
     double ms_denoise, ms_error_terms, ms_blocks, ms_stopping; /* wall-clock times */
+    mcp_variance_source variance_source; /* what the dump's variance rests on */
+    double variance_dof;                 /* its degrees of freedom (0: many/unknown) */
+    int s2_pool;                         /* the radius s² was pooled over */
 } mcp_estimate;
 
 MCP_API int mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,
@@ -379,6 +387,12 @@ typedef struct mcp_series_estimate {
     double first_spp[MCP_ESTIMATE_MAX_TAUS];
     double true_first_spp[MCP_ESTIMATE_MAX_TAUS];
     int agree[MCP_ESTIMATE_MAX_TAUS]; /* mcp_stop_agrees (with a reference) */
+    mcp_variance_source variance_source; /* the last member's */
+    /* Σ(the last member's own Variance/n) / Σ(the spread of the increments before it):
+     * how far the renderer's per-sample variance overstates (> 1) the variance of the
+     * mean that the series itself shows; 0 when not measurable (no per-sample
+     * variance, or fewer than two blocks) */
+    double variance_ratio;
 } mcp_series_estimate;
 
 typedef struct mcp_series_estimate_options {

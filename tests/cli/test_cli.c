@@ -345,6 +345,86 @@ test_denoiser_flags(void **state)
     mcp_dump_free(d);
 }
 
+/* mcpost merge and the job input replicates: give the same dump as mcp_dump_merge;
+ * info and estimate name the variance source; a series with variance_from:
+ * increments is estimated from its increments; bad merges fail in one line. */
+static void
+test_merge_and_variance_sources(void **state)
+{
+    (void)state;
+    const char *names[4] = {"rep0.exr", "rep1.exr", "rep2.exr", "rep3.exr"};
+    mcp_dump *parts[4];
+    for (int k = 0; k < 4; k++) {
+        parts[k] = sample_dump();
+        for (int i = 0; i < 16 * 8 * 3; i++)
+            parts[k]->color->data[i] += 0.1f * (float)((k * 7 + i) % 5);
+        assert_int_equal(mcp_dump_write(parts[k], mcp_test_path(names[k]), MCP_CONV_PBRT, NULL),
+                         0);
+    }
+    mcp_dump *want = NULL, *got = NULL;
+    assert_int_equal(mcp_dump_merge((const mcp_dump *const *)parts, 4, NULL, &want), 0);
+    assert_int_equal(run("merge '%s' '%s' '%s' '%s' -o '%s'", mcp_test_path(names[0]),
+                         mcp_test_path(names[1]), mcp_test_path(names[2]),
+                         mcp_test_path(names[3]), mcp_test_path("merged.exr")),
+                     0);
+    assert_non_null(strstr(out, "512 spp; variance of the mean from their spread (3 degrees"));
+    assert_int_equal(mcp_dump_read(mcp_test_path("merged.exr"), &got), 0);
+    assert_int_equal(got->variance_source, MCP_VARSRC_REPLICATES);
+    assert_true(mcp_test_max_abs_diff(got->color, want->color) == 0);
+    for (int i = 0; i < 16 * 8 * 3; i++)
+        assert_close(got->var_of_mean->data[i], want->var_of_mean->data[i], 1e-6, 1e-12);
+    assert_int_equal(run("info '%s'", mcp_test_path("merged.exr")), 0);
+    assert_non_null(strstr(out, "replicates: the spread of 4 renders (3 degrees of freedom)"));
+    assert_int_equal(run("info '%s'", mcp_test_path(names[0])), 0);
+    assert_non_null(strstr(out, "per-sample / n (assumes independent samples"));
+    /* estimate says what the variance rests on */
+    assert_int_equal(run("estimate '%s' --denoiser gauss --json", mcp_test_path("merged.exr")),
+                     0);
+    cJSON *j = cJSON_Parse(out);
+    assert_non_null(j);
+    assert_string_equal(cJSON_GetObjectItem(j, "variance_source")->valuestring, "replicates");
+    assert_true(cJSON_GetObjectItem(j, "variance_dof")->valuedouble == 3);
+    cJSON_Delete(j);
+    assert_int_equal(run("estimate '%s' --denoiser gauss --json", mcp_test_path(names[0])), 0);
+    j = cJSON_Parse(out);
+    assert_string_equal(cJSON_GetObjectItem(j, "variance_source")->valuestring, "per-sample");
+    assert_non_null(cJSON_GetObjectItem(j, "variance_note"));
+    cJSON_Delete(j);
+    /* the job input: a glob, merged once, the same dump */
+    mcp_test_write_text(mcp_test_path("merge.yaml"),
+                        "inputs:\n  frame: {replicates: rep*.exr}\n"
+                        "  progress: {series: [rep0.exr, merged.exr], variance_from: increments}\n"
+                        "output: merge_out\n"
+                        "stages:\n  - info: {input: frame}\n"
+                        "  - estimate: {input: progress, denoiser: gauss, taus: [0.5]}\n");
+    assert_int_equal(run("run --json '%s'", mcp_test_path("merge.yaml")), 0);
+    j = cJSON_Parse(out);
+    assert_non_null(j);
+    const cJSON *info = cJSON_GetArrayItem(cJSON_GetObjectItem(j, "sections"), 0);
+    assert_string_equal(cJSON_GetObjectItem(info, "variance_source")->valuestring, "replicates");
+    assert_true(cJSON_GetObjectItem(info, "spp")->valuedouble == 512);
+    cJSON_Delete(j);
+    /* errors: one render; a pattern that matches nothing; a bad variance_from */
+    assert_one_line_error(run("merge '%s' -o '%s'", mcp_test_path(names[0]),
+                              mcp_test_path("m1.exr")),
+                          "at least 2");
+    assert_int_equal(access(mcp_test_path("m1.exr"), F_OK), -1);
+    mcp_test_write_text(mcp_test_path("merge_bad.yaml"),
+                        "inputs:\n  frame: {replicates: none*.exr}\n"
+                        "stages:\n  - info: {input: frame}\n");
+    assert_one_line_error(run("run '%s'", mcp_test_path("merge_bad.yaml")),
+                          "merge_bad.yaml:2: replicates: no file matches");
+    mcp_test_write_text(mcp_test_path("merge_bad2.yaml"),
+                        "inputs:\n  p: {series: [rep0.exr, merged.exr], variance_from: spread}\n"
+                        "stages:\n  - info: {input: p}\n");
+    assert_one_line_error(run("run '%s'", mcp_test_path("merge_bad2.yaml")),
+                          "variance_from must be file or increments");
+    mcp_dump_free(want);
+    mcp_dump_free(got);
+    for (int k = 0; k < 4; k++)
+        mcp_dump_free(parts[k]);
+}
+
 static void
 test_help_and_version(void **state)
 {
@@ -368,6 +448,7 @@ main(void)
         cmocka_unit_test(test_every_bad_input_class),
         cmocka_unit_test(test_run_job_with_info_and_convert),
         cmocka_unit_test(test_denoiser_flags),
+        cmocka_unit_test(test_merge_and_variance_sources),
         cmocka_unit_test(test_help_and_version),
     };
     return cmocka_run_group_tests_name("cli", tests, NULL, NULL);

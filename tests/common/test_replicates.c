@@ -226,7 +226,7 @@ test_increments_independent(void **state)
     double est = 0, truth = 0, ratio_sum = 0;
     const int trials = 12;
     mcp_increment_options opt = mcp_increment_defaults();
-    opt.pool_radius = 0; /* the raw estimate: unbiased per value */
+    opt.pool_radius = -1; /* the raw estimate: unbiased per value */
     for (int trial = 0; trial < trials; trial++) {
         mcp_series *s = procedural_series(&scene, spp, 5, 100 + trial, "inc");
         mcp_dump *d = NULL;
@@ -258,6 +258,68 @@ test_increments_independent(void **state)
     mcp_series_free(s);
     mcp_image_free(truth_mean);
     mcp_image_free(truth_var);
+}
+
+/* The same on a stratified render (the procedural renderer's jittered sampler, 4x4
+ * strata per pass of 16 samples, no fireflies), against its exact variance of the
+ * mean: the renderer's Variance/n overstates it, the increments between passes and
+ * the spread of independent renders do not. */
+static void
+test_stratified_sources(void **state)
+{
+    (void)state;
+    mcp_proc_scene scene = mcp_proc_scene_defaults();
+    scene.width = scene.height = 24;
+    scene.firefly_probability = 0;
+    scene.sampler = MCP_PROC_SAMPLER_JITTERED;
+    scene.strata = 4;
+    mcp_image *v64 = NULL, *v16 = NULL;
+    assert_int_equal(mcp_proc_truth_var_of_mean(&scene, 64, &v64), 0);
+    assert_int_equal(mcp_proc_truth_var_of_mean(&scene, 16, &v16), 0);
+    const int spp[4] = {16, 32, 48, 64};
+    const int n = scene.width * scene.height * 3, trials = 12;
+    double truth64 = 0, truth16 = 0, incr = 0, own = 0, rep = 0, ratio_sum = 0;
+    for (int i = 0; i < n; i++)
+        truth64 += v64->data[i], truth16 += v16->data[i];
+    mcp_increment_options opt = mcp_increment_defaults();
+    opt.pool_radius = -1;
+    for (int trial = 0; trial < trials; trial++) {
+        mcp_series *s = procedural_series(&scene, spp, 4, 300 + trial, "strat");
+        mcp_dump *d = NULL, *last = NULL;
+        double ratio = 0;
+        assert_int_equal(mcp_series_increment_variance(s, 3, &opt, &d, &ratio), 0);
+        assert_int_equal(mcp_series_load(s, 3, &last), 0);
+        for (int i = 0; i < n; i++)
+            incr += d->var_of_mean->data[i], own += last->var_of_mean->data[i];
+        ratio_sum += ratio;
+        mcp_dump_free(d);
+        mcp_dump_free(last);
+        mcp_series_free(s);
+        /* four independent 16-spp renders, merged */
+        mcp_dump *parts[4], *m = NULL;
+        for (int k = 0; k < 4; k++)
+            assert_int_equal(mcp_proc_render(&scene, 16,
+                                             mcp_proc_realization_seed(900 + trial, k + 1),
+                                             NULL, &parts[k]),
+                             0);
+        assert_int_equal(mcp_dump_merge((const mcp_dump *const *)parts, 4, NULL, &m), 0);
+        for (int i = 0; i < n; i++)
+            rep += m->var_of_mean->data[i];
+        mcp_dump_free(m);
+        for (int k = 0; k < 4; k++)
+            mcp_dump_free(parts[k]);
+    }
+    incr /= trials, own /= trials, rep /= trials;
+    print_message("stratified, image sums over the exact variance of the mean: "
+                  "increments %.3f, replicates %.3f, Variance/n %.3f (ratio %.3f)\n",
+                  incr / truth64, rep / (truth16 / 4), own / truth64, ratio_sum / trials);
+    /* 12 trials x 1728 values x 3 dof: a few percent; Variance/n is well above */
+    assert_close(incr / truth64, 1.0, 0.06, 0);
+    assert_close(rep / (truth16 / 4), 1.0, 0.06, 0);
+    assert_true(own / truth64 > 1.15);
+    assert_true(ratio_sum / trials > 1.15);
+    mcp_image_free(v64);
+    mcp_image_free(v16);
 }
 
 /* The source travels through a file: merged, written, read back. */
@@ -313,6 +375,7 @@ main(void)
         cmocka_unit_test(test_merge_replicates_unbiased),
         cmocka_unit_test(test_pool_variance),
         cmocka_unit_test(test_increments_independent),
+        cmocka_unit_test(test_stratified_sources),
         cmocka_unit_test(test_source_roundtrip),
         cmocka_unit_test(test_merge_errors),
     };

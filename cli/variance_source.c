@@ -1,0 +1,69 @@
+/* variance_source.c: what a variance rests on, said the same way by every command
+ * (estimate, blend, info): a per-sample variance / n is an assumption that the samples
+ * are independent, which stratified samplers break. */
+#include "cli.h"
+
+#include <stdio.h>
+#include <string.h>
+
+static const char per_sample_note[] =
+    "the renderer's per-sample variance / n assumes independent samples; a stratified "
+    "sampler (Cycles, pbrt-v4) makes it an overstatement: give replicates (mcpost "
+    "merge) or a series with --variance-from increments";
+
+void
+mcp_cli_add_variance_source(cJSON *j, mcp_variance_source src, double dof)
+{
+    cJSON_AddStringToObject(j, "variance_source", mcp_variance_source_name(src));
+    if (dof > 0)
+        cJSON_AddNumberToObject(j, "variance_dof", dof);
+    if (src == MCP_VARSRC_PER_SAMPLE)
+        cJSON_AddStringToObject(j, "variance_note", per_sample_note);
+}
+
+const char *
+mcp_cli_variance_source_words(mcp_variance_source src)
+{
+    switch (src) {
+    case MCP_VARSRC_NONE: return "none";
+    case MCP_VARSRC_PER_SAMPLE:
+        return "per-sample / n (assumes independent samples; see mcpost merge, "
+               "--variance-from increments)";
+    case MCP_VARSRC_OF_MEAN: return "of the mean, as the file stores it";
+    case MCP_VARSRC_REPLICATES: return "the spread between replicates";
+    case MCP_VARSRC_INCREMENTS: return "the spread between the series' increments";
+    }
+    return "?";
+}
+
+int
+mcp_cli_variance_from(const char *text, mcp_variance_source *out)
+{
+    if (!strcmp(text, "file"))
+        *out = MCP_VARSRC_NONE;
+    else if (!strcmp(text, "increments"))
+        *out = MCP_VARSRC_INCREMENTS;
+    else
+        return mcp_error("--variance-from must be file or increments (got '%s')", text);
+    return 0;
+}
+
+int
+mcp_cli_variance_ratio_off(double ratio)
+{
+    return ratio > 0 && (ratio > 1.25 || ratio < 0.8);
+}
+
+const char *
+mcp_cli_variance_ratio_warning(double ratio)
+{
+    static _Thread_local char text[400];
+    snprintf(text, sizeof text,
+             "Variance/n is %.2fx the spread between this series' increments: %s", ratio,
+             ratio > 1 ? "the samples are stratified, so the per-sample variance "
+                         "overstates the error; use --variance-from increments (job: "
+                         "variance_from: increments)"
+                       : "the per-sample variance understates the error (correlated "
+                         "samples?); use --variance-from increments");
+    return text;
+}
