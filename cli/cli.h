@@ -41,7 +41,7 @@ int mcp_cli_variance_from(const char *text, mcp_variance_source *out);
 /* Whether Variance/n over the increments' spread is off 1 by more than its noise
  * allows ([0.8, 1.25] taken as agreement), and the one-line warning that says so. */
 int mcp_cli_variance_ratio_off(double ratio);
-const char *mcp_cli_variance_ratio_warning(double ratio);
+const char *mcp_cli_variance_ratio_warning(double ratio, int using_increments);
 
 /* Prints JSON on stdout (pretty) and frees it. */
 void mcp_cli_print_json(cJSON *json);

@@ -259,8 +259,10 @@ series_json(const mcp_series_estimate *s, const char *denoiser, mcp_error_metric
     if (s->variance_ratio > 0) {
         cJSON_AddNumberToObject(j, "variance_ratio", s->variance_ratio);
         if (mcp_cli_variance_ratio_off(s->variance_ratio))
-            cJSON_AddStringToObject(j, "variance_warning",
-                                    mcp_cli_variance_ratio_warning(s->variance_ratio));
+            cJSON_AddStringToObject(
+                j, "variance_warning",
+                mcp_cli_variance_ratio_warning(s->variance_ratio, s->variance_source ==
+                                                                      MCP_VARSRC_INCREMENTS));
     }
     cJSON *taus = cJSON_AddArrayToObject(j, "taus");
     int agree = 0;
@@ -443,6 +445,16 @@ run_series(const mcp_series *series, const mcp_denoiser *den,
     mcp_series_estimate *s = NULL;
     if (mcp_estimate_series(series, den, so, ref, progress_cb, &p, &s)) return -1;
     cJSON *j = series_json(s, den->name, so->est.sure.metric);
+    const cJSON *warning = cJSON_GetObjectItem(j, "variance_warning");
+    if (warning) {
+        /* one line, always (also with --quiet): it says the estimates may be off */
+        fprintf(stderr, "mcpost: warning: %s\n", warning->valuestring);
+        if (section)
+            cJSON_AddStringToObject(section, "variance_warning", warning->valuestring);
+    }
+    if (section)
+        cJSON_AddStringToObject(section, "variance_source",
+                                mcp_variance_source_name(s->variance_source));
     char path[4352];
     char *text = cJSON_Print(j);
     int rc = !text || (o && (make_dirs(o->dir) ||
@@ -755,9 +767,6 @@ cmd_estimate(int argc, char **argv)
         if (run_series(series, den, &so, ref, outdir ? &od : NULL, section, &summary, &s))
             goto done;
         if (!json) print_series(s);
-        if (mcp_cli_variance_ratio_off(s->variance_ratio))
-            fprintf(stderr, "mcpost estimate: warning: %s\n",
-                    mcp_cli_variance_ratio_warning(s->variance_ratio));
         status = 0;
         if (exit_status) {
             const mcp_series_point *last = &s->points[s->count - 1];

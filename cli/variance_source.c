@@ -55,15 +55,16 @@ mcp_cli_variance_ratio_off(double ratio)
 }
 
 const char *
-mcp_cli_variance_ratio_warning(double ratio)
+mcp_cli_variance_ratio_warning(double ratio, int using_increments)
 {
     static _Thread_local char text[400];
     snprintf(text, sizeof text,
-             "Variance/n is %.2fx the spread between this series' increments: %s", ratio,
-             ratio > 1 ? "the samples are stratified, so the per-sample variance "
-                         "overstates the error; use --variance-from increments (job: "
-                         "variance_from: increments)"
-                       : "the per-sample variance understates the error (correlated "
-                         "samples?); use --variance-from increments");
+             "Variance/n is %.2fx the spread between this series' increments: the "
+             "per-sample variance %s the error (%s)%s",
+             ratio, ratio > 1 ? "overstates" : "understates",
+             ratio > 1 ? "stratified samples" : "correlated samples?",
+             using_increments ? "; the estimates use the increments"
+                              : "; use --variance-from increments (job: variance_from: "
+                                "increments)");
     return text;
 }
