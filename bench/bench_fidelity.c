@@ -9,17 +9,26 @@
  *   replicates4  4 renders with other seeds merged (mcp_dump_merge), each
  *   replicates8  advancing 32 spp per iteration (so 4 or 8 x 32 spp in all)
  *   oracle       the render with the variance of its mean measured from all 8
- *                renders' spread (pooled): what a near-true variance gives
+ *                renders' spread (7 dof, ratio-pooled over 5x5 pixels with the
+ *                render's own Variance as the pattern): what a near-true variance
+ *                gives
  *
- * For each scene, denoiser and source: iterations of 32 spp (per render) up to 1024;
- * three τ from the true 99.9th-percentile RelSE of the denoised image at iterations
- * 2, 6 and 16 of that sequence, raised to twice the reference's noise floor where
- * below it; p = 0.999; a stop agrees when it is within one iteration or a third of
- * the true count (mcp_stop_agrees); an early stop is one before half the true count.
+ * For each scene, denoiser and source: iterations of 32 spp per render, up to 1024
+ * for one render and to 2048 in all for replicates (16 iterations of 4 x 32, 8 of
+ * 8 x 32), so that the reference stays at least 8 times the last image's samples;
+ * the renders a source does not use are merged into the reference. Three τ from the
+ * true 99.9th-percentile RelSE of the denoised image at iterations 2, 6 and 16 of 32
+ * (scaled to the sequence's length), raised to twice the reference's noise floor
+ * where below it; p = 0.999; a stop agrees when it is within one iteration or a third
+ * of the true count (mcp_stop_agrees); an early stop is one before half the true
+ * count.
  * Then the curve blend on the same sequence: where it is <= min(noisy, denoised) and
  * its MSE over the noisy image's at the last iteration.
  *
- *   build/bench/bench_fidelity [--scenes a,b] [--denoisers nlm,bilateral,unet]
+ * Denoisers: any kind, and js-NAME for NAME followed by the James-Stein
+ * post-correction (the `james-stein` denoiser: the error of what the user keeps).
+ *
+ *   build/bench/bench_fidelity [--scenes a,b] [--denoisers nlm,unet,js-unet]
  *                              [--sources LIST] [--fixtures DIR] [--weights TZA]
  *                              [--iterations N] [--no-blend] [--curves]
  *
@@ -201,16 +210,18 @@ iteration_dump(const scene *s, source src, int j, double *ratio)
         if (mcp_dump_merge((const mcp_dump *const *)parts, RENDERS, NULL, &all))
             die("merge oracle");
         d = parts[0];
-        /* the spread of 8 renders of n samples: Var of one = 8 x that of their mean */
-        mcp_image_free(d->var_of_mean);
+        /* the spread of 8 renders of n samples: Var of one = 8 x that of their mean;
+           pooled with the render's own per-sample variance as the pattern */
+        mcp_image *shape = d->var_of_mean;
         d->var_of_mean = all->var_of_mean, all->var_of_mean = NULL;
         for (size_t i = 0; i < (size_t)d->color->width * d->color->height * 3; i++)
             d->var_of_mean->data[i] *= RENDERS;
         d->variance_source = MCP_VARSRC_REPLICATES;
         d->variance_dof = RENDERS - 1;
         d->replicates = RENDERS;
-        if (mcp_dump_pool_variance(d, NULL, 2))
+        if (mcp_dump_pool_variance(d, shape, 2))
             die("pool");
+        mcp_image_free(shape);
         mcp_dump_free(all);
         for (int r = 1; r < RENDERS; r++)
             mcp_dump_free(parts[r]);
@@ -432,19 +443,27 @@ main(int argc, char **argv)
             printf("\n\n| denoiser | τ | estimated spp (true) | agree | early |\n"
                    "|---|---|---|---|---|\n");
             for (int di = 0; di < n_dens; di++) {
-                const char *opts[1] = {NULL};
-                char wopt[4200];
+                /* js-NAME: NAME followed by the James-Stein post-correction */
+                const char *opts[2] = {NULL, NULL}, *kind = dens[di], *base = dens[di];
+                char wopt[4200], inner[64];
                 int n_opts = 0;
-                if (!strcmp(dens[di], "unet")) {
+                if (!strncmp(dens[di], "js-", 3)) {
+                    base = dens[di] + 3;
+                    snprintf(inner, sizeof inner, "inner=%s", base);
+                    kind = "james-stein";
+                    opts[n_opts++] = inner;
+                }
+                if (!strcmp(base, "unet")) {
                     if (!weights) {
-                        printf("| unet | (no weights: set MCPOST_OIDN_WEIGHTS) | | | |\n");
+                        printf("| %s | (no weights: set MCPOST_OIDN_WEIGHTS) | | | |\n",
+                               dens[di]);
                         continue;
                     }
                     snprintf(wopt, sizeof wopt, "weights=%s", weights);
-                    opts[0] = wopt, n_opts = 1;
+                    opts[n_opts++] = wopt;
                 }
                 mcp_denoiser *den = NULL;
-                if (mcp_denoiser_create_from_args(dens[di], opts, n_opts, &den))
+                if (mcp_denoiser_create_from_args(kind, opts, n_opts, &den))
                     die(dens[di]);
                 mcp_series_estimate_options eo = mcp_series_estimate_defaults();
                 eo.est.p = p;

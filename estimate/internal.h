@@ -12,6 +12,9 @@
 /* The built-in kinds; denoisers.c lists them in its table. */
 extern const mcp_denoiser_kind mcp__denoiser_gauss;
 extern const mcp_denoiser_kind mcp__denoiser_nlm;
+/* The James-Stein post-correction around another kind; it lives with the combiner in
+ * blend/ (blend/denoise_james_stein.c). */
+extern const mcp_denoiser_kind mcp__denoiser_james_stein;
 
 /* Checks an input for denoiser `who`: colour present with 3 channels; albedo, normal
  * and variance, when given, 3 channels and the colour's size. */
