@@ -30,7 +30,9 @@
  *
  *   build/bench/bench_fidelity [--scenes a,b] [--denoisers nlm,unet,js-unet]
  *                              [--sources LIST] [--fixtures DIR] [--weights TZA]
- *                              [--iterations N] [--no-blend] [--curves]
+ *                              [--iterations N] [--probes K] [--s2-pool R]
+ *                              [--fit on_the_fly|last_two|retrospective]
+ *                              [--no-blend] [--curves]
  *
  * It prints figures; it is not a timed test. Run it from the repository root (the
  * defaults are relative to it). */
@@ -350,6 +352,7 @@ main(int argc, char **argv)
     char scenes_arg[256] = "cornell,texture,interior", dens_arg[256] = "nlm,bilateral,unet";
     char srcs_arg[256] = "per-sample,increments,replicates4,replicates8,oracle";
     int iters = MAX_ITER, blend = 1, curves = 0, probes = 0, s2_pool = -2;
+    mcp_curve_fit fit = mcp_blend_defaults().fit;
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
         if (!strcmp(a, "--scenes") && v)
@@ -364,7 +367,11 @@ main(int argc, char **argv)
             weights = v, i++;
         else if (!strcmp(a, "--iterations") && v)
             iters = atoi(v), i++;
-        else if (!strcmp(a, "--s2-pool") && v)
+        else if (!strcmp(a, "--fit") && v) {
+            if (mcp_curve_fit_from_name(v, &fit))
+                die("--fit");
+            i++;
+        } else if (!strcmp(a, "--s2-pool") && v)
             s2_pool = atoi(v), i++;
         else if (!strcmp(a, "--probes") && v)
             probes = atoi(v), i++;
@@ -375,7 +382,8 @@ main(int argc, char **argv)
         else {
             fprintf(stderr, "usage: bench_fidelity [--scenes LIST] [--denoisers LIST] "
                             "[--sources LIST] [--fixtures DIR] [--weights TZA] "
-                            "[--iterations N] [--probes K] [--s2-pool R] [--no-blend] [--curves]\n");
+                            "[--iterations N] [--probes K] [--s2-pool R] [--fit NAME] [--no-blend] "
+                            "[--curves]\n");
             return 2;
         }
     }
@@ -509,6 +517,7 @@ main(int argc, char **argv)
                 if (blend && strcmp(dens[di], "bilateral") != 0) {
                     mcp_blend_series_options bo = mcp_blend_series_defaults();
                     bo.flip = 0;
+                    bo.blend.fit = fit;
                     mcp_blend_series_result *br = NULL;
                     if (mcp_blend_series(series, den, reference, &bo, NULL, NULL, &br))
                         die("blend series");

@@ -15,27 +15,36 @@
 
 /* ---- names of things ---- */
 
-static const char *convention_names[] = {"auto", "pbrt", "mitsuba", "blender", "mcpost",
-                                         "plain"};
+#define COUNT(a) ((int)(sizeof(a) / sizeof *(a)))
+
+/* The index of name in a table of names (case-insensitive), or -1. */
+static int
+name_index(const char *const *names, int count, const char *name)
+{
+    for (int i = 0; i < count; i++)
+        if (strcasecmp(name, names[i]) == 0)
+            return i;
+    return -1;
+}
+
+static const char *const convention_names[] = {"auto",    "pbrt",   "mitsuba",
+                                               "blender", "mcpost", "plain"};
 
 const char *
 mcp_convention_name(mcp_convention c)
 {
-    return (unsigned)c < sizeof convention_names / sizeof *convention_names
-               ? convention_names[c]
-               : "unknown";
+    return (unsigned)c < (unsigned)COUNT(convention_names) ? convention_names[c] : "unknown";
 }
 
 int
 mcp_convention_from_name(const char *name, mcp_convention *out)
 {
-    for (int i = 0; i < (int)(sizeof convention_names / sizeof *convention_names); i++)
-        if (strcasecmp(name, convention_names[i]) == 0) {
-            *out = (mcp_convention)i;
-            return 0;
-        }
-    return mcp_error("unknown convention '%s' (auto, pbrt, mitsuba, blender, mcpost, "
-                     "plain)", name);
+    int i = name_index(convention_names, COUNT(convention_names), name);
+    if (i < 0)
+        return mcp_error("unknown convention '%s' (auto, pbrt, mitsuba, blender, mcpost, "
+                         "plain)", name);
+    *out = (mcp_convention)i;
+    return 0;
 }
 
 int
@@ -56,23 +65,20 @@ static const char *const variance_source_names[] = {"none", "per-sample", "of-me
 const char *
 mcp_variance_source_name(mcp_variance_source s)
 {
-    return (unsigned)s < sizeof variance_source_names / sizeof *variance_source_names
-               ? variance_source_names[s]
-               : "?";
+    return (unsigned)s < (unsigned)COUNT(variance_source_names) ? variance_source_names[s]
+                                                                : "?";
 }
 
 int
 mcp_variance_source_from_name(const char *name, mcp_variance_source *out)
 {
-    for (int i = 0; i < (int)(sizeof variance_source_names / sizeof *variance_source_names);
-         i++)
-        if (strcmp(name, variance_source_names[i]) == 0) {
-            *out = (mcp_variance_source)i;
-            return 0;
-        }
-    return mcp_error("unknown variance source '%s' (known: none, per-sample, of-mean, "
-                     "replicates, increments)",
-                     name);
+    int i = name_index(variance_source_names, COUNT(variance_source_names), name);
+    if (i < 0)
+        return mcp_error("unknown variance source '%s' (known: none, per-sample, of-mean, "
+                         "replicates, increments)",
+                         name);
+    *out = (mcp_variance_source)i;
+    return 0;
 }
 
 /* The header attributes that carry a dump's variance source through a file. */
