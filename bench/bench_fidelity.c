@@ -32,7 +32,7 @@
  *                              [--sources LIST] [--fixtures DIR] [--weights TZA]
  *                              [--iterations N] [--probes K] [--s2-pool R]
  *                              [--fit on_the_fly|last_two|retrospective]
- *                              [--no-blend] [--curves]
+ *                              [--no-blend | --blend-only] [--curves]
  *
  * It prints figures; it is not a timed test. Run it from the repository root (the
  * defaults are relative to it). */
@@ -336,6 +336,97 @@ typedef struct tally {
     double worst_final;
 } tally;
 
+/* What every case shares: the settings from the command line. */
+typedef struct run_settings {
+    double p;
+    int probes, s2_pool, curves;
+    mcp_curve_fit fit;
+    double floor;
+    const int *tau_it;
+} run_settings;
+
+/* The stopping protocol on one sequence: τ from its truth, the estimated and true
+ * first spp per τ, and (with --curves) the percentile and mean-error curves. */
+static void
+run_estimate(const run_settings *rs, const mcp_series *series, const mcp_denoiser *den,
+             const mcp_image *reference, const char *label, tally *tl)
+{
+    const double p = rs->p, floor = rs->floor;
+    const int *tau_it = rs->tau_it;
+    mcp_series_estimate_options eo = mcp_series_estimate_defaults();
+    eo.est.p = p;
+    if (rs->probes > 0)
+        eo.est.sure.n_probes = rs->probes;
+    eo.n_taus = 3;
+    for (int t = 0; t < 3; t++) {
+        double tau = true_percentile(series, tau_it[t] - 1, den, reference, p);
+        eo.taus[t] = tau > 2 * floor ? tau : 2 * floor;
+    }
+    eo.est.n_percentiles = 1;
+    eo.est.percentiles[0] = p;
+    mcp_series_estimate *se = NULL;
+    if (rs->s2_pool != -2)
+        eo.est.s2_pool = rs->s2_pool;
+    if (mcp_estimate_series(series, den, &eo, reference, NULL, NULL, &se))
+        die("estimate series");
+    for (int t = 0; t < 3; t++) {
+        double est = se->first_spp[t], tru = se->true_first_spp[t];
+        int early = est > 0 && (tru == 0 || est < tru / 2);
+        tl->cases++;
+        tl->agree += se->agree[t];
+        tl->early += early;
+        tl->never_est += est == 0;
+        char e[32], tr[32];
+        snprintf(e, sizeof e, est > 0 ? "%.0f" : "never", est);
+        snprintf(tr, sizeof tr, tru > 0 ? "%.0f" : "never", tru);
+        printf("| %s | %.4g%s | %s (%s) | %s | %s |\n", label, eo.taus[t],
+               eo.taus[t] == 2 * floor ? " (floor)" : "", e, tr,
+               se->agree[t] ? "yes" : "no", early ? "EARLY" : "");
+    }
+    if (rs->curves) {
+        printf("|  | spp: est. / true 99.9th pct, est. / true mean error: ");
+        for (int i = 0; i < se->count; i += se->count / 8 > 0 ? se->count / 8 : 1)
+            printf("%.0f: %.3g/%.3g, %.3g/%.3g; ", se->points[i].spp,
+                   se->points[i].est_percentile[0],
+                   se->points[i].true_percentile[0],
+                   se->points[i].est_mean_error, se->points[i].true_mean_error);
+        printf("| | | |\n");
+    }
+    mcp_series_estimate_free(se);
+}
+
+/* The curve blend on the same sequence: where it is <= min(noisy, denoised), and its
+ * MSE over the noisy image's at the last member. */
+static void
+run_blend(const run_settings *rs, const mcp_series *series, const mcp_denoiser *den,
+          const mcp_image *reference, const char *label, tally *tl)
+{
+    mcp_blend_series_options bo = mcp_blend_series_defaults();
+    bo.flip = 0;
+    bo.blend.fit = rs->fit;
+    mcp_blend_series_result *br = NULL;
+    if (mcp_blend_series(series, den, reference, &bo, NULL, NULL, &br))
+        die("blend series");
+    int good = 0;
+    for (int i = 0; i < br->count; i++) {
+        const mcp_blend_errors *e = br->rows[i].err;
+        double lo = fmin(e[MCP_BLEND_NOISY].mse, e[MCP_BLEND_DENOISED].mse);
+        good += e[MCP_BLEND_CURVES].mse <= lo;
+    }
+    const mcp_blend_errors *last = br->rows[br->count - 1].err;
+    double final = last[MCP_BLEND_CURVES].mse / last[MCP_BLEND_NOISY].mse;
+    tl->blend_points += br->count;
+    tl->blend_good += good;
+    tl->blend_cases++;
+    if (final > tl->worst_final)
+        tl->worst_final = final;
+    printf("| %s blend | | <= min(noisy, denoised) at %d of %d; last: %.3fx "
+           "noisy MSE (denoised %.3fx) | | |\n",
+           label, good, br->count, final,
+           last[MCP_BLEND_DENOISED].mse / last[MCP_BLEND_NOISY].mse);
+    mcp_blend_series_result_free(br);
+}
+
 static int
 split(char *text, char **words, int max)
 {
@@ -351,7 +442,7 @@ main(int argc, char **argv)
     const char *fixtures = "samples/fixtures/strat", *weights = getenv("MCPOST_OIDN_WEIGHTS");
     char scenes_arg[256] = "cornell,texture,interior", dens_arg[256] = "nlm,bilateral,unet";
     char srcs_arg[256] = "per-sample,increments,replicates4,replicates8,oracle";
-    int iters = MAX_ITER, blend = 1, curves = 0, probes = 0, s2_pool = -2;
+    int iters = MAX_ITER, blend = 1, estimate = 1, curves = 0, probes = 0, s2_pool = -2;
     mcp_curve_fit fit = mcp_blend_defaults().fit;
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
@@ -375,6 +466,8 @@ main(int argc, char **argv)
             s2_pool = atoi(v), i++;
         else if (!strcmp(a, "--probes") && v)
             probes = atoi(v), i++;
+        else if (!strcmp(a, "--blend-only"))
+            estimate = 0;
         else if (!strcmp(a, "--no-blend"))
             blend = 0;
         else if (!strcmp(a, "--curves"))
@@ -382,8 +475,8 @@ main(int argc, char **argv)
         else {
             fprintf(stderr, "usage: bench_fidelity [--scenes LIST] [--denoisers LIST] "
                             "[--sources LIST] [--fixtures DIR] [--weights TZA] "
-                            "[--iterations N] [--probes K] [--s2-pool R] [--fit NAME] [--no-blend] "
-                            "[--curves]\n");
+                            "[--iterations N] [--probes K] [--s2-pool R] [--fit NAME] [--no-blend | "
+                            "--blend-only] [--curves]\n");
             return 2;
         }
     }
@@ -441,6 +534,7 @@ main(int argc, char **argv)
                     tau_it[t] = 1;
             }
             mcp_series *series = write_series(&s, src, n_it, tmp, &ratio);
+            run_settings run = {p, probes, s2_pool, curves, fit, floor, tau_it};
             printf("\n### %s, %s%s; reference %.0f spp, its noise floor at p %.3g",
                    s.name, source_names[src],
                    src == SRC_REP4 || src == SRC_REP8 ? " (spp: all renders together)" : "",
@@ -473,73 +567,11 @@ main(int argc, char **argv)
                 mcp_denoiser *den = NULL;
                 if (mcp_denoiser_create_from_args(kind, opts, n_opts, &den))
                     die(dens[di]);
-                mcp_series_estimate_options eo = mcp_series_estimate_defaults();
-                eo.est.p = p;
-                if (probes > 0)
-                    eo.est.sure.n_probes = probes;
-                eo.n_taus = 3;
-                for (int t = 0; t < 3; t++) {
-                    double tau = true_percentile(series, tau_it[t] - 1, den, reference, p);
-                    eo.taus[t] = tau > 2 * floor ? tau : 2 * floor;
-                }
-                eo.est.n_percentiles = 1;
-                eo.est.percentiles[0] = p;
-                mcp_series_estimate *se = NULL;
-                if (s2_pool != -2)
-                    eo.est.s2_pool = s2_pool;
-                if (mcp_estimate_series(series, den, &eo, reference, NULL, NULL, &se))
-                    die("estimate series");
                 tally *tl = &total[src][di];
-                for (int t = 0; t < 3; t++) {
-                    double est = se->first_spp[t], tru = se->true_first_spp[t];
-                    int early = est > 0 && (tru == 0 || est < tru / 2);
-                    tl->cases++;
-                    tl->agree += se->agree[t];
-                    tl->early += early;
-                    tl->never_est += est == 0;
-                    char e[32], tr[32];
-                    snprintf(e, sizeof e, est > 0 ? "%.0f" : "never", est);
-                    snprintf(tr, sizeof tr, tru > 0 ? "%.0f" : "never", tru);
-                    printf("| %s | %.4g%s | %s (%s) | %s | %s |\n", dens[di], eo.taus[t],
-                           eo.taus[t] == 2 * floor ? " (floor)" : "", e, tr,
-                           se->agree[t] ? "yes" : "no", early ? "EARLY" : "");
-                }
-                if (curves) {
-                    printf("|  | spp: est. / true 99.9th pct, est. / true mean error: ");
-                    for (int i = 0; i < se->count; i += se->count / 8 > 0 ? se->count / 8 : 1)
-                        printf("%.0f: %.3g/%.3g, %.3g/%.3g; ", se->points[i].spp,
-                               se->points[i].est_percentile[0],
-                               se->points[i].true_percentile[0],
-                               se->points[i].est_mean_error, se->points[i].true_mean_error);
-                    printf("| | | |\n");
-                }
-                mcp_series_estimate_free(se);
-                if (blend && strcmp(dens[di], "bilateral") != 0) {
-                    mcp_blend_series_options bo = mcp_blend_series_defaults();
-                    bo.flip = 0;
-                    bo.blend.fit = fit;
-                    mcp_blend_series_result *br = NULL;
-                    if (mcp_blend_series(series, den, reference, &bo, NULL, NULL, &br))
-                        die("blend series");
-                    int good = 0;
-                    for (int i = 0; i < br->count; i++) {
-                        const mcp_blend_errors *e = br->rows[i].err;
-                        double lo = fmin(e[MCP_BLEND_NOISY].mse, e[MCP_BLEND_DENOISED].mse);
-                        good += e[MCP_BLEND_CURVES].mse <= lo;
-                    }
-                    const mcp_blend_errors *last = br->rows[br->count - 1].err;
-                    double final = last[MCP_BLEND_CURVES].mse / last[MCP_BLEND_NOISY].mse;
-                    tl->blend_points += br->count;
-                    tl->blend_good += good;
-                    tl->blend_cases++;
-                    if (final > tl->worst_final)
-                        tl->worst_final = final;
-                    printf("| %s blend | | <= min(noisy, denoised) at %d of %d; last: %.3fx "
-                           "noisy MSE (denoised %.3fx) | | |\n",
-                           dens[di], good, br->count, final,
-                           last[MCP_BLEND_DENOISED].mse / last[MCP_BLEND_NOISY].mse);
-                    mcp_blend_series_result_free(br);
-                }
+                if (estimate)
+                    run_estimate(&run, series, den, reference, dens[di], tl);
+                if (blend && strcmp(dens[di], "bilateral") != 0)
+                    run_blend(&run, series, den, reference, dens[di], tl);
                 mcp_denoiser_free(den);
             }
             printf("\n(%.1f s)\n", (now_ms() - t0) / 1e3);
