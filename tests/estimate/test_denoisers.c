@@ -26,11 +26,13 @@
 
 /* The kinds that are built in and exact, created from their bare name: every kind but
  * those that wrap something outside (an external command, a weights file), which
- * test_external.c and test_unet.c test. */
+ * test_external.c and test_unet.c test, and james-stein, whose inner denoiser is the
+ * U-Net by default (tests/blend/test_james_stein.c). */
 static int
 self_contained(const mcp_denoiser_kind *k)
 {
-    return strcmp(k->name, "external") != 0 && strcmp(k->name, "unet") != 0;
+    return strcmp(k->name, "external") != 0 && strcmp(k->name, "unet") != 0 &&
+           strcmp(k->name, "james-stein") != 0;
 }
 
 #define FOR_EACH_BUILTIN(k)                                                              \

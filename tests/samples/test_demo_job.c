@@ -71,8 +71,9 @@ test_demo_job(void **state)
     free(text);
     assert_non_null(json);
     const cJSON *sections = item(json, "sections");
-    static const char *const stages[] = {"info",     "convert", "convert",   "metrics",
-                                         "estimate", "blend",   "perceptual"};
+    static const char *const stages[] = {"info",     "convert", "convert", "metrics",
+                                         "estimate", "info",    "estimate", "blend",
+                                         "perceptual"};
     const int n = (int)(sizeof stages / sizeof *stages);
     assert_int_equal(cJSON_GetArraySize(sections), n);
     for (int i = 0; i < n; i++)
@@ -92,8 +93,19 @@ test_demo_job(void **state)
     assert_true(cdf >= 0.0 && cdf <= 1.0);
     assert_true(cJSON_IsBool(item(estimate, "stop")));
 
+    /* a stratified render: four renders merged (the variance from their spread), and
+       a progressive series estimated with the variance from its increments, which
+       also measures how far its Variance/n overstates (about 2x on texture) */
+    const cJSON *merged = cJSON_GetArrayItem(sections, 5);
+    assert_string_equal(item(merged, "variance_source")->valuestring, "replicates");
+    assert_true(number(merged, "variance_dof") == 3);
+    assert_true(number(merged, "spp") == 128);
+    const cJSON *strat = cJSON_GetArrayItem(sections, 6);
+    assert_string_equal(item(strat, "variance_source")->valuestring, "increments");
+    assert_non_null(strstr(item(strat, "variance_warning")->valuestring, "overstates"));
+
     /* blend: converging -- the last member's blend is no worse than the noisy image */
-    const cJSON *final = item(cJSON_GetArrayItem(sections, 5), "final");
+    const cJSON *final = item(cJSON_GetArrayItem(sections, 7), "final");
     assert_int_equal((int)number(final, "spp"), 1024);
     double noisy = number(item(final, "noisy"), "mse"),
            curves = number(item(final, "curves"), "mse");
@@ -102,7 +114,7 @@ test_demo_job(void **state)
     assert_true(curves <= noisy);
 
     /* perceptual: lower pMSE than the candidates' mean, energy falling */
-    const cJSON *perc = cJSON_GetArrayItem(sections, 6);
+    const cJSON *perc = cJSON_GetArrayItem(sections, 8);
     print_message("demo: perceptual pMSE / mean %.4f\n", number(perc, "pmse_ratio"));
     assert_true(number(perc, "pmse") < number(perc, "mean_pmse"));
     assert_true(number(perc, "energy_final") < number(perc, "energy_initial"));
