@@ -3,11 +3,13 @@
 #
 #   ./setup.sh demo    install what is missing, build, run samples/jobs/demo.yaml
 #   ./setup.sh test    install what is missing, build (plain and ASan+UBSan), run all tests,
-#                      and the SIMD modules' tests once more with their scalar code
+#                      build everything with clang, and run the SIMD modules' tests once
+#                      more with their scalar code
 #   ./setup.sh build   install what is missing and build only
 #
-# Builds go to build/ (build-asan/ for the sanitizer build, build-scalar/ for the one
-# with MCP_NO_SIMD, whose SSE2 loops fall back to their plain C). Set MCPOST_NO_ASAN=1
+# Builds go to build/ (build-asan/ for the sanitizer build, build-clang/ for clang,
+# build-scalar/ for the one with MCP_NO_SIMD, whose SSE2 loops fall back to their plain
+# C), all with warnings as errors (MCPOST_WERROR). Set MCPOST_NO_ASAN=1, MCPOST_NO_CLANG=1
 # or MCPOST_NO_SCALAR=1 to skip those in `test`, MCPOST_JOBS to change the parallelism.
 set -euo pipefail
 cd "$(dirname "$0")"
@@ -18,9 +20,10 @@ PACKAGES=(gcc g++ make cmake pkg-config
           libyaml-dev libcjson-dev libcmocka-dev)
 JOBS=${MCPOST_JOBS:-$(nproc)}
 
-install_packages() {
-    local missing=()
-    for p in "${PACKAGES[@]}"; do
+install_packages() { # install_packages [PACKAGE...]: PACKAGES when none are named
+    local missing=() wanted=("$@")
+    [ ${#wanted[@]} -gt 0 ] || wanted=("${PACKAGES[@]}")
+    for p in "${wanted[@]}"; do
         dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" ||
             missing+=("$p")
     done
@@ -33,10 +36,10 @@ install_packages() {
         "${missing[@]}"
 }
 
-build() { # build DIR [cmake args...]
+build() { # build DIR [cmake args...]: warnings are errors here (MCPOST_WERROR)
     local dir=$1
     shift
-    cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo "$@" >/dev/null
+    cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DMCPOST_WERROR=ON "$@" >/dev/null
     cmake --build "$dir" -j "$JOBS"
 }
 
@@ -60,6 +63,12 @@ test)
             LSAN_OPTIONS=suppressions=$PWD/tests/lsan.supp:print_suppressions=0 \
             UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
             run_tests build-asan
+    fi
+    if [ -z "${MCPOST_NO_CLANG:-}" ]; then
+        # clang builds everything warning-free too (its own warnings, -Werror); the
+        # tests' numbers are gcc's, so this build is compiled, not run
+        install_packages clang
+        CC=clang CXX=clang++ build build-clang -DMCPOST_BENCH=OFF
     fi
     if [ -z "${MCPOST_NO_SCALAR:-}" ]; then
         # the portable code behind the SSE2 loops (blend, perceptual) gives the same
