@@ -42,6 +42,10 @@ int mcp_cli_variance_from(const char *text, mcp_variance_source *out);
  * allows ([0.8, 1.25] taken as agreement), and the one-line warning that says so. */
 int mcp_cli_variance_ratio_off(double ratio);
 const char *mcp_cli_variance_ratio_warning(double ratio, int using_increments);
+/* A series' ratio into its JSON object / report section ("variance_ratio", and
+ * "variance_warning" when off), and the warning once on stderr (also when quiet: it
+ * says the figures may be off). j may be NULL. */
+void mcp_cli_report_variance_ratio(double ratio, int using_increments, cJSON *j);
 
 /* Prints JSON on stdout (pretty) and frees it. */
 void mcp_cli_print_json(cJSON *json);

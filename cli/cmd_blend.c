@@ -239,6 +239,13 @@ run_blend(const mcp_series *series, const mcp_denoiser *den, const mcp_image *re
     else if (s->prog.tty && !mcp_progress_quiet())
         fputc('\n', stderr); /* no "100%" for a run that failed */
     if (!rc) rc = fill_section(section, r, o, denoiser_name, s);
+    /* the curves are fitted to the variance: say when Variance/n does not track the
+       series' own increments */
+    double ratio = 0;
+    if (!rc) rc = mcp_series_variance_ratio(series, &ratio);
+    if (!rc)
+        mcp_cli_report_variance_ratio(ratio, r->variance_source == MCP_VARSRC_INCREMENTS,
+                                      section);
     cJSON_Delete(s->members);
     s->members = NULL;
     mcp_blend_series_result_free(r);

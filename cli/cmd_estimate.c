@@ -256,14 +256,6 @@ series_json(const mcp_series_estimate *s, const char *denoiser, mcp_error_metric
     cJSON_AddNumberToObject(j, "p", s->p);
     cJSON_AddBoolToObject(j, "reference", s->has_reference);
     mcp_cli_add_variance_source(j, s->variance_source, 0);
-    if (s->variance_ratio > 0) {
-        cJSON_AddNumberToObject(j, "variance_ratio", s->variance_ratio);
-        if (mcp_cli_variance_ratio_off(s->variance_ratio))
-            cJSON_AddStringToObject(
-                j, "variance_warning",
-                mcp_cli_variance_ratio_warning(s->variance_ratio, s->variance_source ==
-                                                                      MCP_VARSRC_INCREMENTS));
-    }
     cJSON *taus = cJSON_AddArrayToObject(j, "taus");
     int agree = 0;
     for (int t = 0; t < s->n_taus; t++) {
@@ -445,16 +437,15 @@ run_series(const mcp_series *series, const mcp_denoiser *den,
     mcp_series_estimate *s = NULL;
     if (mcp_estimate_series(series, den, so, ref, progress_cb, &p, &s)) return -1;
     cJSON *j = series_json(s, den->name, so->est.sure.metric);
-    const cJSON *warning = cJSON_GetObjectItem(j, "variance_warning");
-    if (warning) {
-        /* one line, always (also with --quiet): it says the estimates may be off */
-        fprintf(stderr, "mcpost: warning: %s\n", warning->valuestring);
-        if (section)
-            cJSON_AddStringToObject(section, "variance_warning", warning->valuestring);
-    }
-    if (section)
+    int using_increments = s->variance_source == MCP_VARSRC_INCREMENTS;
+    mcp_cli_report_variance_ratio(s->variance_ratio, using_increments, j);
+    if (section) {
         cJSON_AddStringToObject(section, "variance_source",
                                 mcp_variance_source_name(s->variance_source));
+        const cJSON *w = cJSON_GetObjectItem(j, "variance_warning");
+        if (w)
+            cJSON_AddStringToObject(section, "variance_warning", w->valuestring);
+    }
     char path[4352];
     char *text = cJSON_Print(j);
     int rc = !text || (o && (make_dirs(o->dir) ||

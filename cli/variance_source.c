@@ -48,6 +48,21 @@ mcp_cli_variance_from(const char *text, mcp_variance_source *out)
     return 0;
 }
 
+void
+mcp_cli_report_variance_ratio(double ratio, int using_increments, cJSON *j)
+{
+    if (!(ratio > 0))
+        return;
+    if (j)
+        cJSON_AddNumberToObject(j, "variance_ratio", ratio);
+    if (!mcp_cli_variance_ratio_off(ratio))
+        return;
+    const char *w = mcp_cli_variance_ratio_warning(ratio, using_increments);
+    fprintf(stderr, "mcpost: warning: %s\n", w);
+    if (j)
+        cJSON_AddStringToObject(j, "variance_warning", w);
+}
+
 int
 mcp_cli_variance_ratio_off(double ratio)
 {

@@ -239,6 +239,13 @@ MCP_API int mcp_series_increment_variance(const mcp_series *s, int i,
                                           const mcp_increment_options *opt,
                                           mcp_dump **out, double *ratio);
 
+/* Σ(the last member's own variance) / Σ(the increments' spread before it) over the
+ * image: how far the renderer's Variance/n overstates (> 1) or understates the variance
+ * of the mean that the series itself shows (a stratified sampler overstates it). *ratio
+ * is 0 where that cannot be measured (fewer than two blocks, no per-sample variance, or
+ * no scalar sample counts); only a member that cannot be read fails. */
+MCP_API int mcp_series_variance_ratio(const mcp_series *s, double *ratio);
+
 /* The same from members already in memory: members[0..count) are the series up to
  * the member estimated, members[count - 1]. */
 MCP_API int mcp_dump_increment_variance(const mcp_dump *const *members, int count,

@@ -447,6 +447,31 @@ fail:
 }
 
 int
+mcp_series_variance_ratio(const mcp_series *s, double *ratio)
+{
+    *ratio = 0;
+    if (s->count < 2)
+        return 0;
+    mcp_series plain = *s;
+    plain.variance_from = MCP_VARSRC_NONE; /* the files' own variance is the shape */
+    mcp_increment_options io = s->increments;
+    io.pool_radius = -1; /* the ratio is image-wide: no pooling needed */
+    mcp_dump *incr = NULL, *last = NULL;
+    if (mcp_series_increment_variance(&plain, s->count - 1, &io, &incr, ratio) == 0) {
+        mcp_dump_free(incr);
+        return 0;
+    }
+    /* nothing to measure, unless a member could not be read at all */
+    *ratio = 0;
+    int unreadable = mcp__series_load_file(s, s->count - 1, &last);
+    mcp_dump_free(last);
+    if (unreadable)
+        return -1;
+    mcp_error_clear();
+    return 0;
+}
+
+int
 mcp_series_increment_variance(const mcp_series *s, int i, const mcp_increment_options *opt,
                               mcp_dump **out, double *ratio)
 {

@@ -471,25 +471,12 @@ member_truth(const mcp_estimate *e, const mcp_image *reference,
 static int
 series_variance_check(const mcp_series *series, mcp_series_estimate *s)
 {
-    mcp_dump *last = NULL, *incr = NULL;
+    mcp_dump *last = NULL;
     if (mcp_series_load(series, series->count - 1, &last))
         return -1;
     s->variance_source = last->variance_source;
     mcp_dump_free(last);
-    if (series->count < 2)
-        return 0;
-    mcp_series plain = *series;
-    plain.variance_from = MCP_VARSRC_NONE; /* the files' own variance is the shape */
-    mcp_increment_options io = series->increments;
-    io.pool_radius = -1; /* the ratio is image-wide: no pooling needed */
-    if (mcp_series_increment_variance(&plain, series->count - 1, &io, &incr,
-                                      &s->variance_ratio)) {
-        /* too few blocks, or members without a scalar count: nothing to measure */
-        mcp_error_clear();
-        s->variance_ratio = 0;
-    }
-    mcp_dump_free(incr);
-    return 0;
+    return mcp_series_variance_ratio(series, &s->variance_ratio);
 }
 
 int

@@ -404,6 +404,30 @@ test_merge_and_variance_sources(void **state)
     assert_string_equal(cJSON_GetObjectItem(info, "variance_source")->valuestring, "replicates");
     assert_true(cJSON_GetObjectItem(info, "spp")->valuedouble == 512);
     cJSON_Delete(j);
+    /* blend on the stratified texture series: the source, the measured ratio and the
+       warning in blend.json; with --variance-from increments the source changes */
+    const char *sources[2] = {"", " --variance-from increments"},
+               *want_src[2] = {"per-sample", "increments"};
+    for (int k = 0; k < 2; k++) {
+        assert_int_equal(run("blend '%s/samples/fixtures/strat/texture/series/"
+                             "texture_spp%%04d.exr' --spp 32,64,128 --denoiser gauss "
+                             "--no-flip --quiet -o '%s'%s",
+                             MCP_TEST_SOURCE_DIR, mcp_test_path("strat_blend"), sources[k]),
+                         0);
+        char *text = mcp_test_read_text(mcp_test_path("strat_blend/blend.json"));
+        cJSON *b = cJSON_Parse(text);
+        free(text);
+        assert_non_null(b);
+        assert_string_equal(cJSON_GetObjectItem(b, "variance_source")->valuestring,
+                            want_src[k]);
+        double ratio = cJSON_GetObjectItem(b, "variance_ratio")->valuedouble;
+        assert_true(ratio > 1.6 && ratio < 2.4);
+        assert_non_null(strstr(cJSON_GetObjectItem(b, "variance_warning")->valuestring,
+                               k ? "the estimates use the increments"
+                                 : "use --variance-from increments"));
+        assert_non_null(strstr(err, "mcpost: warning: Variance/n is"));
+        cJSON_Delete(b);
+    }
     /* errors: one render; a pattern that matches nothing; a bad variance_from */
     assert_one_line_error(run("merge '%s' -o '%s'", mcp_test_path(names[0]),
                               mcp_test_path("m1.exr")),
