@@ -8,10 +8,11 @@
 #include <string.h>
 
 static const char usage[] =
-    "usage: mcpost run JOB.yaml [--output DIR] [--json] [--quiet] [--list]\n"
+    "usage: mcpost run JOB.yaml [--output DIR] [--json] [--quiet] [--list] [--check]\n"
     "  Runs the stages of a job file in order and writes the results, report.json and\n"
     "  report.html into the job's output folder (output: in the file, relative to it;\n"
-    "  --output overrides). --json prints the report on stdout. --list names the stages.\n";
+    "  --output overrides). --json prints the report on stdout. --list names the stages.\n"
+    "  --check validates the job (stages, keys, inputs and their files) and runs nothing.\n";
 
 static int
 cmd_run(int argc, char **argv)
@@ -20,16 +21,18 @@ cmd_run(int argc, char **argv)
                                           {"json", no_argument, 0, 'j'},
                                           {"quiet", no_argument, 0, 'q'},
                                           {"list", no_argument, 0, 'l'},
+                                          {"check", no_argument, 0, 'c'},
                                           {"help", no_argument, 0, 'h'},
                                           {0, 0, 0, 0}};
     mcp_job_options jo = mcp_job_defaults();
-    int opt;
+    int opt, check = 0;
     optind = 1;
     while ((opt = getopt_long(argc, argv, "o:qh", longs, NULL)) != -1) {
         switch (opt) {
         case 'o': jo.output_dir = optarg; break;
         case 'j': jo.json_stdout = 1; break;
         case 'q': jo.quiet = 1; break;
+        case 'c': check = 1; break;
         case 'l':
             for (const mcp_stage *const *s = mcp_stages; *s; s++)
                 printf("%-12s %s\n", (*s)->name, (*s)->summary);
@@ -40,6 +43,12 @@ cmd_run(int argc, char **argv)
     }
     if (argc - optind != 1)
         return mcp_cli_usage("run", "give one job file");
+    if (check) {
+        if (mcp_job_check(argv[optind], mcp_stages))
+            return mcp_cli_fail();
+        printf("%s: valid\n", argv[optind]);
+        return 0;
+    }
     mcp_progress_set_quiet(jo.quiet);
     return mcp_job_run_file(argv[optind], mcp_stages, &jo) ? mcp_cli_fail() : 0;
 }

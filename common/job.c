@@ -750,6 +750,38 @@ fail:
     return -1;
 }
 
+/* Everything that can be checked without running a stage: the list of stages, every
+ * input (keys, types, files present), every stage known with only its keys. *list
+ * receives the stages' list. No side effects. */
+static int
+job_validate(mcp_job *job, const mcp_stage *const *stages, const mcp_node **list)
+{
+    *list = mcp_node_get(job->root, "stages");
+    if (!*list || (*list)->kind != MCP_NODE_SEQ || (*list)->count == 0)
+        return mcp_node_error(*list ? *list : job->root, "the job needs a list of stages");
+    if (check_inputs(job))
+        return -1;
+    for (int i = 0; i < (*list)->count; i++) {
+        const mcp_stage *stage;
+        const mcp_node *settings;
+        if (stage_at((*list)->items[i], stages, &stage, &settings))
+            return -1;
+    }
+    return 0;
+}
+
+int
+mcp_job_check(const char *path, const mcp_stage *const *stages)
+{
+    mcp_job *job = NULL;
+    if (job_open(path, NULL, &job))
+        return -1;
+    const mcp_node *list = NULL;
+    int rc = job_validate(job, stages, &list);
+    job_free(job);
+    return rc;
+}
+
 int
 mcp_job_run_file(const char *path, const mcp_stage *const *stages,
                  const mcp_job_options *opt)
@@ -758,20 +790,10 @@ mcp_job_run_file(const char *path, const mcp_stage *const *stages,
     if (job_open(path, opt, &job))
         return -1;
     int rc = -1;
-    const mcp_node *list = mcp_node_get(job->root, "stages");
-    if (!list || list->kind != MCP_NODE_SEQ || list->count == 0) {
-        mcp_node_error(list ? list : job->root, "the job needs a list of stages");
-        goto done;
-    }
+    const mcp_node *list = NULL;
     /* check everything before running anything */
-    if (check_inputs(job))
+    if (job_validate(job, stages, &list))
         goto done;
-    for (int i = 0; i < list->count; i++) {
-        const mcp_stage *stage;
-        const mcp_node *settings;
-        if (stage_at(list->items[i], stages, &stage, &settings))
-            goto done;
-    }
     if (!mcp_job_output_dir(job) || !job->output_made) {
         mcp_error_prefix("%s: output: ", job->path);
         goto done;

@@ -103,6 +103,11 @@ MCP_API mcp_job_options mcp_job_defaults(void);
 MCP_API int mcp_job_run_file(const char *path, const mcp_stage *const *stages,
                              const mcp_job_options *opt);
 
+/* Parses and validates a job as mcp_job_run_file does before its first stage (every
+ * stage known, its keys allowed, every input's keys, types and files), and nothing
+ * else: no stage runs, no folder is made, nothing is written. */
+MCP_API int mcp_job_check(const char *path, const mcp_stage *const *stages);
+
 /* For stages: the job file (for messages), the folder relative paths resolve to, and
  * the output folder (created on first use). */
 MCP_API const char *mcp_job_path(const mcp_job *job);

@@ -2,6 +2,8 @@
  * unknown keys, missing inputs, and the runner calling stages from a table. */
 #include "testing.h"
 
+#include <unistd.h>
+
 #include <mcpost/imageio.h>
 #include <mcpost/job.h>
 #include <mcpost/progress.h>
@@ -257,7 +259,33 @@ test_runner_checks_everything_first(void **state)
         assert_error_contains(mcp_job_run_file(job, table, NULL), cases[i].error);
         /* nothing ran: the failing line could be the last one */
         assert_int_equal(calls, 0);
+        /* the check alone finds the same, except what only a stage knows (which input
+           names it reads, the types of its own settings) */
+        if (!strstr(cases[i].error, "no input or result") &&
+            !strstr(cases[i].error, "scale must be"))
+            assert_error_contains(mcp_job_check(job, table), cases[i].error);
     }
+}
+
+/* mcp_job_check validates and does nothing else: no stage runs, no folder is made. */
+static void
+test_check_has_no_side_effects(void **state)
+{
+    (void)state;
+    setup_input();
+    const char *job = write_job("check.yaml", "inputs:\n"
+                                              "  noisy: {dump: in.exr}\n"
+                                              "output: out/checked\n"
+                                              "stages:\n"
+                                              "  - probe: {input: noisy, scale: 4}\n");
+    calls = 0;
+    assert_int_equal(mcp_job_check(job, table), 0);
+    assert_int_equal(calls, 0);
+    assert_int_equal(access(mcp_test_path("out/checked"), F_OK), -1);
+    char out[4096], err[4096], args[4400];
+    snprintf(args, sizeof args, "run --check '%s'", mcp_test_path("missing.yaml"));
+    assert_int_not_equal(mcp_test_run_mcpost(args, out, sizeof out, err, sizeof err), 0);
+    assert_non_null(strstr(err, "missing.yaml"));
 }
 
 /* Regression (issue 15): a field width of 2147483640 overflowed snprintf's int count,
@@ -432,6 +460,7 @@ main(void)
         cmocka_unit_test(test_yaml_nesting_is_bounded),
         cmocka_unit_test(test_runner_runs_stages_in_order),
         cmocka_unit_test(test_runner_checks_everything_first),
+        cmocka_unit_test(test_check_has_no_side_effects),
         cmocka_unit_test(test_wrong_types_name_the_line_once),
         cmocka_unit_test(test_series_pattern_is_bounded),
         cmocka_unit_test(test_channel_mapping_overrides_detection),
