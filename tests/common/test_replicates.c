@@ -187,6 +187,58 @@ test_pool_variance(void **state)
     mcp_dump_free(d);
 }
 
+/* The degrees of freedom that pooling claims: K = 4 replicates of Gaussian noise of
+ * known variance give a variance with 3 dof (relative spread sqrt(2/3) = 0.816 per
+ * value); pooled over 7x7 the spread of an interior value falls to sqrt(2/(3·49)) =
+ * 0.117, and the mean stays unbiased. */
+static void
+test_pool_degrees_of_freedom(void **state)
+{
+    (void)state;
+    enum { W = 96, H = 96, K = 4 };
+    const double sigma2 = 0.25; /* per-sample variance; 16 spp per replicate */
+    mcp_dump *parts[K];
+    uint64_t rng = 7;
+    for (int k = 0; k < K; k++) {
+        parts[k] = calloc(1, sizeof *parts[k]);
+        parts[k]->color = mcp_test_constant(W, H, 3, 0, rgb);
+        parts[k]->spp = 16;
+        parts[k]->source = strdup("noise");
+        for (int i = 0; i < W * H * 3; i++)
+            parts[k]->color->data[i] =
+                (float)(1.0 + sqrt(sigma2 / 16) * mcp_test_rand_normal(&rng));
+    }
+    mcp_dump *m = NULL;
+    assert_int_equal(mcp_dump_merge((const mcp_dump *const *)parts, K, NULL, &m), 0);
+    const double truth = sigma2 / (16 * K);
+    double spread[2];
+    for (int pass = 0; pass < 2; pass++) {
+        /* pass 0: raw; pass 1: pooled 7x7. Interior values only (full windows). */
+        if (pass == 1)
+            assert_int_equal(mcp_dump_pool_variance(m, NULL, 3), 0);
+        double s = 0, s2 = 0;
+        long n = 0;
+        for (int y = 3; y < H - 3; y++)
+            for (int x = 3; x < W - 3; x++)
+                for (int c = 0; c < 3; c++) {
+                    double r = mcp_image_px(m->var_of_mean, x, y)[c] / truth;
+                    s += r, s2 += r * r, n++;
+                }
+        double mean = s / n;
+        spread[pass] = sqrt(s2 / n - mean * mean);
+        /* 24k values: the mean to about 0.5% raw, less pooled */
+        assert_close(mean, 1.0, 0.03, 0);
+    }
+    print_message("relative spread of the variance: raw %.3f (sqrt(2/3) = 0.816), pooled "
+                  "7x7 %.3f (sqrt(2/147) = 0.117)\n",
+                  spread[0], spread[1]);
+    assert_close(spread[0], sqrt(2.0 / 3.0), 0.05, 0);
+    assert_close(spread[1], sqrt(2.0 / 147.0), 0.08, 0);
+    mcp_dump_free(m);
+    for (int k = 0; k < K; k++)
+        mcp_dump_free(parts[k]);
+}
+
 /* Writes the nested series spp[0..count) of one procedural render to files. */
 static mcp_series *
 procedural_series(const mcp_proc_scene *scene, const int *spp, int count, uint64_t seed,
@@ -374,6 +426,7 @@ main(void)
         cmocka_unit_test(test_merge_pooled_is_one_render),
         cmocka_unit_test(test_merge_replicates_unbiased),
         cmocka_unit_test(test_pool_variance),
+        cmocka_unit_test(test_pool_degrees_of_freedom),
         cmocka_unit_test(test_increments_independent),
         cmocka_unit_test(test_stratified_sources),
         cmocka_unit_test(test_source_roundtrip),
