@@ -482,9 +482,6 @@ main(int argc, char **argv)
     }
     if (iters < 4 || iters > MAX_ITER)
         iters = MAX_ITER;
-    static char default_weights[] = "../shared/oidn-weights/rt_hdr_alb_nrm.tza";
-    if (!weights && access(default_weights, R_OK) == 0)
-        weights = default_weights;
     char *scenes[8], *dens[8], *srcs[8];
     int n_scenes = split(scenes_arg, scenes, 8), n_dens = split(dens_arg, dens, 8),
         n_srcs = split(srcs_arg, srcs, 8);
@@ -555,12 +552,7 @@ main(int argc, char **argv)
                     kind = "james-stein";
                     opts[n_opts++] = inner;
                 }
-                if (!strcmp(base, "unet")) {
-                    if (!weights) {
-                        printf("| %s | (no weights: set MCPOST_OIDN_WEIGHTS) | | | |\n",
-                               dens[di]);
-                        continue;
-                    }
+                if (!strcmp(base, "unet") && weights) {
                     snprintf(wopt, sizeof wopt, "weights=%s", weights);
                     opts[n_opts++] = wopt;
                 }

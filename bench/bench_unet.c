@@ -2,8 +2,8 @@
  * pass/fail): apply, and apply + JVP with 1 and with 4 tangents in one pass, on a
  * render-like input (noisy colour, albedo with edges, normals of two planes, as
  * bench_denoise), with the official colour + albedo + normal weights from
- * $MCPOST_OIDN_WEIGHTS, else ../shared/oidn-weights/rt_hdr_alb_nrm.tza beside the
- * source tree; without them it prints a skip line and exits 0.
+ * $MCPOST_OIDN_WEIGHTS, else the shipped weights/rt_hdr_alb_nrm.tza of the source
+ * tree; without them it prints a skip line and exits 0.
  * Each figure is the median of `repeats` runs after one warm-up: wall-clock ms and ms
  * per megapixel with the default OpenMP team (set OMP_NUM_THREADS to change it), the
  * CPU time of all threads per megapixel (the work, which other jobs on the machine
@@ -27,8 +27,8 @@
 
 #define MAC_PER_PIXEL 125406.0 /* the RT U-Net's 3x3 convolutions, 9 input channels */
 
-/* The weights: $MCPOST_OIDN_WEIGHTS, else ../shared/oidn-weights/ next to the source
- * tree this file was compiled from (CMake passes absolute source paths). */
+/* The weights: $MCPOST_OIDN_WEIGHTS, else the shipped weights/ of the source tree this
+ * file was compiled from (CMake passes absolute source paths). */
 static const char *
 weights_path(void)
 {
@@ -37,8 +37,7 @@ weights_path(void)
     if (env && *env) return env;
     const char *file = __FILE__, *tail = strstr(file, "bench/bench_unet.c");
     if (!tail || tail == file) return NULL;
-    snprintf(buf, sizeof buf, "%.*s../shared/oidn-weights/rt_hdr_alb_nrm.tza",
-             (int)(tail - file), file);
+    snprintf(buf, sizeof buf, "%.*sweights/rt_hdr_alb_nrm.tza", (int)(tail - file), file);
     return buf;
 }
 

@@ -103,14 +103,9 @@ static struct {
 static void
 oiio_load(void)
 {
-    char beside_lib[4096] = "";
-    Dl_info info;
-    if (dladdr((void *)&mcp_image_read, &info) && info.dli_fname) {
-        const char *slash = strrchr(info.dli_fname, '/');
-        if (slash)
-            snprintf(beside_lib, sizeof beside_lib, "%.*s/mcpost",
-                     (int)(slash - info.dli_fname), info.dli_fname);
-    }
+    char code[4096], beside_lib[4200] = "";
+    if (mcp__code_dir(code, sizeof code) == 0)
+        snprintf(beside_lib, sizeof beside_lib, "%s/mcpost", code);
     const char *dirs[] = {getenv("MCPOST_PLUGIN_DIR"), beside_lib, MCP_PLUGIN_BUILD_DIR,
                           MCP_PLUGIN_INSTALL_DIR};
     size_t n = 0;

@@ -15,6 +15,13 @@ double *mcp__window_table(const mcp_image *img);
 void mcp__window_sum(const double *table, int w, int h, int x, int y, int r, double out[3],
                      int *count);
 
+/* Where mcpost's own files are (paths.c): the folder of the file that holds this code
+ * (the shared library, or the executable it is linked into; -1 when unknown), and a
+ * data file of share/mcpost/ found relative to it, else in the build tree, else in the
+ * configured install folder (-1 and buf "" when none has it). */
+int mcp__code_dir(char *buf, size_t cap);
+int mcp__find_data_file(const char *name, char *buf, size_t cap);
+
 /* A series member as its file holds it, whatever the series' variance_from (dump.c). */
 #include <mcpost/dump.h>
 int mcp__series_load_file(const mcp_series *s, int i, mcp_dump **out);

@@ -22,6 +22,8 @@
 #include <string.h>
 
 #define WEIGHTS_ENV "MCPOST_OIDN_WEIGHTS"
+/* The weights mcpost ships (weights/, installed to share/mcpost/). */
+#define SHIPPED_WEIGHTS "rt_hdr_alb_nrm.tza"
 
 typedef struct {
     mcp__unet *net;
@@ -91,13 +93,17 @@ unet_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
                               "unet: tile must be 0 (as memory allows) or a multiple of 16 "
                               "(got %d)",
                               tile);
-    if (!weights || !*weights) {
+    char shipped[4096];
+    if (!weights || !*weights)
         weights = getenv(WEIGHTS_ENV);
-        if (!weights || !*weights)
-            return mcp_node_error(settings,
-                                  "unet: no weights: give weights: PATH (--weights PATH) "
-                                  "or set " WEIGHTS_ENV " to an OIDN .tza file");
-    }
+    if ((!weights || !*weights) && mcp__find_data_file(SHIPPED_WEIGHTS, shipped,
+                                                      sizeof shipped) == 0)
+        weights = shipped; /* OIDN 1.4's, shipped with mcpost (weights/README.md) */
+    if (!weights || !*weights)
+        return mcp_node_error(settings,
+                              "unet: no weights: give weights: PATH (--weights PATH), set "
+                              WEIGHTS_ENV " to an OIDN .tza file, or install mcpost's "
+                              "share/mcpost/" SHIPPED_WEIGHTS);
     char path[PATH_CAP];
     if (weights[0] != '/' && base_dir && *base_dir)
         snprintf(path, sizeof path, "%s/%s", base_dir, weights);

@@ -9,6 +9,9 @@
 
 /* ---- denoisers (denoisers.c, denoise_*.c; SPEC estimate/Denoisers) ---- */
 
+/* A data file of share/mcpost/ (common/paths.c): 0 and its path in buf, or -1. */
+int mcp__find_data_file(const char *name, char *buf, size_t cap);
+
 /* The built-in kinds; denoisers.c lists them in its table. */
 extern const mcp_denoiser_kind mcp__denoiser_gauss;
 extern const mcp_denoiser_kind mcp__denoiser_nlm;

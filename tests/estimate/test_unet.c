@@ -830,10 +830,11 @@ test_denoiser_kind(void **state)
     d = mcp_test_denoiser("unet");
     assert_int_equal(d->uses_normal, 1);
     mcp_denoiser_free(d);
+    /* without either, the weights mcpost ships (the build tree's share/mcpost/) */
     unsetenv("MCPOST_OIDN_WEIGHTS");
-    mcp_test_denoiser_fails("unet",
-                            "job.yaml:1: unet: no weights: give weights: PATH (--weights "
-                            "PATH) or set MCPOST_OIDN_WEIGHTS");
+    d = mcp_test_denoiser("unet");
+    assert_int_equal(d->uses_normal, 1);
+    mcp_denoiser_free(d);
     env_restore("MCPOST_OIDN_WEIGHTS", saved);
     mcp_test_denoiser_fails("{name: unet, weights: absent.tza}",
                             "job.yaml:1: absent.tza");
@@ -883,9 +884,35 @@ weights_path(void)
     static char buf[4096];
     if (env && *env)
         return env;
-    snprintf(buf, sizeof buf, "%s/../shared/oidn-weights/rt_hdr_alb_nrm.tza",
-             MCP_TEST_SOURCE_DIR);
+    snprintf(buf, sizeof buf, "%s/weights/rt_hdr_alb_nrm.tza", MCP_TEST_SOURCE_DIR);
     return buf;
+}
+
+/* The shipped weights are the file weights/README.md names: its SHA-256 (by coreutils'
+ * sha256sum), and the same bytes in the build tree's share/mcpost/. */
+static void
+test_shipped_weights_checksum(void **state)
+{
+    (void)state;
+    char *readme = mcp_test_read_text(MCP_TEST_SOURCE_DIR "/weights/README.md");
+    const char *at = strstr(readme, "SHA-256: `");
+    assert_non_null(at);
+    char want[65];
+    memcpy(want, at + strlen("SHA-256: `"), 64);
+    want[64] = '\0';
+    free(readme);
+    const char *files[2] = {MCP_TEST_SOURCE_DIR "/weights/rt_hdr_alb_nrm.tza",
+                            MCP_TEST_BINARY_DIR "/share/mcpost/rt_hdr_alb_nrm.tza"};
+    for (int i = 0; i < 2; i++) {
+        char cmd[4400], got[128] = "";
+        snprintf(cmd, sizeof cmd, "sha256sum '%s'", files[i]);
+        FILE *p = popen(cmd, "r");
+        assert_non_null(p);
+        assert_non_null(fgets(got, sizeof got, p));
+        assert_int_equal(pclose(p), 0);
+        got[64] = '\0';
+        assert_string_equal(got, want);
+    }
 }
 
 #define SKIP_WITHOUT_WEIGHTS(path)                                                       \
@@ -1187,6 +1214,7 @@ main(void)
         cmocka_unit_test(test_memory_tiles),
         cmocka_unit_test(test_denoiser_kind),
         cmocka_unit_test(test_real_weights_load),
+        cmocka_unit_test(test_shipped_weights_checksum),
         cmocka_unit_test(test_real_weights_fixtures),
         cmocka_unit_test(test_real_weights_jvp),
         cmocka_unit_test(test_real_weights_cli_and_job),

@@ -71,9 +71,9 @@ test_demo_job(void **state)
     free(text);
     assert_non_null(json);
     const cJSON *sections = item(json, "sections");
-    static const char *const stages[] = {"info",     "convert", "convert", "metrics",
-                                         "estimate", "info",    "estimate", "blend",
-                                         "perceptual"};
+    static const char *const stages[] = {"info",     "convert",  "convert", "metrics",
+                                         "estimate", "info",     "estimate", "estimate",
+                                         "blend",    "perceptual"};
     const int n = (int)(sizeof stages / sizeof *stages);
     assert_int_equal(cJSON_GetArraySize(sections), n);
     for (int i = 0; i < n; i++)
@@ -104,8 +104,13 @@ test_demo_job(void **state)
     assert_string_equal(item(strat, "variance_source")->valuestring, "increments");
     assert_non_null(strstr(item(strat, "variance_warning")->valuestring, "overstates"));
 
+    /* the U-Net with the weights mcpost ships, no setting */
+    const cJSON *unet = cJSON_GetArrayItem(sections, 7);
+    assert_string_equal(item(unet, "denoiser")->valuestring, "unet");
+    assert_true(cJSON_IsBool(item(unet, "stop")));
+
     /* blend: converging -- the last member's blend is no worse than the noisy image */
-    const cJSON *final = item(cJSON_GetArrayItem(sections, 7), "final");
+    const cJSON *final = item(cJSON_GetArrayItem(sections, 8), "final");
     assert_int_equal((int)number(final, "spp"), 1024);
     double noisy = number(item(final, "noisy"), "mse"),
            curves = number(item(final, "curves"), "mse");
@@ -114,7 +119,7 @@ test_demo_job(void **state)
     assert_true(curves <= noisy);
 
     /* perceptual: lower pMSE than the candidates' mean, energy falling */
-    const cJSON *perc = cJSON_GetArrayItem(sections, 8);
+    const cJSON *perc = cJSON_GetArrayItem(sections, 9);
     print_message("demo: perceptual pMSE / mean %.4f\n", number(perc, "pmse_ratio"));
     assert_true(number(perc, "pmse") < number(perc, "mean_pmse"));
     assert_true(number(perc, "energy_final") < number(perc, "energy_initial"));

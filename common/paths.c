@@ -1,0 +1,47 @@
+/* paths.c: where mcpost's own files are -- the plug-in (imageio.c) and data files such
+ * as OIDN's weights (estimate/denoise_unet.c) -- relative to the code itself, so that an
+ * installed tree can move, then the build tree and the configured install folders. */
+#define _GNU_SOURCE /* dladdr */
+#include "internal.h"
+
+#include <dlfcn.h>
+#include <stdio.h>
+#include <string.h>
+#include <unistd.h>
+
+int
+mcp__code_dir(char *buf, size_t cap)
+{
+    Dl_info info;
+    buf[0] = '\0';
+    if (!dladdr((void *)&mcp__code_dir, &info) || !info.dli_fname)
+        return -1;
+    const char *slash = strrchr(info.dli_fname, '/');
+    if (!slash)
+        return -1;
+    snprintf(buf, cap, "%.*s", (int)(slash - info.dli_fname), info.dli_fname);
+    return 0;
+}
+
+int
+mcp__find_data_file(const char *name, char *buf, size_t cap)
+{
+    char code[4096];
+    char from_lib[4200] = "", from_bin[4200] = "";
+    if (mcp__code_dir(code, sizeof code) == 0) {
+        /* the code is the shared library (<libdir>) or an executable it is linked
+           into (<bindir>): the data folder is the same relative path from either */
+        snprintf(from_lib, sizeof from_lib, "%s/%s", code, MCP_DATA_FROM_LIB);
+        snprintf(from_bin, sizeof from_bin, "%s/%s", code, MCP_DATA_FROM_BIN);
+    }
+    const char *dirs[] = {from_lib, from_bin, MCP_DATA_BUILD_DIR, MCP_DATA_INSTALL_DIR};
+    for (size_t i = 0; i < sizeof dirs / sizeof *dirs; i++) {
+        if (!*dirs[i])
+            continue;
+        snprintf(buf, cap, "%s/%s", dirs[i], name);
+        if (access(buf, R_OK) == 0)
+            return 0;
+    }
+    buf[0] = '\0';
+    return -1;
+}
