@@ -107,8 +107,17 @@ enum {
 /* Takes one getopt_long result: 1 when opt is a denoiser flag (taken), 0 when it is
  * not, -1 on failure (out of memory; mcp_error is set). */
 int mcp_cli_denoiser_flag(mcp_cli_denoiser_flags *f, int opt, const char *arg);
-/* Creates the denoiser named by the flags (mcp_denoiser_create_from_args). */
+/* Creates the denoiser named by the flags (mcp_denoiser_create_from_args); with no
+ * --denoiser, `default` (the U-Net with the shipped weights, nlm for inputs without
+ * albedo and normal), or `unet` when U-Net settings such as --weights are given. */
 int mcp_cli_denoiser_create(const mcp_cli_denoiser_flags *f, mcp_denoiser **out);
+/* The denoiser of a job stage: its `denoiser:` setting, or `default` when it has none.
+ * Relative paths in the settings resolve against the job file's folder. */
+int mcp_cli_stage_denoiser(mcp_job *job, const mcp_node *settings, mcp_denoiser **out);
+/* What the help texts say about the default denoiser. */
+#define MCP_CLI_DEFAULT_DENOISER                                                         \
+    "[default: unet with the shipped weights; nlm for dumps without albedo and normal]"
+
 /* Frees the options (the name is borrowed); safe on a zeroed struct, and twice. */
 void mcp_cli_denoiser_flags_free(mcp_cli_denoiser_flags *f);
 

@@ -255,7 +255,7 @@ run_blend(const mcp_series *series, const mcp_denoiser *den, const mcp_image *re
 /* ---- the subcommand ---- */
 
 static const char usage[] =
-    "usage: mcpost blend SERIES... --denoiser NAME [options]\n"
+    "usage: mcpost blend SERIES... [--denoiser NAME] [options]\n"
     "  Blends every member of a progressive render with its denoised image so that the\n"
     "  result converges to the noisy (unbiased) one (Denisova & Bocchi 2024). SERIES is\n"
     "  a printf pattern with --spp (e.g. 'cornell_spp%04d.exr' --spp 1,2,4,8), or a "
@@ -264,7 +264,8 @@ static const char usage[] =
     "  Writes NAME.blend.exr and NAME.weights.exr per member, blend.json and a report\n"
     "  (report.json, report.html) into the output folder.\n"
     "\n"
-    "  --denoiser NAME           the denoiser (required; see 'mcpost run --list')\n"
+    "  --denoiser NAME           the denoiser (see 'mcpost denoise --list')\n"
+    "                            " MCP_CLI_DEFAULT_DENOISER "\n"
     MCP_CLI_DENOISER_USAGE("  ")
     "  --spp LIST                the pattern's sample counts, e.g. 1,2,4,8\n"
     "  --stop-denoising-at SPP   denoise up to this spp; later members reuse d and SURE\n"
@@ -486,10 +487,6 @@ cmd_blend(int argc, char **argv)
         status = mcp_cli_usage("blend", "no series given");
         goto done;
     }
-    if (!df.name) {
-        status = mcp_cli_usage("blend", "--denoiser is required");
-        goto done;
-    }
     if (spps && n_files != 1) {
         status =
             mcp_cli_usage("blend", "--spp goes with one pattern (got %d files)", n_files);
@@ -510,9 +507,9 @@ cmd_blend(int argc, char **argv)
     sink.rel = "";
     sink.all_images = all_images;
     char title[600];
-    snprintf(title, sizeof title, "blend: %s with %s", argv[optind], df.name);
+    snprintf(title, sizeof title, "blend: %s with %s", argv[optind], den->name);
     cJSON *section = mcp_report_section(report, "blend", title);
-    if (!section || run_blend(series, den, ref, &o, df.name, &sink, section)) goto fail;
+    if (!section || run_blend(series, den, ref, &o, den->name, &sink, section)) goto fail;
     char *text = cJSON_Print(section), path[4200];
     snprintf(path, sizeof path, "%s/blend.json", out_dir);
     int wrc = !text || mcp_write_file_atomic(path, text, strlen(text));
@@ -640,7 +637,7 @@ stage_blend(mcp_job *job, const mcp_node *settings)
     mcp_blend_series_options o = mcp_blend_series_defaults();
     const char *input = NULL, *reference = NULL, *output = NULL, *title = NULL;
     int all_images = 0;
-    const mcp_node *den_node = NULL, *input_node = NULL;
+    const mcp_node *input_node = NULL;
     const mcp_series *series = NULL;
     const mcp_image *ref = NULL;
     mcp_denoiser *den = NULL;
@@ -651,14 +648,9 @@ stage_blend(mcp_job *job, const mcp_node *settings)
         mcp_node_opt_bool(settings, "all_images", &all_images) ||
         read_stage_options(settings, &o) ||
         mcp_node_require(settings, "input", "stage 'blend'", &input_node) ||
-        mcp_node_require(settings, "denoiser", "stage 'blend'", &den_node) ||
         mcp_job_series(job, settings, "input", &series) ||
-        (reference && mcp_job_image(job, settings, "reference", &ref)))
-        return -1;
-    /* the denoiser's relative paths resolve against the job file's folder */
-    char base_dir[4096];
-    if (mcp_job_resolve(job, ".", base_dir, sizeof base_dir) ||
-        mcp_denoiser_create(den_node, base_dir, &den))
+        (reference && mcp_job_image(job, settings, "reference", &ref)) ||
+        mcp_cli_stage_denoiser(job, settings, &den))
         return -1;
     const char *den_name = den->name;
     blend_sink sink;

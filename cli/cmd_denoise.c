@@ -14,13 +14,14 @@
 #define PATH_CAP 4096
 
 static const char usage[] =
-    "usage: mcpost denoise DUMP --denoiser NAME [options]\n"
+    "usage: mcpost denoise DUMP [--denoiser NAME] [options]\n"
     "       mcpost denoise --color FILE [--albedo FILE] [--normal FILE]\n"
-    "                      [--variance-of-mean FILE] --denoiser NAME [options]\n"
+    "                      [--variance-of-mean FILE] [--denoiser NAME] [options]\n"
     "       mcpost denoise --list\n"
     "  Runs one denoiser on a render dump (colour, and the albedo, normal and variance\n"
     "  it holds) or on separate files, and writes the denoised colour as R,G,B.\n"
     "  --denoiser NAME         which denoiser (see --list)\n"
+    "                          " MCP_CLI_DEFAULT_DENOISER "\n"
     MCP_CLI_DENOISER_USAGE("")
     "  -o, --output FILE       the denoised image [<input stem>_<NAME>.exr, here]\n"
     "  --tangent FILE          also write J·T, the Jacobian-vector product of the\n"
@@ -245,8 +246,6 @@ cmd_denoise(int argc, char **argv)
                                  "--color; a DUMP carries its own");
     else if (in.color && (in.spp || in.convention || in.variance_kind))
         mcp_cli_usage("denoise", "--spp, --convention and --variance go with DUMP");
-    else if (!df.name)
-        mcp_cli_usage("denoise", "no denoiser: give --denoiser NAME (see --list)");
     else if (tangent_out && !tangent)
         mcp_cli_usage("denoise", "--tangent-out needs --tangent");
     else
@@ -260,7 +259,8 @@ cmd_denoise(int argc, char **argv)
     char out_buf[PATH_CAP], jvp_buf[PATH_CAP], stem[PATH_CAP];
     if (!out) {
         stem_of(in.dump ? in.dump : in.color, 1, stem, sizeof stem);
-        snprintf(out_buf, sizeof out_buf, "%s_%s.exr", stem, df.name);
+        snprintf(out_buf, sizeof out_buf, "%s_%s.exr", stem,
+                 df.name ? df.name : df.n_opts ? "unet" : "default");
         out = out_buf;
     }
     if (tangent && !tangent_out) {

@@ -466,13 +466,14 @@ run_series(const mcp_series *series, const mcp_denoiser *den,
 /* ---- the subcommand ---- */
 
 static const char usage[] =
-    "usage: mcpost estimate DUMP... --denoiser NAME [options]\n"
+    "usage: mcpost estimate DUMP... [--denoiser NAME] [options]\n"
     "  Estimates the error of the denoised DUMP (SURE, Firmino et al. 2024) and decides\n"
     "  whether rendering can stop: F(tau) >= p, F the estimated CDF of the per-value\n"
     "  error. Several DUMPs, or --series, make a progressive series: then it reports\n"
     "  the first spp at which each tau is reached (and the true one with --ref).\n"
     "\n"
     "  --denoiser NAME          the denoiser (see `mcpost denoise --list`)\n"
+    "                           " MCP_CLI_DEFAULT_DENOISER "\n"
     MCP_CLI_DENOISER_USAGE(" ")
     "  --metric NAME            relse, relse-perceptual or se [relse]\n"
     "  --tau T                  error threshold [0.01]\n"
@@ -702,10 +703,6 @@ cmd_estimate(int argc, char **argv)
         }
     }
     int n_files = argc - optind;
-    if (!df.name) {
-        mcp_cli_denoiser_flags_free(&df);
-        return mcp_cli_usage("estimate", "--denoiser is required");
-    }
     if (!n_files && !pattern) {
         mcp_cli_denoiser_flags_free(&df);
         return mcp_cli_usage("estimate", "no dump given");
@@ -939,18 +936,15 @@ stage_estimate(mcp_job *job, const mcp_node *settings)
 {
     mcp_series_estimate_options so = mcp_series_estimate_defaults();
     const char *name = NULL, *sub = "estimate", *ref_name = NULL;
-    const mcp_node *dn = NULL;
-    if (mcp_node_require(settings, "denoiser", "estimate", &dn) ||
-        mcp_node_opt_string(settings, "input", &name) ||
+    if (mcp_node_opt_string(settings, "input", &name) ||
         mcp_node_opt_string(settings, "output", &sub) ||
         mcp_node_opt_string(settings, "reference", &ref_name) ||
         read_settings(settings, &so))
         return -1;
-    char base[4096], probe[4352];
+    char probe[4352];
     mcp_denoiser *den = NULL;
-    if (mcp_job_resolve(job, ".", base, sizeof base) ||
-        mcp_denoiser_create(dn, base, &den))
-        return at_line(settings, "denoiser");
+    if (mcp_cli_stage_denoiser(job, settings, &den))
+        return mcp_node_get(settings, "denoiser") ? at_line(settings, "denoiser") : -1;
     const mcp_image *ref = NULL;
     const mcp_series *series = NULL;
     const mcp_dump *dump = NULL;

@@ -697,8 +697,9 @@ static const char usage[] =
     "                      dither, horizontal, histogram, permutation\n"
     "  --surrogate S       denoise [default: the denoiser on the candidates' mean],\n"
     "                      reference (the ground truth: best case), or an image FILE\n"
-    "  --denoiser NAME     the surrogate's denoiser [nlm, guided by the candidates'\n"
-    "                      albedo and normal when they have them]; its settings:\n"
+    "  --denoiser NAME     the surrogate's denoiser [default: unet with the shipped\n"
+    "                      weights; nlm when the candidates have no albedo and normal];\n"
+    "                      its settings:\n"
     MCP_CLI_DENOISER_USAGE("")
     "  --ref FILE          ground truth: pMSE, MSE and the error spectrum\n"
     "  --confidence C      trust in the surrogate, in [0, 1] [1], or a per-pixel FILE\n"
@@ -795,7 +796,7 @@ cmd_perceptual(int argc, char **argv)
     args_init(&a);
     memset(&r, 0, sizeof r);
     const char *out_dir = "perceptual", *ref_path = NULL;
-    mcp_cli_denoiser_flags df = {.name = "nlm"};
+    mcp_cli_denoiser_flags df = {0}; /* no --denoiser: the default */
     int json = 0, opt, idx = 0, status = 1;
     mcp_image *ref = NULL, *surr = NULL, *conf = NULL, *kern = NULL;
     mcp_report *report = NULL;
@@ -1027,7 +1028,6 @@ stage_perceptual(mcp_job *job, const mcp_node *settings)
     if (mcp_node_get(settings, "reference") &&
         mcp_job_image(job, settings, "reference", &r.reference))
         goto done;
-    const mcp_node *sn = mcp_node_get(settings, "surrogate");
     if (strcmp(a.surrogate, "denoise") && strcmp(a.surrogate, "reference") &&
         mcp_job_image(job, settings, "surrogate", &r.surrogate_img))
         goto done;
@@ -1043,14 +1043,7 @@ stage_perceptual(mcp_job *job, const mcp_node *settings)
         r.kernel_img = kern;
     }
     if (!strcmp(a.surrogate, "denoise")) {
-        const mcp_node *dn = mcp_node_get(settings, "denoiser");
-        mcp_node scalar = {.kind = MCP_NODE_SCALAR,
-                           .value = "nlm",
-                           .line = sn ? sn->line : settings->line,
-                           .file = settings->file};
-        char dir[4096];
-        if (mcp_job_resolve(job, ".", dir, sizeof dir) ||
-            mcp_denoiser_create(dn ? dn : &scalar, dir, &r.den))
+        if (mcp_cli_stage_denoiser(job, settings, &r.den))
             goto done;
     }
     /* outputs in <output>/<name>/, images relative to the report */

@@ -50,9 +50,26 @@ int
 mcp_cli_denoiser_create(const mcp_cli_denoiser_flags *f, mcp_denoiser **out)
 {
     /* the duplicate check (a shorthand and --denoiser-opt naming one key) and the
-     * unknown-key check are create_from_args', with its messages */
-    return mcp_denoiser_create_from_args(f->name, (const char *const *)f->opts, f->n_opts,
-                                         out);
+     * unknown-key check are create_from_args', with its messages. No name: the
+     * default (the U-Net, or nlm without features), or the U-Net when its settings
+     * (--weights, ...) are given */
+    const char *name = f->name ? f->name : f->n_opts ? "unet" : "default";
+    return mcp_denoiser_create_from_args(name, (const char *const *)f->opts, f->n_opts, out);
+}
+
+int
+mcp_cli_stage_denoiser(mcp_job *job, const mcp_node *settings, mcp_denoiser **out)
+{
+    const mcp_node *given = mcp_node_get(settings, "denoiser");
+    mcp_node fallback = {.kind = MCP_NODE_SCALAR,
+                         .value = (char *)"default",
+                         .line = settings->line,
+                         .file = settings->file};
+    char base[4096];
+    /* relative paths in the settings (weights) resolve against the job file's folder */
+    if (mcp_job_resolve(job, ".", base, sizeof base))
+        return -1;
+    return mcp_denoiser_create(given ? given : &fallback, base, out);
 }
 
 void

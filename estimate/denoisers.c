@@ -20,6 +20,7 @@ static const mcp_denoiser_kind *const kinds[] = {
     &mcp__denoiser_external,
     &mcp__denoiser_unet,
     &mcp__denoiser_james_stein, /* blend/denoise_james_stein.c: wraps any of the above */
+    &mcp__denoiser_default,     /* unet, or nlm without features: when none is named */
     NULL,
 };
 

@@ -18,6 +18,8 @@ extern const mcp_denoiser_kind mcp__denoiser_nlm;
 /* The James-Stein post-correction around another kind; it lives with the combiner in
  * blend/ (blend/denoise_james_stein.c). */
 extern const mcp_denoiser_kind mcp__denoiser_james_stein;
+/* The denoiser used when none is named (denoise_default.c). */
+extern const mcp_denoiser_kind mcp__denoiser_default;
 
 /* Checks an input for denoiser `who`: colour present with 3 channels; albedo, normal
  * and variance, when given, 3 channels and the colour's size. */

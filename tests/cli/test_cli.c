@@ -396,13 +396,17 @@ test_merge_and_variance_sources(void **state)
                         "  progress: {series: [rep0.exr, merged.exr], variance_from: increments}\n"
                         "output: merge_out\n"
                         "stages:\n  - info: {input: frame}\n"
-                        "  - estimate: {input: progress, denoiser: gauss, taus: [0.5]}\n");
+                        "  - estimate: {input: progress, denoiser: gauss, taus: [0.5]}\n"
+                        "  - estimate: {input: frame, output: default}\n");
     assert_int_equal(run("run --json '%s'", mcp_test_path("merge.yaml")), 0);
     j = cJSON_Parse(out);
     assert_non_null(j);
     const cJSON *info = cJSON_GetArrayItem(cJSON_GetObjectItem(j, "sections"), 0);
     assert_string_equal(cJSON_GetObjectItem(info, "variance_source")->valuestring, "replicates");
     assert_true(cJSON_GetObjectItem(info, "spp")->valuedouble == 512);
+    /* a stage without denoiser: the default, the U-Net (the dumps have features) */
+    const cJSON *est = cJSON_GetArrayItem(cJSON_GetObjectItem(j, "sections"), 2);
+    assert_string_equal(cJSON_GetObjectItem(est, "denoiser")->valuestring, "default (unet)");
     cJSON_Delete(j);
     /* blend on the stratified texture series: the source, the measured ratio and the
        warning in blend.json; with --variance-from increments the source changes */

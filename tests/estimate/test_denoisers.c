@@ -26,13 +26,13 @@
 
 /* The kinds that are built in and exact, created from their bare name: every kind but
  * those that wrap something outside (an external command, a weights file), which
- * test_external.c and test_unet.c test, and james-stein, whose inner denoiser is the
- * U-Net by default (tests/blend/test_james_stein.c). */
+ * test_external.c and test_unet.c test, and james-stein and default, which use the
+ * U-Net (tests/blend/test_james_stein.c, tests/cli/test_cli.c). */
 static int
 self_contained(const mcp_denoiser_kind *k)
 {
     return strcmp(k->name, "external") != 0 && strcmp(k->name, "unet") != 0 &&
-           strcmp(k->name, "james-stein") != 0;
+           strcmp(k->name, "james-stein") != 0 && strcmp(k->name, "default") != 0;
 }
 
 #define FOR_EACH_BUILTIN(k)                                                              \
@@ -1014,10 +1014,23 @@ test_command(void **state)
         mcp_test_run_mcpost("denoise --denoiser gauss", out, sizeof out, err, sizeof err),
         2);
     assert_non_null(strstr(err, "no input"));
+    /* no --denoiser: the default, which for colour alone is nlm, said once; the same
+       image as --denoiser nlm */
     snprintf(args, sizeof args, "denoise --color %s -o %s", mcp_test_path("color.exr"),
              mcp_test_path("x.exr"));
-    assert_int_equal(mcp_test_run_mcpost(args, out, sizeof out, err, sizeof err), 2);
-    assert_non_null(strstr(err, "no denoiser"));
+    assert_int_equal(mcp_test_run_mcpost(args, out, sizeof out, err, sizeof err), 0);
+    assert_non_null(strstr(err, "the default denoiser is nlm instead of the U-Net"));
+    snprintf(args, sizeof args, "denoise --color %s --denoiser nlm -o %s",
+             mcp_test_path("color.exr"), mcp_test_path("x_nlm.exr"));
+    assert_int_equal(mcp_test_run_mcpost(args, out, sizeof out, err, sizeof err), 0);
+    {
+        mcp_image *a = NULL, *b = NULL;
+        assert_int_equal(mcp_image_read(mcp_test_path("x.exr"), NULL, &a), 0);
+        assert_int_equal(mcp_image_read(mcp_test_path("x_nlm.exr"), NULL, &b), 0);
+        assert_true(mcp_test_max_abs_diff(a, b) == 0);
+        mcp_image_free(a);
+        mcp_image_free(b);
+    }
 
     mcp_image_free(prim);
     mcp_image_free(jt);

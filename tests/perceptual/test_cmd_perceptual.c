@@ -141,8 +141,9 @@ test_compare_and_options(void **state)
     cJSON *s = run_json(args);
     const cJSON *t = cJSON_GetObjectItem(s, "comparison");
     assert_int_equal(cJSON_GetArraySize(t), 2 + MCP_PERC_N_METHODS);
+    /* the default denoiser; the candidates have no albedo and normal, so nlm */
     assert_string_equal(cJSON_GetObjectItem(s, "surrogate")->valuestring,
-                        "denoise (nlm)");
+                        "denoise (default (nlm))");
     print_message("mcpost perceptual --compare (nlm surrogate), pMSE / mean:");
     double mean = num(cJSON_GetArrayItem(t, 0), "pmse");
     const cJSON *row;
