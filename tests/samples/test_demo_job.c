@@ -104,9 +104,9 @@ test_demo_job(void **state)
     assert_string_equal(item(strat, "variance_source")->valuestring, "increments");
     assert_non_null(strstr(item(strat, "variance_warning")->valuestring, "overstates"));
 
-    /* the U-Net with the weights mcpost ships, no setting */
+    /* the default denoiser: the U-Net with the weights mcpost ships, no setting */
     const cJSON *unet = cJSON_GetArrayItem(sections, 7);
-    assert_string_equal(item(unet, "denoiser")->valuestring, "unet");
+    assert_string_equal(item(unet, "denoiser")->valuestring, "default (unet)");
     assert_true(cJSON_IsBool(item(unet, "stop")));
 
     /* blend: converging -- the last member's blend is no worse than the noisy image */
