@@ -576,14 +576,20 @@ def main():
            ', '.join('%s %.0f s' % kv for kv in times.items()), wr.clamped, wr.bytes / 1e6))
 
 
-if __name__ == '__main__':
+def run_main(main_fn, name):
+    """Runs a script's main inside Blender so that a failure ends the process with a
+    non-zero status and a traceback (Blender itself would carry on and exit 0)."""
     try:
-        main()
+        main_fn()
     except SystemExit as e:
         if e.code:
-            print('render_dumps: failed (%s)' % e.code, file=sys.stderr)
+            print('%s: failed (%s)' % (name, e.code), file=sys.stderr)
             sys.exit(e.code)
     except Exception:
         import traceback
         traceback.print_exc()
         sys.exit(1)
+
+
+if __name__ == '__main__':
+    run_main(main, 'render_dumps')

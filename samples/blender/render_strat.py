@@ -244,13 +244,4 @@ def main():
 
 
 if __name__ == '__main__':
-    try:
-        main()
-    except SystemExit as e:
-        if e.code:
-            print('render_strat: failed (%s)' % e.code, file=sys.stderr)
-            sys.exit(e.code)
-    except Exception:
-        import traceback
-        traceback.print_exc()
-        sys.exit(1)
+    rdm.run_main(main, 'render_strat')
