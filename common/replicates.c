@@ -56,13 +56,6 @@ new3(const mcp_image *like, const char *a, const char *b, const char *c, mcp_ima
 
 /* ---- merging ---- */
 
-/* Per-pixel weights n_k of every part, and their sum. */
-static double
-part_spp(const mcp_dump *d, int x, int y)
-{
-    return mcp_dump_spp_at(d, x, y);
-}
-
 static int
 check_parts(const mcp_dump *const *parts, int count, const mcp_merge_options *opt)
 {
@@ -108,7 +101,7 @@ merge_mean(const mcp_dump *const *parts, int count, size_t offset, const char *c
             double sum[3] = {0, 0, 0}, n = 0;
             for (int k = 0; k < count; k++) {
                 const mcp_image *part = *(mcp_image *const *)((const char *)parts[k] + offset);
-                double nk = part_spp(parts[k], x, y);
+                double nk = mcp_dump_spp_at(parts[k], x, y);
                 const float *v = mcp_image_px(part, x, y);
                 for (int c = 0; c < 3; c++)
                     sum[c] += nk * v[c];
@@ -135,7 +128,7 @@ merge_variance(const mcp_dump *const *parts, int count, const mcp_merge_options 
             int k_used = 0;
             for (int k = 0; k < count; k++) {
                 const mcp_dump *d = parts[k];
-                double nk = part_spp(d, x, y);
+                double nk = mcp_dump_spp_at(d, x, y);
                 if (!(nk > 0))
                     continue;
                 k_used++;
@@ -195,7 +188,7 @@ merge_spp(const mcp_dump *const *parts, int count, mcp_dump *out)
         for (int x = 0; x < c0->width; x++) {
             double n = 0;
             for (int k = 0; k < count; k++)
-                n += part_spp(parts[k], x, y);
+                n += mcp_dump_spp_at(parts[k], x, y);
             mcp_image_px(out->spp_map, x, y)[0] = (float)n;
         }
     return 0;
