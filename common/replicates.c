@@ -56,6 +56,20 @@ new3(const mcp_image *like, const char *a, const char *b, const char *c, mcp_ima
 
 /* ---- merging ---- */
 
+/* The colour pairs of a covariance's channels RG, RB, GB. */
+static const int cov_pair[3][2] = {{0, 1}, {0, 2}, {1, 2}};
+
+/* Adds w times the outer product of a deviation from the mean: its diagonal to ss
+ * (R, G, B) and its off-diagonal to sc (RG, RB, GB). */
+static void
+add_spread(double w, const double dev[3], double ss[3], double sc[3])
+{
+    for (int c = 0; c < 3; c++)
+        ss[c] += w * dev[c] * dev[c];
+    for (int j = 0; j < 3; j++)
+        sc[j] += w * dev[cov_pair[j][0]] * dev[cov_pair[j][1]];
+}
+
 static int
 check_parts(const mcp_dump *const *parts, int count, const mcp_merge_options *opt)
 {
@@ -119,7 +133,6 @@ static void
 merge_variance(const mcp_dump *const *parts, int count, const mcp_merge_options *opt,
                const mcp_image *mean, mcp_image *var, mcp_image *cov)
 {
-    static const int pair[3][2] = {{0, 1}, {0, 2}, {1, 2}};
 #pragma omp parallel for schedule(static)
     for (int y = 0; y < mean->height; y++)
         for (int x = 0; x < mean->width; x++) {
@@ -135,12 +148,9 @@ merge_variance(const mcp_dump *const *parts, int count, const mcp_merge_options 
                 n += nk;
                 const float *v = mcp_image_px(d->color, x, y);
                 double dev[3];
-                for (int c = 0; c < 3; c++) {
+                for (int c = 0; c < 3; c++)
                     dev[c] = (double)v[c] - m[c];
-                    ss[c] += nk * dev[c] * dev[c];
-                }
-                for (int j = 0; j < 3; j++)
-                    sc[j] += nk * dev[pair[j][0]] * dev[pair[j][1]];
+                add_spread(nk, dev, ss, sc);
                 if (opt->variance == MCP_MERGE_POOLED) {
                     /* the part's own sum of squared deviations, (n_k - 1) s_k² with
                        s_k² = n_k × its variance of the mean */
@@ -382,7 +392,6 @@ mcp_dump_increment_variance(const mcp_dump *const *members, int count,
     if (last->var_of_mean && last->variance_source == MCP_VARSRC_PER_SAMPLE &&
         mcp_image_copy(last->var_of_mean, &shape))
         goto fail;
-    static const int pair[3][2] = {{0, 1}, {0, 2}, {1, 2}};
 #pragma omp parallel for schedule(static)
     for (int y = 0; y < X->height; y++)
         for (int x = 0; x < X->width; x++) {
@@ -396,13 +405,9 @@ mcp_dump_increment_variance(const mcp_dump *const *members, int count,
                 double nb = members[b]->spp, np = b == first ? 0 : members[b - 1]->spp;
                 const float *xp = b == first ? NULL : mcp_image_px(members[b - 1]->color, x, y);
                 double size = nb - np, dev[3];
-                for (int c = 0; c < 3; c++) {
-                    double yb = xp ? (nb * xb[c] - np * xp[c]) / size : xb[c];
-                    dev[c] = yb - xm[c];
-                    ss[c] += size * dev[c] * dev[c];
-                }
-                for (int j = 0; j < 3; j++)
-                    sc[j] += size * dev[pair[j][0]] * dev[pair[j][1]];
+                for (int c = 0; c < 3; c++)
+                    dev[c] = (xp ? (nb * xb[c] - np * xp[c]) / size : xb[c]) - xm[c];
+                add_spread(size, dev, ss, sc);
             }
             float *v = mcp_image_px(d->var_of_mean, x, y),
                   *cv = mcp_image_px(d->cov_of_mean, x, y);
