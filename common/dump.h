@@ -214,7 +214,9 @@ MCP_API int mcp_dump_merge(const mcp_dump *const *parts, int count,
  * spatial pattern is right but whose level a stratified sampler biases) each value
  * becomes shape_i Σ_W V / Σ_W shape, a ratio estimate with about dof·|W| degrees of
  * freedom; without it (or where Σ_W shape is 0) the window mean of V. The covariance,
- * when present, is pooled by the same factors (ratio) or window mean. Sets
+ * when present, becomes the window's pooled correlation Σ_W cov / sqrt(Σ_W V_a Σ_W V_b)
+ * (within [-1, 1]) times the pooled standard deviations (without a shape: the window
+ * mean). Sets
  * dump->variance_pool to the window's pixel count. */
 MCP_API int mcp_dump_pool_variance(mcp_dump *dump, const mcp_image *shape, int radius);
 

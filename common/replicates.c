@@ -281,7 +281,6 @@ mcp_dump_pool_variance(mcp_dump *d, const mcp_image *shape, int radius)
         return mcp_error("variance pooling: the shape is %dx%d with %d channels, the "
                          "variance %dx%d with 3",
                          shape->width, shape->height, shape->channels, w, h);
-    mcp_image *parts[2] = {d->var_of_mean, d->cov_of_mean};
     double *tv = mcp__window_table(d->var_of_mean);
     double *ts = shape ? mcp__window_table(shape) : NULL;
     double *tc = d->cov_of_mean ? mcp__window_table(d->cov_of_mean) : NULL;
@@ -290,7 +289,6 @@ mcp_dump_pool_variance(mcp_dump *d, const mcp_image *shape, int radius)
         rc = -1;
         goto done;
     }
-    double *tables[2] = {tv, tc};
     /* the window sums come from the tables, so values can be overwritten in place */
 #pragma omp parallel for schedule(static)
     for (int y = 0; y < h; y++)
@@ -305,24 +303,22 @@ mcp_dump_pool_variance(mcp_dump *d, const mcp_image *shape, int radius)
             const float *sh = shape ? mcp_image_px(shape, x, y) : NULL;
             for (int c = 0; c < 3; c++)
                 ratio[c] = ss[c] > 0 ? sv[c] / ss[c] : -1;
-            for (int p = 0; p < 2; p++) {
-                if (!parts[p])
-                    continue;
-                double s[3];
-                mcp__window_sum(tables[p], w, h, x, y, radius, s, &n);
-                float *v = mcp_image_px(parts[p], x, y);
-                for (int c = 0; c < 3; c++) {
-                    if (p == 0 && sh && ratio[c] >= 0) {
-                        v[c] = (float)(sh[c] * ratio[c]);
-                    } else if (p == 1 && sh) {
-                        /* the covariance RG scales with sqrt(ratio_R ratio_G) */
-                        static const int pair[3][2] = {{0, 1}, {0, 2}, {1, 2}};
-                        double a = ratio[pair[c][0]], b = ratio[pair[c][1]];
-                        v[c] = a >= 0 && b >= 0 ? (float)(v[c] * sqrt(a * b))
-                                                : (float)(s[c] / n);
-                    } else {
-                        v[c] = (float)(s[c] / n);
-                    }
+            float *v = mcp_image_px(d->var_of_mean, x, y);
+            for (int c = 0; c < 3; c++)
+                v[c] = sh && ratio[c] >= 0 ? (float)(sh[c] * ratio[c]) : (float)(sv[c] / n);
+            if (tc) {
+                /* the covariance as a pooled correlation times the pooled standard
+                   deviations: Σ_W cov / sqrt(Σ_W V_a Σ_W V_b) is within [-1, 1]
+                   (Cauchy-Schwarz), so the matrix stays a covariance; without a
+                   shape this is the window mean */
+                double sc[3];
+                mcp__window_sum(tc, w, h, x, y, radius, sc, &n);
+                float *cv = mcp_image_px(d->cov_of_mean, x, y);
+                for (int j = 0; j < 3; j++) {
+                    int a = cov_pair[j][0], b = cov_pair[j][1];
+                    double norm = sqrt(sv[a] * sv[b]);
+                    cv[j] = norm > 0 ? (float)(sc[j] / norm * sqrt((double)v[a] * v[b]))
+                                     : 0.0f;
                 }
             }
         }

@@ -171,6 +171,17 @@ test_pool_variance(void **state)
     for (int i = 0; i < 9 * 6 * 3; i++)
         assert_close(d->var_of_mean->data[i], shape->data[i] * (i % 3 + 1) * 0.5, 1e-6, 0);
     assert_true(d->variance_pool == 25);
+    /* the covariance: the window's correlation times the pooled deviations. With a
+       constant shape s and V = k_c s, a constant covariance c0 stays c0:
+       (n c0 / (n s sqrt(k_a k_b))) sqrt(k_a s k_b s) */
+    mcp_image *flat = mcp_test_constant(9, 6, 3, 0.5f, rgb);
+    for (int i = 0; i < 9 * 6 * 3; i++)
+        d->var_of_mean->data[i] = 0.5f * (float)(i % 3 + 1);
+    d->cov_of_mean = mcp_test_constant(9, 6, 3, 0.125f, (const char *[]){"RG", "RB", "GB"});
+    assert_int_equal(mcp_dump_pool_variance(d, flat, 2), 0);
+    for (int i = 0; i < 9 * 6 * 3; i++)
+        assert_close(d->cov_of_mean->data[i], 0.125, 1e-6, 0);
+    mcp_image_free(flat);
     /* no shape: one value of 25 at (0, 0) spreads over the 3x3 window cells that
        see it, each window clipped at the corner */
     memset(d->var_of_mean->data, 0, 9 * 6 * 3 * sizeof(float));
