@@ -465,20 +465,6 @@ member_truth(const mcp_estimate *e, const mcp_image *reference,
     return 0;
 }
 
-/* The last member's variance source, and whether the renderer's Variance/n tracks
- * the spread of the series' own increments (a stratified sampler makes it an
- * overstatement: docs "Variance sources"). */
-static int
-series_variance_check(const mcp_series *series, mcp_series_estimate *s)
-{
-    mcp_dump *last = NULL;
-    if (mcp_series_load(series, series->count - 1, &last))
-        return -1;
-    s->variance_source = last->variance_source;
-    mcp_dump_free(last);
-    return mcp_series_variance_ratio(series, &s->variance_ratio);
-}
-
 int
 mcp_estimate_series(const mcp_series *series, const mcp_denoiser *den,
                     const mcp_series_estimate_options *opt, const mcp_image *reference,
@@ -522,6 +508,7 @@ mcp_estimate_series(const mcp_series *series, const mcp_denoiser *den,
             return -1;
         }
         pt->spp = series->spp && series->spp[i] > 0 ? series->spp[i] : mean_spp(d);
+        s->variance_source = d->variance_source; /* the last member's, in the end */
         for (int j = 0; j < o.n_taus; j++)
             pt->stop[j] =
                 mcp_error_should_stop(e->dist, o.taus[j], o.est.p, &pt->cdf[j]) &&
@@ -539,7 +526,9 @@ mcp_estimate_series(const mcp_series *series, const mcp_denoiser *den,
         }
         if (progress) progress(i + 1, series->count, ctx);
     }
-    if (series_variance_check(series, s)) {
+    /* whether the renderer's Variance/n tracks the spread of the series' own
+       increments (a stratified sampler makes it an overstatement) */
+    if (mcp_series_variance_ratio(series, &s->variance_ratio)) {
         mcp_series_estimate_free(s);
         return -1;
     }
