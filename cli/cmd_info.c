@@ -109,11 +109,11 @@ print_variance_source(const cJSON *o)
     const cJSON *dof = cJSON_GetObjectItem(o, "variance_dof"),
                 *k = cJSON_GetObjectItem(o, "replicates"),
                 *pool = cJSON_GetObjectItem(o, "variance_pool");
-    if (strcmp(src->valuestring, "per-sample") == 0)
-        printf("  source:    per-sample / n (assumes independent samples; a stratified "
-               "sampler\n             makes it an overstatement: see mcpost merge)\n");
-    else if (strcmp(src->valuestring, "of-mean") == 0)
-        printf("  source:    of the mean, as the file stores it (origin not recorded)\n");
+    mcp_variance_source s;
+    if (strcmp(src->valuestring, "per-sample") == 0 || strcmp(src->valuestring, "of-mean") == 0)
+        printf("  source:    %s\n", mcp_variance_source_from_name(src->valuestring, &s) == 0
+                                        ? mcp_cli_variance_source_words(s)
+                                        : src->valuestring);
     else
         printf("  source:    %s: the spread of %d %s (%g degrees of freedom)\n",
                src->valuestring, k ? k->valueint : 0,
