@@ -29,7 +29,7 @@ main(int argc, char **argv)
         return 2;
     }
     bench_scene sc;
-    bench_scene_make(side, &sc);
+    bench_scene_make(side, side, &sc);
     int threads = 1;
 #ifdef _OPENMP
     threads = omp_get_max_threads();

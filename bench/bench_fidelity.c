@@ -22,8 +22,9 @@
  * where below it; p = 0.999; a stop agrees when it is within one iteration or a third
  * of the true count (mcp_stop_agrees); an early stop is one before half the true
  * count.
- * Then the curve blend on the same sequence: where it is <= min(noisy, denoised) and
- * its MSE over the noisy image's at the last iteration.
+ * Then the curve blend on the same sequence: where it is <= min(noisy, denoised), its
+ * MSE over the noisy image's at the last iteration, and beside it the window-optimal
+ * blend computed with the reference (an oracle: the most any weights can reach).
  *
  * Denoisers: any kind, and js-NAME for NAME followed by the James-Stein
  * post-correction (the `james-stein` denoiser: the error of what the user keeps).
@@ -40,6 +41,7 @@
 #include <mcpost/blend.h>
 #include <mcpost/dump.h>
 #include <mcpost/estimate.h>
+#include <mcpost/filter.h>
 #include <mcpost/imageio.h>
 #include <mcpost/job.h>
 
@@ -334,6 +336,7 @@ reference_floor(const scene *s, double p, double ref_spp)
 typedef struct tally {
     int cases, agree, early, never_est, blend_points, blend_good, blend_cases;
     double worst_final;
+    double curves_over_min, oracle_over_min; /* sums over the points, for the means */
 } tally;
 
 /* What every case shares: the settings from the command line. */
@@ -395,8 +398,64 @@ run_estimate(const run_settings *rs, const mcp_series *series, const mcp_denoise
     mcp_series_estimate_free(se);
 }
 
-/* The curve blend on the same sequence: where it is <= min(noisy, denoised), and its
- * MSE over the noisy image's at the last member. */
+/* The best any blend of n and d can do, given the reference: per value the weight
+ * rho = <(n - R)(n - d)> / <(n - d)^2>, both averaged over the blend's own Gaussian
+ * window (the window-optimal linear blend (1 - rho) n + rho d, rho in [0, 1]). It
+ * bounds what weights from estimates can reach: where it is barely below
+ * min(noisy, denoised), so must every blend be. */
+typedef struct oracle_ctx {
+    const mcp_image *reference;
+    const mcp_blend_options *blend;
+    double *oracle_mse; /* per member */
+} oracle_ctx;
+
+static int
+oracle_point(const mcp_blend_point *p, void *vctx)
+{
+    oracle_ctx *c = vctx;
+    const mcp_image *n = p->images[MCP_BLEND_NOISY], *d = p->images[MCP_BLEND_DENOISED];
+    const mcp_image *ref = c->reference;
+    size_t np = (size_t)n->width * n->height;
+    mcp_image *num = NULL, *den = NULL, *num_f = NULL, *den_f = NULL;
+    if (mcp_image_new(n->width, n->height, 3, NULL, &num) ||
+        mcp_image_new(n->width, n->height, 3, NULL, &den))
+        die("oracle blend");
+    for (size_t i = 0; i < np; i++)
+        for (int k = 0; k < 3; k++) {
+            double e = n->data[i * n->channels + k] - ref->data[i * ref->channels + k];
+            double g = n->data[i * n->channels + k] - d->data[i * d->channels + k];
+            num->data[i * 3 + k] = (float)(e * g);
+            den->data[i * 3 + k] = (float)(g * g);
+        }
+    /* the window the blend filters its estimates with at this member */
+    double sigma = fmin(sqrt(fmax(p->est->mean_var, 0)), 1.0) * c->blend->filter_sigma_scale;
+    if (p->est->filtered && sigma > 0) {
+        if (mcp_gaussian_blur(num, c->blend->filter_window, sigma, &num_f) ||
+            mcp_gaussian_blur(den, c->blend->filter_window, sigma, &den_f))
+            die("oracle blend");
+    }
+    const mcp_image *a = num_f ? num_f : num, *b = den_f ? den_f : den;
+    double sum = 0;
+    for (size_t i = 0; i < np; i++)
+        for (int k = 0; k < 3; k++) {
+            double q = b->data[i * 3 + k];
+            double rho = q > 0 ? fmin(1, fmax(0, a->data[i * 3 + k] / q)) : 1;
+            double nv = n->data[i * n->channels + k];
+            double e = nv + rho * (d->data[i * d->channels + k] - nv) -
+                       ref->data[i * ref->channels + k];
+            sum += e * e;
+        }
+    c->oracle_mse[p->index] = sum / (3.0 * (double)np);
+    mcp_image_free(num);
+    mcp_image_free(den);
+    mcp_image_free(num_f);
+    mcp_image_free(den_f);
+    return 0;
+}
+
+/* The curve blend on the same sequence: where it is <= min(noisy, denoised), its MSE
+ * over the noisy image's at the last member, and both it and the window-optimal
+ * oracle over min(noisy, denoised). */
 static void
 run_blend(const run_settings *rs, const mcp_series *series, const mcp_denoiser *den,
           const mcp_image *reference, const char *label, tally *tl)
@@ -404,27 +463,36 @@ run_blend(const run_settings *rs, const mcp_series *series, const mcp_denoiser *
     mcp_blend_series_options bo = mcp_blend_series_defaults();
     bo.flip = 0;
     bo.blend.fit = rs->fit;
+    oracle_ctx oc = {reference, &bo.blend, calloc((size_t)series->count, sizeof(double))};
+    if (!oc.oracle_mse)
+        die("out of memory");
     mcp_blend_series_result *br = NULL;
-    if (mcp_blend_series(series, den, reference, &bo, NULL, NULL, &br))
+    if (mcp_blend_series(series, den, reference, &bo, oracle_point, &oc, &br))
         die("blend series");
     int good = 0;
+    double curves_sum = 0, oracle_sum = 0;
     for (int i = 0; i < br->count; i++) {
         const mcp_blend_errors *e = br->rows[i].err;
         double lo = fmin(e[MCP_BLEND_NOISY].mse, e[MCP_BLEND_DENOISED].mse);
         good += e[MCP_BLEND_CURVES].mse <= lo;
+        curves_sum += e[MCP_BLEND_CURVES].mse / lo;
+        oracle_sum += oc.oracle_mse[i] / lo;
     }
     const mcp_blend_errors *last = br->rows[br->count - 1].err;
     double final = last[MCP_BLEND_CURVES].mse / last[MCP_BLEND_NOISY].mse;
     tl->blend_points += br->count;
     tl->blend_good += good;
     tl->blend_cases++;
+    tl->curves_over_min += curves_sum;
+    tl->oracle_over_min += oracle_sum;
     if (final > tl->worst_final)
         tl->worst_final = final;
-    printf("| %s blend | | <= min(noisy, denoised) at %d of %d; last: %.3fx "
-           "noisy MSE (denoised %.3fx) | | |\n",
-           label, good, br->count, final,
+    printf("| %s blend | | <= min(noisy, denoised) at %d of %d; over min: %.3fx on average "
+           "(window-optimal oracle %.3fx); last: %.3fx noisy MSE (denoised %.3fx) | | |\n",
+           label, good, br->count, curves_sum / br->count, oracle_sum / br->count, final,
            last[MCP_BLEND_DENOISED].mse / last[MCP_BLEND_NOISY].mse);
     mcp_blend_series_result_free(br);
+    free(oc.oracle_mse);
 }
 
 static int
@@ -576,8 +644,9 @@ main(int argc, char **argv)
         free_scene(&s);
     }
     printf("\n## Summary over the scenes\n\n| source | denoiser | agree | early stops | "
-           "never stops | blend <= min | blend at the end (worst) |\n"
-           "|---|---|---|---|---|---|---|\n");
+           "never stops | blend <= min | blend / min (mean) | oracle / min (mean) | "
+           "blend at the end (worst) |\n"
+           "|---|---|---|---|---|---|---|---|---|\n");
     for (int k = 0; k < n_srcs; k++)
         for (int di = 0; di < n_dens; di++) {
             const tally *t = &total[src_ids[k]][di];
@@ -587,10 +656,12 @@ main(int argc, char **argv)
                    dens[di], t->agree, t->cases, 100.0 * t->agree / t->cases, t->early,
                    t->never_est);
             if (t->blend_cases)
-                printf(" %d of %d (%.0f%%) | %.3fx |\n", t->blend_good, t->blend_points,
-                       100.0 * t->blend_good / t->blend_points, t->worst_final);
+                printf(" %d of %d (%.0f%%) | %.3fx | %.3fx | %.3fx |\n", t->blend_good,
+                       t->blend_points, 100.0 * t->blend_good / t->blend_points,
+                       t->curves_over_min / t->blend_points,
+                       t->oracle_over_min / t->blend_points, t->worst_final);
             else
-                printf(" | |\n");
+                printf(" | | | |\n");
         }
     rmdir(tmp);
     return 0;

@@ -23,13 +23,13 @@ bench_uniform(uint64_t *s)
     return (double)((z ^ (z >> 31)) >> 11) / 9007199254740992.0;
 }
 
-/* A side x side R,G,B image; exits with a message on failure. */
+/* A w x h R,G,B image; exits with a message on failure. */
 static inline mcp_image *
-bench_rgb(int side)
+bench_rgb(int w, int h)
 {
     static const char *const names[] = {"R", "G", "B"};
     mcp_image *img = NULL;
-    if (mcp_image_new(side, side, 3, names, &img)) {
+    if (mcp_image_new(w, h, 3, names, &img)) {
         fprintf(stderr, "bench: %s\n", mcp_error_message());
         exit(1);
     }
@@ -39,15 +39,15 @@ bench_rgb(int side)
 /* Albedo cells of 16 px, a smooth light, noise of 20 % with its variance given, and
  * the normals of two planes. */
 static inline void
-bench_render_like(int side, mcp_image **color, mcp_image **albedo, mcp_image **normal,
+bench_render_like(int w, int h, mcp_image **color, mcp_image **albedo, mcp_image **normal,
                   mcp_image **variance)
 {
-    *color = bench_rgb(side), *albedo = bench_rgb(side), *normal = bench_rgb(side),
-    *variance = bench_rgb(side);
+    *color = bench_rgb(w, h), *albedo = bench_rgb(w, h), *normal = bench_rgb(w, h),
+    *variance = bench_rgb(w, h);
     uint64_t st = 1;
-    for (int y = 0; y < side; y++)
-        for (int x = 0; x < side; x++) {
-            size_t i = ((size_t)y * side + x) * 3;
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            size_t i = ((size_t)y * w + x) * 3;
             int cell = (x / 16 + y / 16) % 3;
             for (int c = 0; c < 3; c++) {
                 double a = 0.2 + 0.3 * ((cell + c) % 3),
@@ -55,7 +55,7 @@ bench_render_like(int side, mcp_image **color, mcp_image **albedo, mcp_image **n
                 double sd = 0.2 * t, u = bench_uniform(&st) + bench_uniform(&st) +
                                          bench_uniform(&st) - 1.5;
                 (*albedo)->data[i + c] = (float)a;
-                (*normal)->data[i + c] = (float)(c == (y < side / 3 ? 2 : 1));
+                (*normal)->data[i + c] = (float)(c == (y < h / 3 ? 2 : 1));
                 (*variance)->data[i + c] = (float)(sd * sd);
                 (*color)->data[i + c] = (float)(t + 2 * sd * u);
             }
@@ -68,13 +68,13 @@ bench_render_like(int side, mcp_image **color, mcp_image **albedo, mcp_image **n
 /* MAX_TANGENTS colour tangents of the noise's scale (uniform, times the standard
  * deviation), as images tan[k] and tangents t[k]. */
 static inline void
-bench_tangents(int side, const mcp_image *variance, mcp_image **tan,
+bench_tangents(int w, int h, const mcp_image *variance, mcp_image **tan,
                mcp_denoise_tangent *t)
 {
     for (int k = 0; k < MAX_TANGENTS; k++) {
-        tan[k] = bench_rgb(side);
+        tan[k] = bench_rgb(w, h);
         uint64_t st = 100 + k;
-        for (size_t i = 0; i < (size_t)side * side * 3; i++)
+        for (size_t i = 0; i < (size_t)w * h * 3; i++)
             tan[k]->data[i] =
                 (float)((bench_uniform(&st) - 0.5) * sqrt(variance->data[i]));
         t[k] = (mcp_denoise_tangent){tan[k], NULL, NULL};
@@ -89,10 +89,10 @@ typedef struct {
 } bench_scene;
 
 static inline void
-bench_scene_make(int side, bench_scene *s)
+bench_scene_make(int w, int h, bench_scene *s)
 {
-    bench_render_like(side, &s->color, &s->albedo, &s->normal, &s->variance);
-    bench_tangents(side, s->variance, s->tan, s->t);
+    bench_render_like(w, h, &s->color, &s->albedo, &s->normal, &s->variance);
+    bench_tangents(w, h, s->variance, s->tan, s->t);
     s->in = (mcp_denoise_input){s->color, s->albedo, s->normal, s->variance};
 }
 

@@ -5,6 +5,7 @@
  * Activations are planar (CHW) float32; each is freed as soon as it is consumed.
  * Convolutions are direct loops, register-blocked over output channels and columns,
  * OpenMP over (image, row, column chunk). */
+#define _DEFAULT_SOURCE /* madvise, MADV_HUGEPAGE */
 #include "unet_internal.h"
 #include "internal.h"
 
@@ -14,6 +15,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
 #ifdef _OPENMP
 #include <omp.h>
 #endif
@@ -223,12 +225,46 @@ plane(const batch *b, int k, int i)
     return b->d + ((size_t)k * b->c + i) * plane_size(b);
 }
 
+/* Memory for activations and scratch. Large blocks are aligned to 2 MB and marked for
+ * transparent huge pages where the system offers them on request: the first touch of
+ * a fresh block then faults once per 2 MB instead of once per 4 kB page, which
+ * otherwise costs as much as the convolutions on some virtual machines. */
+#define HUGE_PAGE ((size_t)2 << 20)
+
+void *
+mcp__unet_alloc(size_t bytes)
+{
+    if (bytes < 2 * HUGE_PAGE)
+        return mcp_malloc(bytes);
+    void *p = NULL;
+    const size_t rounded = (bytes + HUGE_PAGE - 1) / HUGE_PAGE * HUGE_PAGE;
+    if (!(p = aligned_alloc(HUGE_PAGE, rounded))) {
+        mcp_error("out of memory (%zu bytes)", bytes);
+        return NULL;
+    }
+#ifdef MADV_HUGEPAGE
+    (void)madvise(p, rounded, MADV_HUGEPAGE); /* a hint: without it, 4 kB pages */
+#endif
+    return p;
+}
+
+/* A batch whose every value the caller writes (no zeroing pass over fresh memory). */
+static int
+batch_new_unset(batch *b, int n, int c, int h, int w)
+{
+    *b = (batch){n, c, h, w, NULL};
+    b->d = mcp__unet_alloc((size_t)n * c * h * w * sizeof(float));
+    return b->d ? 0 : -1;
+}
+
+/* A batch of zeros. */
 static int
 batch_new(batch *b, int n, int c, int h, int w)
 {
-    *b = (batch){n, c, h, w, NULL};
-    b->d = mcp_calloc((size_t)n * c * h * w, sizeof(float));
-    return b->d ? 0 : -1;
+    if (batch_new_unset(b, n, c, h, w))
+        return -1;
+    memset(b->d, 0, (size_t)n * c * h * w * sizeof(float));
+    return 0;
 }
 
 static void
@@ -451,9 +487,17 @@ conv_task(const conv_layer *l, int k, int y, int c, float *rows)
     }
 }
 
+int
+mcp__unet_fast(void)
+{
+    const char *fixed = getenv("MCPOST_UNET_FIXED");
+    return !(fixed && *fixed && strcmp(fixed, "0"));
+}
+
 /* out = conv3x3(concat(a, b)) (b may be NULL), the bias on image 0 only; then, with
  * relu, every image is zeroed where image 0's pre-activation is not > 0 (as it is
- * stored: the primal is done first, and its ReLU is > 0 where it was). */
+ * stored: the primal is done first, and its ReLU is > 0 where it was). Winograd
+ * products by default (unet_winograd.c), else the direct loops below. */
 static int
 conv_into(const mcp__unet_conv *L, const batch *a, const batch *b, int relu, batch *out)
 {
@@ -461,6 +505,16 @@ conv_into(const mcp__unet_conv *L, const batch *a, const batch *b, int relu, bat
     const int cin = a->c + cb, cout = L->cout, nob = (cout + OB - 1) / OB;
     if (cin != L->cin)
         return mcp_error("unet: layer of %d input channels given %d", L->cin, cin);
+    if (mcp__unet_fast()) {
+        if (batch_new_unset(out, n, cout, h, w))
+            return -1;
+        if (mcp__unet_conv_winograd(L->weight, L->bias, cin, cout, a->d, a->c, 0,
+                                    b ? b->d : NULL, n, h, w, relu, out->d)) {
+            batch_free(out);
+            return -1;
+        }
+        return 0;
+    }
     int xb;
     const conv_block_fn kernel = choose_kernel(&xb);
     /* tasks of xc columns (the last may have fewer), nxc of them per row */
@@ -535,28 +589,45 @@ conv_replace(const mcp__unet_conv *L, batch *t, batch *skip, int relu)
 }
 
 /* 2x2 max pool of every image at image 0's arg-max (the first maximum in scan order,
- * as PyTorch picks it). */
+ * as PyTorch picks it). Per output row, the primal's choice (0 .. 3: top left, top
+ * right, bottom left, bottom right) is found first, in selects that vectorise; every
+ * image then takes its value there. */
 static int
 maxpool_into(const batch *in, batch *out)
 {
+    enum { RUN = 256 }; /* outputs per run of choices */
     const int h2 = in->h / 2, w2 = in->w / 2, w = in->w;
-    if (batch_new(out, in->n, in->c, h2, w2))
+    if (batch_new_unset(out, in->n, in->c, h2, w2))
         return -1;
 #pragma omp parallel for collapse(2) schedule(static)
     for (int i = 0; i < in->c; i++)
-        for (int y = 0; y < h2; y++) {
-            const float *src0 = plane(in, 0, i);
-            for (int x = 0; x < w2; x++) {
-                const size_t at = (size_t)2 * y * w + 2 * x;
-                const size_t cand[4] = {at, at + 1, at + w, at + w + 1};
-                size_t best = cand[0];
-                for (int c = 1; c < 4; c++)
-                    if (src0[cand[c]] > src0[best])
-                        best = cand[c];
-                for (int k = 0; k < in->n; k++)
-                    plane(out, k, i)[(size_t)y * w2 + x] = plane(in, k, i)[best];
+        for (int y = 0; y < h2; y++)
+            for (int x0 = 0; x0 < w2; x0 += RUN) {
+                const int xn = w2 - x0 < RUN ? w2 - x0 : RUN;
+                const float *restrict top = plane(in, 0, i) + (size_t)2 * y * w + 2 * x0;
+                const float *restrict bottom = top + w;
+                float *restrict dst0 = plane(out, 0, i) + (size_t)y * w2 + x0;
+                unsigned char pick[RUN];
+#pragma omp simd
+                for (int x = 0; x < xn; x++) {
+                    const float a = top[2 * x], b = top[2 * x + 1], c = bottom[2 * x],
+                                d = bottom[2 * x + 1];
+                    /* the first maximum: a later one wins only when strictly greater */
+                    float m = a;
+                    unsigned char k = 0;
+                    k = b > m ? 1 : k, m = b > m ? b : m;
+                    k = c > m ? 2 : k, m = c > m ? c : m;
+                    k = d > m ? 3 : k, m = d > m ? d : m;
+                    pick[x] = k;
+                    dst0[x] = m;
+                }
+                for (int t = 1; t < in->n; t++) {
+                    const float *restrict src = plane(in, t, i) + (size_t)2 * y * w + 2 * x0;
+                    float *restrict dst = plane(out, t, i) + (size_t)y * w2 + x0;
+                    for (int x = 0; x < xn; x++)
+                        dst[x] = src[(pick[x] >> 1) * (size_t)w + 2 * x + (pick[x] & 1)];
+                }
             }
-        }
     return 0;
 }
 
@@ -585,7 +656,7 @@ static int
 upsample_replace(batch *t)
 {
     batch out;
-    if (batch_new(&out, t->n, t->c, 2 * t->h, 2 * t->w))
+    if (batch_new_unset(&out, t->n, t->c, 2 * t->h, 2 * t->w))
         return -1;
     const int planes = t->n * t->c, h = t->h, w = t->w;
 #pragma omp parallel for collapse(2) schedule(static)
@@ -597,6 +668,31 @@ upsample_replace(batch *t)
                 dst[x] = src[x / 2];
         }
     batch_free(t);
+    *t = out;
+    return 0;
+}
+
+/* *t = conv(concat(upsample(*t), skip)), the decoder's step; *t and the skip are
+ * freed. The Winograd path reads *t upsampled as it transforms it, so the upsampled
+ * batch (as large as the skip's level, and more channels) is never stored. */
+static int
+conv_up_replace(const mcp__unet_conv *L, batch *t, batch *skip, int relu)
+{
+    if (!mcp__unet_fast())
+        return upsample_replace(t) || conv_replace(L, t, skip, relu);
+    const int n = t->n, h = skip->h, w = skip->w, cin = t->c + skip->c;
+    if (cin != L->cin || 2 * t->h != h || 2 * t->w != w)
+        return mcp_error("unet: layer of %d input channels given %d", L->cin, cin);
+    batch out;
+    if (batch_new_unset(&out, n, L->cout, h, w))
+        return -1;
+    if (mcp__unet_conv_winograd(L->weight, L->bias, cin, L->cout, t->d, t->c, 1, skip->d,
+                                n, h, w, relu, out.d)) {
+        batch_free(&out);
+        return -1;
+    }
+    batch_free(t);
+    batch_free(skip);
     *t = out;
     return 0;
 }
@@ -616,13 +712,10 @@ network(const mcp__unet *net, batch *x, batch *t)
              pool_replace(t) || conv_replace(&c[E5A], t, NULL, 1) ||
              conv_replace(&c[E5B], t, NULL, 1) ||
              /* decoder: concat(upsampled, skip) */
-             upsample_replace(t) || conv_replace(&c[D4A], t, &p3, 1) ||
-             conv_replace(&c[D4B], t, NULL, 1) ||
-             upsample_replace(t) || conv_replace(&c[D3A], t, &p2, 1) ||
-             conv_replace(&c[D3B], t, NULL, 1) ||
-             upsample_replace(t) || conv_replace(&c[D2A], t, &p1, 1) ||
-             conv_replace(&c[D2B], t, NULL, 1) ||
-             upsample_replace(t) || conv_replace(&c[D1A], t, x, 1) ||
+             conv_up_replace(&c[D4A], t, &p3, 1) || conv_replace(&c[D4B], t, NULL, 1) ||
+             conv_up_replace(&c[D3A], t, &p2, 1) || conv_replace(&c[D3B], t, NULL, 1) ||
+             conv_up_replace(&c[D2A], t, &p1, 1) || conv_replace(&c[D2B], t, NULL, 1) ||
+             conv_up_replace(&c[D1A], t, x, 1) ||
              conv_replace(&c[D1B], t, NULL, 1) ||
              /* no ReLU on the last conv (1.4); the output clamp makes 2.x's ReLU moot */
              conv_replace(&c[D0], t, NULL, 0);
@@ -829,13 +922,17 @@ paste(const mcp_image *src, int ox, int oy, int x0, int y0, int w, int h, mcp_im
                (size_t)w * 3 * sizeof(float));
 }
 
-/* Tiles of tile x tile pixels, each run on a crop that extends it by TILE_OVERLAP on
- * every side (within the image). The crops start on multiples of 16, so that the
- * pooling grid is the whole image's, and the overlap covers the network's receptive
- * field (a radius of ~110 pixels: 3x3 convolutions and 2x2 pooling over five levels):
- * a tile's pixels then see what they see in the whole image, and the result is the
- * same bits (the tests compare). */
-#define TILE_OVERLAP 128
+/* Tiles of tile x tile pixels, each run on a crop that extends it by about
+ * TILE_OVERLAP on every side (within the image). The crops start on multiples of 32,
+ * so that the pooling grid is the whole image's down to 1/16 and the Winograd tiles
+ * (2 x 2 outputs) at 1/16 fall where they fall in the whole image; the overlap covers
+ * what a pixel's value depends on, rounding included: the receptive field of the 3x3
+ * convolutions and 2x2 pooling over five levels has a radius of ~110 pixels, and a
+ * Winograd tile's outputs each depend on all 4 x 4 of its inputs (a radius of 2 per
+ * convolution instead of 1), ~190 in all. A tile's pixels then see what they see in the
+ * whole image, and the result is the same bits (the tests compare). */
+#define TILE_OVERLAP 192
+#define TILE_ALIGN 32
 
 static int
 run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
@@ -853,8 +950,8 @@ run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
     if (!views || !res || (n && !tt)) rc = -1;
     for (int ty = 0; ty < H && !rc; ty += tile)
         for (int tx = 0; tx < W && !rc; tx += tile) {
-            const int x0 = tx > TILE_OVERLAP ? tx - TILE_OVERLAP : 0;
-            const int y0 = ty > TILE_OVERLAP ? ty - TILE_OVERLAP : 0;
+            const int x0 = tx > TILE_OVERLAP ? (tx - TILE_OVERLAP) / TILE_ALIGN * TILE_ALIGN : 0;
+            const int y0 = ty > TILE_OVERLAP ? (ty - TILE_OVERLAP) / TILE_ALIGN * TILE_ALIGN : 0;
             const int x1 = tx + tile + TILE_OVERLAP < W ? tx + tile + TILE_OVERLAP : W;
             const int y1 = ty + tile + TILE_OVERLAP < H ? ty + tile + TILE_OVERLAP : H;
             /* views of the crop: the inputs (k = 0), then each tangent's parts */
@@ -916,9 +1013,9 @@ mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_imag
     if (have > 0 && batch_bytes(W, H, 1 + n) > have) {
         /* the largest tile whose crop fits in half of what is available (the
          * results and the inputs take the rest) */
+        const int margin = 2 * TILE_OVERLAP + TILE_ALIGN; /* a crop's largest extension */
         for (tile = (W > H ? W : H) / 16 * 16; tile >= 16; tile -= 16)
-            if (batch_bytes(tile + 2 * TILE_OVERLAP, tile + 2 * TILE_OVERLAP, 1 + n) <=
-                have / 2)
+            if (batch_bytes(tile + margin, tile + margin, 1 + n) <= have / 2)
                 break;
         if (tile < 16)
             return mcp_error("unet: a %dx%d image with %d tangent(s) does not fit even in "

@@ -90,6 +90,45 @@ int mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color,
                         double input_scale, const mcp_denoise_tangent *t, int n, int tile,
                         mcp_image **out, mcp_image **jt);
 
+/* One 3x3 convolution (padding 1) of n images as Winograd F(2x2, 3x3)
+ * (unet_winograd.c): the input of image k is channels 0 .. ca - 1 at a + (k * ca + i)
+ * * h * w (with a_up: planes of h/2 x w/2 read upsampled, nearest 2x; h and w even) and
+ * channels ca .. cin - 1 at b + (k * (cin - ca) + i - ca) * h * w (the skip; NULL when
+ * ca == cin); out (n * cout planes of h x w) receives conv + bias for image 0 and conv
+ * alone for the tangents, with relu image 0's ReLU and its mask on the others. weight
+ * is [cout][cin][3][3]. */
+int mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cout,
+                            const float *a, int ca, int a_up, const float *b, int n, int h,
+                            int w, int relu, float *out);
+/* 1 when the convolutions run as Winograd products (the default), 0 for the direct
+ * loops whose bits are the same on every x86-64 (MCPOST_UNET_FIXED set to anything but
+ * 0). */
+int mcp__unet_fast(void);
+
+/* malloc for activations and scratch (unet.c): large blocks on huge pages where the
+ * system allows; free() releases. NULL (with the error set) when out of memory. */
+void *mcp__unet_alloc(size_t bytes);
+
+/* The Winograd products' kernel (unet_gemm.c): C = A B in blocks of mr rows x nr
+ * columns, picked for the CPU (or by MCPOST_UNET_KERNEL). */
+typedef struct mcp__unet_gemm {
+    const char *name; /* avx512, avx2 (with FMA), sse2 or generic */
+    int mr, nr;
+    void (*kernel)(void);
+} mcp__unet_gemm;
+
+void mcp__unet_gemm_choose(mcp__unet_gemm *g);
+/* 1 when the CPU can run the kernel of that name. */
+int mcp__unet_gemm_has(const char *name);
+/* A (m x kn, row-major) packed as g's kernel reads it: ceil(m / mr) blocks of kn x mr,
+ * zero rows past m. */
+void mcp__unet_gemm_pack(const mcp__unet_gemm *g, const float *a, int m, int kn,
+                         float *packed);
+/* C = A B for packed A; B is kn x n (row stride ldb), C ceil(m / mr) * mr x n (row
+ * stride ldc); n must be a multiple of g->nr, and ldb, ldc at least n. */
+void mcp__unet_gemm_run(const mcp__unet_gemm *g, const float *packed, int m, int kn,
+                        const float *b, size_t ldb, int n, float *c, size_t ldc);
+
 /* OIDN's PU transfer function (normalised: x = PU(y)/PU(65504)) and its inverse. */
 float mcp__pu_forward(float y);
 float mcp__pu_inverse(float x);

@@ -669,16 +669,20 @@ test_jvp_batched(void **state)
     }
     omp_set_num_threads(saved);
 #endif
-    /* the baseline convolution kernel gives the same bits as the AVX2 one (where the
-     * CPU has it; else this compares the baseline with itself) */
+    /* in the fixed-bit mode, the baseline convolution kernel gives the same bits as
+     * the AVX2 one (where the CPU has it; else this compares the baseline with itself) */
+    char *saved_fixed = env_save("MCPOST_UNET_FIXED");
+    setenv("MCPOST_UNET_FIXED", "1", 1);
+    mcp_image *avx2[3] = {NULL, NULL, NULL}, *base[3] = {NULL, NULL, NULL};
+    assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, 0.0, t, 3, NULL, avx2), 0);
     char *saved_flag = env_save("MCPOST_NO_AVX2");
     setenv("MCPOST_NO_AVX2", "1", 1);
-    mcp_image *base[3] = {NULL, NULL, NULL};
     assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, 0.0, t, 3, NULL, base), 0);
     env_restore("MCPOST_NO_AVX2", saved_flag);
+    env_restore("MCPOST_UNET_FIXED", saved_fixed);
     for (int k = 0; k < 3; k++) {
-        assert_memory_equal(all[k]->data, base[k]->data, bytes);
-        mcp_image_free(base[k]);
+        assert_memory_equal(avx2[k]->data, base[k]->data, bytes);
+        mcp_image_free(avx2[k]), mcp_image_free(base[k]);
     }
     for (int k = 0; k < 3; k++) {
         mcp_image_free(all[k]);
@@ -1118,6 +1122,127 @@ test_real_weights_jvp(void **state)
     mcp_denoiser_free(d);
 }
 
+/* The Winograd convolutions with every matrix kernel the CPU has (avx512, avx2 with
+ * FMA, sse2, generic; MCPOST_UNET_KERNEL picks one), against the double reference:
+ * the output and the JVP (central differences of the double network) within relative
+ * L2 1e-5 (issue 14), and against the fixed-bit direct loops (MCPOST_UNET_FIXED): the
+ * output within the same bound, the JVP within 1e-3 (below). One random network at 9 input channels on an odd-sized image
+ * (partial Winograd tiles at the right and bottom of every level), and, when they are
+ * there, the official weights on a 64x64 crop of the Cornell fixture. */
+static double
+rel_l2(const mcp_image *a, const mcp_image *b)
+{
+    double num = 0, den = 0;
+    for (size_t i = 0; i < (size_t)a->width * a->height * 3; i++) {
+        const double d = (double)a->data[i] - b->data[i];
+        num += d * d, den += (double)b->data[i] * b->data[i];
+    }
+    return sqrt(num / den);
+}
+
+static void
+check_kernels(const mcp__unet *net, const rnet *n, const mcp_image *col,
+              const mcp_image *alb, const mcp_image *nrm, const mcp_denoise_tangent *t,
+              double scale, const char *what)
+{
+    const int w = col->width, h = col->height;
+    const double step = 1e-6;
+    double *ref = ref_forward_along(n, col, alb, nrm, scale, NULL, 0.0);
+    double *fp = ref_forward_along(n, col, alb, nrm, scale, t, step),
+           *fm = ref_forward_along(n, col, alb, nrm, scale, t, -step);
+    for (size_t i = 0; i < (size_t)3 * w * h; i++)
+        fp[i] = (fp[i] - fm[i]) / (2 * step);
+    char *saved_kernel = env_save("MCPOST_UNET_KERNEL"), *saved_fixed = env_save("MCPOST_UNET_FIXED");
+    setenv("MCPOST_UNET_FIXED", "1", 1);
+    mcp_image *fixed = NULL, *fixed_jt = NULL;
+    assert_int_equal(mcp__unet_run(net, col, alb, nrm, scale, t, 1, &fixed, &fixed_jt), 0);
+    setenv("MCPOST_UNET_FIXED", "0", 1);
+    static const char *const names[] = {"avx512", "avx2", "sse2", "generic"};
+    int tried = 0;
+    for (int i = 0; i < 4; i++) {
+        if (!mcp__unet_gemm_has(names[i])) {
+            print_message("%s: kernel %s: not on this CPU\n", what, names[i]);
+            continue;
+        }
+        setenv("MCPOST_UNET_KERNEL", names[i], 1);
+        mcp__unet_gemm g;
+        mcp__unet_gemm_choose(&g);
+        assert_string_equal(g.name, names[i]);
+        mcp_image *out = NULL, *jt = NULL;
+        assert_int_equal(mcp__unet_run(net, col, alb, nrm, scale, t, 1, &out, &jt), 0);
+        const double e_out = rel_err(out, ref), e_jvp = rel_err(jt, fp);
+        const double d_out = rel_l2(out, fixed), d_jvp = rel_l2(jt, fixed_jt);
+        print_message("%s: kernel %s: relative L2 against double: output %.2e, JVP %.2e; "
+                      "against the fixed-bit loops: %.2e, %.2e\n",
+                      what, names[i], e_out, e_jvp, d_out, d_jvp);
+        assert_true(e_out < 1e-5 && e_jvp < 1e-5);
+        /* the JVP is piecewise: where a pre-activation or a pooling choice lies within
+         * rounding of a tie, the two paths may take other sides (both right for their
+         * primal), so the bound against the fixed-bit path is issue 6's 1e-3 */
+        assert_true(d_out < 1e-5 && d_jvp < 1e-3);
+        mcp_image_free(out), mcp_image_free(jt);
+        tried++;
+    }
+    assert_true(tried >= 1); /* generic, at least */
+    print_message("%s: fixed-bit loops against double: output %.2e, JVP %.2e\n", what,
+           rel_err(fixed, ref), rel_err(fixed_jt, fp));
+    env_restore("MCPOST_UNET_KERNEL", saved_kernel);
+    env_restore("MCPOST_UNET_FIXED", saved_fixed);
+    mcp_image_free(fixed), mcp_image_free(fixed_jt);
+    free(ref), free(fp), free(fm);
+}
+
+static void
+test_fast_kernels(void **state)
+{
+    (void)state;
+    rnet n;
+    mcp__unet *net = tiny_net(&n, 9, 313);
+    const int w = 45, h = 35; /* padded to 48 x 48: odd sizes from 1/2 down */
+    inputs in = make_inputs(w, h, 77);
+    mcp_image *tc = mcp_test_random(w, h, 3, -1.0f, 1.0f, 78, NULL),
+              *ta = mcp_test_random(w, h, 3, -0.5f, 0.5f, 79, NULL);
+    mcp_denoise_tangent t = {tc, ta, NULL};
+    check_kernels(net, &n, in.col, in.alb, in.nrm, &t, 0.7, "random net 45x35");
+    mcp_image_free(tc), mcp_image_free(ta);
+    free_inputs(&in);
+    mcp__unet_free(net);
+    rnet_free(&n);
+
+    const char *path = weights_path();
+    SKIP_WITHOUT_WEIGHTS(path);
+    mcp__unet *real = NULL;
+    assert_int_equal(mcp__unet_load(path, &real), 0);
+    rnet rn;
+    rnet_of_unet(real, &rn);
+    mcp_dump *dump = NULL;
+    mcp_image *ref = NULL;
+    int ri[3];
+    read_fixture("cornell", 16, &dump, &ref, ri);
+    const int cw = 64, ch = 64, x0 = 40, y0 = 48;
+    mcp_image *col = NULL, *alb = NULL, *nrm = NULL, *var = NULL;
+    assert_int_equal(mcp_image_crop_view(dump->color, x0, y0, cw, ch, &col) ||
+                         mcp_image_crop_view(dump->albedo, x0, y0, cw, ch, &alb) ||
+                         mcp_image_crop_view(dump->normal, x0, y0, cw, ch, &nrm) ||
+                         mcp_image_crop_view(dump->var_of_mean, x0, y0, cw, ch, &var),
+                     0);
+    mcp_image *probe = mcp_test_constant(cw, ch, 3, 0.0f, NULL);
+    uint64_t st = 99;
+    for (int y = 0; y < ch; y++)
+        for (int x = 0; x < cw; x++)
+            for (int k = 0; k < 3; k++)
+                mcp_image_px(probe, x, y)[k] = (float)(mcp_test_rand_normal(&st) *
+                                                       sqrt(mcp_image_px(var, x, y)[k]));
+    mcp_denoise_tangent pt = {probe, NULL, NULL};
+    check_kernels(real, &rn, col, alb, nrm, &pt, mcp__unet_autoexposure(col, 0),
+                  "official weights, cornell 64x64");
+    mcp_image_free(probe);
+    mcp_image_free(col), mcp_image_free(alb), mcp_image_free(nrm), mcp_image_free(var);
+    mcp_image_free(ref);
+    mcp_dump_free(dump);
+    mcp__unet_free(real); /* rn borrows its tensors */
+}
+
 /* max |a - b| over R, G, B, a read from a file (EXR keeps channels sorted: B, G, R). */
 static double
 max_diff_rgb(const mcp_image *a, const mcp_image *b)
@@ -1217,6 +1342,7 @@ main(void)
         cmocka_unit_test(test_shipped_weights_checksum),
         cmocka_unit_test(test_real_weights_fixtures),
         cmocka_unit_test(test_real_weights_jvp),
+        cmocka_unit_test(test_fast_kernels),
         cmocka_unit_test(test_real_weights_cli_and_job),
     };
     return cmocka_run_group_tests_name("estimate/unet", tests, NULL, NULL);

@@ -1,0 +1,215 @@
+/* unet_gemm.c: the matrix products of the U-Net's Winograd convolutions
+ * (unet_winograd.c), C = A B with A the packed transformed weights (cout x cin) and B
+ * the transformed inputs (cin x tiles), in register-blocked kernels picked at run time
+ * for the CPU: AVX-512F, AVX2 + FMA, or SSE2 (every x86-64; a portable loop
+ * elsewhere). MCPOST_UNET_KERNEL=avx512|avx2|sse2|generic picks one the CPU has (the
+ * tests compare them).
+ *
+ * Every element of C is one sum over k in order, started at 0, one rounding per step
+ * (an FMA, or a multiply and an add without FMA), whatever the element's place in the
+ * block, the number of columns or the thread count: a tile's outputs do not depend on
+ * where the image was cut (unet.c's tiles give the same bits as the whole image).
+ * Blocks never have remainders: the caller pads A to a multiple of mr rows and B and C
+ * to a multiple of nr columns. */
+#include "unet_internal.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+/* C (mr x nr at c, row stride ldc) = sum over k < kn of a[k * mr + r] * b[k * ldb + j] */
+typedef void (*gemm_kernel_fn)(const float *restrict a, const float *restrict b,
+                               size_t ldb, int kn, float *restrict c, size_t ldc);
+
+/* The portable kernel: 4 rows x 8 columns, a multiply and an add per step. */
+#define GENERIC_MR 4
+#define GENERIC_NR 8
+
+static void
+kernel_generic(const float *restrict a, const float *restrict b, size_t ldb, int kn,
+               float *restrict c, size_t ldc)
+{
+    float acc[GENERIC_MR][GENERIC_NR] = {{0}};
+    for (int k = 0; k < kn; k++) {
+        const float *restrict bk = b + (size_t)k * ldb, *restrict ak = a + (size_t)k * GENERIC_MR;
+        for (int r = 0; r < GENERIC_MR; r++)
+            for (int j = 0; j < GENERIC_NR; j++) {
+                const float p = ak[r] * bk[j];
+                acc[r][j] = acc[r][j] + p;
+            }
+    }
+    for (int r = 0; r < GENERIC_MR; r++)
+        memcpy(c + (size_t)r * ldc, acc[r], sizeof acc[r]);
+}
+
+#if defined(__GNUC__) && defined(__x86_64__)
+#include <immintrin.h>
+
+/* SSE2: 4 rows x 8 columns (two 4-float vectors), multiply then add. */
+#define SSE2_MR 4
+#define SSE2_NR 8
+
+static void
+kernel_sse2(const float *restrict a, const float *restrict b, size_t ldb, int kn,
+            float *restrict c, size_t ldc)
+{
+    __m128 c00 = _mm_setzero_ps(), c01 = c00, c10 = c00, c11 = c00;
+    __m128 c20 = c00, c21 = c00, c30 = c00, c31 = c00;
+    for (int k = 0; k < kn; k++, a += SSE2_MR) {
+        const float *bk = b + (size_t)k * ldb;
+        const __m128 b0 = _mm_loadu_ps(bk), b1 = _mm_loadu_ps(bk + 4);
+        __m128 x = _mm_set1_ps(a[0]);
+        c00 = _mm_add_ps(c00, _mm_mul_ps(x, b0)), c01 = _mm_add_ps(c01, _mm_mul_ps(x, b1));
+        x = _mm_set1_ps(a[1]);
+        c10 = _mm_add_ps(c10, _mm_mul_ps(x, b0)), c11 = _mm_add_ps(c11, _mm_mul_ps(x, b1));
+        x = _mm_set1_ps(a[2]);
+        c20 = _mm_add_ps(c20, _mm_mul_ps(x, b0)), c21 = _mm_add_ps(c21, _mm_mul_ps(x, b1));
+        x = _mm_set1_ps(a[3]);
+        c30 = _mm_add_ps(c30, _mm_mul_ps(x, b0)), c31 = _mm_add_ps(c31, _mm_mul_ps(x, b1));
+    }
+    _mm_storeu_ps(c, c00), _mm_storeu_ps(c + 4, c01);
+    _mm_storeu_ps(c + ldc, c10), _mm_storeu_ps(c + ldc + 4, c11);
+    _mm_storeu_ps(c + 2 * ldc, c20), _mm_storeu_ps(c + 2 * ldc + 4, c21);
+    _mm_storeu_ps(c + 3 * ldc, c30), _mm_storeu_ps(c + 3 * ldc + 4, c31);
+}
+
+/* AVX2 + FMA: 4 rows x 24 columns (three 8-float vectors): 12 accumulators, three
+ * loads and four broadcasts per 12 FMAs, within the 16 registers. */
+#define AVX2_MR 4
+#define AVX2_NR 24
+
+__attribute__((target("avx2,fma"))) static void
+kernel_avx2(const float *restrict a, const float *restrict b, size_t ldb, int kn,
+            float *restrict c, size_t ldc)
+{
+    __m256 c00 = _mm256_setzero_ps(), c01 = c00, c02 = c00, c10 = c00, c11 = c00, c12 = c00;
+    __m256 c20 = c00, c21 = c00, c22 = c00, c30 = c00, c31 = c00, c32 = c00;
+    for (int k = 0; k < kn; k++, a += AVX2_MR) {
+        const float *bk = b + (size_t)k * ldb;
+        const __m256 b0 = _mm256_loadu_ps(bk), b1 = _mm256_loadu_ps(bk + 8),
+                     b2 = _mm256_loadu_ps(bk + 16);
+        __m256 x = _mm256_broadcast_ss(a);
+        c00 = _mm256_fmadd_ps(x, b0, c00), c01 = _mm256_fmadd_ps(x, b1, c01);
+        c02 = _mm256_fmadd_ps(x, b2, c02);
+        x = _mm256_broadcast_ss(a + 1);
+        c10 = _mm256_fmadd_ps(x, b0, c10), c11 = _mm256_fmadd_ps(x, b1, c11);
+        c12 = _mm256_fmadd_ps(x, b2, c12);
+        x = _mm256_broadcast_ss(a + 2);
+        c20 = _mm256_fmadd_ps(x, b0, c20), c21 = _mm256_fmadd_ps(x, b1, c21);
+        c22 = _mm256_fmadd_ps(x, b2, c22);
+        x = _mm256_broadcast_ss(a + 3);
+        c30 = _mm256_fmadd_ps(x, b0, c30), c31 = _mm256_fmadd_ps(x, b1, c31);
+        c32 = _mm256_fmadd_ps(x, b2, c32);
+    }
+    _mm256_storeu_ps(c, c00), _mm256_storeu_ps(c + 8, c01), _mm256_storeu_ps(c + 16, c02);
+    c += ldc;
+    _mm256_storeu_ps(c, c10), _mm256_storeu_ps(c + 8, c11), _mm256_storeu_ps(c + 16, c12);
+    c += ldc;
+    _mm256_storeu_ps(c, c20), _mm256_storeu_ps(c + 8, c21), _mm256_storeu_ps(c + 16, c22);
+    c += ldc;
+    _mm256_storeu_ps(c, c30), _mm256_storeu_ps(c + 8, c31), _mm256_storeu_ps(c + 16, c32);
+}
+
+/* AVX-512F: 8 rows x 32 columns (two 16-float vectors): 16 accumulators, two loads and
+ * eight broadcasts per 16 FMAs. */
+#define AVX512_MR 8
+#define AVX512_NR 32
+
+__attribute__((target("avx512f"))) static void
+kernel_avx512(const float *restrict a, const float *restrict b, size_t ldb, int kn,
+              float *restrict c, size_t ldc)
+{
+    __m512 acc[AVX512_MR][2];
+    for (int r = 0; r < AVX512_MR; r++)
+        acc[r][0] = acc[r][1] = _mm512_setzero_ps();
+    for (int k = 0; k < kn; k++, a += AVX512_MR) {
+        const float *bk = b + (size_t)k * ldb;
+        const __m512 b0 = _mm512_loadu_ps(bk), b1 = _mm512_loadu_ps(bk + 16);
+#pragma GCC unroll 8
+        for (int r = 0; r < AVX512_MR; r++) {
+            const __m512 x = _mm512_set1_ps(a[r]);
+            acc[r][0] = _mm512_fmadd_ps(x, b0, acc[r][0]);
+            acc[r][1] = _mm512_fmadd_ps(x, b1, acc[r][1]);
+        }
+    }
+    for (int r = 0; r < AVX512_MR; r++) {
+        _mm512_storeu_ps(c + (size_t)r * ldc, acc[r][0]);
+        _mm512_storeu_ps(c + (size_t)r * ldc + 16, acc[r][1]);
+    }
+}
+#endif
+
+typedef struct kernel_entry {
+    const char *name;
+    gemm_kernel_fn fn;
+    int mr, nr;
+} kernel_entry;
+
+static const kernel_entry kernels[] = {
+#if defined(__GNUC__) && defined(__x86_64__)
+    {"avx512", kernel_avx512, AVX512_MR, AVX512_NR},
+    {"avx2", kernel_avx2, AVX2_MR, AVX2_NR},
+    {"sse2", kernel_sse2, SSE2_MR, SSE2_NR},
+#endif
+    {"generic", kernel_generic, GENERIC_MR, GENERIC_NR},
+};
+#define N_KERNELS ((int)(sizeof kernels / sizeof kernels[0]))
+
+int
+mcp__unet_gemm_has(const char *name)
+{
+#if defined(__GNUC__) && defined(__x86_64__)
+    if (!strcmp(name, "avx512")) return __builtin_cpu_supports("avx512f");
+    if (!strcmp(name, "avx2"))
+        return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+    if (!strcmp(name, "sse2")) return 1;
+#endif
+    return !strcmp(name, "generic");
+}
+
+/* The best kernel the CPU has, or MCPOST_UNET_KERNEL's where the CPU has it. */
+static const kernel_entry *
+choose(void)
+{
+    const char *want = getenv("MCPOST_UNET_KERNEL");
+    for (int i = 0; i < N_KERNELS; i++)
+        if ((!want || !*want || !strcmp(want, kernels[i].name)) &&
+            mcp__unet_gemm_has(kernels[i].name))
+            return &kernels[i];
+    return &kernels[N_KERNELS - 1];
+}
+
+void
+mcp__unet_gemm_choose(mcp__unet_gemm *g)
+{
+    const kernel_entry *k = choose();
+    g->name = k->name;
+    g->mr = k->mr;
+    g->nr = k->nr;
+    g->kernel = (void (*)(void))k->fn;
+}
+
+void
+mcp__unet_gemm_pack(const mcp__unet_gemm *g, const float *a, int m, int kn, float *packed)
+{
+    const int mr = g->mr, blocks = (m + mr - 1) / mr;
+    for (int ob = 0; ob < blocks; ob++)
+        for (int k = 0; k < kn; k++)
+            for (int r = 0; r < mr; r++) {
+                const int o = ob * mr + r;
+                packed[((size_t)ob * kn + k) * mr + r] = o < m ? a[(size_t)o * kn + k] : 0.0f;
+            }
+}
+
+void
+mcp__unet_gemm_run(const mcp__unet_gemm *g, const float *packed, int m, int kn,
+                   const float *b, size_t ldb, int n, float *c, size_t ldc)
+{
+    const gemm_kernel_fn kernel = (gemm_kernel_fn)g->kernel;
+    const int mr = g->mr, nr = g->nr, blocks = (m + mr - 1) / mr;
+    /* column blocks outside: a block of B (kn x nr) stays in the L1 cache across the
+     * row blocks, and all of A in L2 */
+    for (int j = 0; j < n; j += nr)
+        for (int ob = 0; ob < blocks; ob++)
+            kernel(packed + (size_t)ob * kn * mr, b + j, ldb, kn,
+                   c + (size_t)ob * mr * ldc + j, ldc);
+}

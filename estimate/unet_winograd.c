@@ -1,0 +1,335 @@
+/* unet_winograd.c: the U-Net's 3x3 convolutions as Winograd F(2x2, 3x3) (Lavin &
+ * Gray 2016): each 2x2 block of outputs from its 4x4 block of inputs with 16
+ * multiplies per input channel instead of 36, so 2.25 times fewer multiply-adds than
+ * the direct loops of unet.c. Per 2x2 tile and input channel the inputs are
+ * transformed, V = B^T d B; per tile element e (of 16) the channels are mixed by one
+ * matrix product, M_e = U_e V_e, with U_e the element of the transformed weights
+ * G g G^T (computed once per layer, in double); the outputs are Y = A^T M A.
+ *
+ * The matrix products run in unet_gemm.c's kernels, picked for the CPU at run time
+ * (AVX-512, AVX2 + FMA, SSE2). OpenMP runs independent tasks, each CHUNK consecutive
+ * tiles (in row-major order) of one image, and each output is one fixed sequence of
+ * operations whatever the thread count, the chunk or where the image was cut. A task's
+ * transformed inputs and products live in a per-thread scratch of 16 x (cin + cout) x
+ * CHUNK floats (under 2 MB), not in image-sized buffers, so that peak memory stays
+ * that of the direct loops. The bits differ from the direct
+ * loops' (other order, FMA); unet.c keeps those as the fixed-bit mode.
+ *
+ * Accuracy: the transforms have coefficients 0, +-1/2 and +-1, so they add a few float
+ * roundings per value; tests/estimate/test_unet.c bounds the whole network's relative
+ * L2 error against a double reference. */
+#include "unet_internal.h"
+#include "internal.h"
+
+#include <stdlib.h>
+#include <string.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+/* The transforms are additions only, so wider vectors give the same bits: AVX2
+ * where the CPU has it (picked at load time). */
+#if defined(__GNUC__) && defined(__x86_64__)
+#define TRANSFORM_KERNEL __attribute__((target_clones("avx2", "default")))
+#else
+#define TRANSFORM_KERNEL
+#endif
+
+/* Tiles per task: small enough that a task's transformed inputs and products (16 x
+ * (cin + cout) x CHUNK floats) stay in the L2 cache, large enough for whole kernel
+ * blocks (bench_unet measured 64 to 768). */
+#ifndef CHUNK
+#define CHUNK 128
+#endif
+/* U[e][o][i] = (G g_oi G^T)[e], G = [1 0 0; 1/2 1/2 1/2; 1/2 -1/2 1/2; 0 0 1]. */
+static void
+transform_weights(const float *weight, int cin, int cout, float *u)
+{
+    static const double G[4][3] = {{1, 0, 0}, {0.5, 0.5, 0.5}, {0.5, -0.5, 0.5}, {0, 0, 1}};
+    const size_t plane = (size_t)cout * cin;
+#pragma omp parallel for schedule(static)
+    for (int o = 0; o < cout; o++)
+        for (int i = 0; i < cin; i++) {
+            const float *g = weight + ((size_t)o * cin + i) * 9;
+            double t[4][3]; /* G g */
+            for (int a = 0; a < 4; a++)
+                for (int c = 0; c < 3; c++)
+                    t[a][c] = G[a][0] * g[c] + G[a][1] * g[3 + c] + G[a][2] * g[6 + c];
+            for (int a = 0; a < 4; a++)
+                for (int b = 0; b < 4; b++) {
+                    double s = G[b][0] * t[a][0] + G[b][1] * t[a][1] + G[b][2] * t[a][2];
+                    u[(size_t)(a * 4 + b) * plane + (size_t)o * cin + i] = (float)s;
+                }
+        }
+}
+
+/* Input row y of one channel for tiles [tx0, tx0 + nt), split by column parity:
+ * even[j] = column 2 (tx0 + j) - 1 and odd[j] = column 2 (tx0 + j), for j <= nt (zeros
+ * outside the image, and for rows outside it), so that tile tx0 + j's four columns are
+ * even[j], odd[j], even[j + 1], odd[j + 1]. */
+static inline void
+load_row(const float *src, int h, int w, int y, int tx0, int nt, float *restrict even,
+         float *restrict odd)
+{
+    if (y < 0 || y >= h) {
+        memset(even, 0, (size_t)(nt + 1) * sizeof(float));
+        memset(odd, 0, (size_t)(nt + 1) * sizeof(float));
+        return;
+    }
+    const float *r = src + (size_t)y * w + 2 * tx0; /* column 2 tx0 */
+    const int x0 = 2 * tx0;
+    /* j in [lo, hi): both columns inside the image */
+    const int lo = x0 > 0 ? 0 : 1, hi = (w - x0 + 1) / 2 < nt + 1 ? (w - x0 + 1) / 2 : nt + 1;
+#pragma omp simd
+    for (int j = lo; j < hi; j++) {
+        even[j] = r[2 * j - 1];
+        odd[j] = r[2 * j];
+    }
+    if (lo) {
+        even[0] = 0.0f;
+        odd[0] = r[0];
+    }
+    for (int j = hi > lo ? hi : lo; j <= nt; j++) { /* at and past the right edge */
+        even[j] = x0 + 2 * j - 1 < w ? r[2 * j - 1] : 0.0f;
+        odd[j] = x0 + 2 * j < w ? r[2 * j] : 0.0f;
+    }
+}
+
+/* The same for a source at half resolution that the convolution reads upsampled
+ * (nearest, 2x: the decoder's upsampling, never stored): row y is the source's row y / 2
+ * and columns 2 j - 1, 2 j its columns j - 1, j. */
+static inline void
+load_row_up(const float *src, int h, int w, int y, int tx0, int nt, float *restrict even,
+            float *restrict odd)
+{
+    const int lw = w / 2; /* h and w are even (the network pads to 16) */
+    if (y < 0 || y >= h) {
+        memset(even, 0, (size_t)(nt + 1) * sizeof(float));
+        memset(odd, 0, (size_t)(nt + 1) * sizeof(float));
+        return;
+    }
+    const float *r = src + (size_t)(y / 2) * lw;
+    /* j in [lo, hi): both source columns tx0 + j - 1 and tx0 + j inside */
+    const int lo = tx0 > 0 ? 0 : 1, hi = lw - tx0 < nt + 1 ? lw - tx0 : nt + 1;
+#pragma omp simd
+    for (int j = lo; j < hi; j++) {
+        even[j] = r[tx0 + j - 1];
+        odd[j] = r[tx0 + j];
+    }
+    if (lo) {
+        even[0] = 0.0f;
+        odd[0] = r[0];
+    }
+    for (int j = hi > lo ? hi : lo; j <= nt; j++) { /* at and past the right edge */
+        even[j] = tx0 + j - 1 < lw ? r[tx0 + j - 1] : 0.0f;
+        odd[j] = 0.0f;
+    }
+}
+
+/* Asks for the input rows that the tiles [t0, t0 + nt) (row-major) of one channel
+ * read, one cache line at a time: the rows of a task are short runs in planes far
+ * apart, too short for the hardware prefetcher to find. */
+static void
+prefetch_rows(const float *src, int up, int h, int w, size_t t0, int nt, int tw)
+{
+    const int ty0 = (int)(t0 / tw), ty1 = (int)((t0 + nt - 1) / tw);
+    int x0 = ty0 == ty1 ? 2 * (int)(t0 % tw) - 1 : 0;
+    int x1 = ty0 == ty1 ? 2 * (int)((t0 + nt - 1) % tw) + 2 : w - 1;
+    int y0 = 2 * ty0 - 1, y1 = 2 * ty1 + 2;
+    if (up) /* the source's own rows and columns */
+        h /= 2, w /= 2, x0 /= 2, x1 /= 2, y0 /= 2, y1 /= 2;
+    for (int y = y0 > 0 ? y0 : 0; y <= y1 && y < h; y++) {
+        const float *r = src + (size_t)y * w;
+        for (int x = x0 > 0 ? x0 : 0; x <= x1 && x < w; x += 16)
+            __builtin_prefetch(r + x);
+    }
+}
+
+/* V for tiles [tx0, tx0 + nt) of tile row ty, one channel: v[e * ld + j], e = 4 a + b,
+ * from the input rows 2 ty - 1 .. 2 ty + 2 (of the source upsampled, with up), V = B^T d B with
+ * B^T = [1 0 -1 0; 0 1 1 0; 0 -1 1 0; 0 1 0 -1]: first B^T down the rows (whole rows
+ * at a time), then B across each tile. rows holds 8 (nt + 1) floats. */
+TRANSFORM_KERNEL static void
+transform_input(const float *src, int up, int h, int w, int ty, int tx0, int nt,
+                float *rows, float *v, size_t ld)
+{
+    const size_t n = (size_t)nt + 1;
+    float *e[4], *o[4];
+    for (int r = 0; r < 4; r++) {
+        e[r] = rows + 2 * r * n;
+        o[r] = e[r] + n;
+        if (up)
+            load_row_up(src, h, w, 2 * ty - 1 + r, tx0, nt, e[r], o[r]);
+        else
+            load_row(src, h, w, 2 * ty - 1 + r, tx0, nt, e[r], o[r]);
+    }
+    /* rows of B^T d, in place: q0 = d0 - d2, q1 = d1 + d2, q2 = d2 - d1, q3 = d1 - d3 */
+    for (int p = 0; p < 2; p++) {
+        float *restrict d0 = p ? o[0] : e[0], *restrict d1 = p ? o[1] : e[1];
+        float *restrict d2 = p ? o[2] : e[2], *restrict d3 = p ? o[3] : e[3];
+#pragma omp simd
+        for (size_t j = 0; j < n; j++) {
+            const float x0 = d0[j], x1 = d1[j], x2 = d2[j], x3 = d3[j];
+            d0[j] = x0 - x2;
+            d1[j] = x1 + x2;
+            d2[j] = x2 - x1;
+            d3[j] = x1 - x3;
+        }
+    }
+    /* times B across each tile: columns c0 = e[j], c1 = o[j], c2 = e[j + 1],
+     * c3 = o[j + 1] */
+    for (int a = 0; a < 4; a++) {
+        const float *restrict qe = e[a], *restrict qo = o[a];
+        float *restrict v0 = v + (size_t)(4 * a) * ld, *restrict v1 = v0 + ld;
+        float *restrict v2 = v1 + ld, *restrict v3 = v2 + ld;
+#pragma omp simd
+        for (int j = 0; j < nt; j++) {
+            const float c0 = qe[j], c1 = qo[j], c2 = qe[j + 1], c3 = qo[j + 1];
+            v0[j] = c0 - c2;
+            v1[j] = c1 + c2;
+            v2[j] = c2 - c1;
+            v3[j] = c1 - c3;
+        }
+    }
+}
+
+/* Y = A^T m A for tiles [tx0, tx0 + nt) of tile row ty, channel o (m[e * ld + j]),
+ * A^T = [1 1 1 0; 0 1 -1 -1]; then the bias (image 0), and the ReLU (image 0) or image
+ * 0's mask (tangents), stored where inside the image. row holds 4 nt floats. */
+TRANSFORM_KERNEL static void
+transform_output(const float *m, size_t ld, int ty, int tx0, int nt, int h, int w,
+                 float bias, int relu, int primal, const float *p0, float *dst, float *row)
+{
+    float *restrict y0 = row, *restrict y1 = row + 2 * nt;
+    const float *restrict m0 = m, *restrict m1 = m + 4 * ld, *restrict m2 = m + 8 * ld,
+                          *restrict m3 = m + 12 * ld;
+#pragma omp simd
+    for (int j = 0; j < nt; j++) {
+        /* A^T down the columns of the tile, then across */
+        const float s00 = m0[j] + m1[j] + m2[j], s10 = m1[j] - m2[j] - m3[j];
+        const float s01 = m0[ld + j] + m1[ld + j] + m2[ld + j];
+        const float s11 = m1[ld + j] - m2[ld + j] - m3[ld + j];
+        const float s02 = m0[2 * ld + j] + m1[2 * ld + j] + m2[2 * ld + j];
+        const float s12 = m1[2 * ld + j] - m2[2 * ld + j] - m3[2 * ld + j];
+        const float s03 = m0[3 * ld + j] + m1[3 * ld + j] + m2[3 * ld + j];
+        const float s13 = m1[3 * ld + j] - m2[3 * ld + j] - m3[3 * ld + j];
+        y0[2 * j] = s00 + s01 + s02 + bias;
+        y0[2 * j + 1] = s01 - s02 - s03 + bias;
+        y1[2 * j] = s10 + s11 + s12 + bias;
+        y1[2 * j + 1] = s11 - s12 - s13 + bias;
+    }
+    const int x0 = 2 * tx0, xn = w - x0 < 2 * nt ? w - x0 : 2 * nt;
+    for (int a = 0; a < 2 && 2 * ty + a < h; a++) {
+        const size_t at = (size_t)(2 * ty + a) * w + x0;
+        float *restrict y = a ? y1 : y0;
+        const float *restrict mask = p0 + at;
+        if (relu && primal) {
+#pragma omp simd
+            for (int x = 0; x < xn; x++) {
+                const float t = y[x];
+                y[x] = t > 0.0f ? t : 0.0f;
+            }
+        } else if (relu) {
+#pragma omp simd
+            for (int x = 0; x < xn; x++) {
+                const float t = y[x];
+                y[x] = mask[x] > 0.0f ? t : 0.0f;
+            }
+        }
+        memcpy(dst + at, y, (size_t)xn * sizeof(float));
+    }
+}
+
+int
+mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cout,
+                        const float *a, int ca, int a_up, const float *b, int n, int h,
+                        int w, int relu, float *out)
+{
+    mcp__unet_gemm g;
+    mcp__unet_gemm_choose(&g);
+    const int cb = cin - ca, th = (h + 1) / 2, tw = (w + 1) / 2;
+    /* tasks: the image's tiles in row-major order, CHUNK at a time (the last fewer) */
+    const size_t n_tiles = (size_t)th * tw;
+    const int chunks = (int)((n_tiles + CHUNK - 1) / CHUNK);
+    const int mp = (cout + g.mr - 1) / g.mr * g.mr;       /* rows of the products */
+    const size_t ld_max = (CHUNK + g.nr - 1) / g.nr * g.nr; /* padded to whole blocks */
+    const size_t hw = (size_t)h * w, plane = (size_t)cout * cin;
+    const size_t a_hw = a_up ? hw / 4 : hw; /* a's planes */
+    int n_threads = 1;
+#ifdef _OPENMP
+    n_threads = omp_get_max_threads();
+#endif
+    /* per thread: V (16 x cin x ld), M (16 x mp x ld), rows for the transforms */
+    const size_t per_thread = 16 * ld_max * ((size_t)cin + mp) + 8 * ((size_t)CHUNK + 1);
+    float *u = mcp_malloc(16 * plane * sizeof(float));
+    float *packed = u ? mcp_malloc((size_t)16 * mp * cin * sizeof(float)) : NULL;
+    float *scratch =
+        packed ? mcp__unet_alloc((size_t)n_threads * per_thread * sizeof(float)) : NULL;
+    if (!scratch) {
+        free(u), free(packed);
+        return -1;
+    }
+    transform_weights(weight, cin, cout, u);
+    for (int e = 0; e < 16; e++)
+        mcp__unet_gemm_pack(&g, u + e * plane, cout, cin, packed + (size_t)e * mp * cin);
+#pragma omp parallel num_threads(n_threads)
+    {
+        int thread = 0;
+#ifdef _OPENMP
+        thread = omp_get_thread_num();
+#endif
+        float *v = scratch + (size_t)thread * per_thread;
+        float *m = v + 16 * ld_max * (size_t)cin;
+        float *rows = m + 16 * ld_max * (size_t)mp;
+        /* the primal's tasks, then (after the loop's barrier) the tangents': they take
+         * its ReLU mask */
+        for (int pass = 0; pass < 2; pass++) {
+            const int k0 = pass == 0 ? 0 : 1, k1 = pass == 0 ? 1 : n;
+#pragma omp for collapse(2) schedule(dynamic, 1)
+            for (int k = k0; k < k1; k++)
+                for (int c = 0; c < chunks; c++) {
+                    const size_t t0 = (size_t)c * CHUNK;
+                    const int nt = (int)(n_tiles - t0 < CHUNK ? n_tiles - t0 : CHUNK);
+                    const int ld = (nt + g.nr - 1) / g.nr * g.nr;
+                    const size_t ldv = (size_t)cin * ld, ldm = (size_t)mp * ld;
+                    for (int i = 0; i < cin; i++) {
+                        const int up = i < ca && a_up;
+                        const float *src = i < ca ? a + ((size_t)k * ca + i) * a_hw
+                                                  : b + ((size_t)k * cb + (i - ca)) * hw;
+                        if (i + 1 < cin) /* the next channel's rows, while this one runs */
+                            prefetch_rows(i + 1 < ca ? a + ((size_t)k * ca + i + 1) * a_hw
+                                                     : b + ((size_t)k * cb + (i + 1 - ca)) * hw,
+                                          i + 1 < ca && a_up, h, w, t0, nt, tw);
+                        /* the chunk's pieces of tile rows */
+                        for (int j = 0; j < nt;) {
+                            const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
+                            const int len = tw - tx < nt - j ? tw - tx : nt - j;
+                            transform_input(src, up, h, w, ty, tx, len, rows,
+                                            v + (size_t)i * ld + j, ldv);
+                            j += len;
+                        }
+                        /* the padding columns: zeros, so that the padded outputs are
+                         * finite (they are not stored) */
+                        for (int e = 0; e < 16; e++)
+                            memset(v + e * ldv + (size_t)i * ld + nt, 0,
+                                   (size_t)(ld - nt) * sizeof(float));
+                    }
+                    for (int e = 0; e < 16; e++)
+                        mcp__unet_gemm_run(&g, packed + (size_t)e * mp * cin, cout, cin,
+                                           v + e * ldv, ld, ld, m + e * ldm, ld);
+                    for (int o = 0; o < cout; o++)
+                        for (int j = 0; j < nt;) {
+                            const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
+                            const int len = tw - tx < nt - j ? tw - tx : nt - j;
+                            transform_output(m + (size_t)o * ld + j, ldm, ty, tx, len, h, w,
+                                             k == 0 ? bias[o] : 0.0f, relu, k == 0,
+                                             out + (size_t)o * hw,
+                                             out + ((size_t)k * cout + o) * hw, rows);
+                            j += len;
+                        }
+                }
+        }
+    }
+    free(u), free(packed), free(scratch);
+    return 0;
+}
