@@ -30,7 +30,8 @@ kernel_generic(const float *restrict a, const float *restrict b, size_t ldb, int
 {
     float acc[GENERIC_MR][GENERIC_NR] = {{0}};
     for (int k = 0; k < kn; k++) {
-        const float *restrict bk = b + (size_t)k * ldb, *restrict ak = a + (size_t)k * GENERIC_MR;
+        const float *restrict bk = b + (size_t)k * ldb, *restrict ak =
+                                                            a + (size_t)k * GENERIC_MR;
         for (int r = 0; r < GENERIC_MR; r++)
             for (int j = 0; j < GENERIC_NR; j++) {
                 const float p = ak[r] * bk[j];
@@ -58,13 +59,17 @@ kernel_sse2(const float *restrict a, const float *restrict b, size_t ldb, int kn
         const float *bk = b + (size_t)k * ldb;
         const __m128 b0 = _mm_loadu_ps(bk), b1 = _mm_loadu_ps(bk + 4);
         __m128 x = _mm_set1_ps(a[0]);
-        c00 = _mm_add_ps(c00, _mm_mul_ps(x, b0)), c01 = _mm_add_ps(c01, _mm_mul_ps(x, b1));
+        c00 = _mm_add_ps(c00, _mm_mul_ps(x, b0)),
+        c01 = _mm_add_ps(c01, _mm_mul_ps(x, b1));
         x = _mm_set1_ps(a[1]);
-        c10 = _mm_add_ps(c10, _mm_mul_ps(x, b0)), c11 = _mm_add_ps(c11, _mm_mul_ps(x, b1));
+        c10 = _mm_add_ps(c10, _mm_mul_ps(x, b0)),
+        c11 = _mm_add_ps(c11, _mm_mul_ps(x, b1));
         x = _mm_set1_ps(a[2]);
-        c20 = _mm_add_ps(c20, _mm_mul_ps(x, b0)), c21 = _mm_add_ps(c21, _mm_mul_ps(x, b1));
+        c20 = _mm_add_ps(c20, _mm_mul_ps(x, b0)),
+        c21 = _mm_add_ps(c21, _mm_mul_ps(x, b1));
         x = _mm_set1_ps(a[3]);
-        c30 = _mm_add_ps(c30, _mm_mul_ps(x, b0)), c31 = _mm_add_ps(c31, _mm_mul_ps(x, b1));
+        c30 = _mm_add_ps(c30, _mm_mul_ps(x, b0)),
+        c31 = _mm_add_ps(c31, _mm_mul_ps(x, b1));
     }
     _mm_storeu_ps(c, c00), _mm_storeu_ps(c + 4, c01);
     _mm_storeu_ps(c + ldc, c10), _mm_storeu_ps(c + ldc + 4, c11);
@@ -81,7 +86,8 @@ __attribute__((target("avx2,fma"))) static void
 kernel_avx2(const float *restrict a, const float *restrict b, size_t ldb, int kn,
             float *restrict c, size_t ldc)
 {
-    __m256 c00 = _mm256_setzero_ps(), c01 = c00, c02 = c00, c10 = c00, c11 = c00, c12 = c00;
+    __m256 c00 = _mm256_setzero_ps(), c01 = c00, c02 = c00, c10 = c00, c11 = c00,
+           c12 = c00;
     __m256 c20 = c00, c21 = c00, c22 = c00, c30 = c00, c31 = c00, c32 = c00;
     for (int k = 0; k < kn; k++, a += AVX2_MR) {
         const float *bk = b + (size_t)k * ldb;
@@ -109,31 +115,34 @@ kernel_avx2(const float *restrict a, const float *restrict b, size_t ldb, int kn
     _mm256_storeu_ps(c, c30), _mm256_storeu_ps(c + 8, c31), _mm256_storeu_ps(c + 16, c32);
 }
 
-/* AVX-512F: 8 rows x 32 columns (two 16-float vectors): 16 accumulators, two loads and
- * eight broadcasts per 16 FMAs. */
+/* AVX-512F: 8 rows x 48 columns (three 16-float vectors): 24 accumulators, three loads
+ * and eight broadcasts per 24 FMAs. */
 #define AVX512_MR 8
-#define AVX512_NR 32
+#define AVX512_NR 48
 
 __attribute__((target("avx512f"))) static void
 kernel_avx512(const float *restrict a, const float *restrict b, size_t ldb, int kn,
               float *restrict c, size_t ldc)
 {
-    __m512 acc[AVX512_MR][2];
+    __m512 acc[AVX512_MR][3];
     for (int r = 0; r < AVX512_MR; r++)
-        acc[r][0] = acc[r][1] = _mm512_setzero_ps();
+        acc[r][0] = acc[r][1] = acc[r][2] = _mm512_setzero_ps();
     for (int k = 0; k < kn; k++, a += AVX512_MR) {
         const float *bk = b + (size_t)k * ldb;
-        const __m512 b0 = _mm512_loadu_ps(bk), b1 = _mm512_loadu_ps(bk + 16);
+        const __m512 b0 = _mm512_loadu_ps(bk), b1 = _mm512_loadu_ps(bk + 16),
+                     b2 = _mm512_loadu_ps(bk + 32);
 #pragma GCC unroll 8
         for (int r = 0; r < AVX512_MR; r++) {
             const __m512 x = _mm512_set1_ps(a[r]);
             acc[r][0] = _mm512_fmadd_ps(x, b0, acc[r][0]);
             acc[r][1] = _mm512_fmadd_ps(x, b1, acc[r][1]);
+            acc[r][2] = _mm512_fmadd_ps(x, b2, acc[r][2]);
         }
     }
     for (int r = 0; r < AVX512_MR; r++) {
         _mm512_storeu_ps(c + (size_t)r * ldc, acc[r][0]);
         _mm512_storeu_ps(c + (size_t)r * ldc + 16, acc[r][1]);
+        _mm512_storeu_ps(c + (size_t)r * ldc + 32, acc[r][2]);
     }
 }
 #endif
@@ -196,7 +205,8 @@ mcp__unet_gemm_pack(const mcp__unet_gemm *g, const float *a, int m, int kn, floa
         for (int k = 0; k < kn; k++)
             for (int r = 0; r < mr; r++) {
                 const int o = ob * mr + r;
-                packed[((size_t)ob * kn + k) * mr + r] = o < m ? a[(size_t)o * kn + k] : 0.0f;
+                packed[((size_t)ob * kn + k) * mr + r] =
+                    o < m ? a[(size_t)o * kn + k] : 0.0f;
             }
 }
 

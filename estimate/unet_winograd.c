@@ -7,13 +7,13 @@
  * G g G^T (computed once per layer, in double); the outputs are Y = A^T M A.
  *
  * The matrix products run in unet_gemm.c's kernels, picked for the CPU at run time
- * (AVX-512, AVX2 + FMA, SSE2). OpenMP runs independent tasks, each CHUNK consecutive
- * tiles (in row-major order) of one image, and each output is one fixed sequence of
- * operations whatever the thread count, the chunk or where the image was cut. A task's
- * transformed inputs and products live in a per-thread scratch of 16 x (cin + cout) x
- * CHUNK floats (under 2 MB), not in image-sized buffers, so that peak memory stays
- * that of the direct loops. The bits differ from the direct
- * loops' (other order, FMA); unet.c keeps those as the fixed-bit mode.
+ * (AVX-512, AVX2 + FMA, SSE2). OpenMP runs independent tasks, each about CHUNK
+ * consecutive tiles (in row-major order) of every image of the batch, the primal first,
+ * and each output is one fixed sequence of operations whatever the thread count, the
+ * chunk or where the image was cut. A task's transformed inputs and products live in a
+ * per-thread scratch of 16 x (cin + cout) x CHUNK floats (under 2 MB), not in
+ * image-sized buffers, so that peak memory stays below that of the direct loops. The bits differ from the direct loops' (other order,
+ * FMA); unet.c keeps those as the fixed-bit mode.
  *
  * Accuracy: the transforms have coefficients 0, +-1/2 and +-1, so they add a few float
  * roundings per value; tests/estimate/test_unet.c bounds the whole network's relative
@@ -45,7 +45,8 @@
 static void
 transform_weights(const float *weight, int cin, int cout, float *u)
 {
-    static const double G[4][3] = {{1, 0, 0}, {0.5, 0.5, 0.5}, {0.5, -0.5, 0.5}, {0, 0, 1}};
+    static const double G[4][3] = {
+        {1, 0, 0}, {0.5, 0.5, 0.5}, {0.5, -0.5, 0.5}, {0, 0, 1}};
     const size_t plane = (size_t)cout * cin;
 #pragma omp parallel for schedule(static)
     for (int o = 0; o < cout; o++)
@@ -79,7 +80,8 @@ load_row(const float *src, int h, int w, int y, int tx0, int nt, float *restrict
     const float *r = src + (size_t)y * w + 2 * tx0; /* column 2 tx0 */
     const int x0 = 2 * tx0;
     /* j in [lo, hi): both columns inside the image */
-    const int lo = x0 > 0 ? 0 : 1, hi = (w - x0 + 1) / 2 < nt + 1 ? (w - x0 + 1) / 2 : nt + 1;
+    const int lo = x0 > 0 ? 0 : 1,
+              hi = (w - x0 + 1) / 2 < nt + 1 ? (w - x0 + 1) / 2 : nt + 1;
 #pragma omp simd
     for (int j = lo; j < hi; j++) {
         even[j] = r[2 * j - 1];
@@ -146,9 +148,9 @@ prefetch_rows(const float *src, int up, int h, int w, size_t t0, int nt, int tw)
 }
 
 /* V for tiles [tx0, tx0 + nt) of tile row ty, one channel: v[e * ld + j], e = 4 a + b,
- * from the input rows 2 ty - 1 .. 2 ty + 2 (of the source upsampled, with up), V = B^T d B with
- * B^T = [1 0 -1 0; 0 1 1 0; 0 -1 1 0; 0 1 0 -1]: first B^T down the rows (whole rows
- * at a time), then B across each tile. rows holds 8 (nt + 1) floats. */
+ * from the input rows 2 ty - 1 .. 2 ty + 2 (of the source upsampled, with up), V = B^T d
+ * B with B^T = [1 0 -1 0; 0 1 1 0; 0 -1 1 0; 0 1 0 -1]: first B^T down the rows (whole
+ * rows at a time), then B across each tile. rows holds 8 (nt + 1) floats. */
 TRANSFORM_KERNEL static void
 transform_input(const float *src, int up, int h, int w, int ty, int tx0, int nt,
                 float *rows, float *v, size_t ld)
@@ -198,7 +200,8 @@ transform_input(const float *src, int up, int h, int w, int ty, int tx0, int nt,
  * 0's mask (tangents), stored where inside the image. row holds 4 nt floats. */
 TRANSFORM_KERNEL static void
 transform_output(const float *m, size_t ld, int ty, int tx0, int nt, int h, int w,
-                 float bias, int relu, int primal, const float *p0, float *dst, float *row)
+                 float bias, int relu, int primal, const float *p0, float *dst,
+                 float *row)
 {
     float *restrict y0 = row, *restrict y1 = row + 2 * nt;
     const float *restrict m0 = m, *restrict m1 = m + 4 * ld, *restrict m2 = m + 8 * ld,
@@ -248,11 +251,13 @@ mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cou
     mcp__unet_gemm g;
     mcp__unet_gemm_choose(&g);
     const int cb = cin - ca, th = (h + 1) / 2, tw = (w + 1) / 2;
-    /* tasks: the image's tiles in row-major order, CHUNK at a time (the last fewer) */
+    /* tasks: the image's tiles in row-major order, chunk at a time (the last fewer),
+     * chunk about CHUNK in whole column blocks of the kernel */
     const size_t n_tiles = (size_t)th * tw;
-    const int chunks = (int)((n_tiles + CHUNK - 1) / CHUNK);
-    const int mp = (cout + g.mr - 1) / g.mr * g.mr;       /* rows of the products */
-    const size_t ld_max = (CHUNK + g.nr - 1) / g.nr * g.nr; /* padded to whole blocks */
+    const int chunk = (CHUNK + g.nr / 2) / g.nr * g.nr;
+    const int chunks = (int)((n_tiles + chunk - 1) / chunk);
+    const int mp = (cout + g.mr - 1) / g.mr * g.mr; /* rows of the products */
+    const size_t ld_max = (size_t)chunk;            /* whole blocks */
     const size_t hw = (size_t)h * w, plane = (size_t)cout * cin;
     const size_t a_hw = a_up ? hw / 4 : hw; /* a's planes */
     int n_threads = 1;
@@ -260,7 +265,7 @@ mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cou
     n_threads = omp_get_max_threads();
 #endif
     /* per thread: V (16 x cin x ld), M (16 x mp x ld), rows for the transforms */
-    const size_t per_thread = 16 * ld_max * ((size_t)cin + mp) + 8 * ((size_t)CHUNK + 1);
+    const size_t per_thread = 16 * ld_max * ((size_t)cin + mp) + 8 * ((size_t)chunk + 1);
     float *u = mcp_malloc(16 * plane * sizeof(float));
     float *packed = u ? mcp_malloc((size_t)16 * mp * cin * sizeof(float)) : NULL;
     float *scratch =
@@ -281,54 +286,53 @@ mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cou
         float *v = scratch + (size_t)thread * per_thread;
         float *m = v + 16 * ld_max * (size_t)cin;
         float *rows = m + 16 * ld_max * (size_t)mp;
-        /* the primal's tasks, then (after the loop's barrier) the tangents': they take
-         * its ReLU mask */
-        for (int pass = 0; pass < 2; pass++) {
-            const int k0 = pass == 0 ? 0 : 1, k1 = pass == 0 ? 1 : n;
-#pragma omp for collapse(2) schedule(dynamic, 1)
-            for (int k = k0; k < k1; k++)
-                for (int c = 0; c < chunks; c++) {
-                    const size_t t0 = (size_t)c * CHUNK;
-                    const int nt = (int)(n_tiles - t0 < CHUNK ? n_tiles - t0 : CHUNK);
-                    const int ld = (nt + g.nr - 1) / g.nr * g.nr;
-                    const size_t ldv = (size_t)cin * ld, ldm = (size_t)mp * ld;
-                    for (int i = 0; i < cin; i++) {
-                        const int up = i < ca && a_up;
-                        const float *src = i < ca ? a + ((size_t)k * ca + i) * a_hw
-                                                  : b + ((size_t)k * cb + (i - ca)) * hw;
-                        if (i + 1 < cin) /* the next channel's rows, while this one runs */
-                            prefetch_rows(i + 1 < ca ? a + ((size_t)k * ca + i + 1) * a_hw
-                                                     : b + ((size_t)k * cb + (i + 1 - ca)) * hw,
-                                          i + 1 < ca && a_up, h, w, t0, nt, tw);
-                        /* the chunk's pieces of tile rows */
-                        for (int j = 0; j < nt;) {
-                            const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
-                            const int len = tw - tx < nt - j ? tw - tx : nt - j;
-                            transform_input(src, up, h, w, ty, tx, len, rows,
-                                            v + (size_t)i * ld + j, ldv);
-                            j += len;
-                        }
-                        /* the padding columns: zeros, so that the padded outputs are
-                         * finite (they are not stored) */
-                        for (int e = 0; e < 16; e++)
-                            memset(v + e * ldv + (size_t)i * ld + nt, 0,
-                                   (size_t)(ld - nt) * sizeof(float));
+        /* a task is one chunk of every image, the primal first: the tangents take its
+         * ReLU mask while it is still in the cache */
+#pragma omp for schedule(dynamic, 1)
+        for (int c = 0; c < chunks; c++)
+            for (int k = 0; k < n; k++) {
+                const size_t t0 = (size_t)c * chunk;
+                const int nt =
+                    (int)(n_tiles - t0 < (size_t)chunk ? n_tiles - t0 : (size_t)chunk);
+                const int ld = (nt + g.nr - 1) / g.nr * g.nr;
+                const size_t ldv = (size_t)cin * ld, ldm = (size_t)mp * ld;
+                for (int i = 0; i < cin; i++) {
+                    const int up = i < ca && a_up;
+                    const float *src = i < ca ? a + ((size_t)k * ca + i) * a_hw
+                                              : b + ((size_t)k * cb + (i - ca)) * hw;
+                    if (i + 1 < cin) /* the next channel's rows, while this one runs */
+                        prefetch_rows(i + 1 < ca
+                                          ? a + ((size_t)k * ca + i + 1) * a_hw
+                                          : b + ((size_t)k * cb + (i + 1 - ca)) * hw,
+                                      i + 1 < ca && a_up, h, w, t0, nt, tw);
+                    /* the chunk's pieces of tile rows */
+                    for (int j = 0; j < nt;) {
+                        const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
+                        const int len = tw - tx < nt - j ? tw - tx : nt - j;
+                        transform_input(src, up, h, w, ty, tx, len, rows,
+                                        v + (size_t)i * ld + j, ldv);
+                        j += len;
                     }
+                    /* the padding columns: zeros, so that the padded outputs are
+                     * finite (they are not stored) */
                     for (int e = 0; e < 16; e++)
-                        mcp__unet_gemm_run(&g, packed + (size_t)e * mp * cin, cout, cin,
-                                           v + e * ldv, ld, ld, m + e * ldm, ld);
-                    for (int o = 0; o < cout; o++)
-                        for (int j = 0; j < nt;) {
-                            const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
-                            const int len = tw - tx < nt - j ? tw - tx : nt - j;
-                            transform_output(m + (size_t)o * ld + j, ldm, ty, tx, len, h, w,
-                                             k == 0 ? bias[o] : 0.0f, relu, k == 0,
-                                             out + (size_t)o * hw,
-                                             out + ((size_t)k * cout + o) * hw, rows);
-                            j += len;
-                        }
+                        memset(v + e * ldv + (size_t)i * ld + nt, 0,
+                               (size_t)(ld - nt) * sizeof(float));
                 }
-        }
+                for (int e = 0; e < 16; e++)
+                    mcp__unet_gemm_run(&g, packed + (size_t)e * mp * cin, cout, cin,
+                                       v + e * ldv, ld, ld, m + e * ldm, ld);
+                for (int o = 0; o < cout; o++)
+                    for (int j = 0; j < nt;) {
+                        const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
+                        const int len = tw - tx < nt - j ? tw - tx : nt - j;
+                        transform_output(m + (size_t)o * ld + j, ldm, ty, tx, len, h, w,
+                                         k == 0 ? bias[o] : 0.0f, relu, k == 0,
+                                         out + (size_t)o * hw,
+                                         out + ((size_t)k * cout + o) * hw, rows);
+                        j += len;
+                    }
+            }
     }
     free(u), free(packed), free(scratch);
     return 0;
