@@ -1052,6 +1052,43 @@ rnet_of_unet(const mcp__unet *net, rnet *n)
     }
 }
 
+/* A 64x64 crop of the 16-spp Cornell fixture (views of its colour, albedo, normal and
+ * variance) and a Gaussian probe of the noise's scale on it, as SURE draws it. */
+typedef struct cornell_crop {
+    mcp_dump *dump;
+    mcp_image *ref, *col, *alb, *nrm, *var, *probe;
+} cornell_crop;
+
+static void
+cornell_crop_make(uint64_t seed, cornell_crop *c)
+{
+    int ri[3];
+    memset(c, 0, sizeof *c);
+    read_fixture("cornell", 16, &c->dump, &c->ref, ri);
+    const int w = 64, h = 64, x0 = 40, y0 = 48;
+    assert_int_equal(mcp_image_crop_view(c->dump->color, x0, y0, w, h, &c->col) ||
+                         mcp_image_crop_view(c->dump->albedo, x0, y0, w, h, &c->alb) ||
+                         mcp_image_crop_view(c->dump->normal, x0, y0, w, h, &c->nrm) ||
+                         mcp_image_crop_view(c->dump->var_of_mean, x0, y0, w, h, &c->var),
+                     0);
+    c->probe = mcp_test_constant(w, h, 3, 0.0f, NULL);
+    uint64_t st = seed;
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++)
+            for (int k = 0; k < 3; k++)
+                mcp_image_px(c->probe, x, y)[k] = (float)(mcp_test_rand_normal(&st) *
+                                                          sqrt(mcp_image_px(c->var, x, y)[k]));
+}
+
+static void
+cornell_crop_free(cornell_crop *c)
+{
+    mcp_image_free(c->probe);
+    mcp_image_free(c->col), mcp_image_free(c->alb), mcp_image_free(c->nrm);
+    mcp_image_free(c->var), mcp_image_free(c->ref);
+    mcp_dump_free(c->dump);
+}
+
 /* With the official weights on a real render, the exact JVP along a noise-scaled probe
  * (as SURE draws it) matches central differences of the network in double precision:
  * relative error < 1e-3 (issue 6). Differences of the float network itself do not get
@@ -1072,24 +1109,10 @@ test_real_weights_jvp(void **state)
     assert_int_equal(mcp__unet_load(path, &net), 0);
     rnet n;
     rnet_of_unet(net, &n);
-    mcp_dump *dump = NULL;
-    mcp_image *ref = NULL;
-    int ri[3];
-    read_fixture("cornell", 16, &dump, &ref, ri);
-    const int w = 64, h = 64, x0 = 40, y0 = 48;
-    mcp_image *col = NULL, *alb = NULL, *nrm = NULL, *var = NULL;
-    assert_int_equal(mcp_image_crop_view(dump->color, x0, y0, w, h, &col) ||
-                         mcp_image_crop_view(dump->albedo, x0, y0, w, h, &alb) ||
-                         mcp_image_crop_view(dump->normal, x0, y0, w, h, &nrm) ||
-                         mcp_image_crop_view(dump->var_of_mean, x0, y0, w, h, &var),
-                     0);
-    mcp_image *probe = mcp_test_constant(w, h, 3, 0.0f, NULL);
-    uint64_t st = 2024;
-    for (int y = 0; y < h; y++)
-        for (int x = 0; x < w; x++)
-            for (int k = 0; k < 3; k++)
-                mcp_image_px(probe, x, y)[k] = (float)(mcp_test_rand_normal(&st) *
-                                                       sqrt(mcp_image_px(var, x, y)[k]));
+    cornell_crop cc;
+    cornell_crop_make(2024, &cc);
+    const int w = cc.col->width, h = cc.col->height;
+    mcp_image *col = cc.col, *alb = cc.alb, *nrm = cc.nrm, *var = cc.var, *probe = cc.probe;
     mcp_denoise_input at = {col, alb, nrm, var};
     mcp_denoise_tangent t = {probe, NULL, NULL};
     mcp_image *jt = NULL;
@@ -1114,10 +1137,8 @@ test_real_weights_jvp(void **state)
     assert_true(jn > 0);
     assert_true(err < 1e-3);
     free(fp), free(fm);
-    mcp_image_free(jt), mcp_image_free(probe);
-    mcp_image_free(col), mcp_image_free(alb), mcp_image_free(nrm), mcp_image_free(var);
-    mcp_image_free(ref);
-    mcp_dump_free(dump);
+    mcp_image_free(jt);
+    cornell_crop_free(&cc);
     mcp__unet_free(net);
     mcp_denoiser_free(d);
 }
@@ -1215,31 +1236,12 @@ test_fast_kernels(void **state)
     assert_int_equal(mcp__unet_load(path, &real), 0);
     rnet rn;
     rnet_of_unet(real, &rn);
-    mcp_dump *dump = NULL;
-    mcp_image *ref = NULL;
-    int ri[3];
-    read_fixture("cornell", 16, &dump, &ref, ri);
-    const int cw = 64, ch = 64, x0 = 40, y0 = 48;
-    mcp_image *col = NULL, *alb = NULL, *nrm = NULL, *var = NULL;
-    assert_int_equal(mcp_image_crop_view(dump->color, x0, y0, cw, ch, &col) ||
-                         mcp_image_crop_view(dump->albedo, x0, y0, cw, ch, &alb) ||
-                         mcp_image_crop_view(dump->normal, x0, y0, cw, ch, &nrm) ||
-                         mcp_image_crop_view(dump->var_of_mean, x0, y0, cw, ch, &var),
-                     0);
-    mcp_image *probe = mcp_test_constant(cw, ch, 3, 0.0f, NULL);
-    uint64_t st = 99;
-    for (int y = 0; y < ch; y++)
-        for (int x = 0; x < cw; x++)
-            for (int k = 0; k < 3; k++)
-                mcp_image_px(probe, x, y)[k] = (float)(mcp_test_rand_normal(&st) *
-                                                       sqrt(mcp_image_px(var, x, y)[k]));
-    mcp_denoise_tangent pt = {probe, NULL, NULL};
-    check_kernels(real, &rn, col, alb, nrm, &pt, mcp__unet_autoexposure(col, 0),
+    cornell_crop cc;
+    cornell_crop_make(99, &cc);
+    mcp_denoise_tangent pt = {cc.probe, NULL, NULL};
+    check_kernels(real, &rn, cc.col, cc.alb, cc.nrm, &pt, mcp__unet_autoexposure(cc.col, 0),
                   "official weights, cornell 64x64");
-    mcp_image_free(probe);
-    mcp_image_free(col), mcp_image_free(alb), mcp_image_free(nrm), mcp_image_free(var);
-    mcp_image_free(ref);
-    mcp_dump_free(dump);
+    cornell_crop_free(&cc);
     mcp__unet_free(real); /* rn borrows its tensors */
 }
 
