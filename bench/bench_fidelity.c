@@ -650,11 +650,14 @@ main(int argc, char **argv)
     for (int k = 0; k < n_srcs; k++)
         for (int di = 0; di < n_dens; di++) {
             const tally *t = &total[src_ids[k]][di];
-            if (!t->cases)
+            if (!t->cases && !t->blend_cases)
                 continue;
-            printf("| %s | %s | %d of %d (%.0f%%) | %d | %d |", source_names[src_ids[k]],
-                   dens[di], t->agree, t->cases, 100.0 * t->agree / t->cases, t->early,
-                   t->never_est);
+            if (t->cases)
+                printf("| %s | %s | %d of %d (%.0f%%) | %d | %d |", source_names[src_ids[k]],
+                       dens[di], t->agree, t->cases, 100.0 * t->agree / t->cases, t->early,
+                       t->never_est);
+            else /* --blend-only */
+                printf("| %s | %s | | | |", source_names[src_ids[k]], dens[di]);
             if (t->blend_cases)
                 printf(" %d of %d (%.0f%%) | %.3fx | %.3fx | %.3fx |\n", t->blend_good,
                        t->blend_points, 100.0 * t->blend_good / t->blend_points,
