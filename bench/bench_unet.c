@@ -17,7 +17,6 @@
  * Usage: bench_unet [repeats (default 3)] [width (default 512)] [height (default width)]
  *                   [both | default | fixed (the modes timed; default both)]
  *        (1080p: bench_unet 3 1920 1080) */
-#define _POSIX_C_SOURCE 200809L /* setenv */
 #include <mcpost/denoiser.h>
 
 #include "denoiser_bench.h"
