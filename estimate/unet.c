@@ -3,8 +3,9 @@
  * 3x3 convolutions with ReLU, 2x2 max pools, nearest 2x upsampling and skip concats,
  * then the inverse transfer function. Whole image as one tile, padded to 16.
  * Activations are planar (CHW) float32; each is freed as soon as it is consumed.
- * Convolutions are direct loops, register-blocked over output channels and columns,
- * OpenMP over (image, row, column chunk). */
+ * Convolutions are Winograd F(2x2, 3x3) products by default (unet_winograd.c); the
+ * direct loops here, register-blocked over output channels and columns, OpenMP over
+ * (image, row, column chunk), are the fixed-bit mode (MCPOST_UNET_FIXED=1). */
 #define _DEFAULT_SOURCE /* madvise, MADV_HUGEPAGE */
 #include "unet_internal.h"
 #include "internal.h"

@@ -3,7 +3,7 @@
  * the transformed inputs (cin x tiles), in register-blocked kernels picked at run time
  * for the CPU: AVX-512F, AVX2 + FMA, or SSE2 (every x86-64; a portable loop
  * elsewhere). MCPOST_UNET_KERNEL=avx512|avx2|sse2|generic picks one the CPU has (the
- * tests compare them).
+ * tests compare them; a kernel the CPU lacks leaves the choice to the CPU).
  *
  * Every element of C is one sum over k in order, started at 0, one rounding per step
  * (an FMA, or a multiply and an add without FMA), whatever the element's place in the
@@ -175,14 +175,17 @@ mcp__unet_gemm_has(const char *name)
     return !strcmp(name, "generic");
 }
 
-/* The best kernel the CPU has, or MCPOST_UNET_KERNEL's where the CPU has it. */
+/* MCPOST_UNET_KERNEL's kernel where the CPU has it, else the best the CPU has (the
+ * list runs from the widest; generic is always there). */
 static const kernel_entry *
 choose(void)
 {
     const char *want = getenv("MCPOST_UNET_KERNEL");
+    for (int i = 0; want && *want && i < N_KERNELS; i++)
+        if (!strcmp(want, kernels[i].name) && mcp__unet_gemm_has(kernels[i].name))
+            return &kernels[i];
     for (int i = 0; i < N_KERNELS; i++)
-        if ((!want || !*want || !strcmp(want, kernels[i].name)) &&
-            mcp__unet_gemm_has(kernels[i].name))
+        if (mcp__unet_gemm_has(kernels[i].name))
             return &kernels[i];
     return &kernels[N_KERNELS - 1];
 }
