@@ -306,7 +306,7 @@ mcp_blocks_label(const mcp_blocks *blocks, int32_t **label)
     int32_t *l = mcp_calloc((size_t)blocks->width * blocks->height, sizeof *l);
     if (!l) return -1;
     int w = blocks->width;
-#pragma omp parallel for schedule(dynamic, 64)
+#pragma omp parallel for schedule(dynamic, 1)
     for (int i = 0; i < blocks->count; i++) {
         const mcp_block *k = &blocks->items[i];
         for (int y = k->y; y < k->y + k->h; y++)
@@ -330,7 +330,7 @@ mcp_blocks_mean_image(const mcp_blocks *blocks, const mcp_image *values, mcp_ima
     if (mcp__image_new(values->width, values->height, 3, NULL, "block mean", out))
         return -1;
     mcp_image *o = *out;
-#pragma omp parallel for schedule(dynamic, 64)
+#pragma omp parallel for schedule(dynamic, 1)
     for (int i = 0; i < blocks->count; i++) {
         const mcp_block *k = &blocks->items[i];
         double sum[3] = {0, 0, 0};

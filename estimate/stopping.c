@@ -184,7 +184,7 @@ mcp_error_distribution(mcp_blocks *blocks, const mcp_image *var_rel, mcp_error_d
     }
     long bad = 0;
     int packed = var_rel->pixel_stride == 3;
-#pragma omp parallel for schedule(dynamic, 64) reduction(+ : bad)
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : bad)
     for (int i = 0; i < blocks->count; i++) {
         mcp_block *k = &blocks->items[i];
         double sum[3] = {0, 0, 0};
@@ -291,7 +291,7 @@ mcp_error_cdf(const mcp_error_dist *d, double tau)
         float *g = malloc((size_t)(n_max + 1) * sizeof *g);
         float *row = packed ? NULL : malloc((size_t)(n_max + 1) * sizeof *row);
         if (!lpat || !g || (!packed && !row)) failed++;
-#pragma omp for schedule(dynamic, 64)
+#pragma omp for schedule(dynamic, 1)
         for (int i = 0; i < b->count; i++) {
             if (!lpat || !g || (!packed && !row)) continue;
             const mcp_block *k = &b->items[i];
