@@ -7,7 +7,9 @@
  * [default]: OIDN's autoexposure on the colour, or a number: the scale that maps the
  * colour to 1 = 100 cd/m^2), tile (0 [default]: the whole image where it fits in the
  * memory available, else the largest tiles that fit; or a multiple of 16: tiles of that
- * size; tiles give the same bits as the whole image). The autoexposure scale is
+ * size; tiles give the same bits as the whole image), fixed_bits (false [default]:
+ * Winograd convolutions; true: the direct loops, the same bits on every x86-64, as
+ * MCPOST_UNET_FIXED=1 does for a whole process). The autoexposure scale is
  * computed on the primal colour and held constant in the JVP (unet_internal.h).
  * Weights for colour + albedo + normal need both features; colour + albedo weights
  * need the albedo. */
@@ -31,7 +33,8 @@ typedef struct {
     int tile;           /* 0: as memory allows */
 } unet_state;
 
-static const char *const unet_keys[] = {"weights", "input_scale", "tile", NULL};
+static const char *const unet_keys[] = {"weights", "input_scale", "tile", "fixed_bits",
+                                        NULL};
 
 static int
 unet_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
@@ -84,9 +87,10 @@ unet_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
     *out = NULL;
     const char *weights = NULL;
     double scale = 0.0;
-    int tile = 0;
+    int tile = 0, fixed_bits = 0;
     if (mcp_node_opt_string(settings, "weights", &weights) ||
-        read_input_scale(settings, &scale) || mcp_node_opt_int(settings, "tile", &tile))
+        read_input_scale(settings, &scale) || mcp_node_opt_int(settings, "tile", &tile) ||
+        mcp_node_opt_bool(settings, "fixed_bits", &fixed_bits))
         return -1;
     if (tile < 0 || tile % 16)
         return mcp_node_error(mcp_node_get(settings, "tile"),
@@ -119,6 +123,7 @@ unet_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
         mcp__unet_free(net);
         return -1;
     }
+    net->fixed_bits = fixed_bits;
     unet_state *s = d->state;
     s->net = net;
     s->input_scale = scale;
@@ -136,7 +141,8 @@ const mcp_denoiser_kind mcp__denoiser_unet = {
     "unet",
     "OIDN's RT U-Net with .tza weights (1.4 float32 or 2.x float16, base or small), "
     "exact JVP (weights [$" WEIGHTS_ENV "], input_scale [auto] or a number, tile [0: as "
-    "memory allows] or a multiple of 16)",
+    "memory allows] or a multiple of 16, fixed_bits [false]: the direct loops, the same "
+    "bits on every x86-64)",
     unet_keys,
     unet_create,
 };

@@ -489,10 +489,10 @@ conv_task(const conv_layer *l, int k, int y, int c, float *rows)
 }
 
 int
-mcp__unet_fast(void)
+mcp__unet_fast(const mcp__unet *net)
 {
     const char *fixed = getenv("MCPOST_UNET_FIXED");
-    return !(fixed && *fixed && strcmp(fixed, "0"));
+    return !net->fixed_bits && !(fixed && *fixed && strcmp(fixed, "0"));
 }
 
 /* out = conv3x3(concat(a, b)) (b may be NULL), the bias on image 0 only; then, with
@@ -500,13 +500,14 @@ mcp__unet_fast(void)
  * stored: the primal is done first, and its ReLU is > 0 where it was). Winograd
  * products by default (unet_winograd.c), else the direct loops below. */
 static int
-conv_into(const mcp__unet_conv *L, const batch *a, const batch *b, int relu, batch *out)
+conv_into(int fast, const mcp__unet_conv *L, const batch *a, const batch *b, int relu,
+          batch *out)
 {
     const int n = a->n, h = a->h, w = a->w, cb = b ? b->c : 0;
     const int cin = a->c + cb, cout = L->cout, nob = (cout + OB - 1) / OB;
     if (cin != L->cin)
         return mcp_error("unet: layer of %d input channels given %d", L->cin, cin);
-    if (mcp__unet_fast()) {
+    if (fast) {
         if (batch_new_unset(out, n, cout, h, w))
             return -1;
         if (mcp__unet_conv_winograd(L->weight, L->bias, cin, cout, a->d, a->c, 0,
@@ -577,10 +578,10 @@ conv_into(const mcp__unet_conv *L, const batch *a, const batch *b, int relu, bat
 
 /* *t = conv(concat(*t, skip)); the old *t and the skip (when given) are freed. */
 static int
-conv_replace(const mcp__unet_conv *L, batch *t, batch *skip, int relu)
+conv_replace(int fast, const mcp__unet_conv *L, batch *t, batch *skip, int relu)
 {
     batch out;
-    if (conv_into(L, t, skip, relu, &out))
+    if (conv_into(fast, L, t, skip, relu, &out))
         return -1;
     batch_free(t);
     if (skip)
@@ -677,10 +678,10 @@ upsample_replace(batch *t)
  * freed. The Winograd path reads *t upsampled as it transforms it, so the upsampled
  * batch (as large as the skip's level, and more channels) is never stored. */
 static int
-conv_up_replace(const mcp__unet_conv *L, batch *t, batch *skip, int relu)
+conv_up_replace(int fast, const mcp__unet_conv *L, batch *t, batch *skip, int relu)
 {
-    if (!mcp__unet_fast())
-        return upsample_replace(t) || conv_replace(L, t, skip, relu);
+    if (!fast)
+        return upsample_replace(t) || conv_replace(0, L, t, skip, relu);
     const int n = t->n, h = skip->h, w = skip->w, cin = t->c + skip->c;
     if (cin != L->cin || 2 * t->h != h || 2 * t->w != w)
         return mcp_error("unet: layer of %d input channels given %d", L->cin, cin);
@@ -706,20 +707,21 @@ network(const mcp__unet *net, batch *x, batch *t)
     const mcp__unet_conv *c = net->conv;
     batch p1 = {0}, p2 = {0}, p3 = {0};
     *t = (batch){0};
-    int rc = conv_into(&c[E0], x, NULL, 1, t) || conv_replace(&c[E1], t, NULL, 1) ||
-             pool_to(t, &p1) || conv_into(&c[E2], &p1, NULL, 1, t) ||
-             pool_to(t, &p2) || conv_into(&c[E3], &p2, NULL, 1, t) ||
-             pool_to(t, &p3) || conv_into(&c[E4], &p3, NULL, 1, t) ||
-             pool_replace(t) || conv_replace(&c[E5A], t, NULL, 1) ||
-             conv_replace(&c[E5B], t, NULL, 1) ||
+    const int fast = mcp__unet_fast(net);
+    int rc = conv_into(fast, &c[E0], x, NULL, 1, t) || conv_replace(fast, &c[E1], t, NULL, 1) ||
+             pool_to(t, &p1) || conv_into(fast, &c[E2], &p1, NULL, 1, t) ||
+             pool_to(t, &p2) || conv_into(fast, &c[E3], &p2, NULL, 1, t) ||
+             pool_to(t, &p3) || conv_into(fast, &c[E4], &p3, NULL, 1, t) ||
+             pool_replace(t) || conv_replace(fast, &c[E5A], t, NULL, 1) ||
+             conv_replace(fast, &c[E5B], t, NULL, 1) ||
              /* decoder: concat(upsampled, skip) */
-             conv_up_replace(&c[D4A], t, &p3, 1) || conv_replace(&c[D4B], t, NULL, 1) ||
-             conv_up_replace(&c[D3A], t, &p2, 1) || conv_replace(&c[D3B], t, NULL, 1) ||
-             conv_up_replace(&c[D2A], t, &p1, 1) || conv_replace(&c[D2B], t, NULL, 1) ||
-             conv_up_replace(&c[D1A], t, x, 1) ||
-             conv_replace(&c[D1B], t, NULL, 1) ||
+             conv_up_replace(fast, &c[D4A], t, &p3, 1) || conv_replace(fast, &c[D4B], t, NULL, 1) ||
+             conv_up_replace(fast, &c[D3A], t, &p2, 1) || conv_replace(fast, &c[D3B], t, NULL, 1) ||
+             conv_up_replace(fast, &c[D2A], t, &p1, 1) || conv_replace(fast, &c[D2B], t, NULL, 1) ||
+             conv_up_replace(fast, &c[D1A], t, x, 1) ||
+             conv_replace(fast, &c[D1B], t, NULL, 1) ||
              /* no ReLU on the last conv (1.4); the output clamp makes 2.x's ReLU moot */
-             conv_replace(&c[D0], t, NULL, 0);
+             conv_replace(fast, &c[D0], t, NULL, 0);
     batch_free(&p1), batch_free(&p2), batch_free(&p3), batch_free(x);
     if (rc)
         batch_free(t);

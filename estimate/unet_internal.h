@@ -52,6 +52,7 @@ typedef struct mcp__unet_conv {
 typedef struct mcp__unet {
     int ic;       /* input channels: 3 colour, 6 + albedo, 9 + albedo + normal */
     int v2;       /* 1 for float16 (OIDN 2.x) files: autoexposure bins by ceil */
+    int fixed_bits; /* 1: the direct loops (a setting, not read from the file) */
     mcp__unet_conv conv[MCP__UNET_NCONV]; /* enc_conv0 ... dec_conv0 in order */
 } mcp__unet;
 
@@ -101,9 +102,9 @@ int mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int
                             const float *a, int ca, int a_up, const float *b, int n, int h,
                             int w, int relu, float *out);
 /* 1 when the convolutions run as Winograd products (the default), 0 for the direct
- * loops whose bits are the same on every x86-64 (MCPOST_UNET_FIXED set to anything but
- * 0). */
-int mcp__unet_fast(void);
+ * loops whose bits are the same on every x86-64 (net->fixed_bits, the denoiser's
+ * fixed_bits setting, or MCPOST_UNET_FIXED set to anything but 0). */
+int mcp__unet_fast(const mcp__unet *net);
 
 /* malloc for activations and scratch (unet.c): large blocks on huge pages where the
  * system allows; free() releases. NULL (with the error set) when out of memory. */

@@ -544,6 +544,18 @@ rel_err(const mcp_image *a, const double *b)
     return sqrt(num / den);
 }
 
+/* ||a - b|| / ||b|| over two RGB images of one size. */
+static double
+rel_l2(const mcp_image *a, const mcp_image *b)
+{
+    double num = 0, den = 0;
+    for (size_t i = 0; i < (size_t)a->width * a->height * 3; i++) {
+        const double d = (double)a->data[i] - b->data[i];
+        num += d * d, den += (double)b->data[i] * b->data[i];
+    }
+    return sqrt(num / den);
+}
+
 /* A tiny net from the .tza writer, loaded. */
 static mcp__unet *
 tiny_net(rnet *n, int ic, uint64_t seed)
@@ -808,6 +820,22 @@ test_denoiser_kind(void **state)
     assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, 0.5, &t, 1, NULL, &j2), 0);
     assert_memory_equal(p->data, a->data, (size_t)w * h * 3 * sizeof(float));
     assert_memory_equal(j->data, j2->data, (size_t)w * h * 3 * sizeof(float));
+    /* fixed_bits: true gives the bits of MCPOST_UNET_FIXED=1 (the direct loops), which
+     * differ from the default's in the last places only */
+    snprintf(yaml, sizeof yaml, "{name: unet, weights: '%s', input_scale: 0.5, fixed_bits: true}",
+             path);
+    mcp_denoiser *fixed = mcp_test_denoiser(yaml);
+    mcp_image *fa = NULL, *fb = NULL;
+    assert_int_equal(fixed->apply(fixed, &at, &fa), 0);
+    char *saved_fixed = env_save("MCPOST_UNET_FIXED");
+    setenv("MCPOST_UNET_FIXED", "1", 1);
+    assert_int_equal(mcp__unet_forward(net, in.col, in.alb, in.nrm, 0.5, &fb), 0);
+    env_restore("MCPOST_UNET_FIXED", saved_fixed);
+    assert_memory_equal(fa->data, fb->data, (size_t)w * h * 3 * sizeof(float));
+    assert_memory_not_equal(fa->data, a->data, (size_t)w * h * 3 * sizeof(float));
+    assert_true(rel_l2(fa, a) < 1e-5);
+    mcp_image_free(fa), mcp_image_free(fb);
+    mcp_denoiser_free(fixed);
     /* errors: missing features, bad tangents */
     mcp_denoise_input no_normal = {in.col, in.alb, NULL, NULL};
     mcp_image *o = (mcp_image *)&o;
@@ -1150,17 +1178,6 @@ test_real_weights_jvp(void **state)
  * output within the same bound, the JVP within 1e-3 (below). One random network at 9 input channels on an odd-sized image
  * (partial Winograd tiles at the right and bottom of every level), and, when they are
  * there, the official weights on a 64x64 crop of the Cornell fixture. */
-static double
-rel_l2(const mcp_image *a, const mcp_image *b)
-{
-    double num = 0, den = 0;
-    for (size_t i = 0; i < (size_t)a->width * a->height * 3; i++) {
-        const double d = (double)a->data[i] - b->data[i];
-        num += d * d, den += (double)b->data[i] * b->data[i];
-    }
-    return sqrt(num / den);
-}
-
 static void
 check_kernels(const mcp__unet *net, const rnet *n, const mcp_image *col,
               const mcp_image *alb, const mcp_image *nrm, const mcp_denoise_tangent *t,
