@@ -83,7 +83,8 @@ int mcp__unet_run(const mcp__unet *net, const mcp_image *color, const mcp_image 
                   int n, mcp_image **out, mcp_image **jt);
 
 /* mcp__unet_run in tiles of tile x tile pixels (a multiple of 16), each run on a crop
- * 128 pixels larger on every side, which gives the same bits as the whole image; tile
+ * about 192 pixels larger on every side, starting on a multiple of 32 (unet.c's
+ * TILE_OVERLAP), which gives the same bits as the whole image; tile
  * 0 runs the whole image when it fits in the memory available, else the largest tiles
  * that fit (mcp__unet_run does that). */
 int mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color,
