@@ -4,7 +4,8 @@
  * the direct loops of unet.c. Per 2x2 tile and input channel the inputs are
  * transformed, V = B^T d B; per tile element e (of 16) the channels are mixed by one
  * matrix product, M_e = U_e V_e, with U_e the element of the transformed weights
- * G g G^T (computed once per layer, in double); the outputs are Y = A^T M A.
+ * G g G^T (computed per layer and call, in double, as the direct loops repack theirs);
+ * the outputs are Y = A^T M A.
  *
  * The matrix products run in unet_gemm.c's kernels, picked for the CPU at run time
  * (AVX-512, AVX2 + FMA, SSE2). OpenMP runs independent tasks, each about CHUNK
@@ -12,8 +13,9 @@
  * and each output is one fixed sequence of operations whatever the thread count, the
  * chunk or where the image was cut. A task's transformed inputs and products live in a
  * per-thread scratch of 16 x (cin + cout) x CHUNK floats (under 2 MB), not in
- * image-sized buffers, so that peak memory stays below that of the direct loops. The bits differ from the direct loops' (other order,
- * FMA); unet.c keeps those as the fixed-bit mode.
+ * image-sized buffers, so that peak memory stays below that of the direct loops. The
+ * bits differ from the direct loops' (other order, FMA); unet.c keeps those as the
+ * fixed-bit mode.
  *
  * Accuracy: the transforms have coefficients 0, +-1/2 and +-1, so they add a few float
  * roundings per value; tests/estimate/test_unet.c bounds the whole network's relative
@@ -41,6 +43,7 @@
 #ifndef CHUNK
 #define CHUNK 128
 #endif
+
 /* U[e][o][i] = (G g_oi G^T)[e], G = [1 0 0; 1/2 1/2 1/2; 1/2 -1/2 1/2; 0 0 1]. */
 static void
 transform_weights(const float *weight, int cin, int cout, float *u)

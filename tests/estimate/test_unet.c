@@ -642,8 +642,9 @@ test_jvp_finite_differences(void **state)
 }
 
 /* Several tangents in one pass equal one pass each; results do not depend on the
- * thread count or on the convolution kernel (AVX2 or baseline); with autoexposure the JVP is the JVP at the fixed scale that
- * autoexposure finds (the exposure is a constant of F). */
+ * thread count, nor, in the fixed-bit mode, on the direct loops' kernel (AVX2 or
+ * baseline); with autoexposure the JVP is the JVP at the fixed scale that autoexposure
+ * finds (the exposure is a constant of F). */
 static void
 test_jvp_batched(void **state)
 {
@@ -822,8 +823,8 @@ test_denoiser_kind(void **state)
     assert_memory_equal(j->data, j2->data, (size_t)w * h * 3 * sizeof(float));
     /* fixed_bits: true gives the bits of MCPOST_UNET_FIXED=1 (the direct loops), which
      * differ from the default's in the last places only */
-    snprintf(yaml, sizeof yaml, "{name: unet, weights: '%s', input_scale: 0.5, fixed_bits: true}",
-             path);
+    snprintf(yaml, sizeof yaml,
+             "{name: unet, weights: '%s', input_scale: 0.5, fixed_bits: true}", path);
     mcp_denoiser *fixed = mcp_test_denoiser(yaml);
     mcp_image *fa = NULL, *fb = NULL;
     assert_int_equal(fixed->apply(fixed, &at, &fa), 0);
@@ -1175,9 +1176,10 @@ test_real_weights_jvp(void **state)
  * FMA, sse2, generic; MCPOST_UNET_KERNEL picks one), against the double reference:
  * the output and the JVP (central differences of the double network) within relative
  * L2 1e-5 (issue 14), and against the fixed-bit direct loops (MCPOST_UNET_FIXED): the
- * output within the same bound, the JVP within 1e-3 (below). One random network at 9 input channels on an odd-sized image
- * (partial Winograd tiles at the right and bottom of every level), and, when they are
- * there, the official weights on a 64x64 crop of the Cornell fixture. */
+ * output within the same bound, the JVP within 1e-3 (below). One random network at 9
+ * input channels on an odd-sized image (partial Winograd tiles at the right and bottom
+ * of every level), and, when they are there, the official weights on a 64x64 crop of
+ * the Cornell fixture. */
 static void
 check_kernels(const mcp__unet *net, const rnet *n, const mcp_image *col,
               const mcp_image *alb, const mcp_image *nrm, const mcp_denoise_tangent *t,
