@@ -41,7 +41,6 @@
 #include <mcpost/blend.h>
 #include <mcpost/dump.h>
 #include <mcpost/estimate.h>
-#include <mcpost/filter.h>
 #include <mcpost/imageio.h>
 #include <mcpost/job.h>
 
@@ -417,8 +416,9 @@ oracle_point(const mcp_blend_point *p, void *vctx)
     const mcp_image *ref = c->reference;
     size_t np = (size_t)n->width * n->height;
     mcp_image *num = NULL, *den = NULL, *num_f = NULL, *den_f = NULL;
-    if (mcp_image_new(n->width, n->height, 3, NULL, &num) ||
-        mcp_image_new(n->width, n->height, 3, NULL, &den))
+    static const char *const rgb[] = {"R", "G", "B"};
+    if (mcp_image_new(n->width, n->height, 3, rgb, &num) ||
+        mcp_image_new(n->width, n->height, 3, rgb, &den))
         die("oracle blend");
     for (size_t i = 0; i < np; i++)
         for (int k = 0; k < 3; k++) {
@@ -428,12 +428,10 @@ oracle_point(const mcp_blend_point *p, void *vctx)
             den->data[i * 3 + k] = (float)(g * g);
         }
     /* the window the blend filters its estimates with at this member */
-    double sigma = fmin(sqrt(fmax(p->est->mean_var, 0)), 1.0) * c->blend->filter_sigma_scale;
-    if (p->est->filtered && sigma > 0) {
-        if (mcp_gaussian_blur(num, c->blend->filter_window, sigma, &num_f) ||
-            mcp_gaussian_blur(den, c->blend->filter_window, sigma, &den_f))
-            die("oracle blend");
-    }
+    if (p->est->filtered &&
+        (mcp_blend_filter_image(num, p->est->mean_var, c->blend, NULL, &num_f) ||
+         mcp_blend_filter_image(den, p->est->mean_var, c->blend, NULL, &den_f)))
+        die("oracle blend");
     const mcp_image *a = num_f ? num_f : num, *b = den_f ? den_f : den;
     double sum = 0;
     for (size_t i = 0; i < np; i++)
