@@ -161,6 +161,8 @@ estimate_json(const mcp_estimate *e, const char *input, const char *denoiser,
     cJSON_AddNumberToObject(t, "sure_and_variance", e->ms_error_terms);
     cJSON_AddNumberToObject(t, "block_averaging", e->ms_blocks);
     cJSON_AddNumberToObject(t, "stopping", e->ms_stopping);
+    cJSON_AddNumberToObject(t, "percentiles", e->ms_percentiles);
+    cJSON_AddNumberToObject(t, "sampling_map", e->ms_sampling);
     return j;
 }
 
@@ -241,8 +243,10 @@ print_single(const mcp_estimate *e, const char *input, const char *denoiser,
     for (int k = 0; k < e->n_percentiles; k++)
         printf("  %-10g %.6g\n", e->percentiles[k], e->percentile_tau[k]);
     printf(
-        "time (ms):   denoise+jvp %.1f, SURE+variance %.1f, blocks %.1f, stopping %.1f\n",
-        e->ms_denoise, e->ms_error_terms, e->ms_blocks, e->ms_stopping);
+        "time (ms):   denoise+jvp %.1f, SURE+variance %.1f, blocks %.1f, stopping %.1f, "
+        "percentiles %.1f, sampling map %.1f\n",
+        e->ms_denoise, e->ms_error_terms, e->ms_blocks, e->ms_stopping, e->ms_percentiles,
+        e->ms_sampling);
 }
 
 /* ---- a series ---- */

@@ -15,6 +15,10 @@ double *mcp__window_table(const mcp_image *img);
 void mcp__window_sum(const double *table, int w, int h, int x, int y, int r, double out[3],
                      int *count);
 
+/* The values of ranks[0..k) (0-based, each < n) among v[0..n), as a sort would place
+ * them, without sorting (select.c: a two-pass radix select). v must hold no NaN. */
+int mcp__select_ranks(const float *v, size_t n, const size_t *ranks, int k, float *out);
+
 /* Where mcpost's own files are (paths.c): the folder of the file that holds this code
  * (the shared library, or the executable it is linked into; -1 when unknown), and a
  * data file of share/mcpost/ found relative to it, else in the build tree, else in the
@@ -33,4 +37,8 @@ int mcp__exr_read(const char *path, mcp_image **out);
 int mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *opt);
 int mcp__pfm_read(const char *path, mcp_image **out);
 int mcp__pfm_write(const mcp_image *img, const char *path);
+int mcp__png_read(const char *path, const mcp_read_options *opt, mcp_image **out);
+int mcp__png_write(const mcp_image *img, const char *path, const mcp_write_options *opt);
+/* 8-bit samples, c = 1, 3 or 4 channels interleaved, written as they are */
+int mcp__png_write_bytes(const unsigned char *bytes, int w, int h, int c, const char *path);
 #endif

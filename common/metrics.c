@@ -3,6 +3,8 @@
  * distribution"; definitions in metrics.h). */
 #define _POSIX_C_SOURCE 200809L /* mkdir */
 #include <mcpost/metrics.h>
+
+#include "internal.h"
 #include <mcpost/filter.h>
 #include <mcpost/imageio.h>
 #include <mcpost/report.h>
@@ -22,15 +24,7 @@ src_name(const mcp_image *img)
     return img->source ? img->source : "image";
 }
 
-/* Sorts floats ascending (no NaN). */
-static int
-cmp_float(const void *a, const void *b)
-{
-    float x = *(const float *)a, y = *(const float *)b;
-    return (x > y) - (x < y);
-}
-
-/* Nearest-rank index of p in n sorted values. */
+/* Nearest-rank index of p in n values in ascending order. */
 static size_t
 rank_index(double p, size_t n)
 {
@@ -324,29 +318,90 @@ mcp_image_percentiles(const mcp_image *img, const double *p, int n_p, double *ou
     for (int k = 0; k < n_p; k++)
         if (!(p[k] >= 0.0 && p[k] <= 1.0))
             return mcp_error("percentiles: each p must be in [0, 1] (got %g)", p[k]);
-    float *v = mcp_malloc(n * sizeof *v);
-    if (!v) return -1;
-    size_t i = 0;
-    for (int y = 0; y < img->height; y++)
-        for (int x = 0; x < img->width; x++) {
-            const float *q = mcp_image_px(img, x, y);
-            for (int c = 0; c < img->channels; c++)
-                v[i++] = q[c];
-        }
-    for (i = 0; i < n; i++)
-        if (isnan(v[i])) {
-            free(v);
-            return mcp_error("%s: NaN value among the percentiles' values",
-                             src_name(img));
-        }
-    qsort(v, n, sizeof *v, cmp_float);
-    for (int k = 0; k < n_p; k++)
-        out[k] = v[rank_index(p[k], n)];
-    free(v);
-    return 0;
+    /* a packed image is selected from in place; a view is copied first */
+    int packed = mcp_image_is_packed(img);
+    float *copy = NULL;
+    const float *v = img->data;
+    if (!packed) {
+        if (!(copy = mcp_malloc(n * sizeof *copy))) return -1;
+        size_t i = 0;
+        for (int y = 0; y < img->height; y++)
+            for (int x = 0; x < img->width; x++) {
+                const float *q = mcp_image_px(img, x, y);
+                for (int c = 0; c < img->channels; c++)
+                    copy[i++] = q[c];
+            }
+        v = copy;
+    }
+    long nan = 0;
+#pragma omp parallel for reduction(+ : nan) schedule(static)
+    for (size_t i = 0; i < n; i++)
+        nan += isnan(v[i]);
+    if (nan) {
+        free(copy);
+        return mcp_error("%s: NaN value among the percentiles' values", src_name(img));
+    }
+    size_t ranks[MCP_METRICS_MAX_PERCENTILES];
+    float at[MCP_METRICS_MAX_PERCENTILES];
+    int rc = 0;
+    for (int k0 = 0; k0 < n_p && rc == 0; k0 += MCP_METRICS_MAX_PERCENTILES) {
+        int m = n_p - k0 < MCP_METRICS_MAX_PERCENTILES ? n_p - k0
+                                                       : MCP_METRICS_MAX_PERCENTILES;
+        for (int k = 0; k < m; k++)
+            ranks[k] = rank_index(p[k0 + k], n);
+        rc = mcp__select_ranks(v, n, ranks, m, at);
+        for (int k = 0; k < m && rc == 0; k++)
+            out[k0 + k] = at[k];
+    }
+    free(copy);
+    return rc;
 }
 
 /* ---- everything ---- */
+
+/* One pass over the pair for mcp_metrics_compute: the means of SUM_SQ, SUM_REL and
+ * SUM_SRGB (each row summed in double, rows in order: the same bits as mean_error gives
+ * each alone) and, where given, the RelSE and squared-error maps (relse_checked's and
+ * sq_error_map's values). -1 when out of memory. */
+static int
+fused_pass(const mcp_image *t, const int *it, const mcp_image *r, const int *ir,
+           double eps, double mean[3], mcp_image *relse, mcp_image *sq)
+{
+    int w = t->width, h = t->height;
+    double *rows = malloc((size_t)h * 3 * sizeof *rows);
+    if (!rows) return -1;
+#pragma omp parallel for if ((size_t)w * h >= PARALLEL_MIN_PIXELS)
+    for (int y = 0; y < h; y++) {
+        double s_sq = 0.0, s_rel = 0.0, s_disp = 0.0;
+        for (int x = 0; x < w; x++) {
+            const float *pt = mcp_image_px(t, x, y), *pr = mcp_image_px(r, x, y);
+            double m = pt[it[0]];
+            m = pt[it[1]] > m ? pt[it[1]] : m;
+            m = pt[it[2]] > m ? pt[it[2]] : m;
+            for (int c = 0; c < 3; c++) {
+                double a = pt[it[c]], b = pr[ir[c]], d = a - b;
+                double dd = (double)display(pt[it[c]]) - display(pr[ir[c]]);
+                s_sq += d * d;
+                s_rel += d * d / (b * b + eps);
+                s_disp += dd * dd;
+                if (relse) mcp_image_px(relse, x, y)[c] = (float)(d * d / (m * m + eps));
+                if (sq) mcp_image_px(sq, x, y)[c] = (float)(d * d);
+            }
+        }
+        rows[3 * y] = s_sq;
+        rows[3 * y + 1] = s_rel;
+        rows[3 * y + 2] = s_disp;
+    }
+    for (int k = 0; k < 3; k++) {
+        double total = 0.0;
+        for (int y = 0; y < h; y++)
+            total += rows[3 * y + k];
+        mean[k] = total / ((double)w * h * 3.0);
+    }
+    free(rows);
+    return 0;
+}
+
 
 void
 mcp_metrics_maps_free(mcp_metrics_maps *maps)
@@ -359,28 +414,6 @@ mcp_metrics_maps_free(mcp_metrics_maps *maps)
     mcp_image_free(maps->flip_hdr_exposure);
     mcp_image_free(maps->spectra);
     memset(maps, 0, sizeof *maps);
-}
-
-static int
-sq_error_map(const mcp_image *test, const int *it, const mcp_image *ref, const int *ir,
-             mcp_image **out)
-{
-    mcp_image *o = NULL;
-    if (mcp_image_new(test->width, test->height, 3, (const char *const[]){"R", "G", "B"},
-                      &o))
-        return -1;
-    for (int y = 0; y < test->height; y++)
-        for (int x = 0; x < test->width; x++) {
-            const float *pt = mcp_image_px(test, x, y), *pr = mcp_image_px(ref, x, y);
-            float *q = mcp_image_px(o, x, y);
-            for (int c = 0; c < 3; c++) {
-                double d = (double)pt[it[c]] - pr[ir[c]];
-                q[c] = (float)(d * d);
-            }
-        }
-    mcp_image_set_source(o, "squared error");
-    *out = o;
-    return 0;
 }
 
 int
@@ -403,19 +436,27 @@ mcp_metrics_compute(const mcp_image *test, const mcp_image *ref,
                              opt->percentiles[k]);
     int it[3], ir[3];
     if (mcp_metrics_check_pair(test, ref, it, ir)) return -1;
-    mcp_image *relse = NULL;
-    int rc = -1;
-    out->n_values = (long)test->width * test->height * 3;
-    out->mse = mean_error(test, it, ref, ir, SUM_SQ, 0.0);
-    out->relmse = mean_error(test, it, ref, ir, SUM_REL, opt->eps_rel);
-    double display_mse = mean_error(test, it, ref, ir, SUM_SRGB, 0.0);
-    if (isnan(out->mse) || isnan(out->relmse) || isnan(display_mse))
-        return mcp_error("metrics: out of memory (%dx%d)", test->width, test->height);
-    out->rmse = sqrt(out->mse);
-    out->psnr = psnr_of(display_mse);
-    if (pmse_checked(test, it, ref, ir, &opt->pmse, &out->pmse) ||
-        relse_checked(test, it, ref, ir, opt->eps_rel, &relse))
+    mcp_image *relse = NULL, *sq = NULL;
+    const char *const rgb[] = {"R", "G", "B"};
+    int rc = -1, w = test->width, h = test->height;
+    out->n_values = (long)w * h * 3;
+    /* MSE, relMSE, the display MSE and the maps in one pass */
+    int want_relse = maps || opt->n_percentiles;
+    if ((want_relse && mcp_image_new(w, h, 3, rgb, &relse)) ||
+        (maps && mcp_image_new(w, h, 3, rgb, &sq)))
         goto done;
+    double mean[3];
+    if (fused_pass(test, it, ref, ir, opt->eps_rel, mean, relse, sq)) {
+        mcp_error("metrics: out of memory (%dx%d)", w, h);
+        goto done;
+    }
+    if (relse) mcp_image_set_source(relse, "RelSE");
+    if (sq) mcp_image_set_source(sq, "squared error");
+    out->mse = mean[0];
+    out->relmse = mean[1];
+    out->rmse = sqrt(out->mse);
+    out->psnr = psnr_of(mean[2]);
+    if (pmse_checked(test, it, ref, ir, &opt->pmse, &out->pmse)) goto done;
     out->n_percentiles = opt->n_percentiles;
     memcpy(out->percentiles, opt->percentiles, sizeof opt->percentiles);
     if (opt->n_percentiles &&
@@ -442,12 +483,13 @@ mcp_metrics_compute(const mcp_image *test, const mcp_image *ref,
         out->has_spectra = 1;
     }
     if (maps) {
-        if (sq_error_map(test, it, ref, ir, &maps->sq_error)) goto done;
+        maps->sq_error = sq;
         maps->relse = relse;
-        relse = NULL;
+        sq = relse = NULL;
     }
     rc = 0;
 done:
+    mcp_image_free(sq);
     mcp_image_free(relse);
     if (rc && maps) mcp_metrics_maps_free(maps);
     return rc;

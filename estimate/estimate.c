@@ -250,9 +250,12 @@ mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,
     e->n_percentiles = o.n_percentiles;
     memcpy(e->percentiles, o.percentiles, sizeof o.percentiles);
     if (mcp_error_percentiles(e->dist, e->percentiles, e->n_percentiles,
-                              e->percentile_tau) ||
-        sampling_outputs(dump, &o, &ev, e))
+                              e->percentile_tau))
         goto done;
+    double t5 = mcp__now_ms();
+    if (sampling_outputs(dump, &o, &ev, e)) goto done;
+    e->ms_percentiles = t5 - t4;
+    e->ms_sampling = mcp__now_ms() - t5;
     e->ms_denoise = t1 - t0;
     e->ms_error_terms = t2 - t1;
     e->ms_blocks = t3 - t2;
@@ -326,46 +329,67 @@ done:
     return rc;
 }
 
+/* The first 3 channels of an error image as one array of values (malloc'd); NaN is an
+ * error. */
 static int
-cmp_float(const void *a, const void *b)
-{
-    float x = *(const float *)a, y = *(const float *)b;
-    return (x > y) - (x < y);
-}
-
-/* The values of a 3-channel image, sorted ascending (malloc'd). */
-static int
-sorted_values(const mcp_image *err, float **out, size_t *n_out)
+error_values(const mcp_image *err, float **out, size_t *n_out)
 {
     *out = NULL;
     if (!err || err->channels < 3)
         return mcp_error("percentiles: missing 3-channel error image");
-    size_t n = (size_t)err->width * err->height * 3, k = 0;
+    size_t n = (size_t)err->width * err->height * 3;
     float *v = mcp_calloc(n ? n : 1, sizeof *v);
     if (!v) return -1;
+    long nan_at = -1;
+#pragma omp parallel for schedule(static)
     for (int y = 0; y < err->height; y++)
-        for (int x = 0; x < err->width; x++)
+        for (int x = 0; x < err->width; x++) {
+            const float *e = mcp_image_px(err, x, y);
+            size_t k = 3 * ((size_t)y * err->width + x);
             for (int c = 0; c < 3; c++) {
-                float e = mcp_image_px(err, x, y)[c];
-                if (isnan(e)) {
-                    free(v);
-                    return mcp_error("percentiles: %s has NaN at pixel (%d, %d)",
-                                     err->source ? err->source : "the error image", x, y);
+                v[k + c] = e[c];
+                if (isnan(e[c])) {
+#pragma omp critical
+                    if (nan_at < 0 || (long)(k / 3) < nan_at) nan_at = (long)(k / 3);
                 }
-                v[k++] = e;
             }
-    qsort(v, n, sizeof *v, cmp_float);
+        }
+    if (nan_at >= 0) {
+        free(v);
+        return mcp_error("percentiles: %s has NaN at pixel (%ld, %ld)",
+                         err->source ? err->source : "the error image",
+                         nan_at % err->width, nan_at / err->width);
+    }
     *out = v;
     *n_out = n;
     return 0;
 }
 
-static double
-nearest_rank(const float *v, size_t n, double p)
+/* The nearest-rank index of p among n values. */
+static size_t
+nearest_rank(size_t n, double p)
 {
     double r = ceil(p * (double)n) - 1.0;
     size_t i = r < 0.0 ? 0 : (size_t)r;
-    return v[i < n ? i : n - 1];
+    return i < n ? i : n - 1;
+}
+
+/* out[k] = the nearest-rank p[k]-percentile of v[0..n), by selection. */
+static int
+percentiles_of(const float *v, size_t n, const double *p, int k, double *out)
+{
+    size_t ranks[MCP_ESTIMATE_MAX_PERCENTILES + 1];
+    float at[MCP_ESTIMATE_MAX_PERCENTILES + 1];
+    for (int j0 = 0; j0 < k; j0 += MCP_ESTIMATE_MAX_PERCENTILES + 1) {
+        int m = k - j0 < MCP_ESTIMATE_MAX_PERCENTILES + 1 ? k - j0
+                                                          : MCP_ESTIMATE_MAX_PERCENTILES + 1;
+        for (int j = 0; j < m; j++)
+            ranks[j] = nearest_rank(n, p[j0 + j]);
+        if (mcp__select_ranks(v, n, ranks, m, at)) return -1;
+        for (int j = 0; j < m; j++)
+            out[j0 + j] = at[j];
+    }
+    return 0;
 }
 
 int
@@ -373,11 +397,10 @@ mcp_true_percentiles(const mcp_image *err, const double *p, int n, double *out)
 {
     float *v;
     size_t m;
-    if (sorted_values(err, &v, &m)) return -1;
-    for (int k = 0; k < n; k++)
-        out[k] = nearest_rank(v, m, p[k]);
+    if (error_values(err, &v, &m)) return -1;
+    int rc = percentiles_of(v, m, p, n, out);
     free(v);
-    return 0;
+    return rc;
 }
 
 /* ---- series ---- */
@@ -436,32 +459,34 @@ member_truth(const mcp_estimate *e, const mcp_image *reference,
     size_t n = 0;
     if (mcp_true_error(e->maps.denoised, reference, o->est.sure.metric, o->est.sure.ppd,
                        &err) ||
-        sorted_values(err, &v, &n)) {
+        error_values(err, &v, &n)) {
         mcp_image_free(err);
         return -1;
     }
-    double sum = 0.0;
-    for (size_t i = 0; i < n; i++)
-        sum += v[i];
-    pt->true_mean_error = sum / (double)n;
-    double at_p = nearest_rank(v, n, o->est.p);
-    for (int j = 0; j < o->n_taus; j++) {
-        /* fraction of values <= τ: binary search for the first value > τ */
-        size_t lo = 0, hi = n;
-        while (lo < hi) {
-            size_t mid = lo + (hi - lo) / 2;
-            if (v[mid] <= o->taus[j])
-                lo = mid + 1;
-            else
-                hi = mid;
-        }
-        pt->true_cdf[j] = (double)lo / (double)n;
-        pt->true_stop[j] = at_p <= o->taus[j];
-    }
-    for (int k = 0; k < o->est.n_percentiles; k++)
-        pt->true_percentile[k] = nearest_rank(v, n, o->est.percentiles[k]);
-    free(v);
     mcp_image_free(err);
+    double sum = 0.0;
+    long at_most[MCP_ESTIMATE_MAX_TAUS] = {0};
+    int n_taus = o->n_taus;
+    for (size_t i = 0; i < n; i++) { /* in order, so that the sum has fixed bits */
+        sum += v[i];
+        for (int j = 0; j < n_taus; j++)
+            at_most[j] += v[i] <= o->taus[j];
+    }
+    pt->true_mean_error = sum / (double)n;
+    /* the percentile at p and the curve's, in one selection */
+    double p[MCP_ESTIMATE_MAX_PERCENTILES + 1], at[MCP_ESTIMATE_MAX_PERCENTILES + 1];
+    int k = o->est.n_percentiles;
+    memcpy(p, o->est.percentiles, (size_t)k * sizeof *p);
+    p[k] = o->est.p;
+    int rc = percentiles_of(v, n, p, k + 1, at);
+    free(v);
+    if (rc) return -1;
+    for (int j = 0; j < n_taus; j++) {
+        pt->true_cdf[j] = (double)at_most[j] / (double)n;
+        pt->true_stop[j] = at[k] <= o->taus[j];
+    }
+    for (int j = 0; j < k; j++)
+        pt->true_percentile[j] = at[j];
     return 0;
 }
 

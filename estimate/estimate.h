@@ -290,9 +290,10 @@ MCP_API double mcp_error_cdf(const mcp_error_dist *dist, double tau);
 MCP_API int mcp_error_should_stop(const mcp_error_dist *dist, double tau, double p,
                                   double *cdf);
 
-/* The estimated error at percentile p[k] (in [0, 1)): the τ with F(τ) = p by bisection
- * in log τ (relative precision 1e-4); 0 when F is already >= p for every τ > 0, +inf
- * when no finite τ reaches p. */
+/* The estimated error at percentile p[k] (in [0, 1), n at most
+ * MCP_ESTIMATE_MAX_PERCENTILES): the τ with F(τ) = p, within a relative 1e-3 (searched
+ * on the values' s² grouped in narrow bins, stopping.c; the same bits for any thread
+ * count); 0 when F is already >= p for every τ > 0, +inf when no finite τ reaches p. */
 MCP_API int mcp_error_percentiles(const mcp_error_dist *dist, const double *p, int n,
                                   double *tau);
 
@@ -338,7 +339,9 @@ typedef struct mcp_estimate {
     int n_percentiles;
     double percentiles[MCP_ESTIMATE_MAX_PERCENTILES];    /* the p values */
     double percentile_tau[MCP_ESTIMATE_MAX_PERCENTILES]; /* estimated error at each */
-    double ms_denoise, ms_error_terms, ms_blocks, ms_stopping; /* wall-clock times */
+    /* wall-clock times of the steps: F and its JVPs, the error maps, block averaging, the
+     * distribution and the stop decision, the percentile curve, the sampling map */
+    double ms_denoise, ms_error_terms, ms_blocks, ms_stopping, ms_percentiles, ms_sampling;
     mcp_variance_source variance_source; /* what the dump's variance rests on */
     double variance_dof;                 /* its degrees of freedom (0: many/unknown) */
     int s2_pool;                         /* the radius s² was pooled over */

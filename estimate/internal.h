@@ -63,6 +63,9 @@ double mcp__rng_normal(mcp__rng *r);
 /* Fails naming `who` when the dump lacks colour or the variance of the mean. */
 int mcp__check_dump(const char *who, const mcp_dump *dump);
 
+/* The values of given ranks among n floats without sorting them (common/select.c). */
+int mcp__select_ranks(const float *v, size_t n, const size_t *ranks, int k, float *out);
+
 /* A new zero-filled packed image of n channels (names NULL: R, G, B), labelled source
  * (sure.c). */
 int mcp__image_new(int width, int height, int n, const char *const *names,

@@ -361,6 +361,38 @@ test_errors(void **state)
     mcp_image_free(a);
 }
 
+/* mcp_metrics_compute's one fused pass gives the single metrics' values bit for bit, and
+ * the maps of mcp_relse_map and (t - r)². */
+static void
+test_fused_matches_single(void **state)
+{
+    (void)state;
+    mcp_image *t = mcp_test_random(70, 41, 3, 0.0f, 2.0f, 11, RGB);
+    mcp_image *r = mcp_test_random(70, 41, 3, 0.0f, 2.0f, 12, RGB);
+    mcp_metrics m;
+    mcp_metrics_maps maps;
+    mcp_metrics_options o = mcp_metrics_defaults();
+    assert_int_equal(mcp_metrics_compute(t, r, &o, &m, &maps), 0);
+    double mse, relmse, psnr;
+    assert_int_equal(mcp_mse(t, r, &mse), 0);
+    assert_int_equal(mcp_relmse(t, r, o.eps_rel, &relmse), 0);
+    assert_int_equal(mcp_psnr(t, r, &psnr), 0);
+    assert_memory_equal(&m.mse, &mse, sizeof mse);
+    assert_memory_equal(&m.relmse, &relmse, sizeof relmse);
+    assert_memory_equal(&m.psnr, &psnr, sizeof psnr);
+    mcp_image *relse = NULL;
+    assert_int_equal(mcp_relse_map(t, r, o.eps_rel, &relse), 0);
+    assert_memory_equal(maps.relse->data, relse->data, 70 * 41 * 3 * sizeof(float));
+    for (int i = 0; i < 70 * 41 * 3; i++) {
+        double d = (double)t->data[i] - r->data[i];
+        assert_true(maps.sq_error->data[i] == (float)(d * d));
+    }
+    mcp_image_free(relse);
+    mcp_metrics_maps_free(&maps);
+    mcp_image_free(r);
+    mcp_image_free(t);
+}
+
 /* ---- the command line and the job stage ---- */
 
 static char out_buf[1 << 16], err_buf[1 << 14];
@@ -608,6 +640,7 @@ main(void)
         cmocka_unit_test(test_relse_percentiles),
         cmocka_unit_test(test_channel_names),
         cmocka_unit_test(test_errors),
+        cmocka_unit_test(test_fused_matches_single),
         cmocka_unit_test(test_cli),
         cmocka_unit_test(test_job_stage),
     };
