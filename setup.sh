@@ -17,7 +17,7 @@ cd "$(dirname "$0")"
 # Debian 12 packages that mcpost needs (README.md lists what each is for).
 PACKAGES=(gcc g++ make cmake pkg-config
           libopenexr-dev libopenimageio-dev libopencv-core-dev libopencv-imgproc-dev
-          libyaml-dev libcjson-dev libcmocka-dev libopenblas-dev)
+          libyaml-dev libcjson-dev libcmocka-dev libopenblas-dev libpng-dev)
 JOBS=${MCPOST_JOBS:-$(nproc)}
 
 install_packages() { # install_packages [PACKAGE...]: PACKAGES when none are named

@@ -361,21 +361,34 @@ mcp_image_read(const char *path, const mcp_read_options *opt, mcp_image **out)
     switch (mcp_format_from_path(path)) {
     case MCP_FORMAT_EXR: return mcp__exr_read(path, out);
     case MCP_FORMAT_PFM: return mcp__pfm_read(path, out);
+    case MCP_FORMAT_PNG: return mcp__png_read(path, opt, out);
     case MCP_FORMAT_UNKNOWN: {
-        /* no known extension: sniff the EXR magic number before trying OIIO */
-        unsigned char magic[4] = {0};
+        /* no known extension: sniff the EXR and PNG magic numbers before trying OIIO */
+        unsigned char magic[8] = {0};
+        static const unsigned char png[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
         FILE *f = fopen(path, "rb");
         if (f) {
-            size_t got = fread(magic, 1, 4, f);
+            size_t got = fread(magic, 1, 8, f);
             fclose(f);
-            if (got == 4 && magic[0] == 0x76 && magic[1] == 0x2f && magic[2] == 0x31 &&
+            if (got >= 4 && magic[0] == 0x76 && magic[1] == 0x2f && magic[2] == 0x31 &&
                 magic[3] == 0x01)
                 return mcp__exr_read(path, out);
+            if (got == 8 && memcmp(magic, png, 8) == 0) return mcp__png_read(path, opt, out);
         }
         return oiio_read(path, opt, out);
     }
     default: return oiio_read(path, opt, out);
     }
+}
+
+/* The current error names the real output, not the temporary file written. */
+static void
+name_output_in_error(const char *tmp_path, const char *path)
+{
+    char msg[1024];
+    snprintf(msg, sizeof msg, "%s", mcp_error_message());
+    char *at = strstr(msg, tmp_path);
+    if (at) mcp_error("%.*s%s%s", (int)(at - msg), msg, path, at + strlen(tmp_path));
 }
 
 int
@@ -395,15 +408,11 @@ mcp_image_write(const mcp_image *img, const char *path, const mcp_write_options 
     switch (format) {
     case MCP_FORMAT_EXR: rc = mcp__exr_write(img, af.tmp_path, opt); break;
     case MCP_FORMAT_PFM: rc = mcp__pfm_write(img, af.tmp_path); break;
+    case MCP_FORMAT_PNG: rc = mcp__png_write(img, af.tmp_path, opt); break;
     default: rc = oiio_write(img, af.tmp_path, format, opt); break;
     }
     if (rc) {
-        /* name the real output, not the temporary file, in the message */
-        char msg[1024];
-        snprintf(msg, sizeof msg, "%s", mcp_error_message());
-        char *at = strstr(msg, af.tmp_path);
-        if (at)
-            mcp_error("%.*s%s%s", (int)(at - msg), msg, path, at + strlen(af.tmp_path));
+        name_output_in_error(af.tmp_path, path);
         mcp_atomic_abort(&af);
         return -1;
     }
@@ -413,6 +422,16 @@ mcp_image_write(const mcp_image *img, const char *path, const mcp_write_options 
 int
 mcp_write_rgb8(const unsigned char *rgb8, int width, int height, const char *path)
 {
+    if (mcp_format_from_path(path) == MCP_FORMAT_PNG) { /* the bytes as they are */
+        mcp_atomic_file af;
+        if (mcp_atomic_begin(&af, path)) return -1;
+        if (mcp__png_write_bytes(rgb8, width, height, 3, af.tmp_path)) {
+            name_output_in_error(af.tmp_path, path);
+            mcp_atomic_abort(&af);
+            return -1;
+        }
+        return mcp_atomic_commit(&af);
+    }
     mcp_image *img;
     if (mcp_image_new(width, height, 3, (const char *[]){"R", "G", "B"}, &img))
         return -1;
