@@ -106,8 +106,8 @@ test_pipeline_one_dump(void **state)
     assert_close(wsum, 1.0, 1e-5, 0);
     for (int k = 0; k < e->n_percentiles; k++) {
         if (k) assert_true(e->percentile_tau[k] >= e->percentile_tau[k - 1]);
-        if (e->percentile_tau[k] > 0)
-            assert_true(mcp_error_cdf(e->dist, e->percentile_tau[k]) >=
+        if (e->percentile_tau[k] > 0) /* within the promised 1e-3 of F's root */
+            assert_true(mcp_error_cdf(e->dist, e->percentile_tau[k] * (1 + 1e-3)) >=
                         e->percentiles[k]);
     }
     for (int i = 0; i < e->blocks->count; i++) /* pre-split: no block crosses a tile */
