@@ -66,9 +66,22 @@ typedef struct mcp_write_options {
     int exr_tiled;                     /* write tiles of exr_tile_size instead of scanlines [0] */
     int exr_tile_size;                 /* [64] */
     int exr_data_x, exr_data_y;        /* data-window origin [0, 0] */
+    /* zlib level of zip and zips, 1 (fastest) .. 9 (smallest); 0 is
+       MCP_EXR_ZIP_LEVEL_DEFAULT [0] */
+    int exr_zip_level;
+    /* zip and zips: when a sample of the chunks (every 16th) shrinks by less than this
+       fraction, every chunk is stored raw (lossless: readers take raw chunks in any
+       file, and they write and read far faster); 0 is MCP_EXR_MIN_SAVING_DEFAULT, a
+       negative value compresses every chunk [0] */
+    double exr_min_saving;
     /* LDR outputs: encode linear values to sRGB before quantising [1] */
     int srgb_encode;
 } mcp_write_options;
+
+/* The zip level EXR files are written with unless exr_zip_level says otherwise. Core's
+ * own default is zlib's 6; README.md ("EXR speed") has the measurements behind this. */
+#define MCP_EXR_ZIP_LEVEL_DEFAULT 6
+#define MCP_EXR_MIN_SAVING_DEFAULT (1.0 / 32)
 
 MCP_API mcp_write_options mcp_write_defaults(void);
 MCP_API int mcp_exr_compression_from_name(const char *name, mcp_exr_compression *out);
