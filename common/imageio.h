@@ -42,6 +42,13 @@ MCP_API mcp_read_options mcp_read_defaults(void);
 MCP_API int mcp_image_read(const char *path, const mcp_read_options *opt,
                            mcp_image **out);
 
+/* Reads an EXR or PFM image held in memory (data[0 .. size)), the format told by its
+ * first bytes; name labels it in messages and becomes img->source. Other formats fail
+ * with a message (the OpenImageIO plug-in reads files only). The same size checks as
+ * the file readers apply, and the buffer is only read. */
+MCP_API int mcp_image_read_memory(const void *data, size_t size, const char *name,
+                                  mcp_image **out);
+
 typedef enum {
     MCP_EXR_FLOAT,
     MCP_EXR_HALF

@@ -34,5 +34,6 @@ int mcp__exr_read(const char *path, mcp_image **out);
 int mcp__exr_read_memory(const void *data, size_t size, const char *name, mcp_image **out);
 int mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *opt);
 int mcp__pfm_read(const char *path, mcp_image **out);
+int mcp__pfm_read_memory(const void *data, size_t size, const char *name, mcp_image **out);
 int mcp__pfm_write(const mcp_image *img, const char *path);
 #endif
