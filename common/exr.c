@@ -176,6 +176,8 @@ note_failure(chunk_failure *fail, int idx, exr_result_t rc, const char *what)
 {
 #pragma omp critical(mcp_exr_chunk_failure)
     if (fail->idx < 0 || idx < fail->idx) {
+        /* atomic: other threads poll idx (failed()) outside this critical section */
+#pragma omp atomic write
         fail->idx = idx;
         fail->rc = rc;
         fail->what = what;
@@ -590,7 +592,7 @@ encode_chunk(exr_context_t f, const chunk_at *c, exr_encode_pipeline_t *enc,
  * takes for any compression, so pixels never change; this decides that for a whole
  * image from a sample of its chunks instead of compressing every one to find out.
  * It compresses every 16th chunk (at least one), spread over the image, and says raw
- * when they shrink by less than min_saving of their bytes. The sample is fixed, so
+ * when they shrink by less than min_saving of their bytes (1/8 by default). The sample is fixed, so
  * the file does not depend on the thread count; when the data does compress, the cost
  * is those chunks compressed twice (about 6%). */
 #define PROBE_EVERY 16
