@@ -85,58 +85,34 @@ read_attributes(exr_context_t f, mcp_attrs *attrs)
     return 0;
 }
 
-/* Decodes one chunk into img at (x0, y0) of the data window. */
-static int
-decode_chunk(exr_context_t f, const exr_chunk_info_t *ci, exr_decode_pipeline_t *dec,
-             int *initialised, mcp_image *img, int x0, int y0, const char *path)
-{
-    exr_result_t rc = *initialised ? exr_decoding_update(f, 0, ci, dec)
-                                   : exr_decoding_initialize(f, 0, ci, dec);
-    if (rc != EXR_ERR_SUCCESS)
-        return exr_fail(path, "cannot decode", rc);
-    for (int k = 0; k < dec->channel_count; k++) {
-        exr_coding_channel_info_t *ch = &dec->channels[k];
-        int c = mcp_image_channel(img, ch->channel_name);
-        ch->decode_to_ptr = (uint8_t *)mcp_image_px(img, x0, y0) + (size_t)c * sizeof(float);
-        ch->user_pixel_stride = (int32_t)(img->pixel_stride * (ptrdiff_t)sizeof(float));
-        ch->user_line_stride = (int32_t)(img->row_stride * (ptrdiff_t)sizeof(float));
-        ch->user_data_type = EXR_PIXEL_FLOAT;
-        ch->user_bytes_per_element = 4;
-    }
-    if (!*initialised) {
-        if ((rc = exr_decoding_choose_default_routines(f, 0, dec)) != EXR_ERR_SUCCESS)
-            return exr_fail(path, "cannot decode", rc);
-        *initialised = 1;
-    }
-    if ((rc = exr_decoding_run(f, 0, dec)) != EXR_ERR_SUCCESS)
-        return exr_fail(path, "corrupt or truncated pixel data", rc);
-    return 0;
-}
+/* ---- chunks ---- */
 
-/* Called for each level-0 chunk with its info and its place (x0, y0) in the image. */
-typedef int (*chunk_visit)(exr_context_t f, const exr_chunk_info_t *ci, int x0, int y0,
-                           void *ctx);
-
-/* Visits every level-0 chunk of part 0 of a w x h data window, in order. */
-static int
-each_chunk(exr_context_t f, exr_storage_t storage, const exr_attr_box2i_t *dw, int w,
-           int h, const char *path, chunk_visit visit, void *ctx)
-{
+/* One level-0 chunk of part 0 and its place (x0, y0) in the image. */
+typedef struct chunk_at {
     exr_chunk_info_t ci;
-    int rc = 0;
+    int x0, y0;
+} chunk_at;
+
+/* Lists the level-0 chunks of part 0 of a w x h data window in file order (reading or
+ * writing: the chunk-info calls differ). At most max_chunks of them, so that a header
+ * cannot make us allocate more than the file's chunk count allows. The list is made
+ * once, on one thread, so that the parallel loops below only read it. */
+static int
+list_chunks(exr_context_t f, exr_storage_t storage, const exr_attr_box2i_t *dw, int w,
+            int h, int writing, long long max_chunks, const char *path, chunk_at **out,
+            int *count)
+{
+    long long n;
+    int32_t lines = 1;
+    uint32_t tw = 1, th = 1;
+    int nx = 1;
+    *out = NULL;
+    *count = 0;
     if (storage == EXR_STORAGE_SCANLINE) {
-        int32_t lines = 1;
         if (exr_get_scanlines_per_chunk(f, 0, &lines) != EXR_ERR_SUCCESS || lines < 1)
             lines = 1;
-        /* long long: max.y may be INT32_MAX, and y + lines must not overflow */
-        for (long long y = dw->min.y; y <= dw->max.y && !rc; y += lines) {
-            exr_result_t r = exr_read_scanline_chunk_info(f, 0, (int)y, &ci);
-            rc = r != EXR_ERR_SUCCESS
-                     ? exr_fail(path, "corrupt or truncated chunk table", r)
-                     : visit(f, &ci, 0, ci.start_y - dw->min.y, ctx);
-        }
+        n = (h + (long long)lines - 1) / lines;
     } else {
-        uint32_t tw, th;
         exr_tile_level_mode_t level;
         exr_tile_round_mode_t round;
         exr_result_t r = exr_get_tile_descriptor(f, 0, &tw, &th, &level, &round);
@@ -144,122 +120,218 @@ each_chunk(exr_context_t f, exr_storage_t storage, const exr_attr_box2i_t *dw, i
             return exr_fail(path, "bad tile description", r);
         if (tw < 1 || th < 1 || tw > (uint32_t)MCP_MAX_DIM || th > (uint32_t)MCP_MAX_DIM)
             return mcp_error("%s: bad tile size %ux%u", path, tw, th);
-        int nx = (w + (int)tw - 1) / (int)tw, ny = (h + (int)th - 1) / (int)th;
-        for (int ty = 0; ty < ny && !rc; ty++)
-            for (int tx = 0; tx < nx && !rc; tx++) {
-                r = exr_read_tile_chunk_info(f, 0, tx, ty, 0, 0, &ci);
-                rc = r != EXR_ERR_SUCCESS
-                         ? exr_fail(path, "corrupt or truncated tile table", r)
-                         : visit(f, &ci, tx * (int)tw, ty * (int)th, ctx);
-            }
+        nx = (w + (int)tw - 1) / (int)tw;
+        n = (long long)nx * ((h + (int)th - 1) / (int)th);
     }
-    return rc;
+    if (n > max_chunks)
+        return mcp_error("%s: %lld chunks of %dx%d pixels, but the file has %lld "
+                         "(truncated or corrupt)",
+                         path, n, w, h, max_chunks);
+    chunk_at *c = mcp_calloc((size_t)n, sizeof *c);
+    if (!c)
+        return -1;
+    for (long long i = 0; i < n; i++) {
+        exr_result_t r;
+        if (storage == EXR_STORAGE_SCANLINE) {
+            /* long long: max.y may be INT32_MAX, and y + lines must not overflow */
+            long long y = dw->min.y + i * lines;
+            r = writing ? exr_write_scanline_chunk_info(f, 0, (int)y, &c[i].ci)
+                        : exr_read_scanline_chunk_info(f, 0, (int)y, &c[i].ci);
+            c[i].y0 = c[i].ci.start_y - dw->min.y;
+        } else {
+            int tx = (int)(i % nx), ty = (int)(i / nx);
+            r = writing ? exr_write_tile_chunk_info(f, 0, tx, ty, 0, 0, &c[i].ci)
+                        : exr_read_tile_chunk_info(f, 0, tx, ty, 0, 0, &c[i].ci);
+            c[i].x0 = tx * (int)tw;
+            c[i].y0 = ty * (int)th;
+        }
+        if (r != EXR_ERR_SUCCESS) {
+            free(c);
+            return exr_fail(path,
+                            writing ? "cannot write"
+                            : storage == EXR_STORAGE_SCANLINE
+                                ? "corrupt or truncated chunk table"
+                                : "corrupt or truncated tile table",
+                            r);
+        }
+    }
+    *out = c;
+    *count = (int)n;
+    return 0;
+}
+
+/* The first chunk (in file order) that failed inside a parallel loop. Workers cannot
+ * set mcpost's error (it is per thread), so they note what failed, with Core's message
+ * from their own thread, and the calling thread reports it after the loop. Keeping the
+ * lowest index makes the message the same whatever the thread count. */
+typedef struct chunk_failure {
+    int idx; /* -1: none */
+    exr_result_t rc;
+    const char *what;
+    char detail[512];
+} chunk_failure;
+
+static void
+note_failure(chunk_failure *fail, int idx, exr_result_t rc, const char *what)
+{
+#pragma omp critical(mcp_exr_chunk_failure)
+    if (fail->idx < 0 || idx < fail->idx) {
+        /* atomic: other threads poll idx (failed()) outside this critical section */
+#pragma omp atomic write
+        fail->idx = idx;
+        fail->rc = rc;
+        fail->what = what;
+        snprintf(fail->detail, sizeof fail->detail, "%s",
+                 exr_last_message[0] ? exr_last_message
+                                     : exr_get_default_error_message(rc));
+    }
+}
+
+static int
+failed(const chunk_failure *fail)
+{
+    int idx;
+#pragma omp atomic read
+    idx = fail->idx;
+    return idx >= 0;
+}
+
+static int
+report_failure(const chunk_failure *fail, const char *path)
+{
+    return mcp_error("%s: %s: %s", path, fail->what, fail->detail);
 }
 
 /* ---- what the file can hold, checked before the image is allocated ---- */
 
-typedef struct chunk_budget {
-    const char *path;
-    unsigned long long file_bytes;   /* the file's size */
-    unsigned long long packed_bytes; /* the chunks' stored bytes so far */
-    int uncompressed;
-} chunk_budget;
-
-static int
-chunk_fits(exr_context_t f, const exr_chunk_info_t *ci, int x0, int y0, void *ctx)
-{
-    (void)f;
-    (void)x0;
-    (void)y0;
-    chunk_budget *b = ctx;
-    unsigned long long at = ci->data_offset, n = ci->packed_size;
-    if (at > b->file_bytes || n > b->file_bytes - at)
-        return mcp_error("%s: chunk %d (%llu bytes at offset %llu) lies outside the file "
-                         "(%llu bytes)",
-                         b->path, ci->idx, n, at, b->file_bytes);
-    /* chunks do not overlap in a valid file, so together they fit in it; stored
-       uncompressed, each holds all its pixels */
-    b->packed_bytes += n;
-    if (b->packed_bytes > b->file_bytes)
-        return mcp_error("%s: the chunks hold more bytes than the file (%llu)", b->path,
-                         b->file_bytes);
-    if (b->uncompressed && n < ci->unpacked_size)
-        return mcp_error("%s: truncated chunk %d (%llu of %llu bytes)", b->path, ci->idx,
-                         n, (unsigned long long)ci->unpacked_size);
-    return 0;
-}
-
 /* Checks that the chunk table and every chunk of the w x h data window lie inside the
- * file, so that a small file cannot make us allocate a large image. A compressed
- * chunk can still expand a lot (zip about 1000 times): mcp_image_new's ceiling bounds
- * that. */
+ * file of file_bytes bytes, so that a small file cannot make us allocate a large
+ * image; lists the chunks for the decoder. A compressed chunk can still expand a lot
+ * (zip about 1000 times): mcp_image_new's ceiling bounds that. */
 static int
 check_file_holds(exr_context_t f, exr_storage_t storage, exr_compression_t comp,
-                 const exr_attr_box2i_t *dw, int w, int h, const char *path)
+                 const exr_attr_box2i_t *dw, int w, int h, unsigned long long file_bytes,
+                 const char *path, chunk_at **chunks_out, int *count)
 {
-    struct stat st;
     int32_t chunks = 0;
-    if (stat(path, &st) || st.st_size < 0)
-        return mcp_error("%s: cannot stat: %s", path, strerror(errno));
-    chunk_budget b = {path, (unsigned long long)st.st_size, 0,
-                      comp == EXR_COMPRESSION_NONE};
     exr_result_t r = exr_get_chunk_count(f, 0, &chunks);
     if (r != EXR_ERR_SUCCESS) return exr_fail(path, "bad chunk count", r);
     /* each chunk costs 8 bytes of table and at least 8 (scanline) or 20 (tile) bytes
        of its own header */
     unsigned long long per_chunk = storage == EXR_STORAGE_TILED ? 28 : 16;
-    if (chunks < 1 || (unsigned long long)chunks * per_chunk > b.file_bytes)
+    if (chunks < 1 || (unsigned long long)chunks * per_chunk > file_bytes)
         return mcp_error("%s: %d chunks of %lldx%lld pixels cannot fit in a file of %llu "
                          "bytes (truncated or corrupt)",
-                         path, chunks, (long long)w, (long long)h, b.file_bytes);
-    return each_chunk(f, storage, dw, w, h, path, chunk_fits, &b);
+                         path, chunks, (long long)w, (long long)h, file_bytes);
+    chunk_at *c;
+    int n;
+    if (list_chunks(f, storage, dw, w, h, 0, chunks, path, &c, &n))
+        return -1;
+    unsigned long long packed_bytes = 0;
+    for (int i = 0; i < n; i++) {
+        const exr_chunk_info_t *ci = &c[i].ci;
+        unsigned long long at = ci->data_offset, size = ci->packed_size;
+        int bad = 0;
+        if (at > file_bytes || size > file_bytes - at)
+            bad = mcp_error("%s: chunk %d (%llu bytes at offset %llu) lies outside the "
+                            "file (%llu bytes)",
+                            path, ci->idx, size, at, file_bytes);
+        /* chunks do not overlap in a valid file, so together they fit in it; stored
+           uncompressed, each holds all its pixels */
+        else if ((packed_bytes += size) > file_bytes)
+            bad = mcp_error("%s: the chunks hold more bytes than the file (%llu)", path,
+                            file_bytes);
+        else if (comp == EXR_COMPRESSION_NONE && size < ci->unpacked_size)
+            bad = mcp_error("%s: truncated chunk %d (%llu of %llu bytes)", path, ci->idx,
+                            size, (unsigned long long)ci->unpacked_size);
+        if (bad) {
+            free(c);
+            return -1;
+        }
+    }
+    *chunks_out = c;
+    *count = n;
+    return 0;
 }
 
 /* ---- decoding ---- */
 
-typedef struct decoder {
-    exr_decode_pipeline_t dec;
-    int initialised;
-    mcp_image *img;
-    const char *path;
-} decoder;
-
-static int
-chunk_decode(exr_context_t f, const exr_chunk_info_t *ci, int x0, int y0, void *ctx)
+/* Decodes one chunk into img at (x0, y0) of the data window with this thread's
+ * pipeline; on failure *what says which step failed. */
+static exr_result_t
+decode_chunk(exr_context_t f, const chunk_at *c, exr_decode_pipeline_t *dec,
+             int *initialised, mcp_image *img, const char **what)
 {
-    decoder *d = ctx;
-    return decode_chunk(f, ci, &d->dec, &d->initialised, d->img, x0, y0, d->path);
+    *what = "cannot decode";
+    exr_result_t rc = *initialised ? exr_decoding_update(f, 0, &c->ci, dec)
+                                   : exr_decoding_initialize(f, 0, &c->ci, dec);
+    if (rc != EXR_ERR_SUCCESS)
+        return rc;
+    for (int k = 0; k < dec->channel_count; k++) {
+        exr_coding_channel_info_t *ch = &dec->channels[k];
+        int ic = mcp_image_channel(img, ch->channel_name);
+        ch->decode_to_ptr = (uint8_t *)(mcp_image_px(img, c->x0, c->y0) + ic);
+        ch->user_pixel_stride = (int32_t)(img->pixel_stride * (ptrdiff_t)sizeof(float));
+        ch->user_line_stride = (int32_t)(img->row_stride * (ptrdiff_t)sizeof(float));
+        ch->user_data_type = EXR_PIXEL_FLOAT;
+        ch->user_bytes_per_element = 4;
+    }
+    if (!*initialised) {
+        if ((rc = exr_decoding_choose_default_routines(f, 0, dec)) != EXR_ERR_SUCCESS)
+            return rc;
+        *initialised = 1;
+    }
+    *what = "corrupt or truncated pixel data";
+    return exr_decoding_run(f, 0, dec);
 }
 
+/* Decodes the chunks in parallel: Core decodes each chunk on its own, reading its
+ * bytes through the context is safe from many threads (pread, or read_fn, which must
+ * be), and the chunks fill disjoint rectangles of img. Each thread keeps one
+ * pipeline for all its chunks, as Core intends (update instead of initialise). */
 static int
-read_pixels(exr_context_t f, exr_storage_t storage, const exr_attr_box2i_t *dw,
-            mcp_image *img, const char *path)
+read_pixels(exr_context_t f, const chunk_at *chunks, int n, mcp_image *img,
+            const char *path)
 {
-    decoder d = {EXR_DECODE_PIPELINE_INITIALIZER, 0, img, path};
-    int rc = each_chunk(f, storage, dw, img->width, img->height, path, chunk_decode, &d);
-    if (d.initialised) exr_decoding_destroy(f, &d.dec);
-    return rc;
+    chunk_failure fail = {.idx = -1};
+#pragma omp parallel if (n > 1)
+    {
+        exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
+        int initialised = 0;
+        /* chunks cost about the same; dynamic in ones keeps a slow thread (this
+           machine is shared) from holding up the rest */
+#pragma omp for schedule(dynamic, 1)
+        for (int i = 0; i < n; i++) {
+            if (failed(&fail))
+                continue;
+            const char *what;
+            exr_last_message[0] = '\0';
+            exr_result_t rc = decode_chunk(f, &chunks[i], &dec, &initialised, img, &what);
+            if (rc != EXR_ERR_SUCCESS)
+                note_failure(&fail, i, rc, what);
+        }
+        if (initialised)
+            exr_decoding_destroy(f, &dec);
+    }
+    return fail.idx >= 0 ? report_failure(&fail, path) : 0;
 }
 
-int
-mcp__exr_read(const char *path, mcp_image **out)
+/* Reads part 0 of an opened context f; file_bytes is the size of what it reads, name
+ * names it in messages and becomes img->source. Closes f. */
+static int
+read_context(exr_context_t f, unsigned long long file_bytes, const char *name,
+             mcp_image **out)
 {
-    exr_context_t f = NULL;
-    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
-    init.error_handler_fn = exr_capture_error;
-    exr_last_message[0] = '\0';
-    *out = NULL;
-    exr_result_t r = exr_start_read(&f, path, &init);
-    if (r != EXR_ERR_SUCCESS)
-        return exr_fail(path, "cannot read as OpenEXR", r);
-
-    int rc = -1;
+    const char *path = name;
+    int rc = -1, n_chunks = 0;
     mcp_image *img = NULL;
     const char **names = NULL;
+    chunk_at *chunks = NULL;
     exr_storage_t storage;
     exr_attr_box2i_t dw;
     exr_compression_t comp;
     const exr_attr_chlist_t *chans = NULL;
+    exr_result_t r;
     if ((r = exr_get_storage(f, 0, &storage)) || (r = exr_get_data_window(f, 0, &dw)) ||
         (r = exr_get_compression(f, 0, &comp)) || (r = exr_get_channels(f, 0, &chans))) {
         exr_fail(path, "bad header", r);
@@ -286,7 +358,9 @@ mcp__exr_read(const char *path, mcp_image **out)
         mcp_error_prefix("%s: ", path);
         goto done;
     }
-    if (check_file_holds(f, storage, comp, &dw, (int)w, (int)h, path)) goto done;
+    if (check_file_holds(f, storage, comp, &dw, (int)w, (int)h, file_bytes, path, &chunks,
+                         &n_chunks))
+        goto done;
     names = mcp_calloc((size_t)chans->num_channels, sizeof *names);
     if (!names)
         goto done;
@@ -300,7 +374,7 @@ mcp__exr_read(const char *path, mcp_image **out)
         names[c] = e->name.str;
     }
     if (mcp_image_new((int)w, (int)h, chans->num_channels, names, &img) ||
-        mcp_image_set_source(img, path) || read_pixels(f, storage, &dw, img, path) ||
+        mcp_image_set_source(img, path) || read_pixels(f, chunks, n_chunks, img, path) ||
         read_attributes(f, &img->attrs))
         goto done;
     if ((dw.min.x || dw.min.y) &&
@@ -311,10 +385,80 @@ mcp__exr_read(const char *path, mcp_image **out)
     img = NULL;
     rc = 0;
 done:
+    free(chunks);
     free(names);
     mcp_image_free(img);
     exr_finish(&f);
     return rc;
+}
+
+int
+mcp__exr_read(const char *path, mcp_image **out)
+{
+    exr_context_t f = NULL;
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    init.error_handler_fn = exr_capture_error;
+    exr_last_message[0] = '\0';
+    *out = NULL;
+    struct stat st;
+    if (stat(path, &st) || st.st_size < 0)
+        return mcp_error("%s: cannot stat: %s", path, strerror(errno));
+    exr_result_t r = exr_start_read(&f, path, &init);
+    if (r != EXR_ERR_SUCCESS)
+        return exr_fail(path, "cannot read as OpenEXR", r);
+    return read_context(f, (unsigned long long)st.st_size, path, out);
+}
+
+/* ---- reading from memory ---- */
+
+typedef struct memory_stream {
+    const unsigned char *data;
+    size_t size;
+} memory_stream;
+
+/* pread on a buffer: what lies in [offset, offset + sz) of it; a short count past the
+ * end (Core reports that as a short read). Many threads may call it at once. */
+static int64_t
+memory_read(exr_const_context_t ctxt, void *userdata, void *buffer, uint64_t sz,
+            uint64_t offset, exr_stream_error_func_ptr_t error_cb)
+{
+    (void)ctxt;
+    (void)error_cb;
+    const memory_stream *m = userdata;
+    if (offset >= m->size)
+        return 0;
+    uint64_t n = m->size - offset < sz ? m->size - offset : sz;
+    memcpy(buffer, m->data + offset, (size_t)n);
+    return (int64_t)n;
+}
+
+static int64_t
+memory_size(exr_const_context_t ctxt, void *userdata)
+{
+    (void)ctxt;
+    return (int64_t)((const memory_stream *)userdata)->size;
+}
+
+int
+mcp__exr_read_memory(const void *data, size_t size, const char *name, mcp_image **out)
+{
+    *out = NULL;
+    if (!data || size > (size_t)INT64_MAX)
+        return mcp_error("%s: no data to read", name);
+    /* Core keeps the pointer to the stream for the context's life: read_context closes
+       the context before this frame returns */
+    memory_stream m = {data, size};
+    exr_context_t f = NULL;
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    init.error_handler_fn = exr_capture_error;
+    init.user_data = &m;
+    init.read_fn = memory_read;
+    init.size_fn = memory_size;
+    exr_last_message[0] = '\0';
+    exr_result_t r = exr_start_read(&f, name, &init);
+    if (r != EXR_ERR_SUCCESS)
+        return exr_fail(name, "cannot read as OpenEXR", r);
+    return read_context(f, (unsigned long long)size, name, out);
 }
 
 /* ---- writing ---- */
@@ -370,12 +514,15 @@ typedef struct raw_copy {
     exr_result_t (*compress)(exr_encode_pipeline_t *);
     void *bytes;
     size_t cap;
+    int skip; /* store this chunk raw without trying (see store_raw_after_probe) */
 } raw_copy;
 
 static exr_result_t
 compress_or_store_raw(exr_encode_pipeline_t *enc)
 {
     raw_copy *raw = enc->encoding_user_data;
+    if (raw->skip)
+        return EXR_ERR_SUCCESS; /* write_pixels writes the packed bytes */
     if (raw->cap < enc->packed_bytes) {
         void *grown = realloc(raw->bytes, enc->packed_bytes);
         if (!grown)
@@ -394,21 +541,31 @@ compress_or_store_raw(exr_encode_pipeline_t *enc)
     return rc;
 }
 
-static int
-encode_chunk(exr_context_t f, const exr_chunk_info_t *ci, exr_encode_pipeline_t *enc,
-             int *initialised, raw_copy *raw, const mcp_image *img, int x0, int y0,
-             const char *path)
+/* exr_encoding_run's last steps wait for this chunk's turn and write it; here the
+ * chunks are packed and compressed in parallel and written afterwards, in file order,
+ * by write_pixels: these stand in for both steps and leave the bytes in the pipeline. */
+static exr_result_t
+keep_in_pipeline(exr_encode_pipeline_t *enc)
 {
-    exr_result_t rc = *initialised ? exr_encoding_update(f, 0, ci, enc)
-                                   : exr_encoding_initialize(f, 0, ci, enc);
+    (void)enc;
+    return EXR_ERR_SUCCESS;
+}
+
+/* Packs and compresses one chunk of img with this thread's pipeline; the bytes to
+ * write are then enc->compressed_buffer[0 .. compressed_bytes). */
+static exr_result_t
+encode_chunk(exr_context_t f, const chunk_at *c, exr_encode_pipeline_t *enc,
+             int *initialised, raw_copy *raw, const mcp_image *img)
+{
+    exr_result_t rc = *initialised ? exr_encoding_update(f, 0, &c->ci, enc)
+                                   : exr_encoding_initialize(f, 0, &c->ci, enc);
     if (rc != EXR_ERR_SUCCESS)
-        return exr_fail(path, "cannot encode", rc);
+        return rc;
     for (int k = 0; k < enc->channel_count; k++) {
         exr_coding_channel_info_t *ch = &enc->channels[k];
         /* Core sorts channels by name: map them back by name, not position */
-        int c = mcp_image_channel(img, ch->channel_name);
-        ch->encode_from_ptr =
-            (const uint8_t *)(mcp_image_px(img, x0, y0) + c);
+        int ic = mcp_image_channel(img, ch->channel_name);
+        ch->encode_from_ptr = (const uint8_t *)(mcp_image_px(img, c->x0, c->y0) + ic);
         ch->user_pixel_stride = (int32_t)(img->pixel_stride * (ptrdiff_t)sizeof(float));
         ch->user_line_stride = (int32_t)(img->row_stride * (ptrdiff_t)sizeof(float));
         ch->user_data_type = EXR_PIXEL_FLOAT;
@@ -416,50 +573,117 @@ encode_chunk(exr_context_t f, const exr_chunk_info_t *ci, exr_encode_pipeline_t 
     }
     if (!*initialised) {
         if ((rc = exr_encoding_choose_default_routines(f, 0, enc)) != EXR_ERR_SUCCESS)
-            return exr_fail(path, "cannot encode", rc);
-        if (enc->compress_fn && raw) {
+            return rc;
+        if (enc->compress_fn) {
             raw->compress = enc->compress_fn;
             enc->compress_fn = compress_or_store_raw;
         }
+        enc->yield_until_ready_fn = keep_in_pipeline;
+        enc->write_fn = keep_in_pipeline;
         *initialised = 1;
     }
     enc->encoding_user_data = raw;
-    if ((rc = exr_encoding_run(f, 0, enc)) != EXR_ERR_SUCCESS)
-        return exr_fail(path, "cannot write pixel data", rc);
-    return 0;
+    return exr_encoding_run(f, 0, enc);
 }
 
+/* Zip costs about as much per byte as the rest of writing put together, and a
+ * renderer's float noise barely compresses (an estimate's maps: 24.8 of 24.9 MB). A
+ * chunk whose compressed form is not smaller is stored raw, which every EXR reader
+ * takes for any compression, so pixels never change; this decides that for a whole
+ * image from a sample of its chunks instead of compressing every one to find out.
+ * It compresses every 16th chunk (at least one), spread over the image, and says raw
+ * when they shrink by less than min_saving of their bytes (1/8 by default). The sample is fixed, so
+ * the file does not depend on the thread count; when the data does compress, the cost
+ * is those chunks compressed twice (about 6%). */
+#define PROBE_EVERY 16
+
 static int
-write_pixels(exr_context_t f, const mcp_image *img, const mcp_write_options *opt,
+store_raw_after_probe(exr_context_t f, const mcp_image *img, const chunk_at *chunks,
+                      int n, double min_saving)
+{
+    int probes = n / PROBE_EVERY > 0 ? n / PROBE_EVERY : 1;
+    unsigned long long raw_bytes = 0, zip_bytes = 0;
+    int errors = 0;
+#pragma omp parallel if (probes > 1) reduction(+ : raw_bytes, zip_bytes, errors)
+    {
+        exr_encode_pipeline_t enc = EXR_ENCODE_PIPELINE_INITIALIZER;
+        raw_copy raw = {NULL, NULL, 0, 0};
+        int initialised = 0;
+#pragma omp for schedule(dynamic, 1)
+        for (int j = 0; j < probes; j++) {
+            /* the middle chunk of each of `probes` equal runs */
+            int i = (int)(((2LL * j + 1) * n) / (2LL * probes));
+            if (encode_chunk(f, &chunks[i], &enc, &initialised, &raw, img) !=
+                EXR_ERR_SUCCESS) {
+                errors++;
+                continue;
+            }
+            raw_bytes += enc.packed_bytes;
+            zip_bytes += enc.compressed_bytes;
+        }
+        if (initialised)
+            exr_encoding_destroy(f, &enc);
+        free(raw.bytes);
+    }
+    /* on an error, compress as asked: the real pass reports it */
+    return !errors && (double)zip_bytes > (1.0 - min_saving) * (double)raw_bytes;
+}
+
+/* Compresses the chunks in parallel, each thread with its own pipeline, and writes
+ * them in file order (a scanline file in INCREASING_Y order must hold its chunks in
+ * that order, and Core checks it): the ordered region hands the chunks to Core one
+ * after the other while the other threads compress the next ones, so at most one
+ * chunk per thread is held in memory. */
+static int
+write_pixels(exr_context_t f, const mcp_image *img, exr_storage_t storage,
+             exr_compression_t comp, double min_saving, const exr_attr_box2i_t *dw,
              const char *path)
 {
-    exr_encode_pipeline_t enc = EXR_ENCODE_PIPELINE_INITIALIZER;
-    exr_chunk_info_t ci;
-    raw_copy raw = {NULL, NULL, 0};
-    int initialised = 0, rc = 0;
-    if (!opt->exr_tiled) {
-        int32_t lines = 1;
-        exr_get_scanlines_per_chunk(f, 0, &lines);
-        for (int y = 0; y < img->height && !rc; y += lines) {
-            exr_result_t r = exr_write_scanline_chunk_info(f, 0, y + opt->exr_data_y, &ci);
-            rc = r != EXR_ERR_SUCCESS ? exr_fail(path, "cannot write", r)
-                                      : encode_chunk(f, &ci, &enc, &initialised, &raw, img,
-                                                     0, y, path);
-        }
-    } else {
-        int t = opt->exr_tile_size;
-        for (int ty = 0; ty * t < img->height && !rc; ty++)
-            for (int tx = 0; tx * t < img->width && !rc; tx++) {
-                exr_result_t r = exr_write_tile_chunk_info(f, 0, tx, ty, 0, 0, &ci);
-                rc = r != EXR_ERR_SUCCESS ? exr_fail(path, "cannot write", r)
-                                          : encode_chunk(f, &ci, &enc, &initialised, &raw,
-                                                         img, tx * t, ty * t, path);
+    chunk_at *chunks;
+    int n;
+    if (list_chunks(f, storage, dw, img->width, img->height, 1, (long long)INT32_MAX,
+                    path, &chunks, &n))
+        return -1;
+    /* below PROBE_EVERY chunks the probe would cost more than it could save */
+    int store_raw = (comp == EXR_COMPRESSION_ZIP || comp == EXR_COMPRESSION_ZIPS) &&
+                    min_saving > 0 && n >= PROBE_EVERY &&
+                    store_raw_after_probe(f, img, chunks, n, min_saving);
+    chunk_failure fail = {.idx = -1};
+#pragma omp parallel if (n > 1)
+    {
+        exr_encode_pipeline_t enc = EXR_ENCODE_PIPELINE_INITIALIZER;
+        raw_copy raw = {NULL, NULL, 0, store_raw};
+        int initialised = 0;
+#pragma omp for ordered schedule(dynamic, 1)
+        for (int i = 0; i < n; i++) {
+            exr_result_t rc = EXR_ERR_SUCCESS;
+            const char *what = "cannot encode";
+            exr_last_message[0] = '\0';
+            if (!failed(&fail))
+                rc = encode_chunk(f, &chunks[i], &enc, &initialised, &raw, img);
+#pragma omp ordered
+            {
+                /* a chunk after a failed one is not written: Core would refuse it */
+                if (rc == EXR_ERR_SUCCESS && !failed(&fail)) {
+                    const exr_chunk_info_t *ci = &chunks[i].ci;
+                    const void *bytes = store_raw ? enc.packed_buffer : enc.compressed_buffer;
+                    uint64_t size = store_raw ? enc.packed_bytes : enc.compressed_bytes;
+                    what = "cannot write pixel data";
+                    rc = storage == EXR_STORAGE_SCANLINE
+                             ? exr_write_scanline_chunk(f, 0, ci->start_y, bytes, size)
+                             : exr_write_tile_chunk(f, 0, ci->start_x, ci->start_y, 0, 0,
+                                                    bytes, size);
+                }
+                if (rc != EXR_ERR_SUCCESS)
+                    note_failure(&fail, i, rc, what);
             }
+        }
+        if (initialised)
+            exr_encoding_destroy(f, &enc);
+        free(raw.bytes);
     }
-    if (initialised)
-        exr_encoding_destroy(f, &enc);
-    free(raw.bytes);
-    return rc;
+    free(chunks);
+    return fail.idx >= 0 ? report_failure(&fail, path) : 0;
 }
 
 int
@@ -473,6 +697,14 @@ mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *
                          path, compression_name(compression_of[opt->compression]));
     if (opt->exr_tiled && (opt->exr_tile_size < 1 || opt->exr_tile_size > 4096))
         return mcp_error("%s: bad tile size %d", path, opt->exr_tile_size);
+    if (opt->exr_zip_level < 0 || opt->exr_zip_level > 9)
+        return mcp_error("%s: bad zip level %d (1..9, or 0 for the default)", path,
+                         opt->exr_zip_level);
+    int zip_level = opt->exr_zip_level ? opt->exr_zip_level : MCP_EXR_ZIP_LEVEL_DEFAULT;
+    if (!(opt->exr_min_saving < 1)) /* NaN too */
+        return mcp_error("%s: bad exr_min_saving %g (below 1; 0 for the default, "
+                         "negative to compress every chunk)",
+                         path, opt->exr_min_saving);
 
     exr_context_t f = NULL;
     exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
@@ -500,7 +732,8 @@ mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *
         (opt->exr_tiled &&
          (r = exr_set_tile_descriptor(f, part, (uint32_t)opt->exr_tile_size,
                                       (uint32_t)opt->exr_tile_size, EXR_TILE_ONE_LEVEL,
-                                      EXR_TILE_ROUND_DOWN)))) {
+                                      EXR_TILE_ROUND_DOWN))) ||
+        (r = exr_set_zip_compression_level(f, part, zip_level))) {
         exr_fail(path, "cannot write header", r);
         goto done;
     }
@@ -526,7 +759,10 @@ mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *
         exr_fail(path, "cannot write header", r);
         goto done;
     }
-    rc = write_pixels(f, img, opt, path);
+    rc = write_pixels(f, img, opt->exr_tiled ? EXR_STORAGE_TILED : EXR_STORAGE_SCANLINE,
+                      compression_of[opt->compression],
+                      opt->exr_min_saving ? opt->exr_min_saving : MCP_EXR_MIN_SAVING_DEFAULT,
+                      &dw, path);
 done:
     r = exr_finish(&f);
     if (!rc && r != EXR_ERR_SUCCESS)

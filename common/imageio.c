@@ -392,6 +392,26 @@ name_output_in_error(const char *tmp_path, const char *path)
 }
 
 int
+mcp_image_read_memory(const void *data, size_t size, const char *name, mcp_image **out)
+{
+    static const unsigned char exr_magic[4] = {0x76, 0x2f, 0x31, 0x01};
+    const unsigned char *b = data;
+    *out = NULL;
+    if (!name)
+        name = "(memory)";
+    if (!data && size)
+        return mcp_error("%s: no data (%zu bytes at NULL)", name, size);
+    if (size >= 4 && memcmp(b, exr_magic, 4) == 0)
+        return mcp__exr_read_memory(data, size, name, out);
+    if (size >= 2 && b[0] == 'P' && (b[1] == 'F' || b[1] == 'f'))
+        return mcp__pfm_read_memory(data, size, name, out);
+    /* OpenImageIO's plug-in reads only files: other formats go through a file */
+    return mcp_error("%s: not an EXR or PFM image (%zu bytes); only those two are read "
+                     "from memory",
+                     name, size);
+}
+
+int
 mcp_image_write(const mcp_image *img, const char *path, const mcp_write_options *opt)
 {
     mcp_write_options defaults = mcp_write_defaults();

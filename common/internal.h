@@ -34,8 +34,11 @@ int mcp__series_load_file(const mcp_series *s, int i, mcp_dump **out);
  * write exactly `path` (imageio.c passes a temporary name and renames). */
 #include <mcpost/imageio.h>
 int mcp__exr_read(const char *path, mcp_image **out);
+/* The same from a buffer (name labels it in messages); the dump loader uses it too. */
+int mcp__exr_read_memory(const void *data, size_t size, const char *name, mcp_image **out);
 int mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *opt);
 int mcp__pfm_read(const char *path, mcp_image **out);
+int mcp__pfm_read_memory(const void *data, size_t size, const char *name, mcp_image **out);
 int mcp__pfm_write(const mcp_image *img, const char *path);
 int mcp__png_read(const char *path, const mcp_read_options *opt, mcp_image **out);
 int mcp__png_write(const mcp_image *img, const char *path, const mcp_write_options *opt);

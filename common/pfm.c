@@ -1,10 +1,12 @@
 /* pfm.c: Portable Float Map read/write, done by hand because OpenImageIO 2.4 cannot
  * write PFM (notes/libraries.md 2b). Rows are stored bottom to top; a negative scale
  * means little-endian. Colour files ("PF") hold R,G,B; grey files ("Pf") hold Y. */
+#define _POSIX_C_SOURCE 200809L /* fmemopen */
 #include "internal.h"
 
 #include <ctype.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -36,13 +38,10 @@ bytes_left(FILE *f)
     return end - at;
 }
 
-int
-mcp__pfm_read(const char *path, mcp_image **out)
+/* Reads a PFM from the stream f (a file or a buffer), named path in messages. */
+static int
+read_stream(FILE *f, const char *path, mcp_image **out)
 {
-    *out = NULL;
-    FILE *f = fopen(path, "rb");
-    if (!f)
-        return mcp_error("%s: cannot open", path);
     char magic[3] = {0};
     int w = 0, h = 0, rc = -1;
     double scale = 0;
@@ -87,6 +86,33 @@ mcp__pfm_read(const char *path, mcp_image **out)
     rc = 0;
 done:
     mcp_image_free(img);
+    return rc;
+}
+
+int
+mcp__pfm_read(const char *path, mcp_image **out)
+{
+    *out = NULL;
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return mcp_error("%s: cannot open", path);
+    int rc = read_stream(f, path, out);
+    fclose(f);
+    return rc;
+}
+
+int
+mcp__pfm_read_memory(const void *data, size_t size, const char *name, mcp_image **out)
+{
+    *out = NULL;
+    if (!data || !size)
+        return mcp_error("%s: not a PFM file (bad header)", name);
+    /* a read-only stream over the caller's bytes, so that one parser serves both; "r"
+       never writes through the cast-away const */
+    FILE *f = fmemopen((void *)(uintptr_t)data, size, "rb");
+    if (!f)
+        return mcp_error("%s: cannot read from memory", name);
+    int rc = read_stream(f, name, out);
     fclose(f);
     return rc;
 }

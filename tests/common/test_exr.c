@@ -1,0 +1,275 @@
+/* test_exr.c: the parallel EXR writer and reader (common/exr.c). Every compression the
+ * writer takes round-trips bit for bit on 1, 2 and 5 threads, scanline and tiled, with
+ * partial last chunks and nasty values, and the files do not depend on the thread
+ * count; the raw-storage probe keeps pixels and picks raw only for data that does not
+ * compress; a corrupt chunk gives the same one-line error on any thread count. */
+#include "testing.h"
+
+#include <mcpost/imageio.h>
+#include <float.h>
+#include <math.h>
+#include <omp.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+static const char *names5[] = {"R", "G", "B", "Variance.R", "albedo.G"};
+static const int thread_counts[] = {1, 2, 5};
+
+static long
+file_size(const char *path)
+{
+    struct stat st;
+    return stat(path, &st) == 0 ? (long)st.st_size : -1;
+}
+
+static uint32_t
+bits(float v)
+{
+    uint32_t u;
+    memcpy(&u, &v, sizeof u);
+    return u;
+}
+
+/* A random image of odd size with the values that break careless copies: NaN with a
+ * payload, ±Inf, -0, FLT_MAX, the smallest denormal, in scattered pixels. */
+static mcp_image *
+nasty_image(int w, int h, uint64_t seed)
+{
+    mcp_image *img = mcp_test_random(w, h, 5, -3.0f, 7.0f, seed, names5);
+    uint32_t nan_payload = 0x7fc01234u;
+    float nan;
+    memcpy(&nan, &nan_payload, sizeof nan);
+    const float special[] = {nan, INFINITY, -INFINITY, -0.0f, FLT_MAX, -FLT_MAX,
+                             1e-45f, FLT_MIN};
+    uint64_t s = seed;
+    for (int k = 0; k < 64; k++) {
+        int x = (int)(mcp_test_rand_u64(&s) % (uint64_t)w);
+        int y = (int)(mcp_test_rand_u64(&s) % (uint64_t)h);
+        int c = (int)(mcp_test_rand_u64(&s) % 5);
+        mcp_image_px(img, x, y)[c] = special[k % 8];
+    }
+    return img;
+}
+
+/* Every value of a equals the channel of the same name in b, bit for bit. */
+static void
+assert_same_bits(const mcp_image *a, const mcp_image *b)
+{
+    assert_int_equal(a->width, b->width);
+    assert_int_equal(a->height, b->height);
+    assert_int_equal(a->channels, b->channels);
+    for (int c = 0; c < a->channels; c++) {
+        int cb = mcp_image_channel(b, a->names[c]);
+        assert_true(cb >= 0);
+        for (int y = 0; y < a->height; y++)
+            for (int x = 0; x < a->width; x++)
+                if (bits(mcp_image_px(a, x, y)[c]) != bits(mcp_image_px(b, x, y)[cb]))
+                    fail_msg("channel %s pixel (%d, %d): %08x read back as %08x",
+                             a->names[c], x, y, bits(mcp_image_px(a, x, y)[c]),
+                             bits(mcp_image_px(b, x, y)[cb]));
+    }
+}
+
+static int
+same_file_bytes(const char *p, const char *q)
+{
+    long n = file_size(p);
+    if (n < 0 || n != file_size(q))
+        return 0;
+    char *a = mcp_test_read_text(p), *b = mcp_test_read_text(q);
+    int same = memcmp(a, b, (size_t)n) == 0;
+    free(a);
+    free(b);
+    return same;
+}
+
+/* Writes img with o on every thread count and reads each file back on every thread
+ * count: the files are byte for byte the 1-thread file, and (lossless) the pixels are
+ * img's bits, or (pxr24, half) those of the 1-thread read. */
+static void
+roundtrip_all_threads(const mcp_image *img, const mcp_write_options *o, int lossless)
+{
+    char first[4096];
+    snprintf(first, sizeof first, "%s", mcp_test_path("par_t1.exr"));
+    mcp_image *ref = NULL;
+    for (size_t i = 0; i < sizeof thread_counts / sizeof *thread_counts; i++) {
+        omp_set_num_threads(thread_counts[i]);
+        const char *path = i == 0 ? first : mcp_test_path("par_tn.exr");
+        assert_int_equal(mcp_image_write(img, path, o), 0);
+        if (i > 0)
+            assert_true(same_file_bytes(first, path));
+        for (size_t j = 0; j < sizeof thread_counts / sizeof *thread_counts; j++) {
+            omp_set_num_threads(thread_counts[j]);
+            mcp_image *back = NULL;
+            assert_int_equal(mcp_image_read(path, NULL, &back), 0);
+            if (lossless)
+                assert_same_bits(img, back);
+            else if (!ref)
+                ref = back, back = NULL;
+            else
+                assert_same_bits(ref, back);
+            mcp_image_free(back);
+        }
+    }
+    mcp_image_free(ref);
+    omp_set_num_threads(omp_get_num_procs());
+}
+
+static void
+test_every_compression_every_thread_count(void **state)
+{
+    (void)state;
+    /* 61 x 75: zip's 16-line chunks end with 11 lines, piz's 32 with 11, zips has 75
+       chunks (enough for the raw-storage probe); tiles of 16 leave 13 x 11 corners */
+    mcp_image *img = nasty_image(61, 75, 17);
+    mcp_attrs_set_int(&img->attrs, "samplesPerPixel", 32);
+    const char *lossless[] = {"none", "rle", "zips", "zip", "piz"};
+    for (int tiled = 0; tiled <= 1; tiled++)
+        for (size_t k = 0; k < sizeof lossless / sizeof *lossless; k++) {
+            mcp_write_options o = mcp_write_defaults();
+            assert_int_equal(mcp_exr_compression_from_name(lossless[k], &o.compression), 0);
+            o.exr_tiled = tiled;
+            o.exr_tile_size = 16;
+            roundtrip_all_threads(img, &o, 1);
+            /* zip without the probe, and at the old level: the same pixels */
+            if (o.compression == MCP_EXR_ZIP || o.compression == MCP_EXR_ZIPS) {
+                o.exr_min_saving = -1;
+                o.exr_zip_level = 9;
+                roundtrip_all_threads(img, &o, 1);
+            }
+        }
+    /* lossy or half: not img's bits, but the same bits on any thread count */
+    mcp_write_options o = mcp_write_defaults();
+    o.compression = MCP_EXR_PXR24;
+    roundtrip_all_threads(img, &o, 0);
+    o.compression = MCP_EXR_ZIP;
+    o.exr_pixel = MCP_EXR_HALF;
+    o.exr_tiled = 1;
+    o.exr_tile_size = 16;
+    roundtrip_all_threads(img, &o, 0);
+    mcp_image_free(img);
+}
+
+/* A crop of a channel range (strides unlike a packed image) on many threads. */
+static void
+test_view_on_many_threads(void **state)
+{
+    (void)state;
+    mcp_image *img = nasty_image(80, 90, 5), *crop, *view;
+    assert_int_equal(mcp_image_crop_view(img, 7, 3, 61, 83, &crop), 0);
+    assert_int_equal(mcp_image_channel_view(crop, 1, 3, &view), 0);
+    mcp_write_options o = mcp_write_defaults();
+    o.compression = MCP_EXR_ZIPS;
+    roundtrip_all_threads(view, &o, 1);
+    mcp_image_free(view);
+    mcp_image_free(crop);
+    mcp_image_free(img);
+}
+
+/* Raw bytes of a w x h x c float image's pixels. */
+static long
+pixel_bytes(int w, int h, int c)
+{
+    return (long)w * h * c * (long)sizeof(float);
+}
+
+static void
+test_probe_stores_raw_only_what_does_not_compress(void **state)
+{
+    (void)state;
+    const int w = 64, h = 256;
+    const char *path = mcp_test_path("probe.exr");
+    mcp_write_options o = mcp_write_defaults();
+    /* uniform random floats: their mantissas do not compress, so every chunk is raw
+       (the file holds at least the pixel bytes), and the pixels come back */
+    mcp_image *noise = mcp_test_random(w, h, 3, 0.0f, 1.0f, 3, NULL), *back = NULL;
+    assert_int_equal(mcp_image_write(noise, path, &o), 0);
+    assert_true(file_size(path) >= pixel_bytes(w, h, 3));
+    assert_int_equal(mcp_image_read(path, NULL, &back), 0);
+    assert_same_bits(noise, back);
+    mcp_image_free(back);
+    /* a ramp compresses well: zip keeps it far below the raw size */
+    mcp_image *ramp = mcp_test_ramp(w, h, 3, NULL);
+    assert_int_equal(mcp_image_write(ramp, path, &o), 0);
+    assert_true(file_size(path) < pixel_bytes(w, h, 3) / 4);
+    assert_int_equal(mcp_image_read(path, NULL, &back), 0);
+    assert_same_bits(ramp, back);
+    mcp_image_free(back);
+    /* every other row constant: zip saves about half; a threshold below the saving
+       compresses, one above it stores raw */
+    mcp_image *half = mcp_test_random(w, h, 3, 0.0f, 1.0f, 4, NULL);
+    for (int y = 1; y < h; y += 2)
+        for (int x = 0; x < w; x++)
+            for (int c = 0; c < 3; c++)
+                mcp_image_px(half, x, y)[c] = 0.25f;
+    o.exr_min_saving = 0.01;
+    assert_int_equal(mcp_image_write(half, path, &o), 0);
+    long compressed = file_size(path);
+    assert_true(compressed < pixel_bytes(w, h, 3) * 0.9);
+    o.exr_min_saving = 0.9;
+    assert_int_equal(mcp_image_write(half, path, &o), 0);
+    assert_true(file_size(path) >= pixel_bytes(w, h, 3));
+    assert_int_equal(mcp_image_read(path, NULL, &back), 0);
+    assert_same_bits(half, back);
+    mcp_image_free(back);
+    /* bad settings name the file and the field */
+    o.exr_min_saving = 1;
+    assert_error_contains(mcp_image_write(half, path, &o), "probe.exr: bad exr_min_saving 1");
+    o = mcp_write_defaults();
+    o.exr_zip_level = 10;
+    assert_error_contains(mcp_image_write(half, path, &o), "probe.exr: bad zip level 10");
+    mcp_image_free(half);
+    mcp_image_free(ramp);
+    mcp_image_free(noise);
+}
+
+/* Overwrites 64 bytes in the middle of a many-chunk zips file: the error is one line
+ * naming the file, and the same on every thread count (the first bad chunk's). */
+static void
+test_corrupt_chunk_same_error_any_thread_count(void **state)
+{
+    (void)state;
+    mcp_image *img = mcp_test_ramp(61, 200, 3, NULL);
+    mcp_write_options o = mcp_write_defaults();
+    o.compression = MCP_EXR_ZIPS;
+    const char *path = mcp_test_path("corrupt.exr");
+    assert_int_equal(mcp_image_write(img, path, &o), 0);
+    long n = file_size(path);
+    char *bytes = mcp_test_read_text(path);
+    memset(bytes + n / 2, 0x5a, 64);
+    FILE *f = fopen(path, "wb");
+    assert_non_null(f);
+    assert_int_equal(fwrite(bytes, 1, (size_t)n, f), (size_t)n);
+    fclose(f);
+    free(bytes);
+    char first[1024] = "";
+    for (size_t i = 0; i < sizeof thread_counts / sizeof *thread_counts; i++) {
+        omp_set_num_threads(thread_counts[i]);
+        mcp_image *back = NULL;
+        assert_int_equal(mcp_image_read(path, NULL, &back), -1);
+        assert_null(back);
+        const char *msg = mcp_error_message();
+        assert_non_null(strstr(msg, "corrupt.exr: "));
+        assert_null(strchr(msg, '\n'));
+        if (i == 0)
+            snprintf(first, sizeof first, "%s", msg);
+        else
+            assert_string_equal(msg, first);
+    }
+    omp_set_num_threads(omp_get_num_procs());
+    mcp_image_free(img);
+}
+
+int
+main(void)
+{
+    const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_every_compression_every_thread_count),
+        cmocka_unit_test(test_view_on_many_threads),
+        cmocka_unit_test(test_probe_stores_raw_only_what_does_not_compress),
+        cmocka_unit_test(test_corrupt_chunk_same_error_any_thread_count),
+    };
+    return cmocka_run_group_tests_name("common/exr", tests, NULL, NULL);
+}
