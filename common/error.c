@@ -81,31 +81,3 @@ mcp_size_mul3(size_t a, size_t b, size_t c, size_t *out)
     size_t ab;
     return mcp_size_mul(a, b, &ab) ? -1 : mcp_size_mul(ab, c, out);
 }
-
-void *
-mcp_malloc(size_t bytes)
-{
-    void *p = malloc(bytes ? bytes : 1);
-    if (!p)
-        mcp_error("out of memory (%zu bytes)", bytes);
-    return p;
-}
-
-void *
-mcp_calloc(size_t count, size_t size)
-{
-    void *p = calloc(count ? count : 1, size ? size : 1);
-    if (!p)
-        mcp_error("out of memory (%zu x %zu bytes)", count, size);
-    return p;
-}
-
-char *
-mcp_strdup(const char *s)
-{
-    size_t n = strlen(s) + 1;
-    char *p = mcp_malloc(n);
-    if (p)
-        memcpy(p, s, n);
-    return p;
-}

@@ -296,7 +296,10 @@ relse_checked(const mcp_image *test, const int *it, const mcp_image *ref, const 
                 q[c] = (float)(d * d / (m * m + eps));
             }
         }
-    mcp_image_set_source(o, "RelSE");
+    if (mcp_image_set_source(o, "RelSE")) {
+        mcp_image_free(o);
+        return -1;
+    }
     *out = o;
     return 0;
 }
@@ -378,7 +381,10 @@ sq_error_map(const mcp_image *test, const int *it, const mcp_image *ref, const i
                 q[c] = (float)(d * d);
             }
         }
-    mcp_image_set_source(o, "squared error");
+    if (mcp_image_set_source(o, "squared error")) {
+        mcp_image_free(o);
+        return -1;
+    }
     *out = o;
     return 0;
 }
@@ -638,8 +644,8 @@ mcp_metrics_write_maps(const mcp_metrics_maps *maps, const char *dir, const char
                 mean /= maps->relse->channels;
                 mcp_image_px(lg, x, y)[0] = (float)(mean > 1e-30 ? log10(mean) : -30.0);
             }
-        mcp_image_set_source(lg, "RelSE");
-        int rc = emit(&o, lg, "relse", 0, 0, -5.0, 0.0, MCP_COLORMAP_INFERNO,
+        int rc = mcp_image_set_source(lg, "RelSE") ||
+                 emit(&o, lg, "relse", 0, 0, -5.0, 0.0, MCP_COLORMAP_INFERNO,
                       "relative squared error, log10 from -5 to 0 (inferno)");
         mcp_image_free(lg);
         if (rc) return -1;
