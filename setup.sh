@@ -3,14 +3,17 @@
 #
 #   ./setup.sh demo    install what is missing, build, run samples/jobs/demo.yaml
 #   ./setup.sh test    install what is missing, build (plain and ASan+UBSan), run all tests,
-#                      build everything with clang, and run the SIMD modules' tests once
-#                      more with their scalar code
+#                      build everything with clang, run the SIMD modules' tests once
+#                      more with their scalar code, and run each fuzz target (tests/fuzz)
+#                      for a short while
 #   ./setup.sh build   install what is missing and build only
 #
 # Builds go to build/ (build-asan/ for the sanitizer build, build-clang/ for clang,
 # build-scalar/ for the one with MCP_NO_SIMD, whose SSE2 loops fall back to their plain
-# C), all with warnings as errors (MCPOST_WERROR). Set MCPOST_NO_ASAN=1, MCPOST_NO_CLANG=1
-# or MCPOST_NO_SCALAR=1 to skip those in `test`, MCPOST_JOBS to change the parallelism.
+# C, build-fuzz/ for the libFuzzer targets), all with warnings as errors (MCPOST_WERROR).
+# Set MCPOST_NO_ASAN=1, MCPOST_NO_CLANG=1, MCPOST_NO_SCALAR=1 or MCPOST_NO_FUZZ=1 to skip
+# those in `test`, MCPOST_FUZZ_SECONDS to fuzz each target longer or shorter than 60 s,
+# MCPOST_JOBS to change the parallelism.
 set -euo pipefail
 cd "$(dirname "$0")"
 
@@ -67,7 +70,7 @@ test)
     if [ -z "${MCPOST_NO_CLANG:-}" ]; then
         # clang builds everything warning-free too (its own warnings, -Werror); the
         # tests' numbers are gcc's, so this build is compiled, not run
-        install_packages clang
+        install_packages clang libomp-dev
         CC=clang CXX=clang++ build build-clang -DMCPOST_BENCH=OFF
     fi
     if [ -z "${MCPOST_NO_SCALAR:-}" ]; then
@@ -75,6 +78,16 @@ test)
         # results: their tests compare with plain reimplementations value for value
         build build-scalar -DCMAKE_C_FLAGS=-DMCP_NO_SIMD -DMCPOST_BENCH=OFF
         ctest --test-dir build-scalar --output-on-failure -j "$JOBS" -R '^(blend|perceptual)/'
+    fi
+    if [ -z "${MCPOST_NO_FUZZ:-}" ]; then
+        # every reader and parser under libFuzzer with ASan+UBSan, from the committed
+        # seeds and regression inputs, MCPOST_FUZZ_SECONDS each [60]; any finding (a
+        # crash, a sanitizer report, a leak, a broken error message) fails the run.
+        # The plain and ASan builds above replay the same corpora without libFuzzer.
+        install_packages clang libomp-dev libfuzzer-14-dev
+        CC=clang CXX=clang++ build build-fuzz -DMCPOST_FUZZ=ON -DMCPOST_TESTS=OFF \
+            -DMCPOST_BENCH=OFF
+        MCPOST_FUZZ_JOBS=$JOBS tests/fuzz/run.sh build-fuzz "${MCPOST_FUZZ_SECONDS:-60}"
     fi
     ;;
 build)

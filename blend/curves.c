@@ -243,7 +243,11 @@ mcp_blend_curves(const mcp_image *const *var_of_mean, const double *spp, int n,
         free(rgb);
         return -1;
     }
-    mcp_image_set_source(curves, "blend curves");
+    if (mcp_image_set_source(curves, "blend curves")) {
+        free(rgb);
+        mcp_image_free(curves);
+        return -1;
+    }
     /* points of one value: n at most, plus the far point on the fly */
     int cap = n + 1;
     long n_alloc_failed = 0;

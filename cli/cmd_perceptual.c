@@ -236,13 +236,21 @@ add_file(perc_run *r, const mcp_image *img)
             mcp_dump_free(d);
             return -1;
         }
+    } else if (strstr(mcp_error_message(), "out of memory")) {
+        /* a failed allocation is no sign that the file is a plain image: reading it as
+           one would drop its albedo and normal without a word (tests/common/test_alloc) */
+        return -1;
     } else {
         mcp_error_clear();
         int idx[3];
         if (mcp_rgb_channels(img, idx) || mcp_image_copy_channels(img, idx, 3, &rgb))
             return -1;
     }
-    mcp_image_set_source(rgb, img->source ? img->source : "candidate");
+    if (mcp_image_set_source(rgb, img->source ? img->source : "candidate")) {
+        mcp_image_free(rgb);
+        mcp_dump_free(d);
+        return -1;
+    }
     r->albedos[r->n_files] = r->normals[r->n_files] = NULL;
     r->files[r->n_files++] = rgb;
     int rc = (d && d->albedo && mcp_image_copy(d->albedo, &r->albedos[r->n_files - 1])) ||

@@ -739,7 +739,8 @@ mcp_series_free(mcp_series *s)
 {
     if (!s)
         return;
-    for (int i = 0; i < s->count; i++)
+    /* paths is NULL when its own allocation failed (series_new) */
+    for (int i = 0; s->paths && i < s->count; i++)
         free(s->paths[i]);
     free(s->paths);
     free(s->spp);

@@ -11,6 +11,18 @@
 
 static _Thread_local char error_line[MCP_ERROR_MAX];
 
+/* Messages name channels, tensors, keys and paths as the files spell them: a control
+ * character there (a newline in a channel name) would break the one-line contract
+ * that callers and scripts rely on, so every one is shown as '?'. Found by the fuzz
+ * targets (tests/fuzz/regressions/dump, tza). */
+static void
+keep_one_line(char *s)
+{
+    for (; *s; s++)
+        if ((unsigned char)*s < 0x20 || *s == 0x7f)
+            *s = '?';
+}
+
 int
 mcp_error(const char *fmt, ...)
 {
@@ -18,6 +30,7 @@ mcp_error(const char *fmt, ...)
     va_start(ap, fmt);
     vsnprintf(error_line, sizeof error_line, fmt, ap);
     va_end(ap);
+    keep_one_line(error_line);
     return -1;
 }
 
@@ -37,6 +50,7 @@ mcp_error_prefix(const char *fmt, ...)
     size_t m = strlen(old) < rest ? strlen(old) : rest;
     memcpy(error_line + n, old, m);
     error_line[n + m] = '\0';
+    keep_one_line(error_line);
     return -1;
 }
 
@@ -66,32 +80,4 @@ mcp_size_mul3(size_t a, size_t b, size_t c, size_t *out)
 {
     size_t ab;
     return mcp_size_mul(a, b, &ab) ? -1 : mcp_size_mul(ab, c, out);
-}
-
-void *
-mcp_malloc(size_t bytes)
-{
-    void *p = malloc(bytes ? bytes : 1);
-    if (!p)
-        mcp_error("out of memory (%zu bytes)", bytes);
-    return p;
-}
-
-void *
-mcp_calloc(size_t count, size_t size)
-{
-    void *p = calloc(count ? count : 1, size ? size : 1);
-    if (!p)
-        mcp_error("out of memory (%zu x %zu bytes)", count, size);
-    return p;
-}
-
-char *
-mcp_strdup(const char *s)
-{
-    size_t n = strlen(s) + 1;
-    char *p = mcp_malloc(n);
-    if (p)
-        memcpy(p, s, n);
-    return p;
 }

@@ -8,6 +8,13 @@
 
 #include <mcpost/image.h>
 
+/* Fault injection, for tests only (alloc.c): allocation number n (0-based) through
+ * mcp_malloc, mcp_calloc and mcp_strdup from now on fails as if memory were out, the
+ * others succeed; n < 0 turns it off. mcp__alloc_count() is how many allocations were
+ * counted since (a run that finishes with count <= n met no failure). */
+void mcp__alloc_fail_after(long n);
+long mcp__alloc_count(void);
+
 /* Window sums over 3 channels (stats.c): a summed-area table of (width + 1) x
  * (height + 1) x 3 doubles (malloc'd), and the sum over the (2r + 1)² window around
  * (x, y) clipped at the borders, with its pixel count. */

@@ -791,6 +791,12 @@ mcp_job_run_file(const char *path, const mcp_stage *const *stages,
         return -1;
     int rc = -1;
     const mcp_node *list = NULL;
+    /* quiet covers the job's own notes and all that its stages print through mcp_note
+     * and mcp_progress, which read the process-wide switch: it is set for the run and
+     * put back as the caller had it */
+    int was_quiet = mcp_progress_quiet();
+    if (job->opt.quiet)
+        mcp_progress_set_quiet(1);
     /* check everything before running anything */
     if (job_validate(job, stages, &list))
         goto done;
@@ -827,6 +833,7 @@ mcp_job_run_file(const char *path, const mcp_stage *const *stages,
     mcp_note("results in %s (report.html, report.json)", job->output_dir);
     rc = 0;
 done:
+    mcp_progress_set_quiet(was_quiet);
     job_free(job);
     return rc;
 }

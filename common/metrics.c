@@ -290,7 +290,10 @@ relse_checked(const mcp_image *test, const int *it, const mcp_image *ref, const 
                 q[c] = (float)(d * d / (m * m + eps));
             }
         }
-    mcp_image_set_source(o, "RelSE");
+    if (mcp_image_set_source(o, "RelSE")) {
+        mcp_image_free(o);
+        return -1;
+    }
     *out = o;
     return 0;
 }
@@ -450,8 +453,9 @@ mcp_metrics_compute(const mcp_image *test, const mcp_image *ref,
         mcp_error("metrics: out of memory (%dx%d)", w, h);
         goto done;
     }
-    if (relse) mcp_image_set_source(relse, "RelSE");
-    if (sq) mcp_image_set_source(sq, "squared error");
+    if ((relse && mcp_image_set_source(relse, "RelSE")) ||
+        (sq && mcp_image_set_source(sq, "squared error")))
+        goto done;
     out->mse = mean[0];
     out->relmse = mean[1];
     out->rmse = sqrt(out->mse);
@@ -680,8 +684,8 @@ mcp_metrics_write_maps(const mcp_metrics_maps *maps, const char *dir, const char
                 mean /= maps->relse->channels;
                 mcp_image_px(lg, x, y)[0] = (float)(mean > 1e-30 ? log10(mean) : -30.0);
             }
-        mcp_image_set_source(lg, "RelSE");
-        int rc = emit(&o, lg, "relse", 0, 0, -5.0, 0.0, MCP_COLORMAP_INFERNO,
+        int rc = mcp_image_set_source(lg, "RelSE") ||
+                 emit(&o, lg, "relse", 0, 0, -5.0, 0.0, MCP_COLORMAP_INFERNO,
                       "relative squared error, log10 from -5 to 0 (inferno)");
         mcp_image_free(lg);
         if (rc) return -1;

@@ -142,8 +142,9 @@ mcp_spectra_blue_noise(const mcp_image *test, const mcp_image *ref,
                 q[c] = mcp_tonemap_value(opt->tone_map, pt[it[c]]) -
                        mcp_tonemap_value(opt->tone_map, pr[ir[c]]);
         }
-    mcp_image_set_source(e, test->source ? test->source : "error");
-    int rc = mcp_spectra_analyse(e, opt, res, picture);
+    int rc = mcp_image_set_source(e, test->source ? test->source : "error")
+                 ? -1
+                 : mcp_spectra_analyse(e, opt, res, picture);
     mcp_image_free(e);
     return rc;
 }

@@ -124,7 +124,10 @@ mcp_tonemap_apply(const mcp_image *img, mcp_tonemap tm, mcp_image **out)
                 dst[(size_t)x * c + k] = mcp_tonemap_value(tm, p[k]);
         }
     }
-    if (img->source) mcp_image_set_source(o, img->source);
+    if (img->source && mcp_image_set_source(o, img->source)) {
+        mcp_image_free(o); /* out of memory: the name is needed in messages */
+        return -1;
+    }
     *out = o;
     return 0;
 }
@@ -317,7 +320,10 @@ mcp_pkernel_filter(const mcp_image *img, const double *taps, int radius, mcp_ima
                 o->data[((size_t)y * w + x) * c + k] = (float)s;
             }
     free(tmp);
-    if (img->source) mcp_image_set_source(o, img->source);
+    if (img->source && mcp_image_set_source(o, img->source)) {
+        mcp_image_free(o); /* out of memory: the name is needed in messages */
+        return -1;
+    }
     *out = o;
     return 0;
 }

@@ -15,7 +15,11 @@ mcp_perc_mean(const mcp_image *const *cands, int m, mcp_image **out)
     if (mcp__mean_rgb(cands, m, &mean)) return -1;
     int rc = mcp__image_from_rgb(cands[0]->width, cands[0]->height, mean, out);
     free(mean);
-    if (!rc) mcp_image_set_source(*out, "candidates' mean");
+    if (!rc && mcp_image_set_source(*out, "candidates' mean")) {
+        mcp_image_free(*out);
+        *out = NULL;
+        rc = -1;
+    }
     return rc;
 }
 
@@ -71,8 +75,11 @@ mcp_perc_surrogate_denoise(const mcp_image *const *cands, int m, const mcp_image
     int rc = den->apply(den, &in, out);
     if (rc)
         mcp_error_prefix("surrogate: denoiser '%s': ", den->name ? den->name : "?");
-    else
-        mcp_image_set_source(*out, "denoised mean");
+    else if (mcp_image_set_source(*out, "denoised mean")) {
+        mcp_image_free(*out);
+        *out = NULL;
+        rc = -1;
+    }
     mcp_image_free(var);
     mcp_image_free(mean);
     return rc;

@@ -281,7 +281,10 @@ make_mask(const mcp_blue_noise_options *opt, mcp_image **out)
     for (int p = 0; p < n; p++)
         img->data[p] = (float)((rank[p] + 0.5) / n);
     free(rank);
-    mcp_image_set_source(img, "blue-noise mask");
+    if (mcp_image_set_source(img, "blue-noise mask")) {
+        mcp_image_free(img);
+        return -1;
+    }
     *out = img;
     return 0;
 }

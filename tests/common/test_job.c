@@ -256,14 +256,23 @@ test_runner_checks_everything_first(void **state)
     for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
         calls = 0;
         const char *job = write_job("bad.yaml", cases[i].text);
+        rmdir(mcp_test_path("out/bad")); /* a stage's failure leaves it (empty) */
         assert_error_contains(mcp_job_run_file(job, table, NULL), cases[i].error);
         /* nothing ran: the failing line could be the last one */
         assert_int_equal(calls, 0);
         /* the check alone finds the same, except what only a stage knows (which input
-           names it reads, the types of its own settings) */
-        if (!strstr(cases[i].error, "no input or result") &&
-            !strstr(cases[i].error, "scale must be"))
+           names it reads, the types of its own settings); neither makes the output
+           folder then, which comes after the checks */
+        int stage_knows = strstr(cases[i].error, "no input or result") ||
+                          strstr(cases[i].error, "scale must be");
+        if (!stage_knows)
+            assert_int_equal(access(mcp_test_path("out/bad"), F_OK), -1);
+        rmdir(mcp_test_path("out/bad"));
+        if (!stage_knows)
             assert_error_contains(mcp_job_check(job, table), cases[i].error);
+        else
+            assert_int_equal(mcp_job_check(job, table), 0);
+        assert_int_equal(access(mcp_test_path("out/bad"), F_OK), -1);
     }
 }
 
@@ -286,6 +295,41 @@ test_check_has_no_side_effects(void **state)
     snprintf(args, sizeof args, "run --check '%s'", mcp_test_path("missing.yaml"));
     assert_int_not_equal(mcp_test_run_mcpost(args, out, sizeof out, err, sizeof err), 0);
     assert_non_null(strstr(err, "missing.yaml"));
+}
+
+/* mcp_job_options.quiet silences the job's own notes ("[1/2] probe", "results in")
+ * and its stages' (they print through the process-wide switch), and leaves that
+ * switch as the caller had it. */
+static void
+test_quiet_option_silences_the_job(void **state)
+{
+    (void)state;
+    setup_input();
+    const char *job = write_job("quiet.yaml", "inputs:\n"
+                                              "  noisy: {dump: in.exr}\n"
+                                              "output: out/quiet\n"
+                                              "stages:\n"
+                                              "  - probe: {input: noisy, scale: 4}\n"
+                                              "  - consume: {input: probed}\n");
+    mcp_progress_set_quiet(0);
+    mcp_job_options opt = mcp_job_defaults();
+    opt.quiet = 1;
+    /* stderr into a file for the run */
+    fflush(stderr);
+    int saved = dup(2);
+    FILE *capture = fopen(mcp_test_path("quiet.stderr"), "w+");
+    assert_non_null(capture);
+    assert_int_not_equal(dup2(fileno(capture), 2), -1);
+    int rc = mcp_job_run_file(job, table, &opt);
+    fflush(stderr);
+    dup2(saved, 2);
+    close(saved);
+    long written = ftell(capture) >= 0 && fseek(capture, 0, SEEK_END) == 0 ? ftell(capture) : -1;
+    fclose(capture);
+    assert_int_equal(rc, 0);
+    assert_int_equal(written, 0);
+    assert_int_equal(mcp_progress_quiet(), 0);
+    mcp_progress_set_quiet(1);
 }
 
 /* Regression (issue 15): a field width of 2147483640 overflowed snprintf's int count,
@@ -461,6 +505,7 @@ main(void)
         cmocka_unit_test(test_runner_runs_stages_in_order),
         cmocka_unit_test(test_runner_checks_everything_first),
         cmocka_unit_test(test_check_has_no_side_effects),
+        cmocka_unit_test(test_quiet_option_silences_the_job),
         cmocka_unit_test(test_wrong_types_name_the_line_once),
         cmocka_unit_test(test_series_pattern_is_bounded),
         cmocka_unit_test(test_channel_mapping_overrides_detection),

@@ -1,0 +1,94 @@
+/* fuzz_support.c: scratch files and the error contract for the fuzz targets (fuzz.h).
+ * The readers under test take paths; the targets write each input to a file in
+ * memory (/dev/shm) and read it back. The in-memory readers that are on their way
+ * (mcp_image_read_memory) will let the image targets drop this. */
+#define _POSIX_C_SOURCE 200809L
+#include "fuzz.h"
+
+#include <mcpost/progress.h>
+
+#include <dirent.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+static char dir[256];
+
+static void
+remove_dir(void)
+{
+    /* only the targets write here: empty the folder, then remove it */
+    DIR *d = opendir(dir);
+    char path[700];
+    for (struct dirent *e; d && (e = readdir(d));) {
+        if (strcmp(e->d_name, ".") && strcmp(e->d_name, "..")) {
+            snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
+            unlink(path);
+        }
+    }
+    if (d)
+        closedir(d);
+    rmdir(dir);
+}
+
+/* libFuzzer calls this once before the first input (replay.c's main() too). The image
+ * ceiling is lowered to 256 MiB so that an input that gets past the size checks
+ * stays under libFuzzer's own malloc limit (-rss_limit_mb, 2 GiB): the ceiling is
+ * one of the things under test, and an allocation it lets through would otherwise
+ * be reported as an out-of-memory finding. */
+int
+LLVMFuzzerInitialize(int *argc, char ***argv)
+{
+    (void)argc, (void)argv;
+    setenv("MCPOST_MAX_BYTES", "268435456", 0);
+    mcp_progress_set_quiet(1);
+    return 0;
+}
+
+const char *
+mcp_fuzz_dir(void)
+{
+    if (dir[0])
+        return dir;
+    struct stat st;
+    const char *base = stat("/dev/shm", &st) == 0 && S_ISDIR(st.st_mode) ? "/dev/shm"
+                       : getenv("TMPDIR")                                ? getenv("TMPDIR")
+                                                                          : "/tmp";
+    snprintf(dir, sizeof dir, "%s/mcpost-fuzz-%ld", base, (long)getpid());
+    if (mkdir(dir, 0700) != 0 && stat(dir, &st) != 0) {
+        fprintf(stderr, "fuzz: cannot create %s\n", dir);
+        abort();
+    }
+    atexit(remove_dir);
+    return dir;
+}
+
+const char *
+mcp_fuzz_file(int slot, const char *name, const void *data, size_t size)
+{
+    static char paths[8][400];
+    if (slot < 0 || slot >= 8)
+        abort();
+    snprintf(paths[slot], sizeof paths[slot], "%s/%s", mcp_fuzz_dir(), name);
+    FILE *f = fopen(paths[slot], "wb");
+    if (!f || (size && fwrite(data, 1, size, f) != size) || fclose(f) != 0) {
+        fprintf(stderr, "fuzz: cannot write %s\n", paths[slot]);
+        abort();
+    }
+    return paths[slot];
+}
+
+void
+mcp_fuzz_check_error(int rc, const char *what)
+{
+    if (rc == 0)
+        return;
+    const char *msg = mcp_error_message();
+    if (rc != -1 || !msg || !msg[0] || strchr(msg, '\n')) {
+        fprintf(stderr, "fuzz: %s broke the error contract: rc %d, message '%s'\n", what,
+                rc, msg ? msg : "(null)");
+        abort();
+    }
+}
