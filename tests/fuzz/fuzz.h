@@ -8,6 +8,7 @@
 #define MCP_FUZZ_H
 
 #include <mcpost/error.h>
+#include <mcpost/image.h>
 
 #include <stddef.h>
 #include <stdint.h>
@@ -28,5 +29,10 @@ const char *mcp_fuzz_file(int slot, const char *name, const void *data, size_t s
 /* The error contract (SPEC, STYLE 5): a failed call returns -1 with one non-empty line
  * set; aborts (a finding) otherwise. rc is the call's return value. */
 void mcp_fuzz_check_error(int rc, const char *what);
+
+/* The bytes written as a file and read with mcp_image_read must give what reading them
+ * from memory gave (rc, img): both an error, or the same pixels; aborts otherwise. */
+void mcp_fuzz_same_as_file(int rc, const mcp_image *img, const void *data, size_t size,
+                           const char *name);
 
 #endif

@@ -5,6 +5,7 @@
 #define _POSIX_C_SOURCE 200809L
 #include "fuzz.h"
 
+#include <mcpost/imageio.h>
 #include <mcpost/progress.h>
 
 #include <dirent.h>
@@ -89,6 +90,30 @@ mcp_fuzz_check_error(int rc, const char *what)
     if (rc != -1 || !msg || !msg[0] || strchr(msg, '\n')) {
         fprintf(stderr, "fuzz: %s broke the error contract: rc %d, message '%s'\n", what,
                 rc, msg ? msg : "(null)");
+        abort();
+    }
+}
+
+void
+mcp_fuzz_same_as_file(int rc, const mcp_image *img, const void *data, size_t size,
+                      const char *name)
+{
+    const char *path = mcp_fuzz_file(0, name, data, size);
+    mcp_image *from_file = NULL;
+    int rc_file = mcp_image_read(path, NULL, &from_file);
+    mcp_fuzz_check_error(rc_file, "read from a file");
+    int same = (rc == 0) == (rc_file == 0);
+    if (same && rc == 0) {
+        same = img->width == from_file->width && img->height == from_file->height &&
+               img->channels == from_file->channels;
+        for (int y = 0; same && y < img->height; y++)
+            same = memcmp(mcp_image_px(img, 0, y), mcp_image_px(from_file, 0, y),
+                          (size_t)img->width * img->channels * sizeof(float)) == 0;
+    }
+    mcp_image_free(from_file);
+    if (!same) {
+        fprintf(stderr, "fuzz: %s read from memory and from a file differ (rc %d, %d)\n",
+                name, rc, rc_file);
         abort();
     }
 }
