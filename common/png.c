@@ -7,6 +7,7 @@
  * named Y, YA, RGB or RGBA, and the caller decodes sRGB; writing rounds clamped values to
  * 8 bits. libpng reports errors by longjmp, so every object that must be freed on an
  * error lives outside the setjmp frame's locals (volatile or in the context struct). */
+#define _POSIX_C_SOURCE 200809L /* fileno */
 #include "internal.h"
 
 #include <png.h>
