@@ -1,8 +1,10 @@
 /* bench_io.c: EXR write and read times (no pass/fail), each new setting beside its
  * baseline in the same run, since this machine is shared and timings drift between
  * runs: one thread against all (OpenMP; one thread is the old serial path), and the
- * default zip level against zlib's 6 (Core's own default, used before). Also the
- * other lossless compressions, for the file size each buys.
+ * defaults (zip at MCP_EXR_ZIP_LEVEL_DEFAULT, chunks stored raw where zip does not
+ * pay) against what was written before (zlib's 6, Core's own default, on every
+ * chunk). Also other levels and the other lossless compressions, for the file size
+ * each buys.
  *
  * Inputs from the procedural renderer: a 512x512 RGB float image (16 spp), and a
  * 1920x1080 12-channel dump (colour, variance, albedo, normal; 4 spp) as mcp_dump_write
