@@ -4,8 +4,11 @@
  * (not DWAA/DWAB: Core 3.1 cannot, and we say so), float/half/uint channels, data
  * windows with offsets (the image covers the data window; its origin is kept as the
  * int attributes "dataWindowX"/"dataWindowY" when not 0), and int/float/double/string
- * header attributes. Writes scanline or tiled, float or half. notes/libraries.md 2a
- * lists the Core pitfalls this file works around. */
+ * header attributes, from a file or from memory (read_fn). Writes scanline or tiled,
+ * float or half. Chunks are decoded and encoded in parallel (OpenMP), each thread with
+ * its own Core pipeline; zip chunks that would not shrink enough are stored raw
+ * (store_raw_after_probe). notes/libraries.md 2a lists the Core pitfalls this file
+ * works around; README.md ("EXR speed") has the measurements. */
 #define _POSIX_C_SOURCE 200809L
 #include "internal.h"
 
