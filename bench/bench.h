@@ -3,6 +3,9 @@
 #ifndef MCP_BENCH_H
 #define MCP_BENCH_H
 
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 #include <stdlib.h>
 #include <time.h>
 
@@ -23,6 +26,17 @@ cpu_ms(void)
     struct timespec ts;
     clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
     return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+/* OpenMP's thread count for what follows (nothing without OpenMP). */
+static inline void
+bench_set_threads(int n)
+{
+#ifdef _OPENMP
+    omp_set_num_threads(n);
+#else
+    (void)n;
+#endif
 }
 
 /* qsort comparison for doubles (for medians). */

@@ -114,16 +114,6 @@ colormap(void *p)
     return mcp_colormap_apply(p, 0, 0, 1, MCP_COLORMAP_VIRIDIS, rgb);
 }
 
-static void
-set_threads(int n)
-{
-#ifdef _OPENMP
-    omp_set_num_threads(n);
-#else
-    (void)n;
-#endif
-}
-
 int
 main(int argc, char **argv)
 {
@@ -159,9 +149,9 @@ main(int argc, char **argv)
             for (int i = 0; i < win; i++)
                 k2[j * win + i] = k1[i] * k1[j];
 
-        set_threads(1);
+        bench_set_threads(1);
         double one = median_ms(mcp_blur, &b, repeats);
-        set_threads(max_threads);
+        bench_set_threads(max_threads);
         double all = median_ms(mcp_blur, &b, repeats);
         blur_ctx n = b;
         n.out = naive_out;
@@ -183,15 +173,15 @@ main(int argc, char **argv)
         free(k1);
     }
 
-    set_threads(1);
+    bench_set_threads(1);
     double sp1 = median_ms(spectra, img, repeats);
-    set_threads(max_threads);
+    bench_set_threads(max_threads);
     double spn = median_ms(spectra, img, repeats);
     printf("tile power spectra 1024^2 in 32^2 tiles: %7.2f ms (1 thread) %7.2f ms "
            "(%d threads)\n", sp1, spn, max_threads);
-    set_threads(1);
+    bench_set_threads(1);
     double cm1 = median_ms(colormap, img, repeats);
-    set_threads(max_threads);
+    bench_set_threads(max_threads);
     double cmn = median_ms(colormap, img, repeats);
     printf("colormap viridis 1024^2: %7.2f ms (1 thread) %7.2f ms (%d threads)\n", cm1,
            cmn, max_threads);

@@ -30,16 +30,6 @@
 static int repeats = 7;
 static const char *dir = "/tmp";
 
-static void
-set_threads(int n)
-{
-#ifdef _OPENMP
-    omp_set_num_threads(n);
-#else
-    (void)n;
-#endif
-}
-
 static int
 max_threads(void)
 {
@@ -72,7 +62,7 @@ time_write(const mcp_image *img, const char *path, const mcp_write_options *o,
            int threads, double *cpu)
 {
     double t[64], c[64];
-    set_threads(threads);
+    bench_set_threads(threads);
     for (int i = -1; i < repeats; i++) {
         double t0 = now_ms(), c0 = cpu_ms();
         if (mcp_image_write(img, path, o))
@@ -92,7 +82,7 @@ static double
 time_read(const char *path, int threads, int as_dump, double *cpu)
 {
     double t[64], c[64];
-    set_threads(threads);
+    bench_set_threads(threads);
     for (int i = -1; i < repeats; i++) {
         double t0 = now_ms(), c0 = cpu_ms();
         if (as_dump) {
@@ -158,7 +148,7 @@ table(const char *title, const mcp_image *img, const char *path, const setting *
         printf("\n");
         fflush(stdout);
     }
-    set_threads(all);
+    bench_set_threads(all);
     if (write_target > 0)
         printf("  target: write <= %.0f ms, ", write_target);
     else

@@ -190,6 +190,21 @@ test_distribution_parameters(void **state)
     mcp_blocks_free(b);
 }
 
+/* nx x ny equal blocks covering a w x h image (w, h divisible), sums zero. */
+static mcp_blocks *
+grid_blocks(int w, int h, int nx, int ny)
+{
+    mcp_blocks *b = calloc(1, sizeof *b);
+    b->width = w;
+    b->height = h;
+    b->count = nx * ny;
+    b->items = calloc((size_t)b->count, sizeof *b->items);
+    for (int i = 0; i < b->count; i++)
+        b->items[i] = (mcp_block){(i % nx) * (w / nx), (i / nx) * (h / ny), w / nx, h / ny,
+                                  {0}, {0}};
+    return b;
+}
+
 /* The model calibrates itself: values drawn from s²(Z + √λ)² have the percentiles the
  * model predicts (nearest rank of 60000 draws within a few % at p <= 0.99). */
 static void
@@ -197,12 +212,7 @@ test_percentiles_match_draws(void **state)
 {
     (void)state;
     const int w = 100, h = 200;
-    mcp_blocks *b = calloc(1, sizeof *b);
-    b->width = w;
-    b->height = h;
-    b->count = 1;
-    b->items = calloc(1, sizeof *b->items);
-    b->items[0] = (mcp_block){0, 0, w, h, {0}, {0}};
+    mcp_blocks *b = grid_blocks(w, h, 1, 1);
     mcp_image *var = NULL, *err = NULL;
     assert_int_equal(mcp_image_new(w, h, 3, RGB, &var), 0);
     assert_int_equal(mcp_image_new(w, h, 3, RGB, &err), 0);
@@ -249,13 +259,7 @@ test_percentiles_match_exact_search(void **state)
 {
     (void)state;
     const int w = 160, h = 96;
-    mcp_blocks *b = calloc(1, sizeof *b);
-    b->width = w;
-    b->height = h;
-    b->count = 16;
-    b->items = calloc(16, sizeof *b->items);
-    for (int i = 0; i < 16; i++)
-        b->items[i] = (mcp_block){(i % 4) * 40, (i / 4) * 24, 40, 24, {0}, {0}};
+    mcp_blocks *b = grid_blocks(w, h, 4, 4);
     mcp_image *var = NULL;
     assert_int_equal(mcp_image_new(w, h, 3, RGB, &var), 0);
     uint64_t rng = 2026;
