@@ -25,6 +25,9 @@ void mcp__window_sum(const double *table, int w, int h, int x, int y, int r, dou
 /* The values of ranks[0..k) (0-based, each < n) among v[0..n), as a sort would place
  * them, without sorting (select.c: a two-pass radix select). v must hold no NaN. */
 int mcp__select_ranks(const float *v, size_t n, const size_t *ranks, int k, float *out);
+/* out[j] = the nearest-rank p[j]-percentile of v[0..n) (the value of rank
+ * ceil(p n) - 1, clamped), by selection. */
+int mcp__select_percentiles(const float *v, size_t n, const double *p, int k, double *out);
 
 /* Where mcpost's own files are (paths.c): the folder of the file that holds this code
  * (the shared library, or the executable it is linked into; -1 when unknown), and a

@@ -24,16 +24,6 @@ src_name(const mcp_image *img)
     return img->source ? img->source : "image";
 }
 
-/* Nearest-rank index of p in n values in ascending order. */
-static size_t
-rank_index(double p, size_t n)
-{
-    double k = ceil(p * (double)n) - 1.0;
-    if (k < 0.0) k = 0.0;
-    if (k > (double)(n - 1)) k = (double)(n - 1);
-    return (size_t)k;
-}
-
 /* ---- options ---- */
 
 mcp_pmse_options
@@ -344,18 +334,7 @@ mcp_image_percentiles(const mcp_image *img, const double *p, int n_p, double *ou
         free(copy);
         return mcp_error("%s: NaN value among the percentiles' values", src_name(img));
     }
-    size_t ranks[MCP_METRICS_MAX_PERCENTILES];
-    float at[MCP_METRICS_MAX_PERCENTILES];
-    int rc = 0;
-    for (int k0 = 0; k0 < n_p && rc == 0; k0 += MCP_METRICS_MAX_PERCENTILES) {
-        int m = n_p - k0 < MCP_METRICS_MAX_PERCENTILES ? n_p - k0
-                                                       : MCP_METRICS_MAX_PERCENTILES;
-        for (int k = 0; k < m; k++)
-            ranks[k] = rank_index(p[k0 + k], n);
-        rc = mcp__select_ranks(v, n, ranks, m, at);
-        for (int k = 0; k < m && rc == 0; k++)
-            out[k0 + k] = at[k];
-    }
+    int rc = mcp__select_percentiles(v, n, p, n_p, out);
     free(copy);
     return rc;
 }

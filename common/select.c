@@ -10,6 +10,7 @@
  * rank), and independent of the thread count. NaN is the caller's to reject. */
 #include "internal.h"
 
+#include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -70,6 +71,34 @@ select_in_bin(const uint32_t *low, size_t m, uint32_t top, size_t r, uint32_t *c
     for (; b < BINS - 1 && below + count[b] <= r; b++)
         below += count[b];
     return key_float(top << 16 | b);
+}
+
+/* The nearest-rank index of p in [0, 1] among n values: ceil(p n) - 1, clamped. */
+static size_t
+nearest_rank(double p, size_t n)
+{
+    double r = ceil(p * (double)n) - 1.0;
+    if (r < 0.0) r = 0.0;
+    if (r > (double)(n - 1)) r = (double)(n - 1);
+    return (size_t)r;
+}
+
+int
+mcp__select_percentiles(const float *v, size_t n, const double *p, int k, double *out)
+{
+    enum { BATCH = 64 }; /* ranks per selection: any k in a few passes */
+    size_t ranks[BATCH];
+    float at[BATCH];
+    if (n == 0) return mcp_error("selection: no values");
+    for (int j0 = 0; j0 < k; j0 += BATCH) {
+        int m = k - j0 < BATCH ? k - j0 : BATCH;
+        for (int j = 0; j < m; j++)
+            ranks[j] = nearest_rank(p[j0 + j], n);
+        if (mcp__select_ranks(v, n, ranks, m, at)) return -1;
+        for (int j = 0; j < m; j++)
+            out[j0 + j] = at[j];
+    }
+    return 0;
 }
 
 int

@@ -365,40 +365,13 @@ error_values(const mcp_image *err, float **out, size_t *n_out)
     return 0;
 }
 
-/* The nearest-rank index of p among n values. */
-static size_t
-nearest_rank(size_t n, double p)
-{
-    double r = ceil(p * (double)n) - 1.0;
-    size_t i = r < 0.0 ? 0 : (size_t)r;
-    return i < n ? i : n - 1;
-}
-
-/* out[k] = the nearest-rank p[k]-percentile of v[0..n), by selection. */
-static int
-percentiles_of(const float *v, size_t n, const double *p, int k, double *out)
-{
-    size_t ranks[MCP_ESTIMATE_MAX_PERCENTILES + 1];
-    float at[MCP_ESTIMATE_MAX_PERCENTILES + 1];
-    for (int j0 = 0; j0 < k; j0 += MCP_ESTIMATE_MAX_PERCENTILES + 1) {
-        int m = k - j0 < MCP_ESTIMATE_MAX_PERCENTILES + 1 ? k - j0
-                                                          : MCP_ESTIMATE_MAX_PERCENTILES + 1;
-        for (int j = 0; j < m; j++)
-            ranks[j] = nearest_rank(n, p[j0 + j]);
-        if (mcp__select_ranks(v, n, ranks, m, at)) return -1;
-        for (int j = 0; j < m; j++)
-            out[j0 + j] = at[j];
-    }
-    return 0;
-}
-
 int
 mcp_true_percentiles(const mcp_image *err, const double *p, int n, double *out)
 {
     float *v;
     size_t m;
     if (error_values(err, &v, &m)) return -1;
-    int rc = percentiles_of(v, m, p, n, out);
+    int rc = mcp__select_percentiles(v, m, p, n, out);
     free(v);
     return rc;
 }
@@ -478,7 +451,7 @@ member_truth(const mcp_estimate *e, const mcp_image *reference,
     int k = o->est.n_percentiles;
     memcpy(p, o->est.percentiles, (size_t)k * sizeof *p);
     p[k] = o->est.p;
-    int rc = percentiles_of(v, n, p, k + 1, at);
+    int rc = mcp__select_percentiles(v, n, p, k + 1, at);
     free(v);
     if (rc) return -1;
     for (int j = 0; j < n_taus; j++) {

@@ -65,6 +65,7 @@ int mcp__check_dump(const char *who, const mcp_dump *dump);
 
 /* The values of given ranks among n floats without sorting them (common/select.c). */
 int mcp__select_ranks(const float *v, size_t n, const size_t *ranks, int k, float *out);
+int mcp__select_percentiles(const float *v, size_t n, const double *p, int k, double *out);
 
 /* A new zero-filled packed image of n channels (names NULL: R, G, B), labelled source
  * (sure.c). */
