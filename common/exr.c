@@ -8,7 +8,7 @@
  * float or half. Chunks are decoded and encoded in parallel (OpenMP), each thread with
  * its own Core pipeline; zip chunks that would not shrink enough are stored raw
  * (store_raw_after_probe). notes/libraries.md 2a lists the Core pitfalls this file
- * works around; README.md ("EXR speed") has the measurements. */
+ * works around; docs/benchmarks.md ("EXR speed") has the measurements. */
 #define _POSIX_C_SOURCE 200809L
 #include "internal.h"
 #include "exr_zip.h"
