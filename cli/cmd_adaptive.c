@@ -157,16 +157,30 @@ render_pass(int pass, const mcp_image *counts, mcp_dump **out, void *ctx)
     return rc;
 }
 
-/* A one-channel image as a false-colour PNG, scaled to its maximum. */
+static int
+cmp_float(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
+/* A one-channel image as a false-colour PNG, scaled to its 99th percentile: a few
+ * pixels far above the rest (a firefly's) would otherwise leave the picture black. */
 static int
 write_png(const loop_cfg *c, const mcp_image *img, const char *fmt, int pass)
 {
     char path[4352];
-    double hi = 0.0;
+    size_t n = (size_t)img->width * img->height;
+    float *v = mcp_malloc(n * sizeof *v);
+    if (!v) return -1;
     for (int y = 0; y < img->height; y++)
         for (int x = 0; x < img->width; x++)
-            hi = fmax(hi, mcp_image_px(img, x, y)[0]);
-    unsigned char *rgb = mcp_malloc((size_t)img->width * img->height * 3);
+            v[(size_t)y * img->width + x] = mcp_image_px(img, x, y)[0];
+    qsort(v, n, sizeof *v, cmp_float);
+    double hi = v[(size_t)(0.99 * (double)(n - 1))];
+    if (!(hi > 0)) hi = v[n - 1];
+    free(v);
+    unsigned char *rgb = mcp_malloc(n * 3);
     int rc = !rgb || path_in(c, path, sizeof path, fmt, pass) ||
              mcp_colormap_apply(img, 0, 0.0, hi > 0 ? hi : 1.0, MCP_COLORMAP_INFERNO, rgb) ||
              mcp_write_rgb8(rgb, img->width, img->height, path);
