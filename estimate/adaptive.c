@@ -218,14 +218,20 @@ mcp_adaptive_run(int width, int height, const mcp_denoiser *den,
             mcp_dump_free(part);
             goto done;
         }
-        if (accumulate(&r->accumulated, part)) goto done;
+        if (accumulate(&r->accumulated, part)) {
+            mcp_error_prefix("adaptive: pass %d: ", pass);
+            goto done;
+        }
         double t2 = mcp__now_ms();
         total += samples;
         it->total_samples = total;
         it->mean_spp = (double)total / npix;
         mcp_estimate_free(est);
         est = NULL;
-        if (mcp_estimate_compute(r->accumulated, den, &o.est, &est)) goto done;
+        if (mcp_estimate_compute(r->accumulated, den, &o.est, &est)) {
+            mcp_error_prefix("adaptive: pass %d: ", pass);
+            goto done;
+        }
         double t3 = mcp__now_ms();
         it->est_error = mcp_error_dist_mean(est->dist);
         it->cdf_at_tau = est->cdf_at_tau;

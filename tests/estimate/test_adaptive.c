@@ -200,6 +200,40 @@ test_variance_map_beats_uniform(void **state)
     mcp_image_free(truth);
 }
 
+/* A pass that leaves pixels out writes and reads back: count 0, colour and variance 0
+ * there, and the per-sample variance of the others divided by their own n on load. */
+static void
+test_zero_count_pass_round_trip(void **state)
+{
+    (void)state;
+    mcp_proc_scene scene = mcp_proc_scene_defaults();
+    scene.width = scene.height = 4;
+    mcp_image *counts = mcp_test_constant(4, 4, 1, 6.0f, (const char *[]){"SampleCount"});
+    mcp_image_px(counts, 1, 2)[0] = 0.0f;
+    mcp_dump *d = NULL, *back = NULL;
+    assert_int_equal(mcp_proc_render_counts(&scene, counts, 2, 5, &d), 0);
+    const char *path = mcp_test_path("zero_pass.exr");
+    assert_int_equal(mcp_dump_write(d, path, MCP_CONV_MCPOST, NULL), 0);
+    assert_int_equal(mcp_dump_read(path, &back), 0);
+    assert_true(mcp_dump_spp_at(back, 1, 2) == 0.0 && mcp_dump_spp_at(back, 0, 0) == 6.0);
+    for (int c = 0; c < 3; c++) {
+        assert_true(mcp_image_px(back->color, 1, 2)[c] == 0.0f);
+        assert_true(mcp_image_px(back->var_of_mean, 1, 2)[c] == 0.0f);
+        assert_close(mcp_image_px(back->var_of_mean, 3, 3)[c],
+                     mcp_image_px(d->var_of_mean, 3, 3)[c], 1e-6, 0);
+    }
+    /* pixel (0, 0), pass 2: samples 2 * 2^32 ... of its stream */
+    mcp_proc_pixel px;
+    assert_int_equal(mcp_proc_render_pixel(&scene, 0, 0, 0, 0, 6, 5,
+                                           2 * MCP_PROC_PASS_STRIDE, &px),
+                     0);
+    for (int c = 0; c < 3; c++)
+        assert_close(mcp_image_px(back->color, 0, 0)[c], px.mean[c], 1e-6, 1e-7);
+    mcp_dump_free(d);
+    mcp_dump_free(back);
+    mcp_image_free(counts);
+}
+
 static void
 test_equal_error_spp(void **state)
 {
@@ -263,6 +297,7 @@ main(void)
         cmocka_unit_test(test_accumulation_is_exact),
         cmocka_unit_test(test_quantum_keeps_whole_passes),
         cmocka_unit_test(test_variance_map_beats_uniform),
+        cmocka_unit_test(test_zero_count_pass_round_trip),
         cmocka_unit_test(test_equal_error_spp),
         cmocka_unit_test(test_errors),
     };
