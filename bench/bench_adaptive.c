@@ -102,23 +102,32 @@ main(int argc, char **argv)
     double budget = 128, spp_it = 32;
     const char *denoisers = "nlm", *plot_path = NULL;
     for (int i = 1; i + 1 < argc; i += 2) {
-        if (!strcmp(argv[i], "--size")) size = atoi(argv[i + 1]);
-        else if (!strcmp(argv[i], "--budget")) budget = atof(argv[i + 1]);
-        else if (!strcmp(argv[i], "--spp-per-iteration")) spp_it = atof(argv[i + 1]);
-        else if (!strcmp(argv[i], "--denoisers")) denoisers = argv[i + 1];
-        else if (!strcmp(argv[i], "--seeds")) seeds = atoi(argv[i + 1]);
-        else if (!strcmp(argv[i], "--plot")) plot_path = argv[i + 1];
-        else if (!strcmp(argv[i], "--overhead")) over = atoi(argv[i + 1]);
-        else if (!strcmp(argv[i], "--firefly-probability")) fireflies = atof(argv[i + 1]);
-        else if (!strcmp(argv[i], "--probes")) g_probes = atoi(argv[i + 1]);
+        if (!strcmp(argv[i], "--size"))
+            size = atoi(argv[i + 1]);
+        else if (!strcmp(argv[i], "--budget"))
+            budget = atof(argv[i + 1]);
+        else if (!strcmp(argv[i], "--spp-per-iteration"))
+            spp_it = atof(argv[i + 1]);
+        else if (!strcmp(argv[i], "--denoisers"))
+            denoisers = argv[i + 1];
+        else if (!strcmp(argv[i], "--seeds"))
+            seeds = atoi(argv[i + 1]);
+        else if (!strcmp(argv[i], "--plot"))
+            plot_path = argv[i + 1];
+        else if (!strcmp(argv[i], "--overhead"))
+            over = atoi(argv[i + 1]);
+        else if (!strcmp(argv[i], "--firefly-probability"))
+            fireflies = atof(argv[i + 1]);
+        else if (!strcmp(argv[i], "--probes"))
+            g_probes = atoi(argv[i + 1]);
         else {
             fprintf(stderr, "bench_adaptive: unknown option %s\n", argv[i]);
             return 2;
         }
     }
     if (over > 0) return overhead(over);
-    static const mcp_adaptive_map maps[] = {MCP_ADAPTIVE_VARIANCE, MCP_ADAPTIVE_TONEMAPPED,
-                                            MCP_ADAPTIVE_MC_SURE};
+    static const mcp_adaptive_map maps[] = {
+        MCP_ADAPTIVE_VARIANCE, MCP_ADAPTIVE_TONEMAPPED, MCP_ADAPTIVE_MC_SURE};
     static const char *const sampler_names[] = {"independent", "jittered 4x4"};
     double sum_speedup[3] = {0, 0, 0};
     int n_speedup[3] = {0, 0, 0};
@@ -148,7 +157,8 @@ main(int argc, char **argv)
             char sname[64];
             snprintf(sname, sizeof sname, "%s%s", sampler_names[smp],
                      s.scene.firefly_probability > 0 ? "" : ", no ff");
-            s.scene.sampler = smp ? MCP_PROC_SAMPLER_JITTERED : MCP_PROC_SAMPLER_INDEPENDENT;
+            s.scene.sampler =
+                smp ? MCP_PROC_SAMPLER_JITTERED : MCP_PROC_SAMPLER_INDEPENDENT;
             mcp_image *ref = NULL;
             if (mcp_proc_truth(&s.scene, &ref, NULL)) die("truth");
             for (int sd = 0; sd < seeds; sd++) {
@@ -158,7 +168,8 @@ main(int argc, char **argv)
                     run(&s, den, MCP_ADAPTIVE_UNIFORM, 4 * budget, spp_it, ref);
                 double t_uniform = now_ms() - t0;
                 int nu = u->count;
-                double *us = malloc(sizeof(double) * nu), *ue = malloc(sizeof(double) * nu);
+                double *us = malloc(sizeof(double) * nu),
+                       *ue = malloc(sizeof(double) * nu);
                 double at_b = NAN;
                 for (int i = 0; i < nu; i++) {
                     us[i] = u->iterations[i].mean_spp;
@@ -171,7 +182,10 @@ main(int argc, char **argv)
                     memcpy(py[n_series], ue, sizeof(double) * nu);
                     series[n_series] = (mcp_plot_series){names[n_series],
                                                          MCP_SERIES_LINE_POINTS,
-                                                         px[n_series], py[n_series], nu, 1};
+                                                         px[n_series],
+                                                         py[n_series],
+                                                         nu,
+                                                         1};
                     n_series++;
                 }
                 for (int m = 0; m < 3; m++) {
@@ -201,9 +215,10 @@ main(int argc, char **argv)
                             px[n_series][i] = r->iterations[i].mean_spp;
                             py[n_series][i] = r->iterations[i].relmse;
                         }
-                        series[n_series] = (mcp_plot_series){
-                            names[n_series], MCP_SERIES_LINE_POINTS, px[n_series],
-                            py[n_series], r->count, 0};
+                        series[n_series] =
+                            (mcp_plot_series){names[n_series], MCP_SERIES_LINE_POINTS,
+                                              px[n_series],    py[n_series],
+                                              r->count,        0};
                         n_series++;
                     }
                     mcp_adaptive_result_free(r);
@@ -225,8 +240,14 @@ main(int argc, char **argv)
                n_speedup[m] ? sum_speedup[m] / n_speedup[m] : NAN, m < 2 ? "," : "\n");
     if (plot_path) {
         mcp_plot p = {"relMSE of the denoised image against samples per pixel",
-                      "samples per pixel", "relMSE", MCP_AXIS_LOG, MCP_AXIS_LOG, series,
-                      n_series, 720, 450};
+                      "samples per pixel",
+                      "relMSE",
+                      MCP_AXIS_LOG,
+                      MCP_AXIS_LOG,
+                      series,
+                      n_series,
+                      720,
+                      450};
         char *svg = NULL;
         if (mcp_plot_svg(&p, &svg) || mcp_write_file_atomic(plot_path, svg, strlen(svg)))
             die(plot_path);

@@ -181,9 +181,10 @@ write_png(const loop_cfg *c, const mcp_image *img, const char *fmt, int pass)
     if (!(hi > 0)) hi = v[n - 1];
     free(v);
     unsigned char *rgb = mcp_malloc(n * 3);
-    int rc = !rgb || path_in(c, path, sizeof path, fmt, pass) ||
-             mcp_colormap_apply(img, 0, 0.0, hi > 0 ? hi : 1.0, MCP_COLORMAP_INFERNO, rgb) ||
-             mcp_write_rgb8(rgb, img->width, img->height, path);
+    int rc =
+        !rgb || path_in(c, path, sizeof path, fmt, pass) ||
+        mcp_colormap_apply(img, 0, 0.0, hi > 0 ? hi : 1.0, MCP_COLORMAP_INFERNO, rgb) ||
+        mcp_write_rgb8(rgb, img->width, img->height, path);
     free(rgb);
     return rc ? -1 : 0;
 }
@@ -259,29 +260,39 @@ static int
 write_curves(const loop_cfg *c, const mcp_adaptive_result *r)
 {
     int n = r->count, rc = -1;
-    double *x = mcp_calloc((size_t)n, sizeof *x), *rel = mcp_calloc((size_t)n, sizeof *rel),
+    double *x = mcp_calloc((size_t)n, sizeof *x),
+           *rel = mcp_calloc((size_t)n, sizeof *rel),
            *est = mcp_calloc((size_t)n, sizeof *est);
     char *csv = mcp_malloc((size_t)n * 160 + 160), *svg = NULL;
     if (!x || !rel || !est || !csv) goto done;
-    size_t len = (size_t)sprintf(csv, "pass,mean_spp,total_samples,relmse,relmse_noisy,"
-                                      "estimated_error,cdf_at_tau,ms_denoise,ms_mcpost\n");
+    size_t len =
+        (size_t)sprintf(csv, "pass,mean_spp,total_samples,relmse,relmse_noisy,"
+                             "estimated_error,cdf_at_tau,ms_denoise,ms_mcpost\n");
     for (int i = 0; i < n; i++) {
         const mcp_adaptive_iteration *it = &r->iterations[i];
         x[i] = it->mean_spp;
         rel[i] = it->relmse;
         est[i] = it->est_error;
-        len += (size_t)sprintf(csv + len, "%d,%.6g,%" PRId64 ",%.6g,%.6g,%.6g,%.6g,%.1f,%.1f\n",
-                               it->pass, it->mean_spp, it->total_samples, it->relmse,
-                               it->relmse_noisy, it->est_error, it->cdf_at_tau,
-                               it->ms_denoise, it->ms_merge + it->ms_estimate + it->ms_counts);
+        len += (size_t)sprintf(
+            csv + len, "%d,%.6g,%" PRId64 ",%.6g,%.6g,%.6g,%.6g,%.1f,%.1f\n", it->pass,
+            it->mean_spp, it->total_samples, it->relmse, it->relmse_noisy, it->est_error,
+            it->cdf_at_tau, it->ms_denoise,
+            it->ms_merge + it->ms_estimate + it->ms_counts);
     }
     mcp_plot_series s[2] = {
         {"relMSE (denoised vs reference)", MCP_SERIES_LINE_POINTS, x, rel, n, 0},
-        {"estimated error (mean s^2 (lambda + 1))", MCP_SERIES_LINE_POINTS, x, est, n, 1}};
+        {"estimated error (mean s^2 (lambda + 1))", MCP_SERIES_LINE_POINTS, x, est, n,
+         1}};
     int has_ref = c->reference != NULL;
-    mcp_plot plot = {"adaptive sampling: error against samples", "samples per pixel",
-                     "error", MCP_AXIS_LOG, MCP_AXIS_LOG, has_ref ? s : s + 1,
-                     has_ref ? 2 : 1, 0, 0};
+    mcp_plot plot = {"adaptive sampling: error against samples",
+                     "samples per pixel",
+                     "error",
+                     MCP_AXIS_LOG,
+                     MCP_AXIS_LOG,
+                     has_ref ? s : s + 1,
+                     has_ref ? 2 : 1,
+                     0,
+                     0};
     if (write_text(c, "adaptive.csv", csv) || mcp_plot_svg(&plot, &svg) ||
         write_text(c, "adaptive.svg", svg))
         goto done;
@@ -290,9 +301,8 @@ write_curves(const loop_cfg *c, const mcp_adaptive_result *r)
                                            "F(tau)"};
         cJSON *t = mcp_report_add_table(c->section, "per pass", cols, 5);
         for (int i = 0; t && i < n; i++)
-            if (mcp_report_table_add_row(t, "idddd",
-                                         r->iterations[i].pass, x[i], rel[i], est[i],
-                                         r->iterations[i].cdf_at_tau))
+            if (mcp_report_table_add_row(t, "idddd", r->iterations[i].pass, x[i], rel[i],
+                                         est[i], r->iterations[i].cdf_at_tau))
                 goto done;
         cJSON *p = mcp_report_add_plot(c->section, plot.title, plot.x_label, MCP_AXIS_LOG,
                                        plot.y_label, MCP_AXIS_LOG);
@@ -336,16 +346,16 @@ run_loop(loop_cfg *c, cJSON **json)
     if (snprintf(sub, sizeof sub, "%s/maps", c->dir) >= (int)sizeof sub)
         return mcp_error("output path too long: %s", c->dir);
     if (make_dir(sub)) return -1;
-    if (mcp_adaptive_run(c->width, c->height, c->den, &c->ao, render_pass, c, c->reference,
-                         on_iteration, c, &r))
+    if (mcp_adaptive_run(c->width, c->height, c->den, &c->ao, render_pass, c,
+                         c->reference, on_iteration, c, &r))
         return -1;
     cJSON *j = result_json(c, r);
     char *text = j ? cJSON_Print(j) : NULL;
     if (!text || path_in(c, path, sizeof path, "accumulated.exr", 0) ||
         mcp_dump_write(r->accumulated, path, MCP_CONV_MCPOST, NULL) ||
         path_in(c, path, sizeof path, "denoised.exr", 0) ||
-        mcp_image_write(r->denoised, path, NULL) || write_text(c, "adaptive.json", text) ||
-        write_curves(c, r))
+        mcp_image_write(r->denoised, path, NULL) ||
+        write_text(c, "adaptive.json", text) || write_curves(c, r))
         goto done;
     if (c->section) { /* the section owns the figures now */
         cJSON_AddItemToObject(c->section, "adaptive", j);
@@ -383,7 +393,8 @@ static const char usage[] =
     "                       (--budget SPP | --stop) [options]\n"
     "  The adaptive-sampling loop of Firmino 2023: render -> merge -> denoise ->\n"
     "  variance of the denoised image -> sampling map -> integer counts -> render more.\n"
-    "  --render CMD             the render command, run by /bin/sh once per pass; it must\n"
+    "  --render CMD             the render command, run by /bin/sh once per pass; it "
+    "must\n"
     "                           render {counts}(p) new samples in pixel p (an EXR with\n"
     "                           channel SampleCount) from samples no earlier pass used,\n"
     "                           and write a dump with those counts to {output}. {pass}\n"
@@ -405,12 +416,15 @@ static const char usage[] =
     "  --reference REF          the converged image: relMSE per pass\n"
     "  --keep-passes            keep every pass's counts and dump in DIR\n"
     "  --json                   the figures as JSON on stdout\n"
-    "  --denoiser NAME          " MCP_CLI_DEFAULT_DENOISER "\n" MCP_CLI_DENOISER_USAGE("")
-    "example (the procedural renderer, 64 spp in all, against its exact truth):\n"
-    "  mcpost-procedural --width 128 --height 128 --realizations 0 --truth -o t\n"
-    "  mcpost adaptive --size 128x128 --budget 64 --denoiser nlm -o out \\\n"
-    "    --reference t_truth.exr --render 'mcpost-procedural --sample-counts {counts} \\\n"
-    "    --pass {pass} --seed {seed} -o {output}'\n";
+    "  --denoiser NAME          " MCP_CLI_DEFAULT_DENOISER "\n" MCP_CLI_DENOISER_USAGE(
+        " ") "example (the procedural renderer, 64 spp in all, against its exact "
+             "truth):\n"
+             "  mcpost-procedural --width 128 --height 128 --realizations 0 --truth -o "
+             "t\n"
+             "  mcpost adaptive --size 128x128 --budget 64 --denoiser nlm -o out \\\n"
+             "    --reference t_truth.exr --render 'mcpost-procedural --sample-counts "
+             "{counts} \\\n"
+             "    --pass {pass} --seed {seed} -o {output}'\n";
 
 enum {
     OPT_RENDER = 1,
@@ -434,28 +448,27 @@ enum {
 static int
 cmd_adaptive(int argc, char **argv)
 {
-    static const struct option longs[] = {{"render", required_argument, 0, OPT_RENDER},
-                                          {"output", required_argument, 0, 'o'},
-                                          {"size", required_argument, 0, OPT_SIZE},
-                                          {"map", required_argument, 0, OPT_MAP},
-                                          {"spp-per-iteration", required_argument, 0,
-                                           OPT_SPP_IT},
-                                          {"initial-spp", required_argument, 0, OPT_INITIAL},
-                                          {"budget", required_argument, 0, OPT_BUDGET},
-                                          {"stop", no_argument, 0, OPT_STOP},
-                                          {"tau", required_argument, 0, OPT_TAU},
-                                          {"percentile", required_argument, 0, OPT_P},
-                                          {"max-iterations", required_argument, 0,
-                                           OPT_MAXIT},
-                                          {"quantum", required_argument, 0, OPT_QUANTUM},
-                                          {"probes", required_argument, 0, OPT_PROBES},
-                                          {"seed", required_argument, 0, OPT_SEED},
-                                          {"reference", required_argument, 0, OPT_REF},
-                                          {"keep-passes", no_argument, 0, OPT_KEEP},
-                                          {"json", no_argument, 0, OPT_JSON},
-                                          {"help", no_argument, 0, 'h'},
-                                          MCP_CLI_DENOISER_LONGOPTS,
-                                          {0, 0, 0, 0}};
+    static const struct option longs[] = {
+        {"render", required_argument, 0, OPT_RENDER},
+        {"output", required_argument, 0, 'o'},
+        {"size", required_argument, 0, OPT_SIZE},
+        {"map", required_argument, 0, OPT_MAP},
+        {"spp-per-iteration", required_argument, 0, OPT_SPP_IT},
+        {"initial-spp", required_argument, 0, OPT_INITIAL},
+        {"budget", required_argument, 0, OPT_BUDGET},
+        {"stop", no_argument, 0, OPT_STOP},
+        {"tau", required_argument, 0, OPT_TAU},
+        {"percentile", required_argument, 0, OPT_P},
+        {"max-iterations", required_argument, 0, OPT_MAXIT},
+        {"quantum", required_argument, 0, OPT_QUANTUM},
+        {"probes", required_argument, 0, OPT_PROBES},
+        {"seed", required_argument, 0, OPT_SEED},
+        {"reference", required_argument, 0, OPT_REF},
+        {"keep-passes", no_argument, 0, OPT_KEEP},
+        {"json", no_argument, 0, OPT_JSON},
+        {"help", no_argument, 0, 'h'},
+        MCP_CLI_DENOISER_LONGOPTS,
+        {0, 0, 0, 0}};
     loop_cfg c;
     memset(&c, 0, sizeof c);
     c.ao = mcp_adaptive_defaults();
@@ -470,38 +483,66 @@ cmd_adaptive(int argc, char **argv)
         if (taken < 0) goto fail;
         if (taken) continue;
         switch (opt) {
-        case OPT_RENDER: c.render = optarg; break;
-        case 'o': out = optarg; break;
-        case OPT_SIZE: size = optarg; break;
-        case OPT_MAP: rc = mcp_adaptive_map_from_name(optarg, &c.ao.map); break;
+        case OPT_RENDER:
+            c.render = optarg;
+            break;
+        case 'o':
+            out = optarg;
+            break;
+        case OPT_SIZE:
+            size = optarg;
+            break;
+        case OPT_MAP:
+            rc = mcp_adaptive_map_from_name(optarg, &c.ao.map);
+            break;
         case OPT_SPP_IT:
             rc = mcp_cli_double("--spp-per-iteration", optarg, &c.ao.spp_per_iteration);
             break;
         case OPT_INITIAL:
             rc = mcp_cli_double("--initial-spp", optarg, &c.ao.initial_spp);
             break;
-        case OPT_BUDGET: rc = mcp_cli_double("--budget", optarg, &c.ao.budget_spp); break;
-        case OPT_STOP: c.ao.stop_on_estimate = 1; break;
-        case OPT_TAU: rc = mcp_cli_double("--tau", optarg, &c.ao.est.tau); break;
-        case OPT_P: rc = mcp_cli_double("--percentile", optarg, &c.ao.est.p); break;
+        case OPT_BUDGET:
+            rc = mcp_cli_double("--budget", optarg, &c.ao.budget_spp);
+            break;
+        case OPT_STOP:
+            c.ao.stop_on_estimate = 1;
+            break;
+        case OPT_TAU:
+            rc = mcp_cli_double("--tau", optarg, &c.ao.est.tau);
+            break;
+        case OPT_P:
+            rc = mcp_cli_double("--percentile", optarg, &c.ao.est.p);
+            break;
         case OPT_MAXIT:
             rc = mcp_cli_int("--max-iterations", optarg, &c.ao.max_iterations);
             break;
-        case OPT_QUANTUM: rc = mcp_cli_int("--quantum", optarg, &c.ao.quantum); break;
-        case OPT_PROBES: rc = mcp_cli_int("--probes", optarg, &c.ao.est.sure.n_probes); break;
+        case OPT_QUANTUM:
+            rc = mcp_cli_int("--quantum", optarg, &c.ao.quantum);
+            break;
+        case OPT_PROBES:
+            rc = mcp_cli_int("--probes", optarg, &c.ao.est.sure.n_probes);
+            break;
         case OPT_SEED:
             rc = mcp_cli_double("--seed", optarg, &seed);
             if (!rc && (seed < 0 || seed != floor(seed) || seed > 9007199254740992.0))
                 rc = mcp_error("--seed must be a whole number >= 0 (got %s)", optarg);
             break;
-        case OPT_REF: ref_path = optarg; break;
-        case OPT_KEEP: c.keep_passes = 1; break;
-        case OPT_JSON: json = 1; break;
+        case OPT_REF:
+            ref_path = optarg;
+            break;
+        case OPT_KEEP:
+            c.keep_passes = 1;
+            break;
+        case OPT_JSON:
+            json = 1;
+            break;
         case 'h':
             fputs(usage, stdout);
             mcp_cli_denoiser_flags_free(&df);
             return 0;
-        default: mcp_cli_denoiser_flags_free(&df); return mcp_cli_usage("adaptive", "bad option");
+        default:
+            mcp_cli_denoiser_flags_free(&df);
+            return mcp_cli_usage("adaptive", "bad option");
         }
         if (rc) goto fail;
     }
@@ -546,14 +587,16 @@ fail:
 }
 
 const mcp_command mcp_command_adaptive = {
-    "adaptive", "the adaptive-sampling loop: render, denoise, map, render more", cmd_adaptive};
+    "adaptive", "the adaptive-sampling loop: render, denoise, map, render more",
+    cmd_adaptive};
 
 /* ---- the job stage ---- */
 
 static const char *const adaptive_keys[] = {
-    "render", "output",  "size",   "map",   "spp_per_iteration", "initial_spp",
-    "budget", "stop",    "tau",    "p",     "max_iterations",    "quantum",
-    "probes", "seed",    "reference", "keep_passes", "denoiser", "title", NULL};
+    "render",         "output",   "size",   "map",  "spp_per_iteration",
+    "initial_spp",    "budget",   "stop",   "tau",  "p",
+    "max_iterations", "quantum",  "probes", "seed", "reference",
+    "keep_passes",    "denoiser", "title",  NULL};
 
 static int
 stage_adaptive(mcp_job *job, const mcp_node *s)

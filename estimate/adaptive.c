@@ -123,7 +123,8 @@ check_pass(const mcp_dump *part, const mcp_image *counts, int pass)
                          src, c->width, c->height, counts->width, counts->height);
     for (int y = 0; y < c->height; y++)
         for (int x = 0; x < c->width; x++) {
-            double want = mcp_image_px(counts, x, y)[0], got = mcp_dump_spp_at(part, x, y);
+            double want = mcp_image_px(counts, x, y)[0],
+                   got = mcp_dump_spp_at(part, x, y);
             if (got != want)
                 return mcp_error("adaptive: pass %d: %s has %g samples at pixel (%d, %d) "
                                  "but was given %g (does the render command read "

@@ -161,7 +161,8 @@ parse(int argc, char **argv, options *o)
     if (mcp_proc_scene_check(&o->scene)) return -1;
     /* The library refuses partial passes too, but only once some files are written. */
     int pass = o->scene.strata * o->scene.strata;
-    if (!o->sample_counts && o->scene.sampler == MCP_PROC_SAMPLER_JITTERED && o->spp % pass)
+    if (!o->sample_counts && o->scene.sampler == MCP_PROC_SAMPLER_JITTERED &&
+        o->spp % pass)
         return mcp_error("--spp must be a multiple of --strata^2 = %d with the jittered "
                          "sampler (got %d)",
                          pass, o->spp);

@@ -35,7 +35,8 @@ assert_one_line_error(int status, const char *needle)
 {
     if (status == 0 || strncmp(err, "mcpost: ", 8) != 0 || !strstr(err, needle) ||
         strchr(err, '\n') != err + strlen(err) - 1)
-        fail_msg("status %d, stderr \"%s\", wanted one line with \"%s\"", status, err, needle);
+        fail_msg("status %d, stderr \"%s\", wanted one line with \"%s\"", status, err,
+                 needle);
 }
 
 /* The render command of the procedural renderer, for a shell argument. */
@@ -60,7 +61,8 @@ test_cli_matches_library(void **state)
 {
     (void)state;
     char cmd[8192], path[4400];
-    snprintf(cmd, sizeof cmd, "'%s' --width 32 --height 32 --realizations 0 --truth -o '%s'",
+    snprintf(cmd, sizeof cmd,
+             "'%s' --width 32 --height 32 --realizations 0 --truth -o '%s'",
              MCP_TEST_PROCEDURAL, mcp_test_path("t"));
     assert_int_equal(system(cmd), 0);
     const char *dir = mcp_test_path("out");
@@ -105,8 +107,8 @@ test_cli_matches_library(void **state)
     mcp_denoiser *den = NULL;
     mcp_adaptive_result *r = NULL;
     assert_int_equal(mcp_denoiser_create_from_args("gauss", NULL, 0, &den), 0);
-    assert_int_equal(mcp_adaptive_run(32, 32, den, &o, render, &scene, truth, NULL, NULL, &r),
-                     0);
+    assert_int_equal(
+        mcp_adaptive_run(32, 32, den, &o, render, &scene, truth, NULL, NULL, &r), 0);
     for (int i = 0; i < 32 * 32; i++)
         assert_true(r->accumulated->spp_map->data[i] == acc->spp_map->data[i]);
     for (int y = 0; y < 32; y++)
@@ -162,8 +164,9 @@ test_job_stage(void **state)
     assert_string_equal(cJSON_GetObjectItem(j, "map")->valuestring, "tonemapped");
     cJSON *its = cJSON_GetObjectItem(j, "iterations");
     assert_int_equal(cJSON_GetArraySize(its), 3);
-    assert_true(cJSON_GetObjectItem(cJSON_GetArrayItem(its, 2), "total_samples")
-                    ->valuedouble == 24.0 * 24 * 16);
+    assert_true(
+        cJSON_GetObjectItem(cJSON_GetArrayItem(its, 2), "total_samples")->valuedouble ==
+        24.0 * 24 * 16);
     cJSON_Delete(j);
     free(text);
     snprintf(path, sizeof path, "%s/report.json", mcp_test_path("jobout"));
@@ -195,10 +198,11 @@ test_errors(void **state)
                               "{output}' --denoiser gauss",
                               dir),
                           "must name {counts} and {output}");
-    assert_one_line_error(run("adaptive --size 8x8 -o '%s' --render 'x {counts} {output}' "
-                              "--denoiser gauss",
-                              dir),
-                          "adaptive: no stop rule");
+    assert_one_line_error(
+        run("adaptive --size 8x8 -o '%s' --render 'x {counts} {output}' "
+            "--denoiser gauss",
+            dir),
+        "adaptive: no stop rule");
     assert_one_line_error(run("adaptive --size 8 --budget 8 -o '%s' --render 'x {counts} "
                               "{output}'",
                               dir),

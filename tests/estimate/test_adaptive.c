@@ -101,10 +101,10 @@ test_accumulation_is_exact(void **state)
                 long np = (long)mcp_image_px(r.counts[p], x, y)[0];
                 for (long i = 0; i < np; i++) {
                     mcp_proc_pixel px;
-                    assert_int_equal(
-                        mcp_proc_render_pixel(&r.scene, x, y, x, y, 1, r.seed,
-                                              (uint64_t)p * MCP_PROC_PASS_STRIDE + i, &px),
-                        0);
+                    assert_int_equal(mcp_proc_render_pixel(
+                                         &r.scene, x, y, x, y, 1, r.seed,
+                                         (uint64_t)p * MCP_PROC_PASS_STRIDE + i, &px),
+                                     0);
                     for (int c = 0; c < 3; c++) {
                         s1[c] += px.mean[c];
                         s2[c] += px.mean[c] * px.mean[c];
@@ -224,9 +224,9 @@ test_zero_count_pass_round_trip(void **state)
     }
     /* pixel (0, 0), pass 2: samples 2 * 2^32 ... of its stream */
     mcp_proc_pixel px;
-    assert_int_equal(mcp_proc_render_pixel(&scene, 0, 0, 0, 0, 6, 5,
-                                           2 * MCP_PROC_PASS_STRIDE, &px),
-                     0);
+    assert_int_equal(
+        mcp_proc_render_pixel(&scene, 0, 0, 0, 0, 6, 5, 2 * MCP_PROC_PASS_STRIDE, &px),
+        0);
     for (int c = 0; c < 3; c++)
         assert_close(mcp_image_px(back->color, 0, 0)[c], px.mean[c], 1e-6, 1e-7);
     mcp_dump_free(d);
@@ -255,12 +255,14 @@ test_errors(void **state)
     mcp_denoiser *den = denoiser("gauss");
     mcp_adaptive_result *res = NULL;
     mcp_adaptive_options o = mcp_adaptive_defaults();
-    assert_error_contains(mcp_adaptive_run(8, 8, den, &o, render, &r, NULL, NULL, NULL, &res),
-                          "adaptive: no stop rule");
+    assert_error_contains(
+        mcp_adaptive_run(8, 8, den, &o, render, &r, NULL, NULL, NULL, &res),
+        "adaptive: no stop rule");
     assert_null(res);
     o.budget_spp = 64;
     o.spp_per_iteration = 0;
-    assert_error_contains(mcp_adaptive_check(&o), "spp_per_iteration must be > 0 (got 0)");
+    assert_error_contains(mcp_adaptive_check(&o),
+                          "spp_per_iteration must be > 0 (got 0)");
     o = mcp_adaptive_defaults();
     o.budget_spp = 64;
     o.quantum = 0;
@@ -269,7 +271,8 @@ test_errors(void **state)
     r.ignore_counts = 1; /* 4 spp everywhere instead of the 32 asked for */
     assert_error_contains(
         mcp_adaptive_run(8, 8, den, &o, render, &r, NULL, NULL, NULL, &res),
-        "pass 0: procedural(seed 1, 4 spp) has 4 samples at pixel (0, 0) but was given 32");
+        "pass 0: procedural(seed 1, 4 spp) has 4 samples at pixel (0, 0) but was given "
+        "32");
     r.ignore_counts = 0;
     assert_error_contains(
         mcp_adaptive_run(9, 8, den, &o, render, &r, NULL, NULL, NULL, &res),
