@@ -32,6 +32,9 @@ typedef struct scene_ctx {
 } scene_ctx;
 
 static int g_probes = 1; /* --probes: the estimate's */
+/* what every run's passes spent, per denoiser: mcpost's part and the denoiser's */
+static double g_ms_added, g_ms_denoise;
+static long g_passes;
 
 static int
 render(int pass, const mcp_image *counts, mcp_dump **out, void *ctx)
@@ -65,6 +68,12 @@ run(scene_ctx *s, const mcp_denoiser *den, mcp_adaptive_map map, double budget,
     if (mcp_adaptive_run(s->scene.width, s->scene.height, den, &o, render, s, ref, NULL,
                          NULL, &r))
         die("adaptive run");
+    for (int i = 0; i < r->count; i++) {
+        const mcp_adaptive_iteration *it = &r->iterations[i];
+        g_ms_added += it->ms_merge + it->ms_estimate + it->ms_counts;
+        g_ms_denoise += it->ms_denoise;
+        g_passes++;
+    }
     return r;
 }
 
@@ -231,6 +240,12 @@ main(int argc, char **argv)
             }
             mcp_image_free(ref);
         }
+        printf("%s: per pass, mcpost adds %.1f ms (merge, estimate besides the denoiser, "
+               "counts) to the denoiser's %.1f ms (%.1f%%), over %ld passes\n",
+               dn, g_ms_added / g_passes, g_ms_denoise / g_passes,
+               100.0 * g_ms_added / g_ms_denoise, g_passes);
+        g_ms_added = g_ms_denoise = 0;
+        g_passes = 0;
         mcp_denoiser_free(den);
     }
     printf("mean equal-error speed-up over the runs%s:",

@@ -416,6 +416,7 @@ static const char usage[] =
     "  --reference REF          the converged image: relMSE per pass\n"
     "  --keep-passes            keep every pass's counts and dump in DIR\n"
     "  --json                   the figures as JSON on stdout\n"
+    "  --quiet                  no line per pass on stderr\n"
     "  --denoiser NAME          " MCP_CLI_DEFAULT_DENOISER "\n" MCP_CLI_DENOISER_USAGE(
         " ") "example (the procedural renderer, 64 spp in all, against its exact "
              "truth):\n"
@@ -442,7 +443,8 @@ enum {
     OPT_SEED,
     OPT_REF,
     OPT_KEEP,
-    OPT_JSON
+    OPT_JSON,
+    OPT_QUIET
 };
 
 static int
@@ -466,6 +468,7 @@ cmd_adaptive(int argc, char **argv)
         {"reference", required_argument, 0, OPT_REF},
         {"keep-passes", no_argument, 0, OPT_KEEP},
         {"json", no_argument, 0, OPT_JSON},
+        {"quiet", no_argument, 0, OPT_QUIET},
         {"help", no_argument, 0, 'h'},
         MCP_CLI_DENOISER_LONGOPTS,
         {0, 0, 0, 0}};
@@ -535,6 +538,9 @@ cmd_adaptive(int argc, char **argv)
             break;
         case OPT_JSON:
             json = 1;
+            break;
+        case OPT_QUIET:
+            mcp_progress_set_quiet(1);
             break;
         case 'h':
             fputs(usage, stdout);

@@ -200,6 +200,37 @@ test_variance_map_beats_uniform(void **state)
     mcp_image_free(truth);
 }
 
+/* The other stop rules: the estimate's criterion F(tau) >= p, and max_iterations. */
+static void
+test_stop_rules(void **state)
+{
+    (void)state;
+    recorded r = {mcp_proc_scene_defaults(), 2, 0, {0}, {0}, 0};
+    r.scene.width = r.scene.height = 16;
+    r.scene.firefly_probability = 0;
+    mcp_denoiser *den = denoiser("gauss");
+    mcp_adaptive_result *res = NULL;
+    mcp_adaptive_options o = mcp_adaptive_defaults();
+    o.stop_on_estimate = 1;
+    o.est.tau = 10.0; /* every relative error is far below 10 after one pass */
+    assert_int_equal(
+        mcp_adaptive_run(16, 16, den, &o, render, &r, NULL, NULL, NULL, &res), 0);
+    assert_int_equal(res->count, 1);
+    assert_int_equal(res->stopped_by, MCP_ADAPTIVE_STOP_ESTIMATE);
+    assert_true(res->iterations[0].stop && res->iterations[0].cdf_at_tau >= o.est.p);
+    mcp_adaptive_result_free(res);
+    o.est.tau = 1e-12; /* never reached */
+    o.max_iterations = 3;
+    assert_int_equal(
+        mcp_adaptive_run(16, 16, den, &o, render, &r, NULL, NULL, NULL, &res), 0);
+    assert_int_equal(res->count, 3);
+    assert_int_equal(res->stopped_by, MCP_ADAPTIVE_STOP_ITERATIONS);
+    assert_false(res->iterations[2].stop);
+    assert_int_equal(res->iterations[2].total_samples, 3 * 32 * 256);
+    mcp_adaptive_result_free(res);
+    mcp_denoiser_free(den);
+}
+
 /* A pass that leaves pixels out writes and reads back: count 0, colour and variance 0
  * there, and the per-sample variance of the others divided by their own n on load. */
 static void
@@ -300,6 +331,7 @@ main(void)
         cmocka_unit_test(test_accumulation_is_exact),
         cmocka_unit_test(test_quantum_keeps_whole_passes),
         cmocka_unit_test(test_variance_map_beats_uniform),
+        cmocka_unit_test(test_stop_rules),
         cmocka_unit_test(test_zero_count_pass_round_trip),
         cmocka_unit_test(test_equal_error_spp),
         cmocka_unit_test(test_errors),
