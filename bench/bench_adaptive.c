@@ -12,7 +12,10 @@
  *   bench_adaptive [--size N] [--budget SPP] [--spp-per-iteration N]
  *                  [--denoisers nlm,unet] [--seeds K] [--plot FILE.svg]
  *                  [--firefly-probability P] [--probes K]
- *                  [--overhead N]   (only the overhead figure, at NxN with nlm) */
+ *                  [--overhead N]   (only the overhead figure, at NxN with nlm)
+ *
+ * The plot shows the first seed's curves of the independent sampler's scenes (the
+ * jittered ones lie close to them and would crowd it). */
 #include "bench.h"
 
 #include <mcpost/estimate.h>
@@ -185,7 +188,7 @@ main(int argc, char **argv)
                     ue[i] = u->iterations[i].relmse;
                     if (fabs(us[i] - budget) < 1e-9) at_b = ue[i];
                 }
-                if (sd == 0 && n_series < MAX_CURVES && nu <= 256) {
+                if (sd == 0 && smp == 0 && n_series < MAX_CURVES && nu <= 256) {
                     snprintf(names[n_series], 96, "uniform (%s, %s)", dn, sname);
                     memcpy(px[n_series], us, sizeof(double) * nu);
                     memcpy(py[n_series], ue, sizeof(double) * nu);
@@ -217,7 +220,7 @@ main(int argc, char **argv)
                         sum_speedup[m] += speedup;
                         n_speedup[m]++;
                     }
-                    if (sd == 0 && n_series < MAX_CURVES && r->count <= 256) {
+                    if (sd == 0 && smp == 0 && n_series < MAX_CURVES && r->count <= 256) {
                         snprintf(names[n_series], 96, "%s (%s, %s)",
                                  mcp_adaptive_map_name(maps[m]), dn, sname);
                         for (int i = 0; i < r->count; i++) {
