@@ -444,8 +444,9 @@ load_spp(mcp_dump *d, const mcp_image *img, const mcp_dump_spec *spec, const lay
         for (int y = 0; y < d->spp_map->height; y++)
             for (int x = 0; x < d->spp_map->width; x++) {
                 float n = mcp_image_px(d->spp_map, x, y)[0];
-                if (!(n > 0) || !isfinite(n))
-                    return mcp_error("%s: sample count %g at pixel %d,%d (must be > 0)",
+                /* 0 is a pixel that a pass of an adaptive render left out */
+                if (!(n >= 0) || !isfinite(n))
+                    return mcp_error("%s: sample count %g at pixel %d,%d (must be >= 0)",
                                      d->spp_map->source, n, x, y);
             }
         d->spp = 0;
@@ -475,8 +476,8 @@ to_variance_of_mean(mcp_dump *d)
             for (int x = 0; x < parts[p]->width; x++) {
                 double n = mcp_dump_spp_at(d, x, y);
                 float *v = mcp_image_px(parts[p], x, y);
-                for (int c = 0; c < 3; c++)
-                    v[c] = (float)(v[c] / n);
+                for (int c = 0; c < 3; c++) /* no samples: no variance */
+                    v[c] = n > 0 ? (float)(v[c] / n) : 0.0f;
             }
     }
 }

@@ -421,6 +421,110 @@ MCP_API void mcp_series_estimate_free(mcp_series_estimate *s);
  * (never reached) also agree. spps: the series' counts, ascending. */
 MCP_API int mcp_stop_agrees(double est_spp, double true_spp, const double *spps, int n);
 
+/* ---- the adaptive-sampling loop (estimate/adaptive.c; Firmino 2023 §4) ---- */
+
+/* Where the next pass puts its samples: a sampling map of mcp_sampling_map (its three
+ * kinds, the same names), or the same count in every pixel. */
+typedef enum {
+    MCP_ADAPTIVE_VARIANCE = 0, /* "variance"   */
+    MCP_ADAPTIVE_TONEMAPPED,   /* "tonemapped" */
+    MCP_ADAPTIVE_MC_SURE,      /* "mc-sure"    */
+    MCP_ADAPTIVE_UNIFORM       /* "uniform"    */
+} mcp_adaptive_map;
+
+MCP_API int mcp_adaptive_map_from_name(const char *name, mcp_adaptive_map *out);
+MCP_API const char *mcp_adaptive_map_name(mcp_adaptive_map map);
+
+typedef struct mcp_adaptive_options {
+    mcp_estimate_options est; /* the estimate of every iteration; its sampling.kind and
+                                 budget are the loop's to set [defaults, no
+                                 percentiles] */
+    mcp_adaptive_map map;     /* [variance] */
+    double spp_per_iteration; /* new samples per pixel per pass, on average [32] */
+    double initial_spp;       /* the first, uniform pass; 0: spp_per_iteration [0] */
+    double budget_spp;        /* stop once this many samples per pixel (on average) are
+                                 rendered; the last pass is cut to land on it exactly;
+                                 0: no budget [0] */
+    int stop_on_estimate;     /* stop when the estimate says F(tau) >= p [0] */
+    int max_iterations;       /* passes at most [1000] */
+    int quantum;              /* every count is a multiple of this: k^2 for a renderer
+                                 whose samples come in stratified passes of k^2 [1] */
+} mcp_adaptive_options;
+
+MCP_API mcp_adaptive_options mcp_adaptive_defaults(void);
+/* Checks every field, naming it; a budget or stop_on_estimate is required. */
+MCP_API int mcp_adaptive_check(const mcp_adaptive_options *opt);
+
+/* Renders pass `pass` with counts(p) new samples in pixel p (channel "SampleCount"),
+ * from samples no earlier pass used, into *out: a dump whose per-pixel sample count is
+ * counts (a spp_map equal to it, or a scalar spp where counts are all equal). */
+typedef int (*mcp_adaptive_render_fn)(int pass, const mcp_image *counts, mcp_dump **out,
+                                      void *ctx);
+
+/* The figures of one pass. */
+typedef struct mcp_adaptive_iteration {
+    int pass;
+    int64_t samples;       /* rendered in this pass: the sum of its counts */
+    int64_t total_samples; /* in the accumulated dump */
+    double mean_spp;       /* total_samples / pixels */
+    double est_error;      /* the estimate's mean scaled error, mean s^2 (lambda + 1) */
+    double cdf_at_tau;     /* F(tau) */
+    int stop;              /* F(tau) >= p */
+    double relmse;         /* of the denoised image against the reference (NAN: none) */
+    double relmse_noisy;   /* of the accumulated mean (NAN: none) */
+    /* wall-clock milliseconds: the render command, merging the pass in, the denoiser
+     * with its JVPs (est ms_denoise), the rest of the estimate, the next counts */
+    double ms_render, ms_merge, ms_denoise, ms_estimate, ms_counts;
+} mcp_adaptive_iteration;
+
+/* What an iteration's callback sees; everything is borrowed for the call. */
+typedef struct mcp_adaptive_state {
+    const mcp_adaptive_iteration *it;
+    const mcp_image *counts;      /* what this pass rendered */
+    const mcp_dump *accumulated;  /* every pass so far */
+    const mcp_estimate *est;      /* on accumulated: denoised image, maps */
+    const mcp_image *next_counts; /* for the next pass; NULL after the last */
+} mcp_adaptive_state;
+
+typedef enum {
+    MCP_ADAPTIVE_STOP_BUDGET = 0, /* the budget is rendered */
+    MCP_ADAPTIVE_STOP_ESTIMATE,   /* the estimate said F(tau) >= p */
+    MCP_ADAPTIVE_STOP_ITERATIONS  /* max_iterations passes */
+} mcp_adaptive_stop;
+
+typedef struct mcp_adaptive_result {
+    int count; /* passes */
+    mcp_adaptive_iteration *iterations;
+    mcp_dump *accumulated; /* every pass merged (pooled: exact per-pixel sums) */
+    mcp_image *denoised;   /* the last estimate's F */
+    mcp_adaptive_stop stopped_by;
+} mcp_adaptive_result;
+
+MCP_API void mcp_adaptive_result_free(mcp_adaptive_result *r);
+
+/* The loop of Firmino 2023: pass 0 renders initial_spp uniformly; then every pass
+ * is merged into the accumulated dump (mcp_dump_merge, pooled: per-pixel means and
+ * variances as one render of all the samples), the accumulated dump is denoised and
+ * estimated (mcp_estimate_compute), and the map's integer counts for the next pass
+ * (mcp_sample_counts on the sampling map, in units of quantum) sum exactly to
+ * min(spp_per_iteration, what is left of the budget) x pixels, until a stop rule
+ * holds. reference (may be NULL) gives relmse. on_iteration (may be NULL) runs after
+ * every pass; a non-zero return stops the loop with that error. opt may be NULL
+ * (then a budget is missing: it fails). */
+MCP_API int mcp_adaptive_run(int width, int height, const mcp_denoiser *den,
+                             const mcp_adaptive_options *opt,
+                             mcp_adaptive_render_fn render, void *render_ctx,
+                             const mcp_image *reference,
+                             int (*on_iteration)(const mcp_adaptive_state *, void *),
+                             void *ctx, mcp_adaptive_result **out);
+
+/* The uniform samples per pixel at which a uniform run's curve (mean_spp ascending,
+ * error) reaches `error`, interpolated linearly in log spp and log error between the
+ * two passes that bracket it; NAN when the curve never reaches it (or starts below
+ * it: then below its first point). Equal-error speed-up = this / the method's spp. */
+MCP_API double mcp_equal_error_spp(const double *spp, const double *error, int n,
+                                   double target);
+
 #ifdef __cplusplus
 }
 #endif

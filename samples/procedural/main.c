@@ -34,7 +34,18 @@ static const char USAGE[] =
     "                             OUT_PREFIX_truth_var_of_mean.exr\n"
     "  --truth-order N            quadrature points per triangle side [8]\n"
     "  --firefly-probability P    chance of a firefly per ground sample [1e-3]\n"
-    "  --firefly-value V          a firefly's brightness [100]\n";
+    "  --firefly-value V          a firefly's brightness [100]\n"
+    "  --sample-counts MAP.exr    an adaptive pass instead: pixel p gets MAP(p)\n"
+    "                             samples (channel SampleCount), and -o names the\n"
+    "                             one dump written (mcpost convention, with the\n"
+    "                             per-pixel SampleCount); the image size is MAP's\n"
+    "  --pass P                   the pass number: pass P uses sample indices\n"
+    "                             P*2^32 ... of every pixel's stream, so passes\n"
+    "                             never share samples [0]\n"
+    "example (an adaptive loop's render command):\n"
+    "  mcpost adaptive --size 128x128 -o out \\\n"
+    "    --render 'mcpost-procedural --sample-counts {counts} --pass {pass} \\\n"
+    "              --seed {seed} -o {output}'\n";
 
 static int
 fail(const char *what)
@@ -96,9 +107,9 @@ parse_sampler(const char *flag, const char *s, mcp_proc_sampler *out)
 
 typedef struct {
     mcp_proc_scene scene;
-    int spp, realizations, singles, single_spp, truth;
+    int spp, realizations, singles, single_spp, truth, pass;
     uint64_t seed;
-    const char *permutation, *prefix;
+    const char *permutation, *prefix, *sample_counts;
 } options;
 
 static int
@@ -131,6 +142,10 @@ parse(int argc, char **argv, options *o)
             rc = parse_int(a, v, 1, &o->scene.strata);
         else if (!strcmp(a, "--firefly-value"))
             rc = parse_double(a, v, &o->scene.firefly_value);
+        else if (!strcmp(a, "--pass"))
+            rc = parse_int(a, v, 0, &o->pass);
+        else if (!strcmp(a, "--sample-counts") && v)
+            o->sample_counts = v;
         else if (!strcmp(a, "--permutation") && v)
             o->permutation = v;
         else if ((!strcmp(a, "-o") || !strcmp(a, "--output")) && v)
@@ -146,7 +161,8 @@ parse(int argc, char **argv, options *o)
     if (mcp_proc_scene_check(&o->scene)) return -1;
     /* The library refuses partial passes too, but only once some files are written. */
     int pass = o->scene.strata * o->scene.strata;
-    if (o->scene.sampler == MCP_PROC_SAMPLER_JITTERED && o->spp % pass)
+    if (!o->sample_counts && o->scene.sampler == MCP_PROC_SAMPLER_JITTERED &&
+        o->spp % pass)
         return mcp_error("--spp must be a multiple of --strata^2 = %d with the jittered "
                          "sampler (got %d)",
                          pass, o->spp);
@@ -194,6 +210,22 @@ write_truth(const options *o)
     return rc ? -1 : 0;
 }
 
+/* An adaptive pass: one dump with the map's per-pixel counts, at the map's size. */
+static int
+run_counts(options *o)
+{
+    mcp_image *counts = NULL;
+    mcp_dump *d = NULL;
+    if (mcp_image_read(o->sample_counts, NULL, &counts)) return -1;
+    o->scene.width = counts->width;
+    o->scene.height = counts->height;
+    int rc = mcp_proc_render_counts(&o->scene, counts, o->pass, o->seed, &d) ||
+             mcp_dump_write(d, o->prefix, MCP_CONV_MCPOST, NULL);
+    mcp_dump_free(d);
+    mcp_image_free(counts);
+    return rc ? -1 : 0;
+}
+
 static int
 run(const options *o)
 {
@@ -231,6 +263,7 @@ main(int argc, char **argv)
             fputs(USAGE, stdout);
             return 0;
         }
-    if (parse(argc, argv, &o) || run(&o)) return fail(mcp_error_message());
+    if (parse(argc, argv, &o)) return fail(mcp_error_message());
+    if (o.sample_counts ? run_counts(&o) : run(&o)) return fail(mcp_error_message());
     return 0;
 }

@@ -72,6 +72,21 @@ MCP_API uint64_t mcp_proc_realization_seed(uint64_t seed, int realization);
 MCP_API int mcp_proc_render(const mcp_proc_scene *scene, int spp, uint64_t seed,
                             const mcp_image *permutation, mcp_dump **out);
 
+/* Where pass p of an adaptive render starts in every pixel's stream: sample index
+ * p * 2^32. A pass never draws 2^32 samples in a pixel, so passes use disjoint samples
+ * of the same streams (independent estimates) without knowing the earlier counts;
+ * 2^32 is a multiple of every k^2 <= 64^2, so jittered passes stay whole passes. */
+#define MCP_PROC_PASS_STRIDE ((uint64_t)1 << 32)
+
+/* An adaptive pass: pixel p gets counts(p) samples (channel "SampleCount", or the
+ * only channel; non-negative integers, multiples of strata^2 for the jittered sampler),
+ * sample indices [pass * MCP_PROC_PASS_STRIDE, ... + counts(p)) of the stream of
+ * mcp_proc_render with the same seed. *out is as mcp_proc_render's with a per-pixel
+ * spp_map (a pixel given 0 samples has colour, variance and albedo 0), written in the
+ * mcpost convention, and the attribute "mcpost.procedural.pass". */
+MCP_API int mcp_proc_render_counts(const mcp_proc_scene *scene, const mcp_image *counts,
+                                   int pass, uint64_t seed, mcp_dump **out);
+
 /* count images (R, G, B) of spp samples each, image k using sample indices
  * [k*spp, (k+1)*spp) of the streams of mcp_proc_render with the same seed and
  * permutation: independent estimates for the perceptual methods. The mean of count

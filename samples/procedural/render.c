@@ -279,3 +279,103 @@ mcp_proc_render_pixel(const mcp_proc_scene *scene, int x, int y, int src_x, int 
     }
     return 0;
 }
+
+/* The count of every pixel from a count map, checked: a whole, non-negative number of
+ * the sampler's passes. *out is malloc'd. */
+static int
+pixel_counts(const mcp__proc_geom *g, const mcp_image *counts, long **out)
+{
+    const char *src = counts->source ? counts->source : "sample counts";
+    *out = NULL;
+    if (counts->width != g->width || counts->height != g->height)
+        return mcp_error("%s: size %dx%d does not match the image (%dx%d)", src,
+                         counts->width, counts->height, g->width, g->height);
+    int ch = mcp_image_channel(counts, "SampleCount");
+    if (ch < 0 && counts->channels == 1) ch = 0;
+    if (ch < 0)
+        return mcp_error("%s: no channel 'SampleCount' (and more than one channel)", src);
+    size_t npix = (size_t)g->width * (size_t)g->height;
+    long *n = mcp_malloc(npix * sizeof *n);
+    if (!n) return -1;
+    for (int y = 0; y < g->height; y++)
+        for (int x = 0; x < g->width; x++) {
+            double v = mcp_image_px(counts, x, y)[ch];
+            if (!(v >= 0 && v <= (double)(1 << 30)) || v != floor(v)) {
+                free(n);
+                return mcp_error("%s: pixel (%d, %d) has count %g, not a whole number "
+                                 "in [0, 2^30]",
+                                 src, x, y, v);
+            }
+            n[(size_t)y * g->width + x] = (long)v;
+            if (mcp__proc_check_passes(g, "a pixel's count", (uint64_t)v)) {
+                free(n);
+                return mcp_error_prefix("%s: pixel (%d, %d): ", src, x, y);
+            }
+        }
+    *out = n;
+    return 0;
+}
+
+int
+mcp_proc_render_counts(const mcp_proc_scene *scene, const mcp_image *counts, int pass,
+                       uint64_t seed, mcp_dump **out)
+{
+    static const char *const xyz[3] = {"X", "Y", "Z"};
+    mcp__proc_geom g;
+    long *n = NULL;
+    mcp_dump *d = NULL;
+    char label[96], text[32];
+    *out = NULL;
+    if (mcp__proc_geom_init(scene, &g)) return -1;
+    if (!counts) return mcp_error("procedural: missing sample counts");
+    if (pass < 0) return mcp_error("procedural: pass must be >= 0 (got %d)", pass);
+    if (pixel_counts(&g, counts, &n)) return -1;
+    snprintf(label, sizeof label, "procedural(seed %llu, pass %d)",
+             (unsigned long long)seed, pass);
+    static const char *const count_name[1] = {"SampleCount"};
+    if (!(d = mcp_calloc(1, sizeof *d)) || new_rgb(&g, NULL, label, &d->color) ||
+        new_rgb(&g, NULL, label, &d->var_of_mean) ||
+        new_rgb(&g, NULL, label, &d->albedo) || new_rgb(&g, xyz, label, &d->normal) ||
+        mcp_image_new(g.width, g.height, 1, count_name, &d->spp_map) ||
+        !(d->source = mcp_strdup(label)))
+        goto fail;
+    snprintf(text, sizeof text, "%llu", (unsigned long long)seed);
+    if (mcp_attrs_set_string(&d->attrs, "mcpost.procedural.seed", text)) goto fail;
+    snprintf(text, sizeof text, "%d", pass);
+    if (mcp_attrs_set_string(&d->attrs, "mcpost.procedural.pass", text)) goto fail;
+    snprintf(text, sizeof text, "jittered %dx%d", g.strata, g.strata);
+    if (scene->sampler == MCP_PROC_SAMPLER_JITTERED &&
+        mcp_attrs_set_string(&d->attrs, "mcpost.procedural.sampler", text))
+        goto fail;
+    d->spp = 0;
+    d->convention = MCP_CONV_MCPOST;
+    d->variance_in_file = MCP_VAR_PER_SAMPLE; /* as it will be written */
+    d->variance_source = MCP_VARSRC_PER_SAMPLE;
+    const uint64_t first = (uint64_t)pass * MCP_PROC_PASS_STRIDE;
+
+#pragma omp parallel for schedule(dynamic)
+    for (int y = 0; y < g.height; y++)
+        for (int x = 0; x < g.width; x++) {
+            size_t i = (size_t)y * g.width + x;
+            accum a;
+            render_into(&g, x, y, stream_key(seed, i), first, n[i], &a);
+            float *col = mcp_image_px(d->color, x, y),
+                  *var = mcp_image_px(d->var_of_mean, x, y);
+            float *alb = mcp_image_px(d->albedo, x, y),
+                  *nrm = mcp_image_px(d->normal, x, y);
+            for (int c = 0; c < 3; c++) {
+                col[c] = (float)a.mean[c];
+                var[c] = n[i] > 1 ? (float)(a.m2[c] / (n[i] - 1) / n[i]) : 0.0f;
+                alb[c] = (float)a.albedo[c];
+            }
+            nrm[0] = 0.0f, nrm[1] = 1.0f, nrm[2] = 0.0f;
+            mcp_image_px(d->spp_map, x, y)[0] = (float)n[i];
+        }
+    free(n);
+    *out = d;
+    return 0;
+fail:
+    free(n);
+    mcp_dump_free(d);
+    return -1;
+}
