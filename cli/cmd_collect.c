@@ -132,7 +132,7 @@ find_frames(shot *s)
     }
     DIR *d = opendir(s->dir);
     if (!d)
-        return mcp_error("%s: %s", s->dir, strerror(errno));
+        return mcp_error("%s: cannot read the folder: %s", s->dir, strerror(errno));
     for (struct dirent *e; (e = readdir(d));) {
         const char *n = e->d_name;
         size_t len = strlen(n);

@@ -29,7 +29,8 @@ mcp_cli_shot_open(const char *job, const char *output, const char *select, mcp_c
     jo.output_dir = output;
     if (!(s->job = realpath(job, NULL)))
         return mcp_error("%s: %s", job, strerror(errno));
-    if (mcp_job_frames(job, &jo, &s->all, &s->n_all, &s->output_dir))
+    /* the real path: output folders then come out absolute, for scripts run elsewhere */
+    if (mcp_job_frames(s->job, &jo, &s->all, &s->n_all, &s->output_dir))
         goto fail;
     if (!select) {
         if (s->n_all && !(s->chosen = mcp_calloc((size_t)s->n_all, sizeof *s->chosen)))
