@@ -29,9 +29,10 @@
 extern "C" {
 #endif
 
-/* The largest frame number, and the most frames one set may hold. */
+/* The largest frame number, and the most frames one set may hold (over an hour of
+ * film at 24 frames a second). */
 #define MCP_FRAME_MAX 9999999
-#define MCP_FRAMES_MAX_COUNT 1000000
+#define MCP_FRAMES_MAX_COUNT 100000
 
 /* Parses a frame set into a sorted array of distinct frames (*frames malloc'd).
  * Errors name the text: "frames '1-x': ...". */

@@ -855,21 +855,18 @@ job_validate(mcp_job *job, const mcp_stage *const *stages, const mcp_node **list
     return 0;
 }
 
-/* A frame job is checked frame by frame: every frame's inputs must be there. */
+/* A frame job is checked frame by frame: every frame's inputs must be there. Only
+ * the input paths depend on the frame, so one parsed job serves them all. */
 static int
-check_frames(const char *path, const int *frames, int n_frames,
-             const mcp_stage *const *stages)
+check_frames(mcp_job *job, const mcp_stage *const *stages)
 {
-    for (int i = 0; i < n_frames; i++) {
-        mcp_job_options opt = mcp_job_defaults();
-        opt.frame = frames[i];
-        mcp_job *job = NULL;
+    for (int i = 0; i < job->n_frames; i++) {
         const mcp_node *list = NULL;
-        int rc = job_open(path, &opt, &job) || job_validate(job, stages, &list);
-        job_free(job);
-        if (rc)
-            return mcp_error_prefix("frame %d: ", frames[i]);
+        job->opt.frame = job->frames[i];
+        if (job_validate(job, stages, &list))
+            return mcp_error_prefix("frame %d: ", job->frames[i]);
     }
+    job->opt.frame = -1;
     return 0;
 }
 
@@ -880,8 +877,7 @@ mcp_job_check(const char *path, const mcp_stage *const *stages)
     if (job_open(path, NULL, &job))
         return -1;
     const mcp_node *list = NULL;
-    int rc = job->n_frames ? check_frames(path, job->frames, job->n_frames, stages)
-                           : job_validate(job, stages, &list);
+    int rc = job->n_frames ? check_frames(job, stages) : job_validate(job, stages, &list);
     job_free(job);
     return rc;
 }
