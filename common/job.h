@@ -10,6 +10,8 @@
  *                                                          # one dump, variance from
  *                                                          # their spread (or a list)
  *   output: out/frame                                     # relative to the job file
+ *   frames: 1-240                     # optional: a frame job (frames.h, docs/frames.md);
+ *                                     # input paths then hold a frame token (####, %04d)
  *   stages:
  *     - info: {input: noisy}
  *     - convert: {input: reference, output: reference.png}
