@@ -32,6 +32,19 @@ mcp_cli_shot_open(const char *job, const char *output, const char *select, mcp_c
     /* the real path: output folders then come out absolute, for scripts run elsewhere */
     if (mcp_job_frames(s->job, &jo, &s->all, &s->n_all, &s->output_dir))
         goto fail;
+    if (s->output_dir[0] != '/') { /* --output relative to here */
+        char cwd[4096], *abs = NULL;
+        size_t n = strlen(s->output_dir) + sizeof cwd + 2;
+        if (!getcwd(cwd, sizeof cwd)) {
+            mcp_error("cannot tell the current folder: %s", strerror(errno));
+            goto fail;
+        }
+        if (!(abs = mcp_malloc(n)))
+            goto fail;
+        snprintf(abs, n, "%s/%s", cwd, s->output_dir);
+        free(s->output_dir);
+        s->output_dir = abs;
+    }
     if (!select) {
         if (s->n_all && !(s->chosen = mcp_calloc((size_t)s->n_all, sizeof *s->chosen)))
             goto fail;
