@@ -174,8 +174,13 @@ mcp_cli_shot_run(const mcp_cli_shot *s, const mcp_job_options *jo, int jobs, int
     if (skipped)
         mcp_note("%d of %d frames already complete, skipped (--force runs them again)",
                  skipped, s->n_chosen);
+    if (!n_todo) {
+        free(todo);
+        mcp_note("nothing to run; mcpost collect %s gathers the frames", s->output_dir);
+        return 0;
+    }
     if (jobs > n_todo)
-        jobs = n_todo > 0 ? n_todo : 1;
+        jobs = n_todo;
     if (jobs == 1) {
         for (int i = 0; i < n_todo; i++) {
             mcp_note("frame %d (%d of %d)", todo[i], i + 1, n_todo);
