@@ -297,6 +297,51 @@ test_a_failed_frame_is_listed_by_run_and_collect(void **state)
     assert_non_null(strstr(err, "r: no frames here"));
 }
 
+/* A series with both tokens: '#' (or the first %d) is the frame, the other the spp. */
+static void
+test_series_pattern_holds_frame_and_spp(void **state)
+{
+    (void)state;
+    /* frames 1 and 2 at 4 and 8 spp: the 4-spp member is the frame's own render; frame
+     * 2 lacks its 8-spp file */
+    for (int f = 1; f <= 2; f++)
+        sh("cp '%s/r/shot_%04d_0000.exr' '%s/r/ser_%04d_spp0004.exr'", dir, f, dir, f);
+    sh("cp '%s/r/shot_0003_0000.exr' '%s/r/ser_0001_spp0008.exr'", dir, dir);
+    const char *patterns[] = {"r/ser_####_spp%04d.exr", "r/ser_%04d_spp%04d.exr"};
+    for (int p = 0; p < 2; p++) {
+        char path[4200], text[2048];
+        snprintf(path, sizeof path, "%s/series%d.yaml", dir, p);
+        snprintf(text, sizeof text,
+                 "frames: 1-2\n"
+                 "inputs:\n"
+                 "  progress: {series: \"%s\", spp: [4, 8]}\n"
+                 "  noisy: {dump: r/shot_####_0000.exr}\n"
+                 "  reference: {image: r/shot_####_truth.exr}\n"
+                 "stages:\n"
+                 "  - metrics: {input: noisy, reference: reference, series: progress}\n",
+                 patterns[p]);
+        mcp_test_write_text(path, text);
+        assert_int_equal(run("run '%s' --check", path), 1);
+        assert_non_null(strstr(err, "frame 2: "));
+        assert_non_null(strstr(err, "ser_0002_spp0008.exr"));
+        assert_int_equal(run("run '%s' --frames 1 --force -q", path), 0);
+        cJSON *rep = read_json("%s/out/series%d/0001/report.json", dir, p), *sec, *t;
+        double mse4 = NAN;
+        cJSON_ArrayForEach(sec, cJSON_GetObjectItem(rep, "sections"))
+        cJSON_ArrayForEach(t, cJSON_GetObjectItem(sec, "tables"))
+        {
+            cJSON *row = cJSON_GetArrayItem(cJSON_GetObjectItem(t, "rows"), 0);
+            if (!strcmp(cJSON_GetObjectItem(t, "title")->valuestring,
+                        "error against the reference per sample count") &&
+                cJSON_GetArrayItem(row, 0)->valueint == 4)
+                mse4 = cJSON_GetArrayItem(row, 1)->valuedouble;
+        }
+        /* frame 1's 4-spp member is frame 1's render, against frame 1's truth */
+        assert_close(mse4, recomputed_mse(1), 1e-6, 0);
+        cJSON_Delete(rep);
+    }
+}
+
 static void
 test_submit_writes_an_array_job_and_its_collect_job(void **state)
 {
@@ -377,6 +422,7 @@ main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_run_frames_in_parallel_and_resume),
         cmocka_unit_test(test_a_failed_frame_is_listed_by_run_and_collect),
+        cmocka_unit_test(test_series_pattern_holds_frame_and_spp),
         cmocka_unit_test(test_submit_writes_an_array_job_and_its_collect_job),
     };
     return cmocka_run_group_tests(tests, setup, NULL);
