@@ -1,7 +1,7 @@
 /* test_frames_cli.c: frame jobs through the executable (docs/frames.md) -- `run` over
  * frames in parallel into OUTPUT/NNNN/, resuming (complete frames skipped, a killed
  * frame run again), --force and --frames, a failed frame that does not stop the others,
- * `collect` (figures per frame equal to each frame's own, worst first, the failed frame
+ * a series pattern with frame and spp tokens, `collect` (figures per frame equal to each frame's own, worst first, the failed frame
  * listed), and `submit --slurm` (the scripts, and the sbatch calls through a stand-in
  * sbatch). The real Slurm runs in tests/cli/slurm_frames.sh. The frames are 4 renders
  * of the procedural scene with other seeds; their MSE is recomputed here from the
