@@ -59,6 +59,8 @@ demo)
     ;;
 test)
     install_packages
+    # a one-node Slurm for tests/cli/slurm_frames.sh (frame jobs on a cluster)
+    install_packages slurm-wlm munge
     build build
     run_tests build
     if [ -z "${MCPOST_NO_ASAN:-}" ]; then

@@ -1,5 +1,6 @@
 /* cmd_run.c: `mcpost run JOB.yaml` -- runs a whole pipeline from one job file. */
 #include "cli.h"
+#include "shot.h"
 
 #include <mcpost/progress.h>
 
@@ -9,11 +10,18 @@
 
 static const char usage[] =
     "usage: mcpost run JOB.yaml [--output DIR] [--json] [--quiet] [--list] [--check]\n"
+    "                  [--frames SET] [-j N] [--force]\n"
     "  Runs the stages of a job file in order and writes the results, report.json and\n"
     "  report.html into the job's output folder (output: in the file, relative to it;\n"
     "  --output overrides). --json prints the report on stdout. --list names the stages.\n"
     "  --check validates the job as run does before its first stage (every stage's keys,\n"
     "  values, inputs, results of earlier stages and files) and runs nothing.\n"
+    "  A job with frames: runs every frame into its own folder, OUTPUT/0017/, skipping\n"
+    "  frames that are complete (their report.json written): see docs/frames.md;\n"
+    "  `mcpost collect OUTPUT` then gathers the whole shot into one report.\n"
+    "  --frames SET      only these frames (17, 10-20, 1-240:2, 1,5,9)\n"
+    "  -j, --jobs N      run N frames at once, in N processes [1]\n"
+    "  --force           run complete frames again\n"
     "\n"
     "examples (from the source folder, on the sample renders):\n"
     "  mcpost run --list\n"
@@ -24,19 +32,30 @@ static int
 cmd_run(int argc, char **argv)
 {
     static const struct option longs[] = {{"output", required_argument, 0, 'o'},
-                                          {"json", no_argument, 0, 'j'},
+                                          {"json", no_argument, 0, 'J'},
+                                          {"frames", required_argument, 0, 'f'},
+                                          {"jobs", required_argument, 0, 'j'},
+                                          {"force", no_argument, 0, 'F'},
                                           {"quiet", no_argument, 0, 'q'},
                                           {"list", no_argument, 0, 'l'},
                                           {"check", no_argument, 0, 'c'},
                                           {"help", no_argument, 0, 'h'},
                                           {0, 0, 0, 0}};
     mcp_job_options jo = mcp_job_defaults();
-    int opt, check = 0;
+    int opt, check = 0, jobs = 1, force = 0;
+    const char *frames = NULL;
     optind = 1;
-    while ((opt = getopt_long(argc, argv, "o:qh", longs, NULL)) != -1) {
+    while ((opt = getopt_long(argc, argv, "o:qhj:", longs, NULL)) != -1) {
         switch (opt) {
         case 'o': jo.output_dir = optarg; break;
-        case 'j': jo.json_stdout = 1; break;
+        case 'J': jo.json_stdout = 1; break;
+        case 'f': frames = optarg; break;
+        case 'F': force = 1; break;
+        case 'j':
+            if (mcp_cli_int("--jobs", optarg, &jobs) || jobs < 1)
+                return mcp_cli_usage("run", "-j/--jobs takes a count >= 1 (got '%s')",
+                                     optarg);
+            break;
         case 'q': jo.quiet = 1; break;
         case 'c': check = 1; break;
         case 'l':
@@ -56,7 +75,20 @@ cmd_run(int argc, char **argv)
         return 0;
     }
     mcp_progress_set_quiet(jo.quiet);
-    return mcp_job_run_file(argv[optind], mcp_stages, &jo) ? mcp_cli_fail() : 0;
+    mcp_cli_shot shot;
+    if (mcp_cli_shot_open(argv[optind], jo.output_dir, frames, &shot))
+        return mcp_cli_fail();
+    int rc;
+    if (!shot.n_all) {
+        mcp_cli_shot_free(&shot);
+        if (jobs > 1 || force)
+            return mcp_cli_usage("run", "-j and --force are for jobs with frames:");
+        rc = mcp_job_run_file(argv[optind], mcp_stages, &jo);
+    } else {
+        rc = mcp_cli_shot_write_manifest(&shot) || mcp_cli_shot_run(&shot, &jo, jobs, force);
+        mcp_cli_shot_free(&shot);
+    }
+    return rc ? mcp_cli_fail() : 0;
 }
 
 const mcp_command mcp_command_run = {"run", "run a pipeline from a YAML job file", cmd_run};

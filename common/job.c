@@ -3,6 +3,7 @@
  * on the last line fails in a second, not after an hour of work. */
 #define _XOPEN_SOURCE 700 /* realpath */
 #include <mcpost/job.h>
+#include <mcpost/frames.h>
 #include <mcpost/imageio.h>
 #include <mcpost/progress.h>
 
@@ -36,9 +37,11 @@ struct mcp_job {
     mcp_report *report;
     mcp_job_options opt;
     int checking; /* the stages' checks are running (job_validate) */
+    int *frames, n_frames; /* the job's frames: (none: n_frames 0) */
 };
 
-static const char *const root_keys[] = {"title", "inputs", "output", "stages", NULL};
+static const char *const root_keys[] = {"title", "inputs", "output", "frames", "stages",
+                                         NULL};
 /* keys shared by dump and series inputs: how to read a render dump */
 #define DUMP_KEYS                                                                        \
     "convention", "variance", "spp", "bad_values", "variance_file", "albedo_file",       \
@@ -52,7 +55,7 @@ static const char *const channel_keys[] = {"color", "variance", "albedo", "norma
 mcp_job_options
 mcp_job_defaults(void)
 {
-    return (mcp_job_options){.output_dir = NULL, .json_stdout = 0, .quiet = 0};
+    return (mcp_job_options){.output_dir = NULL, .json_stdout = 0, .quiet = 0, .frame = -1};
 }
 
 /* ---- paths ---- */
@@ -65,6 +68,21 @@ mcp_job_resolve(const mcp_job *job, const char *rel, char *buf, size_t cap)
     if (n < 0 || (size_t)n >= cap)
         return mcp_error("%s: path too long: %s", job->path, rel);
     return 0;
+}
+
+/* Resolves an input's path, with the frame token replaced by the frame of a frame
+ * run (frames.h; a series pattern keeps its spp conversion). Errors name the line. */
+static int
+resolve_input(const mcp_job *job, const mcp_node *at, const char *rel, int series, char *buf,
+              size_t cap)
+{
+    char expanded[4096];
+    if (job->opt.frame >= 0) {
+        if (mcp_frame_expand(rel, series, job->opt.frame, expanded, sizeof expanded))
+            return mcp_node_error(at, "%s", mcp_error_message());
+        rel = expanded;
+    }
+    return mcp_job_resolve(job, rel, buf, cap);
 }
 
 static int
@@ -198,7 +216,8 @@ dump_spec_from(mcp_job *job, const mcp_node *def, mcp_dump_spec *spec, char stor
         const mcp_node *n = mcp_node_get(def, file_keys[i]);
         if (!n)
             continue;
-        if (mcp_node_string(n, file_keys[i], &s) || mcp_job_resolve(job, s, store[i], 4096) ||
+        if (mcp_node_string(n, file_keys[i], &s) ||
+            resolve_input(job, n, s, 0, store[i], 4096) ||
             file_exists(n, store[i]))
             return -1;
         *targets[i] = store[i];
@@ -274,8 +293,9 @@ series_from(mcp_job *job, const mcp_node *def, mcp_series **out)
         rc = 0;
         for (int i = 0; i < spp->count && !rc; i++)
             rc = mcp_node_int(spp->items[i], "spp", &counts[i]);
-        if (!rc && (mcp_job_resolve(job, src->value, path, sizeof path) ||
-                    mcp_series_from_pattern(path, counts, spp->count, out)))
+        if (!rc && resolve_input(job, src, src->value, 1, path, sizeof path))
+            rc = -1;
+        else if (!rc && mcp_series_from_pattern(path, counts, spp->count, out))
             rc = mcp_node_error(src, "%s", mcp_error_message());
         free(counts);
         if (rc)
@@ -289,7 +309,8 @@ series_from(mcp_job *job, const mcp_node *def, mcp_series **out)
         for (int i = 0; i < src->count && !rc; i++) {
             const char *s;
             rc = mcp_node_string(src->items[i], "series", &s) ||
-                 mcp_job_resolve(job, s, path, sizeof path) || !(paths[i] = mcp_strdup(path));
+                 resolve_input(job, src->items[i], s, 0, path, sizeof path) ||
+                 !(paths[i] = mcp_strdup(path));
         }
         if (!rc && spp) {
             int n = 0;
@@ -340,8 +361,8 @@ replicate_paths(mcp_job *job, const mcp_node *def, char ***out, int *count)
     int n = 0, rc = 0;
     if (src->kind == MCP_NODE_SCALAR) {
         glob_t g;
-        if (mcp_job_resolve(job, src->value, path, sizeof path))
-            return mcp_node_error(src, "%s", mcp_error_message());
+        if (resolve_input(job, src, src->value, 0, path, sizeof path))
+            return -1;
         int grc = glob(path, 0, NULL, &g);
         if (grc == GLOB_NOMATCH)
             return mcp_node_error(src, "replicates: no file matches %s", path);
@@ -360,7 +381,7 @@ replicate_paths(mcp_job *job, const mcp_node *def, char ***out, int *count)
         for (int i = 0; i < n && !rc; i++) {
             const char *f;
             rc = mcp_node_string(src->items[i], "replicates", &f) ||
-                 mcp_job_resolve(job, f, path, sizeof path) ||
+                 resolve_input(job, src->items[i], f, 0, path, sizeof path) ||
                  !(paths[i] = mcp_strdup(path)) || file_exists(src->items[i], path);
         }
     } else {
@@ -460,7 +481,7 @@ check_inputs(mcp_job *job)
             e->kind = ENTRY_DUMP;
             if (mcp_node_check_keys(def, dump_keys, what) ||
                 mcp_node_string(mcp_node_get(def, "dump"), "dump", &file) ||
-                mcp_job_resolve(job, file, path, sizeof path) ||
+                resolve_input(job, mcp_node_get(def, "dump"), file, 0, path, sizeof path) ||
                 file_exists(mcp_node_get(def, "dump"), path) ||
                 dump_spec_from(job, def, &spec, store))
                 return -1;
@@ -479,7 +500,7 @@ check_inputs(mcp_job *job)
             e->kind = ENTRY_IMAGE;
             if (mcp_node_check_keys(def, image_keys, what) ||
                 mcp_node_string(mcp_node_get(def, "image"), "image", &file) ||
-                mcp_job_resolve(job, file, path, sizeof path) ||
+                resolve_input(job, mcp_node_get(def, "image"), file, 0, path, sizeof path) ||
                 file_exists(mcp_node_get(def, "image"), path))
                 return -1;
         } else if (mcp_node_get(def, "series")) {
@@ -514,7 +535,7 @@ load_entry(mcp_job *job, entry *e)
         if (mcp_node_get(e->def, "replicates"))
             return load_replicates(job, e->def, &e->dump);
         mcp_node_string(mcp_node_get(e->def, "dump"), "dump", &file);
-        if (mcp_job_resolve(job, file, path, sizeof path) ||
+        if (resolve_input(job, e->def, file, 0, path, sizeof path) ||
             dump_spec_from(job, e->def, &spec, store))
             return -1;
         spec.path = path;
@@ -523,7 +544,7 @@ load_entry(mcp_job *job, entry *e)
         if (e->image)
             return 0;
         mcp_node_string(mcp_node_get(e->def, "image"), "image", &file);
-        if (mcp_job_resolve(job, file, path, sizeof path))
+        if (resolve_input(job, e->def, file, 0, path, sizeof path))
             return -1;
         return mcp_image_read(path, NULL, &e->image);
     case ENTRY_SERIES:
@@ -787,7 +808,61 @@ job_free(mcp_job *job)
     free(job->path);
     free(job->dir);
     free(job->output_dir);
+    free(job->frames);
     free(job);
+}
+
+/* The job's `frames:` (a set as text, "1-240:2", or a list of numbers and sets). */
+static int
+frames_from(mcp_job *job)
+{
+    const mcp_node *n = mcp_node_get(job->root, "frames");
+    if (!n)
+        return 0;
+    char text[4096] = "";
+    size_t len = 0;
+    int items = n->kind == MCP_NODE_SEQ ? n->count : 1;
+    if (n->kind == MCP_NODE_MAP || items == 0)
+        return mcp_node_error(n, "frames must be a set such as 1-240, 1-240:2 or 1,5,9-12, "
+                                 "or a list of them");
+    for (int i = 0; i < items; i++) {
+        const mcp_node *item = n->kind == MCP_NODE_SEQ ? n->items[i] : n;
+        const char *s;
+        if (mcp_node_string(item, "frames", &s))
+            return -1;
+        int w = snprintf(text + len, sizeof text - len, "%s%s", i ? "," : "", s);
+        if (w < 0 || (size_t)w >= sizeof text - len)
+            return mcp_node_error(n, "frames: the list is too long; write ranges (1-240)");
+        len += (size_t)w;
+    }
+    if (mcp_frames_parse(text, &job->frames, &job->n_frames))
+        return mcp_node_error(n, "%s", mcp_error_message());
+    return 0;
+}
+
+/* A frame run (opt.frame >= 0) writes into the frame's own folder of the job's output
+ * folder, "<output>/0017", so that frames run in any order, anywhere, apart. */
+static int
+frame_open(mcp_job *job)
+{
+    int f = job->opt.frame;
+    if (f < 0)
+        return 0;
+    if (!job->n_frames)
+        return mcp_error("%s: frame %d asked for, but the job has no frames:", job->path, f);
+    if (!mcp_frames_contains(job->frames, job->n_frames, f)) {
+        char set[256];
+        if (mcp_frames_format(job->frames, job->n_frames, set, sizeof set))
+            snprintf(set, sizeof set, "%d-%d, %d frames", job->frames[0],
+                     job->frames[job->n_frames - 1], job->n_frames);
+        return mcp_node_error(mcp_node_get(job->root, "frames"),
+                              "frame %d is not among the job's frames (%s)", f, set);
+    }
+    char dir[4096];
+    if (mcp_frame_dir(job->output_dir, f, dir, sizeof dir))
+        return -1;
+    free(job->output_dir);
+    return (job->output_dir = mcp_strdup(dir)) ? 0 : -1;
 }
 
 static int
@@ -824,9 +899,19 @@ job_open(const char *path, const mcp_job_options *opt, mcp_job **out)
             goto fail;
         job->output_dir = mcp_strdup(resolved);
     }
-    if (!job->output_dir ||
-        mcp_report_new(title ? title : job->path, &job->report))
+    char frame_title[4096];
+    if (job->opt.frame >= 0)
+        snprintf(frame_title, sizeof frame_title, "%s, frame %d", title ? title : job->path,
+                 job->opt.frame);
+    if (!job->output_dir || frames_from(job) || frame_open(job) ||
+        mcp_report_new(job->opt.frame >= 0 ? frame_title : title ? title : job->path,
+                       &job->report))
         goto fail;
+    if (job->opt.frame >= 0 &&
+        !cJSON_AddNumberToObject(mcp_report_json(job->report), "frame", job->opt.frame)) {
+        mcp_error("out of memory");
+        goto fail;
+    }
     *out = job;
     return 0;
 fail:
@@ -881,6 +966,21 @@ job_validate(mcp_job *job, const mcp_stage *const *stages, const mcp_node **list
     return rc;
 }
 
+/* A frame job is checked frame by frame: every frame's inputs must be there. Only
+ * the input paths depend on the frame, so one parsed job serves them all. */
+static int
+check_frames(mcp_job *job, const mcp_stage *const *stages)
+{
+    for (int i = 0; i < job->n_frames; i++) {
+        const mcp_node *list = NULL;
+        job->opt.frame = job->frames[i];
+        if (job_validate(job, stages, &list))
+            return mcp_error_prefix("frame %d: ", job->frames[i]);
+    }
+    job->opt.frame = -1;
+    return 0;
+}
+
 int
 mcp_job_check(const char *path, const mcp_stage *const *stages)
 {
@@ -888,8 +988,52 @@ mcp_job_check(const char *path, const mcp_stage *const *stages)
     if (job_open(path, NULL, &job))
         return -1;
     const mcp_node *list = NULL;
-    int rc = job_validate(job, stages, &list);
+    int rc = job->n_frames ? check_frames(job, stages) : job_validate(job, stages, &list);
     job_free(job);
+    return rc;
+}
+
+int
+mcp_job_frames(const char *path, const mcp_job_options *opt, int **frames, int *count,
+               char **output_dir)
+{
+    *frames = NULL, *count = 0;
+    if (output_dir)
+        *output_dir = NULL;
+    mcp_job_options base = opt ? *opt : mcp_job_defaults();
+    base.frame = -1;
+    mcp_job *job = NULL;
+    if (job_open(path, &base, &job))
+        return -1;
+    int rc = 0;
+    if (output_dir && !(*output_dir = mcp_strdup(job->output_dir)))
+        rc = -1;
+    if (!rc) {
+        *frames = job->frames, *count = job->n_frames;
+        job->frames = NULL, job->n_frames = 0;
+    }
+    job_free(job);
+    return rc;
+}
+
+/* report.html first and report.json last, each atomically: a frame whose report.json
+ * exists is complete (mcp_frame_complete), and a run killed at any moment leaves
+ * none, or the one of the previous complete run removed before it started. */
+static int
+write_report(mcp_job *job)
+{
+    char *html = NULL, *json = cJSON_Print(mcp_report_json(job->report)), path[4096];
+    int rc = -1;
+    if (!json)
+        mcp_error("out of memory");
+    else if (!mcp_report_html(job->report, job->output_dir, &html) &&
+             !mcp_job_output_path(job, "report.html", path, sizeof path) &&
+             !mcp_write_file_atomic(path, html, strlen(html)) &&
+             !mcp_job_output_path(job, "report.json", path, sizeof path) &&
+             !mcp_write_file_atomic(path, json, strlen(json)))
+        rc = 0;
+    free(json);
+    free(html);
     return rc;
 }
 
@@ -908,9 +1052,26 @@ mcp_job_run_file(const char *path, const mcp_stage *const *stages,
     int was_quiet = mcp_progress_quiet();
     if (job->opt.quiet)
         mcp_progress_set_quiet(1);
+    if (job->n_frames && job->opt.frame < 0) {
+        char set[256];
+        if (mcp_frames_format(job->frames, job->n_frames, set, sizeof set))
+            snprintf(set, sizeof set, "%d frames", job->n_frames);
+        mcp_error("%s: the job has frames: (%s); run them with mcpost run, or name one",
+                  job->path, set);
+        goto done;
+    }
     /* check everything before running anything */
     if (job_validate(job, stages, &list))
         goto done;
+    if (job->opt.frame >= 0) {
+        /* a rerun (--force) is incomplete until its own report.json is written */
+        char stale[4200];
+        snprintf(stale, sizeof stale, "%s/report.json", job->output_dir);
+        if (unlink(stale) != 0 && errno != ENOENT) {
+            mcp_error("%s: cannot remove: %s", stale, strerror(errno));
+            goto done;
+        }
+    }
     if (!mcp_job_output_dir(job) || !job->output_made) {
         mcp_error_prefix("%s: output: ", job->path);
         goto done;
@@ -930,7 +1091,7 @@ mcp_job_run_file(const char *path, const mcp_stage *const *stages,
             goto done;
         }
     }
-    if (mcp_report_write(job->report, job->output_dir))
+    if (write_report(job))
         goto done;
     if (job->opt.json_stdout) {
         char *json = cJSON_Print(mcp_report_json(job->report));

@@ -10,6 +10,8 @@
  *                                                          # one dump, variance from
  *                                                          # their spread (or a list)
  *   output: out/frame                                     # relative to the job file
+ *   frames: 1-240                     # optional: a frame job (frames.h, docs/frames.md);
+ *                                     # input paths then hold a frame token (####, %04d)
  *   stages:
  *     - info: {input: noisy}
  *     - convert: {input: reference, output: reference.png}
@@ -101,6 +103,8 @@ typedef struct mcp_job_options {
     const char *output_dir;   /* overrides the job's `output:` [NULL] */
     int json_stdout;          /* print the report JSON on stdout when done [0] */
     int quiet;                /* no progress on stderr [0] */
+    int frame;                /* the frame to run, of a job with frames: [-1: none]; its
+                               * results go to <output>/<frame, 4 digits>/ (frames.h) */
 } mcp_job_options;
 
 MCP_API mcp_job_options mcp_job_defaults(void);
@@ -110,6 +114,13 @@ MCP_API mcp_job_options mcp_job_defaults(void);
  * the stages add) to the output folder. */
 MCP_API int mcp_job_run_file(const char *path, const mcp_stage *const *stages,
                              const mcp_job_options *opt);
+
+/* The frames of a job (its `frames:`, sorted; *count 0 when it has none; *frames
+ * malloc'd) and, when output_dir is not NULL, its output folder (malloc'd; frame F's
+ * results go to its subfolder mcp_frame_dir). opt may give output_dir; its frame is
+ * ignored. */
+MCP_API int mcp_job_frames(const char *path, const mcp_job_options *opt, int **frames,
+                           int *count, char **output_dir);
 
 /* Parses and validates a job as mcp_job_run_file does before its first stage (every
  * stage known, its keys allowed, every input's keys, types and files), and nothing

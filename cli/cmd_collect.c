@@ -1,0 +1,535 @@
+/* cmd_collect.c: `mcpost collect OUT_DIR` -- one report for the frames of a shot.
+ *
+ * Reads OUT_DIR/frames.json (the job's frames, written by run and submit) and every
+ * frame folder OUT_DIR/NNNN/, takes each complete frame's figures from its report.json
+ * (MSE, relMSE, FLIP, estimated error, stop spp of every metrics and estimate section),
+ * and writes OUT_DIR/report.json and report.html: each figure plotted against the
+ * frame number, a table with the worst frames first, a link to each frame's page, and
+ * the frames that are missing, failed or unfinished, listed by name. */
+#include "cli.h"
+
+#include <mcpost/frames.h>
+#include <mcpost/imageio.h>
+#include <mcpost/progress.h>
+#include <mcpost/report.h>
+
+#include <ctype.h>
+#include <dirent.h>
+#include <errno.h>
+#include <getopt.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+static const char usage[] =
+    "usage: mcpost collect OUT_DIR [--json] [--quiet]\n"
+    "  Gathers the frames of a frame job (OUT_DIR/0001/report.json, ...) into one\n"
+    "  report, OUT_DIR/report.json and report.html: every figure (MSE, relMSE, FLIP,\n"
+    "  estimated error, stop spp) against the frame number, the worst frames first\n"
+    "  (by relMSE, else MSE, FLIP or estimated error), links to the frames' pages, and\n"
+    "  the frames that are missing (never ran), failed (their error.txt) or unfinished.\n"
+    "  The expected frames come from OUT_DIR/frames.json, which mcpost run and submit\n"
+    "  write. Exits 1 when any frame is not complete (the report is written anyway).\n"
+    "  --json prints the report on stdout.\n"
+    "\n"
+    "examples (from the source folder, on the sample renders):\n"
+    "  mcpost run samples/jobs/shot.yaml -j 2 && mcpost collect out/shot\n"
+    "  mcpost collect out/shot --json > out/shot_figures.json\n";
+
+#define MAX_FIGURES 64
+
+typedef enum { FRAME_COMPLETE, FRAME_FAILED, FRAME_UNFINISHED, FRAME_MISSING } frame_status;
+static const char *const status_names[] = {"complete", "failed", "unfinished", "missing"};
+
+typedef struct frame_row {
+    int frame;
+    frame_status status;
+    char message[1024];
+    double values[MAX_FIGURES];
+} frame_row;
+
+typedef struct shot {
+    const char *dir;
+    char *job;   /* from the manifest (NULL when none) */
+    char *title; /* the frames' title, without ", frame N" */
+    frame_row *rows;
+    int n_rows, cap;
+    char *figures[MAX_FIGURES];
+    int n_figures;
+} shot;
+
+static char *
+read_text(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return NULL;
+    size_t cap = 1 << 16, len = 0;
+    char *buf = malloc(cap);
+    for (size_t n; buf && (n = fread(buf + len, 1, cap - len - 1, f)) > 0;) {
+        len += n;
+        if (len + 1 == cap) {
+            char *grown = realloc(buf, cap *= 2);
+            if (!grown)
+                free(buf);
+            buf = grown;
+        }
+    }
+    fclose(f);
+    if (buf)
+        buf[len] = '\0';
+    return buf;
+}
+
+static frame_row *
+add_row(shot *s, int frame)
+{
+    for (int i = 0; i < s->n_rows; i++)
+        if (s->rows[i].frame == frame)
+            return &s->rows[i];
+    if (s->n_rows == s->cap) {
+        int cap = s->cap ? 2 * s->cap : 64;
+        frame_row *grown = realloc(s->rows, (size_t)cap * sizeof *grown);
+        if (!grown) {
+            mcp_error("out of memory");
+            return NULL;
+        }
+        s->rows = grown, s->cap = cap;
+    }
+    frame_row *r = &s->rows[s->n_rows++];
+    memset(r, 0, sizeof *r);
+    r->frame = frame;
+    r->status = FRAME_MISSING;
+    for (int k = 0; k < MAX_FIGURES; k++)
+        r->values[k] = NAN;
+    return r;
+}
+
+/* The frames the job has (frames.json) and those with a folder here. */
+static int
+find_frames(shot *s)
+{
+    char path[4200];
+    snprintf(path, sizeof path, "%s/frames.json", s->dir);
+    char *text = read_text(path);
+    if (text) {
+        cJSON *m = cJSON_Parse(text), *frames = cJSON_GetObjectItem(m, "frames");
+        free(text);
+        if (!cJSON_IsArray(frames)) {
+            cJSON_Delete(m);
+            return mcp_error("%s: not a frames manifest (no \"frames\" list)", path);
+        }
+        cJSON *f, *job = cJSON_GetObjectItem(m, "job");
+        cJSON_ArrayForEach(f, frames) if (cJSON_IsNumber(f) && !add_row(s, f->valueint))
+        {
+            cJSON_Delete(m);
+            return -1;
+        }
+        if (cJSON_IsString(job) && !(s->job = mcp_strdup(job->valuestring))) {
+            cJSON_Delete(m);
+            return -1;
+        }
+        cJSON_Delete(m);
+    }
+    DIR *d = opendir(s->dir);
+    if (!d)
+        return mcp_error("%s: cannot read the folder: %s", s->dir, strerror(errno));
+    for (struct dirent *e; (e = readdir(d));) {
+        const char *n = e->d_name;
+        size_t len = strlen(n);
+        if (len < 4 || len > 7 || strspn(n, "0123456789") != len)
+            continue;
+        struct stat st;
+        snprintf(path, sizeof path, "%s/%s", s->dir, n);
+        if (stat(path, &st) == 0 && S_ISDIR(st.st_mode) && !add_row(s, atoi(n))) {
+            closedir(d);
+            return -1;
+        }
+    }
+    closedir(d);
+    if (!s->n_rows)
+        return mcp_error("%s: no frames here (no frames.json and no frame folders such as "
+                         "0001/)",
+                         s->dir);
+    return 0;
+}
+
+static int
+figure_index(shot *s, const char *name)
+{
+    for (int k = 0; k < s->n_figures; k++)
+        if (!strcmp(s->figures[k], name))
+            return k;
+    if (s->n_figures == MAX_FIGURES || !(s->figures[s->n_figures] = mcp_strdup(name)))
+        return -1;
+    return s->n_figures++;
+}
+
+static void
+put_figure(shot *s, frame_row *r, const char *section, const char *what, double v)
+{
+    char name[512];
+    snprintf(name, sizeof name, "%s: %s", section, what);
+    int k = figure_index(s, name);
+    if (k >= 0)
+        r->values[k] = v;
+}
+
+/* The figures of one section of a frame's report. */
+static void
+section_figures(shot *s, frame_row *r, const cJSON *sec)
+{
+    const cJSON *title = cJSON_GetObjectItem(sec, "title"),
+                *stage = cJSON_GetObjectItem(sec, "stage");
+    /* a section's title names its stage and input ("metrics: noisy against reference") */
+    char name[256];
+    snprintf(name, sizeof name, "%s",
+             cJSON_IsString(title)   ? title->valuestring
+             : cJSON_IsString(stage) ? stage->valuestring
+                                     : "?");
+    static const char *const keys[][2] = {{"mse", "MSE"},
+                                          {"relmse", "relMSE"},
+                                          {"flip_ldr", "FLIP LDR"},
+                                          {"flip_hdr", "FLIP HDR"},
+                                          {"expected_mean_error", "estimated error"}};
+    for (size_t i = 0; i < sizeof keys / sizeof keys[0]; i++) {
+        const cJSON *v = cJSON_GetObjectItem(sec, keys[i][0]);
+        if (cJSON_IsObject(v)) /* flip_*: {"mean": ...} */
+            v = cJSON_GetObjectItem(v, "mean");
+        if (cJSON_IsNumber(v))
+            put_figure(s, r, name, keys[i][1], v->valuedouble);
+    }
+    /* estimate over a series: the first spp at which it would stop, per tau */
+    const cJSON *table;
+    cJSON_ArrayForEach(table, cJSON_GetObjectItem(sec, "tables"))
+    {
+        const cJSON *cols = cJSON_GetObjectItem(table, "columns"), *row;
+        int col = -1, i = 0;
+        const cJSON *c;
+        cJSON_ArrayForEach(c, cols)
+        {
+            if (cJSON_IsString(c) && !strcmp(c->valuestring, "estimated first spp"))
+                col = i;
+            i++;
+        }
+        if (col < 1)
+            continue;
+        cJSON_ArrayForEach(row, cJSON_GetObjectItem(table, "rows"))
+        {
+            const cJSON *tau = cJSON_GetArrayItem(row, 0), *spp = cJSON_GetArrayItem(row, col);
+            char what[64];
+            if (!cJSON_IsNumber(tau) || !cJSON_IsNumber(spp))
+                continue;
+            snprintf(what, sizeof what, "stop spp (tau %g)", tau->valuedouble);
+            put_figure(s, r, name, what, spp->valuedouble);
+        }
+    }
+}
+
+/* One frame's state and figures. */
+static void
+read_frame(shot *s, frame_row *r)
+{
+    char dir[4096], path[4200];
+    struct stat st;
+    mcp_frame_dir(s->dir, r->frame, dir, sizeof dir);
+    if (stat(dir, &st) != 0) {
+        r->status = FRAME_MISSING;
+        snprintf(r->message, sizeof r->message, "never ran (no folder %04d/)", r->frame);
+        return;
+    }
+    snprintf(path, sizeof path, "%s/report.json", dir);
+    char *text = read_text(path);
+    cJSON *rep = text ? cJSON_Parse(text) : NULL;
+    free(text);
+    if (rep) {
+        r->status = FRAME_COMPLETE;
+        const cJSON *sec, *title = cJSON_GetObjectItem(rep, "title");
+        cJSON_ArrayForEach(sec, cJSON_GetObjectItem(rep, "sections"))
+            section_figures(s, r, sec);
+        if (!s->title && cJSON_IsString(title) && (s->title = mcp_strdup(title->valuestring))) {
+            char *cut = strstr(s->title, ", frame ");
+            if (cut)
+                *cut = '\0';
+        }
+        cJSON_Delete(rep);
+        return;
+    }
+    snprintf(path, sizeof path, "%s/error.txt", dir);
+    if ((text = read_text(path))) {
+        r->status = FRAME_FAILED;
+        text[strcspn(text, "\n")] = '\0';
+        snprintf(r->message, sizeof r->message, "%s", text);
+        free(text);
+        return;
+    }
+    snprintf(path, sizeof path, "%s/report.json", dir);
+    r->status = stat(path, &st) == 0 ? FRAME_FAILED : FRAME_UNFINISHED;
+    snprintf(r->message, sizeof r->message, "%s",
+             r->status == FRAME_FAILED ? "report.json is not JSON"
+                                       : "no report.json: still running, or killed");
+}
+
+/* The figure that orders the frames: relMSE, else MSE, FLIP or estimated error. */
+static int
+rank_figure(const shot *s)
+{
+    static const char *const order[] = {": relMSE", ": MSE", ": FLIP LDR", ": FLIP HDR",
+                                        ": estimated error"};
+    for (size_t o = 0; o < sizeof order / sizeof order[0]; o++)
+        for (int k = 0; k < s->n_figures; k++) {
+            size_t n = strlen(s->figures[k]), m = strlen(order[o]);
+            if (n >= m && !strcmp(s->figures[k] + n - m, order[o]))
+                return k;
+        }
+    return -1;
+}
+
+static int rank_by; /* for qsort */
+static int
+worst_first(const void *a, const void *b)
+{
+    const frame_row *x = a, *y = b;
+    if (x->status != y->status) /* complete frames first; the others have no figures */
+        return (x->status > y->status) - (x->status < y->status);
+    double u = rank_by >= 0 ? x->values[rank_by] : NAN,
+           v = rank_by >= 0 ? y->values[rank_by] : NAN;
+    if (isnan(u) != isnan(v))
+        return isnan(u) ? 1 : -1;
+    if (!isnan(u) && u != v)
+        return u < v ? 1 : -1;
+    return (x->frame > y->frame) - (x->frame < y->frame);
+}
+
+static int
+by_frame(const void *a, const void *b)
+{
+    const frame_row *x = a, *y = b;
+    return (x->frame > y->frame) - (x->frame < y->frame);
+}
+
+static int
+build_report(shot *s, mcp_report *rep, int counts[4])
+{
+    cJSON *sec = mcp_report_section(rep, "collect", "the shot");
+    if (!sec)
+        return -1;
+    cJSON_AddNumberToObject(sec, "frames", s->n_rows);
+    for (int st = 0; st < 4; st++)
+        cJSON_AddNumberToObject(sec, status_names[st], counts[st]);
+    if (s->job)
+        cJSON_AddStringToObject(sec, "job", s->job);
+    int rank = rank_figure(s);
+    if (rank >= 0)
+        cJSON_AddStringToObject(sec, "worst_first_by", s->figures[rank]);
+
+    /* every frame, machine-readable: its state, figures and page */
+    cJSON *list = cJSON_AddArrayToObject(sec, "frame_list");
+    for (int i = 0; list && i < s->n_rows; i++) {
+        const frame_row *r = &s->rows[i];
+        cJSON *o = cJSON_CreateObject(), *fig = cJSON_CreateObject();
+        char page[64];
+        snprintf(page, sizeof page, "%04d/report.html", r->frame);
+        cJSON_AddItemToArray(list, o);
+        cJSON_AddNumberToObject(o, "frame", r->frame);
+        cJSON_AddStringToObject(o, "status", status_names[r->status]);
+        if (r->status == FRAME_COMPLETE)
+            cJSON_AddStringToObject(o, "page", page);
+        else
+            cJSON_AddStringToObject(o, "message", r->message);
+        cJSON_AddItemToObject(o, "figures", fig);
+        for (int k = 0; k < s->n_figures; k++)
+            if (!isnan(r->values[k]))
+                cJSON_AddNumberToObject(fig, s->figures[k], r->values[k]);
+    }
+
+    /* frames that are not complete: named, never dropped */
+    if (counts[FRAME_COMPLETE] < s->n_rows) {
+        static const char *const cols[] = {"frame", "status", "why"};
+        cJSON *t = mcp_report_add_table(sec, "frames not complete", cols, 3);
+        for (int i = 0; t && i < s->n_rows; i++)
+            if (s->rows[i].status != FRAME_COMPLETE &&
+                mcp_report_table_add_row(t, "iss", s->rows[i].frame,
+                                         status_names[s->rows[i].status], s->rows[i].message))
+                return -1;
+    }
+
+    /* each figure against the frame number */
+    double *x = mcp_calloc((size_t)s->n_rows + 1, sizeof *x),
+           *y = mcp_calloc((size_t)s->n_rows + 1, sizeof *y);
+    if (!x || !y) {
+        free(x), free(y);
+        return -1;
+    }
+    for (int k = 0; k < s->n_figures; k++) {
+        int shown = 0;
+        for (int i = 0; i < s->n_rows; i++) {
+            x[i] = s->rows[i].frame, y[i] = s->rows[i].values[k];
+            shown += !isnan(y[i]);
+        }
+        if (!shown)
+            continue;
+        cJSON *plot = mcp_report_add_plot(sec, s->figures[k], "frame", MCP_AXIS_LINEAR,
+                                          s->figures[k], MCP_AXIS_LINEAR);
+        if (!plot || !mcp_report_plot_add_series(plot, s->figures[k],
+                                                 MCP_SERIES_LINE_POINTS, x, y, s->n_rows)) {
+            free(x), free(y);
+            return -1;
+        }
+    }
+    free(x), free(y);
+
+    /* the complete frames, worst first */
+    if (counts[FRAME_COMPLETE]) {
+        const char *cols[MAX_FIGURES + 2];
+        int n = 0;
+        cols[n++] = "frame";
+        for (int k = 0; k < s->n_figures; k++)
+            cols[n++] = s->figures[k];
+        cols[n++] = "page";
+        rank_by = rank;
+        frame_row *sorted = mcp_calloc((size_t)s->n_rows, sizeof *sorted);
+        cJSON *t = sorted ? mcp_report_add_table(sec, "frames, worst first", cols, n) : NULL;
+        if (!t) {
+            free(sorted);
+            return -1;
+        }
+        memcpy(sorted, s->rows, (size_t)s->n_rows * sizeof *sorted);
+        qsort(sorted, (size_t)s->n_rows, sizeof *sorted, worst_first);
+        /* rows of any width: one cJSON row per frame, as mcp_report_table_add_row
+         * writes them (numbers, null for NaN, strings) */
+        cJSON *rows = cJSON_GetObjectItem(t, "rows");
+        for (int i = 0; i < counts[FRAME_COMPLETE]; i++) {
+            cJSON *row = cJSON_CreateArray();
+            char page[64];
+            snprintf(page, sizeof page, "%04d/report.html", sorted[i].frame);
+            cJSON_AddItemToArray(rows, row);
+            cJSON_AddItemToArray(row, cJSON_CreateNumber(sorted[i].frame));
+            for (int k = 0; k < s->n_figures; k++)
+                cJSON_AddItemToArray(row, isnan(sorted[i].values[k])
+                                              ? cJSON_CreateNull()
+                                              : cJSON_CreateNumber(sorted[i].values[k]));
+            cJSON_AddItemToArray(row, cJSON_CreateString(page));
+        }
+        free(sorted);
+    }
+    return 0;
+}
+
+/* report.html, with a line of links to the frames' own pages added at its end. */
+static int
+write_html(shot *s, mcp_report *rep)
+{
+    char *html = NULL, path[4200];
+    if (mcp_report_html(rep, s->dir, &html))
+        return -1;
+    size_t cap = strlen(html) + 256 + (size_t)s->n_rows * 96, len = 0;
+    char *out = malloc(cap);
+    if (!out) {
+        free(html);
+        return mcp_error("out of memory");
+    }
+    char *end = strstr(html, "</body>");
+    size_t head = end ? (size_t)(end - html) : strlen(html);
+    memcpy(out, html, head);
+    len = head;
+    len += (size_t)snprintf(out + len, cap - len,
+                            "<section id=\"frame-pages\"><h2>the frames' pages</h2><p>\n");
+    for (int i = 0; i < s->n_rows; i++) {
+        const frame_row *r = &s->rows[i];
+        len += (size_t)(r->status == FRAME_COMPLETE
+                            ? snprintf(out + len, cap - len,
+                                       "<a href=\"%04d/report.html\">%d</a>\n", r->frame,
+                                       r->frame)
+                            : snprintf(out + len, cap - len, "<s title=\"%s\">%d</s>\n",
+                                       status_names[r->status], r->frame));
+    }
+    len += (size_t)snprintf(out + len, cap - len, "</p></section>\n%s", end ? end : "");
+    free(html);
+    snprintf(path, sizeof path, "%s/report.html", s->dir);
+    int rc = mcp_write_file_atomic(path, out, len);
+    free(out);
+    return rc;
+}
+
+static int
+collect(const char *dir, int json_stdout)
+{
+    shot s = {.dir = dir};
+    mcp_report *rep = NULL;
+    int rc = -1, counts[4] = {0};
+    char path[4200], *json = NULL;
+    if (find_frames(&s))
+        goto done;
+    qsort(s.rows, (size_t)s.n_rows, sizeof *s.rows, by_frame);
+    for (int i = 0; i < s.n_rows; i++) {
+        read_frame(&s, &s.rows[i]);
+        counts[s.rows[i].status]++;
+    }
+    char title[600];
+    snprintf(title, sizeof title, "%s: %d frames", s.title ? s.title : dir, s.n_rows);
+    if (mcp_report_new(title, &rep) || build_report(&s, rep, counts) || write_html(&s, rep))
+        goto done;
+    if (!(json = cJSON_Print(mcp_report_json(rep)))) {
+        mcp_error("out of memory");
+        goto done;
+    }
+    snprintf(path, sizeof path, "%s/report.json", dir);
+    if (mcp_write_file_atomic(path, json, strlen(json)))
+        goto done;
+    if (json_stdout)
+        puts(json);
+    mcp_note("%d frames: %d complete, %d failed, %d unfinished, %d missing; report in %s "
+             "(report.html, report.json)",
+             s.n_rows, counts[0], counts[1], counts[2], counts[3], dir);
+    rc = 0;
+    if (counts[FRAME_COMPLETE] < s.n_rows) {
+        char list[256] = "";
+        size_t len = 0;
+        int shown = 0;
+        for (int i = 0; i < s.n_rows && len < sizeof list - 32; i++)
+            if (s.rows[i].status != FRAME_COMPLETE)
+                len += (size_t)snprintf(list + len, sizeof list - len, "%s%d (%s)",
+                                        shown++ ? ", " : "", s.rows[i].frame,
+                                        status_names[s.rows[i].status]);
+        rc = mcp_error("%s: %d of %d frames not complete: %s%s", dir,
+                       s.n_rows - counts[FRAME_COMPLETE], s.n_rows, list,
+                       shown < s.n_rows - counts[FRAME_COMPLETE] ? ", ..." : "");
+    }
+done:
+    free(json);
+    mcp_report_free(rep);
+    for (int k = 0; k < s.n_figures; k++)
+        free(s.figures[k]);
+    free(s.rows);
+    free(s.job);
+    free(s.title);
+    return rc;
+}
+
+static int
+cmd_collect(int argc, char **argv)
+{
+    static const struct option longs[] = {{"json", no_argument, 0, 'j'},
+                                          {"quiet", no_argument, 0, 'q'},
+                                          {"help", no_argument, 0, 'h'},
+                                          {0, 0, 0, 0}};
+    int opt, json = 0;
+    optind = 1;
+    while ((opt = getopt_long(argc, argv, "qh", longs, NULL)) != -1) {
+        switch (opt) {
+        case 'j': json = 1; break;
+        case 'q': mcp_progress_set_quiet(1); break;
+        case 'h': fputs(usage, stdout); return 0;
+        default: return mcp_cli_usage("collect", "bad option");
+        }
+    }
+    if (argc - optind != 1)
+        return mcp_cli_usage("collect", "give one output folder (of a job with frames:)");
+    return collect(argv[optind], json) ? mcp_cli_fail() : 0;
+}
+
+const mcp_command mcp_command_collect = {"collect", "gather a frame job's reports into one",
+                                         cmd_collect};
