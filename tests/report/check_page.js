@@ -1,7 +1,8 @@
 /* check_page.js: what tests/report/check_page.sh injects into a copy of report.html.
  * Once the page has loaded it checks what a reader would see go wrong -- an image that
  * does not load, an element wider than its box, a page wider than the window, a
- * section without its verdict, JSON text in a table cell -- and writes the findings
+ * section without its verdict, JSON text in a table cell, a comparison that shows one
+ * image twice or whose slider does not move the split -- and writes the findings
  * into the element #mcp-check, which the shell script reads back from
  * `chromium --dump-dom`. */
 window.addEventListener('load', function () {
@@ -45,6 +46,19 @@ window.addEventListener('load', function () {
     var t = td.textContent.trim();
     if (!td.children.length && /^[\[{]\s*["{\[]/.test(t))
       bad.push('JSON text in a table cell' + where(td) + ': ' + t.slice(0, 60));
+  });
+  /* the comparison works: two different images, and the slider moves the split */
+  document.querySelectorAll('.compare').forEach(function (c) {
+    var r = c.querySelector('.cmp-pos'), clip = c.querySelector('.cmp-clip');
+    if (c.querySelector('img.cmp-a').src === c.querySelector('img.cmp-b').src)
+      bad.push('the comparison shows one image twice' + where(c));
+    r.value = 25;
+    r.dispatchEvent(new Event('input'));
+    if (clip.style.clipPath.indexOf('75%') < 0)
+      bad.push('the comparison slider does not move the split' + where(c) + ': ' +
+               clip.style.clipPath);
+    r.value = 50;
+    r.dispatchEvent(new Event('input'));
   });
   var compares = document.querySelectorAll('.compare:not([hidden])').length;
   var out = document.createElement('pre');

@@ -61,7 +61,7 @@ for w in "${widths[@]}"; do
     run_browser --window-size="$w,900" --virtual-time-budget=15000 --dump-dom \
         "file://$(cd "$dir" && pwd)/.report-check.html" > "$tmp/dom.html" || true
     result=$(sed -n '/<pre id="mcp-check">/,/<\/pre>/p' "$tmp/dom.html" |
-             sed -e 's/<pre id="mcp-check">//' -e 's/<\/pre>.*//')
+             sed -e 's/<pre id="mcp-check">//' -e 's/<\/pre>.*//' -e 's/&gt;/>/g' -e 's/&lt;/</g' -e 's/&amp;/\&/g')
     if [ -z "$result" ]; then
         echo "check_page: width $w: no result from the page (chromium log below)" >&2
         tail -20 "$tmp/browser.log" >&2
