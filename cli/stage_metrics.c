@@ -253,7 +253,8 @@ metrics_verdict(cJSON *section)
                      "spp^-1)",
                      len ? "; " : "", slope, s0, s1);
     }
-    return mcp_report_set_verdict(section, MCP_VERDICT_INFO, "%s", text);
+    return mcp_report_set_verdict(section, MCP_VERDICT_INFO, "%s",
+                                  *text ? text : "no figure to judge by (see the table)");
 }
 
 static int

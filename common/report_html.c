@@ -557,9 +557,12 @@ render_colour_bar(sbuf *b, const cJSON *scale)
     const char *axis = json_string(scale, "axis");
     mcp_image *ramp = NULL;
     unsigned char rgb[RAMP_STOPS * 3];
-    if (mcp_colormap_from_name(name, &map) ||
-        mcp_image_new(RAMP_STOPS, 1, 1, (const char *const[]){"t"}, &ramp)) {
+    if (mcp_colormap_from_name(name, &map)) { /* not a scale we can draw */
         mcp_error_clear();
+        return;
+    }
+    if (mcp_image_new(RAMP_STOPS, 1, 1, (const char *const[]){"t"}, &ramp)) {
+        b->failed = 1; /* out of memory: the page fails as a whole */
         return;
     }
     for (int i = 0; i < RAMP_STOPS; i++)
@@ -567,7 +570,7 @@ render_colour_bar(sbuf *b, const cJSON *scale)
     int rc = mcp_colormap_apply(ramp, 0, 0.0, 1.0, map, rgb);
     mcp_image_free(ramp);
     if (rc) {
-        mcp_error_clear();
+        b->failed = 1;
         return;
     }
     sb_str(b, "<div class=\"cbar\"><div class=\"ramp\" style=\"background:linear-gradient("
