@@ -652,9 +652,10 @@ perceptual_verdict(cJSON *section, const cJSON *summary)
         rc = mcp_report_set_verdict(
             section, ratio < 1 ? MCP_VERDICT_GOOD : MCP_VERDICT_BAD,
             "%s: pMSE %.3g\u00d7 the candidates' mean (%.2g%% %s perceived error); "
-            "low-frequency share of the error %.3g vs %.3g for the mean (blue noise: lower)",
+            "low-frequency share of the error %.3g against the mean's %.3g: %s",
             method, ratio, 100 * fabs(1 - ratio), ratio < 1 ? "less" : "more: no gain",
-            low, mean_low);
+            low, mean_low,
+            low < mean_low ? "bluer noise" : "no bluer than the mean's white noise");
     else
         rc = mcp_report_set_verdict(
             section, MCP_VERDICT_INFO,
