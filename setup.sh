@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # setup.sh: everything from a fresh Debian 12 machine to results.
 #
-#   ./setup.sh demo    install what is missing, build, run samples/jobs/demo.yaml
+#   ./setup.sh demo    install what is missing, build, run samples/jobs/demo.yaml (and,
+#                      with chromium installed, screenshot its page: out/demo/report.png)
 #   ./setup.sh test    install what is missing, build (plain and ASan+UBSan), run all tests,
 #                      build everything with clang, run the SIMD modules' tests once
 #                      more with their scalar code, and run each fuzz target (tests/fuzz)
@@ -56,11 +57,18 @@ demo)
     install_packages
     build build
     ./build/mcpost run samples/jobs/demo.yaml
+    # where Chromium is installed (setup.sh test installs it): the page checked in a
+    # real browser and a screenshot of it, out/demo/report.png
+    if command -v chromium >/dev/null; then
+        tests/report/check_page.sh out/demo 1280 || echo "setup: report.html check failed" >&2
+    fi
     ;;
 test)
     install_packages
     # a one-node Slurm for tests/cli/slurm_frames.sh (frame jobs on a cluster)
     install_packages slurm-wlm munge
+    # headless Chromium opens report.html in the test report/page_in_chromium
+    install_packages chromium
     build build
     run_tests build
     if [ -z "${MCPOST_NO_ASAN:-}" ]; then

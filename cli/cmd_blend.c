@@ -163,6 +163,37 @@ add_error_figures(cJSON *section, const mcp_blend_series_result *r, const char *
     return rc;
 }
 
+/* The blend section's verdict: with a reference, the blend's MSE (method curves) as a
+ * multiple of the noisy image's at the last member, where it must be at most 1 for
+ * the blend to converge, and at the member where the blend helps most. */
+static int
+blend_verdict(cJSON *section, const mcp_blend_series_result *r)
+{
+    const mcp_blend_row *last = &r->rows[r->count - 1];
+    if (!r->has_reference)
+        return mcp_report_set_verdict(section, MCP_VERDICT_INFO,
+                                      "blended %d members, %g to %g spp; without a "
+                                      "reference there are no error figures to judge "
+                                      "convergence by",
+                                      r->count, r->rows[0].spp, last->spp);
+    double fin = last->err[MCP_BLEND_CURVES].mse / last->err[MCP_BLEND_NOISY].mse,
+           den = last->err[MCP_BLEND_DENOISED].mse / last->err[MCP_BLEND_NOISY].mse;
+    int best = r->count - 1;
+    for (int i = 0; i < r->count; i++)
+        if (r->rows[i].err[MCP_BLEND_CURVES].mse / r->rows[i].err[MCP_BLEND_NOISY].mse <
+            r->rows[best].err[MCP_BLEND_CURVES].mse / r->rows[best].err[MCP_BLEND_NOISY].mse)
+            best = i;
+    double best_ratio =
+        r->rows[best].err[MCP_BLEND_CURVES].mse / r->rows[best].err[MCP_BLEND_NOISY].mse;
+    int converges = fin <= 1.0;
+    return mcp_report_set_verdict(
+        section, converges ? MCP_VERDICT_GOOD : MCP_VERDICT_BAD,
+        "blend %s: at %g spp %.3g\u00d7 the noisy MSE (denoised alone %.3g\u00d7); at "
+        "best %.3g\u00d7 at %g spp",
+        converges ? "converges" : "does not beat the noisy image", last->spp, fin, den,
+        best_ratio, r->rows[best].spp);
+}
+
 /* Fills a report section with the run's settings, per-member figures and, with a
  * reference, the comparison. */
 static int
@@ -213,6 +244,7 @@ fill_section(cJSON *section, const mcp_blend_series_result *r,
              add_error_figures(section, r, "HDR-FLIP", 2, "mean HDR-FLIP")))
             return -1;
     }
+    if (blend_verdict(section, r)) return -1;
     const char *shown[] = {"noisy", "denoised", "curves"};
     for (int i = 0; i < 3; i++) {
         char rel[1400], caption[700];

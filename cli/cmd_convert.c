@@ -212,7 +212,15 @@ stage_convert(mcp_job *job, const mcp_node *settings)
     if (rc)
         return chan ? mcp_node_error(chan, "%s", mcp_error_message()) : -1;
     cJSON *section = mcp_report_section(mcp_job_report(job), "convert", out);
-    if (!section || mcp_report_add_image(section, out, out))
+    const char *input = NULL, *dot = strrchr(out, '.');
+    mcp_node_opt_string(settings, "input", &input);
+    int png = dot && !strcmp(dot, ".png");
+    if (!section || mcp_report_add_image(section, out, out) ||
+        mcp_report_set_verdict(section, MCP_VERDICT_INFO, "wrote %s from %s, %dx%d%s", out,
+                               input ? input : "the input", img->width, img->height,
+                               png ? ": linear values clamped to [0, 1] and sRGB-encoded, "
+                                     "as a screen shows them"
+                                   : ""))
         return -1;
     mcp_note("wrote %s", path);
     return 0;

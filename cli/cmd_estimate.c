@@ -166,9 +166,52 @@ estimate_json(const mcp_estimate *e, const char *input, const char *denoiser,
     return j;
 }
 
-/* Every image of one estimate, the block picture, and their place in the report. */
+/* The report's block picture: the error each pixel is expected to have under the
+ * model that F(tau) comes from, s²(λ + 1) (mean of R, G, B; log10 from -5 to 0 in
+ * inferno, like the metrics' RelSE map), with the block edges in white. Unlike
+ * blocks.png, whose colours only tell blocks apart, its colour bar reads as a value,
+ * and a single block still shows where the error is: s² varies per pixel. */
 static int
-write_single(const mcp_estimate *e, const out_dir *o, cJSON *section)
+blocks_error_picture(const mcp_blocks *blocks, const mcp_image *dist,
+                     unsigned char *rgb8)
+{
+    int w = blocks->width, h = blocks->height, ch[6];
+    int32_t *label = NULL;
+    mcp_image *lg = NULL;
+    if (mcp_image_channels(dist,
+                           (const char *[]){"lambda.R", "lambda.G", "lambda.B", "s2.R",
+                                            "s2.G", "s2.B"},
+                           6, ch) ||
+        mcp_blocks_label(blocks, &label) ||
+        mcp_image_new(w, h, 1, (const char *const[]){"log10_error"}, &lg)) {
+        free(label);
+        return -1;
+    }
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            const float *p = mcp_image_px(dist, x, y);
+            double mean = 0;
+            for (int c = 0; c < 3; c++)
+                mean += p[ch[3 + c]] * (p[ch[c]] + 1.0) / 3.0;
+            mcp_image_px(lg, x, y)[0] = (float)(mean > 1e-30 ? log10(mean) : -30.0);
+        }
+    int rc = mcp_colormap_apply(lg, 0, -5.0, 0.0, MCP_COLORMAP_INFERNO, rgb8);
+    for (int y = 0; !rc && y < h; y++)
+        for (int x = 0; x < w; x++) {
+            size_t i = (size_t)y * w + x;
+            if ((x + 1 < w && label[i] != label[i + 1]) ||
+                (y + 1 < h && label[i] != label[i + w]))
+                memset(rgb8 + 3 * i, 255, 3);
+        }
+    mcp_image_free(lg);
+    free(label);
+    return rc;
+}
+
+/* Every image of one estimate, the block pictures, and their place in the report. */
+static int
+write_single(const mcp_estimate *e, const out_dir *o, cJSON *section,
+             const cJSON *summary)
 {
     mcp_image *block_mean = NULL, *dist = NULL;
     unsigned char *rgb = NULL;
@@ -189,9 +232,34 @@ write_single(const mcp_estimate *e, const out_dir *o, cJSON *section)
     if (!rgb || mcp_blocks_picture(e->blocks, rgb) ||
         out_path(o, "blocks.png", path, sizeof path) || mcp_write_rgb8(rgb, w, h, path))
         goto done;
-    snprintf(rel, sizeof rel, "%sblocks.png", o->rel);
-    if (section && mcp_report_add_image(section, rel, "blocks (Firmino 2024 Alg. 1)"))
-        goto done;
+    if (section) {
+        char caption[256], unit[256];
+        const cJSON *mj = cJSON_GetObjectItem(summary, "metric");
+        const char *metric = cJSON_IsString(mj) ? mj->valuestring : "error";
+        if (e->blocks->count == 1)
+            snprintf(caption, sizeof caption,
+                     "expected %s per pixel; 1 block: Firmino 2024 Alg. 1 found no "
+                     "split that passes its test, so one SURE mean covers the image",
+                     metric);
+        else
+            snprintf(caption, sizeof caption,
+                     "expected %s per pixel; %d blocks (Firmino 2024 Alg. 1), edges in "
+                     "white",
+                     metric, e->blocks->count);
+        snprintf(unit, sizeof unit,
+                 "the model's expected error s\u00b2(\u03bb + 1), mean of R, G, B, log "
+                 "scale; F(tau) averages each pixel's chance to be below tau");
+        cJSON *map;
+        if (blocks_error_picture(e->blocks, dist, rgb) ||
+            out_path(o, "blocks_error.png", path, sizeof path) ||
+            mcp_write_rgb8(rgb, w, h, path))
+            goto done;
+        snprintf(rel, sizeof rel, "%sblocks_error.png", o->rel);
+        if (!(map = mcp_report_add_map(section, rel, caption, MCP_COLORMAP_INFERNO, 1e-5, 1.0,
+                                       MCP_AXIS_LOG, unit)) ||
+            mcp_report_map_add_mark(map, e->tau, "tau"))
+            goto done;
+    }
     rc = 0;
 done:
     free(rgb);
@@ -211,6 +279,21 @@ report_single(cJSON *section, const cJSON *summary, const mcp_estimate *e)
         const cJSON *v = cJSON_GetObjectItem(summary, keys[i]);
         if (v) cJSON_AddItemToObject(section, keys[i], cJSON_Duplicate(v, 1));
     }
+    const cJSON *mj = cJSON_GetObjectItem(summary, "metric");
+    const char *metric = cJSON_IsString(mj) ? mj->valuestring : "error";
+    int rc;
+    if (e->no_variance)
+        rc = mcp_report_set_verdict(section, MCP_VERDICT_BAD,
+                                    "no estimate: the dump's variance is 0 everywhere "
+                                    "(e.g. 1 spp), so the model cannot see any error");
+    else
+        rc = mcp_report_set_verdict(
+            section, e->stop ? MCP_VERDICT_GOOD : MCP_VERDICT_INFO,
+            "stop: %s, %.4g%% of the estimated %s values below tau = %g (%.4g%% "
+            "needed)%s; expected mean error %.3g",
+            e->stop ? "yes" : "no", 100 * e->cdf_at_tau, metric, e->tau, 100 * e->p,
+            e->stop ? "" : ": render more samples", mcp_error_dist_mean(e->dist));
+    if (rc) return -1;
     const char *cols[] = {"percentile", "estimated error"};
     cJSON *t = mcp_report_add_table(section, "estimated error percentiles", cols, 2);
     if (!t) return -1;
@@ -336,6 +419,31 @@ report_series(cJSON *section, const mcp_series_estimate *s)
     }
     if (s->has_reference)
         cJSON_AddNumberToObject(section, "agreement_rate", (double)agree / s->n_taus);
+    /* the verdict: where each tau is reached, and whether the truth agrees */
+    char text[900];
+    int len = snprintf(text, sizeof text, "stop points (F(tau) >= %.4g%%):", 100 * s->p);
+    for (int j = 0; j < s->n_taus && len < (int)sizeof text - 120; j++) {
+        len += s->first_spp[j] > 0
+                   ? snprintf(text + len, sizeof text - len, "%s tau = %g at %g spp",
+                              j ? "," : "", s->taus[j], (double)s->first_spp[j])
+                   : snprintf(text + len, sizeof text - len,
+                              "%s tau = %g not reached by %g spp", j ? "," : "",
+                              s->taus[j], (double)s->points[s->count - 1].spp);
+        if (s->has_reference)
+            len += s->true_first_spp[j] > 0
+                       ? snprintf(text + len, sizeof text - len, " (true: %g)",
+                                  (double)s->true_first_spp[j])
+                       : snprintf(text + len, sizeof text - len, " (true: not reached)");
+    }
+    if (s->has_reference)
+        snprintf(text + len, sizeof text - len, "; estimate and truth agree on %d of %d",
+                 agree, s->n_taus);
+    if (mcp_report_set_verdict(section,
+                               !s->has_reference     ? MCP_VERDICT_INFO
+                               : agree == s->n_taus ? MCP_VERDICT_GOOD
+                                                    : MCP_VERDICT_BAD,
+                               "%s", text))
+        return -1;
     /* F(τ) against spp, one line per τ */
     cJSON *plot = mcp_report_add_plot(section, "estimated F(tau) against spp", "spp",
                                       MCP_AXIS_LOG, "F(tau)", MCP_AXIS_LOGIT);
@@ -793,7 +901,7 @@ cmd_estimate(int argc, char **argv)
         if (outdir) {
             char path_json[4352];
             char *text = cJSON_Print(summary);
-            int rc = !text || write_single(e, &od, section) ||
+            int rc = !text || write_single(e, &od, section, summary) ||
                      out_path(&od, "estimate.json", path_json, sizeof path_json) ||
                      mcp_write_file_atomic(path_json, text, strlen(text)) ||
                      report_single(section, summary, e);
@@ -1026,7 +1134,7 @@ stage_estimate(mcp_job *job, const mcp_node *settings)
         cJSON *j = estimate_json(e, name, den->name, &so.est);
         char path[4352];
         char *text = cJSON_Print(j);
-        int bad = !text || write_single(e, &od, section) ||
+        int bad = !text || write_single(e, &od, section, j) ||
                   out_path(&od, "estimate.json", path, sizeof path) ||
                   mcp_write_file_atomic(path, text, strlen(text)) ||
                   report_single(section, j, e);

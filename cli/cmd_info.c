@@ -261,6 +261,48 @@ check_info(mcp_job *job, const mcp_node *settings)
     return mcp_job_check_input(job, settings, "input", MCP_JOB_IMAGE);
 }
 
+/* The info section's verdict: whether any value would break the later stages (NaN,
+ * Inf, or a negative radiance or variance; normals and covariances may be negative). */
+static int
+info_verdict(cJSON *section, const cJSON *channels)
+{
+    char worst[600] = "";
+    int n_channels = 0, len = 0;
+    const cJSON *ch;
+    cJSON_ArrayForEach(ch, channels)
+    {
+        const cJSON *name = cJSON_GetObjectItem(ch, "name");
+        const char *nm = cJSON_IsString(name) ? name->valuestring : "?";
+        int signed_ok = !strncmp(nm, "normal.", 7) || !strncmp(nm, "covariance_of_mean.", 19);
+        static const char *const bad[] = {"nan", "inf", "negative"};
+        n_channels++;
+        for (int k = 0; k < 3; k++) {
+            const cJSON *v = cJSON_GetObjectItem(ch, bad[k]);
+            if (!cJSON_IsNumber(v) || v->valuedouble <= 0 || (k == 2 && signed_ok) ||
+                len >= (int)sizeof worst - 80)
+                continue;
+            len += snprintf(worst + len, sizeof worst - len, "%s%.0f %s in %s",
+                            len ? ", " : "", v->valuedouble, bad[k], nm);
+        }
+    }
+    const cJSON *spp = cJSON_GetObjectItem(section, "spp"),
+                *conv = cJSON_GetObjectItem(section, "convention");
+    char what[200] = "";
+    if (cJSON_IsString(conv) && cJSON_IsNumber(spp))
+        snprintf(what, sizeof what, "; %s convention, %g spp", conv->valuestring,
+                 spp->valuedouble);
+    else if (cJSON_IsString(conv))
+        snprintf(what, sizeof what, "; %s convention", conv->valuestring);
+    if (*worst)
+        return mcp_report_set_verdict(section, MCP_VERDICT_BAD,
+                                      "check the input: %s (such values spoil means, "
+                                      "variances and metrics)%s",
+                                      worst, what);
+    return mcp_report_set_verdict(section, MCP_VERDICT_GOOD,
+                                  "clean: %d channels, no NaN, Inf or negative values%s",
+                                  n_channels, what);
+}
+
 static int
 stage_info(mcp_job *job, const mcp_node *settings)
 {
@@ -290,6 +332,7 @@ stage_info(mcp_job *job, const mcp_node *settings)
         return -1;
     }
     mcp_error_clear();
+    if (info_verdict(section, channels)) return -1;
     mcp_note("%s: %dx%d", name, img->width, img->height);
     return 0;
 }

@@ -299,7 +299,10 @@ write_spectrum(const perc_run *r, const mcp_image *pic, const char *name,
     snprintf(rel, sizeof rel, "%s%s", r->rel, name);
     int rc = mcp_colormap_apply(pic, 0, 0.0, 1.0, MCP_COLORMAP_INFERNO, rgb8) ||
              mcp_write_rgb8(rgb8, pic->width, pic->height, path) ||
-             mcp_report_add_image(r->section, rel, caption);
+             !mcp_report_add_map(r->section, rel, caption, MCP_COLORMAP_INFERNO, 0.0, 1.0,
+                                 MCP_AXIS_LINEAR,
+                                 "c ln(1 + power), scaled to 0..1 per picture: blue noise "
+                                 "is dark at the centre of each tile");
     free(rgb8);
     if (!rc) cJSON_AddItemToArray(outputs, cJSON_CreateString(path));
     return rc ? -1 : 0;
@@ -625,7 +628,45 @@ done:
     return rc;
 }
 
-/* Copies the summary's members into the report section. */
+static double
+summary_number(const cJSON *s, const char *key)
+{
+    const cJSON *v = cJSON_GetObjectItem(s, key);
+    return cJSON_IsNumber(v) ? v->valuedouble : NAN;
+}
+
+/* The section's verdict from the summary: with a reference, pMSE against the
+ * candidates' mean (below 1: the method lowered the perceived error) and how much of
+ * the error's power is at low frequencies (blue noise: less than the mean's white
+ * noise); without one, what the optimisation did to its own energy. */
+static void
+perceptual_verdict(cJSON *section, const cJSON *summary)
+{
+    const cJSON *mj = cJSON_GetObjectItem(summary, "method");
+    const char *method = cJSON_IsString(mj) ? mj->valuestring : "the method";
+    double ratio = summary_number(summary, "pmse_ratio"),
+           low = summary_number(summary, "low_freq_fraction"),
+           mean_low = summary_number(summary, "mean_low_freq_fraction");
+    int rc;
+    if (!isnan(ratio))
+        rc = mcp_report_set_verdict(
+            section, ratio < 1 ? MCP_VERDICT_GOOD : MCP_VERDICT_BAD,
+            "%s: pMSE %.3g\u00d7 the candidates' mean (%.2g%% %s perceived error); "
+            "low-frequency share of the error %.3g against the mean's %.3g: %s",
+            method, ratio, 100 * fabs(1 - ratio), ratio < 1 ? "less" : "more: no gain",
+            low, mean_low,
+            low < mean_low ? "bluer noise" : "no bluer than the mean's white noise");
+    else
+        rc = mcp_report_set_verdict(
+            section, MCP_VERDICT_INFO,
+            "%s: energy %.4g to %.4g in %.0f passes (the model's own error; give a "
+            "reference for the true pMSE)",
+            method, summary_number(summary, "energy_initial"),
+            summary_number(summary, "energy_final"), summary_number(summary, "passes"));
+    if (rc) mcp_error_clear(); /* the figures are in; the page shows no verdict */
+}
+
+/* Copies the summary's members into the report section, with a verdict. */
 static void
 fill_section(cJSON *section, const cJSON *summary)
 {
@@ -635,6 +676,7 @@ fill_section(cJSON *section, const cJSON *summary)
         if (!strcmp(it->string, "comparison")) continue; /* in the section's table */
         cJSON_AddItemToObject(section, it->string, cJSON_Duplicate(it, 1));
     }
+    perceptual_verdict(section, summary);
 }
 
 static void

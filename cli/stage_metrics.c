@@ -195,6 +195,68 @@ write_preview(mcp_job *job, const mcp_image *img, const char *rel, cJSON *sectio
 }
 
 /* Error-vs-spp curves: every member of a series against the reference. */
+/* FLIP's 0..1 scale in words (a rough reading guide; docs/report.md). */
+static const char *
+flip_words(double flip)
+{
+    return flip < 0.01   ? "practically identical"
+           : flip < 0.05 ? "differences only on close inspection"
+           : flip < 0.1  ? "differences noticeable"
+           : flip < 0.2  ? "differences visible at a glance"
+                         : "strongly different";
+}
+
+static double
+number_of(const cJSON *v)
+{
+    return cJSON_IsNumber(v) ? v->valuedouble : NAN;
+}
+
+static double
+member_number(const cJSON *obj, const char *key)
+{
+    return number_of(cJSON_GetObjectItem(obj, key));
+}
+
+/* The metrics section's verdict, from its figures: the relative error in percent,
+ * FLIP in words, and over a series how fast the MSE falls (1/spp when unbiased). */
+static int
+metrics_verdict(cJSON *section)
+{
+    char text[700] = "";
+    int len = 0;
+    double relmse = member_number(section, "relmse");
+    double fh = member_number(cJSON_GetObjectItem(section, "flip_hdr"), "mean"),
+           fl = member_number(cJSON_GetObjectItem(section, "flip_ldr"), "mean");
+    if (!isnan(relmse))
+        len += snprintf(text + len, sizeof text - len,
+                        "relMSE %.3g (RMS relative error about %.2g%%)", relmse,
+                        100 * sqrt(relmse));
+    if (!isnan(fh) || !isnan(fl))
+        len += snprintf(text + len, sizeof text - len, "%s%s mean %.3g on 0..1: %s",
+                        len ? "; " : "", isnan(fh) ? "LDR-FLIP" : "HDR-FLIP",
+                        isnan(fh) ? fl : fh, flip_words(isnan(fh) ? fl : fh));
+    /* the series table: first and last rows' spp and MSE */
+    const cJSON *t = cJSON_GetArrayItem(cJSON_GetObjectItem(section, "tables"), 0);
+    const cJSON *rows = cJSON_GetObjectItem(t, "rows");
+    int n = cJSON_GetArraySize(rows);
+    if (n > 1) {
+        const cJSON *a = cJSON_GetArrayItem(rows, 0), *z = cJSON_GetArrayItem(rows, n - 1);
+        double s0 = number_of(cJSON_GetArrayItem(a, 0)),
+               s1 = number_of(cJSON_GetArrayItem(z, 0)),
+               m0 = number_of(cJSON_GetArrayItem(a, 1)),
+               m1 = number_of(cJSON_GetArrayItem(z, 1));
+        double slope = log(m1 / m0) / log(s1 / s0);
+        if (isfinite(slope))
+            snprintf(text + len, sizeof text - len,
+                     "%sMSE falls as spp^%.2f from %g to %g spp (an unbiased render: "
+                     "spp^-1)",
+                     len ? "; " : "", slope, s0, s1);
+    }
+    return mcp_report_set_verdict(section, MCP_VERDICT_INFO, "%s",
+                                  *text ? text : "no figure to judge by (see the table)");
+}
+
 static int
 series_curves(mcp_job *job, const mcp_node *settings, const mcp_series *series,
               const mcp_image *ref, const mcp_metrics_options *opt, cJSON *section)
@@ -388,6 +450,7 @@ stage_metrics(mcp_job *job, const mcp_node *settings)
         }
     }
     if (series && series_curves(job, settings, series, ref, &o, section)) goto done;
+    if (metrics_verdict(section)) goto done;
     rc = 0;
 done:
     mcp_metrics_maps_free(&maps);

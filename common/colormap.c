@@ -53,6 +53,14 @@ mcp_colormap_from_name(const char *name, mcp_colormap *map)
                      name ? name : "(null)");
 }
 
+const char *
+mcp_colormap_name(mcp_colormap map)
+{
+    for (int i = 0; i < N_COLORMAPS; i++)
+        if (colormaps[i].map == map) return colormaps[i].name;
+    return NULL;
+}
+
 int
 mcp_colormap_apply(const mcp_image *img, int channel, double lo, double hi,
                    mcp_colormap map, unsigned char *rgb8)

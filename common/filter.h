@@ -53,6 +53,8 @@ MCP_API int mcp_colormap_apply(const mcp_image *img, int channel, double lo, dou
 
 /* Looks a colour map up by name ("viridis", "magma", "inferno", "turbo", "gray"). */
 MCP_API int mcp_colormap_from_name(const char *name, mcp_colormap *map);
+/* The name of a colour map ("viridis", ...), or NULL for an unknown value. */
+MCP_API const char *mcp_colormap_name(mcp_colormap map);
 
 #ifdef __cplusplus
 }

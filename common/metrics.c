@@ -666,9 +666,13 @@ out_path(const map_out *o, const char *name, const char *ext, char *path, size_t
     return 0;
 }
 
+/* Writes img as EXR (exr) and channel png_channel as a false-colour PNG for the
+ * report: lo..hi over the colour map, with log_values when the channel holds log10 of
+ * what unit names (the colour bar then shows 10^lo..10^hi on a log axis). */
 static int
 emit(const map_out *o, const mcp_image *img, const char *name, int exr, int png_channel,
-     double lo, double hi, mcp_colormap map, const char *caption)
+     double lo, double hi, mcp_colormap map, int log_values, const char *caption,
+     const char *unit)
 {
     char path[4096], rel[2048];
     if (exr && (out_path(o, name, "exr", path, sizeof path, rel, sizeof rel) ||
@@ -678,7 +682,13 @@ emit(const map_out *o, const mcp_image *img, const char *name, int exr, int png_
     if (out_path(o, name, "png", path, sizeof path, rel, sizeof rel) ||
         write_png(img, png_channel, lo, hi, map, path))
         return -1;
-    return o->section ? mcp_report_add_image(o->section, rel, caption) : 0;
+    if (!o->section) return 0;
+    return mcp_report_add_map(o->section, rel, caption, map,
+                              log_values ? pow(10.0, lo) : lo,
+                              log_values ? pow(10.0, hi) : hi,
+                              log_values ? MCP_AXIS_LOG : MCP_AXIS_LINEAR, unit)
+               ? 0
+               : -1;
 }
 
 int
@@ -694,21 +704,22 @@ mcp_metrics_write_maps(const mcp_metrics_maps *maps, const char *dir, const char
     if (n < 0 || (size_t)n >= sizeof sub)
         return mcp_error("output path too long: %s/%s", dir, o.prefix);
     if (make_dirs(sub)) return -1;
+    static const char flip_unit[] = "FLIP error: 0 identical, 1 most different";
     if (maps->flip_ldr && emit(&o, maps->flip_ldr, "flip_ldr", 1, 0, 0.0, 1.0,
-                               MCP_COLORMAP_MAGMA, "LDR-FLIP (magma, 0 to 1)"))
+                               MCP_COLORMAP_MAGMA, 0, "LDR-FLIP per pixel", flip_unit))
         return -1;
     if (maps->flip_hdr && emit(&o, maps->flip_hdr, "flip_hdr", 1, 0, 0.0, 1.0,
-                               MCP_COLORMAP_MAGMA, "HDR-FLIP (magma, 0 to 1)"))
+                               MCP_COLORMAP_MAGMA, 0, "HDR-FLIP per pixel", flip_unit))
         return -1;
     if (maps->flip_hdr_exposure &&
         emit(&o, maps->flip_hdr_exposure, "flip_hdr_exposure", 1, 0, 0.0, 1.0,
-             MCP_COLORMAP_VIRIDIS,
-             "HDR-FLIP exposure of the maximum (viridis, start to stop)"))
+             MCP_COLORMAP_VIRIDIS, 0, "HDR-FLIP: the exposure where each pixel's error is largest",
+             "0: the start exposure, 1: the stop exposure (flip_hdr in the figures)"))
         return -1;
-    if (maps->sq_error && emit(&o, maps->sq_error, "sq_error", 1, -1, 0, 0, 0, NULL))
+    if (maps->sq_error && emit(&o, maps->sq_error, "sq_error", 1, -1, 0, 0, 0, 0, NULL, NULL))
         return -1;
     if (maps->relse) {
-        if (emit(&o, maps->relse, "relse", 1, -1, 0, 0, 0, NULL)) return -1;
+        if (emit(&o, maps->relse, "relse", 1, -1, 0, 0, 0, 0, NULL, NULL)) return -1;
         mcp_image *lg = NULL;
         if (mcp_image_new(maps->relse->width, maps->relse->height, 1,
                           (const char *const[]){"log10_relse"}, &lg))
@@ -723,15 +734,17 @@ mcp_metrics_write_maps(const mcp_metrics_maps *maps, const char *dir, const char
                 mcp_image_px(lg, x, y)[0] = (float)(mean > 1e-30 ? log10(mean) : -30.0);
             }
         int rc = mcp_image_set_source(lg, "RelSE") ||
-                 emit(&o, lg, "relse", 0, 0, -5.0, 0.0, MCP_COLORMAP_INFERNO,
-                      "relative squared error, log10 from -5 to 0 (inferno)");
+                 emit(&o, lg, "relse", 0, 0, -5.0, 0.0, MCP_COLORMAP_INFERNO, 1,
+                      "relative squared error per pixel, mean of the channels",
+                      "(test - ref)^2 / (largest channel of test^2 + 0.01), log scale");
         mcp_image_free(lg);
         if (rc) return -1;
     }
     if (maps->spectra &&
-        emit(&o, maps->spectra, "spectra", 0, 0, 0.0, 1.0, MCP_COLORMAP_GRAY,
-             "error power spectra per tile, c ln(1 + |e|), DC at the "
-             "centre"))
+        emit(&o, maps->spectra, "spectra", 0, 0, 0.0, 1.0, MCP_COLORMAP_GRAY, 0,
+             "error power spectrum per tile, zero frequency at each tile's centre",
+             "c ln(1 + power), scaled to 0..1 per picture: blue noise is dark at the "
+             "centre of each tile"))
         return -1;
     return 0;
 }

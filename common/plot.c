@@ -308,11 +308,23 @@ mcp_plot_svg(const mcp_plot *p, char **svg)
                          mcp_axis_scale_name(p->x_scale),
                          mcp_axis_scale_name(p->y_scale));
 
-    const double left = 72, right = 16, top = p->title ? 34 : 14, bottom = 48;
-    axis ax = {p->x_scale, 0, 0, left, W - right},
-         ay = {p->y_scale, 0, 0, H - bottom, top};
-    set_range(&ax, xlo, xhi);
+    const double right = 16, top = p->title ? 34 : 14, bottom = 48;
+    axis ay = {p->y_scale, 0, 0, H - bottom, top};
     set_range(&ay, ylo, yhi);
+    /* The left margin holds the y label and the widest y tick label (~7 px a
+     * character at 12 px; logit ticks such as 0.99999999 are long). */
+    tick t[MAX_TICKS];
+    char label[64];
+    size_t widest = 0;
+    int nt = ticks(&ay, t);
+    for (int i = 0; i < nt; i++) {
+        if (!t[i].major) continue;
+        tick_label(&ay, t[i].value, label, sizeof label);
+        widest = strlen(label) > widest ? strlen(label) : widest;
+    }
+    const double left = 30 + 7.0 * (double)widest > 72 ? 30 + 7.0 * (double)widest : 72;
+    axis ax = {p->x_scale, 0, 0, left, W - right};
+    set_range(&ax, xlo, xhi);
 
     sbuf b = {0};
     sb_printf(
@@ -332,9 +344,7 @@ mcp_plot_svg(const mcp_plot *p, char **svg)
         sb_printf(&b, "</text>\n");
     }
     /* Grid and tick labels. */
-    tick t[MAX_TICKS];
-    int nt = ticks(&ax, t);
-    char label[64];
+    nt = ticks(&ax, t);
     for (int i = 0; i < nt; i++) {
         double x = to_px(&ax, t[i].value);
         sb_printf(

@@ -5,21 +5,29 @@
  * and plots. Stages add one section each.
  *
  * A section is a JSON object. Besides "title" and "stage" it may hold:
- *   any other members      key figures: numbers, strings, booleans, nested objects
- *                          (shown flattened as a.b) and lists of numbers
+ *   "verdict": {"level": "good"|"bad"|"info", "text"}
+ *                          one line in words: what the figures mean (the first thing
+ *                          the page shows of the section)
+ *   any other members      key figures: numbers, strings, booleans, and nested objects
+ *                          and lists (shown as nested tables and lists)
  *   "tables": [{"title", "columns": [names], "rows": [[number|string|null, ...]]}]
- *   "images": [{"path" (relative to the report's folder), "caption"}]
+ *   "images": [{"path" (relative to the report's folder), "caption",
+ *               "scale": {"colormap", "min", "max", "axis": "linear"|"log", "unit",
+ *                         "marks": [{"value", "label"}]} (false-colour maps only)}]
  *   "plots":  [{"title", "x": {"label", "scale"}, "y": {...},
  *               "series": [{"name", "style", "dashed", "x": [...], "y": [...]}]}]
  * report.html renders every section generically from that, so a stage only fills
- * the JSON. The page needs no network: CSS is inline, images are embedded as base64
- * data URIs (PNG, JPEG, GIF, SVG, WebP; other files are listed by name), and plots
- * are inline SVG drawn by plot.h. */
+ * the JSON. The page needs no network: CSS and a small script (the image comparison)
+ * are inline, images are embedded as base64 data URIs (PNG, JPEG, GIF, SVG, WebP;
+ * other files are listed by name), shown at their pixel size or an integer multiple
+ * of it (nearest neighbour), maps with their colour bar, and plots are inline SVG
+ * drawn by plot.h. docs/report.md describes the page for its readers. */
 #ifndef MCP_REPORT_H
 #define MCP_REPORT_H
 
 #include <cjson/cJSON.h>
 #include <mcpost/error.h>
+#include <mcpost/filter.h>
 #include <mcpost/plot.h>
 
 #ifdef __cplusplus
@@ -42,6 +50,26 @@ MCP_API cJSON *mcp_report_section(mcp_report *r, const char *stage, const char *
  * "images" list. */
 MCP_API int mcp_report_add_image(cJSON *section, const char *rel_path,
                                  const char *caption);
+
+/* Adds a false-colour map to a section's "images" list, with its scale: the colour map,
+ * the values at the ramp's two ends (lo at its first colour, hi at its last), whether
+ * the colours step linearly or by log10 of the value (then 0 < lo), and what the
+ * values are (unit, e.g. "relative squared error"). Returns the image's object (owned
+ * by the section; see mcp_report_map_add_mark), or NULL on failure. */
+MCP_API cJSON *mcp_report_add_map(cJSON *section, const char *rel_path,
+                                  const char *caption, mcp_colormap map, double lo,
+                                  double hi, mcp_axis_scale axis, const char *unit);
+
+/* Marks a value on a map's colour bar (e.g. the threshold tau). */
+MCP_API int mcp_report_map_add_mark(cJSON *map, double value, const char *label);
+
+typedef enum { MCP_VERDICT_INFO, MCP_VERDICT_GOOD, MCP_VERDICT_BAD } mcp_verdict;
+
+/* Sets the section's verdict: one line in words saying what its figures mean (e.g.
+ * "stop: yes, 99.9% of values below tau = 0.01"), shown first; GOOD and BAD colour it.
+ * A second call replaces the first. */
+MCP_API int mcp_report_set_verdict(cJSON *section, mcp_verdict level, const char *fmt,
+                                   ...) MCP_PRINTF(3, 4);
 
 /* Adds a table to a section's "tables" list and returns it (owned by the section),
  * or NULL on failure. */
@@ -69,7 +97,8 @@ MCP_API cJSON *mcp_report_plot_add_series(cJSON *plot, const char *name,
 /* Draws the series dashed (e.g. an estimate beside the truth). */
 MCP_API int mcp_report_series_set_dashed(cJSON *series, int dashed);
 
-/* The HTML page of the report (malloc'd); image paths are read relative to dir. */
+/* The HTML page of the report (malloc'd); image paths are read relative to dir
+ * (report_html.c). */
 MCP_API int mcp_report_html(mcp_report *r, const char *dir, char **html);
 
 /* Writes report.json and report.html into dir (atomically). */

@@ -119,8 +119,10 @@ test_html_self_contained(void **state)
     char *html = mcp_test_read_text(path);
     assert_non_null(strstr(html, "<title>Title &lt;&amp;&gt;</title>"));
     assert_non_null(strstr(html, "<style>"));
-    assert_non_null(strstr(html, "<th>flip_hdr.mean</th><td>0.0625</td>"));
-    assert_non_null(strstr(html, "<th>mse</th><td>0.125</td>"));
+    /* nested objects are nested tables, not "a.b" rows or JSON text */
+    assert_non_null(strstr(html, "<th>flip_hdr</th><td><table class=\"kv\"><tr><th>mean"
+                                 "</th><td class=\"num\">0.0625</td></tr></table></td>"));
+    assert_non_null(strstr(html, "<th>mse</th><td class=\"num\">0.125</td>"));
     assert_non_null(strstr(html, "<td>row&lt;1&gt;</td>"));
     assert_non_null(strstr(html, "src=\"data:image/png;base64,YWJjZA==\""));
     assert_int_equal(count(html, "src=\"data:image/png;base64,"), 2);
@@ -131,8 +133,10 @@ test_html_self_contained(void **state)
     /* Nothing is fetched: no external src/href (the SVG namespace is not a fetch). */
     assert_null(strstr(html, "src=\"http"));
     assert_null(strstr(html, "href=\"http"));
-    assert_null(strstr(html, "<script"));
+    assert_int_equal(count(html, "<script"), 1); /* the inline comparison script */
     assert_null(strstr(html, "<link"));
+    /* the 2x2 PNG is shown at 160x its size (a whole factor up to 320 px) */
+    assert_non_null(strstr(html, "alt=\"maps/tiny.png\" width=\"320\" height=\"320\""));
     free(html);
     snprintf(path, sizeof path, "%s/report.json", dir);
     char *json = mcp_test_read_text(path);
@@ -141,6 +145,119 @@ test_html_self_contained(void **state)
     assert_int_equal(cJSON_GetArraySize(cJSON_GetObjectItem(doc, "sections")), 2);
     cJSON_Delete(doc);
     free(json);
+}
+
+/* What issue 17 asked of the page: lists and objects as tables and lists, maps with
+ * their colour bar, a verdict first, and a comparison of same-size images. */
+static void
+test_html_values_maps_verdicts(void **state)
+{
+    (void)state;
+    const char *dir = mcp_test_path("report2");
+    char cmd[4200], path[4200];
+    snprintf(cmd, sizeof cmd, "mkdir -p '%s'", dir);
+    assert_int_equal(system(cmd), 0);
+    unsigned char rgb[4 * 2 * 3] = {0};
+    const char *names[3] = {"a.png", "b.png", "map.png"};
+    for (int i = 0; i < 3; i++) {
+        snprintf(path, sizeof path, "%s/%s", dir, names[i]);
+        assert_int_equal(mcp_write_rgb8(rgb, 4, 2, path), 0);
+    }
+    mcp_report *r = NULL;
+    assert_int_equal(mcp_report_new("values", &r), 0);
+    cJSON *s = mcp_report_section(r, "info", "lists");
+    cJSON *chans = cJSON_AddArrayToObject(s, "channels");
+    cJSON *c0 = cJSON_CreateObject(), *c1 = cJSON_CreateObject();
+    cJSON_AddStringToObject(c0, "name", "R");
+    cJSON_AddNumberToObject(c0, "min", 0.5);
+    cJSON_AddStringToObject(c1, "name", "G");
+    cJSON_AddNumberToObject(c1, "nan", 3); /* a key only the second one has */
+    cJSON_AddItemToArray(chans, c0);
+    cJSON_AddItemToArray(chans, c1);
+    cJSON *outs = cJSON_AddArrayToObject(s, "outputs");
+    cJSON_AddItemToArray(outs, cJSON_CreateString("/a/long/path/to/some/output.exr"));
+    cJSON_AddItemToArray(outs, cJSON_CreateString("/a/long/path/to/another/one.exr"));
+    cJSON *spp = cJSON_AddArrayToObject(s, "spp");
+    cJSON_AddItemToArray(spp, cJSON_CreateNumber(1));
+    cJSON_AddItemToArray(spp, cJSON_CreateNumber(2));
+    cJSON_AddArrayToObject(s, "empty");
+    /* an object of records (the blend's final errors per method): one table */
+    cJSON *fin = cJSON_AddObjectToObject(s, "final");
+    cJSON_AddNumberToObject(fin, "spp", 1024);
+    cJSON_AddNumberToObject(cJSON_AddObjectToObject(fin, "noisy"), "mse", 0.5);
+    cJSON_AddNumberToObject(cJSON_AddObjectToObject(fin, "curves"), "mse", 0.25);
+    assert_int_equal(mcp_report_set_verdict(s, MCP_VERDICT_BAD, "first %d", 1), 0);
+    assert_int_equal(mcp_report_set_verdict(s, MCP_VERDICT_GOOD, "stop: yes, %g%%", 99.9),
+                     0);
+    cJSON *s2 = mcp_report_section(r, "estimate", "maps");
+    assert_int_equal(mcp_report_add_image(s2, "a.png", "noisy"), 0);
+    cJSON *map = mcp_report_add_map(s2, "map.png", "error", MCP_COLORMAP_GRAY, 1e-5, 1.0,
+                                    MCP_AXIS_LOG, "relative error");
+    assert_non_null(map);
+    assert_int_equal(mcp_report_map_add_mark(map, 0.01, "tau"), 0);
+    assert_int_equal(mcp_report_add_image(s2, "b.png", "reference"), 0);
+    assert_non_null(mcp_report_add_map(s2, "map.png", "linear", MCP_COLORMAP_GRAY, 0.0,
+                                       2.0, MCP_AXIS_LINEAR, NULL));
+    assert_null(mcp_report_add_map(s2, "map.png", "bad", MCP_COLORMAP_GRAY, 0.0, 1.0,
+                                   MCP_AXIS_LOG, "x"));
+    assert_non_null(strstr(mcp_error_message(), "report: map 'map.png'"));
+    assert_null(mcp_report_add_map(s2, "map.png", "bad", MCP_COLORMAP_GRAY, 1.0, 1.0,
+                                   MCP_AXIS_LINEAR, "x"));
+    assert_error_contains(mcp_report_map_add_mark(s2, 1.0, "x"), "report: not a map");
+    mcp_error_clear();
+
+    /* the JSON: the verdict replaced, the scale with its mark */
+    const cJSON *v = cJSON_GetObjectItem(s, "verdict");
+    assert_string_equal(cJSON_GetObjectItem(v, "level")->valuestring, "good");
+    assert_string_equal(cJSON_GetObjectItem(v, "text")->valuestring, "stop: yes, 99.9%");
+    const cJSON *sc = cJSON_GetObjectItem(map, "scale");
+    assert_string_equal(cJSON_GetObjectItem(sc, "colormap")->valuestring, "gray");
+    assert_string_equal(cJSON_GetObjectItem(sc, "axis")->valuestring, "log");
+    assert_float_equal(cJSON_GetObjectItem(sc, "min")->valuedouble, 1e-5, 0);
+    assert_int_equal(cJSON_GetArraySize(cJSON_GetObjectItem(sc, "marks")), 1);
+
+    char *html = NULL;
+    assert_int_equal(mcp_report_html(r, dir, &html), 0);
+    /* the verdict comes right after the heading */
+    assert_non_null(strstr(html, "</h2>\n<p class=\"verdict good\">stop: yes, 99.9%</p>"));
+    assert_null(strstr(html, "first 1"));
+    /* a list of objects: one table, a column for every key any of them has */
+    assert_non_null(strstr(html, "<tr><th>name</th><th>min</th><th>nan</th></tr>"));
+    assert_non_null(strstr(html, "<tr><td>G</td><td></td><td class=\"num\">3</td></tr>"));
+    /* long strings: a list; short numbers: one line; nothing: "none" */
+    assert_non_null(strstr(html, "<ul class=\"list\"><li>/a/long/path/to/some/output.exr"
+                                 "</li><li>"));
+    assert_non_null(strstr(html, "<th>spp</th><td>1, 2</td>"));
+    assert_non_null(strstr(html, "<th>empty</th><td><span class=\"dim\">none</span>"));
+    assert_non_null(strstr(html, "<tr><th>spp</th><td class=\"num\">1024</td></tr></table>"
+                                 "<div class=\"scroll\"><table class=\"data nested\"><tr><th>"
+                                 "</th><th>mse</th></tr>\n<tr><td>noisy</td><td class=\"num\">"
+                                 "0.5</td></tr>\n<tr><td>curves</td>"));
+    assert_null(strstr(html, "[{"));
+    assert_null(strstr(html, "{&quot;"));
+    /* the colour bar: gray runs from black to white; decades 10^-5 ... 1 at every 20%;
+     * tau = 0.01 sits at (log10(0.01) + 5) / 5 = 60% */
+    assert_non_null(strstr(html, "linear-gradient(to right,#000000 0.0%,"));
+    assert_non_null(strstr(html, ",#ffffff 100.0%)"));
+    assert_non_null(strstr(html, "<span class=\"first\" style=\"left:0.00%\">10<sup>-5</sup></span>"));
+    assert_non_null(strstr(html, "<span class=\"mid\" style=\"left:60.00%\">10<sup>-2</sup></span>"));
+    assert_non_null(strstr(html, "<span class=\"last\" style=\"left:100.00%\">1</span>"));
+    assert_non_null(strstr(html, "<i class=\"mark\" style=\"left:60.00%\"></i>"));
+    assert_non_null(strstr(html, "&#9650; tau = 0.01"));
+    assert_non_null(strstr(html, "<div class=\"unit\">relative error</div>"));
+    /* the linear map: 0, 0.5, 1, 1.5, 2 */
+    assert_non_null(strstr(html, "<span class=\"mid\" style=\"left:75.00%\">1.5</span>"));
+    assert_int_equal(count(html, "class=\"cbar\""), 2);
+    /* the comparison: the four 4x2 images, left the first photo, right the last one;
+     * shown 160x (640 px across) */
+    assert_int_equal(count(html, "class=\"compare\" hidden"), 1);
+    assert_non_null(strstr(html, "<option value=\"im1_0\" selected>noisy</option>"));
+    assert_non_null(strstr(html, "<option value=\"im1_2\" selected>reference</option>"));
+    assert_non_null(strstr(html, "style=\"width:640px;aspect-ratio:4/2\""));
+    assert_non_null(strstr(html, "id=\"im1_1\" class=\"px\" alt=\"map.png\" width=\"320\" "
+                                 "height=\"160\""));
+    free(html);
+    mcp_report_free(r);
 }
 
 static void
@@ -203,6 +320,7 @@ main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_sections_tables_plots_json),
         cmocka_unit_test(test_html_self_contained),
+        cmocka_unit_test(test_html_values_maps_verdicts),
         cmocka_unit_test(test_plot_axes),
     };
     return cmocka_run_group_tests_name("common/report", tests, NULL, NULL);
