@@ -145,6 +145,18 @@ mcp_py_dump_get(PyObject *obj, const char *what, mcp_py_dump *out)
         PyErr_Format(mcp_py_error, "%s['spp'] must be >= 0 (got %g)", what, d->spp);
         goto fail;
     }
+    PyObject *attrs = PyDict_GetItemString(obj, "attributes");
+    if (attrs && attrs != Py_None) {
+        if (!PyDict_Check(attrs)) {
+            PyErr_Format(PyExc_TypeError, "%s['attributes'] must be a dict", what);
+            goto fail;
+        }
+        PyObject *k, *v;
+        Py_ssize_t pos = 0;
+        while (PyDict_Next(attrs, &pos, &k, &v))
+            if (mcp_py_attrs_set(&d->attrs, k, v))
+                goto fail;
+    }
     PyObject *src = PyDict_GetItemString(obj, "source");
     const char *s = src && PyUnicode_Check(src) ? PyUnicode_AsUTF8(src) : NULL;
     if (!(d->source = mcp_strdup(s && *s ? s : what))) {

@@ -56,9 +56,8 @@ py_read_image(PyObject *self, PyObject *args, PyObject *kw)
     return Py_BuildValue("(NNN)", pixels, names, attrs);
 }
 
-/* Sets an attribute from a Python value: int, float or str. */
-static int
-set_attr(mcp_attrs *attrs, PyObject *key, PyObject *value)
+int
+mcp_py_attrs_set(mcp_attrs *attrs, PyObject *key, PyObject *value)
 {
     const char *name = PyUnicode_Check(key) ? PyUnicode_AsUTF8(key) : NULL;
     if (!name) {
@@ -146,7 +145,7 @@ py_write_image(PyObject *self, PyObject *args, PyObject *kw)
         PyObject *k, *v;
         Py_ssize_t pos = 0;
         while (PyDict_Next(attributes, &pos, &k, &v))
-            if (set_attr(&im.img->attrs, k, v))
+            if (mcp_py_attrs_set(&im.img->attrs, k, v))
                 goto done;
     }
     int rc;

@@ -71,8 +71,10 @@ int mcp_py_dump_get(PyObject *obj, const char *what, mcp_py_dump *out);
 void mcp_py_dump_release(mcp_py_dump *d);
 /* The dict of a dump, taking its images over (the dump is freed). */
 PyObject *mcp_py_dump_dict(mcp_dump *dump);
-/* The header attributes as a dict. */
+/* The header attributes as a dict, and one attribute from a Python int, float or str
+ * (0, or -1 with an exception). */
 PyObject *mcp_py_attrs_dict(const mcp_attrs *attrs);
+int mcp_py_attrs_set(mcp_attrs *attrs, PyObject *key, PyObject *value);
 
 /* ---- denoisers (python/denoise.c) ---- */
 

@@ -100,6 +100,28 @@ def test_dump_round_trip(tmp):
         mcpost.write_dump(path, {"color": d["color"][:64], "albedo": d["albedo"]})
 
 
+@pytest.mark.parametrize("convention", ["mcpost", "mitsuba", "blender", "pbrt"])
+def test_write_dump_matches_convert(tmp, convention):
+    cli("convert", series("cornell", 16), tmp / "cli.exr", "--dump", convention,
+        json_out=False)
+    mcpost.write_dump(tmp / "py.exr", mcpost.read_dump(series("cornell", 16)),
+                      convention=convention)
+    a, an, aa = mcpost.read_image(tmp / "py.exr")
+    b, bn, ba = mcpost.read_image(tmp / "cli.exr")
+    assert an == bn and aa == ba
+    np.testing.assert_array_equal(a, b)
+
+
+def test_write_image_matches_convert(tmp):
+    pixels, names, attrs = mcpost.read_image(series("cornell", 16))
+    cli("convert", series("cornell", 16), tmp / "cli.exr", "--half", json_out=False)
+    mcpost.write_image(tmp / "py.exr", pixels, channels=names, attributes=attrs, half=True)
+    a, an, _ = mcpost.read_image(tmp / "py.exr")
+    b, bn, _ = mcpost.read_image(tmp / "cli.exr")
+    assert an == bn
+    np.testing.assert_array_equal(a, b)
+
+
 def test_merge_matches_the_cli(tmp):
     parts = [os.path.join(CORNELL, "realizations", f"cornell_spp0032_r{r}.exr")
              for r in range(4)]

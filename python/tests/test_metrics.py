@@ -69,6 +69,7 @@ def test_metrics_is_the_cli_json(pair, cli_metrics, tmp):
         np.testing.assert_array_equal(maps[name], want)
     for name in ("relse", "sq_error"):  # EXR files keep channels in name order: B, G, R
         np.testing.assert_array_equal(maps[name], rgb(tmp / f"{name}.exr"))
+    np.testing.assert_array_equal(mcpost.relse_map(*pair), maps["relse"])
 
 
 def test_metrics_options_follow_the_cli_words(pair):
