@@ -324,7 +324,64 @@ done:
     return result;
 }
 
+static PyObject *
+py_increment_variance(PyObject *self, PyObject *args, PyObject *kw)
+{
+    (void)self;
+    static char *keys[] = {"dumps", "first_spp", "pool_radius", NULL};
+    PyObject *list;
+    mcp_increment_options io = {0, 0};
+    if (!PyArg_ParseTupleAndKeywords(args, kw, "O|$di:increment_variance", keys, &list,
+                                     &io.first_spp, &io.pool_radius))
+        return NULL;
+    PyObject *fast = PySequence_Fast(list, "dumps must be a list of dumps (paths or dicts)");
+    if (!fast)
+        return NULL;
+    Py_ssize_t n = PySequence_Fast_GET_SIZE(fast);
+    mcp_py_dump *parts = PyMem_Calloc((size_t)(n ? n : 1), sizeof *parts);
+    const mcp_dump **members = PyMem_Calloc((size_t)(n ? n : 1), sizeof *members);
+    PyObject *result = NULL;
+    if (!parts || !members) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    for (Py_ssize_t i = 0; i < n; i++) {
+        char what[32];
+        snprintf(what, sizeof what, "dumps[%zd]", i);
+        if (mcp_py_dump_get(PySequence_Fast_GET_ITEM(fast, i), what, &parts[i]))
+            goto done;
+        members[i] = parts[i].dump;
+    }
+    mcp_dump *out = NULL;
+    double ratio = 0;
+    int rc;
+    Py_BEGIN_ALLOW_THREADS
+    rc = mcp_dump_increment_variance(members, (int)n, &io, &out, &ratio);
+    Py_END_ALLOW_THREADS
+    if (rc) {
+        mcp_py_fail();
+        goto done;
+    }
+    PyObject *d = mcp_py_dump_dict(out);
+    result = d ? Py_BuildValue("(Nd)", d, ratio) : NULL;
+done:
+    for (Py_ssize_t i = 0; parts && i < n; i++)
+        mcp_py_dump_release(&parts[i]);
+    PyMem_Free(parts);
+    PyMem_Free(members);
+    Py_DECREF(fast);
+    return result;
+}
+
 PyMethodDef mcp_py_dump_methods[] = {
+    {"increment_variance", (PyCFunction)(void (*)(void))py_increment_variance,
+     METH_VARARGS | METH_KEYWORDS,
+     "increment_variance(dumps, *, first_spp=0, pool_radius=0) -> (dump, ratio)\n\n"
+     "The last of a progressive render's members (dumps in increasing spp) with its\n"
+     "variance of the mean from the spread between the increments before it (right for\n"
+     "stratified samplers; docs/variance-sources.md), and ratio: the member's own\n"
+     "variance over that spread (0 when not measurable). pool_radius 0 is automatic,\n"
+     "< 0 none."},
     {"read_dump", (PyCFunction)(void (*)(void))py_read_dump, METH_VARARGS | METH_KEYWORDS,
      "read_dump(path, *, spp=0, convention=None, variance=None, bad_values=None,\n"
      "          variance_path=None, albedo_path=None, normal_path=None,\n"

@@ -142,3 +142,21 @@ def test_merge_matches_the_cli(tmp):
     np.testing.assert_allclose(got["variance"], spread, rtol=1e-5, atol=1e-12)
     with pytest.raises(mcpost.Error, match="pool must be >= 0"):
         mcpost.merge(parts, pool=-1)
+
+
+def test_increment_variance_matches_the_cli_series():
+    members = [series("cornell", n) for n in (4, 8, 16, 32)]
+    want = cli("estimate", *members, "--denoiser", "gauss", "--variance-from", "increments",
+               "--json")
+    d, ratio = mcpost.increment_variance(members)
+    assert d["variance_source"] == want["variance_source"] == "increments"
+    assert d["spp"] == 32 and d["replicates"] == 4 and d["variance_dof"] == 3
+    assert_close(ratio, want["variance_ratio"])
+    # the series' last member is estimated on exactly this variance
+    e = mcpost.estimate(d, denoiser="gauss", taus=[t["tau"] for t in want["taus"]])
+    last = want["members"][-1]
+    assert_close(e["cdf"], last["cdf"])
+    assert_close(e["percentile_error"], last["estimated_percentiles"])
+    assert_close(e["expected_mean_error"], last["expected_mean_error"])
+    with pytest.raises(mcpost.Error):
+        mcpost.increment_variance(members[:1])  # one block: no spread to measure
