@@ -299,7 +299,14 @@ static const char usage[] =
     "  --no-flip                 skip HDR-FLIP\n"
     "  --variance-from KIND      file (each member's own variance) or increments (the\n"
     "                            spread between the series' increments: right for\n"
-    "                            stratified samplers) [file]\n";
+    "                            stratified samplers) [file]\n"
+    "\n"
+    "examples (from the source folder, on the sample renders):\n"
+    "  mcpost blend 'samples/fixtures/cornell/series/cornell_spp%04d.exr' --spp 16,32,64,128 --denoiser gauss \\\n"
+    "               --fit last_two -o out/blend\n"
+    "  mcpost blend samples/fixtures/texture/series/texture_spp0016.exr \\\n"
+    "               samples/fixtures/texture/series/texture_spp0064.exr --denoiser nlm --no-flip \\\n"
+    "               --ref samples/fixtures/texture/texture_reference.exr -o out/blend_texture\n";
 
 enum {
     OPT_SPP = 256,
@@ -631,27 +638,61 @@ read_stage_options(const mcp_node *s, mcp_blend_series_options *o)
     return 0;
 }
 
+/* The stage's settings, read before anything is loaded (by the run, and by the job's
+ * check before any stage runs): the options, the series and reference by name (checked
+ * against the job's inputs) and the denoiser, created from its settings. Strings are
+ * borrowed from the settings; the denoiser is the plan's. */
+typedef struct blend_plan {
+    mcp_blend_series_options o;
+    const char *input, *reference, *output, *title;
+    int all_images;
+    mcp_denoiser *den;
+} blend_plan;
+
+static int
+parse_blend(mcp_job *job, const mcp_node *settings, blend_plan *pl)
+{
+    const mcp_node *input_node = NULL;
+    memset(pl, 0, sizeof *pl);
+    pl->o = mcp_blend_series_defaults();
+    if (mcp_node_opt_string(settings, "input", &pl->input) ||
+        mcp_node_opt_string(settings, "reference", &pl->reference) ||
+        mcp_node_opt_string(settings, "output", &pl->output) ||
+        mcp_node_opt_string(settings, "title", &pl->title) ||
+        mcp_node_opt_bool(settings, "all_images", &pl->all_images) ||
+        read_stage_options(settings, &pl->o) ||
+        mcp_node_require(settings, "input", "stage 'blend'", &input_node) ||
+        mcp_job_check_input(job, settings, "input", MCP_JOB_SERIES) ||
+        (pl->reference && mcp_job_check_input(job, settings, "reference", MCP_JOB_IMAGE)) ||
+        mcp_cli_stage_denoiser(job, settings, &pl->den))
+        return -1;
+    return 0;
+}
+
+static int
+check_blend(mcp_job *job, const mcp_node *settings)
+{
+    blend_plan pl;
+    int rc = parse_blend(job, settings, &pl);
+    mcp_denoiser_free(pl.den);
+    return rc;
+}
+
 static int
 stage_blend(mcp_job *job, const mcp_node *settings)
 {
-    mcp_blend_series_options o = mcp_blend_series_defaults();
-    const char *input = NULL, *reference = NULL, *output = NULL, *title = NULL;
-    int all_images = 0;
-    const mcp_node *input_node = NULL;
+    blend_plan pl;
     const mcp_series *series = NULL;
     const mcp_image *ref = NULL;
-    mcp_denoiser *den = NULL;
-    if (mcp_node_opt_string(settings, "input", &input) ||
-        mcp_node_opt_string(settings, "reference", &reference) ||
-        mcp_node_opt_string(settings, "output", &output) ||
-        mcp_node_opt_string(settings, "title", &title) ||
-        mcp_node_opt_bool(settings, "all_images", &all_images) ||
-        read_stage_options(settings, &o) ||
-        mcp_node_require(settings, "input", "stage 'blend'", &input_node) ||
-        mcp_job_series(job, settings, "input", &series) ||
-        (reference && mcp_job_image(job, settings, "reference", &ref)) ||
-        mcp_cli_stage_denoiser(job, settings, &den))
+    if (parse_blend(job, settings, &pl) || mcp_job_series(job, settings, "input", &series) ||
+        (pl.reference && mcp_job_image(job, settings, "reference", &ref))) {
+        mcp_denoiser_free(pl.den);
         return -1;
+    }
+    mcp_blend_series_options o = pl.o;
+    const char *input = pl.input, *output = pl.output, *title = pl.title;
+    int all_images = pl.all_images;
+    mcp_denoiser *den = pl.den;
     const char *den_name = den->name;
     blend_sink sink;
     memset(&sink, 0, sizeof sink);
@@ -688,4 +729,4 @@ const mcp_stage mcp_stage_blend = {"blend",
                                    "blend a series with its denoised images so that it "
                                    "converges (Denisova & Bocchi 2024), comparing noisy, "
                                    "denoised, easy, curves, ideal and James-Stein",
-                                   blend_keys, stage_blend};
+                                   blend_keys, stage_blend, check_blend};

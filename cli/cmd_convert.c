@@ -47,7 +47,12 @@ static const char usage[] =
     "  --linear               LDR outputs: write values as they are (default: sRGB-encode)\n"
     "  --dump CONVENTION      read IN as a render dump and write it in CONVENTION\n"
     "                         (pbrt, mitsuba, blender, mcpost); with --spp N for files\n"
-    "                         that hold no sample count\n";
+    "                         that hold no sample count\n"
+    "\n"
+    "examples (from the source folder, on the sample renders):\n"
+    "  mcpost convert samples/fixtures/cornell/cornell_reference.exr /tmp/cornell.png --channels R,G,B\n"
+    "  mcpost convert samples/fixtures/cornell/series/cornell_spp0016.exr /tmp/cornell_mitsuba.exr --dump mitsuba\n"
+    "  mcpost convert samples/fixtures/cornell/cornell_reference.exr /tmp/cornell_half.exr --half --compression piz\n";
 
 static int
 cmd_convert(int argc, char **argv)
@@ -123,42 +128,80 @@ const mcp_command mcp_command_convert = {"convert", "convert images and render d
 static const char *const convert_keys[] = {"input", "output", "channels", "pixel",
                                            "compression", NULL};
 
+/* The stage's settings, read before anything is loaded (by the run, and by the job's
+ * check before any stage runs): the output file's name and how to write it, and the
+ * channels to keep (names borrowed from the settings; free `names`). */
+typedef struct convert_plan {
+    const char *out;
+    mcp_write_options wo;
+    const char **names;
+    int count;
+} convert_plan;
+
 static int
-stage_convert(mcp_job *job, const mcp_node *settings)
+parse_convert(mcp_job *job, const mcp_node *settings, convert_plan *pl)
 {
-    const mcp_image *img = NULL;
     const mcp_node *out_node = NULL, *chan = mcp_node_get(settings, "channels");
-    const char *out = NULL, *pixel = NULL, *comp = NULL;
-    mcp_write_options wo = mcp_write_defaults();
-    if (mcp_job_image(job, settings, "input", &img) ||
+    const char *pixel = NULL, *comp = NULL;
+    memset(pl, 0, sizeof *pl);
+    pl->wo = mcp_write_defaults();
+    if (mcp_job_check_input(job, settings, "input", MCP_JOB_IMAGE) ||
         mcp_node_require(settings, "output", "stage 'convert'", &out_node) ||
-        mcp_node_string(out_node, "output", &out) ||
+        mcp_node_string(out_node, "output", &pl->out) ||
         mcp_node_opt_string(settings, "pixel", &pixel) ||
         mcp_node_opt_string(settings, "compression", &comp))
         return -1;
+    if (mcp_format_from_path(pl->out) == MCP_FORMAT_UNKNOWN)
+        return mcp_node_error(out_node, "output: unknown image format '%s'", pl->out);
     if (pixel && strcmp(pixel, "half") && strcmp(pixel, "float"))
         return mcp_node_error(mcp_node_get(settings, "pixel"),
                               "pixel must be half or float (got '%s')", pixel);
     if (pixel && !strcmp(pixel, "half"))
-        wo.exr_pixel = MCP_EXR_HALF;
-    if (comp && mcp_exr_compression_from_name(comp, &wo.compression))
+        pl->wo.exr_pixel = MCP_EXR_HALF;
+    if (comp && mcp_exr_compression_from_name(comp, &pl->wo.compression))
         return mcp_node_error(mcp_node_get(settings, "compression"), "%s",
                               mcp_error_message());
-    const char **names = NULL;
-    int count = 0;
     if (chan) {
         if (chan->kind != MCP_NODE_SEQ || chan->count == 0)
             return mcp_node_error(chan, "channels must be a list of channel names");
-        names = mcp_calloc((size_t)chan->count, sizeof *names);
-        if (!names)
+        if (!(pl->names = mcp_calloc((size_t)chan->count, sizeof *pl->names)))
             return -1;
-        count = chan->count;
-        for (int i = 0; i < count; i++)
-            if (mcp_node_string(chan->items[i], "channels", &names[i])) {
-                free(names);
+        pl->count = chan->count;
+        for (int i = 0; i < pl->count; i++)
+            if (mcp_node_string(chan->items[i], "channels", &pl->names[i])) {
+                free(pl->names);
+                pl->names = NULL;
                 return -1;
             }
     }
+    return 0;
+}
+
+static int
+check_convert(mcp_job *job, const mcp_node *settings)
+{
+    convert_plan pl;
+    int rc = parse_convert(job, settings, &pl);
+    free(pl.names);
+    return rc;
+}
+
+static int
+stage_convert(mcp_job *job, const mcp_node *settings)
+{
+    const mcp_image *img = NULL;
+    const mcp_node *chan = mcp_node_get(settings, "channels");
+    convert_plan pl;
+    if (parse_convert(job, settings, &pl))
+        return -1;
+    if (mcp_job_image(job, settings, "input", &img)) {
+        free(pl.names);
+        return -1;
+    }
+    const char *out = pl.out;
+    const char **names = pl.names;
+    int count = pl.count;
+    mcp_write_options wo = pl.wo;
     char path[4096];
     mcp_image *picked = NULL;
     int rc = mcp_job_output_path(job, out, path, sizeof path) ||
@@ -177,4 +220,4 @@ stage_convert(mcp_job *job, const mcp_node *settings)
 
 const mcp_stage mcp_stage_convert = {"convert", "write an input in another format, with "
                                                 "chosen channels",
-                                     convert_keys, stage_convert};
+                                     convert_keys, stage_convert, check_convert};

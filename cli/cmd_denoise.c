@@ -33,7 +33,12 @@ static const char usage[] =
     "  --variance-of-mean FILE the variance of the colour mean, R,G,B (separate inputs)\n"
     "  --no-albedo, --no-normal, --no-variance   ignore that part of the input\n"
     "  --spp N, --convention NAME, --variance KIND   how to read DUMP, as for info\n"
-    "  --list                  print the denoisers and their settings\n";
+    "  --list                  print the denoisers and their settings\n"
+    "\n"
+    "examples (from the source folder, on the sample renders):\n"
+    "  mcpost denoise samples/fixtures/cornell/series/cornell_spp0064.exr --denoiser nlm -o /tmp/cornell_nlm.exr\n"
+    "  mcpost denoise samples/fixtures/cornell/series/cornell_spp0016.exr -o /tmp/cornell_unet.exr   # the U-Net\n"
+    "  mcpost denoise --list\n";
 
 static void
 print_kinds(void)

@@ -510,7 +510,12 @@ static const char usage[] =
     "                           stratified samplers) [file]\n"
     "  Reading dumps:\n"
     "  --convention NAME        pbrt, mitsuba, blender, mcpost, plain [auto]\n"
-    "  --variance KIND          per-sample or of-mean [per convention]\n";
+    "  --variance KIND          per-sample or of-mean [per convention]\n"
+    "\n"
+    "examples (from the source folder, on the sample renders):\n"
+    "  mcpost estimate samples/fixtures/cornell/series/cornell_spp0064.exr --denoiser nlm -o out/estimate\n"
+    "  mcpost estimate --series 'samples/fixtures/cornell/series/cornell_spp%04d.exr' --spp 16,32,64,128 \\\n"
+    "                  --denoiser bilateral --ref samples/fixtures/cornell/cornell_reference.exr\n";
 
 enum {
     OPT_METRIC = 256,
@@ -935,20 +940,56 @@ done:
     return rc;
 }
 
+/* The stage's settings, read before anything is loaded (by the run, and by the job's
+ * check before any stage runs): the options, the names of the input (a dump or a
+ * series) and the reference, checked against the job's inputs, and the denoiser,
+ * created from its settings (its files read). Strings are borrowed from the settings;
+ * the denoiser is the plan's. */
+typedef struct estimate_plan {
+    mcp_series_estimate_options so;
+    const char *name, *sub, *ref_name;
+    mcp_denoiser *den;
+} estimate_plan;
+
+static int
+parse_estimate(mcp_job *job, const mcp_node *settings, estimate_plan *pl)
+{
+    memset(pl, 0, sizeof *pl);
+    pl->so = mcp_series_estimate_defaults();
+    pl->sub = "estimate";
+    if (mcp_node_opt_string(settings, "input", &pl->name) ||
+        mcp_node_opt_string(settings, "output", &pl->sub) ||
+        mcp_node_opt_string(settings, "reference", &pl->ref_name) ||
+        read_settings(settings, &pl->so) ||
+        mcp_job_check_input(job, settings, "input", MCP_JOB_SERIES | MCP_JOB_DUMP) ||
+        (pl->ref_name && mcp_job_check_input(job, settings, "reference", MCP_JOB_IMAGE)))
+        return -1;
+    if (mcp_cli_stage_denoiser(job, settings, &pl->den))
+        return mcp_node_get(settings, "denoiser") ? at_line(settings, "denoiser") : -1;
+    return 0;
+}
+
+static int
+check_estimate(mcp_job *job, const mcp_node *settings)
+{
+    estimate_plan pl;
+    int rc = parse_estimate(job, settings, &pl);
+    mcp_denoiser_free(pl.den);
+    return rc;
+}
+
 static int
 stage_estimate(mcp_job *job, const mcp_node *settings)
 {
-    mcp_series_estimate_options so = mcp_series_estimate_defaults();
-    const char *name = NULL, *sub = "estimate", *ref_name = NULL;
-    if (mcp_node_opt_string(settings, "input", &name) ||
-        mcp_node_opt_string(settings, "output", &sub) ||
-        mcp_node_opt_string(settings, "reference", &ref_name) ||
-        read_settings(settings, &so))
+    estimate_plan pl;
+    if (parse_estimate(job, settings, &pl)) {
+        mcp_denoiser_free(pl.den);
         return -1;
+    }
+    mcp_series_estimate_options so = pl.so;
+    const char *name = pl.name, *sub = pl.sub, *ref_name = pl.ref_name;
     char probe[4352];
-    mcp_denoiser *den = NULL;
-    if (mcp_cli_stage_denoiser(job, settings, &den))
-        return mcp_node_get(settings, "denoiser") ? at_line(settings, "denoiser") : -1;
+    mcp_denoiser *den = pl.den;
     const mcp_image *ref = NULL;
     const mcp_series *series = NULL;
     const mcp_dump *dump = NULL;
@@ -1006,4 +1047,4 @@ done:
 const mcp_stage mcp_stage_estimate = {
     "estimate",
     "error estimate of a denoised dump or series: SURE, blocks, stopping (Firmino 2024)",
-    estimate_keys, stage_estimate};
+    estimate_keys, stage_estimate, check_estimate};

@@ -175,7 +175,11 @@ static const char usage[] =
     "  Prints size, channels with min/mean/max and NaN/Inf/negative counts, the\n"
     "  render-dump convention (pbrt, mitsuba, blender, mcpost, plain) and the sample\n"
     "  count. --spp gives the count for files that hold none (Mitsuba);\n"
-    "  --variance per-sample|of-mean overrides what the convention says.\n";
+    "  --variance per-sample|of-mean overrides what the convention says.\n"
+    "\n"
+    "examples (from the source folder, on the sample renders):\n"
+    "  mcpost info samples/fixtures/cornell/series/cornell_spp0016.exr\n"
+    "  mcpost info --json samples/fixtures/cornell/cornell_reference.exr\n";
 
 static int
 cmd_info(int argc, char **argv)
@@ -249,12 +253,20 @@ const mcp_command mcp_command_info = {"info", "describe images and render dumps"
 
 static const char *const info_keys[] = {"input", NULL};
 
+/* The stage's settings: one input, an image or a dump (read by the run, before it
+ * loads anything, and by the job's check before any stage runs). */
+static int
+check_info(mcp_job *job, const mcp_node *settings)
+{
+    return mcp_job_check_input(job, settings, "input", MCP_JOB_IMAGE);
+}
+
 static int
 stage_info(mcp_job *job, const mcp_node *settings)
 {
     const char *name = NULL;
     const mcp_image *img = NULL;
-    if (mcp_node_opt_string(settings, "input", &name) ||
+    if (check_info(job, settings) || mcp_node_opt_string(settings, "input", &name) ||
         mcp_job_image(job, settings, "input", &img))
         return -1;
     cJSON *section = mcp_report_section(mcp_job_report(job), "info", name);
@@ -284,4 +296,4 @@ stage_info(mcp_job *job, const mcp_node *settings)
 
 const mcp_stage mcp_stage_info = {"info", "describe an input (channels, statistics, "
                                           "convention, sample count) in the report",
-                                  info_keys, stage_info};
+                                  info_keys, stage_info, check_info};

@@ -26,9 +26,11 @@ static const char usage[] =
     "                         :replicates\n"
     "  --spp N, --convention NAME  how to read INs that hold no sample count\n"
     "  --half                 store half floats\n"
-    "example:\n"
-    "  mcpost merge frame_seed1.exr frame_seed2.exr frame_seed3.exr frame_seed4.exr \\\n"
-    "               -o frame_merged.exr && mcpost info frame_merged.exr\n";
+    "\n"
+    "examples (from the source folder, on the sample renders):\n"
+    "  mcpost merge samples/fixtures/strat/texture/blocks/texture_r[0-3]_b00.exr -o /tmp/texture_merged.exr\n"
+    "  mcpost merge --variance pooled samples/fixtures/strat/texture/blocks/texture_r0_b0[0-3].exr \\\n"
+    "                 -o /tmp/texture_pooled.exr\n";
 
 static int
 cmd_merge(int argc, char **argv)

@@ -46,7 +46,14 @@ static const char usage[] =
     "  Blue noise:\n"
     "  --no-spectra              skip the tiled error spectra\n"
     "  --spectra-tile-size N     tile size [32]\n"
-    "  --spectra-cutoff X        fraction of Nyquist [0.25]\n";
+    "  --spectra-cutoff X        fraction of Nyquist [0.25]\n"
+    "\n"
+    "examples (from the source folder, on the sample renders):\n"
+    "  mcpost metrics samples/fixtures/cornell/series/cornell_spp0016.exr samples/fixtures/cornell/cornell_reference.exr\n"
+    "  mcpost metrics --json --flip ldr samples/fixtures/cornell/series/cornell_spp0064.exr \\\n"
+    "                 samples/fixtures/cornell/cornell_reference.exr\n"
+    "  mcpost metrics samples/fixtures/cornell/series/cornell_spp0016.exr samples/fixtures/cornell/cornell_reference.exr \\\n"
+    "                 -o out/metrics_maps --tone-mapper hable\n";
 
 enum {
     OPT_JSON = 256,

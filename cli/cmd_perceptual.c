@@ -728,7 +728,15 @@ static const char usage[] =
     "         --tile N [8] (permutation baseline)\n"
     "  mask:  --mask-size N [128]; --mask-sigma S [1.5]; --mask-seed S [1]; --no-cache\n"
     "         (the mask is cached in $XDG_CACHE_HOME/mcpost or ~/.cache/mcpost)\n"
-    "  --spectra-tile N    tiles of the error spectrum [32]\n";
+    "  --spectra-tile N    tiles of the error spectrum [32]\n"
+    "\n"
+    "examples (from the source folder, on the sample renders):\n"
+    "  mcpost perceptual samples/fixtures/cornell/singles/cornell_single0[0-3].exr \\\n"
+    "                    --ref samples/fixtures/cornell/cornell_reference.exr -o out/perceptual\n"
+    "  mcpost perceptual --compare --surrogate reference --ref samples/fixtures/cornell/cornell_reference.exr \\\n"
+    "                    samples/fixtures/cornell/singles/cornell_single0[0-3].exr -o out/compare\n"
+    "  mcpost perceptual --group 4 --method error-diffusion \\\n"
+    "                    samples/fixtures/texture/singles/texture_single*.exr -o out/perceptual_texture\n";
 
 static int
 mkdirs(const char *path)
@@ -991,6 +999,74 @@ stage_candidates(mcp_job *job, const mcp_node *settings, perc_run *r)
     return finish_features(r);
 }
 
+/* The stage's settings, read before anything is loaded (by the run, and by the job's
+ * check before any stage runs): every word into `a` (as the flags), the result's
+ * name, the inputs it names (candidates, reference, surrogate, confidence: checked
+ * against the job's inputs and earlier results), the kernel file, and the surrogate's
+ * denoiser (*den, the caller's to free). Declares the result for later stages. */
+static int
+parse_perceptual(mcp_job *job, const mcp_node *settings, perc_args *a, const char **name,
+                 mcp_denoiser **den)
+{
+    *name = "perceptual";
+    *den = NULL;
+    for (int i = 0; i < settings->count; i++) {
+        const char *key = settings->keys[i]->value;
+        const mcp_node *v = settings->items[i];
+        if (!strcmp(key, "candidates") || !strcmp(key, "denoiser") ||
+            !strcmp(key, "reference") || !strcmp(key, "name"))
+            continue;
+        if (!strcmp(key, "kernel") && v->kind == MCP_NODE_SEQ) {
+            double *t = NULL;
+            int n = 0;
+            if (mcp_node_opt_doubles(settings, "kernel", &t, &n)) return -1;
+            int bad = parse_taps(a, t, n);
+            free(t);
+            if (bad) return mcp_node_error(v, "%s", mcp_error_message());
+            continue;
+        }
+        if (v->kind != MCP_NODE_SCALAR)
+            return mcp_node_error(v, "%s must be a single value", key);
+        if (set_word(a, key, v->value)) return mcp_node_error(v, "%s", mcp_error_message());
+    }
+    const mcp_node *n = NULL;
+    if (mcp_node_opt_string(settings, "name", name) ||
+        mcp_node_require(settings, "candidates", "stage 'perceptual'", &n))
+        return -1;
+    if (n->kind == MCP_NODE_SCALAR) {
+        if (mcp_job_check_name(job, n, MCP_JOB_SERIES)) return -1;
+    } else if (n->kind == MCP_NODE_SEQ) {
+        for (int i = 0; i < n->count; i++)
+            if (mcp_job_check_name(job, n->items[i], MCP_JOB_IMAGE)) return -1;
+    } else {
+        return mcp_node_error(n,
+                              "candidates must name a series input or list image inputs");
+    }
+    if ((mcp_node_get(settings, "reference") &&
+         mcp_job_check_input(job, settings, "reference", MCP_JOB_IMAGE)) ||
+        (strcmp(a->surrogate, "denoise") && strcmp(a->surrogate, "reference") &&
+         mcp_job_check_input(job, settings, "surrogate", MCP_JOB_IMAGE)) ||
+        (a->confidence && mcp_job_check_input(job, settings, "confidence", MCP_JOB_IMAGE)) ||
+        (a->kernel_file && mcp_job_check_file(job, mcp_node_get(settings, "kernel"), "kernel")))
+        return -1;
+    if (!strcmp(a->surrogate, "denoise") && mcp_cli_stage_denoiser(job, settings, den))
+        return -1;
+    return mcp_job_declare(job, *name, MCP_JOB_IMAGE);
+}
+
+static int
+check_perceptual(mcp_job *job, const mcp_node *settings)
+{
+    perc_args a;
+    args_init(&a);
+    const char *name;
+    mcp_denoiser *den = NULL;
+    int rc = parse_perceptual(job, settings, &a, &name, &den);
+    mcp_denoiser_free(den);
+    args_free(&a);
+    return rc;
+}
+
 static int
 stage_perceptual(mcp_job *job, const mcp_node *settings)
 {
@@ -1002,35 +1078,7 @@ stage_perceptual(mcp_job *job, const mcp_node *settings)
     const char *name = "perceptual";
     cJSON *summary = NULL;
     mcp_image *kern = NULL, *img = NULL;
-    /* scalar settings, by the same words as the flags */
-    for (int i = 0; i < settings->count; i++) {
-        const char *key = settings->keys[i]->value;
-        const mcp_node *v = settings->items[i];
-        if (!strcmp(key, "candidates") || !strcmp(key, "denoiser") ||
-            !strcmp(key, "reference") || !strcmp(key, "name"))
-            continue;
-        if (!strcmp(key, "kernel") && v->kind == MCP_NODE_SEQ) {
-            double *t = NULL;
-            int n = 0;
-            if (mcp_node_opt_doubles(settings, "kernel", &t, &n)) goto done;
-            int bad = parse_taps(&a, t, n);
-            free(t);
-            if (bad) {
-                mcp_node_error(v, "%s", mcp_error_message());
-                goto done;
-            }
-            continue;
-        }
-        if (v->kind != MCP_NODE_SCALAR) {
-            mcp_node_error(v, "%s must be a single value", key);
-            goto done;
-        }
-        if (set_word(&a, key, v->value)) {
-            mcp_node_error(v, "%s", mcp_error_message());
-            goto done;
-        }
-    }
-    if (mcp_node_opt_string(settings, "name", &name) ||
+    if (parse_perceptual(job, settings, &a, &name, &r.den) ||
         stage_candidates(job, settings, &r))
         goto done;
     if (mcp_node_get(settings, "reference") &&
@@ -1049,10 +1097,6 @@ stage_perceptual(mcp_job *job, const mcp_node *settings)
             goto done;
         }
         r.kernel_img = kern;
-    }
-    if (!strcmp(a.surrogate, "denoise")) {
-        if (mcp_cli_stage_denoiser(job, settings, &r.den))
-            goto done;
     }
     /* outputs in <output>/<name>/, images relative to the report */
     char probe[4600];
@@ -1096,4 +1140,4 @@ const mcp_stage mcp_stage_perceptual = {
     "perceptual",
     "perceptual error optimisation of few-sample renders, with scores and the comparison "
     "of every method",
-    perceptual_keys, stage_perceptual};
+    perceptual_keys, stage_perceptual, check_perceptual};

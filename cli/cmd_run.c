@@ -12,7 +12,13 @@ static const char usage[] =
     "  Runs the stages of a job file in order and writes the results, report.json and\n"
     "  report.html into the job's output folder (output: in the file, relative to it;\n"
     "  --output overrides). --json prints the report on stdout. --list names the stages.\n"
-    "  --check validates the job (stages, keys, inputs and their files) and runs nothing.\n";
+    "  --check validates the job as run does before its first stage (every stage's keys,\n"
+    "  values, inputs, results of earlier stages and files) and runs nothing.\n"
+    "\n"
+    "examples (from the source folder, on the sample renders):\n"
+    "  mcpost run --list\n"
+    "  mcpost run --check samples/jobs/demo.yaml\n"
+    "  mcpost run samples/jobs/metrics.yaml          # then open out/metrics/report.html\n";
 
 static int
 cmd_run(int argc, char **argv)

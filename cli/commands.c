@@ -9,6 +9,7 @@ extern const mcp_command mcp_command_perceptual;
 extern const mcp_command mcp_command_estimate;
 extern const mcp_command mcp_command_blend;
 extern const mcp_command mcp_command_merge;
+extern const mcp_command mcp_command_help;
 const mcp_command *const mcp_commands[] = {
     &mcp_command_info,
     &mcp_command_convert,
@@ -19,5 +20,6 @@ const mcp_command *const mcp_commands[] = {
     &mcp_command_perceptual,
     &mcp_command_estimate,
     &mcp_command_blend,
+    &mcp_command_help,
     NULL,
 };

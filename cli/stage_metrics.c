@@ -279,31 +279,68 @@ done:
 
 /* ---- the stage ---- */
 
+/* The stage's settings, read before anything is loaded (by the run, and by the job's
+ * check before any stage runs): the options and the names of what it compares, each
+ * checked against the job's inputs and earlier results. Strings are borrowed from the
+ * settings. */
+typedef struct metrics_plan {
+    mcp_metrics_options o;
+    const char *input, *reference, *title, *output, *series_name, *estimate_name;
+    int want_maps;
+} metrics_plan;
+
 static int
-stage_metrics(mcp_job *job, const mcp_node *settings)
+parse_metrics(mcp_job *job, const mcp_node *settings, metrics_plan *pl)
 {
-    mcp_metrics_options o = mcp_metrics_defaults();
-    const char *input = NULL, *reference = NULL, *title = NULL, *output = NULL,
-               *series_name = NULL, *estimate_name = NULL;
-    int want_maps = 1;
-    if (mcp_node_opt_string(settings, "input", &input) ||
-        mcp_node_opt_string(settings, "reference", &reference) ||
-        mcp_node_opt_string(settings, "series", &series_name) ||
-        mcp_node_opt_string(settings, "estimate", &estimate_name) ||
-        mcp_node_opt_string(settings, "title", &title) ||
-        mcp_node_opt_string(settings, "output", &output) ||
-        mcp_node_opt_bool(settings, "maps", &want_maps) || read_options(settings, &o))
+    memset(pl, 0, sizeof *pl);
+    pl->o = mcp_metrics_defaults();
+    pl->want_maps = 1;
+    if (mcp_node_opt_string(settings, "input", &pl->input) ||
+        mcp_node_opt_string(settings, "reference", &pl->reference) ||
+        mcp_node_opt_string(settings, "series", &pl->series_name) ||
+        mcp_node_opt_string(settings, "estimate", &pl->estimate_name) ||
+        mcp_node_opt_string(settings, "title", &pl->title) ||
+        mcp_node_opt_string(settings, "output", &pl->output) ||
+        mcp_node_opt_bool(settings, "maps", &pl->want_maps) ||
+        read_options(settings, &pl->o))
         return -1;
-    if (!reference) {
+    if (!pl->reference) {
         const mcp_node *n = NULL;
         return mcp_node_require(settings, "reference", "stage 'metrics'", &n);
     }
-    if (!input && !series_name)
+    if (!pl->input && !pl->series_name)
         return mcp_node_error(settings,
                               "stage 'metrics' needs 'input' or 'series' (or both)");
-    if (estimate_name && !input)
+    if (pl->estimate_name && !pl->input)
         return mcp_node_error(mcp_node_get(settings, "estimate"),
                               "'estimate' needs 'input' (the image it estimates)");
+    return mcp_job_check_input(job, settings, "reference", MCP_JOB_IMAGE) ||
+           (pl->input && mcp_job_check_input(job, settings, "input", MCP_JOB_IMAGE)) ||
+           (pl->estimate_name &&
+            mcp_job_check_input(job, settings, "estimate", MCP_JOB_IMAGE)) ||
+           (pl->series_name && mcp_job_check_input(job, settings, "series", MCP_JOB_SERIES))
+               ? -1
+               : 0;
+}
+
+static int
+check_metrics(mcp_job *job, const mcp_node *settings)
+{
+    metrics_plan pl;
+    return parse_metrics(job, settings, &pl);
+}
+
+static int
+stage_metrics(mcp_job *job, const mcp_node *settings)
+{
+    metrics_plan pl;
+    if (parse_metrics(job, settings, &pl))
+        return -1;
+    mcp_metrics_options o = pl.o;
+    const char *input = pl.input, *reference = pl.reference, *title = pl.title,
+               *output = pl.output, *series_name = pl.series_name,
+               *estimate_name = pl.estimate_name;
+    int want_maps = pl.want_maps;
 
     const mcp_image *ref = NULL, *test = NULL, *estimate = NULL;
     const mcp_series *series = NULL;
@@ -362,4 +399,4 @@ const mcp_stage mcp_stage_metrics = {"metrics",
                                      "reference (MSE, relMSE, PSNR, pMSE, FLIP, "
                                      "RelSE percentiles, blue noise) with maps and "
                                      "plots",
-                                     metrics_keys, stage_metrics};
+                                     metrics_keys, stage_metrics, check_metrics};

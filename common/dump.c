@@ -383,6 +383,20 @@ check_values(mcp_image *img, const char *part, int is_variance, mcp_badval_polic
 {
     if (!img)
         return 0;
+    /* bad values are rare: a parallel count over every value first, and the serial
+       pass that finds the first and replaces them only when there are some */
+    long any_bad = 0;
+    const int nc = img->channels;
+#pragma omp parallel for reduction(+ : any_bad) schedule(static) \
+    if ((long long)img->width * img->height * nc > 65536)
+    for (int y = 0; y < img->height; y++)
+        for (int x = 0; x < img->width; x++) {
+            const float *v = mcp_image_px(img, x, y);
+            for (int c = 0; c < nc; c++)
+                any_bad += !isfinite(v[c]) || (is_variance && v[c] < 0);
+        }
+    if (!any_bad)
+        return 0;
     for (int c = 0; c < img->channels; c++) {
         long bad = 0;
         int fx = -1, fy = -1;

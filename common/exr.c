@@ -8,9 +8,10 @@
  * float or half. Chunks are decoded and encoded in parallel (OpenMP), each thread with
  * its own Core pipeline; zip chunks that would not shrink enough are stored raw
  * (store_raw_after_probe). notes/libraries.md 2a lists the Core pitfalls this file
- * works around; README.md ("EXR speed") has the measurements. */
+ * works around; docs/benchmarks.md ("EXR speed") has the measurements. */
 #define _POSIX_C_SOURCE 200809L
 #include "internal.h"
+#include "exr_zip.h"
 
 #include <openexr.h>
 
@@ -259,11 +260,30 @@ check_file_holds(exr_context_t f, exr_storage_t storage, exr_compression_t comp,
 
 /* ---- decoding ---- */
 
+/* Zip chunks are inflated by exr_zip.c (libdeflate) instead of Core's zlib; Core has
+ * read the chunk into packed_buffer and sized unpacked_buffer for it. A chunk whose
+ * size equals its raw size was stored raw. */
+static exr_result_t
+decompress_zip_chunk(exr_decode_pipeline_t *dec)
+{
+    uint64_t packed = dec->chunk.packed_size, unpacked = dec->chunk.unpacked_size;
+    if (packed == unpacked) {
+        if (dec->unpacked_buffer != dec->packed_buffer)
+            memcpy(dec->unpacked_buffer, dec->packed_buffer, unpacked);
+        return EXR_ERR_SUCCESS;
+    }
+    int rc = mcp__zip_decode(dec->decoding_user_data, dec->packed_buffer, packed,
+                             dec->unpacked_buffer, unpacked);
+    return rc == 0 ? EXR_ERR_SUCCESS
+                   : rc == -2 ? EXR_ERR_OUT_OF_MEMORY : EXR_ERR_CORRUPT_CHUNK;
+}
+
 /* Decodes one chunk into img at (x0, y0) of the data window with this thread's
- * pipeline; on failure *what says which step failed. */
+ * pipeline; on failure *what says which step failed. zip: this thread's zip decoder
+ * for a zip file, NULL otherwise. */
 static exr_result_t
 decode_chunk(exr_context_t f, const chunk_at *c, exr_decode_pipeline_t *dec,
-             int *initialised, mcp_image *img, const char **what)
+             int *initialised, mcp__zip_codec *zip, mcp_image *img, const char **what)
 {
     *what = "cannot decode";
     exr_result_t rc = *initialised ? exr_decoding_update(f, 0, &c->ci, dec)
@@ -282,6 +302,10 @@ decode_chunk(exr_context_t f, const chunk_at *c, exr_decode_pipeline_t *dec,
     if (!*initialised) {
         if ((rc = exr_decoding_choose_default_routines(f, 0, dec)) != EXR_ERR_SUCCESS)
             return rc;
+        if (zip && dec->decompress_fn) {
+            dec->decompress_fn = decompress_zip_chunk;
+            dec->decoding_user_data = zip;
+        }
         *initialised = 1;
     }
     *what = "corrupt or truncated pixel data";
@@ -293,28 +317,34 @@ decode_chunk(exr_context_t f, const chunk_at *c, exr_decode_pipeline_t *dec,
  * be), and the chunks fill disjoint rectangles of img. Each thread keeps one
  * pipeline for all its chunks, as Core intends (update instead of initialise). */
 static int
-read_pixels(exr_context_t f, const chunk_at *chunks, int n, mcp_image *img,
-            const char *path)
+read_pixels(exr_context_t f, const chunk_at *chunks, int n, exr_compression_t comp,
+            mcp_image *img, const char *path)
 {
     chunk_failure fail = {.idx = -1};
+    int zip = comp == EXR_COMPRESSION_ZIP || comp == EXR_COMPRESSION_ZIPS;
 #pragma omp parallel if (n > 1)
     {
         exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
         int initialised = 0;
+        mcp__zip_codec *decoder = zip ? mcp__zip_decoder_new() : NULL;
         /* chunks cost about the same; dynamic in ones keeps a slow thread (this
            machine is shared) from holding up the rest */
 #pragma omp for schedule(dynamic, 1)
         for (int i = 0; i < n; i++) {
             if (failed(&fail))
                 continue;
-            const char *what;
+            const char *what = "out of memory";
             exr_last_message[0] = '\0';
-            exr_result_t rc = decode_chunk(f, &chunks[i], &dec, &initialised, img, &what);
+            exr_result_t rc =
+                zip && !decoder
+                    ? EXR_ERR_OUT_OF_MEMORY
+                    : decode_chunk(f, &chunks[i], &dec, &initialised, decoder, img, &what);
             if (rc != EXR_ERR_SUCCESS)
                 note_failure(&fail, i, rc, what);
         }
         if (initialised)
             exr_decoding_destroy(f, &dec);
+        mcp__zip_codec_free(decoder);
     }
     return fail.idx >= 0 ? report_failure(&fail, path) : 0;
 }
@@ -377,7 +407,7 @@ read_context(exr_context_t f, unsigned long long file_bytes, const char *name,
         names[c] = e->name.str;
     }
     if (mcp_image_new((int)w, (int)h, chans->num_channels, names, &img) ||
-        mcp_image_set_source(img, path) || read_pixels(f, chunks, n_chunks, img, path) ||
+        mcp_image_set_source(img, path) || read_pixels(f, chunks, n_chunks, comp, img, path) ||
         read_attributes(f, &img->attrs))
         goto done;
     if ((dw.min.x || dw.min.y) &&
@@ -509,37 +539,64 @@ write_attributes(exr_context_t f, const mcp_attrs *attrs)
     return 0;
 }
 
-/* OpenEXR Core 3.1.5 writes a corrupt chunk when ZIP/ZIPS output is not smaller than
- * the raw data (the file must then hold the raw bytes; Core stores something else, and
- * both Core and the C++ library read garbage back). Wrap the compressor: keep the raw
- * packed bytes, and where compression did not pay, put exactly those bytes out. */
-typedef struct raw_copy {
-    exr_result_t (*compress)(exr_encode_pipeline_t *);
-    void *bytes;
-    size_t cap;
-    int skip; /* store this chunk raw without trying (see store_raw_after_probe) */
-} raw_copy;
+/* Compresses one chunk: the bytes to write are then out[0 .. out_bytes). Zip chunks go
+ * to exr_zip.c (libdeflate); other compressions to Core's compress_fn, wrapped: Core
+ * 3.1.5 writes a corrupt chunk when its output is not smaller than the raw data (the
+ * file must then hold the raw bytes; Core stores something else, and both Core and
+ * the C++ library read garbage back), so keep the raw packed bytes, and where
+ * compression did not pay, put exactly those out. A chunk is stored raw for every
+ * compression when its compressed form is not smaller: readers (ours, Core, the C++
+ * library) take a chunk whose size equals its raw size as raw. */
+typedef struct chunk_coder {
+    exr_result_t (*core_compress)(exr_encode_pipeline_t *); /* NULL for zip */
+    mcp__zip_codec *zip;                                     /* zip's encoder */
+    void *raw;                                               /* core_compress's copy */
+    size_t raw_cap;
+    int store_raw; /* store without trying (see store_raw_after_probe) */
+    const void *out;
+    uint64_t out_bytes;
+} chunk_coder;
+
+static void
+chunk_coder_free(chunk_coder *coder)
+{
+    mcp__zip_codec_free(coder->zip);
+    free(coder->raw);
+}
 
 static exr_result_t
-compress_or_store_raw(exr_encode_pipeline_t *enc)
+compress_chunk(exr_encode_pipeline_t *enc)
 {
-    raw_copy *raw = enc->encoding_user_data;
-    if (raw->skip)
-        return EXR_ERR_SUCCESS; /* write_pixels writes the packed bytes */
-    if (raw->cap < enc->packed_bytes) {
-        void *grown = realloc(raw->bytes, enc->packed_bytes);
+    chunk_coder *coder = enc->encoding_user_data;
+    coder->out = enc->packed_buffer;
+    coder->out_bytes = enc->packed_bytes;
+    if (coder->store_raw)
+        return EXR_ERR_SUCCESS;
+    if (coder->zip) {
+        const void *stream;
+        long long size = mcp__zip_encode(coder->zip, enc->packed_buffer, enc->packed_bytes,
+                                         &stream);
+        if (size < 0)
+            return EXR_ERR_OUT_OF_MEMORY;
+        if ((uint64_t)size < enc->packed_bytes) {
+            coder->out = stream;
+            coder->out_bytes = (uint64_t)size;
+        }
+        return EXR_ERR_SUCCESS;
+    }
+    if (coder->raw_cap < enc->packed_bytes) {
+        void *grown = realloc(coder->raw, enc->packed_bytes);
         if (!grown)
             return EXR_ERR_OUT_OF_MEMORY;
-        raw->bytes = grown;
-        raw->cap = enc->packed_bytes;
+        coder->raw = grown;
+        coder->raw_cap = enc->packed_bytes;
     }
-    memcpy(raw->bytes, enc->packed_buffer, enc->packed_bytes);
-    exr_result_t rc = raw->compress(enc);
-    if (rc == EXR_ERR_SUCCESS && enc->compressed_bytes >= enc->packed_bytes) {
-        if (enc->compressed_alloc_size < enc->packed_bytes)
-            return EXR_ERR_CORRUPT_CHUNK;
-        memcpy(enc->compressed_buffer, raw->bytes, enc->packed_bytes);
-        enc->compressed_bytes = enc->packed_bytes;
+    memcpy(coder->raw, enc->packed_buffer, enc->packed_bytes);
+    coder->out = coder->raw;
+    exr_result_t rc = coder->core_compress(enc);
+    if (rc == EXR_ERR_SUCCESS && enc->compressed_bytes < enc->packed_bytes) {
+        coder->out = enc->compressed_buffer;
+        coder->out_bytes = enc->compressed_bytes;
     }
     return rc;
 }
@@ -554,11 +611,11 @@ keep_in_pipeline(exr_encode_pipeline_t *enc)
     return EXR_ERR_SUCCESS;
 }
 
-/* Packs and compresses one chunk of img with this thread's pipeline; the bytes to
- * write are then enc->compressed_buffer[0 .. compressed_bytes). */
+/* Packs and compresses one chunk of img with this thread's pipeline and coder; the
+ * bytes to write are then coder->out[0 .. out_bytes). zip_level > 0 for zip files. */
 static exr_result_t
 encode_chunk(exr_context_t f, const chunk_at *c, exr_encode_pipeline_t *enc,
-             int *initialised, raw_copy *raw, const mcp_image *img)
+             int *initialised, chunk_coder *coder, int zip_level, const mcp_image *img)
 {
     exr_result_t rc = *initialised ? exr_encoding_update(f, 0, &c->ci, enc)
                                    : exr_encoding_initialize(f, 0, &c->ci, enc);
@@ -577,16 +634,26 @@ encode_chunk(exr_context_t f, const chunk_at *c, exr_encode_pipeline_t *enc,
     if (!*initialised) {
         if ((rc = exr_encoding_choose_default_routines(f, 0, enc)) != EXR_ERR_SUCCESS)
             return rc;
-        if (enc->compress_fn) {
-            raw->compress = enc->compress_fn;
-            enc->compress_fn = compress_or_store_raw;
+        if (zip_level > 0) {
+            if (!coder->zip && !(coder->zip = mcp__zip_encoder_new(zip_level)))
+                return EXR_ERR_OUT_OF_MEMORY;
+            enc->compress_fn = compress_chunk;
+        } else if (enc->compress_fn) {
+            coder->core_compress = enc->compress_fn;
+            enc->compress_fn = compress_chunk;
         }
         enc->yield_until_ready_fn = keep_in_pipeline;
         enc->write_fn = keep_in_pipeline;
         *initialised = 1;
     }
-    enc->encoding_user_data = raw;
-    return exr_encoding_run(f, 0, enc);
+    enc->encoding_user_data = coder;
+    coder->out = NULL;
+    rc = exr_encoding_run(f, 0, enc);
+    if (rc == EXR_ERR_SUCCESS && !coder->out) { /* no compression: Core's bytes */
+        coder->out = enc->compressed_buffer ? enc->compressed_buffer : enc->packed_buffer;
+        coder->out_bytes = enc->compressed_buffer ? enc->compressed_bytes : enc->packed_bytes;
+    }
+    return rc;
 }
 
 /* Zip costs about as much per byte as the rest of writing put together, and a
@@ -602,7 +669,7 @@ encode_chunk(exr_context_t f, const chunk_at *c, exr_encode_pipeline_t *enc,
 
 static int
 store_raw_after_probe(exr_context_t f, const mcp_image *img, const chunk_at *chunks,
-                      int n, double min_saving)
+                      int n, int zip_level, double min_saving)
 {
     int probes = n / PROBE_EVERY > 0 ? n / PROBE_EVERY : 1;
     unsigned long long raw_bytes = 0, zip_bytes = 0;
@@ -610,23 +677,23 @@ store_raw_after_probe(exr_context_t f, const mcp_image *img, const chunk_at *chu
 #pragma omp parallel if (probes > 1) reduction(+ : raw_bytes, zip_bytes, errors)
     {
         exr_encode_pipeline_t enc = EXR_ENCODE_PIPELINE_INITIALIZER;
-        raw_copy raw = {NULL, NULL, 0, 0};
+        chunk_coder coder = {0};
         int initialised = 0;
 #pragma omp for schedule(dynamic, 1)
         for (int j = 0; j < probes; j++) {
             /* the middle chunk of each of `probes` equal runs */
             int i = (int)(((2LL * j + 1) * n) / (2LL * probes));
-            if (encode_chunk(f, &chunks[i], &enc, &initialised, &raw, img) !=
+            if (encode_chunk(f, &chunks[i], &enc, &initialised, &coder, zip_level, img) !=
                 EXR_ERR_SUCCESS) {
                 errors++;
                 continue;
             }
             raw_bytes += enc.packed_bytes;
-            zip_bytes += enc.compressed_bytes;
+            zip_bytes += coder.out_bytes;
         }
         if (initialised)
             exr_encoding_destroy(f, &enc);
-        free(raw.bytes);
+        chunk_coder_free(&coder);
     }
     /* on an error, compress as asked: the real pass reports it */
     return !errors && (double)zip_bytes > (1.0 - min_saving) * (double)raw_bytes;
@@ -639,7 +706,8 @@ store_raw_after_probe(exr_context_t f, const mcp_image *img, const chunk_at *chu
  * chunk per thread is held in memory. */
 static int
 write_pixels(exr_context_t f, const mcp_image *img, exr_storage_t storage,
-             exr_compression_t comp, double min_saving, const exr_attr_box2i_t *dw,
+             exr_compression_t comp, int zip_level, double min_saving,
+             const exr_attr_box2i_t *dw,
              const char *path)
 {
     chunk_at *chunks;
@@ -648,14 +716,16 @@ write_pixels(exr_context_t f, const mcp_image *img, exr_storage_t storage,
                     path, &chunks, &n))
         return -1;
     /* below PROBE_EVERY chunks the probe would cost more than it could save */
-    int store_raw = (comp == EXR_COMPRESSION_ZIP || comp == EXR_COMPRESSION_ZIPS) &&
-                    min_saving > 0 && n >= PROBE_EVERY &&
-                    store_raw_after_probe(f, img, chunks, n, min_saving);
+    int zip = comp == EXR_COMPRESSION_ZIP || comp == EXR_COMPRESSION_ZIPS;
+    if (!zip)
+        zip_level = 0;
+    int store_raw = zip && min_saving > 0 && n >= PROBE_EVERY &&
+                    store_raw_after_probe(f, img, chunks, n, zip_level, min_saving);
     chunk_failure fail = {.idx = -1};
 #pragma omp parallel if (n > 1)
     {
         exr_encode_pipeline_t enc = EXR_ENCODE_PIPELINE_INITIALIZER;
-        raw_copy raw = {NULL, NULL, 0, store_raw};
+        chunk_coder coder = {.store_raw = store_raw};
         int initialised = 0;
 #pragma omp for ordered schedule(dynamic, 1)
         for (int i = 0; i < n; i++) {
@@ -663,14 +733,14 @@ write_pixels(exr_context_t f, const mcp_image *img, exr_storage_t storage,
             const char *what = "cannot encode";
             exr_last_message[0] = '\0';
             if (!failed(&fail))
-                rc = encode_chunk(f, &chunks[i], &enc, &initialised, &raw, img);
+                rc = encode_chunk(f, &chunks[i], &enc, &initialised, &coder, zip_level, img);
 #pragma omp ordered
             {
                 /* a chunk after a failed one is not written: Core would refuse it */
                 if (rc == EXR_ERR_SUCCESS && !failed(&fail)) {
                     const exr_chunk_info_t *ci = &chunks[i].ci;
-                    const void *bytes = store_raw ? enc.packed_buffer : enc.compressed_buffer;
-                    uint64_t size = store_raw ? enc.packed_bytes : enc.compressed_bytes;
+                    const void *bytes = coder.out;
+                    uint64_t size = coder.out_bytes;
                     what = "cannot write pixel data";
                     rc = storage == EXR_STORAGE_SCANLINE
                              ? exr_write_scanline_chunk(f, 0, ci->start_y, bytes, size)
@@ -683,7 +753,7 @@ write_pixels(exr_context_t f, const mcp_image *img, exr_storage_t storage,
         }
         if (initialised)
             exr_encoding_destroy(f, &enc);
-        free(raw.bytes);
+        chunk_coder_free(&coder);
     }
     free(chunks);
     return fail.idx >= 0 ? report_failure(&fail, path) : 0;
@@ -763,7 +833,7 @@ mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *
         goto done;
     }
     rc = write_pixels(f, img, opt->exr_tiled ? EXR_STORAGE_TILED : EXR_STORAGE_SCANLINE,
-                      compression_of[opt->compression],
+                      compression_of[opt->compression], zip_level,
                       opt->exr_min_saving ? opt->exr_min_saving : MCP_EXR_MIN_SAVING_DEFAULT,
                       &dw, path);
 done:

@@ -9,6 +9,7 @@
  * This file needs -ffp-contract=off (the default in ISO C mode, which mcpost builds
  * in): a fused multiply-add would change the float rounding FLIP's numbers depend on. */
 #include <mcpost/flip.h>
+#include "fastpow.h"
 
 #include <float.h>
 #include <math.h>
@@ -35,7 +36,7 @@ static const float CSF_B2[3] = {1.0e-5f, 1.0e-5f, 0.025f};
 
 /* ---- colour transforms (FLIP.h color3), float, same operation order ---- */
 
-static inline void
+static inline MCP_ALWAYS_INLINE void
 rgb_to_xyz(float r, float g, float b, float *xyz)
 {
     const float a11 = 10135552.0f / 24577794.0f, a12 = 8788810.0f / 24577794.0f,
@@ -49,7 +50,7 @@ rgb_to_xyz(float r, float g, float b, float *xyz)
     xyz[2] = a31 * r + a32 * g + a33 * b;
 }
 
-static inline void
+static inline MCP_ALWAYS_INLINE void
 xyz_to_rgb(const float *xyz, float *rgb)
 {
     rgb[0] = 3.241003275f * xyz[0] + -1.537398934f * xyz[1] + -0.498615861f * xyz[2];
@@ -57,7 +58,7 @@ xyz_to_rgb(const float *xyz, float *rgb)
     rgb[2] = 0.055639423f * xyz[0] + -0.204011202f * xyz[1] + 1.057148933f * xyz[2];
 }
 
-static inline void
+static inline MCP_ALWAYS_INLINE void
 xyz_to_ycxcz(const float *xyz, float *out)
 {
     float x = xyz[0] * INV_WHITE[0], y = xyz[1] * INV_WHITE[1], z = xyz[2] * INV_WHITE[2];
@@ -66,7 +67,7 @@ xyz_to_ycxcz(const float *xyz, float *out)
     out[2] = 200.0f * (y - z);
 }
 
-static inline void
+static inline MCP_ALWAYS_INLINE void
 ycxcz_to_xyz(float Y, float Cx, float Cz, float *xyz)
 {
     const float y = (Y + 16.0f) / 116.0f, cx = Cx / 500.0f, cz = Cz / 200.0f;
@@ -75,37 +76,41 @@ ycxcz_to_xyz(float Y, float Cx, float Cz, float *xyz)
     xyz[2] = (y - cz) * WHITE[2];
 }
 
-static inline float
-lab_f(float t)
+/* fast: the cube root by mcp__powf_pos (fastpow.h), which vectorises, instead of
+ * libm's powf (a few float roundings apart; tests/common/test_flip.c compares the maps
+ * with a double-precision FLIP per pixel). */
+static inline MCP_ALWAYS_INLINE float
+lab_f(float t, int fast)
 {
     const float delta = 6.0f / 29.0f;
     const float delta_square = delta * delta;
     const float delta_cube = delta * delta_square;
     const float factor = 1.0f / (3.0f * delta_square);
     const float term = 4.0f / 29.0f;
-    return t > delta_cube ? powf(t, 1.0f / 3.0f) : factor * t + term;
+    float cube_root = fast ? mcp__powf_pos(t, 1.0f / 3.0f) : powf(t, 1.0f / 3.0f);
+    return t > delta_cube ? cube_root : factor * t + term;
 }
 
 /* XYZ -> CIELAB with the Hunt adjustment (a, b scaled by 0.01 L). */
-static inline void
-xyz_to_lab_hunt(const float *xyz, float *lab)
+static inline MCP_ALWAYS_INLINE void
+xyz_to_lab_hunt(const float *xyz, float *lab, int fast)
 {
-    float fx = lab_f(xyz[0] * INV_WHITE[0]), fy = lab_f(xyz[1] * INV_WHITE[1]),
-          fz = lab_f(xyz[2] * INV_WHITE[2]);
+    float fx = lab_f(xyz[0] * INV_WHITE[0], fast), fy = lab_f(xyz[1] * INV_WHITE[1], fast),
+          fz = lab_f(xyz[2] * INV_WHITE[2], fast);
     float L = 116.0f * fy - 16.0f, a = 500.0f * (fx - fy), b = 200.0f * (fy - fz);
     lab[0] = L;
     lab[1] = 0.01f * L * a;
     lab[2] = 0.01f * L * b;
 }
 
-static inline float
+static inline MCP_ALWAYS_INLINE float
 hyab(const float *r, const float *t)
 {
     float dl = fabsf(r[0] - t[0]);
     return dl + sqrtf((r[1] - t[1]) * (r[1] - t[1]) + (r[2] - t[2]) * (r[2] - t[2]));
 }
 
-static inline float
+static inline MCP_ALWAYS_INLINE float
 clamp01(float v)
 {
     return (v > 0.0f ? v : 0.0f) > 1.0f ? 1.0f : (v > 0.0f ? v : 0.0f);
@@ -116,9 +121,9 @@ mcp_flip_cmax(void)
 {
     float xyz[3], green[3], blue[3];
     rgb_to_xyz(0.0f, 1.0f, 0.0f, xyz);
-    xyz_to_lab_hunt(xyz, green);
+    xyz_to_lab_hunt(xyz, green, 0);
     rgb_to_xyz(0.0f, 0.0f, 1.0f, xyz);
-    xyz_to_lab_hunt(xyz, blue);
+    xyz_to_lab_hunt(xyz, blue, 0);
     return powf(hyab(green, blue), MCP_FLIP_QC);
 }
 
@@ -630,6 +635,96 @@ filter_y2_avx2(const float *plane, const size_t *off, int x0, int n, int r,
 }
 #endif
 
+/* The colour difference of one pixel from filtered YCxCz (FLIP.h
+ * computeColorDifference, after the y pass). Branch-free arithmetic, so that the row
+ * loops below vectorise. */
+static inline MCP_ALWAYS_INLINE float
+color_difference(float yr, float cxr, float czr, float yt, float cxt, float czt,
+                 float cmax, float pccmax)
+{
+    float xyz[3], rgb[3], lab_r[3], lab_t[3];
+    ycxcz_to_xyz(yr, cxr, czr, xyz);
+    xyz_to_rgb(xyz, rgb);
+    rgb_to_xyz(clamp01(rgb[0]), clamp01(rgb[1]), clamp01(rgb[2]), xyz);
+    xyz_to_lab_hunt(xyz, lab_r, 1);
+    ycxcz_to_xyz(yt, cxt, czt, xyz);
+    xyz_to_rgb(xyz, rgb);
+    rgb_to_xyz(clamp01(rgb[0]), clamp01(rgb[1]), clamp01(rgb[2]), xyz);
+    xyz_to_lab_hunt(xyz, lab_t, 1);
+    float e = mcp__powf_pos(hyab(lab_r, lab_t), MCP_FLIP_QC);
+    if (e < pccmax)
+        e *= MCP_FLIP_PT / pccmax;
+    else
+        e = MCP_FLIP_PT + ((e - pccmax) / (cmax - pccmax)) * (1.0f - MCP_FLIP_PT);
+    return e;
+}
+
+/* The per-pixel ends of the two y passes, over one tile row of nx pixels, from the
+ * eight filtered planes in a (reference then test). Their loops vectorise (no calls:
+ * fastpow.h instead of powf; sqrtf one instruction and compares masks because this
+ * file is built with -fno-math-errno and -fno-trapping-math, CMakeLists.txt); the
+ * same C is compiled for SSE2 and for AVX2, without FMA, so both give the same bits. */
+static inline MCP_ALWAYS_INLINE void
+color_row_body(float *const *a, int nx, float cmax, float pccmax, float *m)
+{
+#pragma omp simd
+    for (int i = 0; i < nx; i++) {
+        float yr = a[0][i], cxr = a[1][i], czr = a[2][i] + a[3][i];
+        float yt = a[4][i], cxt = a[5][i], czt = a[6][i] + a[7][i];
+        /* Equal filtered colours (black or saturated areas) give HyAB 0 and so an
+         * error of exactly 0 (mcp__powf_pos(0, qc) is 0: no special case needed). */
+        m[i] = color_difference(yr, cxr, czr, yt, cxt, czt, cmax, pccmax);
+    }
+}
+
+static inline MCP_ALWAYS_INLINE void
+feature_row_body(float *const *a, int nx, float *m)
+{
+    const float norm = 1.0f / sqrtf(2.0f);
+#pragma omp simd
+    for (int i = 0; i < nx; i++) {
+        float dxr = a[0][i], ddxr = a[1][i], dyr = a[2][i], ddyr = a[3][i];
+        float dxt = a[4][i], ddxt = a[5][i], dyt = a[6][i], ddyt = a[7][i];
+        float edge_r = sqrtf(dxr * dxr + dyr * dyr);
+        float edge_t = sqrtf(dxt * dxt + dyt * dyt);
+        float point_r = sqrtf(ddxr * ddxr + ddyr * ddyr);
+        float point_t = sqrtf(ddxt * ddxt + ddyt * ddyt);
+        float edge_diff = fabsf(edge_r - edge_t);
+        float point_diff = fabsf(point_r - point_t);
+        /* FLIP raises to qf = 0.5 with powf; sqrtf is the same function, exactly
+         * rounded. */
+        float fd = sqrtf(norm * (edge_diff > point_diff ? edge_diff : point_diff));
+        /* 0^(1 - fd) is 0, 1 or +Inf as with powf */
+        m[i] = mcp__powf_pos(m[i], 1.0f - fd);
+    }
+}
+
+static void
+color_row(float *const *a, int nx, float cmax, float pccmax, float *m)
+{
+    color_row_body(a, nx, cmax, pccmax, m);
+}
+
+static void
+feature_row(float *const *a, int nx, float *m)
+{
+    feature_row_body(a, nx, m);
+}
+
+#ifdef FLIP_AVX2
+static AVX2 void
+color_row_avx2(float *const *a, int nx, float cmax, float pccmax, float *m)
+{
+    color_row_body(a, nx, cmax, pccmax, m);
+}
+
+static AVX2 void
+feature_row_avx2(float *const *a, int nx, float *m)
+{
+    feature_row_body(a, nx, m);
+}
+#endif
+
 /* The filter set in use (the AVX2 one where the CPU has it, unless MCPOST_NO_AVX2 is
  * set in the environment, which the tests use to compare the two). */
 typedef struct {
@@ -640,13 +735,16 @@ typedef struct {
     void (*y1)(const float *, const size_t *, int, int, int, const float *, float *);
     void (*y2)(const float *, const size_t *, int, int, int, const float *, const float *,
                float *, float *);
+    void (*color_row)(float *const *, int, float, float, float *);
+    void (*feature_row)(float *const *, int, float *);
 } filter_set;
 
-static const filter_set filters_sse = {filter_x1, filter_x2, filter_x3, filter_y1,
-                                       filter_y2};
+static const filter_set filters_sse = {filter_x1, filter_x2,  filter_x3,  filter_y1,
+                                       filter_y2, color_row, feature_row};
 #ifdef FLIP_AVX2
-static const filter_set filters_avx2 = {filter_x1_avx2, filter_x2_avx2, filter_x3_avx2,
-                                        filter_y1_avx2, filter_y2_avx2};
+static const filter_set filters_avx2 = {
+    filter_x1_avx2, filter_x2_avx2,  filter_x3_avx2,  filter_y1_avx2,
+    filter_y2_avx2, color_row_avx2, feature_row_avx2};
 #endif
 
 static const filter_set *
@@ -658,29 +756,6 @@ choose_filters(void)
         return &filters_avx2;
 #endif
     return &filters_sse;
-}
-
-/* The colour difference of one pixel from filtered YCxCz (FLIP.h
- * computeColorDifference, after the y pass). */
-static inline float
-color_difference(float yr, float cxr, float czr, float yt, float cxt, float czt,
-                 float cmax, float pccmax)
-{
-    float xyz[3], rgb[3], lab_r[3], lab_t[3];
-    ycxcz_to_xyz(yr, cxr, czr, xyz);
-    xyz_to_rgb(xyz, rgb);
-    rgb_to_xyz(clamp01(rgb[0]), clamp01(rgb[1]), clamp01(rgb[2]), xyz);
-    xyz_to_lab_hunt(xyz, lab_r);
-    ycxcz_to_xyz(yt, cxt, czt, xyz);
-    xyz_to_rgb(xyz, rgb);
-    rgb_to_xyz(clamp01(rgb[0]), clamp01(rgb[1]), clamp01(rgb[2]), xyz);
-    xyz_to_lab_hunt(xyz, lab_t);
-    float e = powf(hyab(lab_r, lab_t), MCP_FLIP_QC);
-    if (e < pccmax)
-        e *= MCP_FLIP_PT / pccmax;
-    else
-        e = MCP_FLIP_PT + ((e - pccmax) / (cmax - pccmax)) * (1.0f - MCP_FLIP_PT);
-    return e;
 }
 
 /* The y passes run over tiles TILE_W pixels wide and TILE_H rows high: the 2r + 1
@@ -707,16 +782,7 @@ color_tile(const flip_work *k, const mcp_flip_filters *f, const filter_set *fs, 
             fs->y1(k->xcz1[s], off, x0, nx, rs, f->cz1, a[4 * s + 2]);
             fs->y1(k->xcz2[s], off, x0, nx, rs, f->cz2, a[4 * s + 3]);
         }
-        float *m = map + (size_t)y * w + x0;
-        for (int i = 0; i < nx; i++) {
-            float yr = a[0][i], cxr = a[1][i], czr = a[2][i] + a[3][i];
-            float yt = a[4][i], cxt = a[5][i], czt = a[6][i] + a[7][i];
-            /* Equal filtered colours (black or saturated areas) give HyAB 0 and so an
-             * error of exactly 0: skip the conversions. */
-            m[i] = yr == yt && cxr == cxt && czr == czt
-                       ? 0.0f
-                       : color_difference(yr, cxr, czr, yt, cxt, czt, cmax, pccmax);
-        }
+        fs->color_row(a, nx, cmax, pccmax, map + (size_t)y * w + x0);
     }
 }
 
@@ -726,7 +792,6 @@ feature_tile(const flip_work *k, const mcp_flip_filters *f, const filter_set *fs
              int nx, int y0, int y1, float *acc, size_t *off, float *map)
 {
     const int w = k->w, h = k->h, rf = f->feature_radius;
-    const float norm = 1.0f / sqrtf(2.0f);
     float *a[8];
     for (int i = 0; i < 8; i++)
         a[i] = acc + (size_t)i * TILE_W;
@@ -738,22 +803,7 @@ feature_tile(const flip_work *k, const mcp_flip_filters *f, const filter_set *fs
             fs->y2(k->xcz1[s], off, x0, nx, rf, f->dg, f->ddg, a[4 * s + 2],
                    a[4 * s + 3]); /* dy, ddy */
         }
-        float *m = map + (size_t)y * w + x0;
-        for (int i = 0; i < nx; i++) {
-            float dxr = a[0][i], ddxr = a[1][i], dyr = a[2][i], ddyr = a[3][i];
-            float dxt = a[4][i], ddxt = a[5][i], dyt = a[6][i], ddyt = a[7][i];
-            float edge_r = sqrtf(dxr * dxr + dyr * dyr);
-            float edge_t = sqrtf(dxt * dxt + dyt * dyt);
-            float point_r = sqrtf(ddxr * ddxr + ddyr * ddyr);
-            float point_t = sqrtf(ddxt * ddxt + ddyt * ddyt);
-            float edge_diff = fabsf(edge_r - edge_t);
-            float point_diff = fabsf(point_r - point_t);
-            /* FLIP raises to qf = 0.5 with powf; sqrtf is the same function, exactly
-             * rounded. */
-            float fd = sqrtf(norm * (edge_diff > point_diff ? edge_diff : point_diff));
-            /* powf(0, y) is +0 for y > 0: skip the call for error-free pixels. */
-            m[i] = m[i] == 0.0f && fd < 1.0f ? 0.0f : powf(m[i], 1.0f - fd);
-        }
+        fs->feature_row(a, nx, map + (size_t)y * w + x0);
     }
 }
 

@@ -269,6 +269,8 @@ mcp_image_copy_channels(const mcp_image *img, const int *index, int count,
     free(names);
     if (rc)
         return -1;
+#pragma omp parallel for schedule(static) \
+    if ((long long)img->width * img->height * count > 65536)
     for (int y = 0; y < img->height; y++)
         for (int x = 0; x < img->width; x++) {
             const float *s = mcp_image_px(img, x, y);

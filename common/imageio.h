@@ -86,7 +86,7 @@ typedef struct mcp_write_options {
 } mcp_write_options;
 
 /* The zip level and raw-storage threshold EXR files are written with unless the
- * options say otherwise (README.md, "EXR speed", has the measurements). Level 4: on
+ * options say otherwise (docs/benchmarks.md, "EXR speed", has the measurements). Level 4: on
  * float renders zlib's levels 1-6 differ by under 0.6% in size, and 4 took the time
  * of Core's default 6 within this machine's noise; levels 1-3, up to 20% faster, made
  * a blocky map twice as large as 4 did. 1/8: renders' float noise saves about 11%

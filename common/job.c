@@ -24,6 +24,7 @@ typedef struct entry {
     mcp_dump *dump;
     mcp_image *image;
     mcp_series *series;
+    unsigned declared; /* MCP_JOB_* a stage's check said its result will provide */
 } entry;
 
 struct mcp_job {
@@ -34,6 +35,7 @@ struct mcp_job {
     int n_entries;
     mcp_report *report;
     mcp_job_options opt;
+    int checking; /* the stages' checks are running (job_validate) */
 };
 
 static const char *const root_keys[] = {"title", "inputs", "output", "stages", NULL};
@@ -608,6 +610,88 @@ mcp_job_find_image(mcp_job *job, const char *name)
     return e->image ? e->image : e->dump ? e->dump->color : NULL;
 }
 
+/* ---- checks before anything runs ---- */
+
+static unsigned
+entry_kinds(const entry *e)
+{
+    unsigned k = e->declared;
+    if (e->def)
+        k |= e->kind == ENTRY_DUMP    ? MCP_JOB_DUMP | MCP_JOB_IMAGE
+             : e->kind == ENTRY_IMAGE ? MCP_JOB_IMAGE
+                                      : MCP_JOB_SERIES;
+    if (e->dump)
+        k |= MCP_JOB_DUMP | MCP_JOB_IMAGE;
+    if (e->image)
+        k |= MCP_JOB_IMAGE;
+    if (e->series)
+        k |= MCP_JOB_SERIES;
+    return k;
+}
+
+unsigned
+mcp_job_kinds(mcp_job *job, const char *name)
+{
+    entry *e = find_entry(job, name);
+    return e ? entry_kinds(e) : 0;
+}
+
+int
+mcp_job_check_name(mcp_job *job, const mcp_node *name_node, unsigned kinds)
+{
+    const char *name;
+    if (mcp_node_string(name_node, "the name of an input", &name))
+        return -1;
+    entry *e = find_entry(job, name);
+    if (!e || !entry_kinds(e))
+        return mcp_node_error(name_node, "no input or result called '%s'", name);
+    if (!(entry_kinds(e) & kinds)) {
+        /* an image is anything with colour, a dump included: name the widest */
+        int image = (kinds & MCP_JOB_IMAGE) != 0, series = (kinds & MCP_JOB_SERIES) != 0,
+            dump = !image && (kinds & MCP_JOB_DUMP);
+        return mcp_node_error(name_node, "'%s' is not %s%s%s%s", name,
+                              series ? "a series" : "", series && (image || dump) ? " or " : "",
+                              image ? "an image" : "", dump ? "a render dump" : "");
+    }
+    return 0;
+}
+
+int
+mcp_job_check_input(mcp_job *job, const mcp_node *settings, const char *key,
+                    unsigned kinds)
+{
+    const mcp_node *n = mcp_node_get(settings, key);
+    if (!n)
+        return mcp_node_error(settings, "missing key '%s' (the name of an input)", key);
+    return mcp_job_check_name(job, n, kinds);
+}
+
+int
+mcp_job_declare(mcp_job *job, const char *name, unsigned kind)
+{
+    if (!job->checking)
+        return 0;
+    entry *e = find_entry(job, name);
+    if (!e && !(e = add_entry(job, name)))
+        return -1;
+    e->declared |= kind & MCP_JOB_DUMP ? MCP_JOB_DUMP | MCP_JOB_IMAGE : kind;
+    return 0;
+}
+
+int
+mcp_job_check_file(const mcp_job *job, const mcp_node *path_node, const char *key)
+{
+    const char *rel;
+    char path[4096];
+    struct stat st;
+    if (mcp_node_string(path_node, key, &rel) ||
+        mcp_job_resolve(job, rel, path, sizeof path))
+        return -1;
+    if (stat(path, &st) != 0 || !S_ISREG(st.st_mode))
+        return mcp_node_error(path_node, "%s: no such file: %s", key, path);
+    return 0;
+}
+
 int
 mcp_job_put_image(mcp_job *job, const char *name, mcp_image *img)
 {
@@ -750,9 +834,19 @@ fail:
     return -1;
 }
 
+/* Puts the stage's place in front of the current error unless it names one. */
+static void
+stage_error_place(const mcp_job *job, const mcp_node *item, const mcp_stage *stage)
+{
+    if (!strstr(mcp_error_message(), job->path))
+        mcp_error_prefix("%s:%d: stage '%s': ", job->path, item->line, stage->name);
+}
+
 /* Everything that can be checked without running a stage: the list of stages, every
- * input (keys, types, files present), every stage known with only its keys. *list
- * receives the stages' list. No side effects. */
+ * input (keys, types, files present), every stage known, its keys allowed, and its
+ * settings as its check reads them (values, the inputs and results it names, its
+ * files), in order, so that a stage may name the results of the stages before it.
+ * *list receives the stages' list. No side effects: nothing is loaded or written. */
 static int
 job_validate(mcp_job *job, const mcp_stage *const *stages, const mcp_node **list)
 {
@@ -761,13 +855,30 @@ job_validate(mcp_job *job, const mcp_stage *const *stages, const mcp_node **list
         return mcp_node_error(*list ? *list : job->root, "the job needs a list of stages");
     if (check_inputs(job))
         return -1;
-    for (int i = 0; i < (*list)->count; i++) {
+    int rc = 0;
+    job->checking = 1;
+    for (int i = 0; i < (*list)->count && rc == 0; i++) {
         const mcp_stage *stage;
         const mcp_node *settings;
-        if (stage_at((*list)->items[i], stages, &stage, &settings))
-            return -1;
+        if (stage_at((*list)->items[i], stages, &stage, &settings)) {
+            rc = -1;
+            break;
+        }
+        if (!stage->check)
+            continue;
+        mcp_node *empty = settings ? NULL : empty_map_at((*list)->items[i]);
+        if (!settings && !empty) {
+            rc = -1;
+            break;
+        }
+        if (stage->check(job, settings ? settings : empty)) {
+            stage_error_place(job, (*list)->items[i], stage);
+            rc = -1;
+        }
+        free(empty);
     }
-    return 0;
+    job->checking = 0;
+    return rc;
 }
 
 int
@@ -815,10 +926,7 @@ mcp_job_run_file(const char *path, const mcp_stage *const *stages,
         int failed = stage->run(job, settings ? settings : empty);
         free(empty);
         if (failed) {
-            /* put the stage's place in front unless the message already names one */
-            if (!strstr(mcp_error_message(), job->path))
-                mcp_error_prefix("%s:%d: stage '%s': ", job->path, list->items[i]->line,
-                                 stage->name);
+            stage_error_place(job, list->items[i], stage);
             goto done;
         }
     }

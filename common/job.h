@@ -17,7 +17,8 @@
  * Paths are relative to the job file's folder. Every stage is looked up by name in a
  * table that the caller passes in (cli/stages.c), so a module adds a stage by adding
  * one entry there. Unknown keys, wrong types and missing inputs are errors that name
- * "job.yaml:LINE". */
+ * "job.yaml:LINE", and every stage's settings are checked (mcp_stage.check) before the
+ * first stage runs. */
 #ifndef MCP_JOB_H
 #define MCP_JOB_H
 
@@ -87,6 +88,13 @@ typedef struct mcp_stage {
     const char *const *keys;        /* allowed settings keys, NULL-terminated */
     /* settings is the stage's map (never NULL: an empty map when none given) */
     int (*run)(mcp_job *job, const mcp_node *settings);
+    /* Checks the settings as run would read them, without running: every key's type
+     * and value, the inputs and results it names (mcp_job_check_input: by name and
+     * kind, nothing loaded), the files it reads, the results it makes
+     * (mcp_job_declare). Called for every stage before the first one runs, and by
+     * mcp_job_check; no side effects. A stage's run reuses the same parse. NULL: the
+     * keys alone are checked. */
+    int (*check)(mcp_job *job, const mcp_node *settings);
 } mcp_stage;
 
 typedef struct mcp_job_options {
@@ -127,6 +135,27 @@ MCP_API int mcp_job_image(mcp_job *job, const mcp_node *settings, const char *ke
                           const mcp_image **out);
 MCP_API int mcp_job_series(mcp_job *job, const mcp_node *settings, const char *key,
                            const mcp_series **out);
+/* What an input or result provides, for checks. A dump is also an image. */
+enum { MCP_JOB_DUMP = 1, MCP_JOB_IMAGE = 2, MCP_JOB_SERIES = 4 };
+
+/* For stages' checks, before anything is loaded: the scalar `name` (a value in the
+ * settings) names an input or a result of an earlier stage that provides one of
+ * `kinds`; fails with "FILE:LINE: no input or result called 'N'" or "'N' is not a
+ * series" (or a render dump, an image). mcp_job_check_input does the same for the
+ * value of settings' `key`, which must be there. */
+MCP_API int mcp_job_check_name(mcp_job *job, const mcp_node *name, unsigned kinds);
+MCP_API int mcp_job_check_input(mcp_job *job, const mcp_node *settings, const char *key,
+                                unsigned kinds);
+/* The kinds the input or result `name` provides (0: none such). */
+MCP_API unsigned mcp_job_kinds(mcp_job *job, const char *name);
+/* For stages' checks: a later stage may name this stage's result `name` (one of
+ * MCP_JOB_*). While the job runs it does nothing (mcp_job_put_* publishes). */
+MCP_API int mcp_job_declare(mcp_job *job, const char *name, unsigned kind);
+/* A file the job reads (a kernel, a map, weights): the path relative to the job file
+ * must exist, else "FILE:LINE: KEY: no such file: PATH". */
+MCP_API int mcp_job_check_file(const mcp_job *job, const mcp_node *path_node,
+                               const char *key);
+
 /* By name, without a settings line (NULL when absent; no error). */
 MCP_API const mcp_image *mcp_job_find_image(mcp_job *job, const char *name);
 

@@ -743,7 +743,7 @@ create_with(const char *name, nlm_params p, const mcp_node *settings, mcp_denois
 }
 
 /* Defaults tuned on the Cornell-box fixtures (1-1024 spp) and the procedural scene;
- * README.md (Denoisers) gives the figures. */
+ * docs/denoisers.md and docs/benchmarks.md give the figures. */
 static int
 nlm_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
 {

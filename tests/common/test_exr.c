@@ -2,10 +2,14 @@
  * writer takes round-trips bit for bit on 1, 2 and 5 threads, scanline and tiled, with
  * partial last chunks and nasty values, and the files do not depend on the thread
  * count; the raw-storage probe keeps pixels and picks raw only for data that does not
- * compress; a corrupt chunk gives the same one-line error on any thread count. */
+ * compress; a corrupt chunk gives the same one-line error on any thread count. Zip
+ * chunks go through libdeflate (common/exr_zip.c): OpenEXR Core's own zlib decoder
+ * reads what it writes, and it reads what zlib wrote (a renderer's file), value for
+ * value the same as Core. */
 #include "testing.h"
 
 #include <mcpost/imageio.h>
+#include <openexr.h>
 #include <float.h>
 #include <math.h>
 #include <omp.h>
@@ -262,6 +266,89 @@ test_corrupt_chunk_same_error_any_thread_count(void **state)
     mcp_image_free(img);
 }
 
+/* Reads a scanline file with OpenEXR Core's default routines only (its zlib, its
+ * unpacking): the independent decoder for test_zip_streams_agree_with_core. */
+static mcp_image *
+read_with_core_only(const char *path)
+{
+    exr_context_t f = NULL;
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    assert_int_equal(exr_start_read(&f, path, &init), EXR_ERR_SUCCESS);
+    exr_attr_box2i_t dw;
+    const exr_attr_chlist_t *chans;
+    int32_t lines;
+    assert_int_equal(exr_get_data_window(f, 0, &dw), EXR_ERR_SUCCESS);
+    assert_int_equal(exr_get_channels(f, 0, &chans), EXR_ERR_SUCCESS);
+    assert_int_equal(exr_get_scanlines_per_chunk(f, 0, &lines), EXR_ERR_SUCCESS);
+    const char *names[64];
+    assert_true(chans->num_channels <= 64);
+    for (int c = 0; c < chans->num_channels; c++)
+        names[c] = chans->entries[c].name.str;
+    int w = dw.max.x - dw.min.x + 1, h = dw.max.y - dw.min.y + 1;
+    mcp_image *img = NULL;
+    assert_int_equal(mcp_image_new(w, h, chans->num_channels, names, &img), 0);
+    for (int y = dw.min.y; y <= dw.max.y; y += lines) {
+        exr_chunk_info_t ci;
+        exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
+        assert_int_equal(exr_read_scanline_chunk_info(f, 0, y, &ci), EXR_ERR_SUCCESS);
+        assert_int_equal(exr_decoding_initialize(f, 0, &ci, &dec), EXR_ERR_SUCCESS);
+        for (int k = 0; k < dec.channel_count; k++) {
+            exr_coding_channel_info_t *ch = &dec.channels[k];
+            int ic = mcp_image_channel(img, ch->channel_name);
+            ch->decode_to_ptr = (uint8_t *)(mcp_image_px(img, 0, y - dw.min.y) + ic);
+            ch->user_pixel_stride = (int32_t)(img->pixel_stride * (ptrdiff_t)sizeof(float));
+            ch->user_line_stride = (int32_t)(img->row_stride * (ptrdiff_t)sizeof(float));
+            ch->user_data_type = EXR_PIXEL_FLOAT;
+            ch->user_bytes_per_element = 4;
+        }
+        assert_int_equal(exr_decoding_choose_default_routines(f, 0, &dec), EXR_ERR_SUCCESS);
+        assert_int_equal(exr_decoding_run(f, 0, &dec), EXR_ERR_SUCCESS);
+        exr_decoding_destroy(f, &dec);
+    }
+    exr_finish(&f);
+    return img;
+}
+
+/* Our zip and zips files, every chunk compressed (a smooth ramp and nasty values, no
+ * raw-storage probe, levels 1, 4 and 9), decode through Core's zlib to the written
+ * bits; a renderer's zip file (the cornell reference, written with zlib) reads the
+ * same through libdeflate as through Core. */
+static void
+test_zip_streams_agree_with_core(void **state)
+{
+    (void)state;
+    mcp_image *ramp = mcp_test_ramp(61, 75, 5, names5), *nasty = nasty_image(61, 75, 3);
+    const mcp_image *images[] = {ramp, nasty};
+    const int levels[] = {1, 4, 9};
+    const char *path = mcp_test_path("zip_vs_core.exr");
+    for (int i = 0; i < 2; i++)
+        for (int zips = 0; zips <= 1; zips++)
+            for (int l = 0; l < 3; l++) {
+                mcp_write_options o = mcp_write_defaults();
+                o.compression = zips ? MCP_EXR_ZIPS : MCP_EXR_ZIP;
+                o.exr_min_saving = -1;
+                o.exr_zip_level = levels[l];
+                assert_int_equal(mcp_image_write(images[i], path, &o), 0);
+                mcp_image *core = read_with_core_only(path);
+                assert_same_bits(images[i], core);
+                mcp_image_free(core);
+            }
+    /* the ramp's chunks were compressed, not stored raw: Core inflated them */
+    mcp_write_options o = mcp_write_defaults();
+    assert_int_equal(mcp_image_write(ramp, path, &o), 0);
+    assert_true(file_size(path) < 61L * 75 * 5 * 4 / 2);
+    char renders[4096];
+    snprintf(renders, sizeof renders, "%s/samples/fixtures/cornell/cornell_reference.exr",
+             MCP_TEST_SOURCE_DIR);
+    mcp_image *ours = NULL, *core = read_with_core_only(renders);
+    assert_int_equal(mcp_image_read(renders, NULL, &ours), 0);
+    assert_same_bits(core, ours);
+    mcp_image_free(ours);
+    mcp_image_free(core);
+    mcp_image_free(ramp);
+    mcp_image_free(nasty);
+}
+
 int
 main(void)
 {
@@ -270,6 +357,7 @@ main(void)
         cmocka_unit_test(test_view_on_many_threads),
         cmocka_unit_test(test_probe_stores_raw_only_what_does_not_compress),
         cmocka_unit_test(test_corrupt_chunk_same_error_any_thread_count),
+        cmocka_unit_test(test_zip_streams_agree_with_core),
     };
     return cmocka_run_group_tests_name("common/exr", tests, NULL, NULL);
 }

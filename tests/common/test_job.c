@@ -167,8 +167,8 @@ stage_consume(mcp_job *job, const mcp_node *settings)
 }
 
 static const char *const probe_keys[] = {"input", "scale", NULL};
-static const mcp_stage probe = {"probe", "test stage", probe_keys, stage_probe};
-static const mcp_stage consume = {"consume", "test stage", probe_keys, stage_consume};
+static const mcp_stage probe = {"probe", "test stage", probe_keys, stage_probe, NULL};
+static const mcp_stage consume = {"consume", "test stage", probe_keys, stage_consume, NULL};
 static const mcp_stage *const table[] = {&probe, &consume, NULL};
 
 static const char *
@@ -449,7 +449,7 @@ test_channel_mapping_overrides_detection(void **state)
     mcp_attrs_set_int(&img->attrs, "samplesPerPixel", 16);
     assert_int_equal(mcp_image_write(img, mcp_test_path("odd.exr"), NULL), 0);
     mcp_image_free(img);
-    static const mcp_stage mapped = {"mapped", "test stage", probe_keys, stage_mapped};
+    static const mcp_stage mapped = {"mapped", "test stage", probe_keys, stage_mapped, NULL};
     static const mcp_stage *const mapped_table[] = {&mapped, NULL};
     const char *job = write_job("map.yaml", "inputs:\n"
                                             "  d:\n"

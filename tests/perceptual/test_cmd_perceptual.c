@@ -345,7 +345,7 @@ test_errors(void **state)
              "  - perceptual: {candidates: [t, u], surrogate: reference, reference: t}\n",
              dir);
     mcp_test_write_text(path, yaml);
-    expect_fail(args, 1, "bad.yaml:4: no image input or result called 'u'");
+    expect_fail(args, 1, "bad.yaml:4: no input or result called 'u'");
     snprintf(yaml, sizeof yaml,
              "inputs:\n  t: {image: '%s_truth.exr'}\nstages:\n"
              "  - perceptual: {candidates: [t], surogate: reference}\n",

@@ -142,7 +142,7 @@ test_jittered_variance_of_mean_over_seeds(void **state)
             /* The dump's variance is the ordinary unbiased sample variance over all n
              * samples, over n. With the per-sample variance sigma2 its expectation is
              * (sigma2 - V) / (n - 1): sigma2 / n when V = sigma2 / n, and more than
-             * V whenever the cells' means differ (README.md). */
+             * V whenever the cells' means differ (samples/procedural/README.md). */
             dump_sum += dump_vm[i];
             dump_expected += (tvar->data[i] - tvm->data[i]) / (n - 1);
         }
@@ -365,8 +365,9 @@ static void
 test_stratification_gain_of_the_default_scene(void **state)
 {
     (void)state;
-    /* The figures of README.md: the default scene (64x64) at one pass (the ratios do
-     * not depend on n), with and without fireflies, k = 2, 4, 8. "Gain" is
+    /* The figures of samples/procedural/README.md: the default scene (64x64) at one
+     * pass (the ratios do not depend on n), with and without fireflies, k = 2, 4, 8.
+     * "Gain" is
      * (sigma2 / n) / V: the image mean of the numerator over the image mean of V per
      * channel, and per pixel (green) the mean, median and largest ratio and how
      * often it reaches 2. The k = 4 figures are pinned: they are exact (to float). */
