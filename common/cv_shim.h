@@ -1,5 +1,7 @@
-/* cv_shim.h: the private C ABI of cv_shim.cpp, the only file in mcpost that talks to
- * OpenCV (core + imgproc; notes/libraries.md 2c). Not installed.
+/* cv_shim.h: the private C ABI over OpenCV (core + imgproc; notes/libraries.md 2c).
+ * cv_plugin.cpp, the only file in mcpost that talks to OpenCV, implements it in the
+ * plug-in mcpost_cv.so; cv.c implements the functions below by loading that plug-in
+ * on first use and calling through its table. Not installed.
  *
  * Buffers are the caller's: the shim wraps them as cv::Mat without copying and never
  * lets OpenCV reallocate an output (it checks and fails instead). Every function
@@ -57,6 +59,21 @@ int mcp__cv_colormap_lut(int cv_map, unsigned char *rgb, char *err, size_t err_c
 
 /* cv::ColormapTypes values the C side needs (checked against OpenCV at compile time
  * in cv_shim.cpp). */
+/* The plug-in's table of the functions above (cv_plugin.cpp), from its one exported
+ * function MCP__CV_TABLE; abi must be MCP__CV_ABI. */
+typedef struct mcp__cv_table {
+    int abi;
+    int (*sep_filter_rows)(const mcp__cv_plane *, const mcp__cv_plane *, int, int,
+                           const float *, int, const float *, int, char *, size_t);
+    int (*filter2d_rows)(const mcp__cv_plane *, const mcp__cv_plane *, int, int,
+                         const float *, int, int, char *, size_t);
+    int (*dft_power)(const double *, int, double *, char *, size_t);
+    int (*colormap_lut)(int, unsigned char *, char *, size_t);
+} mcp__cv_table;
+typedef const mcp__cv_table *(*mcp__cv_table_fn)(void);
+#define MCP__CV_ABI 1
+#define MCP__CV_TABLE "mcp_cv_plugin_table"
+
 #define MCP__CV_COLORMAP_MAGMA 13
 #define MCP__CV_COLORMAP_INFERNO 14
 #define MCP__CV_COLORMAP_VIRIDIS 16

@@ -97,42 +97,21 @@ static struct {
     char error[1024];
 } oiio = {PTHREAD_ONCE_INIT, NULL, NULL, NULL, ""};
 
-/* Looks for the plug-in in: $MCPOST_PLUGIN_DIR; beside the mcpost library that this
- * code is in (<libdir>/mcpost/, found with dladdr, so an installed tree can move); the
- * build tree; the configured install folder. */
+/* Loads the plug-in (mcp__plugin_open says where from) and its two functions. */
 static void
 oiio_load(void)
 {
-    char code[4096], beside_lib[4200] = "";
-    if (mcp__code_dir(code, sizeof code) == 0)
-        snprintf(beside_lib, sizeof beside_lib, "%s/mcpost", code);
-    const char *dirs[] = {getenv("MCPOST_PLUGIN_DIR"), beside_lib, MCP_PLUGIN_BUILD_DIR,
-                          MCP_PLUGIN_INSTALL_DIR};
-    size_t n = 0;
-    for (size_t i = 0; i < sizeof dirs / sizeof *dirs; i++) {
-        if (!dirs[i] || !*dirs[i])
-            continue;
-        char path[4200];
-        snprintf(path, sizeof path, "%s/mcpost_oiio.so", dirs[i]);
-        if (access(path, R_OK) != 0)
-            continue;
-        void *h = dlopen(path, RTLD_NOW | RTLD_LOCAL);
-        if (!h) {
-            n += (size_t)snprintf(oiio.error + n, n < sizeof oiio.error ? sizeof oiio.error - n : 0,
-                                  "%s; ", dlerror());
-            continue;
-        }
-        oiio.read = (mcp__oiio_read_fn)(uintptr_t)dlsym(h, MCP__OIIO_READ);
-        oiio.write = (mcp__oiio_write_fn)(uintptr_t)dlsym(h, MCP__OIIO_WRITE);
-        if (oiio.read && oiio.write) {
-            oiio.handle = h;
-            return;
-        }
-        dlclose(h);
+    void *h = mcp__plugin_open("mcpost_oiio.so", oiio.error, sizeof oiio.error);
+    if (!h)
+        return;
+    oiio.read = (mcp__oiio_read_fn)(uintptr_t)dlsym(h, MCP__OIIO_READ);
+    oiio.write = (mcp__oiio_write_fn)(uintptr_t)dlsym(h, MCP__OIIO_WRITE);
+    if (oiio.read && oiio.write) {
+        oiio.handle = h;
+        return;
     }
-    if (!n)
-        snprintf(oiio.error, sizeof oiio.error,
-                 "mcpost_oiio.so not found (set MCPOST_PLUGIN_DIR)");
+    snprintf(oiio.error, sizeof oiio.error, "mcpost_oiio.so lacks its functions");
+    dlclose(h);
 }
 
 static int

@@ -35,6 +35,10 @@ int mcp__select_percentiles(const float *v, size_t n, const double *p, int k, do
  * configured install folder (-1 and buf "" when none has it). */
 int mcp__code_dir(char *buf, size_t cap);
 int mcp__find_data_file(const char *name, char *buf, size_t cap);
+/* dlopens the plug-in `file` (mcpost_oiio.so, mcpost_cv.so) from $MCPOST_PLUGIN_DIR,
+ * beside the library (<libdir>/mcpost/), the build tree or the install folder, in that
+ * order; NULL with the reason in err when none loads. */
+void *mcp__plugin_open(const char *file, char *err, size_t cap);
 
 /* A series member as its file holds it, whatever the series' variance_from (dump.c). */
 #include <mcpost/dump.h>

@@ -1,11 +1,12 @@
-/* paths.c: where mcpost's own files are -- the plug-in (imageio.c) and data files such
- * as OIDN's weights (estimate/denoise_unet.c) -- relative to the code itself, so that an
+/* paths.c: where mcpost's own files are -- the plug-ins (imageio.c, cv.c) and data
+ * files such as OIDN's weights (estimate/denoise_unet.c) -- relative to the code itself, so that an
  * installed tree can move, then the build tree and the configured install folders. */
 #define _GNU_SOURCE /* dladdr */
 #include "internal.h"
 
 #include <dlfcn.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
 
@@ -44,4 +45,34 @@ mcp__find_data_file(const char *name, char *buf, size_t cap)
     }
     buf[0] = '\0';
     return -1;
+}
+
+/* The plug-in folders: $MCPOST_PLUGIN_DIR; beside the mcpost library that this code is
+ * in (<libdir>/mcpost/, found with dladdr, so an installed tree can move); the build
+ * tree; the configured install folder. */
+void *
+mcp__plugin_open(const char *file, char *err, size_t cap)
+{
+    char code[4096], beside_lib[4200] = "";
+    if (mcp__code_dir(code, sizeof code) == 0)
+        snprintf(beside_lib, sizeof beside_lib, "%s/mcpost", code);
+    const char *dirs[] = {getenv("MCPOST_PLUGIN_DIR"), beside_lib, MCP_PLUGIN_BUILD_DIR,
+                          MCP_PLUGIN_INSTALL_DIR};
+    size_t n = 0;
+    err[0] = '\0';
+    for (size_t i = 0; i < sizeof dirs / sizeof *dirs; i++) {
+        if (!dirs[i] || !*dirs[i])
+            continue;
+        char path[4200];
+        snprintf(path, sizeof path, "%s/%s", dirs[i], file);
+        if (access(path, R_OK) != 0)
+            continue;
+        void *h = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+        if (h)
+            return h;
+        n += (size_t)snprintf(err + n, n < cap ? cap - n : 0, "%s; ", dlerror());
+    }
+    if (!n)
+        snprintf(err, cap, "%s not found (set MCPOST_PLUGIN_DIR)", file);
+    return NULL;
 }

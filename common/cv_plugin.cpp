@@ -1,6 +1,8 @@
-// cv_shim.cpp: the C ABI over OpenCV core + imgproc that filter.c and colormap.c use
-// (SPEC perceptual, blend and FLIP filters; notes/libraries.md 2c). C++17 stays in this
-// file. Caller buffers are wrapped as cv::Mat without copies (const_cast for inputs;
+// cv_plugin.cpp: the OpenCV plug-in (mcpost_cv.so): the C ABI over OpenCV core +
+// imgproc that filter.c and colormap.c use (SPEC perceptual, blend and FLIP filters;
+// notes/libraries.md 2c), through cv.c, which loads it on first use (OpenCV and what it
+// links cost every process ~10 ms of relocations at start, most of `mcpost --version`).
+// C++17 stays in this file. Caller buffers are wrapped as cv::Mat without copies (const_cast for inputs;
 // OpenCV never writes through src). Every entry point catches every exception: none may
 // cross extern "C". Borders are BORDER_REPLICATE (clamp to edge) everywhere, as SPEC
 // asks ("Borders: replicate"); filters are correlations with the anchor at the centre.
@@ -70,8 +72,8 @@ check_strip(const mcp__cv_plane *src, const mcp__cv_plane *dst, int y0, int y1,
     return 0;
 }
 
-extern "C" int
-mcp__cv_sep_filter_rows(const mcp__cv_plane *src, const mcp__cv_plane *dst, int y0,
+static int
+sep_filter_rows(const mcp__cv_plane *src, const mcp__cv_plane *dst, int y0,
                         int y1, const float *kx, int kx_len, const float *ky, int ky_len,
                         char *err, size_t err_cap)
 {
@@ -111,8 +113,8 @@ filter2d_roi(const cv::Mat &s, const cv::Mat &d, cv::Range rows, cv::Range cols,
     return dr.data == before;
 }
 
-extern "C" int
-mcp__cv_filter2d_rows(const mcp__cv_plane *src, const mcp__cv_plane *dst, int y0, int y1,
+static int
+filter2d_rows(const mcp__cv_plane *src, const mcp__cv_plane *dst, int y0, int y1,
                       const float *kernel, int kw, int kh, char *err, size_t err_cap)
 {
     const char *op = "2d filter";
@@ -157,8 +159,8 @@ mcp__cv_filter2d_rows(const mcp__cv_plane *src, const mcp__cv_plane *dst, int y0
     }
 }
 
-extern "C" int
-mcp__cv_dft_power(const double *tile, int n, double *power, char *err, size_t err_cap)
+static int
+dft_power(const double *tile, int n, double *power, char *err, size_t err_cap)
 {
     const char *op = "tile dft";
     try {
@@ -179,8 +181,8 @@ mcp__cv_dft_power(const double *tile, int n, double *power, char *err, size_t er
     }
 }
 
-extern "C" int
-mcp__cv_colormap_lut(int cv_map, unsigned char *rgb, char *err, size_t err_cap)
+static int
+colormap_lut(int cv_map, unsigned char *rgb, char *err, size_t err_cap)
 {
     const char *op = "colormap";
     try {
@@ -202,4 +204,13 @@ mcp__cv_colormap_lut(int cv_map, unsigned char *rgb, char *err, size_t err_cap)
     } catch (...) {
         return fail_current(err, err_cap, op);
     }
+}
+
+// The plug-in's one entry point (cv.c looks it up with dlsym).
+extern "C" __attribute__((visibility("default"))) const mcp__cv_table *
+mcp_cv_plugin_table(void)
+{
+    static const mcp__cv_table table = {MCP__CV_ABI, sep_filter_rows, filter2d_rows,
+                                        dft_power, colormap_lut};
+    return &table;
 }
