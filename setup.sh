@@ -7,7 +7,8 @@
 #                      build everything with clang, run the SIMD modules' tests once
 #                      more with their scalar code, and run each fuzz target (tests/fuzz)
 #                      for a short while
-#   ./setup.sh build   install what is missing and build only
+#   ./setup.sh build   install what is missing and build only (demo and build also make
+#                      `python3 -c "import mcpost"` find build/python: docs/python.md)
 #
 # Builds go to build/ (build-asan/ for the sanitizer build, build-clang/ for clang,
 # build-scalar/ for the one with MCP_NO_SIMD, whose SSE2 loops fall back to their plain
@@ -22,7 +23,7 @@ cd "$(dirname "$0")"
 PACKAGES=(gcc g++ make cmake pkg-config
           libopenexr-dev libopenimageio-dev libopencv-core-dev libopencv-imgproc-dev
           libyaml-dev libcjson-dev libcmocka-dev libopenblas-dev libpng-dev
-          libdeflate-dev)
+          libdeflate-dev python3-dev python3-numpy python3-pytest python3-matplotlib)
 JOBS=${MCPOST_JOBS:-$(nproc)}
 
 install_packages() { # install_packages [PACKAGE...]: PACKAGES when none are named
@@ -41,11 +42,25 @@ install_packages() { # install_packages [PACKAGE...]: PACKAGES when none are nam
         "${missing[@]}"
 }
 
+# The Python module is built for Debian's interpreter, the one python3-numpy is for
+# (a python3 earlier on PATH, e.g. pyenv's, may have no numpy).
+PYTHON=/usr/bin/python3
+
 build() { # build DIR [cmake args...]: warnings are errors here (MCPOST_WERROR)
     local dir=$1
     shift
-    cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DMCPOST_WERROR=ON "$@" >/dev/null
+    cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DMCPOST_WERROR=ON \
+        -DPython3_EXECUTABLE="$PYTHON" "$@" >/dev/null
     cmake --build "$dir" -j "$JOBS"
+}
+
+link_python() { # lets `python3 -c "import mcpost"` find build/python: a .pth file in
+    # the user's site-packages ($PYTHONUSERBASE), as `pip install --user -e` would do
+    compgen -G "build/python/mcpost*.so" >/dev/null || return 0
+    local site
+    site=$("$PYTHON" -c 'import site; print(site.getusersitepackages())') || return 0
+    mkdir -p "$site" && echo "$PWD/build/python" >"$site/mcpost-build.pth"
+    echo "setup: python3 finds the mcpost module in build/python ($site/mcpost-build.pth)" >&2
 }
 
 run_tests() { # run_tests DIR
@@ -56,6 +71,7 @@ case "${1:-}" in
 demo)
     install_packages
     build build
+    link_python
     ./build/mcpost run samples/jobs/demo.yaml
     # where Chromium is installed (setup.sh test installs it): the page checked in a
     # real browser and a screenshot of it, out/demo/report.png
@@ -106,6 +122,7 @@ test)
 build)
     install_packages
     build build
+    link_python
     ;;
 *)
     echo "usage: ./setup.sh demo|test|build" >&2

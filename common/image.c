@@ -111,6 +111,28 @@ mcp_image_new(int width, int height, int channels, const char *const *names,
     return 0;
 }
 
+int
+mcp_image_wrap(float *data, int width, int height, int channels, ptrdiff_t pixel_stride,
+               ptrdiff_t row_stride, const char *const *names, const char *source,
+               mcp_image **out)
+{
+    *out = NULL;
+    if (mcp_image_check_size(width, height, channels)) return -1;
+    if (!data || pixel_stride < channels || row_stride < (ptrdiff_t)width * pixel_stride)
+        return mcp_error("%s: bad pixel layout (pixel stride %td, row stride %td for "
+                         "%dx%dx%d)",
+                         source ? source : "(image)", pixel_stride, row_stride, width,
+                         height, channels);
+    mcp_image *img = header_new(width, height, channels, names, source);
+    if (!img) return -1;
+    img->pixel_stride = pixel_stride;
+    img->row_stride = row_stride;
+    img->data = data;
+    img->owns_data = 0;
+    *out = img;
+    return 0;
+}
+
 void
 mcp_image_free(mcp_image *img)
 {

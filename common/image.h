@@ -70,6 +70,14 @@ MCP_API int mcp_image_new(int width, int height, int channels,
 
 MCP_API void mcp_image_free(mcp_image *img);
 
+/* A view of pixels the caller owns (a numpy array, a renderer's buffer): channel c of
+ * pixel (x, y) at data[y * row_stride + x * pixel_stride + c]. names may be NULL
+ * ("C0", ...); source labels messages (NULL: "(image)"). Within mcp_image_check_size;
+ * the pixels must outlive the view, and mcp_image_free frees only the header. */
+MCP_API int mcp_image_wrap(float *data, int width, int height, int channels,
+                           ptrdiff_t pixel_stride, ptrdiff_t row_stride,
+                           const char *const *names, const char *source, mcp_image **out);
+
 /* A deep, packed copy (pixels, names, attributes, source). */
 MCP_API int mcp_image_copy(const mcp_image *img, mcp_image **out);
 

@@ -95,6 +95,31 @@ test_crop_view_shares_pixels(void **state)
     mcp_image_free(img);
 }
 
+/* A view of the caller's pixels: strides as given, the pixels never freed. */
+static void
+test_wrap_borrows_pixels(void **state)
+{
+    (void)state;
+    float px[2 * 3 * 4]; /* 2 rows, 3 pixels of 4 floats, of which 2 channels are used */
+    for (int i = 0; i < 24; i++)
+        px[i] = (float)i;
+    mcp_image *img = NULL;
+    assert_int_equal(mcp_image_wrap(px + 1, 3, 2, 2, 4, 12, (const char *[]){"u", "v"},
+                                    "buffer", &img),
+                     0);
+    assert_false(img->owns_data);
+    assert_string_equal(img->names[1], "v");
+    assert_string_equal(img->source, "buffer");
+    /* pixel (2, 1), channel 1: 1 + 1 * 12 + 2 * 4 + 1 */
+    assert_true(mcp_image_px(img, 2, 1)[1] == 22.0f);
+    mcp_image_free(img); /* px is on the stack: freeing it would crash */
+    assert_error_contains(mcp_image_wrap(px, 3, 2, 4, 2, 12, NULL, "buffer", &img),
+                          "buffer: bad pixel layout (pixel stride 2");
+    assert_null(img);
+    assert_error_contains(mcp_image_wrap(px, 0, 2, 1, 1, 1, NULL, NULL, &img),
+                          "bad image size 0x2x1");
+}
+
 static void
 test_channel_view_and_subset(void **state)
 {
@@ -189,6 +214,7 @@ main(void)
         cmocka_unit_test(test_bad_sizes_are_refused),
         cmocka_unit_test(test_size_ceiling),
         cmocka_unit_test(test_crop_view_shares_pixels),
+        cmocka_unit_test(test_wrap_borrows_pixels),
         cmocka_unit_test(test_channel_view_and_subset),
         cmocka_unit_test(test_attributes),
         cmocka_unit_test(test_same_size_message),

@@ -18,4 +18,19 @@ cc -std=c11 "$src/consumer/consumer.c" -o "$work/pc-consumer" $(pkg-config --cfl
     -Wl,-rpath,"$(pkg-config --variable=libdir mcpost)"
 "$work/pc-consumer" "$work"
 test -s "$work/consumer.png"
+# the Python module, when it was built: installed under the prefix, it imports from
+# there and finds libmcpost and the U-Net's weights (share/mcpost) relative to itself
+python=$(sed -n 's/^Python3_EXECUTABLE:[A-Z]*=//p' "$build/CMakeCache.txt")
+if compgen -G "$build/python/mcpost*.so" >/dev/null; then
+    module=$(find "$prefix" -name 'mcpost*.so' -path '*-packages/*')
+    test -n "$module"
+    (cd "$work" && PYTHONPATH=$(dirname "$module") "$python" -c '
+import sys, mcpost, numpy as np
+assert mcpost.__file__.startswith(sys.argv[1]), mcpost.__file__
+rng = np.random.default_rng(1)
+c, a, n = (rng.random((32, 32, 3), dtype=np.float32) for _ in range(3))
+assert mcpost.denoise(c, albedo=a, normal=n, denoiser="unet").shape == (32, 32, 3)
+' "$prefix")
+    echo "install check: the Python module imports from $(dirname "$module")"
+fi
 echo "install check: find_package and pkg-config consumers ran"

@@ -1,0 +1,258 @@
+/* blend.c: blend(dumps, ...) -- converging blends of a progressive render with its
+ * denoised images (blend/blend.h; Denisova & Bocchi 2024): per member the blended image
+ * and the weights, the figures of the CLI's members table and, with a reference, the
+ * errors of every method. The one long call here with a hook: Ctrl-C stops it after the
+ * member being blended. */
+#include "internal.h"
+
+#include <mcpost/blend.h>
+
+#include <math.h>
+
+/* What the driver hands over per member, copied (its images are borrowed). */
+typedef struct member {
+    char *source;
+    mcp_blend_row row;
+    mcp_image *images[MCP_BLEND_N_METHODS];
+    mcp_image *weights;
+} member;
+
+typedef struct sink {
+    member *members;
+    int count;
+    int all_images;
+    PyThreadState *thread; /* the caller's, to take the GIL back for signals */
+} sink;
+
+static int
+on_point(const mcp_blend_point *p, void *ctx)
+{
+    sink *s = ctx;
+    /* Ctrl-C: Python's handler only notes the signal; look at it here, with the GIL */
+    PyEval_RestoreThread(s->thread);
+    int interrupted = PyErr_CheckSignals();
+    s->thread = PyEval_SaveThread();
+    if (interrupted)
+        return mcp_error("blend: interrupted");
+    member *m = &s->members[p->index];
+    memset(m, 0, sizeof *m);
+    m->row = *p->row;
+    if (!(m->source = mcp_strdup(p->source)) || mcp_image_copy(p->weights, &m->weights))
+        return -1;
+    for (int k = 0; k < MCP_BLEND_N_METHODS; k++)
+        if (p->images[k] && (s->all_images || k == MCP_BLEND_CURVES) &&
+            mcp_image_copy(p->images[k], &m->images[k]))
+            return -1;
+    s->count = p->index + 1;
+    return 0;
+}
+
+static void
+sink_free(sink *s, int n)
+{
+    for (int i = 0; s->members && i < n; i++) {
+        free(s->members[i].source);
+        mcp_image_free(s->members[i].weights);
+        for (int k = 0; k < MCP_BLEND_N_METHODS; k++)
+            mcp_image_free(s->members[i].images[k]);
+    }
+    PyMem_Free(s->members);
+}
+
+static PyObject *
+member_dict(member *m, int has_reference, int has_flip)
+{
+    PyObject *d = PyDict_New(), *images = NULL, *errors = NULL;
+    if (!d || mcp_py_set(d, "source", PyUnicode_DecodeFSDefault(m->source)) ||
+        mcp_py_set(d, "spp", PyFloat_FromDouble(m->row.spp)) ||
+        mcp_py_set(d, "denoised_spp", PyFloat_FromDouble(m->row.denoised_spp)) ||
+        mcp_py_set(d, "mean_var", PyFloat_FromDouble(m->row.mean_var)) ||
+        mcp_py_set(d, "mean_sure", PyFloat_FromDouble(m->row.mean_sure)) ||
+        mcp_py_set(d, "filtered", PyBool_FromLong(m->row.filtered)) ||
+        mcp_py_set(d, "negative_sure",
+                   PyUnicode_FromString(m->row.magnitude ? "magnitude" : "zero")) ||
+        mcp_py_set(d, "mean_rho", PyFloat_FromDouble(m->row.mean_rho)))
+        goto fail;
+    mcp_image *blend = m->images[MCP_BLEND_CURVES], *w = m->weights;
+    m->images[MCP_BLEND_CURVES] = m->weights = NULL;
+    if (mcp_py_set(d, "blend", mcp_py_array(blend)) || mcp_py_set(d, "weights", mcp_py_array(w)))
+        goto fail;
+    images = PyDict_New();
+    if (!images)
+        goto fail;
+    for (int k = 0; k < MCP_BLEND_N_METHODS; k++)
+        if (m->images[k]) {
+            mcp_image *img = m->images[k];
+            m->images[k] = NULL;
+            if (mcp_py_set(images, mcp_blend_method_name(k), mcp_py_array(img)))
+                goto fail;
+        }
+    if (mcp_py_set(d, "images", images))
+        goto fail;
+    images = NULL;
+    if (has_reference) {
+        errors = PyDict_New();
+        for (int k = 0; errors && k < MCP_BLEND_N_METHODS; k++) {
+            const mcp_blend_errors *e = &m->row.err[k];
+            PyObject *one = has_flip ? Py_BuildValue("{s:d,s:d,s:d}", "mse", e->mse, "relmse",
+                                                     e->relmse, "flip_hdr", e->flip_hdr)
+                                     : Py_BuildValue("{s:d,s:d}", "mse", e->mse, "relmse",
+                                                     e->relmse);
+            if (mcp_py_set(errors, mcp_blend_method_name(k), one))
+                goto fail;
+        }
+        if (mcp_py_set(d, "errors", errors))
+            goto fail;
+        errors = NULL;
+    }
+    return d;
+fail:
+    Py_XDECREF(images);
+    Py_XDECREF(errors);
+    Py_XDECREF(d);
+    return NULL;
+}
+
+static int
+parse_seed(PyObject *v, uint64_t *out)
+{
+    unsigned long long s = PyLong_AsUnsignedLongLong(v);
+    if (s == (unsigned long long)-1 && PyErr_Occurred())
+        return -1;
+    *out = s;
+    return 0;
+}
+
+static PyObject *
+py_blend(PyObject *self, PyObject *args, PyObject *kw)
+{
+    (void)self;
+    static char *keys[] = {"dumps",         "denoiser",     "reference",
+                           "stop_denoising_at", "fit",      "curve",
+                           "far_spp",       "max_weight",   "denoiser_keeps_zeros",
+                           "filter",        "filter_window", "filter_sigma_scale",
+                           "stop_filtering", "negative_sure", "n_probes",
+                           "seed",          "js_window",    "flip",
+                           "variance_from", "all_images",   NULL};
+    mcp_blend_series_options o = mcp_blend_series_defaults();
+    mcp_blend_options *b = &o.blend;
+    PyObject *list, *den_obj = Py_None, *ref_obj = Py_None, *seed = NULL;
+    const char *fit = NULL, *curve = NULL, *filter = NULL, *neg = NULL, *vfrom = NULL;
+    int all_images = 0;
+    if (!PyArg_ParseTupleAndKeywords(
+            args, kw, "O|$OOdzzddpzidpziOipzp:blend", keys, &list, &den_obj, &ref_obj,
+            &o.stop_denoising_at, &fit, &curve, &b->far_spp, &b->max_weight,
+            &b->denoiser_keeps_zeros, &filter, &b->filter_window, &b->filter_sigma_scale,
+            &b->stop_filtering, &neg, &o.sure.n_probes, &seed, &b->js_window, &o.flip,
+            &vfrom, &all_images))
+        return NULL;
+    if (seed && parse_seed(seed, &o.sure.seed))
+        return NULL;
+    mcp_variance_source vsrc = MCP_VARSRC_NONE;
+    if ((fit && mcp_curve_fit_from_name(fit, &b->fit)) ||
+        (curve && mcp_curve_model_from_name(curve, &b->curve)) ||
+        (filter && mcp_blend_filter_from_name(filter, &b->filter)) ||
+        (neg && mcp_neg_sure_from_name(neg, &b->negative_sure)) ||
+        mcp_blend_options_check(b))
+        return mcp_py_fail();
+    if (vfrom && strcmp(vfrom, "file")) {
+        if (strcmp(vfrom, "increments")) {
+            PyErr_Format(mcp_py_error,
+                         "variance_from must be file or increments (got '%s')", vfrom);
+            return NULL;
+        }
+        vsrc = MCP_VARSRC_INCREMENTS;
+    }
+    /* the members: paths in increasing spp (the driver loads them one at a time) */
+    PyObject *fast = PySequence_Fast(list, "dumps must be a list of paths");
+    if (!fast)
+        return NULL;
+    Py_ssize_t n = PySequence_Fast_GET_SIZE(fast);
+    PyObject **held = PyMem_Calloc((size_t)(n ? n : 1), sizeof *held);
+    const char **paths = PyMem_Calloc((size_t)(n ? n : 1), sizeof *paths);
+    mcp_series *series = NULL;
+    mcp_denoiser *den = NULL;
+    mcp_py_image ref = {0};
+    mcp_blend_series_result *r = NULL;
+    sink s = {0};
+    PyObject *result = NULL;
+    if (!held || !paths) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    if (n < 1) {
+        PyErr_SetString(mcp_py_error, "blend: no dumps given");
+        goto done;
+    }
+    for (Py_ssize_t i = 0; i < n; i++) {
+        char what[32];
+        snprintf(what, sizeof what, "dumps[%zd]", i);
+        if (!(held[i] = mcp_py_path(PySequence_Fast_GET_ITEM(fast, i), what)))
+            goto done;
+        paths[i] = PyBytes_AS_STRING(held[i]);
+    }
+    if (mcp_series_from_paths(paths, NULL, (int)n, &series)) {
+        mcp_py_fail();
+        goto done;
+    }
+    series->variance_from = vsrc;
+    if (mcp_py_image_opt(ref_obj, "reference", 0, NULL, &ref) ||
+        mcp_py_denoiser_arg(den_obj, &den))
+        goto done;
+    if (!(s.members = PyMem_Calloc((size_t)n, sizeof *s.members))) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    s.all_images = all_images;
+    int rc;
+    s.thread = PyEval_SaveThread();
+    rc = mcp_blend_series(series, den, ref.img, &o, on_point, &s, &r);
+    PyEval_RestoreThread(s.thread);
+    if (PyErr_Occurred() || mcp_py_check_signals())
+        goto done;
+    if (rc) {
+        mcp_py_fail();
+        goto done;
+    }
+    PyObject *members = PyList_New(r->count);
+    for (int i = 0; members && i < r->count; i++) {
+        s.members[i].row = r->rows[i]; /* the final row (errors filled in) */
+        PyObject *m = member_dict(&s.members[i], r->has_reference, r->has_flip);
+        if (!m)
+            Py_CLEAR(members);
+        else
+            PyList_SET_ITEM(members, i, m);
+    }
+    if (members)
+        result = Py_BuildValue(
+            "{s:N,s:s,s:s,s:O}", "members", members, "denoiser", den->name,
+            "variance_source", mcp_variance_source_name(r->variance_source), "has_reference",
+            r->has_reference ? Py_True : Py_False);
+done:
+    sink_free(&s, (int)n);
+    mcp_blend_series_result_free(r);
+    mcp_py_image_release(&ref);
+    mcp_denoiser_free(den);
+    mcp_series_free(series);
+    for (Py_ssize_t i = 0; held && i < n; i++)
+        Py_XDECREF(held[i]);
+    PyMem_Free(held);
+    PyMem_Free(paths);
+    Py_DECREF(fast);
+    return result;
+}
+
+PyMethodDef mcp_py_blend_methods[] = {
+    {"blend", (PyCFunction)(void (*)(void))py_blend, METH_VARARGS | METH_KEYWORDS,
+     "blend(dumps, *, denoiser='default', reference=None, stop_denoising_at=0,\n"
+     "      fit='on_the_fly', curve='log', far_spp=1e6, max_weight=0,\n"
+     "      denoiser_keeps_zeros=False, filter='gauss', filter_window=11,\n"
+     "      filter_sigma_scale=100, stop_filtering=True, negative_sure='switch',\n"
+     "      n_probes=1, seed=0, js_window=7, flip=True, variance_from='file',\n"
+     "      all_images=False) -> dict\n\n"
+     "Blends every member of a progressive render (dump paths in increasing spp) with\n"
+     "its denoised image (Denisova & Bocchi 2024). 'members': per member 'blend',\n"
+     "'weights', 'spp', 'mean_var', 'mean_sure', 'mean_rho', ..., 'images' (every\n"
+     "method's image with all_images) and with a reference 'errors' (mse, relmse,\n"
+     "flip_hdr per method). Ctrl-C stops it after the current member."},
+    {NULL, NULL, 0, NULL}};

@@ -1,0 +1,261 @@
+/* estimate.c: estimate(dump, ...) -- how wrong the denoised render still is and whether
+ * to stop (estimate/estimate.h; SPEC "estimate"): the error maps, the blocks, the
+ * distribution's λ and s², F(τ) and the decision F(τ) >= p, the estimated percentile
+ * curve, the sampling map and, with a reference, the true percentiles beside it. The
+ * keywords are the CLI's flags ('-' as '_'). */
+#include "internal.h"
+
+#include <mcpost/estimate.h>
+
+#include <math.h>
+#include <stdlib.h>
+
+static int
+parse_vprobes(const char *s, int *out)
+{
+    if (!strcmp(s, "sure"))
+        *out = 0;
+    else if (!strcmp(s, "rademacher"))
+        *out = 1;
+    else
+        return mcp_error("variance probes must be sure or rademacher (got '%s')", s);
+    return 0;
+}
+
+/* The keywords into o; 0 or -1 with an exception. */
+static int
+options(const char *metric, PyObject *plist, unsigned long long seed, const char *vprobes,
+        const char *sampling, double budget, PyObject *s2_pool, mcp_estimate_options *o)
+{
+    if ((metric && mcp_error_metric_from_name(metric, &o->sure.metric)) ||
+        (vprobes && parse_vprobes(vprobes, &o->variance_rademacher)) ||
+        (sampling && mcp_sampling_kind_from_name(sampling, &o->sampling.kind)))
+        return mcp_py_fail_int();
+    o->sure.seed = seed;
+    if (plist && mcp_py_doubles(plist, "percentiles", o->percentiles,
+                                MCP_ESTIMATE_MAX_PERCENTILES, &o->n_percentiles))
+        return -1;
+    if (budget < 0 || budget != floor(budget) || budget > 4503599627370496.0) {
+        PyErr_Format(mcp_py_error, "budget must be a whole number of samples (got %g)", budget);
+        return -1;
+    }
+    o->budget = (int64_t)budget;
+    if (s2_pool) {
+        if (PyUnicode_Check(s2_pool) && !strcmp(PyUnicode_AsUTF8(s2_pool), "auto")) {
+            o->s2_pool = -1;
+        } else {
+            long r = PyLong_AsLong(s2_pool);
+            if (r == -1 && PyErr_Occurred()) {
+                PyErr_Clear();
+                PyErr_SetString(PyExc_TypeError, "s2_pool must be an int or 'auto'");
+                return -1;
+            }
+            o->s2_pool = (int)r;
+        }
+    }
+    return mcp_estimate_check(o) ? mcp_py_fail_int() : 0;
+}
+
+/* Takes an image out of a slot into d[key] (None when it is NULL). */
+static int
+take(PyObject *d, const char *key, mcp_image **slot)
+{
+    mcp_image *img = *slot;
+    *slot = NULL;
+    return mcp_py_set(d, key, mcp_py_array(img));
+}
+
+/* The result dict; takes the estimate's images over. */
+static PyObject *
+result_dict(mcp_estimate *e, const mcp_estimate_options *o, const double *taus, int n_taus,
+            const double *truth, const char *denoiser)
+{
+    PyObject *d = PyDict_New();
+    mcp_image *dist = NULL, *block_mean = NULL;
+    int32_t *label = NULL;
+    if (!d)
+        return NULL;
+    /* the distribution and the block-averaged SURE, before the maps are taken */
+    if (mcp_error_dist_image(e->dist, &dist) ||
+        mcp_blocks_mean_image(e->blocks, e->maps.sure_rel, &block_mean) ||
+        mcp_blocks_label(e->blocks, &label)) {
+        mcp_py_fail();
+        goto fail;
+    }
+    double cdf[MCP_ESTIMATE_MAX_TAUS];
+    for (int j = 0; j < n_taus; j++)
+        cdf[j] = mcp_error_cdf(e->dist, taus[j]);
+    double lambda = 0, s2 = 0, n = (double)e->blocks->width * e->blocks->height * 3;
+    for (int i = 0; i < e->blocks->count; i++) {
+        const mcp_block *k = &e->blocks->items[i];
+        for (int c = 0; c < 3; c++) {
+            lambda += mcp_error_dist_lambda(e->dist, i, c) * k->w * k->h;
+            s2 += k->var_sum[c];
+        }
+    }
+    npy_intp dims[2] = {e->blocks->height, e->blocks->width};
+    PyObject *labels = PyArray_SimpleNew(2, dims, NPY_INT32);
+    if (labels)
+        memcpy(PyArray_DATA((PyArrayObject *)labels), label,
+               (size_t)dims[0] * dims[1] * sizeof *label);
+    if (mcp_py_set(d, "denoiser", PyUnicode_FromString(denoiser)) ||
+        mcp_py_set(d, "metric", PyUnicode_FromString(mcp_error_metric_name(o->sure.metric))) ||
+        mcp_py_set(d, "tau", PyFloat_FromDouble(e->tau)) ||
+        mcp_py_set(d, "p", PyFloat_FromDouble(e->p)) ||
+        mcp_py_set(d, "cdf_at_tau", PyFloat_FromDouble(e->cdf_at_tau)) ||
+        mcp_py_set(d, "stop", PyBool_FromLong(e->stop)) ||
+        mcp_py_set(d, "no_variance", PyBool_FromLong(e->no_variance)) ||
+        mcp_py_set(d, "taus", mcp_py_vector(taus, n_taus)) ||
+        mcp_py_set(d, "cdf", mcp_py_vector(cdf, n_taus)) ||
+        mcp_py_set(d, "percentiles", mcp_py_vector(e->percentiles, e->n_percentiles)) ||
+        mcp_py_set(d, "percentile_error", mcp_py_vector(e->percentile_tau, e->n_percentiles)) ||
+        mcp_py_set(d, "true_percentiles",
+                   truth ? mcp_py_vector(truth, e->n_percentiles) : Py_NewRef(Py_None)) ||
+        mcp_py_set(d, "blocks", PyLong_FromLong(e->blocks->count)) ||
+        mcp_py_set(d, "block_labels", labels) ||
+        mcp_py_set(d, "expected_mean_error", PyFloat_FromDouble(mcp_error_dist_mean(e->dist))) ||
+        mcp_py_set(d, "mean_lambda", PyFloat_FromDouble(lambda / n)) ||
+        mcp_py_set(d, "mean_s2", PyFloat_FromDouble(s2 / n)) ||
+        mcp_py_set(d, "lambda", mcp_py_array_channels(dist, 0, 3)) ||
+        mcp_py_set(d, "s2", mcp_py_array_channels(dist, 3, 3)) ||
+        mcp_py_set(d, "variance_source",
+                   PyUnicode_FromString(mcp_variance_source_name(e->variance_source))) ||
+        mcp_py_set(d, "variance_dof", PyFloat_FromDouble(e->variance_dof)) ||
+        mcp_py_set(d, "s2_pool", PyLong_FromLong(e->s2_pool)) ||
+        mcp_py_set(d, "time_ms",
+                   Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:d}", "denoise_and_jvp",
+                                 e->ms_denoise, "sure_and_variance", e->ms_error_terms,
+                                 "block_averaging", e->ms_blocks, "stopping", e->ms_stopping,
+                                 "percentiles", e->ms_percentiles, "sampling_map",
+                                 e->ms_sampling)) ||
+        take(d, "blocks_sure_rel", &block_mean) || take(d, "denoised", &e->maps.denoised) ||
+        take(d, "sure", &e->maps.sure) || take(d, "sure_rel", &e->maps.sure_rel) ||
+        take(d, "variance", &e->maps.var) || take(d, "variance_rel", &e->maps.var_rel) ||
+        take(d, "sigma_rel", &e->maps.sigma_rel) ||
+        take(d, "denominator", &e->maps.denominator) ||
+        take(d, "sampling_map", &e->sampling_map) ||
+        take(d, "sample_counts", &e->sample_counts))
+        goto fail;
+    free(label);
+    mcp_image_free(dist);
+    return d;
+fail:
+    free(label);
+    mcp_image_free(dist);
+    mcp_image_free(block_mean);
+    Py_DECREF(d);
+    return NULL;
+}
+
+static PyObject *
+py_estimate(PyObject *self, PyObject *args, PyObject *kw)
+{
+    (void)self;
+    static char *keys[] = {"dump",     "denoiser", "metric",  "tau",     "percentile",
+                           "percentiles", "probes", "seed",   "mc_sure", "delta",
+                           "variance_probes", "ppd", "tile",  "sampling", "budget",
+                           "s2_pool",  "reference", "taus",  NULL};
+    PyObject *dump_obj, *den_obj = Py_None, *plist = NULL, *s2 = NULL, *ref_obj = Py_None,
+                        *tlist = NULL;
+    const char *metric = NULL, *vprobes = NULL, *sampling = NULL;
+    unsigned long long seed = 0;
+    double budget = 0;
+    mcp_estimate_options o = mcp_estimate_defaults();
+    if (!PyArg_ParseTupleAndKeywords(
+            args, kw, "O|$OzddOiKpdzdizdOOO:estimate", keys, &dump_obj, &den_obj, &metric,
+            &o.tau, &o.p, &plist, &o.sure.n_probes, &seed, &o.sure.mc_sure, &o.sure.fd_delta,
+            &vprobes, &o.sure.ppd, &o.blocks.tile_size, &sampling, &budget, &s2, &ref_obj,
+            &tlist) ||
+        options(metric, plist, seed, vprobes, sampling, budget, s2, &o))
+        return NULL;
+    double taus[MCP_ESTIMATE_MAX_TAUS] = {o.tau};
+    int n_taus = 1;
+    if (tlist && mcp_py_doubles(tlist, "taus", taus, MCP_ESTIMATE_MAX_TAUS, &n_taus))
+        return NULL;
+    mcp_py_dump dump;
+    mcp_py_image ref = {0};
+    mcp_denoiser *den = NULL;
+    if (mcp_py_dump_get(dump_obj, "dump", &dump))
+        return NULL;
+    PyObject *result = NULL;
+    mcp_estimate *e = NULL;
+    mcp_image *err = NULL;
+    if (mcp_py_image_opt(ref_obj, "reference", 0, NULL, &ref) ||
+        mcp_py_denoiser_arg(den_obj, &den))
+        goto done;
+    double truth[MCP_ESTIMATE_MAX_PERCENTILES];
+    int rc;
+    Py_BEGIN_ALLOW_THREADS
+    rc = mcp_estimate_compute(dump.dump, den, &o, &e);
+    if (!rc && ref.img)
+        rc = mcp_true_error(e->maps.denoised, ref.img, o.sure.metric, o.sure.ppd, &err) ||
+             mcp_true_percentiles(err, e->percentiles, e->n_percentiles, truth);
+    Py_END_ALLOW_THREADS
+    if (mcp_py_check_signals())
+        goto done;
+    if (rc) {
+        mcp_py_fail();
+        goto done;
+    }
+    result = result_dict(e, &o, taus, n_taus, ref.img ? truth : NULL, den->name);
+done:
+    mcp_image_free(err);
+    mcp_estimate_free(e);
+    mcp_denoiser_free(den);
+    mcp_py_image_release(&ref);
+    mcp_py_dump_release(&dump);
+    return result;
+}
+
+static PyObject *
+py_true_error(PyObject *self, PyObject *args, PyObject *kw)
+{
+    (void)self;
+    static char *keys[] = {"denoised", "reference", "metric", "ppd", NULL};
+    PyObject *a, *b;
+    const char *metric = NULL;
+    double ppd = 0;
+    mcp_error_metric m = MCP_METRIC_RELSE;
+    if (!PyArg_ParseTupleAndKeywords(args, kw, "OO|$zd:true_error", keys, &a, &b, &metric,
+                                     &ppd))
+        return NULL;
+    if (metric && mcp_error_metric_from_name(metric, &m))
+        return mcp_py_fail();
+    mcp_py_image f, r;
+    if (mcp_py_image_get(a, "denoised", 0, NULL, &f))
+        return NULL;
+    if (mcp_py_image_get(b, "reference", 0, NULL, &r)) {
+        mcp_py_image_release(&f);
+        return NULL;
+    }
+    mcp_image *err = NULL;
+    int rc;
+    Py_BEGIN_ALLOW_THREADS
+    rc = mcp_true_error(f.img, r.img, m, ppd, &err);
+    Py_END_ALLOW_THREADS
+    mcp_py_image_release(&f);
+    mcp_py_image_release(&r);
+    return rc ? mcp_py_fail() : mcp_py_array(err);
+}
+
+#define KW (METH_VARARGS | METH_KEYWORDS)
+#define FN(f) (PyCFunction)(void (*)(void))(f)
+PyMethodDef mcp_py_estimate_methods[] = {
+    {"estimate", FN(py_estimate), KW,
+     "estimate(dump, *, denoiser='default', metric='relse', tau=0.01, percentile=0.999,\n"
+     "         percentiles=(0.5, 0.9, 0.99, 0.999, 0.9999), probes=1, seed=0,\n"
+     "         mc_sure=False, delta=0.1, variance_probes='sure', ppd=0, tile=0,\n"
+     "         sampling='variance', budget=0, s2_pool=0, reference=None, taus=None)\n"
+     "    -> dict\n\n"
+     "The error estimate of the denoised dump (SURE, Firmino et al. 2024) and the stop\n"
+     "decision F(tau) >= p: maps ('denoised', 'sure', 'sure_rel', 'variance',\n"
+     "'variance_rel', 'sigma_rel', 'denominator', 'blocks_sure_rel', 'sampling_map',\n"
+     "'sample_counts'), the distribution ('lambda', 's2', 'block_labels', 'blocks',\n"
+     "'mean_lambda', 'mean_s2', 'expected_mean_error'), 'cdf_at_tau', 'stop', 'cdf'\n"
+     "(F at each of taus), 'percentile_error' at 'percentiles', and with a reference\n"
+     "'true_percentiles'. dump is a path or a dict; denoiser a name or a dict with\n"
+     "'name' and its settings."},
+    {"true_error", FN(py_true_error), KW,
+     "true_error(denoised, reference, *, metric='relse', ppd=0) -> ndarray H x W x 3:\n"
+     "the true per-value error in the metric (SPEC 'Ground truth for evaluation')"},
+    {NULL, NULL, 0, NULL}};

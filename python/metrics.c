@@ -1,0 +1,446 @@
+/* metrics.c: how far a test image is from a reference (common/metrics.h) -- mse, relmse,
+ * psnr, pmse, flip (the mean and the map), relse_percentiles, blue_noise, and metrics(),
+ * every figure at once in the CLI's JSON layout. The first image is the test image,
+ * the second the reference, as everywhere in mcpost. */
+#include "internal.h"
+
+#include <mcpost/metrics.h>
+
+#include <math.h>
+
+/* The two images of every metric; 0 or -1 with an exception. */
+static int
+get_pair(PyObject *test, PyObject *ref, mcp_py_image *t, mcp_py_image *r)
+{
+    if (mcp_py_image_get(test, "test", 0, NULL, t))
+        return -1;
+    if (mcp_py_image_get(ref, "ref", 0, NULL, r)) {
+        mcp_py_image_release(t);
+        return -1;
+    }
+    return 0;
+}
+
+static void
+release_pair(mcp_py_image *t, mcp_py_image *r)
+{
+    mcp_py_image_release(t);
+    mcp_py_image_release(r);
+}
+
+static PyObject *
+py_mse(PyObject *self, PyObject *args, PyObject *kw)
+{
+    (void)self;
+    static char *keys[] = {"test", "ref", NULL};
+    PyObject *a, *b;
+    mcp_py_image t, r;
+    double v;
+    if (!PyArg_ParseTupleAndKeywords(args, kw, "OO:mse", keys, &a, &b) ||
+        get_pair(a, b, &t, &r))
+        return NULL;
+    int rc = mcp_mse(t.img, r.img, &v);
+    release_pair(&t, &r);
+    return rc ? mcp_py_fail() : PyFloat_FromDouble(v);
+}
+
+static PyObject *
+py_relmse(PyObject *self, PyObject *args, PyObject *kw)
+{
+    (void)self;
+    static char *keys[] = {"test", "ref", "eps_rel", NULL};
+    PyObject *a, *b;
+    double eps = MCP_EPS_REL, v;
+    mcp_py_image t, r;
+    if (!PyArg_ParseTupleAndKeywords(args, kw, "OO|$d:relmse", keys, &a, &b, &eps) ||
+        get_pair(a, b, &t, &r))
+        return NULL;
+    int rc = mcp_relmse(t.img, r.img, eps, &v);
+    release_pair(&t, &r);
+    return rc ? mcp_py_fail() : PyFloat_FromDouble(v);
+}
+
+static PyObject *
+py_psnr(PyObject *self, PyObject *args, PyObject *kw)
+{
+    (void)self;
+    static char *keys[] = {"test", "ref", NULL};
+    PyObject *a, *b;
+    double v;
+    mcp_py_image t, r;
+    if (!PyArg_ParseTupleAndKeywords(args, kw, "OO:psnr", keys, &a, &b) ||
+        get_pair(a, b, &t, &r))
+        return NULL;
+    int rc = mcp_psnr(t.img, r.img, &v);
+    release_pair(&t, &r);
+    return rc ? mcp_py_fail() : PyFloat_FromDouble(v);
+}
+
+/* pMSE's keywords (the CLI's --pmse-* words) into o. */
+static int
+pmse_options(const char *kernel, double dpi, double distance_in, int filter_reference,
+             const char *tone_map, mcp_pmse_options *o)
+{
+    *o = mcp_pmse_defaults();
+    if ((kernel && mcp_pkernel_kind_from_name(kernel, &o->kernel.kind)) ||
+        (tone_map && mcp_tonemap_from_name(tone_map, &o->tone_map)))
+        return mcp_py_fail_int();
+    if (dpi > 0)
+        o->kernel.dpi = dpi;
+    if (distance_in > 0)
+        o->kernel.distance_in = distance_in;
+    o->filter_reference = filter_reference;
+    return 0;
+}
+
+static PyObject *
+py_pmse(PyObject *self, PyObject *args, PyObject *kw)
+{
+    (void)self;
+    static char *keys[] = {"test", "ref", "kernel", "dpi", "distance_in",
+                           "filter_reference", "tone_map", NULL};
+    PyObject *a, *b;
+    const char *kernel = NULL, *tone = NULL;
+    double dpi = 0, dist = 0, v;
+    int filter = 0;
+    mcp_pmse_options o;
+    mcp_py_image t, r;
+    if (!PyArg_ParseTupleAndKeywords(args, kw, "OO|$zddpz:pmse", keys, &a, &b, &kernel,
+                                     &dpi, &dist, &filter, &tone) ||
+        pmse_options(kernel, dpi, dist, filter, tone, &o) || get_pair(a, b, &t, &r))
+        return NULL;
+    int rc;
+    Py_BEGIN_ALLOW_THREADS
+    rc = mcp_pmse(t.img, r.img, &o, &v);
+    Py_END_ALLOW_THREADS
+    release_pair(&t, &r);
+    if (mcp_py_check_signals())
+        return NULL;
+    return rc ? mcp_py_fail() : PyFloat_FromDouble(v);
+}
+
+/* FLIP's keywords (the CLI's words) into o. */
+static int
+flip_options(double ppd, double distance_m, double width_m, double width_px,
+             const char *tone_mapper, double start, double stop, int num,
+             mcp_flip_options *o)
+{
+    *o = mcp_flip_defaults();
+    if (tone_mapper && mcp_tonemap_from_name(tone_mapper, &o->tone_mapper))
+        return mcp_py_fail_int();
+    o->ppd = ppd;
+    if (distance_m > 0)
+        o->distance_m = distance_m;
+    if (width_m > 0)
+        o->display_width_m = width_m;
+    if (width_px > 0)
+        o->display_width_px = width_px;
+    o->start_exposure = start;
+    o->stop_exposure = stop;
+    o->num_exposures = num;
+    return 0;
+}
+
+static PyObject *
+py_flip(PyObject *self, PyObject *args, PyObject *kw)
+{
+    (void)self;
+    static char *keys[] = {"test",          "ref",         "hdr",
+                           "ppd",           "distance_m",  "display_width_m",
+                           "display_width_px", "tone_mapper", "start_exposure",
+                           "stop_exposure", "num_exposures", "exposure_map", NULL};
+    PyObject *a, *b;
+    int hdr = 0, num = 0, want_exposure = 0;
+    double ppd = 0, dist = 0, wm = 0, wpx = 0, start = NAN, stop = NAN;
+    const char *tm = NULL;
+    mcp_flip_options o;
+    mcp_py_image t, r;
+    if (!PyArg_ParseTupleAndKeywords(args, kw, "OO|$pddddzddip:flip", keys, &a, &b, &hdr,
+                                     &ppd, &dist, &wm, &wpx, &tm, &start, &stop, &num,
+                                     &want_exposure) ||
+        flip_options(ppd, dist, wm, wpx, tm, start, stop, num, &o) ||
+        get_pair(a, b, &t, &r))
+        return NULL;
+    mcp_flip_result res;
+    mcp_image *map = NULL, *exposure = NULL;
+    int rc;
+    Py_BEGIN_ALLOW_THREADS
+    rc = hdr ? mcp_flip_hdr(t.img, r.img, &o, &res, &map, want_exposure ? &exposure : NULL)
+             : mcp_flip_ldr(t.img, r.img, &o, &res, &map);
+    Py_END_ALLOW_THREADS
+    release_pair(&t, &r);
+    if (mcp_py_check_signals()) {
+        mcp_image_free(map);
+        mcp_image_free(exposure);
+        return NULL;
+    }
+    if (rc)
+        return mcp_py_fail();
+    if (hdr && want_exposure)
+        return Py_BuildValue("(dNN)", res.mean, mcp_py_array(map), mcp_py_array(exposure));
+    return Py_BuildValue("(dN)", res.mean, mcp_py_array(map));
+}
+
+static PyObject *
+py_relse_percentiles(PyObject *self, PyObject *args, PyObject *kw)
+{
+    (void)self;
+    static char *keys[] = {"test", "ref", "percentiles", "eps_rel", NULL};
+    PyObject *a, *b, *plist = NULL;
+    double eps = MCP_EPS_REL;
+    double p[MCP_METRICS_MAX_PERCENTILES] = {0.5, 0.9, 0.99}, v[MCP_METRICS_MAX_PERCENTILES];
+    int n = 3;
+    mcp_py_image t, r;
+    if (!PyArg_ParseTupleAndKeywords(args, kw, "OO|$Od:relse_percentiles", keys, &a, &b,
+                                     &plist, &eps) ||
+        (plist && mcp_py_doubles(plist, "percentiles", p, MCP_METRICS_MAX_PERCENTILES, &n)))
+        return NULL;
+    for (int k = 0; k < n; k++)
+        if (!(p[k] >= 0 && p[k] <= 1)) {
+            PyErr_Format(mcp_py_error, "percentiles: %g is not in [0, 1]", p[k]);
+            return NULL;
+        }
+    if (get_pair(a, b, &t, &r))
+        return NULL;
+    mcp_image *relse = NULL;
+    int rc;
+    Py_BEGIN_ALLOW_THREADS
+    rc = mcp_relse_map(t.img, r.img, eps, &relse) || mcp_image_percentiles(relse, p, n, v);
+    Py_END_ALLOW_THREADS
+    mcp_image_free(relse);
+    release_pair(&t, &r);
+    return rc ? mcp_py_fail() : mcp_py_vector(v, n);
+}
+
+static PyObject *
+py_relse_map(PyObject *self, PyObject *args, PyObject *kw)
+{
+    (void)self;
+    static char *keys[] = {"test", "ref", "eps_rel", NULL};
+    PyObject *a, *b;
+    double eps = MCP_EPS_REL;
+    mcp_py_image t, r;
+    if (!PyArg_ParseTupleAndKeywords(args, kw, "OO|$d:relse_map", keys, &a, &b, &eps) ||
+        get_pair(a, b, &t, &r))
+        return NULL;
+    mcp_image *relse = NULL;
+    int rc = mcp_relse_map(t.img, r.img, eps, &relse);
+    release_pair(&t, &r);
+    return rc ? mcp_py_fail() : mcp_py_array(relse);
+}
+
+static PyObject *
+py_blue_noise(PyObject *self, PyObject *args, PyObject *kw)
+{
+    (void)self;
+    static char *keys[] = {"test", "ref", "tile_size", "cutoff", "tone_map", NULL};
+    PyObject *a, *b;
+    mcp_spectra_options o = mcp_spectra_defaults();
+    const char *tone = NULL;
+    mcp_py_image t, r;
+    if (!PyArg_ParseTupleAndKeywords(args, kw, "OO|$idz:blue_noise", keys, &a, &b,
+                                     &o.tile_size, &o.cutoff, &tone))
+        return NULL;
+    if (tone && mcp_tonemap_from_name(tone, &o.tone_map))
+        return mcp_py_fail();
+    if (get_pair(a, b, &t, &r))
+        return NULL;
+    mcp_spectra_result res;
+    mcp_image *picture = NULL;
+    int rc;
+    Py_BEGIN_ALLOW_THREADS
+    rc = mcp_spectra_blue_noise(t.img, r.img, &o, &res, &picture);
+    Py_END_ALLOW_THREADS
+    release_pair(&t, &r);
+    if (rc)
+        return mcp_py_fail();
+    PyObject *d = PyDict_New();
+    if (!d || mcp_py_set(d, "low_fraction", PyFloat_FromDouble(res.low_fraction)) ||
+        mcp_py_set(d, "white_fraction", PyFloat_FromDouble(res.white_fraction)) ||
+        mcp_py_set(d, "energy", PyFloat_FromDouble(res.energy)) ||
+        mcp_py_set(d, "tile_size", PyLong_FromLong(res.tile_size)) ||
+        mcp_py_set(d, "tiles", Py_BuildValue("(ii)", res.tiles_x, res.tiles_y)) ||
+        mcp_py_set(d, "spectrum", mcp_py_array(picture))) {
+        Py_XDECREF(d);
+        return NULL;
+    }
+    return d;
+}
+
+/* cJSON into Python: numbers become floats, "inf" (how the library writes an infinite
+ * figure) float('inf'). */
+static PyObject *
+from_json(const cJSON *j)
+{
+    if (cJSON_IsNumber(j))
+        return PyFloat_FromDouble(j->valuedouble);
+    if (cJSON_IsBool(j))
+        return PyBool_FromLong(cJSON_IsTrue(j));
+    if (cJSON_IsString(j))
+        return !strcmp(j->valuestring, "inf") ? PyFloat_FromDouble(INFINITY)
+                                              : PyUnicode_FromString(j->valuestring);
+    if (cJSON_IsArray(j)) {
+        PyObject *l = PyList_New(0);
+        const cJSON *it;
+        cJSON_ArrayForEach(it, j)
+        {
+            PyObject *v = from_json(it);
+            if (!l || !v || PyList_Append(l, v)) {
+                Py_XDECREF(v);
+                Py_XDECREF(l);
+                return NULL;
+            }
+            Py_DECREF(v);
+        }
+        return l;
+    }
+    if (cJSON_IsObject(j)) {
+        PyObject *d = PyDict_New();
+        const cJSON *it;
+        cJSON_ArrayForEach(it, j)
+        {
+            if (!d || mcp_py_set(d, it->string, from_json(it))) {
+                Py_XDECREF(d);
+                return NULL;
+            }
+        }
+        return d;
+    }
+    Py_RETURN_NONE;
+}
+
+static PyObject *
+py_metrics(PyObject *self, PyObject *args, PyObject *kw)
+{
+    (void)self;
+    static char *keys[] = {"test",          "ref",           "percentiles",
+                           "eps_rel",       "flip",          "ppd",
+                           "distance_m",    "display_width_m", "display_width_px",
+                           "tone_mapper",   "start_exposure", "stop_exposure",
+                           "num_exposures", "pmse_kernel",   "pmse_dpi",
+                           "pmse_distance_in", "pmse_filter_reference", "pmse_tone_map",
+                           "spectra",       "spectra_tile_size", "spectra_cutoff",
+                           "maps",          NULL};
+    PyObject *a, *b, *plist = NULL, *flip = NULL;
+    mcp_metrics_options o = mcp_metrics_defaults();
+    double ppd = 0, dist = 0, wm = 0, wpx = 0, start = NAN, stop = NAN, pdpi = 0, pdist = 0;
+    int num = 0, pfilter = 0, want_maps = 0;
+    const char *tm = NULL, *pkernel = NULL, *ptone = NULL;
+    if (!PyArg_ParseTupleAndKeywords(
+            args, kw, "OO|$OdOddddzddizddpzpidp:metrics", keys, &a, &b, &plist, &o.eps_rel,
+            &flip, &ppd, &dist, &wm, &wpx, &tm, &start, &stop, &num, &pkernel, &pdpi,
+            &pdist, &pfilter, &ptone, &o.spectra, &o.spectra_opt.tile_size,
+            &o.spectra_opt.cutoff, &want_maps))
+        return NULL;
+    if (flip_options(ppd, dist, wm, wpx, tm, start, stop, num, &o.flip) ||
+        pmse_options(pkernel, pdpi, pdist, pfilter, ptone, &o.pmse))
+        return NULL;
+    if (flip) { /* "ldr,hdr", "none", or a list of those words */
+        PyObject *comma = PyUnicode_FromString(",");
+        PyObject *words = !comma                ? NULL
+                          : PyUnicode_Check(flip) ? PyUnicode_Split(flip, comma, -1)
+                                                  : PySequence_List(flip);
+        Py_XDECREF(comma);
+        if (!words)
+            return NULL;
+        o.flip_ldr = o.flip_hdr = 0;
+        for (Py_ssize_t i = 0; i < PyList_GET_SIZE(words); i++) {
+            const char *w = PyUnicode_Check(PyList_GET_ITEM(words, i))
+                                ? PyUnicode_AsUTF8(PyList_GET_ITEM(words, i))
+                                : "?";
+            if (!strcmp(w, "ldr"))
+                o.flip_ldr = 1;
+            else if (!strcmp(w, "hdr"))
+                o.flip_hdr = 1;
+            else if (strcmp(w, "none")) {
+                PyErr_Format(mcp_py_error, "flip: unknown '%s' (use ldr, hdr or none)", w);
+                Py_DECREF(words);
+                return NULL;
+            }
+        }
+        Py_DECREF(words);
+    }
+    if (plist) {
+        double p[MCP_METRICS_MAX_PERCENTILES];
+        int n;
+        if (mcp_py_doubles(plist, "percentiles", p, MCP_METRICS_MAX_PERCENTILES, &n))
+            return NULL;
+        if (mcp_metrics_set_percentiles(&o, p, n))
+            return mcp_py_fail();
+    }
+    mcp_py_image t, r;
+    if (get_pair(a, b, &t, &r))
+        return NULL;
+    mcp_metrics m;
+    mcp_metrics_maps maps = {0};
+    int rc;
+    Py_BEGIN_ALLOW_THREADS
+    rc = mcp_metrics_compute(t.img, r.img, &o, &m, want_maps ? &maps : NULL);
+    Py_END_ALLOW_THREADS
+    release_pair(&t, &r);
+    PyObject *result = NULL;
+    cJSON *doc = NULL;
+    if (mcp_py_check_signals())
+        goto done;
+    if (rc || !(doc = cJSON_CreateObject()) || mcp_metrics_json(&m, &o, doc)) {
+        mcp_py_fail();
+        goto done;
+    }
+    result = from_json(doc);
+    if (result && want_maps) {
+        PyObject *md = PyDict_New();
+        mcp_image **items[] = {&maps.sq_error, &maps.relse, &maps.flip_ldr, &maps.flip_hdr,
+                               &maps.flip_hdr_exposure, &maps.spectra};
+        static const char *const names[] = {"sq_error", "relse",   "flip_ldr",
+                                            "flip_hdr", "flip_hdr_exposure", "spectra"};
+        for (int i = 0; md && i < 6; i++) {
+            mcp_image *img = *items[i];
+            *items[i] = NULL;
+            if (mcp_py_set(md, names[i], mcp_py_array(img)))
+                Py_CLEAR(md);
+        }
+        PyObject *pair = md ? Py_BuildValue("(NN)", result, md) : NULL;
+        if (!pair)
+            Py_CLEAR(result);
+        result = pair;
+    }
+done:
+    cJSON_Delete(doc);
+    mcp_metrics_maps_free(&maps);
+    return result;
+}
+
+#define KW (METH_VARARGS | METH_KEYWORDS)
+#define FN(f) (PyCFunction)(void (*)(void))(f)
+PyMethodDef mcp_py_metrics_methods[] = {
+    {"mse", FN(py_mse), KW, "mse(test, ref) -> float: mean (t - r)^2 over R, G, B"},
+    {"relmse", FN(py_relmse), KW,
+     "relmse(test, ref, *, eps_rel=0.01) -> float: mean (t - r)^2 / (r^2 + eps_rel)"},
+    {"psnr", FN(py_psnr), KW,
+     "psnr(test, ref) -> float: PSNR of the displayed images (clamped to [0, 1], sRGB),\n"
+     "inf for identical displays"},
+    {"pmse", FN(py_pmse), KW,
+     "pmse(test, ref, *, kernel='tap3', dpi=300, distance_in=16, filter_reference=False,\n"
+     "     tone_map='clamp') -> float: perceptual MSE (Chizhov et al. 2022)"},
+    {"flip", FN(py_flip), KW,
+     "flip(test, ref, *, hdr=False, ppd=0, distance_m=0.7, display_width_m=0.7,\n"
+     "     display_width_px=3840, tone_mapper='aces', start_exposure=nan,\n"
+     "     stop_exposure=nan, num_exposures=0, exposure_map=False) -> (mean, map)\n\n"
+     "LDR-FLIP, or HDR-FLIP with hdr=True, as NVIDIA FLIP v1.6 computes them; the map\n"
+     "is H x W. ppd 0 takes it from the viewing condition; nan exposures are automatic.\n"
+     "With hdr and exposure_map=True: (mean, map, exposure map)."},
+    {"relse_percentiles", FN(py_relse_percentiles), KW,
+     "relse_percentiles(test, ref, *, percentiles=(0.5, 0.9, 0.99), eps_rel=0.01)\n"
+     "    -> ndarray: RelSE = (t - r)^2 / (maxc(t)^2 + eps_rel) at each p (nearest rank)"},
+    {"relse_map", FN(py_relse_map), KW,
+     "relse_map(test, ref, *, eps_rel=0.01) -> ndarray H x W x 3: RelSE per value"},
+    {"blue_noise", FN(py_blue_noise), KW,
+     "blue_noise(test, ref, *, tile_size=32, cutoff=0.25, tone_map='clamp') -> dict\n\n"
+     "The low-frequency energy fraction of the error (low_fraction; white_fraction is\n"
+     "what white noise gives), its energy, and the tiled spectrum picture."},
+    {"metrics", FN(py_metrics), KW,
+     "metrics(test, ref, *, percentiles=None, eps_rel=0.01, flip='ldr,hdr', ppd=0, ...,\n"
+     "        pmse_kernel='tap3', ..., spectra=True, spectra_tile_size=32,\n"
+     "        spectra_cutoff=0.25, maps=False) -> dict (or (dict, maps) with maps=True)\n\n"
+     "Every figure of `mcpost metrics --json`, with its keys and keywords."},
+    {NULL, NULL, 0, NULL}};

@@ -1,0 +1,88 @@
+"""blend against `mcpost blend -o DIR` (the blended images, weights and final errors)
+and perceptual against `mcpost perceptual --json -o DIR` (the optimised image, the
+candidate index and the scores), on the committed renders."""
+import json
+
+import mcpost
+import numpy as np
+import pytest
+
+from conftest import assert_close, cli, reference, rgb, series, single
+
+MEMBERS = [series("cornell", n) for n in (1, 2, 4)]
+
+
+def test_blend_matches_the_cli(tmp):
+    # HDR-FLIP of six images per member is most of the time here; flip() has its test
+    cli("blend", *MEMBERS, "--denoiser", "gauss", "--ref", reference("cornell"), "-o", tmp,
+        "--quiet", "--no-flip", json_out=False)
+    want = json.load(open(tmp / "blend.json"))
+    got = mcpost.blend(MEMBERS, denoiser="gauss", reference=reference("cornell"), flip=False)
+    assert got["has_reference"] and len(got["members"]) == 3
+    for m, f in zip(got["members"], want["files"]):
+        assert m["spp"] == f["spp"] and m["source"] == f["source"]
+        np.testing.assert_array_equal(m["blend"], rgb(tmp / f["files"]["blend"]))
+        np.testing.assert_array_equal(m["weights"], rgb(tmp / f["files"]["weights"]))
+    last = got["members"][-1]["errors"]
+    for method, errors in want["final"].items():
+        if method == "spp":
+            continue
+        for k, v in errors.items():
+            assert_close(last[method][k], v, err_msg=f"{method} {k}")
+
+
+def test_blend_options_and_errors(tmp):
+    got = mcpost.blend(MEMBERS[:2], denoiser="gauss", all_images=True, fit="last_two",
+                       flip=False)
+    images = got["members"][1]["images"]
+    assert set(images) == {"noisy", "denoised", "easy", "james_stein"}
+    np.testing.assert_array_equal(images["noisy"], rgb(MEMBERS[1]))
+    assert "errors" not in got["members"][1]
+    with pytest.raises(mcpost.Error, match="fit"):
+        mcpost.blend(MEMBERS, fit="sideways")
+    with pytest.raises(mcpost.Error, match="no dumps given"):
+        mcpost.blend([])
+    with pytest.raises(mcpost.Error, match="missing.exr"):
+        mcpost.blend([series("cornell", 1), "missing.exr"], denoiser="gauss")
+
+
+CANDIDATES = [single("cornell", i) for i in range(4)]
+
+
+@pytest.mark.parametrize("method", ["vertical-iterative", "error-diffusion", "horizontal"])
+def test_perceptual_matches_the_cli(tmp, method):
+    want = cli("perceptual", "--method", method, "--surrogate", "reference", "--ref",
+               reference("cornell"), "-o", tmp, "--json", "--no-cache", *CANDIDATES)
+    got = mcpost.perceptual(CANDIDATES, method=method, surrogate="reference",
+                            reference=reference("cornell"), cache=False)
+    np.testing.assert_array_equal(got["image"], rgb(tmp / f"{method}.exr"))
+    if got["index"] is not None:
+        index, _, _ = mcpost.read_image(tmp / f"{method}_index.exr")
+        np.testing.assert_array_equal(got["index"], index)
+    else:
+        perm, names, _ = mcpost.read_image(tmp / f"{method}_permutation.exr")
+        np.testing.assert_array_equal(got["permutation"],
+                                      perm[..., [names.index("X"), names.index("Y")]])
+    for key in ("energy", "pmse", "mse", "low_freq_fraction", "mean_energy", "mean_pmse",
+                "pmse_ratio", "passes", "changes"):
+        assert_close(got[key], want[key], err_msg=key)
+
+
+def test_perceptual_from_arrays_and_errors():
+    arrays = [rgb(p) for p in CANDIDATES]
+    ref = rgb(reference("cornell"))
+    a = mcpost.perceptual(arrays, surrogate=ref, reference=ref)
+    b = mcpost.perceptual(CANDIDATES, surrogate="reference", reference=ref)
+    np.testing.assert_array_equal(a["image"], b["image"])
+    # every pixel takes one of the candidates' values
+    pick = np.take_along_axis(np.stack(arrays), a["index"].astype(int)[None, ..., None],
+                              axis=0)[0]
+    np.testing.assert_array_equal(a["image"], pick)
+    with pytest.raises(mcpost.Error, match="surrogate 'reference' needs a reference"):
+        mcpost.perceptual(arrays, surrogate="reference")
+    with pytest.raises(mcpost.Error, match="method"):
+        mcpost.perceptual(arrays, surrogate=ref, method="best")
+    with pytest.raises(mcpost.Error, match=r"candidates\[1\]: needs 3 channels"):
+        mcpost.perceptual([arrays[0], arrays[1][..., :1]], surrogate=ref)
+    with pytest.raises(mcpost.Error, match="kernel"):
+        mcpost.perceptual(arrays, surrogate=ref, kernel=[0.25, 0.75])

@@ -1,0 +1,128 @@
+"""The metrics against `mcpost metrics --json` on the committed renders (the same
+numbers) and against numpy where the formula is simple (MSE, relMSE)."""
+import math
+
+import mcpost
+import numpy as np
+import pytest
+
+from conftest import assert_close, cli, reference, rgb, series
+
+
+@pytest.fixture(scope="module")
+def pair():
+    return rgb(series("cornell", 16)), rgb(reference("cornell"))
+
+
+@pytest.fixture(scope="module")
+def cli_metrics():
+    return cli("metrics", series("cornell", 16), reference("cornell"), "--json")
+
+
+def test_mse_and_relmse_match_numpy(pair):
+    t, r = (a.astype(np.float64) for a in pair)
+    assert_close(mcpost.mse(*pair), np.mean((t - r) ** 2), rtol=1e-12)
+    assert_close(mcpost.relmse(*pair), np.mean((t - r) ** 2 / (r ** 2 + 1e-2)), rtol=1e-12)
+    assert_close(mcpost.relmse(*pair, eps_rel=0.5), np.mean((t - r) ** 2 / (r ** 2 + 0.5)),
+                 rtol=1e-12)
+
+
+def test_single_metrics_match_the_cli(pair, cli_metrics):
+    m = cli_metrics
+    assert_close(mcpost.mse(*pair), m["mse"])
+    assert_close(mcpost.relmse(*pair), m["relmse"])
+    assert_close(mcpost.psnr(*pair), m["psnr"])
+    assert_close(mcpost.pmse(*pair), m["pmse"])
+    assert_close(mcpost.relse_percentiles(*pair), m["relse_percentiles"]["value"])
+    assert_close(mcpost.blue_noise(*pair)["low_fraction"], m["blue_noise"]["low_fraction"])
+    ldr, ldr_map = mcpost.flip(*pair)
+    hdr, hdr_map = mcpost.flip(*pair, hdr=True)
+    assert_close(ldr, m["flip_ldr"]["mean"])
+    assert_close(hdr, m["flip_hdr"]["mean"])
+    assert ldr_map.shape == hdr_map.shape == (128, 128) and ldr_map.dtype == np.float32
+    # the map's mean is the FLIP value (FLIP sums in float, row-major: 1e-6 apart)
+    assert_close(ldr_map.mean(dtype=np.float64), ldr, rtol=1e-5)
+
+
+def test_paths_give_the_same_numbers(cli_metrics):
+    assert_close(mcpost.mse(series("cornell", 16), reference("cornell")), cli_metrics["mse"])
+
+
+def test_metrics_is_the_cli_json(pair, cli_metrics, tmp):
+    got, maps = mcpost.metrics(*pair, maps=True)
+    for key in ("test", "reference", "width", "height"):
+        cli_metrics.pop(key)
+    assert got.keys() == cli_metrics.keys()
+    for key, want in cli_metrics.items():
+        if isinstance(want, dict):
+            for k, v in want.items():
+                if isinstance(v, (int, float, list)):
+                    assert_close(got[key][k], v)
+                else:
+                    assert got[key][k] == v
+        else:
+            assert_close(got[key], want)
+    # the maps are the files the CLI writes with -o
+    cli("metrics", series("cornell", 16), reference("cornell"), "-o", tmp, json_out=False)
+    for name in ("flip_ldr", "flip_hdr"):
+        want, _, _ = mcpost.read_image(tmp / f"{name}.exr")
+        np.testing.assert_array_equal(maps[name], want)
+    for name in ("relse", "sq_error"):  # EXR files keep channels in name order: B, G, R
+        np.testing.assert_array_equal(maps[name], rgb(tmp / f"{name}.exr"))
+    np.testing.assert_array_equal(mcpost.relse_map(*pair), maps["relse"])
+
+
+def test_metrics_options_follow_the_cli_words(pair):
+    want = cli("metrics", series("cornell", 16), reference("cornell"), "--json",
+               "--percentiles", "0.25,0.75", "--eps-rel", "0.1", "--flip", "hdr",
+               "--tone-mapper", "reinhard", "--pmse-kernel", "gaussian",
+               "--pmse-filter-reference", "--no-spectra")
+    got = mcpost.metrics(*pair, percentiles=[0.25, 0.75], eps_rel=0.1, flip="hdr",
+                         tone_mapper="reinhard", pmse_kernel="gaussian",
+                         pmse_filter_reference=True, spectra=False)
+    assert "flip_ldr" not in got and "blue_noise" not in got
+    assert_close(got["relse_percentiles"]["value"], want["relse_percentiles"]["value"])
+    assert_close(got["flip_hdr"]["mean"], want["flip_hdr"]["mean"])
+    assert_close(got["pmse"], want["pmse"])
+    assert_close(got["relmse"], want["relmse"])
+
+
+def test_identical_images_have_infinite_psnr(pair):
+    assert math.isinf(mcpost.psnr(pair[1], pair[1]))
+    assert mcpost.metrics(pair[1], pair[1], flip="none", spectra=False)["psnr"] == math.inf
+
+
+def test_other_dtypes_are_converted(pair):
+    t, r = pair
+    assert mcpost.mse(t.astype(np.float64), r) == mcpost.mse(t, r)
+    # a non-contiguous view is copied once, with the same result
+    wide = np.concatenate([t, t], axis=2)[..., :3]
+    assert not wide.flags["C_CONTIGUOUS"]
+    assert mcpost.mse(wide, r) == mcpost.mse(t, r)
+    assert mcpost.mse(np.zeros((2, 2, 3), np.int32), np.ones((2, 2, 3), np.uint8)) == 1.0
+
+
+def test_bad_inputs_raise_clear_errors(pair):
+    t, r = pair
+    with pytest.raises(mcpost.Error, match=r"^test: size 128x128 does not match ref \(128x64\)"):
+        mcpost.mse(t, r[:64])
+    with pytest.raises(mcpost.Error, match="needs an H x W x C or H x W array"):
+        mcpost.mse(t.ravel(), r)
+    with pytest.raises(TypeError, match="test must hold real numbers"):
+        mcpost.mse(t.astype(np.complex64), r)
+    with pytest.raises(TypeError, match="ref must hold real numbers"):
+        mcpost.mse(t, np.full((128, 128, 3), "x"))
+    bad = t.copy()
+    bad[5, 7, 1] = np.nan
+    with pytest.raises(mcpost.Error, match=r"test: non-finite value nan at pixel \(7, 5\) channel G"):
+        mcpost.mse(bad, r)
+    with pytest.raises(mcpost.Error, match="ref"):
+        mcpost.flip(t, np.where(np.isnan(bad), np.inf, r))
+    with pytest.raises(mcpost.Error, match="unknown"):
+        mcpost.pmse(t, r, tone_map="sepia")
+    with pytest.raises(mcpost.Error, match="percentiles"):
+        mcpost.relse_percentiles(t, r, percentiles=[1.5])
+    with pytest.raises(mcpost.Error, match="no-such.exr"):
+        mcpost.mse("no-such.exr", r)
+    with pytest.raises(TypeError):
+        mcpost.mse(t, r, eps_rel=1)  # mse takes no eps_rel
