@@ -19,16 +19,7 @@
 
 static char out[1 << 16], err[1 << 14];
 
-static int
-run(const char *fmt, ...)
-{
-    char args[8192];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(args, sizeof args, fmt, ap);
-    va_end(ap);
-    return mcp_test_run_mcpost(args, out, sizeof out, err, sizeof err);
-}
+#define run(...) mcp_test_run_mcpostf(out, sizeof out, err, sizeof err, __VA_ARGS__)
 
 static void
 assert_one_line_error(int status, const char *needle)

@@ -15,16 +15,7 @@
 
 static char out[1 << 16], err[1 << 16];
 
-static int
-run(const char *fmt, ...)
-{
-    char args[8192];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(args, sizeof args, fmt, ap);
-    va_end(ap);
-    return mcp_test_run_mcpost(args, out, sizeof out, err, sizeof err);
-}
+#define run(...) mcp_test_run_mcpostf(out, sizeof out, err, sizeof err, __VA_ARGS__)
 
 /* The failure contract: non-zero exit, exactly one stderr line "mcpost: ...needle...". */
 static void

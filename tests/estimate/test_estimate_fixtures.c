@@ -337,16 +337,7 @@ test_stratified_series(void **state)
 
 static char out[1 << 16], err[1 << 16];
 
-static int
-run(const char *fmt, ...)
-{
-    char args[8192];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(args, sizeof args, fmt, ap);
-    va_end(ap);
-    return mcp_test_run_mcpost(args, out, sizeof out, err, sizeof err);
-}
+#define run(...) mcp_test_run_mcpostf(out, sizeof out, err, sizeof err, __VA_ARGS__)
 
 /* Skips while `mcpost estimate` or the `gauss` denoiser is not built in. */
 static void

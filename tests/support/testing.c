@@ -1,6 +1,8 @@
 /* testing.c: shared test helpers (see testing.h). */
 #include "testing.h"
 
+#include <stdarg.h>
+
 #include <errno.h>
 #include <math.h>
 #include <stdio.h>
@@ -203,4 +205,16 @@ mcp_test_read_text(const char *path)
     buf[n] = '\0';
     fclose(f);
     return buf;
+}
+
+int
+mcp_test_run_mcpostf(char *out, size_t out_cap, char *err, size_t err_cap, const char *fmt,
+                     ...)
+{
+    char args[8192];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(args, sizeof args, fmt, ap);
+    va_end(ap);
+    return mcp_test_run_mcpost(args, out, out_cap, err, err_cap);
 }

@@ -48,6 +48,11 @@ double mcp_test_rand_normal(uint64_t *state);
  * exit status (or -1). */
 int mcp_test_run_mcpost(const char *args, char *out, size_t out_cap, char *err,
                         size_t err_cap);
+/* mcp_test_run_mcpost with the arguments formatted from fmt. Tests define
+ *   #define run(...) mcp_test_run_mcpostf(out, sizeof out, err, sizeof err, __VA_ARGS__)
+ * over their own out and err buffers. */
+int mcp_test_run_mcpostf(char *out, size_t out_cap, char *err, size_t err_cap,
+                         const char *fmt, ...) __attribute__((format(printf, 5, 6)));
 
 /* Writes a text file (for job files and corrupt inputs). */
 void mcp_test_write_text(const char *path, const char *text);
