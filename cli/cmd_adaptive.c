@@ -40,25 +40,6 @@ typedef struct loop_cfg {
 } loop_cfg;
 
 static int
-make_dir(const char *path)
-{
-    char buf[4096];
-    if (snprintf(buf, sizeof buf, "%s", path) >= (int)sizeof buf)
-        return mcp_error("path too long: %s", path);
-    for (char *p = buf + 1;; p++) {
-        if (*p == '/' || !*p) {
-            char c = *p;
-            *p = '\0';
-            if (mkdir(buf, 0777) && errno != EEXIST)
-                return mcp_error("%s: cannot create folder (%s)", buf, strerror(errno));
-            *p = c;
-            if (!c) break;
-        }
-    }
-    return 0;
-}
-
-static int
 path_in(const loop_cfg *c, char *buf, size_t cap, const char *fmt, int pass)
 {
     char name[256];
@@ -345,7 +326,7 @@ run_loop(loop_cfg *c, cJSON **json)
                          c->render);
     if (snprintf(sub, sizeof sub, "%s/maps", c->dir) >= (int)sizeof sub)
         return mcp_error("output path too long: %s", c->dir);
-    if (make_dir(sub)) return -1;
+    if (mcp_make_dirs(sub)) return -1;
     if (mcp_adaptive_run(c->width, c->height, c->den, &c->ao, render_pass, c,
                          c->reference, on_iteration, c, &r))
         return -1;

@@ -30,26 +30,6 @@ typedef struct {
     char last_base[512]; /* the last member's file name without extension */
 } blend_sink;
 
-/* mkdir -p */
-static int
-make_dirs(const char *path)
-{
-    char buf[4096];
-    size_t n = strlen(path);
-    if (n == 0 || n >= sizeof buf)
-        return mcp_error("blend: bad output folder '%s'", path);
-    memcpy(buf, path, n + 1);
-    for (size_t i = 1; i <= n; i++)
-        if (buf[i] == '/' || buf[i] == '\0') {
-            char c = buf[i];
-            buf[i] = '\0';
-            if (mkdir(buf, 0777) != 0 && errno != EEXIST)
-                return mcp_error("%s: cannot create folder (%s)", buf, strerror(errno));
-            buf[i] = c;
-        }
-    return 0;
-}
-
 /* The file name of path without folder and extension. */
 static void
 base_name(const char *path, char *out, size_t cap)
@@ -536,7 +516,7 @@ cmd_blend(int argc, char **argv)
               : mcp_series_from_paths((const char *const *)argv + optind, NULL, n_files,
                                       &series)) ||
         mcp_cli_denoiser_create(&df, &den) ||
-        (ref_path && mcp_image_read(ref_path, NULL, &ref)) || make_dirs(out_dir) ||
+        (ref_path && mcp_image_read(ref_path, NULL, &ref)) || mcp_make_dirs(out_dir) ||
         mcp_report_new("mcpost blend", &report))
         goto fail;
     series->variance_from = variance_from;

@@ -63,26 +63,6 @@ parse_int_list(const char *flag, const char *text, int **out, int *n)
     return 0;
 }
 
-/* mkdir -p */
-static int
-make_dirs(const char *path)
-{
-    char buf[4096];
-    if (snprintf(buf, sizeof buf, "%s", path) >= (int)sizeof buf)
-        return mcp_error("path too long: %s", path);
-    for (char *p = buf + 1;; p++) {
-        if (*p == '/' || !*p) {
-            char c = *p;
-            *p = '\0';
-            if (mkdir(buf, 0777) && errno != EEXIST)
-                return mcp_error("%s: cannot create folder (%s)", buf, strerror(errno));
-            *p = c;
-            if (!c) break;
-        }
-    }
-    return 0;
-}
-
 /* Where outputs go: a folder and a prefix for report paths ("" or "estimate/"). */
 typedef struct out_dir {
     char dir[4096];
@@ -217,7 +197,7 @@ write_single(const mcp_estimate *e, const out_dir *o, cJSON *section,
     unsigned char *rgb = NULL;
     int rc = -1, w = e->blocks->width, h = e->blocks->height;
     char path[4352], rel[512];
-    if (make_dirs(o->dir) || write_image(o, "denoised.exr", e->maps.denoised) ||
+    if (mcp_make_dirs(o->dir) || write_image(o, "denoised.exr", e->maps.denoised) ||
         write_image(o, "sure.exr", e->maps.sure) ||
         write_image(o, "sure_rel.exr", e->maps.sure_rel) ||
         write_image(o, "variance.exr", e->maps.var) ||
@@ -560,7 +540,7 @@ run_series(const mcp_series *series, const mcp_denoiser *den,
     }
     char path[4352];
     char *text = cJSON_Print(j);
-    int rc = !text || (o && (make_dirs(o->dir) ||
+    int rc = !text || (o && (mcp_make_dirs(o->dir) ||
                              out_path(o, "estimate.json", path, sizeof path) ||
                              mcp_write_file_atomic(path, text, strlen(text))));
     free(text);

@@ -781,23 +781,6 @@ static const char usage[] =
     "                    samples/fixtures/texture/singles/texture_single*.exr -o out/perceptual_texture\n";
 
 static int
-mkdirs(const char *path)
-{
-    char buf[4096];
-    snprintf(buf, sizeof buf, "%s", path);
-    for (char *p = buf + 1; *p; p++)
-        if (*p == '/') {
-            *p = '\0';
-            if (mkdir(buf, 0777) != 0 && errno != EEXIST)
-                return mcp_error("%s: %s", buf, strerror(errno));
-            *p = '/';
-        }
-    if (mkdir(buf, 0777) != 0 && errno != EEXIST)
-        return mcp_error("%s: %s", buf, strerror(errno));
-    return 0;
-}
-
-static int
 read_rgb(const char *path, mcp_image **out)
 {
     mcp_image *img = NULL;
@@ -940,7 +923,7 @@ cmd_perceptual(int argc, char **argv)
     if (!strcmp(a.surrogate, "denoise") &&
         mcp_cli_denoiser_create(&df, &r.den))
         goto fail;
-    if (mkdirs(out_dir) || mcp_report_new("mcpost perceptual", &report)) goto fail;
+    if (mcp_make_dirs(out_dir) || mcp_report_new("mcpost perceptual", &report)) goto fail;
     snprintf(r.out_dir, sizeof r.out_dir, "%s", out_dir);
     if (!(r.section = mcp_report_section(report, "perceptual",
                                          mcp_perc_method_name(a.opt.method))))

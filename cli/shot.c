@@ -86,24 +86,6 @@ mcp_cli_shot_free(mcp_cli_shot *s)
     memset(s, 0, sizeof *s);
 }
 
-static int
-make_dirs(const char *path)
-{
-    char buf[4096];
-    snprintf(buf, sizeof buf, "%s", path);
-    for (char *p = buf + 1;; p++) {
-        if (*p == '/' || !*p) {
-            char saved = *p;
-            *p = '\0';
-            if (mkdir(buf, 0777) != 0 && errno != EEXIST)
-                return mcp_error("%s: cannot create folder: %s", buf, strerror(errno));
-            if (!(*p = saved))
-                break;
-        }
-    }
-    return 0;
-}
-
 int
 mcp_cli_shot_write_manifest(const mcp_cli_shot *s)
 {
@@ -121,7 +103,7 @@ mcp_cli_shot_write_manifest(const mcp_cli_shot *s)
         goto done;
     }
     snprintf(path, sizeof path, "%s/frames.json", s->output_dir);
-    rc = make_dirs(s->output_dir) || mcp_write_file_atomic(path, text, strlen(text)) ? -1 : 0;
+    rc = mcp_make_dirs(s->output_dir) || mcp_write_file_atomic(path, text, strlen(text)) ? -1 : 0;
 done:
     cJSON_Delete(m);
     free(text);
@@ -145,7 +127,7 @@ run_frame(const mcp_cli_shot *s, const mcp_job_options *jo, int frame)
     mcp_error_prefix("frame %d: ", frame);
     char message[1100];
     snprintf(message, sizeof message, "%s\n", mcp_error_message());
-    if (!make_dirs(dir))
+    if (!mcp_make_dirs(dir))
         mcp_write_file_atomic(err_path, message, strlen(message));
     fprintf(stderr, "mcpost: %s", message);
     return -1;

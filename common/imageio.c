@@ -307,6 +307,27 @@ mcp_atomic_abort(mcp_atomic_file *f)
 }
 
 int
+mcp_make_dirs(const char *path)
+{
+    char buf[4096];
+    size_t n = strlen(path);
+    if (n == 0)
+        return mcp_error("no folder name given");
+    if (n >= sizeof buf)
+        return mcp_error("path too long: %s", path);
+    memcpy(buf, path, n + 1);
+    for (size_t i = 1; i <= n; i++)
+        if (buf[i] == '/' || buf[i] == '\0') {
+            char c = buf[i];
+            buf[i] = '\0';
+            if (mkdir(buf, 0777) != 0 && errno != EEXIST)
+                return mcp_error("%s: cannot create folder: %s", buf, strerror(errno));
+            buf[i] = c;
+        }
+    return 0;
+}
+
+int
 mcp_write_file_atomic(const char *path, const void *data, size_t size)
 {
     mcp_atomic_file af;

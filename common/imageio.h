@@ -127,6 +127,10 @@ MCP_API void mcp_atomic_abort(mcp_atomic_file *f);
 /* Writes a whole text/binary buffer atomically. */
 MCP_API int mcp_write_file_atomic(const char *path, const void *data, size_t size);
 
+/* Creates the folder path and any missing parents (mkdir -p); 0, or -1 with a one-line
+ * error naming the folder that could not be made. */
+MCP_API int mcp_make_dirs(const char *path);
+
 /* sRGB transfer functions (IEC 61966-2-1, as FLIP uses them). */
 MCP_API float mcp_srgb_to_linear(float c);
 MCP_API float mcp_linear_to_srgb(float l);

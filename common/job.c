@@ -85,24 +85,6 @@ resolve_input(const mcp_job *job, const mcp_node *at, const char *rel, int serie
     return mcp_job_resolve(job, rel, buf, cap);
 }
 
-static int
-make_dirs(const char *path)
-{
-    char buf[4096];
-    snprintf(buf, sizeof buf, "%s", path);
-    for (char *p = buf + 1;; p++) {
-        if (*p == '/' || !*p) {
-            char saved = *p;
-            *p = '\0';
-            if (mkdir(buf, 0777) != 0 && errno != EEXIST)
-                return mcp_error("%s: cannot create folder: %s", buf, strerror(errno));
-            if (!(*p = saved))
-                break;
-        }
-    }
-    return 0;
-}
-
 const char *
 mcp_job_path(const mcp_job *job)
 {
@@ -116,7 +98,7 @@ make_output_dir(mcp_job *job)
 {
     if (job->output_made)
         return 0;
-    if (make_dirs(job->output_dir))
+    if (mcp_make_dirs(job->output_dir))
         return -1;
     char *real = realpath(job->output_dir, NULL);
     if (real) {
@@ -146,7 +128,7 @@ mcp_job_output_path(mcp_job *job, const char *name, char *buf, size_t cap)
     char *slash = strrchr(buf, '/');
     if (slash && slash > buf + strlen(job->output_dir)) {
         *slash = '\0';
-        int rc = make_dirs(buf);
+        int rc = mcp_make_dirs(buf);
         *slash = '/';
         return rc;
     }

@@ -613,26 +613,6 @@ mcp_metrics_json(const mcp_metrics *m, const mcp_metrics_options *opt, cJSON *ob
     return 0;
 }
 
-/* mkdir -p */
-static int
-make_dirs(const char *path)
-{
-    char buf[4096];
-    int n = snprintf(buf, sizeof buf, "%s", path);
-    if (n < 0 || (size_t)n >= sizeof buf) return mcp_error("path too long: %s", path);
-    for (char *p = buf + 1;; p++) {
-        if (*p == '/' || *p == '\0') {
-            char c = *p;
-            *p = '\0';
-            if (mkdir(buf, 0777) && errno != EEXIST)
-                return mcp_error("%s: cannot create folder: %s", buf, strerror(errno));
-            *p = c;
-            if (!c) break;
-        }
-    }
-    return 0;
-}
-
 /* One channel of img through a colour map into an 8-bit PNG. */
 static int
 write_png(const mcp_image *img, int channel, double lo, double hi, mcp_colormap map,
@@ -703,7 +683,7 @@ mcp_metrics_write_maps(const mcp_metrics_maps *maps, const char *dir, const char
                      o.prefix);
     if (n < 0 || (size_t)n >= sizeof sub)
         return mcp_error("output path too long: %s/%s", dir, o.prefix);
-    if (make_dirs(sub)) return -1;
+    if (mcp_make_dirs(sub)) return -1;
     static const char flip_unit[] = "FLIP error: 0 identical, 1 most different";
     if (maps->flip_ldr && emit(&o, maps->flip_ldr, "flip_ldr", 1, 0, 0.0, 1.0,
                                MCP_COLORMAP_MAGMA, 0, "LDR-FLIP per pixel", flip_unit))
