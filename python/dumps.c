@@ -268,6 +268,37 @@ py_write_dump(PyObject *self, PyObject *args, PyObject *kw)
     Py_RETURN_NONE;
 }
 
+/* The dumps of a Python sequence (paths or dicts), as the library takes them: parts[i]
+ * holds what keeps dumps[i] alive. -1 with the Python error set; either way
+ * release_dump_list frees what was made. */
+static int
+get_dump_list(PyObject *fast, Py_ssize_t n, mcp_py_dump **parts, const mcp_dump ***dumps)
+{
+    *parts = PyMem_Calloc((size_t)(n ? n : 1), sizeof **parts);
+    *dumps = PyMem_Calloc((size_t)(n ? n : 1), sizeof **dumps);
+    if (!*parts || !*dumps) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    for (Py_ssize_t i = 0; i < n; i++) {
+        char what[32];
+        snprintf(what, sizeof what, "dumps[%zd]", i);
+        if (mcp_py_dump_get(PySequence_Fast_GET_ITEM(fast, i), what, &(*parts)[i]))
+            return -1;
+        (*dumps)[i] = (*parts)[i].dump;
+    }
+    return 0;
+}
+
+static void
+release_dump_list(mcp_py_dump *parts, const mcp_dump **dumps, Py_ssize_t n)
+{
+    for (Py_ssize_t i = 0; parts && i < n; i++)
+        mcp_py_dump_release(&parts[i]);
+    PyMem_Free(parts);
+    PyMem_Free(dumps);
+}
+
 static PyObject *
 py_merge(PyObject *self, PyObject *args, PyObject *kw)
 {
@@ -295,20 +326,11 @@ py_merge(PyObject *self, PyObject *args, PyObject *kw)
         PyErr_SetString(mcp_py_error, "merge: no dumps given");
         return NULL;
     }
-    mcp_py_dump *parts = PyMem_Calloc((size_t)n, sizeof *parts);
-    const mcp_dump **dumps = PyMem_Calloc((size_t)n, sizeof *dumps);
+    mcp_py_dump *parts = NULL;
+    const mcp_dump **dumps = NULL;
     PyObject *result = NULL;
-    if (!parts || !dumps) {
-        PyErr_NoMemory();
+    if (get_dump_list(fast, n, &parts, &dumps))
         goto done;
-    }
-    for (Py_ssize_t i = 0; i < n; i++) {
-        char what[32];
-        snprintf(what, sizeof what, "dumps[%zd]", i);
-        if (mcp_py_dump_get(PySequence_Fast_GET_ITEM(fast, i), what, &parts[i]))
-            goto done;
-        dumps[i] = parts[i].dump;
-    }
     mcp_dump *merged = NULL;
     int rc;
     Py_BEGIN_ALLOW_THREADS
@@ -316,10 +338,7 @@ py_merge(PyObject *self, PyObject *args, PyObject *kw)
     Py_END_ALLOW_THREADS
     result = rc ? mcp_py_fail() : mcp_py_dump_dict(merged);
 done:
-    for (Py_ssize_t i = 0; parts && i < n; i++)
-        mcp_py_dump_release(&parts[i]);
-    PyMem_Free(parts);
-    PyMem_Free(dumps);
+    release_dump_list(parts, dumps, n);
     Py_DECREF(fast);
     return result;
 }
@@ -338,20 +357,11 @@ py_increment_variance(PyObject *self, PyObject *args, PyObject *kw)
     if (!fast)
         return NULL;
     Py_ssize_t n = PySequence_Fast_GET_SIZE(fast);
-    mcp_py_dump *parts = PyMem_Calloc((size_t)(n ? n : 1), sizeof *parts);
-    const mcp_dump **members = PyMem_Calloc((size_t)(n ? n : 1), sizeof *members);
+    mcp_py_dump *parts = NULL;
+    const mcp_dump **members = NULL;
     PyObject *result = NULL;
-    if (!parts || !members) {
-        PyErr_NoMemory();
+    if (get_dump_list(fast, n, &parts, &members))
         goto done;
-    }
-    for (Py_ssize_t i = 0; i < n; i++) {
-        char what[32];
-        snprintf(what, sizeof what, "dumps[%zd]", i);
-        if (mcp_py_dump_get(PySequence_Fast_GET_ITEM(fast, i), what, &parts[i]))
-            goto done;
-        members[i] = parts[i].dump;
-    }
     mcp_dump *out = NULL;
     double ratio = 0;
     int rc;
@@ -365,10 +375,7 @@ py_increment_variance(PyObject *self, PyObject *args, PyObject *kw)
     PyObject *d = mcp_py_dump_dict(out);
     result = d ? Py_BuildValue("(Nd)", d, ratio) : NULL;
 done:
-    for (Py_ssize_t i = 0; parts && i < n; i++)
-        mcp_py_dump_release(&parts[i]);
-    PyMem_Free(parts);
-    PyMem_Free(members);
+    release_dump_list(parts, members, n);
     Py_DECREF(fast);
     return result;
 }
