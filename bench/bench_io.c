@@ -10,12 +10,22 @@
  * 1920x1080 12-channel dump (colour, variance, albedo, normal; 4 spp) as mcp_dump_write
  * writes it. Targets (issue 16): 512² RGB write <= 30 ms, read <= 20 ms; 1080p dump
  * read <= 100 ms. Each figure is the median of `repeats` runs after one warm-up.
- * Usage: bench_io [repeats (default 7)] [folder for the files (default /tmp)] */
+ *
+ * PNG: the report's pictures as mcp_write_rgb8 writes them (common/png_encode.c:
+ * filters chosen in parallel, libdeflate) beside libpng's writer as it was used before
+ * (zlib level 3, libpng's filter search, one thread), on a 1080p colour map of a noisy
+ * map and on a flat picture of a few colours.
+ * Usage: bench_io [repeats (default 7)] [folder for the files (default /tmp)] [png]
+ * (png: the PNG table only) */
 #define _POSIX_C_SOURCE 200809L /* clock_gettime */
 #include <mcpost/dump.h>
 #include <mcpost/imageio.h>
+#include <mcpost/filter.h>
 #include <procedural.h>
 
+#include <png.h>
+
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -157,6 +167,109 @@ table(const char *title, const mcp_image *img, const char *path, const setting *
     unlink(path);
 }
 
+/* The baseline: libpng writing 8-bit RGB at zlib level 3 with its default filters, as
+ * common/png.c did before png_encode.c. */
+static void
+libpng_write_rgb8(const unsigned char *rgb, int w, int h, const char *path)
+{
+    FILE *f = fopen(path, "wb");
+    png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, NULL, NULL, NULL);
+    png_infop info = png ? png_create_info_struct(png) : NULL;
+    if (!f || !info || setjmp(png_jmpbuf(png))) {
+        fprintf(stderr, "bench_io: libpng cannot write %s\n", path);
+        exit(1);
+    }
+    png_init_io(png, f);
+    png_set_compression_level(png, 3);
+    png_set_IHDR(png, info, (png_uint_32)w, (png_uint_32)h, 8, PNG_COLOR_TYPE_RGB,
+                 PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+    png_set_sRGB(png, info, PNG_sRGB_INTENT_PERCEPTUAL);
+    png_write_info(png, info);
+    for (int y = 0; y < h; y++)
+        png_write_row(png, rgb + (size_t)y * w * 3);
+    png_write_end(png, info);
+    png_destroy_write_struct(&png, &info);
+    fclose(f);
+}
+
+/* Median wall ms of writing rgb as PNG (ours, or libpng's when baseline) on `threads`;
+ * *cpu the median CPU ms of those runs. */
+static double
+time_png(const unsigned char *rgb, int w, int h, const char *path, int baseline,
+         int threads, double *cpu)
+{
+    double t[64], c[64];
+    bench_set_threads(threads);
+    for (int i = -1; i < repeats; i++) {
+        double t0 = now_ms(), c0 = cpu_ms();
+        if (baseline)
+            libpng_write_rgb8(rgb, w, h, path);
+        else if (mcp_write_rgb8(rgb, w, h, path))
+            die(path);
+        if (i >= 0) {
+            t[i] = now_ms() - t0;
+            c[i] = cpu_ms() - c0;
+        }
+    }
+    *cpu = median(c, repeats);
+    return median(t, repeats);
+}
+
+/* Two report pictures of img's size: an inferno map of log10 of its first channel (a
+ * noisy render: every pixel differs, as in blocks_error.png or a RelSE map) and eight
+ * flat bands (as blocks.png), each written by both writers. */
+static void
+png_table(const mcp_image *img, const char *path)
+{
+    int w = img->width, h = img->height, all = max_threads();
+    unsigned char *rgb = malloc((size_t)w * h * 3);
+    mcp_image *lg = NULL;
+    if (!rgb || mcp_image_new(w, h, 1, (const char *const[]){"Y"}, &lg))
+        die("png picture");
+    double *sorted = malloc((size_t)w * h * sizeof *sorted);
+    if (!sorted)
+        die("png picture");
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            float v = mcp_image_px(img, x, y)[0];
+            mcp_image_px(lg, x, y)[0] = v > 1e-12f ? log10f(v) : -12.0f;
+            sorted[(size_t)y * w + x] = mcp_image_px(lg, x, y)[0];
+        }
+    /* the colour bar spans the 2nd to the 98th percentile, as a report's maps do */
+    qsort(sorted, (size_t)w * h, sizeof *sorted, cmp_double);
+    double lo = sorted[(size_t)w * h / 50], hi = sorted[(size_t)w * h * 49 / 50];
+    free(sorted);
+    printf("\nPNG, %dx%d RGB 8-bit: wall ms on 1 and on %d threads, CPU ms of the 1-thread "
+           "runs, file MB\n", w, h, all);
+    printf("  %-44s %6s %6s %6s %7s\n", "picture, writer", "1", "N", "cpu", "MB");
+    for (int picture = 0; picture < 2; picture++) {
+        if (picture == 0) {
+            if (mcp_colormap_apply(lg, 0, lo, hi, MCP_COLORMAP_INFERNO, rgb))
+                die("colour map");
+        } else {
+            for (int y = 0; y < h; y++)
+                for (int x = 0; x < w; x++)
+                    memset(rgb + 3 * ((size_t)y * w + x), 30 * ((8 * y / h) + 1), 3);
+        }
+        for (int baseline = 0; baseline < 2; baseline++) {
+            double cpu, unused;
+            double t1 = time_png(rgb, w, h, path, baseline, 1, &cpu);
+            double tn = time_png(rgb, w, h, path, baseline, all, &unused);
+            printf("  %-44s %6.1f %6.1f %6.1f %7.3f\n",
+                   picture == 0 ? (baseline ? "noisy colour map, libpng zlib 3 (before)"
+                                            : "noisy colour map, mcp_write_rgb8")
+                                : (baseline ? "flat bands, libpng zlib 3 (before)"
+                                            : "flat bands, mcp_write_rgb8"),
+                   t1, tn, cpu, file_mb(path));
+            fflush(stdout);
+        }
+    }
+    bench_set_threads(all);
+    unlink(path);
+    mcp_image_free(lg);
+    free(rgb);
+}
+
 int
 main(int argc, char **argv)
 {
@@ -164,8 +277,9 @@ main(int argc, char **argv)
         repeats = atoi(argv[1]);
     if (argc > 2)
         dir = argv[2];
-    if (repeats < 1 || repeats > 64) {
-        fprintf(stderr, "usage: bench_io [repeats 1..64] [folder]\n");
+    int png_only = argc > 3 && strcmp(argv[3], "png") == 0;
+    if (repeats < 1 || repeats > 64 || (argc > 3 && !png_only)) {
+        fprintf(stderr, "usage: bench_io [repeats 1..64] [folder] [png]\n");
         return 2;
     }
     char label[64];
@@ -190,7 +304,8 @@ main(int argc, char **argv)
     if (mcp_proc_render(&scene, 16, 1, NULL, &small))
         die("procedural render");
     snprintf(path, sizeof path, "%s/bench_io_rgb.exr", dir);
-    table("512x512 RGB render (16 spp)", small->color, path, settings, n, 0, 30, 20);
+    if (!png_only)
+        table("512x512 RGB render (16 spp)", small->color, path, settings, n, 0, 30, 20);
 
     scene.width = 1920;
     scene.height = 1080;
@@ -199,11 +314,14 @@ main(int argc, char **argv)
     /* the dump as mcpost writes it, read back as the 12-channel image it is */
     snprintf(path, sizeof path, "%s/bench_io_dump.exr", dir);
     mcp_image *dump_img = NULL;
-    if (mcp_dump_write(big, path, MCP_CONV_PBRT, NULL) ||
-        mcp_image_read(path, NULL, &dump_img))
+    if (!png_only && (mcp_dump_write(big, path, MCP_CONV_PBRT, NULL) ||
+        mcp_image_read(path, NULL, &dump_img)))
         die(path);
-    table("1080p dump (pbrt channels, 4 spp)", dump_img, path, settings, n, 1, 0, 100);
+    if (!png_only)
+        table("1080p dump (pbrt channels, 4 spp)", dump_img, path, settings, n, 1, 0, 100);
     mcp_image_free(dump_img);
+    snprintf(path, sizeof path, "%s/bench_io_picture.png", dir);
+    png_table(big->var_of_mean ? big->var_of_mean : big->color, path);
     mcp_dump_free(big);
     mcp_dump_free(small);
     return 0;

@@ -77,15 +77,6 @@ out_path(const out_dir *o, const char *name, char *buf, size_t cap)
     return 0;
 }
 
-static int
-write_image(const out_dir *o, const char *name, const mcp_image *img)
-{
-    char path[4352];
-    if (out_path(o, name, path, sizeof path) || mcp_image_write(img, path, NULL))
-        return -1;
-    return 0;
-}
-
 /* ---- one dump ---- */
 
 static cJSON *
@@ -167,6 +158,7 @@ blocks_error_picture(const mcp_blocks *blocks, const mcp_image *dist,
         free(label);
         return -1;
     }
+#pragma omp parallel for schedule(static)
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++) {
             const float *p = mcp_image_px(dist, x, y);
@@ -176,7 +168,8 @@ blocks_error_picture(const mcp_blocks *blocks, const mcp_image *dist,
             mcp_image_px(lg, x, y)[0] = (float)(mean > 1e-30 ? log10(mean) : -30.0);
         }
     int rc = mcp_colormap_apply(lg, 0, -5.0, 0.0, MCP_COLORMAP_INFERNO, rgb8);
-    for (int y = 0; !rc && y < h; y++)
+#pragma omp parallel for schedule(static) if (!rc)
+    for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++) {
             size_t i = (size_t)y * w + x;
             if ((x + 1 < w && label[i] != label[i + 1]) ||
@@ -188,32 +181,57 @@ blocks_error_picture(const mcp_blocks *blocks, const mcp_image *dist,
     return rc;
 }
 
-/* Every image of one estimate, the block pictures, and their place in the report. */
+/* Every image of one estimate, the block pictures, and their place in the report.
+ * The pictures are made first and every file is then written at once, a file per
+ * thread (mcp_write_files), the costliest first: distribution.exr (its six channels
+ * halve under zip), the error picture's PNG, then the maps, which are stored raw. */
 static int
 write_single(const mcp_estimate *e, const out_dir *o, cJSON *section,
              const cJSON *summary)
 {
+    enum { MAX_FILES = 12 };
     mcp_image *block_mean = NULL, *dist = NULL;
-    unsigned char *rgb = NULL;
-    int rc = -1, w = e->blocks->width, h = e->blocks->height;
-    char path[4352], rel[512];
-    if (mcp_make_dirs(o->dir) || write_image(o, "denoised.exr", e->maps.denoised) ||
-        write_image(o, "sure.exr", e->maps.sure) ||
-        write_image(o, "sure_rel.exr", e->maps.sure_rel) ||
-        write_image(o, "variance.exr", e->maps.var) ||
-        write_image(o, "variance_rel.exr", e->maps.var_rel) ||
-        write_image(o, "sampling_map.exr", e->sampling_map) ||
-        (e->sample_counts && write_image(o, "sample_counts.exr", e->sample_counts)) ||
+    unsigned char *blocks_rgb = NULL, *error_rgb = NULL;
+    char (*paths)[4352] = NULL;
+    int rc = -1, n = 0, w = e->blocks->width, h = e->blocks->height;
+    if (mcp_make_dirs(o->dir) ||
         mcp_blocks_mean_image(e->blocks, e->maps.sure_rel, &block_mean) ||
-        write_image(o, "blocks_sure_rel.exr", block_mean) ||
-        mcp_error_dist_image(e->dist, &dist) || write_image(o, "distribution.exr", dist))
+        mcp_error_dist_image(e->dist, &dist) ||
+        !(paths = mcp_malloc(MAX_FILES * sizeof *paths)) ||
+        !(blocks_rgb = mcp_malloc((size_t)w * h * 3)) ||
+        mcp_blocks_picture(e->blocks, blocks_rgb))
         goto done;
-    rgb = mcp_malloc((size_t)w * h * 3);
-    if (!rgb || mcp_blocks_picture(e->blocks, rgb) ||
-        out_path(o, "blocks.png", path, sizeof path) || mcp_write_rgb8(rgb, w, h, path))
+    if (section && (!(error_rgb = mcp_malloc((size_t)w * h * 3)) ||
+                    blocks_error_picture(e->blocks, dist, error_rgb)))
         goto done;
+    const struct {
+        const char *name;
+        const mcp_image *image;
+        const unsigned char *rgb8;
+    } outputs[MAX_FILES] = {
+        {"distribution.exr", dist, NULL},
+        {"blocks_error.png", NULL, error_rgb},
+        {"denoised.exr", e->maps.denoised, NULL},
+        {"sure.exr", e->maps.sure, NULL},
+        {"sure_rel.exr", e->maps.sure_rel, NULL},
+        {"variance.exr", e->maps.var, NULL},
+        {"variance_rel.exr", e->maps.var_rel, NULL},
+        {"sampling_map.exr", e->sampling_map, NULL},
+        {"sample_counts.exr", e->sample_counts, NULL},
+        {"blocks_sure_rel.exr", block_mean, NULL},
+        {"blocks.png", NULL, blocks_rgb},
+    };
+    mcp_file_write files[MAX_FILES];
+    for (int i = 0; i < MAX_FILES; i++) {
+        if (!outputs[i].image && !outputs[i].rgb8) continue; /* none, or not asked for */
+        if (out_path(o, outputs[i].name, paths[n], sizeof *paths)) goto done;
+        files[n] = (mcp_file_write){.path = paths[n], .image = outputs[i].image,
+                                    .rgb8 = outputs[i].rgb8, .width = w, .height = h};
+        n++;
+    }
+    if (mcp_write_files(files, n)) goto done;
     if (section) {
-        char caption[256], unit[256];
+        char caption[256], unit[256], rel[512];
         const cJSON *mj = cJSON_GetObjectItem(summary, "metric");
         const char *metric = cJSON_IsString(mj) ? mj->valuestring : "error";
         if (e->blocks->count == 1)
@@ -229,20 +247,16 @@ write_single(const mcp_estimate *e, const out_dir *o, cJSON *section,
         snprintf(unit, sizeof unit,
                  "the model's expected error s\u00b2(\u03bb + 1), mean of R, G, B, log "
                  "scale; F(tau) averages each pixel's chance to be below tau");
-        cJSON *map;
-        if (blocks_error_picture(e->blocks, dist, rgb) ||
-            out_path(o, "blocks_error.png", path, sizeof path) ||
-            mcp_write_rgb8(rgb, w, h, path))
-            goto done;
         snprintf(rel, sizeof rel, "%sblocks_error.png", o->rel);
-        if (!(map = mcp_report_add_map(section, rel, caption, MCP_COLORMAP_INFERNO, 1e-5, 1.0,
-                                       MCP_AXIS_LOG, unit)) ||
-            mcp_report_map_add_mark(map, e->tau, "tau"))
-            goto done;
+        cJSON *map = mcp_report_add_map(section, rel, caption, MCP_COLORMAP_INFERNO, 1e-5,
+                                        1.0, MCP_AXIS_LOG, unit);
+        if (!map || mcp_report_map_add_mark(map, e->tau, "tau")) goto done;
     }
     rc = 0;
 done:
-    free(rgb);
+    free(error_rgb);
+    free(blocks_rgb);
+    free(paths);
     mcp_image_free(block_mean);
     mcp_image_free(dist);
     return rc;

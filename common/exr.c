@@ -664,12 +664,17 @@ encode_chunk(exr_context_t f, const chunk_at *c, exr_encode_pipeline_t *enc,
  * It compresses every 16th chunk (at least one), spread over the image, and says raw
  * when they shrink by less than min_saving of their bytes (1/8 by default). The sample is fixed, so
  * the file does not depend on the thread count; when the data does compress, the cost
- * is those chunks compressed twice (about 6%). */
+ * is those chunks compressed twice (about 6%). The probe compresses at libdeflate's
+ * level 1 whatever the file's level: its sizes are within 0.1% of level 4's on renders
+ * and maps, and on float noise it runs about three times as fast, which took the
+ * probe from a third of writing an incompressible 1080p map to a tenth
+ * (docs/benchmarks.md, "EXR speed"). */
 #define PROBE_EVERY 16
+#define PROBE_ZIP_LEVEL 1
 
 static int
 store_raw_after_probe(exr_context_t f, const mcp_image *img, const chunk_at *chunks,
-                      int n, int zip_level, double min_saving)
+                      int n, double min_saving)
 {
     int probes = n / PROBE_EVERY > 0 ? n / PROBE_EVERY : 1;
     unsigned long long raw_bytes = 0, zip_bytes = 0;
@@ -683,8 +688,8 @@ store_raw_after_probe(exr_context_t f, const mcp_image *img, const chunk_at *chu
         for (int j = 0; j < probes; j++) {
             /* the middle chunk of each of `probes` equal runs */
             int i = (int)(((2LL * j + 1) * n) / (2LL * probes));
-            if (encode_chunk(f, &chunks[i], &enc, &initialised, &coder, zip_level, img) !=
-                EXR_ERR_SUCCESS) {
+            if (encode_chunk(f, &chunks[i], &enc, &initialised, &coder, PROBE_ZIP_LEVEL,
+                             img) != EXR_ERR_SUCCESS) {
                 errors++;
                 continue;
             }
@@ -720,7 +725,7 @@ write_pixels(exr_context_t f, const mcp_image *img, exr_storage_t storage,
     if (!zip)
         zip_level = 0;
     int store_raw = zip && min_saving > 0 && n >= PROBE_EVERY &&
-                    store_raw_after_probe(f, img, chunks, n, zip_level, min_saving);
+                    store_raw_after_probe(f, img, chunks, n, min_saving);
     chunk_failure fail = {.idx = -1};
 #pragma omp parallel if (n > 1)
     {

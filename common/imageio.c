@@ -463,3 +463,32 @@ mcp_write_rgb8(const unsigned char *rgb8, int width, int height, const char *pat
     mcp_image_free(img);
     return rc;
 }
+
+int
+mcp_write_files(const mcp_file_write *files, int n)
+{
+    if (n <= 0) return 0;
+    /* a failed file's error line, kept from its worker thread (error lines are
+       thread-local; error.c's are 1024 bytes too) */
+    char (*message)[1024] = mcp_calloc((size_t)n, sizeof *message);
+    if (!message) return -1;
+    int failed = 0;
+#pragma omp parallel for schedule(dynamic, 1) if (n > 1) reduction(+ : failed)
+    for (int i = 0; i < n; i++) {
+        const mcp_file_write *w = &files[i];
+        int rc = w->image ? mcp_image_write(w->image, w->path, w->opt)
+                          : mcp_write_rgb8(w->rgb8, w->width, w->height, w->path);
+        if (rc) {
+            snprintf(message[i], sizeof *message, "%s", mcp_error_message());
+            failed++;
+        }
+    }
+    int rc = 0;
+    for (int i = 0; failed && i < n; i++)
+        if (message[i][0]) {
+            rc = mcp_error("%s", message[i]);
+            break;
+        }
+    free(message);
+    return rc;
+}

@@ -106,6 +106,25 @@ MCP_API int mcp_image_write(const mcp_image *img, const char *path,
 MCP_API int mcp_write_rgb8(const unsigned char *rgb8, int width, int height,
                            const char *path);
 
+/* One file of a batch for mcp_write_files: an image (any format by extension, with
+ * opt, which may be NULL) or, when image is NULL, an 8-bit RGB buffer (as
+ * mcp_write_rgb8). */
+typedef struct mcp_file_write {
+    const char *path;
+    const mcp_image *image;
+    const mcp_write_options *opt;
+    const unsigned char *rgb8;
+    int width, height;
+} mcp_file_write;
+
+/* Writes n files at once, one per thread (each file on its own thread: a single
+ * file's parallel chunks spend much of their time waiting for the one writer, so
+ * whole files in parallel finish a command's outputs sooner). List the costliest
+ * first. Every file is written or left alone as by mcp_image_write; on failure the
+ * error line is the first failed file's (in list order), and the other files are
+ * still written. */
+MCP_API int mcp_write_files(const mcp_file_write *files, int n);
+
 /* 1 once the OpenImageIO plug-in has been loaded in this process. */
 MCP_API int mcp_oiio_loaded(void);
 

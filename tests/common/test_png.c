@@ -1,8 +1,10 @@
-/* test_png.c: common/png.c, the libpng reader and writer, against values computed
- * here: the 8-bit quantisation of written floats, 16-bit, palette and grey+alpha files
- * made with libpng itself, and files that must be refused before allocation. */
+/* test_png.c: common/png.c, the libpng reader, and common/png_encode.c, the writer,
+ * against values computed here: the 8-bit quantisation of written floats, 16-bit,
+ * palette and grey+alpha files made with libpng itself, files that must be refused
+ * before allocation, and the writer's files decoded by libpng directly. */
 #include "testing.h"
 
+#include <libdeflate.h>
 #include <png.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -92,6 +94,122 @@ test_bytes_and_decoding(void **state)
     for (int i = 0; i < 45; i++)
         assert_true(back->data[i] == rgb[i] / 255.0f);
     mcp_image_free(back);
+}
+
+/* Rows that each make one of PNG's five filters the best (smallest sum of magnitudes),
+ * in a cycle of seven: noise, a copy of it (Up: zeros), a ramp of step 7 (Sub: sevens),
+ * zeros (None: zeros, and first on a tie), noise, a row that Average predicts exactly,
+ * and one that Paeth predicts exactly after a first pixel of noise. */
+static unsigned char *
+filter_picture(int w, int h, int c, unsigned seed)
+{
+    size_t rb = (size_t)w * c;
+    unsigned char *px = malloc(rb * h);
+    for (int y = 0; y < h; y++) {
+        unsigned char *r = px + (size_t)y * rb, *up = y ? r - rb : NULL;
+        for (size_t i = 0; i < rb; i++) {
+            int a = i >= (size_t)c ? r[i - c] : 0, b = up ? up[i] : 0;
+            int cc = up && i >= (size_t)c ? up[i - c] : 0;
+            int p = a + b - cc, pa = abs(p - a), pb = abs(p - b), pc = abs(p - cc);
+            int paeth = pa <= pb && pa <= pc ? a : pb <= pc ? b : cc;
+            seed = seed * 1664525u + 1013904223u;
+            switch (y % 7) {
+            case 1: r[i] = (unsigned char)b; break;
+            case 2: r[i] = (unsigned char)(7 * (i / c) + 40 * (i % c)); break;
+            case 3: r[i] = 0; break;
+            case 5: r[i] = (unsigned char)((a + b) >> 1); break;
+            case 6: /* its first pixel is noise: a copy of the row above would tie */
+                r[i] = (unsigned char)(i < (size_t)c ? seed >> 24 : (unsigned)paeth);
+                break;
+            default: r[i] = (unsigned char)(seed >> 24);
+            }
+        }
+    }
+    return px;
+}
+
+/* The filter-type byte of every row of a PNG the writer made, from its IDAT chunks
+ * inflated by libdeflate; returns a bit per filter type seen. */
+static unsigned
+filter_types_used(const char *path, int w, int h, int c)
+{
+    FILE *f = fopen(path, "rb");
+    assert_non_null(f);
+    fseek(f, 0, SEEK_END);
+    long size = ftell(f);
+    fseek(f, 0, SEEK_SET);
+    unsigned char *file = malloc((size_t)size), *stream = malloc((size_t)size);
+    assert_int_equal(fread(file, 1, (size_t)size, f), (size_t)size);
+    fclose(f);
+    size_t at = 8, stream_bytes = 0;
+    while (at + 12 <= (size_t)size) {
+        size_t len = (size_t)file[at] << 24 | (size_t)file[at + 1] << 16 |
+                     (size_t)file[at + 2] << 8 | file[at + 3];
+        if (memcmp(file + at + 4, "IDAT", 4) == 0) {
+            memcpy(stream + stream_bytes, file + at + 8, len);
+            stream_bytes += len;
+        }
+        at += 12 + len;
+    }
+    size_t rb = (size_t)w * c, n = (rb + 1) * h, got = 0;
+    unsigned char *rows = malloc(n);
+    struct libdeflate_decompressor *d = libdeflate_alloc_decompressor();
+    assert_int_equal(libdeflate_zlib_decompress(d, stream, stream_bytes, rows, n, &got),
+                     LIBDEFLATE_SUCCESS);
+    assert_int_equal(got, n);
+    unsigned used = 0;
+    for (int y = 0; y < h; y++) {
+        assert_true(rows[(size_t)y * (rb + 1)] < 5);
+        used |= 1u << rows[(size_t)y * (rb + 1)];
+    }
+    libdeflate_free_decompressor(d);
+    free(rows);
+    free(stream);
+    free(file);
+    return used;
+}
+
+/* The writer's files, decoded by libpng's own reader (which checks every CRC and the
+ * zlib stream's checksum), give back the bytes written, for 1, 3 and 4 channels, sizes
+ * from one pixel up to one filtered in parallel, and pictures where every filter is
+ * chosen somewhere. */
+static void
+test_encoder_decoded_by_libpng(void **state)
+{
+    (void)state;
+    static const int sizes[][2] = {{1, 1}, {2, 3}, {1, 9}, {37, 23}, {301, 211}};
+    static const int formats[5] = {0, PNG_FORMAT_GRAY, 0, PNG_FORMAT_RGB, PNG_FORMAT_RGBA};
+    static const char *const names[4][4] = {
+        {"Y"}, {0}, {"R", "G", "B"}, {"R", "G", "B", "A"}};
+    for (int c = 1; c <= 4; c += c == 1 ? 2 : 1)
+        for (size_t k = 0; k < sizeof sizes / sizeof *sizes; k++) {
+            int w = sizes[k][0], h = sizes[k][1];
+            unsigned char *px = filter_picture(w, h, c, (unsigned)(17 * k + c));
+            /* the writer takes floats; linear values i/255 round back to byte i */
+            mcp_image *img = NULL;
+            assert_int_equal(mcp_image_new(w, h, c, names[c - 1], &img), 0);
+            for (size_t i = 0; i < (size_t)w * h * c; i++)
+                img->data[i] = px[i] / 255.0f;
+            mcp_write_options wo = mcp_write_defaults();
+            wo.srgb_encode = 0;
+            const char *path = tmp_path("encoded.png");
+            assert_int_equal(mcp_image_write(img, path, &wo), 0);
+            png_image pi;
+            memset(&pi, 0, sizeof pi);
+            pi.version = PNG_IMAGE_VERSION;
+            assert_true(png_image_begin_read_from_file(&pi, path));
+            assert_int_equal(pi.width, w);
+            assert_int_equal(pi.height, h);
+            pi.format = (png_uint_32)formats[c];
+            unsigned char *back = malloc(PNG_IMAGE_SIZE(pi));
+            assert_true(png_image_finish_read(&pi, NULL, back, 0, NULL));
+            assert_memory_equal(back, px, (size_t)w * h * c);
+            if (w * h >= 37 * 23)
+                assert_int_equal(filter_types_used(path, w, h, c), 0x1f);
+            free(back);
+            mcp_image_free(img);
+            free(px);
+        }
 }
 
 static void
@@ -191,6 +309,7 @@ main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_float_round_trip),
         cmocka_unit_test(test_bytes_and_decoding),
+        cmocka_unit_test(test_encoder_decoded_by_libpng),
         cmocka_unit_test(test_other_layouts),
         cmocka_unit_test(test_bad_files),
     };
