@@ -8,6 +8,7 @@
 
 #include <ctype.h>
 #include <math.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -376,6 +377,23 @@ done:
     return rc;
 }
 
+/* How many of n values are NaN/Inf or, for variance, negative (below -0), from their
+ * bits, so that the loop vectorises: exponent all ones is NaN or Inf, and a value
+ * above 0x80000000 has its sign set and is not -0. */
+static long
+count_bad(const float *v, size_t n, int is_variance)
+{
+    long bad = 0;
+    const uint32_t negative_above = is_variance ? 0x80000000u : UINT32_MAX;
+#pragma omp simd reduction(+ : bad)
+    for (size_t i = 0; i < n; i++) {
+        uint32_t b;
+        memcpy(&b, &v[i], sizeof b);
+        bad += (b & 0x7f800000u) == 0x7f800000u || b > negative_above;
+    }
+    return bad;
+}
+
 /* NaN/Inf (and, for variance, negative values): fail naming the first, or zero them. */
 static int
 check_values(mcp_image *img, const char *part, int is_variance, mcp_badval_policy policy,
@@ -387,14 +405,17 @@ check_values(mcp_image *img, const char *part, int is_variance, mcp_badval_polic
        pass that finds the first and replaces them only when there are some */
     long any_bad = 0;
     const int nc = img->channels;
+    const int packed = img->pixel_stride == nc;
 #pragma omp parallel for reduction(+ : any_bad) schedule(static) \
     if ((long long)img->width * img->height * nc > 65536)
-    for (int y = 0; y < img->height; y++)
-        for (int x = 0; x < img->width; x++) {
-            const float *v = mcp_image_px(img, x, y);
-            for (int c = 0; c < nc; c++)
-                any_bad += !isfinite(v[c]) || (is_variance && v[c] < 0);
+    for (int y = 0; y < img->height; y++) {
+        if (packed) {
+            any_bad += count_bad(mcp_image_px(img, 0, y), (size_t)img->width * nc, is_variance);
+            continue;
         }
+        for (int x = 0; x < img->width; x++)
+            any_bad += count_bad(mcp_image_px(img, x, y), (size_t)nc, is_variance);
+    }
     if (!any_bad)
         return 0;
     for (int c = 0; c < img->channels; c++) {
@@ -472,6 +493,8 @@ to_variance_of_mean(mcp_dump *d)
     for (int p = 0; p < 2; p++) {
         if (!parts[p])
             continue;
+#pragma omp parallel for schedule(static) \
+    if ((long long)parts[p]->width * parts[p]->height > 65536)
         for (int y = 0; y < parts[p]->height; y++)
             for (int x = 0; x < parts[p]->width; x++) {
                 double n = mcp_dump_spp_at(d, x, y);
