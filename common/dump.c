@@ -336,18 +336,44 @@ layout_for(const mcp_image *img, mcp_convention conv, layout *L)
 /* ---- loading ---- */
 
 static int
-pick3(const mcp_image *img, const name3 *names, mcp_image **out)
-{
-    const char *n[3] = {names->c[0], names->c[1], names->c[2]};
-    int idx[3];
-    return mcp_image_channels(img, n, 3, idx) || mcp_image_copy_channels(img, idx, 3, out);
-}
-
-static int
 rename3(mcp_image *img, const char *a, const char *b, const char *c)
 {
     return mcp_image_set_channel_name(img, 0, a) || mcp_image_set_channel_name(img, 1, b) ||
            mcp_image_set_channel_name(img, 2, c);
+}
+
+/* Where the main file's channels come from: a whole image in memory, whose triples
+ * are copied out, or (an EXR file on disk) images the reader decoded those triples
+ * straight into (read_direct), with no whole image to copy them from. */
+enum { PART_COLOR, PART_ALBEDO, PART_NORMAL, PART_COV, PART_VAR, PART_M2, PART_SPP, N_PARTS };
+
+typedef struct channel_source {
+    const mcp_image *img; /* names, attributes and source; pixels unless header_only */
+    int header_only;
+    mcp_image *direct[N_PARTS];
+} channel_source;
+
+/* Part `part` as an image of its n channels `names` (1 or 3), from the source. */
+static int
+take_part(channel_source *src, int part, const char *const *names, int n, mcp_image **out)
+{
+    if (src->direct[part]) {
+        *out = src->direct[part];
+        src->direct[part] = NULL;
+        return 0;
+    }
+    if (src->header_only) /* route_parts and dump_fill disagree on the parts */
+        return mcp_error("%s: part %d was not read", src->img->source, part);
+    int idx[3];
+    return mcp_image_channels(src->img, names, n, idx) ||
+           mcp_image_copy_channels(src->img, idx, n, out);
+}
+
+static int
+take3(channel_source *src, int part, const name3 *names, mcp_image **out)
+{
+    const char *n[3] = {names->c[0], names->c[1], names->c[2]};
+    return take_part(src, part, n, 3, out);
 }
 
 /* Reads a separate part file and takes its colour-like triple (R,G,B / X,Y,Z or the
@@ -444,8 +470,9 @@ check_values(mcp_image *img, const char *part, int is_variance, mcp_badval_polic
 }
 
 static int
-load_spp(mcp_dump *d, const mcp_image *img, const mcp_dump_spec *spec, const layout *L)
+load_spp(mcp_dump *d, channel_source *src, const mcp_dump_spec *spec, const layout *L)
 {
+    const mcp_image *img = src->img;
     if (spec->spp_map_path) {
         mcp_image *m = NULL;
         if (mcp_image_read(spec->spp_map_path, NULL, &m))
@@ -457,8 +484,8 @@ load_spp(mcp_dump *d, const mcp_image *img, const mcp_dump_spec *spec, const lay
         if (!ok)
             return -1;
     } else if (L->spp_channel[0] && has(img, L->spp_channel)) {
-        int idx = mcp_image_channel(img, L->spp_channel);
-        if (mcp_image_copy_channels(img, &idx, 1, &d->spp_map))
+        const char *name = L->spp_channel;
+        if (take_part(src, PART_SPP, &name, 1, &d->spp_map))
             return -1;
     }
     if (d->spp_map) {
@@ -505,52 +532,59 @@ to_variance_of_mean(mcp_dump *d)
     }
 }
 
-int
-mcp_dump_from_image(const mcp_image *img, const mcp_dump_spec *spec, mcp_dump **out)
+/* The dump's convention, source, attributes and channel layout, from the main file's
+ * channel names and header (img's pixels are not read). */
+static int
+dump_layout(const mcp_image *img, const mcp_dump_spec *spec, mcp_dump *d, layout *L)
 {
-    mcp_dump_spec defaults = mcp_dump_spec_defaults();
-    if (!spec)
-        spec = &defaults;
-    *out = NULL;
-    mcp_dump *d = mcp_calloc(1, sizeof *d);
-    if (!d)
-        return -1;
     d->convention = spec->convention ? spec->convention : mcp_dump_detect(img);
-    layout L;
     if (!(d->source = mcp_strdup(img->source)) || mcp_attrs_copy(&img->attrs, &d->attrs) ||
-        layout_for(img, d->convention, &L))
-        goto fail;
+        layout_for(img, d->convention, L))
+        return -1;
     /* explicit names win over the convention */
     for (int k = 0; k < 3; k++) {
         if (spec->color[k])
-            snprintf(L.color.c[k], sizeof L.color.c[k], "%s", spec->color[k]);
+            snprintf(L->color.c[k], sizeof L->color.c[k], "%s", spec->color[k]);
         if (spec->var[k])
-            snprintf(L.var.c[k], 512, "%s", spec->var[k]), L.has_var = 1;
+            snprintf(L->var.c[k], 512, "%s", spec->var[k]), L->has_var = 1;
         if (spec->albedo[k])
-            snprintf(L.albedo.c[k], 512, "%s", spec->albedo[k]), L.has_albedo = 1;
+            snprintf(L->albedo.c[k], 512, "%s", spec->albedo[k]), L->has_albedo = 1;
         if (spec->normal[k])
-            snprintf(L.normal.c[k], 512, "%s", spec->normal[k]), L.has_normal = 1;
+            snprintf(L->normal.c[k], 512, "%s", spec->normal[k]), L->has_normal = 1;
     }
-    if (pick3(img, &L.color, &d->color) || rename3(d->color, "R", "G", "B"))
-        goto fail;
-    if (L.has_albedo && (pick3(img, &L.albedo, &d->albedo) || rename3(d->albedo, "R", "G", "B")))
-        goto fail;
-    if (L.has_normal && (pick3(img, &L.normal, &d->normal) || rename3(d->normal, "X", "Y", "Z")))
-        goto fail;
-    if (L.has_cov && (pick3(img, &L.cov, &d->cov_of_mean) ||
-                      rename3(d->cov_of_mean, "RG", "RB", "GB")))
-        goto fail;
-    d->variance_in_file = spec->variance ? spec->variance : L.var_kind;
-    if (L.has_var) {
-        if (pick3(img, &L.var, &d->var_of_mean) || rename3(d->var_of_mean, "R", "G", "B"))
-            goto fail;
-    } else if (L.has_m2) {
+    return 0;
+}
+
+/* Everything after the layout: the parts from the source (renamed to R,G,B / X,Y,Z),
+ * Mitsuba's moments, the separate part files, the sample count, the bad-value
+ * checks and the variance of the mean. */
+static int
+dump_fill(mcp_dump *d, channel_source *src, const mcp_dump_spec *spec, const layout *L)
+{
+    if (take3(src, PART_COLOR, &L->color, &d->color) || rename3(d->color, "R", "G", "B"))
+        return -1;
+    if (L->has_albedo && (take3(src, PART_ALBEDO, &L->albedo, &d->albedo) ||
+                          rename3(d->albedo, "R", "G", "B")))
+        return -1;
+    if (L->has_normal && (take3(src, PART_NORMAL, &L->normal, &d->normal) ||
+                          rename3(d->normal, "X", "Y", "Z")))
+        return -1;
+    if (L->has_cov && (take3(src, PART_COV, &L->cov, &d->cov_of_mean) ||
+                       rename3(d->cov_of_mean, "RG", "RB", "GB")))
+        return -1;
+    d->variance_in_file = spec->variance ? spec->variance : L->var_kind;
+    if (L->has_var) {
+        if (take3(src, PART_VAR, &L->var, &d->var_of_mean) ||
+            rename3(d->var_of_mean, "R", "G", "B"))
+            return -1;
+    } else if (L->has_m2) {
         /* Mitsuba's moment integrator: per-sample variance = E[x^2] - E[x]^2; float
          * rounding can make it slightly negative where the variance is ~0 */
-        if (pick3(img, &L.m2, &d->var_of_mean) || rename3(d->var_of_mean, "R", "G", "B"))
-            goto fail;
-        for (int y = 0; y < img->height; y++)
-            for (int x = 0; x < img->width; x++) {
+        if (take3(src, PART_M2, &L->m2, &d->var_of_mean) ||
+            rename3(d->var_of_mean, "R", "G", "B"))
+            return -1;
+        for (int y = 0; y < d->color->height; y++)
+            for (int x = 0; x < d->color->width; x++) {
                 float *v = mcp_image_px(d->var_of_mean, x, y);
                 const float *m = mcp_image_px(d->color, x, y);
                 for (int c = 0; c < 3; c++) {
@@ -567,7 +601,7 @@ mcp_dump_from_image(const mcp_image *img, const mcp_dump_spec *spec, mcp_dump **
         if (load_part(spec->variance_path, (const char *const[]){"R", "G", "B"}, d->color,
                       &d->var_of_mean) ||
             rename3(d->var_of_mean, "R", "G", "B"))
-            goto fail;
+            return -1;
         d->variance_in_file = spec->variance ? spec->variance : MCP_VAR_OF_MEAN;
     }
     if (spec->albedo_path) {
@@ -576,7 +610,7 @@ mcp_dump_from_image(const mcp_image *img, const mcp_dump_spec *spec, mcp_dump **
         if (load_part(spec->albedo_path, (const char *const[]){"R", "G", "B"}, d->color,
                       &d->albedo) ||
             rename3(d->albedo, "R", "G", "B"))
-            goto fail;
+            return -1;
     }
     if (spec->normal_path) {
         mcp_image_free(d->normal);
@@ -584,23 +618,148 @@ mcp_dump_from_image(const mcp_image *img, const mcp_dump_spec *spec, mcp_dump **
         if (load_part(spec->normal_path, (const char *const[]){"X", "Y", "Z"}, d->color,
                       &d->normal) ||
             rename3(d->normal, "X", "Y", "Z"))
-            goto fail;
+            return -1;
     }
-    if (load_spp(d, img, spec, &L) ||
+    if (load_spp(d, src, spec, L) ||
         check_values(d->color, "colour", 0, spec->bad_values, &d->n_bad_values) ||
         check_values(d->albedo, "albedo", 0, spec->bad_values, &d->n_bad_values) ||
         check_values(d->normal, "normal", 0, spec->bad_values, &d->n_bad_values) ||
         check_values(d->var_of_mean, "variance", 1, spec->bad_values, &d->n_bad_values) ||
         check_values(d->cov_of_mean, "covariance", 0, spec->bad_values, &d->n_bad_values))
-        goto fail;
+        return -1;
     if (d->variance_in_file == MCP_VAR_PER_SAMPLE)
         to_variance_of_mean(d);
     read_variance_source(d);
+    return 0;
+}
+
+int
+mcp_dump_from_image(const mcp_image *img, const mcp_dump_spec *spec, mcp_dump **out)
+{
+    mcp_dump_spec defaults = mcp_dump_spec_defaults();
+    if (!spec)
+        spec = &defaults;
+    *out = NULL;
+    mcp_dump *d = mcp_calloc(1, sizeof *d);
+    if (!d)
+        return -1;
+    layout L;
+    channel_source src = {.img = img};
+    if (dump_layout(img, spec, d, &L) || dump_fill(d, &src, spec, &L)) {
+        mcp_dump_free(d);
+        return -1;
+    }
     *out = d;
     return 0;
-fail:
-    mcp_dump_free(d);
-    return -1;
+}
+
+/* ---- reading an EXR's parts directly ---- */
+
+/* What the router of read_direct works with: it lays out the dump from the header and
+ * makes an image for each part the main file gives, and the reader decodes the
+ * channels into them. clash: two parts want one channel (names given in the spec), so
+ * the whole image must be read and copied from instead. */
+typedef struct direct_read {
+    const mcp_dump_spec *spec;
+    mcp_dump *d;
+    layout L;
+    channel_source src;
+    mcp_image *header; /* a copy of the header, for dump_fill's names and attributes */
+    int clash;
+} direct_read;
+
+/* An image of the n channels `names` of the header for part `part`, and the routes
+ * that send the file's channels into it. */
+static int
+route_part(direct_read *r, const mcp_image *header, int w, int h, int part,
+           const char *const *names, int n, mcp__exr_route *routes)
+{
+    int idx[3];
+    const char *own[3];
+    mcp_image *img = NULL;
+    if (mcp_image_channels(header, names, n, idx))
+        return -1;
+    for (int k = 0; k < n; k++) {
+        if (routes[idx[k]].base) {
+            r->clash = 1;
+            return mcp_error("%s: channel '%s' is wanted twice", header->source, names[k]);
+        }
+        own[k] = header->names[idx[k]];
+    }
+    if (mcp_image_new(w, h, n, own, &img) || mcp_image_set_source(img, header->source) ||
+        mcp_attrs_copy(&header->attrs, &img->attrs)) {
+        mcp_image_free(img);
+        return -1;
+    }
+    for (int k = 0; k < n; k++)
+        routes[idx[k]] = (mcp__exr_route){img->data + k, img->pixel_stride, img->row_stride};
+    r->src.direct[part] = img;
+    return 0;
+}
+
+static int
+route_parts(const mcp_image *header, int w, int h, void *ctx, mcp__exr_route *routes)
+{
+    direct_read *r = ctx;
+    layout *L = &r->L;
+    /* the header outlives the read: dump_fill looks up names in a copy of it */
+    if (mcp_image_new(1, 1, header->channels, (const char *const *)header->names,
+                      &r->header) ||
+        mcp_image_set_source(r->header, header->source) ||
+        mcp_attrs_copy(&header->attrs, &r->header->attrs))
+        return -1;
+    r->src.img = r->header;
+    r->src.header_only = 1;
+    if (dump_layout(header, r->spec, r->d, L))
+        return -1;
+    const struct {
+        int part, wanted;
+        const name3 *names;
+    } parts[] = {
+        {PART_COLOR, 1, &L->color},
+        {PART_ALBEDO, L->has_albedo, &L->albedo},
+        {PART_NORMAL, L->has_normal, &L->normal},
+        {PART_COV, L->has_cov, &L->cov},
+        {PART_VAR, L->has_var, &L->var},
+        {PART_M2, !L->has_var && L->has_m2, &L->m2},
+    };
+    for (size_t i = 0; i < sizeof parts / sizeof *parts; i++) {
+        const char *n[3] = {parts[i].names->c[0], parts[i].names->c[1],
+                            parts[i].names->c[2]};
+        if (parts[i].wanted && route_part(r, header, w, h, parts[i].part, n, 3, routes))
+            return -1;
+    }
+    if (!r->spec->spp_map_path && L->spp_channel[0] && has(header, L->spp_channel)) {
+        const char *n = L->spp_channel;
+        if (route_part(r, header, w, h, PART_SPP, &n, 1, routes))
+            return -1;
+    }
+    return 0;
+}
+
+/* Loads an EXR dump with its parts decoded straight from the file: no whole image and
+ * no copies, which took a third of reading a 1080p dump (docs/benchmarks.md, "EXR
+ * speed"). 1 in *fallback when the whole image must be read instead. */
+static int
+read_direct(const mcp_dump_spec *spec, mcp_dump **out, int *fallback)
+{
+    direct_read r = {.spec = spec};
+    *fallback = 0;
+    int rc = -1;
+    if (!(r.d = mcp_calloc(1, sizeof *r.d)))
+        return -1;
+    if (mcp__exr_read_routed(spec->path, route_parts, &r) == 0 &&
+        dump_fill(r.d, &r.src, spec, &r.L) == 0) {
+        *out = r.d;
+        r.d = NULL;
+        rc = 0;
+    }
+    *fallback = r.clash;
+    for (int i = 0; i < N_PARTS; i++)
+        mcp_image_free(r.src.direct[i]);
+    mcp_image_free(r.header);
+    mcp_dump_free(r.d);
+    return rc;
 }
 
 int
@@ -609,6 +768,12 @@ mcp_dump_load(const mcp_dump_spec *spec, mcp_dump **out)
     *out = NULL;
     if (!spec || !spec->path)
         return mcp_error("render dump: no file given");
+    if (mcp_format_from_path(spec->path) == MCP_FORMAT_EXR) {
+        int fallback;
+        if (mcp__check_readable(spec->path)) return -1;
+        if (read_direct(spec, out, &fallback) == 0) return 0;
+        if (!fallback) return -1;
+    }
     mcp_image *img = NULL;
     mcp_read_options ro = mcp_read_defaults();
     if (mcp_image_read(spec->path, &ro, &img))

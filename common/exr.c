@@ -278,12 +278,14 @@ decompress_zip_chunk(exr_decode_pipeline_t *dec)
                    : rc == -2 ? EXR_ERR_OUT_OF_MEMORY : EXR_ERR_CORRUPT_CHUNK;
 }
 
-/* Decodes one chunk into img at (x0, y0) of the data window with this thread's
- * pipeline; on failure *what says which step failed. zip: this thread's zip decoder
- * for a zip file, NULL otherwise. */
+/* Decodes one chunk at (x0, y0) of the data window to where routes say, with this
+ * thread's pipeline; on failure *what says which step failed. named holds the file's
+ * channel names in the routes' order. zip: this thread's zip decoder for a zip file,
+ * NULL otherwise. */
 static exr_result_t
 decode_chunk(exr_context_t f, const chunk_at *c, exr_decode_pipeline_t *dec,
-             int *initialised, mcp__zip_codec *zip, mcp_image *img, const char **what)
+             int *initialised, mcp__zip_codec *zip, const mcp_image *named,
+             const mcp__exr_route *routes, const char **what)
 {
     *what = "cannot decode";
     exr_result_t rc = *initialised ? exr_decoding_update(f, 0, &c->ci, dec)
@@ -292,10 +294,14 @@ decode_chunk(exr_context_t f, const chunk_at *c, exr_decode_pipeline_t *dec,
         return rc;
     for (int k = 0; k < dec->channel_count; k++) {
         exr_coding_channel_info_t *ch = &dec->channels[k];
-        int ic = mcp_image_channel(img, ch->channel_name);
-        ch->decode_to_ptr = (uint8_t *)(mcp_image_px(img, c->x0, c->y0) + ic);
-        ch->user_pixel_stride = (int32_t)(img->pixel_stride * (ptrdiff_t)sizeof(float));
-        ch->user_line_stride = (int32_t)(img->row_stride * (ptrdiff_t)sizeof(float));
+        /* Core sorts channels by name: map them back by name, not position */
+        const mcp__exr_route *r = &routes[mcp_image_channel(named, ch->channel_name)];
+        /* a channel without a place is skipped: Core unpacks none of it */
+        ch->decode_to_ptr = r->base ? (uint8_t *)(r->base + (ptrdiff_t)c->y0 * r->row_stride +
+                                                  (ptrdiff_t)c->x0 * r->pixel_stride)
+                                    : NULL;
+        ch->user_pixel_stride = (int32_t)(r->pixel_stride * (ptrdiff_t)sizeof(float));
+        ch->user_line_stride = (int32_t)(r->row_stride * (ptrdiff_t)sizeof(float));
         ch->user_data_type = EXR_PIXEL_FLOAT;
         ch->user_bytes_per_element = 4;
     }
@@ -314,11 +320,11 @@ decode_chunk(exr_context_t f, const chunk_at *c, exr_decode_pipeline_t *dec,
 
 /* Decodes the chunks in parallel: Core decodes each chunk on its own, reading its
  * bytes through the context is safe from many threads (pread, or read_fn, which must
- * be), and the chunks fill disjoint rectangles of img. Each thread keeps one
+ * be), and the chunks fill disjoint rectangles. Each thread keeps one
  * pipeline for all its chunks, as Core intends (update instead of initialise). */
 static int
 read_pixels(exr_context_t f, const chunk_at *chunks, int n, exr_compression_t comp,
-            mcp_image *img, const char *path)
+            const mcp_image *named, const mcp__exr_route *routes, const char *path)
 {
     chunk_failure fail = {.idx = -1};
     int zip = comp == EXR_COMPRESSION_ZIP || comp == EXR_COMPRESSION_ZIPS;
@@ -338,7 +344,8 @@ read_pixels(exr_context_t f, const chunk_at *chunks, int n, exr_compression_t co
             exr_result_t rc =
                 zip && !decoder
                     ? EXR_ERR_OUT_OF_MEMORY
-                    : decode_chunk(f, &chunks[i], &dec, &initialised, decoder, img, &what);
+                    : decode_chunk(f, &chunks[i], &dec, &initialised, decoder, named,
+                                   routes, &what);
             if (rc != EXR_ERR_SUCCESS)
                 note_failure(&fail, i, rc, what);
         }
@@ -349,15 +356,29 @@ read_pixels(exr_context_t f, const chunk_at *chunks, int n, exr_compression_t co
     return fail.idx >= 0 ? report_failure(&fail, path) : 0;
 }
 
+/* The channels' places when a whole image is read: its own pixels. */
+static int
+route_to_image(mcp_image *img, mcp__exr_route **routes)
+{
+    if (!(*routes = mcp_calloc((size_t)img->channels, sizeof **routes)))
+        return -1;
+    for (int c = 0; c < img->channels; c++)
+        (*routes)[c] = (mcp__exr_route){img->data + c, img->pixel_stride, img->row_stride};
+    return 0;
+}
+
 /* Reads part 0 of an opened context f; file_bytes is the size of what it reads, name
- * names it in messages and becomes img->source. Closes f. */
+ * names it in messages and becomes the image's source. Closes f. Without a router the
+ * whole image goes to *out; with one, the header (channel names, attributes, 1x1
+ * unread pixels) goes to the router, which says where each channel's values go. */
 static int
 read_context(exr_context_t f, unsigned long long file_bytes, const char *name,
-             mcp_image **out)
+             mcp__exr_router router, void *ctx, mcp_image **out)
 {
     const char *path = name;
     int rc = -1, n_chunks = 0;
     mcp_image *img = NULL;
+    mcp__exr_route *routes = NULL;
     const char **names = NULL;
     chunk_at *chunks = NULL;
     exr_storage_t storage;
@@ -406,18 +427,30 @@ read_context(exr_context_t f, unsigned long long file_bytes, const char *name,
         }
         names[c] = e->name.str;
     }
-    if (mcp_image_new((int)w, (int)h, chans->num_channels, names, &img) ||
-        mcp_image_set_source(img, path) || read_pixels(f, chunks, n_chunks, comp, img, path) ||
-        read_attributes(f, &img->attrs))
+    /* the header's attributes before the pixels, so that a router sees them */
+    if (mcp_image_new(router ? 1 : (int)w, router ? 1 : (int)h, chans->num_channels, names,
+                      &img) ||
+        mcp_image_set_source(img, path) || read_attributes(f, &img->attrs))
         goto done;
     if ((dw.min.x || dw.min.y) &&
         (mcp_attrs_set_int(&img->attrs, "dataWindowX", dw.min.x) ||
          mcp_attrs_set_int(&img->attrs, "dataWindowY", dw.min.y)))
         goto done;
-    *out = img;
-    img = NULL;
+    if (router) {
+        if (!(routes = mcp_calloc((size_t)chans->num_channels, sizeof *routes)) ||
+            router(img, (int)w, (int)h, ctx, routes))
+            goto done;
+    } else if (route_to_image(img, &routes))
+        goto done;
+    if (read_pixels(f, chunks, n_chunks, comp, img, routes, path))
+        goto done;
+    if (!router) {
+        *out = img;
+        img = NULL;
+    }
     rc = 0;
 done:
+    free(routes);
     free(chunks);
     free(names);
     mcp_image_free(img);
@@ -425,21 +458,33 @@ done:
     return rc;
 }
 
-int
-mcp__exr_read(const char *path, mcp_image **out)
+static int
+read_file(const char *path, mcp__exr_router router, void *ctx, mcp_image **out)
 {
     exr_context_t f = NULL;
     exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
     init.error_handler_fn = exr_capture_error;
     exr_last_message[0] = '\0';
-    *out = NULL;
     struct stat st;
     if (stat(path, &st) || st.st_size < 0)
         return mcp_error("%s: cannot stat: %s", path, strerror(errno));
     exr_result_t r = exr_start_read(&f, path, &init);
     if (r != EXR_ERR_SUCCESS)
         return exr_fail(path, "cannot read as OpenEXR", r);
-    return read_context(f, (unsigned long long)st.st_size, path, out);
+    return read_context(f, (unsigned long long)st.st_size, path, router, ctx, out);
+}
+
+int
+mcp__exr_read(const char *path, mcp_image **out)
+{
+    *out = NULL;
+    return read_file(path, NULL, NULL, out);
+}
+
+int
+mcp__exr_read_routed(const char *path, mcp__exr_router router, void *ctx)
+{
+    return read_file(path, router, ctx, NULL);
 }
 
 /* ---- reading from memory ---- */
@@ -491,7 +536,7 @@ mcp__exr_read_memory(const void *data, size_t size, const char *name, mcp_image 
     exr_result_t r = exr_start_read(&f, name, &init);
     if (r != EXR_ERR_SUCCESS)
         return exr_fail(name, "cannot read as OpenEXR", r);
-    return read_context(f, (unsigned long long)size, name, out);
+    return read_context(f, (unsigned long long)size, name, NULL, NULL, out);
 }
 
 /* ---- writing ---- */

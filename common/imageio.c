@@ -347,17 +347,25 @@ mcp_write_file_atomic(const char *path, const void *data, size_t size)
 /* ---- public read/write ---- */
 
 int
+mcp__check_readable(const char *path)
+{
+    struct stat st;
+    if (stat(path, &st) != 0)
+        return mcp_error("%s: cannot open: %s", path, strerror(errno));
+    if (S_ISDIR(st.st_mode))
+        return mcp_error("%s: is a directory, not an image", path);
+    return 0;
+}
+
+int
 mcp_image_read(const char *path, const mcp_read_options *opt, mcp_image **out)
 {
     mcp_read_options defaults = mcp_read_defaults();
     *out = NULL;
     if (!opt)
         opt = &defaults;
-    struct stat st;
-    if (stat(path, &st) != 0)
-        return mcp_error("%s: cannot open: %s", path, strerror(errno));
-    if (S_ISDIR(st.st_mode))
-        return mcp_error("%s: is a directory, not an image", path);
+    if (mcp__check_readable(path))
+        return -1;
     switch (mcp_format_from_path(path)) {
     case MCP_FORMAT_EXR: return mcp__exr_read(path, out);
     case MCP_FORMAT_PFM: return mcp__pfm_read(path, out);

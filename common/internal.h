@@ -47,10 +47,27 @@ int mcp__series_load_file(const mcp_series *s, int i, mcp_dump **out);
 /* Format back ends behind mcp_image_read / mcp_image_write (imageio.c). The writers
  * write exactly `path` (imageio.c passes a temporary name and renames). */
 #include <mcpost/imageio.h>
+/* 0 when path exists and is no folder; else -1 and "PATH: cannot open: ..." or "PATH: is a
+ * directory, not an image" (imageio.c) */
+int mcp__check_readable(const char *path);
 int mcp__exr_read(const char *path, mcp_image **out);
 /* The same from a buffer (name labels it in messages); the dump loader uses it too. */
 int mcp__exr_read_memory(const void *data, size_t size, const char *name, mcp_image **out);
 int mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *opt);
+/* Reading an EXR's channels straight to where a caller wants them (the dump loader: no
+ * whole image to copy the parts out of). Once the header is read and checked, the
+ * router gets it as `header` (the channel names in the file's order, the attributes
+ * and the source, with 1x1 pixels that are not read) and the data window's size, and
+ * fills routes[c] for each channel c it wants: the value at pixel (x, y) goes to
+ * base[y * row_stride + x * pixel_stride] (in floats); a channel left with base NULL
+ * is skipped. It returns 0, or -1 with the error set, which the read returns. */
+typedef struct mcp__exr_route {
+    float *base;
+    ptrdiff_t pixel_stride, row_stride;
+} mcp__exr_route;
+typedef int (*mcp__exr_router)(const mcp_image *header, int width, int height, void *ctx,
+                               mcp__exr_route *routes);
+int mcp__exr_read_routed(const char *path, mcp__exr_router router, void *ctx);
 int mcp__pfm_read(const char *path, mcp_image **out);
 int mcp__pfm_read_memory(const void *data, size_t size, const char *name, mcp_image **out);
 int mcp__pfm_write(const mcp_image *img, const char *path);

@@ -5,6 +5,7 @@
 #include <mcpost/dump.h>
 #include <mcpost/imageio.h>
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -135,6 +136,90 @@ test_mcpost_convention_per_pixel_spp_and_covariance(void **state)
     mcp_dump_free(d);
 }
 
+/* Both images hold the same channel names and the same bits. */
+static void
+assert_same_image(const mcp_image *a, const mcp_image *b)
+{
+    if (!a || !b) {
+        assert_true(a == b);
+        return;
+    }
+    assert_int_equal(a->width, b->width);
+    assert_int_equal(a->height, b->height);
+    assert_int_equal(a->channels, b->channels);
+    for (int c = 0; c < a->channels; c++)
+        assert_string_equal(a->names[c], b->names[c]);
+    for (int y = 0; y < a->height; y++)
+        for (int x = 0; x < a->width; x++)
+            assert_memory_equal(mcp_image_px(a, x, y), mcp_image_px(b, x, y),
+                                sizeof(float) * (size_t)a->channels);
+}
+
+/* mcp_dump_load decodes an EXR's parts straight into the dump's images; reading the
+ * whole image and splitting it (mcp_dump_from_image) must give the same dump, bit for
+ * bit, in every convention, with a data window that does not start at 0,0, with bad
+ * values replaced, and when a spec names one channel for two parts (which the direct
+ * reader cannot route and hands back to the whole-image path). */
+static void
+test_direct_read_matches_whole_image(void **state)
+{
+    (void)state;
+    const mcp_convention convs[] = {MCP_CONV_PBRT, MCP_CONV_BLENDER, MCP_CONV_MITSUBA,
+                                    MCP_CONV_MCPOST};
+    for (size_t i = 0; i < sizeof convs / sizeof *convs; i++)
+        for (int variant = 0; variant < 3; variant++) {
+            /* tall enough for many chunks, so that they are decoded in parallel */
+            mcp_dump *d = make_dump(37, 150, convs[i] == MCP_CONV_MCPOST ? 0 : 16);
+            if (convs[i] == MCP_CONV_MCPOST) {
+                d->spp_map = mcp_test_random(37, 150, 1, 1.0f, 9.0f, 9, (const char *[]){"n"});
+                d->cov_of_mean = mcp_test_random(37, 150, 3, -0.1f, 0.1f, 5,
+                                                 (const char *[]){"RG", "RB", "GB"});
+            }
+            if (variant == 1) /* a NaN and an Inf to replace */
+                d->color->data[100] = NAN, d->albedo->data[7] = INFINITY;
+            mcp_write_options wo = mcp_write_defaults();
+            wo.exr_data_x = 5;
+            wo.exr_data_y = -3;
+            const char *path = mcp_test_path("direct.exr");
+            assert_int_equal(mcp_dump_write(d, path, convs[i], &wo), 0);
+            mcp_dump_spec spec = mcp_dump_spec_defaults();
+            spec.path = path;
+            spec.spp = convs[i] == MCP_CONV_MITSUBA ? 16 : 0;
+            spec.bad_values = variant == 1 ? MCP_BADVAL_ZERO : MCP_BADVAL_FAIL;
+            static char names[3][64]; /* variant 2: the colour's channels for the albedo */
+            for (int k = 0; variant == 2 && k < 3; k++) {
+                snprintf(names[k], sizeof names[k], "%s%c",
+                         convs[i] == MCP_CONV_BLENDER ? "ViewLayer.Combined." : "", "RGB"[k]);
+                spec.albedo[k] = names[k];
+            }
+            mcp_dump *direct = NULL, *whole = NULL;
+            mcp_image *raw = NULL;
+            assert_int_equal(mcp_dump_load(&spec, &direct), 0);
+            assert_int_equal(mcp_image_read(path, NULL, &raw), 0);
+            assert_int_equal(mcp_dump_from_image(raw, &spec, &whole), 0);
+            assert_int_equal(direct->convention, whole->convention);
+            assert_true(direct->spp == whole->spp);
+            assert_int_equal(direct->variance_in_file, whole->variance_in_file);
+            assert_int_equal(direct->n_bad_values, whole->n_bad_values);
+            /* Mitsuba's second moment carries the colour's NaN into the variance too */
+            assert_true(variant == 1 ? direct->n_bad_values >= 2 : direct->n_bad_values == 0);
+            assert_string_equal(direct->source, whole->source);
+            assert_int_equal(direct->attrs.count, whole->attrs.count);
+            assert_same_image(direct->color, whole->color);
+            assert_same_image(direct->var_of_mean, whole->var_of_mean);
+            assert_same_image(direct->cov_of_mean, whole->cov_of_mean);
+            assert_same_image(direct->albedo, whole->albedo);
+            assert_same_image(direct->normal, whole->normal);
+            assert_same_image(direct->spp_map, whole->spp_map);
+            if (variant == 2)
+                assert_same_image(direct->albedo, direct->color);
+            mcp_image_free(raw);
+            mcp_dump_free(whole);
+            mcp_dump_free(direct);
+            mcp_dump_free(d);
+        }
+}
+
 static void
 test_plain_with_separate_files(void **state)
 {
@@ -262,6 +347,7 @@ main(void)
         cmocka_unit_test(test_mitsuba_roundtrip_needs_spp),
         cmocka_unit_test(test_per_sample_variance_semantics),
         cmocka_unit_test(test_mcpost_convention_per_pixel_spp_and_covariance),
+        cmocka_unit_test(test_direct_read_matches_whole_image),
         cmocka_unit_test(test_plain_with_separate_files),
         cmocka_unit_test(test_bad_values),
         cmocka_unit_test(test_series_pattern),
