@@ -6,6 +6,7 @@
 #include <mcpost/frames.h>
 #include <mcpost/imageio.h>
 #include <mcpost/progress.h>
+#include <mcpost/stages.h> /* the built-in table, for stages == NULL (jobs/) */
 
 #include <errno.h>
 #include <libgen.h>
@@ -967,6 +968,8 @@ int
 mcp_job_check(const char *path, const mcp_stage *const *stages)
 {
     mcp_job *job = NULL;
+    if (!stages)
+        stages = mcp_job_stages();
     if (job_open(path, NULL, &job))
         return -1;
     const mcp_node *list = NULL;
@@ -1024,6 +1027,8 @@ mcp_job_run_file(const char *path, const mcp_stage *const *stages,
                  const mcp_job_options *opt)
 {
     mcp_job *job = NULL;
+    if (!stages)
+        stages = mcp_job_stages();
     if (job_open(path, opt, &job))
         return -1;
     int rc = -1;

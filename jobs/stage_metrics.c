@@ -2,7 +2,7 @@
  * input against a reference, with maps, previews and the error-percentile plot
  * (Firmino et al. 2024) in the report, and error-vs-spp curves for a series.
  * Job keys are the flags of `mcpost metrics` with '_' for '-'. */
-#include "cli.h"
+#include "internal.h"
 
 #include <mcpost/metrics.h>
 #include <mcpost/progress.h>
