@@ -136,6 +136,17 @@ mcp_job_output_path(mcp_job *job, const char *name, char *buf, size_t cap)
     return 0;
 }
 
+int
+mcp_job_output_subdir(mcp_job *job, const char *sub, char *buf, size_t cap)
+{
+    if (make_output_dir(job))
+        return -1;
+    int n = snprintf(buf, cap, "%s/%s", job->output_dir, sub);
+    if (n < 0 || (size_t)n >= cap)
+        return mcp_error("%s: output path too long: %s", job->path, sub);
+    return mcp_make_dirs(buf);
+}
+
 mcp_report *
 mcp_job_report(mcp_job *job)
 {

@@ -139,6 +139,9 @@ MCP_API const char *mcp_job_output_dir(mcp_job *job);
 MCP_API int mcp_job_resolve(const mcp_job *job, const char *rel, char *buf, size_t cap);
 /* The path of an output file `name` inside the output folder (folders created). */
 MCP_API int mcp_job_output_path(mcp_job *job, const char *name, char *buf, size_t cap);
+/* The path of the folder `sub` (may hold slashes) inside the output folder, made with
+ * its parents: where a stage puts its files ("estimate", "blend", ...). */
+MCP_API int mcp_job_output_subdir(mcp_job *job, const char *sub, char *buf, size_t cap);
 
 /* Named inputs and results. Lookups take the settings map and the key whose value
  * names the input (e.g. "input"), so that a missing name is reported at its line.

@@ -86,12 +86,8 @@ stage_adaptive(mcp_job *job, const mcp_node *s)
         (pl.ref_name && mcp_job_image(job, s, "reference", &c->reference)))
         goto done;
     if (!pl.have_size) c->width = c->reference->width, c->height = c->reference->height;
-    char probe[4352], rel_json[300];
     snprintf(c->rel, sizeof c->rel, "%s/", pl.sub);
-    snprintf(rel_json, sizeof rel_json, "%sadaptive.json", c->rel);
-    if (mcp_job_output_path(job, rel_json, probe, sizeof probe)) goto done;
-    *strrchr(probe, '/') = '\0';
-    snprintf(c->dir, sizeof c->dir, "%s", probe);
+    if (mcp_job_output_subdir(job, pl.sub, c->dir, sizeof c->dir)) goto done;
     c->den = pl.den;
     c->section = mcp_report_section(mcp_job_report(job), "adaptive",
                                     pl.title ? pl.title : "adaptive sampling");

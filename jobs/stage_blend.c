@@ -158,18 +158,13 @@ stage_blend(mcp_job *job, const mcp_node *settings)
     const char *den_name = den->name;
     mcp__blend_sink sink;
     memset(&sink, 0, sizeof sink);
-    char rel[1024], probe[4096];
-    snprintf(rel, sizeof rel, "%s/", output ? output : "blend");
+    char rel[1024], path[4200];
+    const char *sub = output ? output : "blend";
+    snprintf(rel, sizeof rel, "%s/", sub);
     sink.rel = rel;
     sink.all_images = all_images;
     int rc = -1;
-    /* mcp_job_output_path creates the folders of rel */
-    char marker[1100];
-    snprintf(marker, sizeof marker, "%sblend.json", rel);
-    if (mcp_job_output_path(job, marker, probe, sizeof probe) == 0) {
-        char *slash = strrchr(probe, '/');
-        if (slash) *slash = '\0';
-        snprintf(sink.dir, sizeof sink.dir, "%s", probe);
+    if (mcp_job_output_subdir(job, sub, sink.dir, sizeof sink.dir) == 0) {
         char default_title[600];
         snprintf(default_title, sizeof default_title, "blend: %s with %s", input,
                  den_name);
@@ -178,8 +173,8 @@ stage_blend(mcp_job *job, const mcp_node *settings)
         if (section &&
             mcp__blend_run(series, den, ref, &o, den_name, &sink, section) == 0) {
             char *text = cJSON_Print(section);
-            snprintf(probe + strlen(probe), sizeof probe - strlen(probe), "/blend.json");
-            rc = text && mcp_write_file_atomic(probe, text, strlen(text)) == 0 ? 0 : -1;
+            snprintf(path, sizeof path, "%s/blend.json", sink.dir);
+            rc = text && mcp_write_file_atomic(path, text, strlen(text)) == 0 ? 0 : -1;
             free(text);
             if (rc == 0) mcp_note("blend: %s: %d members", input, series->count);
         }

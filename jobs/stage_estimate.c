@@ -124,7 +124,6 @@ done:
 typedef struct estimate_plan {
     mcp_series_estimate_options so;
     const char *name, *sub, *ref_name;
-    char probe[4352];
     mcp_denoiser *den;
 } estimate_plan;
 
@@ -165,7 +164,6 @@ stage_estimate(mcp_job *job, const mcp_node *settings)
     }
     mcp_series_estimate_options so = pl.so;
     const char *name = pl.name, *sub = pl.sub, *ref_name = pl.ref_name;
-    char probe[4352];
     mcp_denoiser *den = pl.den;
     const mcp_image *ref = NULL;
     const mcp_series *series = NULL;
@@ -182,12 +180,7 @@ stage_estimate(mcp_job *job, const mcp_node *settings)
     mcp__estimate_dir od;
     memset(&od, 0, sizeof od);
     snprintf(od.rel, sizeof od.rel, "%s/", sub);
-    char rel_json[300];
-    snprintf(rel_json, sizeof rel_json, "%sestimate.json", od.rel);
-    if (mcp_job_output_path(job, rel_json, probe, sizeof probe)) /* creates the folder */
-        goto done;
-    *strrchr(probe, '/') = '\0';
-    snprintf(od.dir, sizeof od.dir, "%s", probe);
+    if (mcp_job_output_subdir(job, sub, od.dir, sizeof od.dir)) goto done;
     cJSON *section = mcp_report_section(mcp_job_report(job), "estimate", name);
     if (!section) goto done;
     if (series) {

@@ -173,12 +173,8 @@ stage_perceptual(mcp_job *job, const mcp_node *settings)
         r.kernel_img = kern;
     }
     /* outputs in <output>/<name>/, images relative to the report */
-    char probe[4600];
     snprintf(r.rel, sizeof r.rel, "%s/", name);
-    snprintf(probe, sizeof probe, "%s/x", name);
-    char path[4096];
-    if (mcp_job_output_path(job, probe, path, sizeof path)) goto done;
-    snprintf(r.out_dir, sizeof r.out_dir, "%s/%s", mcp_job_output_dir(job), name);
+    if (mcp_job_output_subdir(job, name, r.out_dir, sizeof r.out_dir)) goto done;
     char title[300];
     snprintf(title, sizeof title, "%s: %s", name, mcp_perc_method_name(a.opt.method));
     if (!(r.section = mcp_report_section(mcp_job_report(job), "perceptual", title)) ||
