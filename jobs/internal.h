@@ -28,6 +28,16 @@ int mcp__parse_int(const char *flag, const char *text, int *out);
 int mcp__split_words(const char *text, char ***words, int *count);
 void mcp__free_words(char **words, int count);
 
+/* ---- settings.c: a stage's settings ---- */
+
+/* An enum key read with its from_name function (parse's out is the enum); a bad name
+ * fails at the key's line. Absent: *out unchanged. */
+int mcp__opt_enum(const mcp_node *settings, const char *key,
+                  int (*parse)(const char *, void *), void *out);
+/* The current error put at the line of settings' key ("FILE:LINE: ..."); -1, and the
+ * error unchanged when settings has no such key. */
+int mcp__at_line(const mcp_node *settings, const char *key);
+
 /* ---- variance_source.c: what a variance rests on, said the same way everywhere ---- */
 
 /* "variance_source" (and "variance_dof" when known) into a JSON object, with a

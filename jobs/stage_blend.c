@@ -30,18 +30,7 @@ static const char *const blend_keys[] = {"input",
                                          "flip",
                                          NULL};
 
-/* An enum key read with its from_name function; errors at the key's line. */
-static int
-opt_name(const mcp_node *settings, const char *key, int (*parse)(const char *, void *),
-         void *out)
-{
-    const char *s = NULL;
-    if (mcp_node_opt_string(settings, key, &s)) return -1;
-    if (s && parse(s, out))
-        return mcp_node_error(mcp_node_get(settings, key), "%s", mcp_error_message());
-    return 0;
-}
-
+/* The enum keys' from_name functions, for mcp__opt_enum. */
 static int
 p_fit(const char *s, void *o)
 {
@@ -71,15 +60,16 @@ read_stage_options(const mcp_node *s, mcp_blend_series_options *o)
     int flip = o->flip, stop_filtering = b->stop_filtering,
         keeps_zeros = b->denoiser_keeps_zeros;
     if (mcp_node_opt_double(s, "stop_denoising_at", &o->stop_denoising_at) ||
-        opt_name(s, "fit", p_fit, &b->fit) || opt_name(s, "curve", p_curve, &b->curve) ||
+        mcp__opt_enum(s, "fit", p_fit, &b->fit) ||
+        mcp__opt_enum(s, "curve", p_curve, &b->curve) ||
         mcp_node_opt_double(s, "far_spp", &b->far_spp) ||
         mcp_node_opt_double(s, "max_weight", &b->max_weight) ||
         mcp_node_opt_bool(s, "denoiser_keeps_zeros", &keeps_zeros) ||
-        opt_name(s, "filter", p_filter, &b->filter) ||
+        mcp__opt_enum(s, "filter", p_filter, &b->filter) ||
         mcp_node_opt_int(s, "filter_window", &b->filter_window) ||
         mcp_node_opt_double(s, "filter_sigma_scale", &b->filter_sigma_scale) ||
         mcp_node_opt_bool(s, "stop_filtering", &stop_filtering) ||
-        opt_name(s, "negative_sure", p_neg, &b->negative_sure) ||
+        mcp__opt_enum(s, "negative_sure", p_neg, &b->negative_sure) ||
         mcp_node_opt_int(s, "n_probes", &o->sure.n_probes) ||
         mcp_node_opt_double(s, "seed", &seed) ||
         mcp_node_opt_int(s, "js_window", &b->js_window) ||

@@ -14,23 +14,6 @@ static const char *const estimate_keys[] = {
     "reference",       "taus",     "output", "s2_pool",  NULL};
 
 static int
-at_line(const mcp_node *settings, const char *key)
-{
-    const mcp_node *n = mcp_node_get(settings, key);
-    return n ? mcp_node_error(n, "%s", mcp_error_message()) : -1;
-}
-
-static int
-opt_enum(const mcp_node *settings, const char *key, int (*parse)(const char *, void *),
-         void *out)
-{
-    const char *s = NULL;
-    if (mcp_node_opt_string(settings, key, &s)) return -1;
-    if (s && parse(s, out)) return at_line(settings, key);
-    return 0;
-}
-
-static int
 parse_metric(const char *s, void *out)
 {
     return mcp_error_metric_from_name(s, out);
@@ -54,7 +37,7 @@ read_settings(const mcp_node *s, mcp_series_estimate_options *so)
     mcp_estimate_options *o = &so->est;
     double *p = NULL, *taus = NULL, seed = 0, budget = 0;
     int np = 0, nt = 0, rc = -1;
-    if (opt_enum(s, "metric", parse_metric, &o->sure.metric) ||
+    if (mcp__opt_enum(s, "metric", parse_metric, &o->sure.metric) ||
         mcp_node_opt_double(s, "tau", &o->tau) ||
         mcp_node_opt_double(s, "percentile", &o->p) ||
         mcp_node_opt_doubles(s, "percentiles", &p, &np) ||
@@ -62,10 +45,10 @@ read_settings(const mcp_node *s, mcp_series_estimate_options *so)
         mcp_node_opt_double(s, "seed", &seed) ||
         mcp_node_opt_bool(s, "mc_sure", &o->sure.mc_sure) ||
         mcp_node_opt_double(s, "delta", &o->sure.fd_delta) ||
-        opt_enum(s, "variance_probes", parse_vprobes, &o->variance_rademacher) ||
+        mcp__opt_enum(s, "variance_probes", parse_vprobes, &o->variance_rademacher) ||
         mcp_node_opt_double(s, "ppd", &o->sure.ppd) ||
         mcp_node_opt_int(s, "tile", &o->blocks.tile_size) ||
-        opt_enum(s, "sampling", parse_sampling, &o->sampling.kind) ||
+        mcp__opt_enum(s, "sampling", parse_sampling, &o->sampling.kind) ||
         mcp_node_opt_double(s, "budget", &budget) ||
         mcp_node_opt_int(s, "s2_pool", &o->s2_pool) ||
         mcp_node_opt_doubles(s, "taus", &taus, &nt))
@@ -141,7 +124,7 @@ parse_estimate(mcp_job *job, const mcp_node *settings, estimate_plan *pl)
         (pl->ref_name && mcp_job_check_input(job, settings, "reference", MCP_JOB_IMAGE)))
         return -1;
     if (mcp__stage_denoiser(job, settings, &pl->den))
-        return mcp_node_get(settings, "denoiser") ? at_line(settings, "denoiser") : -1;
+        return mcp_node_get(settings, "denoiser") ? mcp__at_line(settings, "denoiser") : -1;
     return 0;
 }
 
