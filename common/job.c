@@ -117,14 +117,23 @@ mcp_job_output_dir(mcp_job *job)
     return job->output_dir;
 }
 
-int
-mcp_job_output_path(mcp_job *job, const char *name, char *buf, size_t cap)
+/* <output>/name into buf, the output folder made. */
+static int
+output_join(mcp_job *job, const char *name, char *buf, size_t cap)
 {
     if (make_output_dir(job))
         return -1;
     int n = snprintf(buf, cap, "%s/%s", job->output_dir, name);
     if (n < 0 || (size_t)n >= cap)
         return mcp_error("%s: output path too long: %s", job->path, name);
+    return 0;
+}
+
+int
+mcp_job_output_path(mcp_job *job, const char *name, char *buf, size_t cap)
+{
+    if (output_join(job, name, buf, cap))
+        return -1;
     /* names may hold sub-folders ("maps/flip.png") */
     char *slash = strrchr(buf, '/');
     if (slash && slash > buf + strlen(job->output_dir)) {
@@ -139,12 +148,7 @@ mcp_job_output_path(mcp_job *job, const char *name, char *buf, size_t cap)
 int
 mcp_job_output_subdir(mcp_job *job, const char *sub, char *buf, size_t cap)
 {
-    if (make_output_dir(job))
-        return -1;
-    int n = snprintf(buf, cap, "%s/%s", job->output_dir, sub);
-    if (n < 0 || (size_t)n >= cap)
-        return mcp_error("%s: output path too long: %s", job->path, sub);
-    return mcp_make_dirs(buf);
+    return output_join(job, sub, buf, cap) || mcp_make_dirs(buf) ? -1 : 0;
 }
 
 mcp_report *
