@@ -9,20 +9,13 @@
 #include "cli.h"
 
 #include <mcpost/estimate.h>
-#include <mcpost/filter.h>
-#include <mcpost/plot.h>
 #include <mcpost/progress.h>
 
-#include <errno.h>
 #include <getopt.h>
-#include <inttypes.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 /* ---- the subcommand ---- */
 

@@ -9,7 +9,6 @@
 
 #include <mcpost/blend.h>
 #include <mcpost/progress.h>
-#include <mcpost/tonemap.h>
 
 #include <errno.h>
 #include <getopt.h>
@@ -17,7 +16,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
 
 /* ---- the subcommand ---- */
 

@@ -3,9 +3,6 @@
  * and compression, or rewrite a render dump in another renderer's convention. */
 #include "cli.h"
 
-#include <mcpost/progress.h>
-#include <mcpost/tonemap.h>
-
 #include <getopt.h>
 #include <stdio.h>
 #include <stdlib.h>

@@ -13,7 +13,6 @@
 #include "cli.h"
 
 #include <mcpost/estimate.h>
-#include <mcpost/progress.h>
 
 #include <errno.h>
 #include <getopt.h>
@@ -21,7 +20,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
 
 #define EXIT_CONTINUE 10 /* --exit-status: keep rendering */
 

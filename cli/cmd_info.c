@@ -3,9 +3,6 @@
  * the library's, shared with the `info` job stage: jobs/stage_info.c). */
 #include "cli.h"
 
-#include <mcpost/progress.h>
-#include <mcpost/stats.h>
-
 #include <getopt.h>
 #include <stdio.h>
 #include <stdlib.h>

@@ -8,18 +8,13 @@
  * are the same words ('-' in flags, '_' in keys). */
 #include "cli.h"
 
-#include <mcpost/filter.h>
 #include <mcpost/perceptual.h>
-#include <mcpost/progress.h>
 
-#include <errno.h>
 #include <getopt.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <strings.h>
-#include <sys/stat.h>
 
 static void
 print_summary(const cJSON *s)

@@ -7,7 +7,6 @@
 
 #include <mcpost/tonemap.h>
 
-#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>

@@ -18,7 +18,6 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
-#include <sys/stat.h>
 /* ---- settings shared by the flags and the job keys ---- */
 
 void
