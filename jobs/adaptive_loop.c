@@ -17,6 +17,7 @@
 #include <string.h>
 #include <sys/wait.h>
 #include <unistd.h>
+
 static int
 path_in(const mcp__adaptive_loop *c, char *buf, size_t cap, const char *fmt, int pass)
 {

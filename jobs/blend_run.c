@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+
 /* The file name of path without folder and extension. */
 static void
 base_name(const char *path, char *out, size_t cap)

@@ -8,7 +8,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-/* Where outputs go: a folder and a prefix for report paths ("" or "estimate/"). */
+
 int
 mcp__estimate_path(const mcp__estimate_dir *o, const char *name, char *buf, size_t cap)
 {

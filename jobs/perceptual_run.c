@@ -18,6 +18,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+
 /* ---- settings shared by the flags and the job keys ---- */
 
 void

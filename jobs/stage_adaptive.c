@@ -5,6 +5,7 @@
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
+
 static const char *const adaptive_keys[] = {
     "render",         "output",   "size",   "map",  "spp_per_iteration",
     "initial_spp",    "budget",   "stop",   "tau",  "p",

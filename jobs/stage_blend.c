@@ -7,6 +7,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+
 static const char *const blend_keys[] = {"input",
                                          "denoiser",
                                          "stop_denoising_at",

@@ -7,6 +7,7 @@
 
 #include <stdlib.h>
 #include <string.h>
+
 static const char *const convert_keys[] = {"input", "output", "channels", "pixel",
                                            "compression", NULL};
 

@@ -7,6 +7,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+
 static const char *const estimate_keys[] = {
     "input",           "denoiser", "metric", "tau",      "percentile",
     "percentiles",     "probes",   "seed",   "mc_sure",  "delta",

@@ -7,6 +7,7 @@
 
 #include <stdio.h>
 #include <string.h>
+
 static const char *const info_keys[] = {"input", NULL};
 
 /* The stage's settings: one input, an image or a dump (read by the run, before it

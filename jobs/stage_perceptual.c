@@ -6,6 +6,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+
 static const char *const perceptual_keys[] = {"name",
                                               "candidates",
                                               "method",
