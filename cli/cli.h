@@ -1,4 +1,6 @@
-/* cli.h: the command table, the stage table, and helpers every subcommand shares. */
+/* cli.h: the command table and helpers every subcommand shares. What a subcommand
+ * shares with its job stage (outputs, reports, settings words) is the library's, in
+ * jobs/internal.h. */
 #ifndef MCP_CLI_H
 #define MCP_CLI_H
 
@@ -6,6 +8,8 @@
 #include <mcpost/imageio.h>
 #include <mcpost/denoiser.h>
 #include <cjson/cJSON.h>
+
+#include "../jobs/internal.h"
 
 typedef struct mcp_command {
     const char *name;
@@ -15,37 +19,11 @@ typedef struct mcp_command {
 
 /* cli/commands.c: every subcommand, in --help order (NULL-terminated). */
 extern const mcp_command *const mcp_commands[];
-/* cli/stages.c: every job stage (NULL-terminated). */
-extern const mcp_stage *const mcp_stages[];
 
 /* Prints "mcpost: <current error>" and returns the failure exit status (1). */
 int mcp_cli_fail(void);
 /* Prints a usage error "mcpost CMD: <msg>; see mcpost CMD --help" and returns 2. */
 int mcp_cli_usage(const char *cmd, const char *fmt, ...) MCP_PRINTF(2, 3);
-
-/* Parses a number / positive integer option value, naming the flag on error. */
-int mcp_cli_double(const char *flag, const char *text, double *out);
-int mcp_cli_int(const char *flag, const char *text, int *out);
-/* Splits "a,b,c" into a malloc'd array of strdup'd words. */
-int mcp_cli_split(const char *text, char ***words, int *count);
-void mcp_cli_free_words(char **words, int count);
-
-/* cli/variance_source.c: how the commands tell what a variance rests on.
- * "variance_source" (and "variance_dof" when known) into a JSON object, with a
- * "variance_note" when the source is an assumption (per-sample). */
-void mcp_cli_add_variance_source(cJSON *j, mcp_variance_source src, double dof);
-/* The source in words, for the text output. */
-const char *mcp_cli_variance_source_words(mcp_variance_source src);
-/* --variance-from: "file" (the members' own) or "increments". */
-int mcp_cli_variance_from(const char *text, mcp_variance_source *out);
-/* Whether Variance/n over the increments' spread is off 1 by more than its noise
- * allows ([0.8, 1.25] taken as agreement), and the one-line warning that says so. */
-int mcp_cli_variance_ratio_off(double ratio);
-const char *mcp_cli_variance_ratio_warning(double ratio, int using_increments);
-/* A series' ratio into its JSON object / report section ("variance_ratio", and
- * "variance_warning" when off), and the warning once on stderr (also when quiet: it
- * says the figures may be off). j may be NULL. */
-void mcp_cli_report_variance_ratio(double ratio, int using_increments, cJSON *j);
 
 /* Prints JSON on stdout (pretty) and frees it. */
 void mcp_cli_print_json(cJSON *json);
@@ -111,9 +89,6 @@ int mcp_cli_denoiser_flag(mcp_cli_denoiser_flags *f, int opt, const char *arg);
  * --denoiser, `default` (the U-Net with the shipped weights, nlm for inputs without
  * albedo and normal), or `unet` when U-Net settings such as --weights are given. */
 int mcp_cli_denoiser_create(const mcp_cli_denoiser_flags *f, mcp_denoiser **out);
-/* The denoiser of a job stage: its `denoiser:` setting, or `default` when it has none.
- * Relative paths in the settings resolve against the job file's folder. */
-int mcp_cli_stage_denoiser(mcp_job *job, const mcp_node *settings, mcp_denoiser **out);
 /* What the help texts say about the default denoiser. */
 #define MCP_CLI_DEFAULT_DENOISER                                                         \
     "[default: unet with the shipped weights; nlm for dumps without albedo and normal]"

@@ -50,7 +50,7 @@ cmd_merge(int argc, char **argv)
         switch (opt) {
         case 'v': rc = mcp_merge_variance_from_name(optarg, &mo.variance); break;
         case 'p':
-            rc = mcp_cli_int("--pool", optarg, &mo.pool_radius);
+            rc = mcp__parse_int("--pool", optarg, &mo.pool_radius);
             if (!rc && mo.pool_radius < 0)
                 rc = mcp_error("--pool must be >= 0 (got %s)", optarg);
             break;

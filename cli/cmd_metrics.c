@@ -84,7 +84,7 @@ parse_flip_list(const char *text, mcp_metrics_options *o)
 {
     char **words = NULL;
     int n = 0;
-    if (mcp_cli_split(text, &words, &n)) return -1;
+    if (mcp__split_words(text, &words, &n)) return -1;
     o->flip_ldr = o->flip_hdr = 0;
     int rc = 0;
     for (int i = 0; i < n && !rc; i++) {
@@ -95,7 +95,7 @@ parse_flip_list(const char *text, mcp_metrics_options *o)
         else if (strcmp(words[i], "none"))
             rc = mcp_error("--flip: unknown '%s' (use ldr, hdr or none)", words[i]);
     }
-    mcp_cli_free_words(words, n);
+    mcp__free_words(words, n);
     return rc;
 }
 
@@ -104,15 +104,15 @@ parse_percentiles(const char *text, mcp_metrics_options *o)
 {
     char **words = NULL;
     int n = 0, rc = 0;
-    if (mcp_cli_split(text, &words, &n)) return -1;
+    if (mcp__split_words(text, &words, &n)) return -1;
     double p[MCP_METRICS_MAX_PERCENTILES];
     if (n > MCP_METRICS_MAX_PERCENTILES)
         rc = mcp_error("--percentiles: at most %d values (got %d)",
                        MCP_METRICS_MAX_PERCENTILES, n);
     for (int i = 0; i < n && !rc; i++)
-        rc = mcp_cli_double("--percentiles", words[i], &p[i]);
+        rc = mcp__parse_double("--percentiles", words[i], &p[i]);
     if (!rc) rc = mcp_metrics_set_percentiles(o, p, n);
-    mcp_cli_free_words(words, n);
+    mcp__free_words(words, n);
     return rc;
 }
 
@@ -191,28 +191,29 @@ cmd_metrics(int argc, char **argv)
             json = 1;
             break;
         case OPT_PPD:
-            rc = mcp_cli_double("--ppd", optarg, &o.flip.ppd);
+            rc = mcp__parse_double("--ppd", optarg, &o.flip.ppd);
             break;
         case OPT_DISTANCE:
-            rc = mcp_cli_double("--distance-m", optarg, &o.flip.distance_m);
+            rc = mcp__parse_double("--distance-m", optarg, &o.flip.distance_m);
             break;
         case OPT_WIDTH_M:
-            rc = mcp_cli_double("--display-width-m", optarg, &o.flip.display_width_m);
+            rc = mcp__parse_double("--display-width-m", optarg, &o.flip.display_width_m);
             break;
         case OPT_WIDTH_PX:
-            rc = mcp_cli_double("--display-width-px", optarg, &o.flip.display_width_px);
+            rc =
+                mcp__parse_double("--display-width-px", optarg, &o.flip.display_width_px);
             break;
         case OPT_TONE_MAPPER:
             rc = mcp_tonemap_from_name(optarg, &o.flip.tone_mapper);
             break;
         case OPT_START:
-            rc = mcp_cli_double("--start-exposure", optarg, &o.flip.start_exposure);
+            rc = mcp__parse_double("--start-exposure", optarg, &o.flip.start_exposure);
             break;
         case OPT_STOP:
-            rc = mcp_cli_double("--stop-exposure", optarg, &o.flip.stop_exposure);
+            rc = mcp__parse_double("--stop-exposure", optarg, &o.flip.stop_exposure);
             break;
         case OPT_NUM:
-            rc = mcp_cli_int("--num-exposures", optarg, &o.flip.num_exposures);
+            rc = mcp__parse_int("--num-exposures", optarg, &o.flip.num_exposures);
             break;
         case OPT_FLIP:
             rc = parse_flip_list(optarg, &o);
@@ -221,16 +222,17 @@ cmd_metrics(int argc, char **argv)
             rc = parse_percentiles(optarg, &o);
             break;
         case OPT_EPS:
-            rc = mcp_cli_double("--eps-rel", optarg, &o.eps_rel);
+            rc = mcp__parse_double("--eps-rel", optarg, &o.eps_rel);
             break;
         case OPT_PKERNEL:
             rc = mcp_pkernel_kind_from_name(optarg, &o.pmse.kernel.kind);
             break;
         case OPT_PDPI:
-            rc = mcp_cli_double("--pmse-dpi", optarg, &o.pmse.kernel.dpi);
+            rc = mcp__parse_double("--pmse-dpi", optarg, &o.pmse.kernel.dpi);
             break;
         case OPT_PDIST:
-            rc = mcp_cli_double("--pmse-distance-in", optarg, &o.pmse.kernel.distance_in);
+            rc = mcp__parse_double("--pmse-distance-in", optarg,
+                                   &o.pmse.kernel.distance_in);
             break;
         case OPT_PFILTER:
             o.pmse.filter_reference = 1;
@@ -242,10 +244,10 @@ cmd_metrics(int argc, char **argv)
             o.spectra = 0;
             break;
         case OPT_TILE:
-            rc = mcp_cli_int("--spectra-tile-size", optarg, &o.spectra_opt.tile_size);
+            rc = mcp__parse_int("--spectra-tile-size", optarg, &o.spectra_opt.tile_size);
             break;
         case OPT_CUTOFF:
-            rc = mcp_cli_double("--spectra-cutoff", optarg, &o.spectra_opt.cutoff);
+            rc = mcp__parse_double("--spectra-cutoff", optarg, &o.spectra_opt.cutoff);
             break;
         case 'h':
             fputs(usage, stdout);

@@ -52,14 +52,14 @@ cmd_run(int argc, char **argv)
         case 'f': frames = optarg; break;
         case 'F': force = 1; break;
         case 'j':
-            if (mcp_cli_int("--jobs", optarg, &jobs) || jobs < 1)
+            if (mcp__parse_int("--jobs", optarg, &jobs) || jobs < 1)
                 return mcp_cli_usage("run", "-j/--jobs takes a count >= 1 (got '%s')",
                                      optarg);
             break;
         case 'q': jo.quiet = 1; break;
         case 'c': check = 1; break;
         case 'l':
-            for (const mcp_stage *const *s = mcp_stages; *s; s++)
+            for (const mcp_stage *const *s = mcp_job_stages(); *s; s++)
                 printf("%-12s %s\n", (*s)->name, (*s)->summary);
             return 0;
         case 'h': fputs(usage, stdout); return 0;
@@ -69,7 +69,7 @@ cmd_run(int argc, char **argv)
     if (argc - optind != 1)
         return mcp_cli_usage("run", "give one job file");
     if (check) {
-        if (mcp_job_check(argv[optind], mcp_stages))
+        if (mcp_job_check(argv[optind], mcp_job_stages()))
             return mcp_cli_fail();
         printf("%s: valid\n", argv[optind]);
         return 0;
@@ -83,7 +83,7 @@ cmd_run(int argc, char **argv)
         mcp_cli_shot_free(&shot);
         if (jobs > 1 || force)
             return mcp_cli_usage("run", "-j and --force are for jobs with frames:");
-        rc = mcp_job_run_file(argv[optind], mcp_stages, &jo);
+        rc = mcp_job_run_file(argv[optind], mcp_job_stages(), &jo);
     } else {
         rc = mcp_cli_shot_write_manifest(&shot) || mcp_cli_shot_run(&shot, &jo, jobs, force);
         mcp_cli_shot_free(&shot);

@@ -338,7 +338,7 @@ cmd_submit(int argc, char **argv)
         case 'h': fputs(usage, stdout); return 0;
         default: return mcp_cli_usage("submit", "bad option");
         }
-        if (count && (mcp_cli_int(flag, optarg, count) || *count < 1))
+        if (count && (mcp__parse_int(flag, optarg, count) || *count < 1))
             return mcp_cli_usage("submit", "%s takes a count >= 1 (got '%s')", flag, optarg);
     }
     if (argc - optind != 1)

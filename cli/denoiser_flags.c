@@ -57,21 +57,6 @@ mcp_cli_denoiser_create(const mcp_cli_denoiser_flags *f, mcp_denoiser **out)
     return mcp_denoiser_create_from_args(name, (const char *const *)f->opts, f->n_opts, out);
 }
 
-int
-mcp_cli_stage_denoiser(mcp_job *job, const mcp_node *settings, mcp_denoiser **out)
-{
-    const mcp_node *given = mcp_node_get(settings, "denoiser");
-    mcp_node fallback = {.kind = MCP_NODE_SCALAR,
-                         .value = (char *)"default",
-                         .line = settings->line,
-                         .file = settings->file};
-    char base[4096];
-    /* relative paths in the settings (weights) resolve against the job file's folder */
-    if (mcp_job_resolve(job, ".", base, sizeof base))
-        return -1;
-    return mcp_denoiser_create(given ? given : &fallback, base, out);
-}
-
 void
 mcp_cli_denoiser_flags_free(mcp_cli_denoiser_flags *f)
 {

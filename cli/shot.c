@@ -122,7 +122,7 @@ run_frame(const mcp_cli_shot *s, const mcp_job_options *jo, int frame)
         return -1;
     snprintf(err_path, sizeof err_path, "%s/error.txt", dir);
     unlink(err_path);
-    if (mcp_job_run_file(s->job, mcp_stages, &o) == 0)
+    if (mcp_job_run_file(s->job, mcp_job_stages(), &o) == 0)
         return 0;
     mcp_error_prefix("frame %d: ", frame);
     char message[1100];

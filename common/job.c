@@ -6,6 +6,7 @@
 #include <mcpost/frames.h>
 #include <mcpost/imageio.h>
 #include <mcpost/progress.h>
+#include <mcpost/stages.h> /* the built-in table, for stages == NULL (jobs/) */
 
 #include <errno.h>
 #include <libgen.h>
@@ -116,14 +117,23 @@ mcp_job_output_dir(mcp_job *job)
     return job->output_dir;
 }
 
-int
-mcp_job_output_path(mcp_job *job, const char *name, char *buf, size_t cap)
+/* <output>/name into buf, the output folder made. */
+static int
+output_join(mcp_job *job, const char *name, char *buf, size_t cap)
 {
     if (make_output_dir(job))
         return -1;
     int n = snprintf(buf, cap, "%s/%s", job->output_dir, name);
     if (n < 0 || (size_t)n >= cap)
         return mcp_error("%s: output path too long: %s", job->path, name);
+    return 0;
+}
+
+int
+mcp_job_output_path(mcp_job *job, const char *name, char *buf, size_t cap)
+{
+    if (output_join(job, name, buf, cap))
+        return -1;
     /* names may hold sub-folders ("maps/flip.png") */
     char *slash = strrchr(buf, '/');
     if (slash && slash > buf + strlen(job->output_dir)) {
@@ -133,6 +143,12 @@ mcp_job_output_path(mcp_job *job, const char *name, char *buf, size_t cap)
         return rc;
     }
     return 0;
+}
+
+int
+mcp_job_output_subdir(mcp_job *job, const char *sub, char *buf, size_t cap)
+{
+    return output_join(job, sub, buf, cap) || mcp_make_dirs(buf) ? -1 : 0;
 }
 
 mcp_report *
@@ -967,6 +983,8 @@ int
 mcp_job_check(const char *path, const mcp_stage *const *stages)
 {
     mcp_job *job = NULL;
+    if (!stages)
+        stages = mcp_job_stages();
     if (job_open(path, NULL, &job))
         return -1;
     const mcp_node *list = NULL;
@@ -1024,6 +1042,8 @@ mcp_job_run_file(const char *path, const mcp_stage *const *stages,
                  const mcp_job_options *opt)
 {
     mcp_job *job = NULL;
+    if (!stages)
+        stages = mcp_job_stages();
     if (job_open(path, opt, &job))
         return -1;
     int rc = -1;

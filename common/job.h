@@ -17,8 +17,9 @@
  *     - convert: {input: reference, output: reference.png}
  *
  * Paths are relative to the job file's folder. Every stage is looked up by name in a
- * table that the caller passes in (cli/stages.c), so a module adds a stage by adding
- * one entry there. Unknown keys, wrong types and missing inputs are errors that name
+ * table that the caller passes in, or the library's own (jobs/stages.c,
+ * <mcpost/stages.h>) when it passes NULL, so a module adds a stage by adding one entry
+ * there. Unknown keys, wrong types and missing inputs are errors that name
  * "job.yaml:LINE", and every stage's settings are checked (mcp_stage.check) before the
  * first stage runs. */
 #ifndef MCP_JOB_H
@@ -110,8 +111,9 @@ typedef struct mcp_job_options {
 MCP_API mcp_job_options mcp_job_defaults(void);
 
 /* Parses, validates (every stage known, its keys allowed, every input's file
- * present) and runs a job. stages is NULL-terminated. Writes report.json (and what
- * the stages add) to the output folder. */
+ * present) and runs a job. stages is NULL-terminated; NULL means the library's own
+ * (mcp_job_stages, <mcpost/stages.h>: the stages `mcpost run` knows). Writes
+ * report.json (and what the stages add) to the output folder; opt NULL: defaults. */
 MCP_API int mcp_job_run_file(const char *path, const mcp_stage *const *stages,
                              const mcp_job_options *opt);
 
@@ -124,7 +126,8 @@ MCP_API int mcp_job_frames(const char *path, const mcp_job_options *opt, int **f
 
 /* Parses and validates a job as mcp_job_run_file does before its first stage (every
  * stage known, its keys allowed, every input's keys, types and files), and nothing
- * else: no stage runs, no folder is made, nothing is written. */
+ * else: no stage runs, no folder is made, nothing is written. stages NULL: the
+ * library's own, as for mcp_job_run_file. */
 MCP_API int mcp_job_check(const char *path, const mcp_stage *const *stages);
 
 /* For stages: the job file (for messages), the folder relative paths resolve to, and
@@ -136,6 +139,9 @@ MCP_API const char *mcp_job_output_dir(mcp_job *job);
 MCP_API int mcp_job_resolve(const mcp_job *job, const char *rel, char *buf, size_t cap);
 /* The path of an output file `name` inside the output folder (folders created). */
 MCP_API int mcp_job_output_path(mcp_job *job, const char *name, char *buf, size_t cap);
+/* The path of the folder `sub` (may hold slashes) inside the output folder, made with
+ * its parents: where a stage puts its files ("estimate", "blend", ...). */
+MCP_API int mcp_job_output_subdir(mcp_job *job, const char *sub, char *buf, size_t cap);
 
 /* Named inputs and results. Lookups take the settings map and the key whose value
  * names the input (e.g. "input"), so that a missing name is reported at its line.

@@ -106,5 +106,6 @@ extern PyMethodDef mcp_py_denoise_methods[];
 extern PyMethodDef mcp_py_estimate_methods[];
 extern PyMethodDef mcp_py_blend_methods[];
 extern PyMethodDef mcp_py_perceptual_methods[];
+extern PyMethodDef mcp_py_jobs_methods[];
 
 #endif

@@ -128,7 +128,8 @@ join_tables(void)
                              mcp_py_denoise_methods,
                              mcp_py_estimate_methods,
                              mcp_py_blend_methods,
-                             mcp_py_perceptual_methods};
+                             mcp_py_perceptual_methods,
+                             mcp_py_jobs_methods};
     size_t n = 0;
     for (size_t t = 0; t < sizeof tables / sizeof *tables; t++)
         for (PyMethodDef *m = tables[t]; m->ml_name; m++) {

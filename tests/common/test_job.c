@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 static void
 test_yaml_tree_and_lines(void **state)
@@ -153,15 +154,21 @@ stage_probe(mcp_job *job, const mcp_node *settings)
     return 0;
 }
 
+static char subdir_seen[4096];
+
 static int
 stage_consume(mcp_job *job, const mcp_node *settings)
 {
     const mcp_image *img = NULL;
     if (mcp_job_image(job, settings, "input", &img))
         return -1;
-    char path[4096];
+    char path[4096], dir[4096];
     if (mcp_job_output_path(job, "sub/out.exr", path, sizeof path))
         return -1;
+    /* a stage's own folder, made with its parents: <output>/made/here */
+    if (mcp_job_output_subdir(job, "made/here", dir, sizeof dir))
+        return -1;
+    snprintf(subdir_seen, sizeof subdir_seen, "%s", dir);
     calls++;
     return mcp_image_write(img, path, NULL);
 }
@@ -209,6 +216,13 @@ test_runner_runs_stages_in_order(void **state)
     assert_int_equal(mcp_image_read(mcp_test_path("out/ok/sub/out.exr"), NULL, &back), 0);
     assert_true(back->data[5] == 0.25f);
     mcp_image_free(back);
+    /* mcp_job_output_subdir: the folder's path, made */
+    const char *tail = "/out/ok/made/here";
+    size_t n = strlen(subdir_seen);
+    assert_true(n > strlen(tail) && !strcmp(subdir_seen + n - strlen(tail), tail));
+    struct stat st;
+    assert_int_equal(stat(mcp_test_path("out/ok/made/here"), &st), 0);
+    assert_true(S_ISDIR(st.st_mode));
     char *report = mcp_test_read_text(mcp_test_path("out/ok/report.json"));
     assert_non_null(strstr(report, "\"value\":\t1"));
     free(report);

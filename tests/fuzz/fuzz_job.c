@@ -1,6 +1,7 @@
 /* fuzz_job.c: the job-file path -- the YAML parser (common/yaml.c, on libyaml) and
- * the job's validation (mcp_job_check with the tool's own stage table: inputs, stage
- * names and keys, series patterns, replicate globs). The input is the job file.
+ * the job's validation (mcp_job_check with the library's stage table, the one
+ * `mcpost run` uses: inputs, stage names and keys, series patterns, replicate globs).
+ * The input is the job file.
  *
  * mcp_job_check has no side effects, so a fuzzed `output:` makes no folder. The files
  * the seeds name (in.exr, x_0001.exr, ...) exist, empty, in the scratch folder: the
@@ -9,13 +10,11 @@
 #include "fuzz.h"
 
 #include <mcpost/job.h>
+#include <mcpost/stages.h>
 
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-
-/* cli/stages.c: the stages `mcpost run` knows */
-extern const mcp_stage *const mcp_stages[];
 
 int
 LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
@@ -46,7 +45,7 @@ LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     free(text);
     /* the whole check, from a file as `mcpost run --check` reads it */
     const char *path = mcp_fuzz_file(0, "job.yaml", data, size);
-    rc = mcp_job_check(path, mcp_stages);
+    rc = mcp_job_check(path, mcp_job_stages());
     mcp_fuzz_check_error(rc, "job check");
     return 0;
 }

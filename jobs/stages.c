@@ -1,5 +1,7 @@
 /* stages.c: the job-stage table. A module adds its stage here, one line. */
-#include "cli.h"
+#include "internal.h"
+
+#include <string.h>
 
 extern const mcp_stage mcp_stage_info, mcp_stage_convert;
 extern const mcp_stage mcp_stage_metrics;
@@ -8,7 +10,7 @@ extern const mcp_stage mcp_stage_perceptual;
 extern const mcp_stage mcp_stage_estimate;
 extern const mcp_stage mcp_stage_blend;
 extern const mcp_stage mcp_stage_adaptive;
-const mcp_stage *const mcp_stages[] = {
+static const mcp_stage *const stages[] = {
     &mcp_stage_info,
     &mcp_stage_convert,
     &mcp_stage_metrics,
@@ -18,3 +20,18 @@ const mcp_stage *const mcp_stages[] = {
     &mcp_stage_adaptive,
     NULL,
 };
+
+const mcp_stage *const *
+mcp_job_stages(void)
+{
+    return stages;
+}
+
+const mcp_stage *
+mcp_job_stage_find(const char *name)
+{
+    for (const mcp_stage *const *s = stages; name && *s; s++)
+        if (!strcmp((*s)->name, name))
+            return *s;
+    return NULL;
+}

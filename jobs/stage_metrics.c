@@ -2,7 +2,7 @@
  * input against a reference, with maps, previews and the error-percentile plot
  * (Firmino et al. 2024) in the report, and error-vs-spp curves for a series.
  * Job keys are the flags of `mcpost metrics` with '_' for '-'. */
-#include "cli.h"
+#include "internal.h"
 
 #include <mcpost/metrics.h>
 #include <mcpost/progress.h>
@@ -43,17 +43,6 @@ static const char *const metrics_keys[] = {"input",
 /* ---- settings ---- */
 
 static int
-opt_enum(const mcp_node *settings, const char *key, int (*parse)(const char *, void *),
-         void *out)
-{
-    const char *s = NULL;
-    if (mcp_node_opt_string(settings, key, &s)) return -1;
-    if (s && parse(s, out))
-        return mcp_node_error(mcp_node_get(settings, key), "%s", mcp_error_message());
-    return 0;
-}
-
-static int
 parse_tonemap(const char *s, void *out)
 {
     return mcp_tonemap_from_name(s, out);
@@ -89,14 +78,7 @@ read_flip(const mcp_node *settings, mcp_metrics_options *o)
     return 0;
 }
 
-/* A bad value found by the library is reported at the stage's line. */
-static int
-at_line(const mcp_node *settings, const char *key)
-{
-    const mcp_node *n = mcp_node_get(settings, key);
-    return n ? mcp_node_error(n, "%s", mcp_error_message()) : -1;
-}
-
+/* The metrics' options from the stage's keys (the flags' words with '_' for '-'). */
 static int
 read_options(const mcp_node *s, mcp_metrics_options *o)
 {
@@ -107,17 +89,17 @@ read_options(const mcp_node *s, mcp_metrics_options *o)
         mcp_node_opt_double(s, "distance_m", &o->flip.distance_m) ||
         mcp_node_opt_double(s, "display_width_m", &o->flip.display_width_m) ||
         mcp_node_opt_double(s, "display_width_px", &o->flip.display_width_px) ||
-        opt_enum(s, "tone_mapper", parse_tonemap, &o->flip.tone_mapper) ||
+        mcp__opt_enum(s, "tone_mapper", parse_tonemap, &o->flip.tone_mapper) ||
         mcp_node_opt_double(s, "start_exposure", &o->flip.start_exposure) ||
         mcp_node_opt_double(s, "stop_exposure", &o->flip.stop_exposure) ||
         mcp_node_opt_int(s, "num_exposures", &o->flip.num_exposures) || read_flip(s, o) ||
         mcp_node_opt_doubles(s, "percentiles", &p, &np) ||
         mcp_node_opt_double(s, "eps_rel", &o->eps_rel) ||
-        opt_enum(s, "pmse_kernel", parse_pkernel, &o->pmse.kernel.kind) ||
+        mcp__opt_enum(s, "pmse_kernel", parse_pkernel, &o->pmse.kernel.kind) ||
         mcp_node_opt_double(s, "pmse_dpi", &o->pmse.kernel.dpi) ||
         mcp_node_opt_double(s, "pmse_distance_in", &o->pmse.kernel.distance_in) ||
         mcp_node_opt_bool(s, "pmse_filter_reference", &filt) ||
-        opt_enum(s, "pmse_tone_map", parse_tonemap, &o->pmse.tone_map) ||
+        mcp__opt_enum(s, "pmse_tone_map", parse_tonemap, &o->pmse.tone_map) ||
         mcp_node_opt_bool(s, "spectra", &spectra) ||
         mcp_node_opt_int(s, "spectra_tile_size", &o->spectra_opt.tile_size) ||
         mcp_node_opt_double(s, "spectra_cutoff", &o->spectra_opt.cutoff))
@@ -125,12 +107,12 @@ read_options(const mcp_node *s, mcp_metrics_options *o)
     o->spectra = spectra;
     o->pmse.filter_reference = filt;
     if (p && mcp_metrics_set_percentiles(o, p, np)) {
-        at_line(s, "percentiles");
+        mcp__at_line(s, "percentiles");
         goto done;
     }
     if (o->flip_hdr &&
         mcp_tonemap_flip_coefficients(o->flip.tone_mapper, (float[6]){0})) {
-        at_line(s, "tone_mapper");
+        mcp__at_line(s, "tone_mapper");
         goto done;
     }
     rc = 0;
@@ -282,7 +264,7 @@ series_curves(mcp_job *job, const mcp_node *settings, const mcp_series *series,
         mcp_metrics m;
         if (mcp_series_load(series, i, &d)) {
             mcp_progress_end(&prog);
-            at_line(settings, "series");
+            mcp__at_line(settings, "series");
             goto done;
         }
         spp[i] = series->spp && series->spp[i] > 0 ? series->spp[i] : d->spp;
@@ -429,7 +411,7 @@ stage_metrics(mcp_job *job, const mcp_node *settings)
         mcp_metrics m;
         cJSON_AddStringToObject(section, "input", input);
         if (estimate && !mcp_image_same_size(estimate, test)) {
-            at_line(settings, "estimate");
+            mcp__at_line(settings, "estimate");
             goto done;
         }
         mcp_note("metrics: %s against %s", input, reference);

@@ -1,7 +1,7 @@
 /* variance_source.c: what a variance rests on, said the same way by every command
  * (estimate, blend, info): a per-sample variance / n is an assumption that the samples
  * are independent, which stratified samplers break. */
-#include "cli.h"
+#include "internal.h"
 
 #include <stdio.h>
 #include <string.h>
@@ -12,7 +12,7 @@ static const char per_sample_note[] =
     "merge) or a series with --variance-from increments";
 
 void
-mcp_cli_add_variance_source(cJSON *j, mcp_variance_source src, double dof)
+mcp__add_variance_source(cJSON *j, mcp_variance_source src, double dof)
 {
     cJSON_AddStringToObject(j, "variance_source", mcp_variance_source_name(src));
     if (dof > 0)
@@ -22,7 +22,7 @@ mcp_cli_add_variance_source(cJSON *j, mcp_variance_source src, double dof)
 }
 
 const char *
-mcp_cli_variance_source_words(mcp_variance_source src)
+mcp__variance_source_words(mcp_variance_source src)
 {
     switch (src) {
     case MCP_VARSRC_NONE: return "none";
@@ -37,7 +37,7 @@ mcp_cli_variance_source_words(mcp_variance_source src)
 }
 
 int
-mcp_cli_variance_from(const char *text, mcp_variance_source *out)
+mcp__variance_from(const char *text, mcp_variance_source *out)
 {
     if (!strcmp(text, "file"))
         *out = MCP_VARSRC_NONE;
@@ -49,28 +49,28 @@ mcp_cli_variance_from(const char *text, mcp_variance_source *out)
 }
 
 void
-mcp_cli_report_variance_ratio(double ratio, int using_increments, cJSON *j)
+mcp__report_variance_ratio(double ratio, int using_increments, cJSON *j)
 {
     if (!(ratio > 0))
         return;
     if (j)
         cJSON_AddNumberToObject(j, "variance_ratio", ratio);
-    if (!mcp_cli_variance_ratio_off(ratio))
+    if (!mcp__variance_ratio_off(ratio))
         return;
-    const char *w = mcp_cli_variance_ratio_warning(ratio, using_increments);
+    const char *w = mcp__variance_ratio_warning(ratio, using_increments);
     fprintf(stderr, "mcpost: warning: %s\n", w);
     if (j)
         cJSON_AddStringToObject(j, "variance_warning", w);
 }
 
 int
-mcp_cli_variance_ratio_off(double ratio)
+mcp__variance_ratio_off(double ratio)
 {
     return ratio > 0 && (ratio > 1.25 || ratio < 0.8);
 }
 
 const char *
-mcp_cli_variance_ratio_warning(double ratio, int using_increments)
+mcp__variance_ratio_warning(double ratio, int using_increments)
 {
     static _Thread_local char text[400];
     snprintf(text, sizeof text,

@@ -1,0 +1,469 @@
+/* estimate_output.c: what an estimate writes, for `mcpost estimate` and the `estimate`
+ * job stage alike (estimate/estimate.h; SPEC "estimate"): one dump's images, block
+ * pictures, estimate.json and report section; a series' first spp per tau (Firmino 2024
+ * Table 1), its estimate.json and report section. */
+#include "internal.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+int
+mcp__estimate_path(const mcp__estimate_dir *o, const char *name, char *buf, size_t cap)
+{
+    if (snprintf(buf, cap, "%s/%s", o->dir, name) >= (int)cap)
+        return mcp_error("output path too long: %s/%s", o->dir, name);
+    return 0;
+}
+
+/* ---- one dump ---- */
+
+cJSON *
+mcp__estimate_json(const mcp_estimate *e, const char *input, const char *denoiser,
+              const mcp_estimate_options *o)
+{
+    cJSON *j = cJSON_CreateObject();
+    cJSON_AddStringToObject(j, "input", input);
+    cJSON_AddStringToObject(j, "denoiser", denoiser);
+    cJSON_AddStringToObject(j, "metric", mcp_error_metric_name(o->sure.metric));
+    cJSON_AddNumberToObject(j, "tau", e->tau);
+    cJSON_AddNumberToObject(j, "p", e->p);
+    cJSON_AddNumberToObject(j, "cdf_at_tau", e->cdf_at_tau);
+    cJSON_AddBoolToObject(j, "stop", e->stop);
+    if (e->no_variance)
+        cJSON_AddStringToObject(j, "warning",
+                                "the dump has no variance (1 spp?): no estimate, "
+                                "stop forced to false");
+    mcp__add_variance_source(j, e->variance_source, e->variance_dof);
+    cJSON_AddNumberToObject(j, "s2_pool", e->s2_pool);
+    cJSON *pct = cJSON_AddArrayToObject(j, "percentiles");
+    for (int k = 0; k < e->n_percentiles; k++) {
+        cJSON *item = cJSON_CreateObject();
+        cJSON_AddNumberToObject(item, "p", e->percentiles[k]);
+        if (isfinite(e->percentile_tau[k]))
+            cJSON_AddNumberToObject(item, "error", e->percentile_tau[k]);
+        else
+            cJSON_AddStringToObject(item, "error", "inf");
+        cJSON_AddItemToArray(pct, item);
+    }
+    cJSON_AddNumberToObject(j, "blocks", e->blocks->count);
+    cJSON_AddNumberToObject(j, "expected_mean_error", mcp_error_dist_mean(e->dist));
+    /* the distribution parameters in brief (every value: distribution.exr) */
+    double lambda = 0.0, s2 = 0.0, n = (double)e->blocks->width * e->blocks->height * 3;
+    for (int i = 0; i < e->blocks->count; i++) {
+        const mcp_block *k = &e->blocks->items[i];
+        for (int c = 0; c < 3; c++) {
+            lambda += mcp_error_dist_lambda(e->dist, i, c) * k->w * k->h;
+            s2 += k->var_sum[c];
+        }
+    }
+    cJSON *dist = cJSON_AddObjectToObject(j, "distribution");
+    cJSON_AddNumberToObject(dist, "mean_lambda", lambda / n);
+    cJSON_AddNumberToObject(dist, "mean_s2", s2 / n);
+    cJSON_AddStringToObject(dist, "file", "distribution.exr (lambda.R/G/B, s2.R/G/B)");
+    cJSON_AddNumberToObject(j, "probes", o->sure.n_probes);
+    cJSON_AddNumberToObject(j, "seed", (double)o->sure.seed);
+    cJSON_AddBoolToObject(j, "mc_sure", o->sure.mc_sure);
+    cJSON_AddStringToObject(j, "sampling", mcp_sampling_kind_name(o->sampling.kind));
+    if (o->budget > 0) cJSON_AddNumberToObject(j, "budget", (double)o->budget);
+    cJSON *t = cJSON_AddObjectToObject(j, "time_ms");
+    cJSON_AddNumberToObject(t, "denoise_and_jvp", e->ms_denoise);
+    cJSON_AddNumberToObject(t, "sure_and_variance", e->ms_error_terms);
+    cJSON_AddNumberToObject(t, "block_averaging", e->ms_blocks);
+    cJSON_AddNumberToObject(t, "stopping", e->ms_stopping);
+    cJSON_AddNumberToObject(t, "percentiles", e->ms_percentiles);
+    cJSON_AddNumberToObject(t, "sampling_map", e->ms_sampling);
+    return j;
+}
+
+/* The report's block picture: the error each pixel is expected to have under the
+ * model that F(tau) comes from, s²(λ + 1) (mean of R, G, B; log10 from -5 to 0 in
+ * inferno, like the metrics' RelSE map), with the block edges in white. Unlike
+ * blocks.png, whose colours only tell blocks apart, its colour bar reads as a value,
+ * and a single block still shows where the error is: s² varies per pixel. */
+static int
+blocks_error_picture(const mcp_blocks *blocks, const mcp_image *dist,
+                     unsigned char *rgb8)
+{
+    int w = blocks->width, h = blocks->height, ch[6];
+    int32_t *label = NULL;
+    mcp_image *lg = NULL;
+    if (mcp_image_channels(dist,
+                           (const char *[]){"lambda.R", "lambda.G", "lambda.B", "s2.R",
+                                            "s2.G", "s2.B"},
+                           6, ch) ||
+        mcp_blocks_label(blocks, &label) ||
+        mcp_image_new(w, h, 1, (const char *const[]){"log10_error"}, &lg)) {
+        free(label);
+        return -1;
+    }
+#pragma omp parallel for schedule(static)
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            const float *p = mcp_image_px(dist, x, y);
+            double mean = 0;
+            for (int c = 0; c < 3; c++)
+                mean += p[ch[3 + c]] * (p[ch[c]] + 1.0) / 3.0;
+            mcp_image_px(lg, x, y)[0] = (float)(mean > 1e-30 ? log10(mean) : -30.0);
+        }
+    int rc = mcp_colormap_apply(lg, 0, -5.0, 0.0, MCP_COLORMAP_INFERNO, rgb8);
+#pragma omp parallel for schedule(static) if (!rc)
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            size_t i = (size_t)y * w + x;
+            if ((x + 1 < w && label[i] != label[i + 1]) ||
+                (y + 1 < h && label[i] != label[i + w]))
+                memset(rgb8 + 3 * i, 255, 3);
+        }
+    mcp_image_free(lg);
+    free(label);
+    return rc;
+}
+
+/* Every image of one estimate, the block pictures, and their place in the report.
+ * The pictures are made first and every file is then written at once, a file per
+ * thread (mcp_write_files), the costliest first: distribution.exr (its six channels
+ * halve under zip), the error picture's PNG, then the maps, which are stored raw. */
+int
+mcp__estimate_write_single(const mcp_estimate *e, const mcp__estimate_dir *o,
+                           cJSON *section, const cJSON *summary)
+{
+    enum { MAX_FILES = 12 };
+    mcp_image *block_mean = NULL, *dist = NULL;
+    unsigned char *blocks_rgb = NULL, *error_rgb = NULL;
+    char (*paths)[4352] = NULL;
+    int rc = -1, n = 0, w = e->blocks->width, h = e->blocks->height;
+    if (mcp_make_dirs(o->dir) ||
+        mcp_blocks_mean_image(e->blocks, e->maps.sure_rel, &block_mean) ||
+        mcp_error_dist_image(e->dist, &dist) ||
+        !(paths = mcp_malloc(MAX_FILES * sizeof *paths)) ||
+        !(blocks_rgb = mcp_malloc((size_t)w * h * 3)) ||
+        mcp_blocks_picture(e->blocks, blocks_rgb))
+        goto done;
+    if (section && (!(error_rgb = mcp_malloc((size_t)w * h * 3)) ||
+                    blocks_error_picture(e->blocks, dist, error_rgb)))
+        goto done;
+    const struct {
+        const char *name;
+        const mcp_image *image;
+        const unsigned char *rgb8;
+    } outputs[MAX_FILES] = {
+        {"distribution.exr", dist, NULL},
+        {"blocks_error.png", NULL, error_rgb},
+        {"denoised.exr", e->maps.denoised, NULL},
+        {"sure.exr", e->maps.sure, NULL},
+        {"sure_rel.exr", e->maps.sure_rel, NULL},
+        {"variance.exr", e->maps.var, NULL},
+        {"variance_rel.exr", e->maps.var_rel, NULL},
+        {"sampling_map.exr", e->sampling_map, NULL},
+        {"sample_counts.exr", e->sample_counts, NULL},
+        {"blocks_sure_rel.exr", block_mean, NULL},
+        {"blocks.png", NULL, blocks_rgb},
+    };
+    mcp_file_write files[MAX_FILES];
+    for (int i = 0; i < MAX_FILES; i++) {
+        if (!outputs[i].image && !outputs[i].rgb8) continue; /* none, or not asked for */
+        if (mcp__estimate_path(o, outputs[i].name, paths[n], sizeof *paths)) goto done;
+        files[n] = (mcp_file_write){.path = paths[n], .image = outputs[i].image,
+                                    .rgb8 = outputs[i].rgb8, .width = w, .height = h};
+        n++;
+    }
+    if (mcp_write_files(files, n)) goto done;
+    if (section) {
+        char caption[256], unit[256], rel[512];
+        const cJSON *mj = cJSON_GetObjectItem(summary, "metric");
+        const char *metric = cJSON_IsString(mj) ? mj->valuestring : "error";
+        if (e->blocks->count == 1)
+            snprintf(caption, sizeof caption,
+                     "expected %s per pixel; 1 block: Firmino 2024 Alg. 1 found no "
+                     "split that passes its test, so one SURE mean covers the image",
+                     metric);
+        else
+            snprintf(caption, sizeof caption,
+                     "expected %s per pixel; %d blocks (Firmino 2024 Alg. 1), edges in "
+                     "white",
+                     metric, e->blocks->count);
+        snprintf(unit, sizeof unit,
+                 "the model's expected error s\u00b2(\u03bb + 1), mean of R, G, B, log "
+                 "scale; F(tau) averages each pixel's chance to be below tau");
+        snprintf(rel, sizeof rel, "%sblocks_error.png", o->rel);
+        cJSON *map = mcp_report_add_map(section, rel, caption, MCP_COLORMAP_INFERNO, 1e-5,
+                                        1.0, MCP_AXIS_LOG, unit);
+        if (!map || mcp_report_map_add_mark(map, e->tau, "tau")) goto done;
+    }
+    rc = 0;
+done:
+    free(error_rgb);
+    free(blocks_rgb);
+    free(paths);
+    mcp_image_free(block_mean);
+    mcp_image_free(dist);
+    return rc;
+}
+
+/* The report section of one estimate: key figures, the percentile table and curve. */
+int
+mcp__estimate_report_single(cJSON *section, const cJSON *summary, const mcp_estimate *e)
+{
+    const char *keys[] = {"input", "denoiser", "metric",
+                          "tau",   "p",        "cdf_at_tau",
+                          "stop",  "blocks",   "expected_mean_error"};
+    for (size_t i = 0; i < sizeof keys / sizeof *keys; i++) {
+        const cJSON *v = cJSON_GetObjectItem(summary, keys[i]);
+        if (v) cJSON_AddItemToObject(section, keys[i], cJSON_Duplicate(v, 1));
+    }
+    const cJSON *mj = cJSON_GetObjectItem(summary, "metric");
+    const char *metric = cJSON_IsString(mj) ? mj->valuestring : "error";
+    int rc;
+    if (e->no_variance)
+        rc = mcp_report_set_verdict(section, MCP_VERDICT_BAD,
+                                    "no estimate: the dump's variance is 0 everywhere "
+                                    "(e.g. 1 spp), so the model cannot see any error");
+    else
+        rc = mcp_report_set_verdict(
+            section, e->stop ? MCP_VERDICT_GOOD : MCP_VERDICT_INFO,
+            "stop: %s, %.4g%% of the estimated %s values below tau = %g (%.4g%% "
+            "needed)%s; expected mean error %.3g",
+            e->stop ? "yes" : "no", 100 * e->cdf_at_tau, metric, e->tau, 100 * e->p,
+            e->stop ? "" : ": render more samples", mcp_error_dist_mean(e->dist));
+    if (rc) return -1;
+    const char *cols[] = {"percentile", "estimated error"};
+    cJSON *t = mcp_report_add_table(section, "estimated error percentiles", cols, 2);
+    if (!t) return -1;
+    for (int k = 0; k < e->n_percentiles; k++)
+        if (mcp_report_table_add_row(t, "dd", e->percentiles[k], e->percentile_tau[k]))
+            return -1;
+    cJSON *plot =
+        mcp_report_add_plot(section, "estimated error percentiles", "percentile",
+                            MCP_AXIS_LOGIT, "error", MCP_AXIS_LOG);
+    if (!plot ||
+        !mcp_report_plot_add_series(plot, "estimated", MCP_SERIES_LINE_POINTS,
+                                    e->percentiles, e->percentile_tau, e->n_percentiles))
+        return -1;
+    return 0;
+}
+
+/* ---- a series ---- */
+
+static cJSON *
+series_json(const mcp_series_estimate *s, const char *denoiser, mcp_error_metric metric)
+{
+    cJSON *j = cJSON_CreateObject();
+    cJSON_AddStringToObject(j, "denoiser", denoiser);
+    cJSON_AddStringToObject(j, "metric", mcp_error_metric_name(metric));
+    cJSON_AddNumberToObject(j, "p", s->p);
+    cJSON_AddBoolToObject(j, "reference", s->has_reference);
+    mcp__add_variance_source(j, s->variance_source, 0);
+    cJSON *taus = cJSON_AddArrayToObject(j, "taus");
+    int agree = 0;
+    for (int t = 0; t < s->n_taus; t++) {
+        cJSON *o = cJSON_CreateObject();
+        cJSON_AddNumberToObject(o, "tau", s->taus[t]);
+        if (s->first_spp[t] > 0)
+            cJSON_AddNumberToObject(o, "first_spp", s->first_spp[t]);
+        else
+            cJSON_AddNullToObject(o, "first_spp");
+        if (s->has_reference) {
+            if (s->true_first_spp[t] > 0)
+                cJSON_AddNumberToObject(o, "true_first_spp", s->true_first_spp[t]);
+            else
+                cJSON_AddNullToObject(o, "true_first_spp");
+            cJSON_AddBoolToObject(o, "agree", s->agree[t]);
+            agree += s->agree[t];
+        }
+        cJSON_AddItemToArray(taus, o);
+    }
+    if (s->has_reference)
+        cJSON_AddNumberToObject(j, "agreement_rate", (double)agree / s->n_taus);
+    cJSON *members = cJSON_AddArrayToObject(j, "members");
+    for (int i = 0; i < s->count; i++) {
+        const mcp_series_point *pt = &s->points[i];
+        cJSON *m = cJSON_CreateObject();
+        cJSON_AddNumberToObject(m, "spp", pt->spp);
+        cJSON *cdf = cJSON_AddArrayToObject(m, "cdf"),
+              *stop = cJSON_AddArrayToObject(m, "stop");
+        for (int t = 0; t < s->n_taus; t++) {
+            cJSON_AddItemToArray(cdf, cJSON_CreateNumber(pt->cdf[t]));
+            cJSON_AddItemToArray(stop, cJSON_CreateBool(pt->stop[t]));
+        }
+        cJSON *ep = cJSON_AddArrayToObject(m, "estimated_percentiles");
+        for (int k = 0; k < s->n_percentiles; k++)
+            cJSON_AddItemToArray(ep, cJSON_CreateNumber(isfinite(pt->est_percentile[k])
+                                                            ? pt->est_percentile[k]
+                                                            : -1));
+        cJSON_AddNumberToObject(m, "expected_mean_error", pt->est_mean_error);
+        if (s->has_reference) {
+            cJSON *tc = cJSON_AddArrayToObject(m, "true_cdf");
+            for (int t = 0; t < s->n_taus; t++)
+                cJSON_AddItemToArray(tc, cJSON_CreateNumber(pt->true_cdf[t]));
+            cJSON *tp = cJSON_AddArrayToObject(m, "true_percentiles");
+            for (int k = 0; k < s->n_percentiles; k++)
+                cJSON_AddItemToArray(tp, cJSON_CreateNumber(pt->true_percentile[k]));
+            cJSON_AddNumberToObject(m, "true_mean_error", pt->true_mean_error);
+        }
+        cJSON_AddItemToArray(members, m);
+    }
+    cJSON *pct = cJSON_AddArrayToObject(j, "percentiles");
+    for (int k = 0; k < s->n_percentiles; k++)
+        cJSON_AddItemToArray(pct, cJSON_CreateNumber(s->percentiles[k]));
+    return j;
+}
+
+static int
+report_series(cJSON *section, const mcp_series_estimate *s)
+{
+    const char *cols[] = {"tau", "estimated first spp", "true first spp", "agree"};
+    cJSON *t = mcp_report_add_table(section,
+                                    "first spp at which F(tau) >= p "
+                                    "(Firmino 2024 Table 1; 0: not within the series)",
+                                    cols, s->has_reference ? 4 : 2);
+    if (!t) return -1;
+    int agree = 0;
+    for (int j = 0; j < s->n_taus; j++) {
+        int rc = s->has_reference
+                     ? mcp_report_table_add_row(t, "ddds", s->taus[j], s->first_spp[j],
+                                                s->true_first_spp[j],
+                                                s->agree[j] ? "yes" : "no")
+                     : mcp_report_table_add_row(t, "dd", s->taus[j], s->first_spp[j]);
+        if (rc) return -1;
+        agree += s->agree[j];
+    }
+    if (s->has_reference)
+        cJSON_AddNumberToObject(section, "agreement_rate", (double)agree / s->n_taus);
+    /* the verdict: where each tau is reached, and whether the truth agrees */
+    char text[900];
+    int len = snprintf(text, sizeof text, "stop points (F(tau) >= %.4g%%):", 100 * s->p);
+    for (int j = 0; j < s->n_taus && len < (int)sizeof text - 120; j++) {
+        len += s->first_spp[j] > 0
+                   ? snprintf(text + len, sizeof text - len, "%s tau = %g at %g spp",
+                              j ? "," : "", s->taus[j], (double)s->first_spp[j])
+                   : snprintf(text + len, sizeof text - len,
+                              "%s tau = %g not reached by %g spp", j ? "," : "",
+                              s->taus[j], (double)s->points[s->count - 1].spp);
+        if (s->has_reference)
+            len += s->true_first_spp[j] > 0
+                       ? snprintf(text + len, sizeof text - len, " (true: %g)",
+                                  (double)s->true_first_spp[j])
+                       : snprintf(text + len, sizeof text - len, " (true: not reached)");
+    }
+    if (s->has_reference)
+        snprintf(text + len, sizeof text - len, "; estimate and truth agree on %d of %d",
+                 agree, s->n_taus);
+    if (mcp_report_set_verdict(section,
+                               !s->has_reference     ? MCP_VERDICT_INFO
+                               : agree == s->n_taus ? MCP_VERDICT_GOOD
+                                                    : MCP_VERDICT_BAD,
+                               "%s", text))
+        return -1;
+    /* F(τ) against spp, one line per τ */
+    cJSON *plot = mcp_report_add_plot(section, "estimated F(tau) against spp", "spp",
+                                      MCP_AXIS_LOG, "F(tau)", MCP_AXIS_LOGIT);
+    double *x = mcp_calloc((size_t)s->count, sizeof *x),
+           *y = mcp_calloc((size_t)s->count, sizeof *y);
+    int rc = plot && x && y ? 0 : -1;
+    for (int j = 0; j < s->n_taus && !rc; j++) {
+        char name[64];
+        for (int i = 0; i < s->count; i++) {
+            x[i] = s->points[i].spp;
+            y[i] = s->points[i].cdf[j];
+        }
+        snprintf(name, sizeof name, "tau %g", s->taus[j]);
+        cJSON *ser = mcp_report_plot_add_series(plot, name, MCP_SERIES_LINE_POINTS, x, y,
+                                                s->count);
+        rc = ser ? 0 : -1;
+        if (!rc && s->has_reference) {
+            for (int i = 0; i < s->count; i++)
+                y[i] = s->points[i].true_cdf[j];
+            snprintf(name, sizeof name, "tau %g, true", s->taus[j]);
+            ser = mcp_report_plot_add_series(plot, name, MCP_SERIES_LINE, x, y, s->count);
+            rc = ser && !mcp_report_series_set_dashed(ser, 1) ? 0 : -1;
+        }
+    }
+    free(x);
+    free(y);
+    if (rc) return -1;
+    /* the estimated (dashed) and true percentile curves of up to 4 members, evenly
+     * spaced and ending with the last */
+    plot = mcp_report_add_plot(section, "estimated (dashed) and true error percentiles",
+                               "percentile", MCP_AXIS_LOGIT, "error", MCP_AXIS_LOG);
+    if (!plot) return -1;
+    int step = (s->count + 3) / 4;
+    for (int i = 0; i < s->count; i++) {
+        if ((s->count - 1 - i) % step) continue;
+        const mcp_series_point *pt = &s->points[i];
+        char name[64];
+        snprintf(name, sizeof name, "%g spp", pt->spp);
+        cJSON *ser =
+            mcp_report_plot_add_series(plot, name, MCP_SERIES_LINE, s->percentiles,
+                                       pt->est_percentile, s->n_percentiles);
+        if (!ser || mcp_report_series_set_dashed(ser, 1)) return -1;
+        if (s->has_reference) {
+            snprintf(name, sizeof name, "%g spp, true", pt->spp);
+            if (!mcp_report_plot_add_series(plot, name, MCP_SERIES_LINE, s->percentiles,
+                                            pt->true_percentile, s->n_percentiles))
+                return -1;
+        }
+    }
+    return 0;
+}
+
+static void
+progress_cb(int done, int total, void *ctx)
+{
+    mcp_progress *p = ctx;
+    if (done == 1) mcp_progress_begin(p, "estimate", total);
+    mcp_progress_update(p, done);
+    if (done == total) mcp_progress_end(p);
+}
+
+/* Runs a series and writes estimate.json and the section. *stop_all: the last member
+ * reached every τ. */
+int
+mcp__estimate_run_series(const mcp_series *series, const mcp_denoiser *den,
+                         const mcp_series_estimate_options *so, const mcp_image *ref,
+                         const mcp__estimate_dir *o, cJSON *section, cJSON **json_out,
+                         mcp_series_estimate **out)
+{
+    mcp_progress p;
+    memset(&p, 0, sizeof p);
+    mcp_series_estimate *s = NULL;
+    if (mcp_estimate_series(series, den, so, ref, progress_cb, &p, &s)) return -1;
+    cJSON *j = series_json(s, den->name, so->est.sure.metric);
+    int using_increments = s->variance_source == MCP_VARSRC_INCREMENTS;
+    mcp__report_variance_ratio(s->variance_ratio, using_increments, j);
+    if (section) {
+        cJSON_AddStringToObject(section, "variance_source",
+                                mcp_variance_source_name(s->variance_source));
+        const cJSON *w = cJSON_GetObjectItem(j, "variance_warning");
+        if (w)
+            cJSON_AddStringToObject(section, "variance_warning", w->valuestring);
+    }
+    char path[4352];
+    char *text = cJSON_Print(j);
+    int rc = !text || (o && (mcp_make_dirs(o->dir) ||
+                             mcp__estimate_path(o, "estimate.json", path, sizeof path) ||
+                             mcp_write_file_atomic(path, text, strlen(text))));
+    free(text);
+    if (!rc && section) rc = report_series(section, s);
+    if (rc) {
+        cJSON_Delete(j);
+        mcp_series_estimate_free(s);
+        return -1;
+    }
+    *json_out = j;
+    *out = s;
+    return 0;
+}
+
+int
+mcp__variance_probes_from_name(const char *text, int *out)
+{
+    if (!strcmp(text, "sure"))
+        *out = 0;
+    else if (!strcmp(text, "rademacher"))
+        *out = 1;
+    else
+        return mcp_error("variance probes must be sure or rademacher (got '%s')", text);
+    return 0;
+}

@@ -1,0 +1,193 @@
+/* internal.h: what the job stages share with the subcommands of cli/ (not installed).
+ * A stage and its subcommand read the same words, write the same files and fill the
+ * same report sections; the code for that lives here, in the library, so that the
+ * stage table (stages.c) needs nothing from cli/. The tool links the static library,
+ * which keeps these hidden symbols reachable. */
+#ifndef MCP_JOBS_INTERNAL_H
+#define MCP_JOBS_INTERNAL_H
+
+#include <mcpost/blend.h>
+#include <mcpost/denoiser.h>
+#include <mcpost/estimate.h>
+#include <mcpost/imageio.h>
+#include <mcpost/job.h>
+#include <mcpost/perceptual.h>
+#include <mcpost/progress.h>
+#include <mcpost/stages.h>
+
+#include <cjson/cJSON.h>
+#include <stddef.h>
+#include <stdint.h>
+
+/* ---- words.c: values as the flags and the job keys read them ---- */
+
+/* A number / an integer, naming the flag or key on error. */
+int mcp__parse_double(const char *flag, const char *text, double *out);
+int mcp__parse_int(const char *flag, const char *text, int *out);
+/* Splits "a,b,c" into a malloc'd array of strdup'd words. */
+int mcp__split_words(const char *text, char ***words, int *count);
+void mcp__free_words(char **words, int count);
+
+/* ---- settings.c: a stage's settings ---- */
+
+/* An enum key read with its from_name function (parse's out is the enum); a bad name
+ * fails at the key's line. Absent: *out unchanged. */
+int mcp__opt_enum(const mcp_node *settings, const char *key,
+                  int (*parse)(const char *, void *), void *out);
+/* The current error put at the line of settings' key ("FILE:LINE: ..."); -1, and the
+ * error unchanged when settings has no such key. */
+int mcp__at_line(const mcp_node *settings, const char *key);
+
+/* ---- variance_source.c: what a variance rests on, said the same way everywhere ---- */
+
+/* "variance_source" (and "variance_dof" when known) into a JSON object, with a
+ * "variance_note" when the source is an assumption (per-sample). */
+void mcp__add_variance_source(cJSON *j, mcp_variance_source src, double dof);
+/* The source in words, for the text output. */
+const char *mcp__variance_source_words(mcp_variance_source src);
+/* --variance-from: "file" (the members' own) or "increments". */
+int mcp__variance_from(const char *text, mcp_variance_source *out);
+/* Whether Variance/n over the increments' spread is off 1 by more than its noise
+ * allows ([0.8, 1.25] taken as agreement), and the one-line warning that says so. */
+int mcp__variance_ratio_off(double ratio);
+const char *mcp__variance_ratio_warning(double ratio, int using_increments);
+/* A series' ratio into its JSON object / report section ("variance_ratio", and
+ * "variance_warning" when off), and the warning once on stderr (also when quiet: it
+ * says the figures may be off). j may be NULL. */
+void mcp__report_variance_ratio(double ratio, int using_increments, cJSON *j);
+
+/* ---- stage_denoiser.c ---- */
+
+/* The denoiser of a job stage: its `denoiser:` setting, or `default` when it has none.
+ * Relative paths in the settings resolve against the job file's folder. */
+int mcp__stage_denoiser(mcp_job *job, const mcp_node *settings, mcp_denoiser **out);
+
+/* ---- stage_info.c ---- */
+
+/* Appends statistics of every channel of img to the array, names prefixed. */
+int mcp__info_add_channels(cJSON *array, const mcp_image *img, const char *prefix);
+/* What a render dump means: convention, spp, variance and its source, features. */
+void mcp__info_add_dump(cJSON *o, const mcp_dump *d);
+
+/* ---- stage_convert.c ---- */
+
+/* The channels of img named in `names`, as a new image. With no names: all channels,
+ * except that an 8-bit or RGBE output (out_path's format) of a many-channel file (a
+ * render dump) gets its colour, which is what a person converting to PNG means. */
+int mcp__convert_pick_channels(const mcp_image *img, char **names, int count,
+                               const char *out_path, mcp_image **out);
+
+/* ---- estimate_output.c: what an estimate writes ---- */
+
+/* Where outputs go: a folder and a prefix for report paths ("" or "estimate/"). */
+typedef struct mcp__estimate_dir {
+    char dir[4096];
+    char rel[256];
+} mcp__estimate_dir;
+
+/* dir/name into buf. */
+int mcp__estimate_path(const mcp__estimate_dir *o, const char *name, char *buf,
+                       size_t cap);
+/* The figures of one estimate (estimate.json). */
+cJSON *mcp__estimate_json(const mcp_estimate *e, const char *input, const char *denoiser,
+                          const mcp_estimate_options *o);
+/* Every image of one estimate and the block pictures into o->dir (made), and with a
+ * section its block map in the report. */
+int mcp__estimate_write_single(const mcp_estimate *e, const mcp__estimate_dir *o,
+                               cJSON *section, const cJSON *summary);
+/* The report section of one estimate: key figures, the percentile table and curve. */
+int mcp__estimate_report_single(cJSON *section, const cJSON *summary,
+                                const mcp_estimate *e);
+/* Runs a series and writes estimate.json (o may be NULL: nothing written) and the
+ * section (may be NULL); the figures and the result come back. */
+int mcp__estimate_run_series(const mcp_series *series, const mcp_denoiser *den,
+                             const mcp_series_estimate_options *so, const mcp_image *ref,
+                             const mcp__estimate_dir *o, cJSON *section, cJSON **json_out,
+                             mcp_series_estimate **out);
+/* variance probes: sure (0) or rademacher (1). */
+int mcp__variance_probes_from_name(const char *text, int *out);
+
+/* ---- blend_run.c: a blend over a series, its files and its report section ---- */
+
+/* Where a run writes, and what it reports. */
+typedef struct {
+    char dir[4096];  /* the output folder (exists) */
+    const char *rel; /* the folder relative to the report's folder ("" or "x/") */
+    int all_images;  /* also denoised, easy, james_stein, ideal */
+    cJSON *members;  /* per-member file list for the JSON */
+    mcp_progress prog;
+    char last_base[512]; /* the last member's file name without extension */
+} mcp__blend_sink;
+
+/* Runs the driver into the sink and fills section. */
+int mcp__blend_run(const mcp_series *series, const mcp_denoiser *den,
+                   const mcp_image *ref, const mcp_blend_series_options *o,
+                   const char *denoiser_name, mcp__blend_sink *s, cJSON *section);
+
+/* ---- adaptive_loop.c: the adaptive-sampling loop around a render command ---- */
+
+typedef struct mcp__adaptive_loop {
+    const char *render; /* the command template */
+    char dir[4096];     /* output folder */
+    char rel[256];      /* prefix of report paths ("" or "adaptive/") */
+    int width, height;
+    uint64_t seed;
+    int keep_passes;
+    mcp_adaptive_options ao;
+    const mcp_image *reference;
+    const mcp_denoiser *den;
+    cJSON *section; /* the job report's section, or NULL */
+} mcp__adaptive_loop;
+
+/* Runs the loop and writes every output; *json (may be NULL) receives the figures. */
+int mcp__adaptive_run_loop(mcp__adaptive_loop *c, cJSON **json);
+/* "WIDTHxHEIGHT". */
+int mcp__parse_size(const char *text, int *w, int *h);
+
+/* ---- perceptual_run.c: settings and the run of perceptual optimisation ---- */
+
+typedef struct {
+    mcp_perc_options opt;
+    double *kernel;          /* user kernel taps, owned (separable list or 2D file) */
+    const char *kernel_file; /* a 2D kernel image, loaded before the run */
+    const char *surrogate;   /* "denoise" [default], "reference", or a file/input name */
+    const char *confidence;  /* a file/input name for a map, or NULL (the number) */
+    int group;               /* files averaged into one candidate [1] */
+    int compare;             /* the comparison table [0] */
+    const char *rerender;    /* command with {permutation} {output} {method} [NULL] */
+    int spectra_tile;        /* [32] */
+} mcp__perc_args;
+
+typedef struct {
+    mcp_image **files;   /* colour (R, G, B) of every candidate file, owned */
+    mcp_image **albedos; /* each file's albedo and normal, or NULL; owned */
+    mcp_image **normals;
+    int n_files;
+    mcp_image *albedo; /* mean albedo of the files, or NULL; owned */
+    mcp_image *normal; /* mean normal, or NULL; owned */
+    const mcp_image *reference, *surrogate_img, *confidence_map, *kernel_img;
+    mcp_denoiser *den;  /* for surrogate: denoise */
+    char out_dir[4096]; /* where the files go */
+    char rel[256];      /* their path relative to the report's folder: rel + name */
+    cJSON *section;     /* the report section to fill */
+} mcp__perc_run;
+
+void mcp__perc_args_init(mcp__perc_args *a);
+void mcp__perc_args_free(mcp__perc_args *a);
+/* One setting, by its job key (the flag's words with '_'), from its text. */
+int mcp__perc_set_word(mcp__perc_args *a, const char *key, const char *v);
+/* A separable kernel's taps (an odd count). */
+int mcp__perc_set_taps(mcp__perc_args *a, const double *t, int n);
+void mcp__perc_run_free(mcp__perc_run *r);
+/* Adds one file's colour (by its render-dump convention when it has one) and its
+ * features to the run; finish_features averages the features once all are in. */
+int mcp__perc_add_file(mcp__perc_run *r, const mcp_image *img);
+int mcp__perc_finish_features(mcp__perc_run *r);
+/* Runs the optimisation and writes its files; *summary gets the figures, *result
+ * (may be NULL) the optimised image. */
+int mcp__perceptual_run(mcp__perc_args *a, mcp__perc_run *r, cJSON **summary,
+                        mcp_image **result);
+/* Copies the summary's members into the report section, with a verdict. */
+void mcp__perc_fill_section(cJSON *section, const cJSON *summary);
+
+#endif
