@@ -669,6 +669,61 @@ test_atomic_write_keeps_old_file_on_failure(void **state)
     mcp_image_free(bad);
 }
 
+/* mcp_write_files: a batch of EXRs (one incompressible and stored raw, one zip-
+ * compressed, one PFM) and an 8-bit PNG, written side by side on the test's threads,
+ * read back bit for bit; one file that cannot be written (its folder does not exist)
+ * fails the batch with that file's message, while the rest are still written. */
+static void
+test_write_files_batch(void **state)
+{
+    (void)state;
+    enum { N = 5 };
+    mcp_image *noise = mcp_test_random(301, 97, 3, 0.0f, 1.0f, 11, NULL);
+    mcp_image *ramp = mcp_test_ramp(64, 200, 6, NULL);
+    mcp_image *small = mcp_test_random(5, 3, 1, -2.0f, 2.0f, 12, NULL);
+    unsigned char rgb[7 * 4 * 3];
+    for (size_t i = 0; i < sizeof rgb; i++)
+        rgb[i] = (unsigned char)(37 * i + 5);
+    char paths[N][4200];
+    const char *names[N] = {"batch_noise.exr", "batch_ramp.exr", "batch_small.pfm",
+                            "batch_rgb.png", "no-such-folder/batch_lost.exr"};
+    for (int i = 0; i < N; i++)
+        snprintf(paths[i], sizeof paths[i], "%s", mcp_test_path(names[i]));
+    mcp_file_write files[N] = {
+        {.path = paths[0], .image = noise},
+        {.path = paths[1], .image = ramp},
+        {.path = paths[2], .image = small},
+        {.path = paths[3], .rgb8 = rgb, .width = 7, .height = 4},
+        {.path = paths[4], .image = small},
+    };
+    assert_int_equal(mcp_write_files(files, N - 1), 0);
+    const mcp_image *want[3] = {noise, ramp, small};
+    for (int k = 0; k < 2; k++) {
+        for (int i = 0; i < 3; i++) {
+            mcp_image *back = NULL;
+            assert_int_equal(mcp_image_read(paths[i], NULL, &back), 0);
+            assert_true(mcp_test_max_abs_diff(back, want[i]) == 0.0);
+            mcp_image_free(back);
+            if (k == 0) unlink(paths[i]);
+        }
+        mcp_read_options ro = mcp_read_defaults();
+        ro.srgb_decode = 0;
+        mcp_image *back = NULL;
+        assert_int_equal(mcp_image_read(paths[3], &ro, &back), 0);
+        for (size_t i = 0; i < sizeof rgb; i++)
+            assert_true(back->data[i] == rgb[i] / 255.0f);
+        mcp_image_free(back);
+        if (k == 0) {
+            unlink(paths[3]);
+            /* the whole batch, with the file that cannot be written last */
+            assert_error_contains(mcp_write_files(files, N), "batch_lost.exr");
+        }
+    }
+    mcp_image_free(noise);
+    mcp_image_free(ramp);
+    mcp_image_free(small);
+}
+
 int
 main(void)
 {
@@ -685,6 +740,7 @@ main(void)
         cmocka_unit_test(test_pfm_header_checked_before_allocation),
         cmocka_unit_test(test_exr_size_checked_before_allocation),
         cmocka_unit_test(test_atomic_write_keeps_old_file_on_failure),
+        cmocka_unit_test(test_write_files_batch),
         cmocka_unit_test(test_memory_truncated_and_foreign),
         cmocka_unit_test(test_png_roundtrip_then_tiff_loads_plugin),
         cmocka_unit_test(test_jpeg_roundtrip),
