@@ -204,11 +204,9 @@ mcp__perc_add_file(mcp__perc_run *r, const mcp_image *img)
     mcp_image **normal = albedo ? realloc(r->normals, n * sizeof *normal) : NULL;
     if (!normal) return mcp_error("out of memory");
     r->normals = normal;
-    if (mcp_dump_from_image(img, NULL, &d) == 0) {
-        if (mcp_image_copy(d->color, &rgb)) {
-            mcp_dump_free(d);
-            return -1;
-        }
+    if (mcp_dump_from_image(img, NULL, &d) == 0) { /* the dump's parts are the run's now */
+        rgb = d->color;
+        d->color = NULL;
     } else if (strstr(mcp_error_message(), "out of memory")) {
         /* a failed allocation is no sign that the file is a plain image: reading it as
            one would drop its albedo and normal without a word (tests/common/test_alloc) */
@@ -224,12 +222,12 @@ mcp__perc_add_file(mcp__perc_run *r, const mcp_image *img)
         mcp_dump_free(d);
         return -1;
     }
-    r->albedos[r->n_files] = r->normals[r->n_files] = NULL;
+    r->albedos[r->n_files] = d ? d->albedo : NULL;
+    r->normals[r->n_files] = d ? d->normal : NULL;
     r->files[r->n_files++] = rgb;
-    int rc = (d && d->albedo && mcp_image_copy(d->albedo, &r->albedos[r->n_files - 1])) ||
-             (d && d->normal && mcp_image_copy(d->normal, &r->normals[r->n_files - 1]));
+    if (d) d->albedo = d->normal = NULL;
     mcp_dump_free(d);
-    return rc ? -1 : 0;
+    return 0;
 }
 
 /* The mean albedo and normal of the files, when every file has them (for the
