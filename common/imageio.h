@@ -86,12 +86,14 @@ typedef struct mcp_write_options {
 } mcp_write_options;
 
 /* The zip level and raw-storage threshold EXR files are written with unless the
- * options say otherwise (docs/benchmarks.md, "EXR speed", has the measurements). Level 4: on
- * float renders zlib's levels 1-6 differ by under 0.6% in size, and 4 took the time
- * of Core's default 6 within this machine's noise; levels 1-3, up to 20% faster, made
- * a blocky map twice as large as 4 did. 1/8: renders' float noise saves about 11%
- * under zip, for about 12 times the writing and 5 times the reading time of raw. */
-#define MCP_EXR_ZIP_LEVEL_DEFAULT 4
+ * options say otherwise (docs/benchmarks.md, "EXR speed", has the measurements). Level 1:
+ * with libdeflate (common/exr_zip.c) it is the fastest level on every file measured
+ * (renders, dumps, an estimate's maps, a perceptual result: 3-28% less time than 4) and
+ * within 0.7% of level 4's size, the blocky maps included (zlib's levels 1-3 had made
+ * those twice as large as its 4, which is why 4 was the default until December 2026).
+ * 1/8: renders' float noise saves about 11% under zip, for about 12 times the writing
+ * and 5 times the reading time of raw. */
+#define MCP_EXR_ZIP_LEVEL_DEFAULT 1
 #define MCP_EXR_MIN_SAVING_DEFAULT (1.0 / 8)
 
 MCP_API mcp_write_options mcp_write_defaults(void);
