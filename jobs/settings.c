@@ -2,11 +2,22 @@
  * an error the library found put at the line of the key it came from. */
 #include "internal.h"
 
+#include <ctype.h>
+#include <string.h>
+
 int
 mcp__at_line(const mcp_node *settings, const char *key)
 {
     const mcp_node *n = mcp_node_get(settings, key);
-    return n ? mcp_node_error(n, "%s", mcp_error_message()) : -1;
+    if (!n)
+        return -1;
+    /* an error from inside the key's value (a denoiser's unknown setting) already
+       names its own line: "job.yaml:6: job.yaml:6: ..." would say it twice */
+    const char *msg = mcp_error_message();
+    size_t len = strlen(n->file);
+    if (strncmp(msg, n->file, len) == 0 && msg[len] == ':' && isdigit((unsigned char)msg[len + 1]))
+        return -1;
+    return mcp_node_error(n, "%s", msg);
 }
 
 int

@@ -66,6 +66,8 @@ assert_fails_up_front(const char *stages, int line, const char *needle)
         strchr(err, '\n') != err + strlen(err) - 1)
         fail_msg("run: status %d, stderr \"%s\", wanted one line \"%s...%s\"", status, err,
                  want, needle);
+    if (strstr(err + strlen(want), job_copy))
+        fail_msg("the job file's place is given twice: %s", err);
     if (strstr(err, "[1/") || strstr(out, "[1/"))
         fail_msg("a stage ran before the error: %s", err);
     if (exists(outdir))
@@ -149,6 +151,11 @@ test_estimate_bad_metric(void **state)
                           "      input: noisy\n"                     /* 14 */
                           "      denoiser: {name: gauss, sigma: -1}\n", /* 15 */
                           15, "sigma");
+    /* an unknown setting of the denoiser, named at its line once */
+    assert_fails_up_front("  - estimate:\n"                               /* 13 */
+                          "      input: noisy\n"                          /* 14 */
+                          "      denoiser: {name: gauss, sigmaa: 2}\n",   /* 15 */
+                          15, "unknown key 'sigmaa' in denoiser 'gauss'");
 }
 
 static void
