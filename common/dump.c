@@ -349,22 +349,42 @@ rename3(mcp_image *img, const char *a, const char *b, const char *c)
            mcp_image_set_channel_name(img, 2, c);
 }
 
+static int
+in_memory(const mcp_dump_buffer *buf)
+{
+    return buf->data != NULL;
+}
+
+/* Reads one file of a dump: from its buffer when it has one (named by path, or by its
+ * role when there is none), else from path. */
+static int
+read_part(const char *path, const mcp_dump_buffer *buf, const char *role,
+          const mcp_read_options *ro, mcp_image **out)
+{
+    if (!in_memory(buf))
+        return mcp_image_read(path, ro, out);
+    char name[64];
+    if (!path)
+        snprintf(name, sizeof name, "%s (in memory)", role);
+    return mcp_image_read_memory(buf->data, buf->size, path ? path : name, out);
+}
+
 /* Reads a separate part file and takes its colour-like triple (R,G,B / X,Y,Z or the
  * first three channels). */
 static int
-load_part(const char *path, const char *const names[3], const mcp_image *like,
-          mcp_image **out)
+load_part(const char *path, const mcp_dump_buffer *buf, const char *role,
+          const char *const names[3], const mcp_image *like, mcp_image **out)
 {
     mcp_image *img = NULL;
     mcp_read_options ro = mcp_read_defaults();
     ro.srgb_decode = 0; /* data, not colour */
-    if (mcp_image_read(path, &ro, &img))
+    if (read_part(path, buf, role, &ro, &img))
         return -1;
     int idx[3] = {0, 1, 2}, rc = -1;
     if (mcp_image_channels(img, names, 3, idx) && img->channels >= 3) {
         idx[0] = 0, idx[1] = 1, idx[2] = 2;
     } else if (img->channels < 3) {
-        mcp_error("%s: needs 3 channels (%s,%s,%s), has %d", path, names[0], names[1],
+        mcp_error("%s: needs 3 channels (%s,%s,%s), has %d", img->source, names[0], names[1],
                   names[2], img->channels);
         goto done;
     }
@@ -423,11 +443,12 @@ check_values(mcp_image *img, const char *part, int is_variance, mcp_badval_polic
 }
 
 static int
-load_spp(mcp_dump *d, const mcp_image *img, const mcp_dump_spec *spec, const layout *L)
+load_spp(mcp_dump *d, const mcp_image *img, const mcp_dump_spec *spec,
+         const mcp_dump_buffers *parts, const layout *L)
 {
-    if (spec->spp_map_path) {
+    if (spec->spp_map_path || in_memory(&parts->spp_map)) {
         mcp_image *m = NULL;
-        if (mcp_image_read(spec->spp_map_path, NULL, &m))
+        if (read_part(spec->spp_map_path, &parts->spp_map, "spp map", NULL, &m))
             return -1;
         int idx = 0;
         int ok = mcp_image_same_size(m, d->color) &&
@@ -482,12 +503,11 @@ to_variance_of_mean(mcp_dump *d)
     }
 }
 
-int
-mcp_dump_from_image(const mcp_image *img, const mcp_dump_spec *spec, mcp_dump **out)
+/* mcp_dump_from_image, with the separate parts from parts' buffers or spec's paths. */
+static int
+from_image(const mcp_image *img, const mcp_dump_spec *spec, const mcp_dump_buffers *parts,
+           mcp_dump **out)
 {
-    mcp_dump_spec defaults = mcp_dump_spec_defaults();
-    if (!spec)
-        spec = &defaults;
     *out = NULL;
     mcp_dump *d = mcp_calloc(1, sizeof *d);
     if (!d)
@@ -538,32 +558,32 @@ mcp_dump_from_image(const mcp_image *img, const mcp_dump_spec *spec, mcp_dump **
             }
         d->variance_in_file = MCP_VAR_PER_SAMPLE;
     }
-    if (spec->variance_path) {
+    if (spec->variance_path || in_memory(&parts->variance)) {
         mcp_image_free(d->var_of_mean);
         d->var_of_mean = NULL;
-        if (load_part(spec->variance_path, (const char *const[]){"R", "G", "B"}, d->color,
-                      &d->var_of_mean) ||
+        if (load_part(spec->variance_path, &parts->variance, "variance",
+                      (const char *const[]){"R", "G", "B"}, d->color, &d->var_of_mean) ||
             rename3(d->var_of_mean, "R", "G", "B"))
             goto fail;
         d->variance_in_file = spec->variance ? spec->variance : MCP_VAR_OF_MEAN;
     }
-    if (spec->albedo_path) {
+    if (spec->albedo_path || in_memory(&parts->albedo)) {
         mcp_image_free(d->albedo);
         d->albedo = NULL;
-        if (load_part(spec->albedo_path, (const char *const[]){"R", "G", "B"}, d->color,
-                      &d->albedo) ||
+        if (load_part(spec->albedo_path, &parts->albedo, "albedo",
+                      (const char *const[]){"R", "G", "B"}, d->color, &d->albedo) ||
             rename3(d->albedo, "R", "G", "B"))
             goto fail;
     }
-    if (spec->normal_path) {
+    if (spec->normal_path || in_memory(&parts->normal)) {
         mcp_image_free(d->normal);
         d->normal = NULL;
-        if (load_part(spec->normal_path, (const char *const[]){"X", "Y", "Z"}, d->color,
-                      &d->normal) ||
+        if (load_part(spec->normal_path, &parts->normal, "normal",
+                      (const char *const[]){"X", "Y", "Z"}, d->color, &d->normal) ||
             rename3(d->normal, "X", "Y", "Z"))
             goto fail;
     }
-    if (load_spp(d, img, spec, &L) ||
+    if (load_spp(d, img, spec, parts, &L) ||
         check_values(d->color, "colour", 0, spec->bad_values, &d->n_bad_values) ||
         check_values(d->albedo, "albedo", 0, spec->bad_values, &d->n_bad_values) ||
         check_values(d->normal, "normal", 0, spec->bad_values, &d->n_bad_values) ||
@@ -581,18 +601,39 @@ fail:
 }
 
 int
-mcp_dump_load(const mcp_dump_spec *spec, mcp_dump **out)
+mcp_dump_from_image(const mcp_image *img, const mcp_dump_spec *spec, mcp_dump **out)
 {
+    mcp_dump_spec defaults = mcp_dump_spec_defaults();
+    static const mcp_dump_buffers none;
+    return from_image(img, spec ? spec : &defaults, &none, out);
+}
+
+int
+mcp_dump_read_memory(const mcp_dump_spec *spec, const mcp_dump_buffers *parts,
+                     mcp_dump **out)
+{
+    mcp_dump_spec defaults = mcp_dump_spec_defaults();
+    static const mcp_dump_buffers none;
     *out = NULL;
-    if (!spec || !spec->path)
+    if (!spec)
+        spec = &defaults;
+    if (!parts)
+        parts = &none;
+    if (!spec->path && !in_memory(&parts->main))
         return mcp_error("render dump: no file given");
     mcp_image *img = NULL;
     mcp_read_options ro = mcp_read_defaults();
-    if (mcp_image_read(spec->path, &ro, &img))
+    if (read_part(spec->path, &parts->main, "main", &ro, &img))
         return -1;
-    int rc = mcp_dump_from_image(img, spec, out);
+    int rc = from_image(img, spec, parts, out);
     mcp_image_free(img);
     return rc;
+}
+
+int
+mcp_dump_load(const mcp_dump_spec *spec, mcp_dump **out)
+{
+    return mcp_dump_read_memory(spec, NULL, out);
 }
 
 int
