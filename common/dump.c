@@ -384,8 +384,8 @@ load_part(const char *path, const mcp_dump_buffer *buf, const char *role,
     if (mcp_image_channels(img, names, 3, idx) && img->channels >= 3) {
         idx[0] = 0, idx[1] = 1, idx[2] = 2;
     } else if (img->channels < 3) {
-        mcp_error("%s: needs 3 channels (%s,%s,%s), has %d", img->source, names[0], names[1],
-                  names[2], img->channels);
+        mcp_error("%s: needs 3 channels (%s,%s,%s), has %d", img->source, names[0],
+                  names[1], names[2], img->channels);
         goto done;
     }
     if (!mcp_image_same_size(img, like))

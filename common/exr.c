@@ -642,8 +642,9 @@ encode_chunk(exr_context_t f, const chunk_at *c, exr_encode_pipeline_t *enc,
         ch->user_bytes_per_element = 4;
     }
     if (!*initialised) {
-        if ((rc = exr_encoding_choose_default_routines(f, 0, enc)) == EXR_ERR_SUCCESS &&
-            zip_level > 0 && !coder->zip && !(coder->zip = mcp__zip_encoder_new(zip_level)))
+        rc = exr_encoding_choose_default_routines(f, 0, enc);
+        if (rc == EXR_ERR_SUCCESS && zip_level > 0 && !coder->zip &&
+            !(coder->zip = mcp__zip_encoder_new(zip_level)))
             rc = EXR_ERR_OUT_OF_MEMORY;
         if (rc != EXR_ERR_SUCCESS) {
             /* not initialised for the caller, who would not destroy it: undone here */

@@ -358,7 +358,8 @@ attr_slot(mcp_attrs *attrs, const char *name)
         a->s = NULL;
         return a;
     }
-    mcp_attr *items = mcp_realloc(attrs->items, (size_t)(attrs->count + 1) * sizeof *items);
+    mcp_attr *items =
+        mcp_realloc(attrs->items, (size_t)(attrs->count + 1) * sizeof *items);
     if (!items) {
         mcp_error("out of memory for attribute '%s'", name);
         return NULL;

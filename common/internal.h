@@ -9,9 +9,10 @@
 #include <mcpost/image.h>
 
 /* Fault injection, for tests only (alloc.c): allocation number n (0-based) through
- * mcp_malloc, mcp_calloc, mcp_realloc and mcp_strdup from now on fails as if memory were out, the
- * others succeed; n < 0 turns it off. mcp__alloc_count() is how many allocations were
- * counted since (a run that finishes with count <= n met no failure). */
+ * mcp_malloc, mcp_calloc, mcp_realloc and mcp_strdup from now on fails as if memory
+ * were out, the others succeed; n < 0 turns it off. mcp__alloc_count() is how many
+ * allocations were counted since (a run that finishes with count <= n met no
+ * failure). */
 void mcp__alloc_fail_after(long n);
 long mcp__alloc_count(void);
 

@@ -244,7 +244,8 @@ add_entry(mcp_job *job, const char *name)
         e->dump = NULL, e->image = NULL, e->series = NULL;
         return e;
     }
-    entry *grown = mcp_realloc(job->entries, (size_t)(job->n_entries + 1) * sizeof *grown);
+    entry *grown =
+        mcp_realloc(job->entries, (size_t)(job->n_entries + 1) * sizeof *grown);
     if (!grown)
         return NULL;
     job->entries = grown;

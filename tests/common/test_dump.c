@@ -391,7 +391,8 @@ test_read_memory_fixture(void **state)
             *b = (mcp_dump_buffer){copy, n};
             char needle[64];
             snprintf(needle, sizeof needle, "%s (in memory): ", roles[i]);
-            assert_error_contains(mcp_dump_read_memory(&spec, &bad, &from_memory), needle);
+            assert_error_contains(mcp_dump_read_memory(&spec, &bad, &from_memory),
+                                  needle);
             assert_null(from_memory);
             assert_null(strchr(mcp_error_message(), '\n'));
             free(copy);
