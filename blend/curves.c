@@ -253,8 +253,8 @@ mcp_blend_curves(const mcp_image *const *var_of_mean, const double *spp, int n,
     long n_alloc_failed = 0;
 #pragma omp parallel reduction(+ : n_alloc_failed)
     {
-        double *xs = malloc(2 * (size_t)cap * sizeof *xs), *vs = xs ? xs + cap : NULL;
-        unsigned char *keep = malloc((size_t)cap);
+        double *xs = mcp_malloc(2 * (size_t)cap * sizeof *xs), *vs = xs ? xs + cap : NULL;
+        unsigned char *keep = mcp_malloc((size_t)cap);
         if (!xs || !keep) n_alloc_failed++;
 #pragma omp for schedule(static)
         for (int y = 0; y < h; y++) {

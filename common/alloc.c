@@ -54,6 +54,15 @@ mcp_calloc(size_t count, size_t size)
     return p;
 }
 
+void *
+mcp_realloc(void *p, size_t bytes)
+{
+    void *q = injected_failure() ? NULL : realloc(p, bytes ? bytes : 1);
+    if (!q)
+        mcp_error("out of memory (%zu bytes)", bytes);
+    return q;
+}
+
 char *
 mcp_strdup(const char *s)
 {

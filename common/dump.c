@@ -376,23 +376,43 @@ take3(channel_source *src, int part, const name3 *names, mcp_image **out)
     return take_part(src, part, n, 3, out);
 }
 
+static int
+in_memory(const mcp_dump_buffer *buf)
+{
+    return buf->data != NULL;
+}
+
+/* Reads one file of a dump: from its buffer when it has one (named by path, or by its
+ * role when there is none), else from path. */
+static int
+read_part(const char *path, const mcp_dump_buffer *buf, const char *role,
+          const mcp_read_options *ro, mcp_image **out)
+{
+    if (!in_memory(buf))
+        return mcp_image_read(path, ro, out);
+    char name[64];
+    if (!path)
+        snprintf(name, sizeof name, "%s (in memory)", role);
+    return mcp_image_read_memory(buf->data, buf->size, path ? path : name, out);
+}
+
 /* Reads a separate part file and takes its colour-like triple (R,G,B / X,Y,Z or the
  * first three channels). */
 static int
-load_part(const char *path, const char *const names[3], const mcp_image *like,
-          mcp_image **out)
+load_part(const char *path, const mcp_dump_buffer *buf, const char *role,
+          const char *const names[3], const mcp_image *like, mcp_image **out)
 {
     mcp_image *img = NULL;
     mcp_read_options ro = mcp_read_defaults();
     ro.srgb_decode = 0; /* data, not colour */
-    if (mcp_image_read(path, &ro, &img))
+    if (read_part(path, buf, role, &ro, &img))
         return -1;
     int idx[3] = {0, 1, 2}, rc = -1;
     if (mcp_image_channels(img, names, 3, idx) && img->channels >= 3) {
         idx[0] = 0, idx[1] = 1, idx[2] = 2;
     } else if (img->channels < 3) {
-        mcp_error("%s: needs 3 channels (%s,%s,%s), has %d", path, names[0], names[1],
-                  names[2], img->channels);
+        mcp_error("%s: needs 3 channels (%s,%s,%s), has %d", img->source, names[0],
+                  names[1], names[2], img->channels);
         goto done;
     }
     if (!mcp_image_same_size(img, like))
@@ -470,12 +490,13 @@ check_values(mcp_image *img, const char *part, int is_variance, mcp_badval_polic
 }
 
 static int
-load_spp(mcp_dump *d, channel_source *src, const mcp_dump_spec *spec, const layout *L)
+load_spp(mcp_dump *d, channel_source *src, const mcp_dump_spec *spec,
+         const mcp_dump_buffers *parts, const layout *L)
 {
     const mcp_image *img = src->img;
-    if (spec->spp_map_path) {
+    if (spec->spp_map_path || in_memory(&parts->spp_map)) {
         mcp_image *m = NULL;
-        if (mcp_image_read(spec->spp_map_path, NULL, &m))
+        if (read_part(spec->spp_map_path, &parts->spp_map, "spp map", NULL, &m))
             return -1;
         int idx = 0;
         int ok = mcp_image_same_size(m, d->color) &&
@@ -559,7 +580,8 @@ dump_layout(const mcp_image *img, const mcp_dump_spec *spec, mcp_dump *d, layout
  * Mitsuba's moments, the separate part files, the sample count, the bad-value
  * checks and the variance of the mean. */
 static int
-dump_fill(mcp_dump *d, channel_source *src, const mcp_dump_spec *spec, const layout *L)
+dump_fill(mcp_dump *d, channel_source *src, const mcp_dump_spec *spec,
+          const mcp_dump_buffers *parts, const layout *L)
 {
     if (take3(src, PART_COLOR, &L->color, &d->color) || rename3(d->color, "R", "G", "B"))
         return -1;
@@ -595,32 +617,32 @@ dump_fill(mcp_dump *d, channel_source *src, const mcp_dump_spec *spec, const lay
             }
         d->variance_in_file = MCP_VAR_PER_SAMPLE;
     }
-    if (spec->variance_path) {
+    if (spec->variance_path || in_memory(&parts->variance)) {
         mcp_image_free(d->var_of_mean);
         d->var_of_mean = NULL;
-        if (load_part(spec->variance_path, (const char *const[]){"R", "G", "B"}, d->color,
-                      &d->var_of_mean) ||
+        if (load_part(spec->variance_path, &parts->variance, "variance",
+                      (const char *const[]){"R", "G", "B"}, d->color, &d->var_of_mean) ||
             rename3(d->var_of_mean, "R", "G", "B"))
             return -1;
         d->variance_in_file = spec->variance ? spec->variance : MCP_VAR_OF_MEAN;
     }
-    if (spec->albedo_path) {
+    if (spec->albedo_path || in_memory(&parts->albedo)) {
         mcp_image_free(d->albedo);
         d->albedo = NULL;
-        if (load_part(spec->albedo_path, (const char *const[]){"R", "G", "B"}, d->color,
-                      &d->albedo) ||
+        if (load_part(spec->albedo_path, &parts->albedo, "albedo",
+                      (const char *const[]){"R", "G", "B"}, d->color, &d->albedo) ||
             rename3(d->albedo, "R", "G", "B"))
             return -1;
     }
-    if (spec->normal_path) {
+    if (spec->normal_path || in_memory(&parts->normal)) {
         mcp_image_free(d->normal);
         d->normal = NULL;
-        if (load_part(spec->normal_path, (const char *const[]){"X", "Y", "Z"}, d->color,
-                      &d->normal) ||
+        if (load_part(spec->normal_path, &parts->normal, "normal",
+                      (const char *const[]){"X", "Y", "Z"}, d->color, &d->normal) ||
             rename3(d->normal, "X", "Y", "Z"))
             return -1;
     }
-    if (load_spp(d, src, spec, L) ||
+    if (load_spp(d, src, spec, parts, L) ||
         check_values(d->color, "colour", 0, spec->bad_values, &d->n_bad_values) ||
         check_values(d->albedo, "albedo", 0, spec->bad_values, &d->n_bad_values) ||
         check_values(d->normal, "normal", 0, spec->bad_values, &d->n_bad_values) ||
@@ -633,24 +655,31 @@ dump_fill(mcp_dump *d, channel_source *src, const mcp_dump_spec *spec, const lay
     return 0;
 }
 
-int
-mcp_dump_from_image(const mcp_image *img, const mcp_dump_spec *spec, mcp_dump **out)
+/* mcp_dump_from_image, with the separate parts from parts' buffers or spec's paths. */
+static int
+from_image(const mcp_image *img, const mcp_dump_spec *spec, const mcp_dump_buffers *parts,
+           mcp_dump **out)
 {
-    mcp_dump_spec defaults = mcp_dump_spec_defaults();
-    if (!spec)
-        spec = &defaults;
     *out = NULL;
     mcp_dump *d = mcp_calloc(1, sizeof *d);
     if (!d)
         return -1;
     layout L;
     channel_source src = {.img = img};
-    if (dump_layout(img, spec, d, &L) || dump_fill(d, &src, spec, &L)) {
+    if (dump_layout(img, spec, d, &L) || dump_fill(d, &src, spec, parts, &L)) {
         mcp_dump_free(d);
         return -1;
     }
     *out = d;
     return 0;
+}
+
+int
+mcp_dump_from_image(const mcp_image *img, const mcp_dump_spec *spec, mcp_dump **out)
+{
+    mcp_dump_spec defaults = mcp_dump_spec_defaults();
+    static const mcp_dump_buffers none;
+    return from_image(img, spec ? spec : &defaults, &none, out);
 }
 
 /* ---- reading an EXR's parts directly ---- */
@@ -661,6 +690,7 @@ mcp_dump_from_image(const mcp_image *img, const mcp_dump_spec *spec, mcp_dump **
  * the whole image must be read and copied from instead. */
 typedef struct direct_read {
     const mcp_dump_spec *spec;
+    const mcp_dump_buffers *parts;
     mcp_dump *d;
     layout L;
     channel_source src;
@@ -729,7 +759,8 @@ route_parts(const mcp_image *header, int w, int h, void *ctx, mcp__exr_route *ro
         if (parts[i].wanted && route_part(r, header, w, h, parts[i].part, n, 3, routes))
             return -1;
     }
-    if (!r->spec->spp_map_path && L->spp_channel[0] && has(header, L->spp_channel)) {
+    if (!r->spec->spp_map_path && !in_memory(&r->parts->spp_map) && L->spp_channel[0] &&
+        has(header, L->spp_channel)) {
         const char *n = L->spp_channel;
         if (route_part(r, header, w, h, PART_SPP, &n, 1, routes))
             return -1;
@@ -737,19 +768,27 @@ route_parts(const mcp_image *header, int w, int h, void *ctx, mcp__exr_route *ro
     return 0;
 }
 
-/* Loads an EXR dump with its parts decoded straight from the file: no whole image and
- * no copies, which took a third of reading a 1080p dump (docs/benchmarks.md, "EXR
- * speed"). 1 in *fallback when the whole image must be read instead. */
+/* Loads an EXR dump (a file, or parts->main in memory) with its parts decoded straight
+ * from it: no whole image and no copies, which took a third of reading a 1080p dump
+ * (docs/benchmarks.md, "EXR speed"). 1 in *fallback when the whole image must be read
+ * instead. */
 static int
-read_direct(const mcp_dump_spec *spec, mcp_dump **out, int *fallback)
+read_direct(const mcp_dump_spec *spec, const mcp_dump_buffers *parts, mcp_dump **out,
+            int *fallback)
 {
-    direct_read r = {.spec = spec};
+    direct_read r = {.spec = spec, .parts = parts};
     *fallback = 0;
     int rc = -1;
     if (!(r.d = mcp_calloc(1, sizeof *r.d)))
         return -1;
-    if (mcp__exr_read_routed(spec->path, route_parts, &r) == 0 &&
-        dump_fill(r.d, &r.src, spec, &r.L) == 0) {
+    int read = -1;
+    if (in_memory(&parts->main))
+        read = mcp__exr_read_memory_routed(parts->main.data, parts->main.size,
+                                           spec->path ? spec->path : "main (in memory)",
+                                           route_parts, &r);
+    else
+        read = mcp__exr_read_routed(spec->path, route_parts, &r);
+    if (read == 0 && dump_fill(r.d, &r.src, spec, parts, &r.L) == 0) {
         *out = r.d;
         r.d = NULL;
         rc = 0;
@@ -762,25 +801,49 @@ read_direct(const mcp_dump_spec *spec, mcp_dump **out, int *fallback)
     return rc;
 }
 
-int
-mcp_dump_load(const mcp_dump_spec *spec, mcp_dump **out)
+/* An EXR main part, read directly: in memory by its magic number (as
+ * mcp_image_read_memory tells formats), on disk by its extension (as mcp_image_read). */
+static int
+main_is_exr(const mcp_dump_spec *spec, const mcp_dump_buffers *parts)
 {
+    static const unsigned char exr_magic[4] = {0x76, 0x2f, 0x31, 0x01};
+    if (in_memory(&parts->main))
+        return parts->main.size >= 4 && memcmp(parts->main.data, exr_magic, 4) == 0;
+    return mcp_format_from_path(spec->path) == MCP_FORMAT_EXR;
+}
+
+int
+mcp_dump_read_memory(const mcp_dump_spec *spec, const mcp_dump_buffers *parts,
+                     mcp_dump **out)
+{
+    mcp_dump_spec defaults = mcp_dump_spec_defaults();
+    static const mcp_dump_buffers none;
     *out = NULL;
-    if (!spec || !spec->path)
+    if (!spec)
+        spec = &defaults;
+    if (!parts)
+        parts = &none;
+    if (!spec->path && !in_memory(&parts->main))
         return mcp_error("render dump: no file given");
-    if (mcp_format_from_path(spec->path) == MCP_FORMAT_EXR) {
+    if (main_is_exr(spec, parts)) {
         int fallback;
-        if (mcp__check_readable(spec->path)) return -1;
-        if (read_direct(spec, out, &fallback) == 0) return 0;
+        if (!in_memory(&parts->main) && mcp__check_readable(spec->path)) return -1;
+        if (read_direct(spec, parts, out, &fallback) == 0) return 0;
         if (!fallback) return -1;
     }
     mcp_image *img = NULL;
     mcp_read_options ro = mcp_read_defaults();
-    if (mcp_image_read(spec->path, &ro, &img))
+    if (read_part(spec->path, &parts->main, "main", &ro, &img))
         return -1;
-    int rc = mcp_dump_from_image(img, spec, out);
+    int rc = from_image(img, spec, parts, out);
     mcp_image_free(img);
     return rc;
+}
+
+int
+mcp_dump_load(const mcp_dump_spec *spec, mcp_dump **out)
+{
+    return mcp_dump_read_memory(spec, NULL, out);
 }
 
 int

@@ -127,6 +127,32 @@ MCP_API int mcp_dump_load(const mcp_dump_spec *spec, mcp_dump **out);
 /* Shorthand: detect everything from one file. */
 MCP_API int mcp_dump_read(const char *path, mcp_dump **out);
 
+/* The bytes of one EXR or PFM file in memory (data[0 .. size)), read as
+ * mcp_image_read_memory reads them; data NULL: not given. */
+typedef struct mcp_dump_buffer {
+    const void *data;
+    size_t size;
+} mcp_dump_buffer;
+
+/* The files of a dump held in memory, one per part of mcp_dump_spec. */
+typedef struct mcp_dump_buffers {
+    mcp_dump_buffer main;     /* instead of spec->path */
+    mcp_dump_buffer variance; /* instead of spec->variance_path */
+    mcp_dump_buffer albedo;   /* instead of spec->albedo_path */
+    mcp_dump_buffer normal;   /* instead of spec->normal_path */
+    mcp_dump_buffer spp_map;  /* instead of spec->spp_map_path */
+} mcp_dump_buffers;
+
+/* Loads a dump as mcp_dump_load does, with any of its files in memory: a part whose
+ * buffer has data is read from the buffer, and its path in spec, when set, only names
+ * it (in messages, and as dump->source for the main part); without one it is named
+ * "main (in memory)", "variance (in memory)", ... The parts without a buffer are read
+ * from their paths as usual. spec may be NULL (defaults). The buffers are only read,
+ * and may be freed once this returns. Gives exactly what mcp_dump_load gives on the
+ * same bytes in files. */
+MCP_API int mcp_dump_read_memory(const mcp_dump_spec *spec, const mcp_dump_buffers *parts,
+                                 mcp_dump **out);
+
 /* Builds a dump from an image already in memory (detection as for files). */
 MCP_API int mcp_dump_from_image(const mcp_image *img, const mcp_dump_spec *spec,
                                 mcp_dump **out);

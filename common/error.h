@@ -47,9 +47,11 @@ MCP_API void mcp_error_clear(void);
 MCP_API int mcp_size_mul(size_t a, size_t b, size_t *out);
 MCP_API int mcp_size_mul3(size_t a, size_t b, size_t c, size_t *out);
 
-/* Allocation that sets "out of memory (N bytes)" on failure. */
+/* Allocation that sets "out of memory (N bytes)" on failure (free with free()).
+ * mcp_realloc leaves p as it was when it fails, as realloc does. */
 MCP_API void *mcp_malloc(size_t bytes);
 MCP_API void *mcp_calloc(size_t count, size_t size);
+MCP_API void *mcp_realloc(void *p, size_t bytes);
 MCP_API char *mcp_strdup(const char *s);
 
 /* Images larger than this on either side are refused as corrupt rather than allocated. */

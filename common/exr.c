@@ -34,12 +34,20 @@ exr_capture_error(exr_const_context_t ctxt, exr_result_t code, const char *msg)
              msg ? msg : exr_get_default_error_message(code));
 }
 
+/* What went wrong, for a message: out of memory in our words (callers tell it from a
+ * corrupt file by them: replicates.c), else Core's last message. */
+static const char *
+exr_detail(exr_result_t rc)
+{
+    if (rc == EXR_ERR_OUT_OF_MEMORY)
+        return "out of memory";
+    return exr_last_message[0] ? exr_last_message : exr_get_default_error_message(rc);
+}
+
 static int
 exr_fail(const char *path, const char *what, exr_result_t rc)
 {
-    const char *detail = exr_last_message[0] ? exr_last_message
-                                               : exr_get_default_error_message(rc);
-    return mcp_error("%s: %s: %s", path, what, detail);
+    return mcp_error("%s: %s: %s", path, what, exr_detail(rc));
 }
 
 static const char *
@@ -185,9 +193,7 @@ note_failure(chunk_failure *fail, int idx, exr_result_t rc, const char *what)
         fail->idx = idx;
         fail->rc = rc;
         fail->what = what;
-        snprintf(fail->detail, sizeof fail->detail, "%s",
-                 exr_last_message[0] ? exr_last_message
-                                     : exr_get_default_error_message(rc));
+        snprintf(fail->detail, sizeof fail->detail, "%s", exr_detail(rc));
     }
 }
 
@@ -306,8 +312,12 @@ decode_chunk(exr_context_t f, const chunk_at *c, exr_decode_pipeline_t *dec,
         ch->user_bytes_per_element = 4;
     }
     if (!*initialised) {
-        if ((rc = exr_decoding_choose_default_routines(f, 0, dec)) != EXR_ERR_SUCCESS)
+        if ((rc = exr_decoding_choose_default_routines(f, 0, dec)) != EXR_ERR_SUCCESS) {
+            /* not initialised for the caller, who would not destroy it: undone here */
+            exr_decoding_destroy(f, dec);
+            *dec = (exr_decode_pipeline_t)EXR_DECODE_PIPELINE_INITIALIZER;
             return rc;
+        }
         if (zip && dec->decompress_fn) {
             dec->decompress_fn = decompress_zip_chunk;
             dec->decoding_user_data = zip;
@@ -517,10 +527,10 @@ memory_size(exr_const_context_t ctxt, void *userdata)
     return (int64_t)((const memory_stream *)userdata)->size;
 }
 
-int
-mcp__exr_read_memory(const void *data, size_t size, const char *name, mcp_image **out)
+static int
+read_memory(const void *data, size_t size, const char *name, mcp__exr_router router,
+            void *ctx, mcp_image **out)
 {
-    *out = NULL;
     if (!data || size > (size_t)INT64_MAX)
         return mcp_error("%s: no data to read", name);
     /* Core keeps the pointer to the stream for the context's life: read_context closes
@@ -536,7 +546,21 @@ mcp__exr_read_memory(const void *data, size_t size, const char *name, mcp_image 
     exr_result_t r = exr_start_read(&f, name, &init);
     if (r != EXR_ERR_SUCCESS)
         return exr_fail(name, "cannot read as OpenEXR", r);
-    return read_context(f, (unsigned long long)size, name, NULL, NULL, out);
+    return read_context(f, (unsigned long long)size, name, router, ctx, out);
+}
+
+int
+mcp__exr_read_memory(const void *data, size_t size, const char *name, mcp_image **out)
+{
+    *out = NULL;
+    return read_memory(data, size, name, NULL, NULL, out);
+}
+
+int
+mcp__exr_read_memory_routed(const void *data, size_t size, const char *name,
+                            mcp__exr_router router, void *ctx)
+{
+    return read_memory(data, size, name, router, ctx, NULL);
 }
 
 /* ---- writing ---- */
@@ -630,7 +654,7 @@ compress_chunk(exr_encode_pipeline_t *enc)
         return EXR_ERR_SUCCESS;
     }
     if (coder->raw_cap < enc->packed_bytes) {
-        void *grown = realloc(coder->raw, enc->packed_bytes);
+        void *grown = mcp_realloc(coder->raw, enc->packed_bytes);
         if (!grown)
             return EXR_ERR_OUT_OF_MEMORY;
         coder->raw = grown;
@@ -677,11 +701,17 @@ encode_chunk(exr_context_t f, const chunk_at *c, exr_encode_pipeline_t *enc,
         ch->user_bytes_per_element = 4;
     }
     if (!*initialised) {
-        if ((rc = exr_encoding_choose_default_routines(f, 0, enc)) != EXR_ERR_SUCCESS)
+        rc = exr_encoding_choose_default_routines(f, 0, enc);
+        if (rc == EXR_ERR_SUCCESS && zip_level > 0 && !coder->zip &&
+            !(coder->zip = mcp__zip_encoder_new(zip_level)))
+            rc = EXR_ERR_OUT_OF_MEMORY;
+        if (rc != EXR_ERR_SUCCESS) {
+            /* not initialised for the caller, who would not destroy it: undone here */
+            exr_encoding_destroy(f, enc);
+            *enc = (exr_encode_pipeline_t)EXR_ENCODE_PIPELINE_INITIALIZER;
             return rc;
+        }
         if (zip_level > 0) {
-            if (!coder->zip && !(coder->zip = mcp__zip_encoder_new(zip_level)))
-                return EXR_ERR_OUT_OF_MEMORY;
             enc->compress_fn = compress_chunk;
         } else if (enc->compress_fn) {
             coder->core_compress = enc->compress_fn;

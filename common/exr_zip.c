@@ -16,6 +16,8 @@
  * equals its packed size) is not a zlib stream; exr.c deals with that case. */
 #include "exr_zip.h"
 
+#include <mcpost/error.h>
+
 #include <libdeflate.h>
 
 #include <stdint.h>
@@ -37,7 +39,7 @@ struct mcp__zip_codec {
 mcp__zip_codec *
 mcp__zip_encoder_new(int level)
 {
-    mcp__zip_codec *c = calloc(1, sizeof *c);
+    mcp__zip_codec *c = mcp_calloc(1, sizeof *c);
     if (!c)
         return NULL;
     if (!(c->compressor = libdeflate_alloc_compressor(level))) {
@@ -50,7 +52,7 @@ mcp__zip_encoder_new(int level)
 mcp__zip_codec *
 mcp__zip_decoder_new(void)
 {
-    mcp__zip_codec *c = calloc(1, sizeof *c);
+    mcp__zip_codec *c = mcp_calloc(1, sizeof *c);
     if (!c)
         return NULL;
     if (!(c->decompressor = libdeflate_alloc_decompressor())) {
@@ -78,7 +80,7 @@ reserve(uint8_t **buf, size_t *cap, size_t n)
 {
     if (*cap >= n)
         return 0;
-    uint8_t *grown = realloc(*buf, n);
+    uint8_t *grown = mcp_realloc(*buf, n);
     if (!grown)
         return -1;
     *buf = grown;

@@ -822,9 +822,9 @@ flip_planes(flip_work *k, const mcp_flip_filters *f, float *map)
 
 #pragma omp parallel if (par)
     {
-        float *pad = malloc(((size_t)w + 2 * (size_t)rmax + VB) * sizeof(float));
-        float *acc = malloc(8 * TILE_W * sizeof(float));
-        size_t *off = malloc((2 * (size_t)rmax + 1) * sizeof(size_t));
+        float *pad = mcp_malloc(((size_t)w + 2 * (size_t)rmax + VB) * sizeof(float));
+        float *acc = mcp_malloc(8 * TILE_W * sizeof(float));
+        size_t *off = mcp_malloc((2 * (size_t)rmax + 1) * sizeof(size_t));
         if (!pad || !acc || !off) {
 #pragma omp atomic
             failed++;

@@ -70,11 +70,9 @@ mcp_frames_parse(const char *text, int **frames, int *count)
                     goto fail;
                 }
                 cap = cap ? 2 * cap : 64;
-                int *grown = realloc(set, (size_t)cap * sizeof *grown);
-                if (!grown) {
-                    mcp_error("out of memory");
+                int *grown = mcp_realloc(set, (size_t)cap * sizeof *grown);
+                if (!grown)
                     goto fail;
-                }
                 set = grown;
             }
             set[n++] = (int)f;

@@ -101,7 +101,7 @@ mcp_image_new(int width, int height, int channels, const char *const *names,
     mcp_image *img = header_new(width, height, channels, names, NULL);
     if (!img)
         return -1;
-    img->data = calloc(n / sizeof(float), sizeof(float));
+    img->data = mcp_calloc(n / sizeof(float), sizeof(float));
     if (!img->data) {
         mcp_image_free(img);
         return mcp_error("out of memory for a %dx%dx%d image", width, height, channels);
@@ -358,7 +358,8 @@ attr_slot(mcp_attrs *attrs, const char *name)
         a->s = NULL;
         return a;
     }
-    mcp_attr *items = realloc(attrs->items, (size_t)(attrs->count + 1) * sizeof *items);
+    mcp_attr *items =
+        mcp_realloc(attrs->items, (size_t)(attrs->count + 1) * sizeof *items);
     if (!items) {
         mcp_error("out of memory for attribute '%s'", name);
         return NULL;

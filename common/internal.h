@@ -9,9 +9,10 @@
 #include <mcpost/image.h>
 
 /* Fault injection, for tests only (alloc.c): allocation number n (0-based) through
- * mcp_malloc, mcp_calloc and mcp_strdup from now on fails as if memory were out, the
- * others succeed; n < 0 turns it off. mcp__alloc_count() is how many allocations were
- * counted since (a run that finishes with count <= n met no failure). */
+ * mcp_malloc, mcp_calloc, mcp_realloc and mcp_strdup from now on fails as if memory
+ * were out, the others succeed; n < 0 turns it off. mcp__alloc_count() is how many
+ * allocations were counted since (a run that finishes with count <= n met no
+ * failure). */
 void mcp__alloc_fail_after(long n);
 long mcp__alloc_count(void);
 
@@ -68,6 +69,8 @@ typedef struct mcp__exr_route {
 typedef int (*mcp__exr_router)(const mcp_image *header, int width, int height, void *ctx,
                                mcp__exr_route *routes);
 int mcp__exr_read_routed(const char *path, mcp__exr_router router, void *ctx);
+int mcp__exr_read_memory_routed(const void *data, size_t size, const char *name,
+                                mcp__exr_router router, void *ctx);
 int mcp__pfm_read(const char *path, mcp_image **out);
 int mcp__pfm_read_memory(const void *data, size_t size, const char *name, mcp_image **out);
 int mcp__pfm_write(const mcp_image *img, const char *path);

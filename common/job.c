@@ -260,11 +260,10 @@ add_entry(mcp_job *job, const char *name)
         e->dump = NULL, e->image = NULL, e->series = NULL;
         return e;
     }
-    entry *grown = realloc(job->entries, (size_t)(job->n_entries + 1) * sizeof *grown);
-    if (!grown) {
-        mcp_error("out of memory");
+    entry *grown =
+        mcp_realloc(job->entries, (size_t)(job->n_entries + 1) * sizeof *grown);
+    if (!grown)
         return NULL;
-    }
     job->entries = grown;
     e = &grown[job->n_entries];
     memset(e, 0, sizeof *e);

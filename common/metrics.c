@@ -136,12 +136,12 @@ mean_error(const mcp_image *t, const int *it, const mcp_image *r, const int *ir,
            sum_kind kind, double eps)
 {
     int w = t->width, h = t->height, out_of_memory = 0;
-    double *rows = malloc((size_t)h * sizeof *rows), total = 0.0;
+    double *rows = mcp_malloc((size_t)h * sizeof *rows), total = 0.0;
     if (!rows) return NAN;
 #pragma omp parallel if ((size_t)w * h >= PARALLEL_MIN_PIXELS)
     {
         /* the row's display values, test then reference */
-        float *disp = kind == SUM_SRGB ? malloc((size_t)w * 6 * sizeof *disp) : NULL;
+        float *disp = kind == SUM_SRGB ? mcp_malloc((size_t)w * 6 * sizeof *disp) : NULL;
         if (kind == SUM_SRGB && !disp) {
 #pragma omp atomic write
             out_of_memory = 1;
@@ -390,12 +390,12 @@ fused_pass(const mcp_image *t, const int *it, const mcp_image *r, const int *ir,
            double eps, double mean[3], mcp_image *relse, mcp_image *sq)
 {
     int w = t->width, h = t->height, out_of_memory = 0;
-    double *rows = malloc((size_t)h * 3 * sizeof *rows);
+    double *rows = mcp_malloc((size_t)h * 3 * sizeof *rows);
     if (!rows) return -1;
 #pragma omp parallel if ((size_t)w * h >= PARALLEL_MIN_PIXELS)
     {
         /* the row's display values, test then reference */
-        float *disp = malloc((size_t)w * 6 * sizeof *disp);
+        float *disp = mcp_malloc((size_t)w * 6 * sizeof *disp);
         if (!disp) {
 #pragma omp atomic write
             out_of_memory = 1;

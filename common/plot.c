@@ -93,7 +93,7 @@ static void MCP_PRINTF(2, 3) sb_printf(sbuf *b, const char *fmt, ...)
         size_t cap = b->cap ? b->cap * 2 : 4096;
         while (cap < b->len + (size_t)n + 1)
             cap *= 2;
-        char *s = realloc(b->s, cap);
+        char *s = mcp_realloc(b->s, cap);
         if (!s) {
             b->failed = 1;
             return;

@@ -50,7 +50,7 @@ sb_put(sbuf *b, const char *s, size_t n)
         size_t cap = b->cap ? b->cap : 65536;
         while (cap < b->len + n + 1)
             cap *= 2;
-        char *p = realloc(b->s, cap);
+        char *p = mcp_realloc(b->s, cap);
         if (!p) {
             b->failed = 1;
             return;
@@ -84,7 +84,7 @@ static void MCP_PRINTF(2, 3) sb_printf(sbuf *b, const char *fmt, ...)
         sb_put(b, small, (size_t)n);
         return;
     }
-    char *big = malloc((size_t)n + 1);
+    char *big = mcp_malloc((size_t)n + 1);
     if (!big) {
         b->failed = 1;
         return;
@@ -446,23 +446,29 @@ mime_of(const char *path)
     return NULL;
 }
 
-/* Reads a whole file (at most EMBED_MAX_BYTES); NULL when absent or too large. */
-static unsigned char *
-read_file(const char *path, size_t *size)
+/* Reads a whole file (at most EMBED_MAX_BYTES) into *data, which stays NULL when the
+ * file is absent or too large (the page then goes without it). -1 only when memory
+ * runs out: that must fail the page, not drop the image. */
+static int
+read_file(const char *path, unsigned char **data, size_t *size)
 {
+    *data = NULL;
     FILE *f = fopen(path, "rb");
-    if (!f) return NULL;
-    unsigned char *data = NULL;
+    if (!f) return 0;
     long n = -1;
+    int rc = 0;
     if (fseek(f, 0, SEEK_END) == 0 && (n = ftell(f)) >= 0 && n <= EMBED_MAX_BYTES &&
-        fseek(f, 0, SEEK_SET) == 0 && (data = malloc((size_t)n + 1)) &&
-        fread(data, 1, (size_t)n, f) != (size_t)n) {
-        free(data);
-        data = NULL;
+        fseek(f, 0, SEEK_SET) == 0) {
+        if (!(*data = mcp_malloc((size_t)n + 1))) {
+            rc = -1;
+        } else if (fread(*data, 1, (size_t)n, f) != (size_t)n) {
+            free(*data);
+            *data = NULL;
+        }
     }
     fclose(f);
     *size = n > 0 ? (size_t)n : 0;
-    return data;
+    return rc;
 }
 
 /* One image of a section, read for embedding. */
@@ -703,8 +709,8 @@ render_images(sbuf *b, const cJSON *section, const char *dir, int section_index)
     const cJSON *images = cJSON_GetObjectItem(section, "images"), *ij;
     int n = cJSON_GetArraySize(images), k = 0;
     if (!n) return;
-    page_image *ims = calloc((size_t)n, sizeof *ims);
-    int *members = calloc((size_t)n, sizeof *members);
+    page_image *ims = mcp_calloc((size_t)n, sizeof *ims);
+    int *members = mcp_calloc((size_t)n, sizeof *members);
     if (!ims || !members) {
         free(ims);
         free(members);
@@ -722,7 +728,8 @@ render_images(sbuf *b, const cJSON *section, const char *dir, int section_index)
         snprintf(im->id, sizeof im->id, "im%d_%d", section_index, k);
         char full[4096];
         snprintf(full, sizeof full, "%s/%s", dir, im->rel);
-        im->data = im->mime ? read_file(full, &im->size) : NULL;
+        im->data = NULL;
+        if (im->mime && read_file(full, &im->data, &im->size)) b->failed = 1;
         if (im->data) png_size(im);
         k++;
     }
@@ -753,7 +760,7 @@ static double *
 json_doubles(const cJSON *a, int *n)
 {
     *n = cJSON_GetArraySize(a);
-    double *v = malloc(((size_t)*n + 1) * sizeof *v);
+    double *v = mcp_malloc(((size_t)*n + 1) * sizeof *v);
     const cJSON *i;
     int k = 0;
     if (!v) return NULL;
@@ -779,7 +786,7 @@ render_plots(sbuf *b, const cJSON *section)
         mcp_error_clear();
         const cJSON *series = cJSON_GetObjectItem(pj, "series"), *sj;
         int n = cJSON_GetArraySize(series), k = 0;
-        mcp_plot_series *ps = calloc((size_t)n + 1, sizeof *ps);
+        mcp_plot_series *ps = mcp_calloc((size_t)n + 1, sizeof *ps);
         if (!ps) {
             b->failed = 1;
             return;
@@ -797,6 +804,7 @@ render_plots(sbuf *b, const cJSON *section)
             ps[k].x = x;
             ps[k].y = y;
             ps[k].n = x && y ? (nx < ny ? nx : ny) : 0;
+            if (!x || !y) b->failed = 1; /* out of memory (json_doubles) */
             k++;
         }
         mcp_error_clear();
@@ -806,6 +814,8 @@ render_plots(sbuf *b, const cJSON *section)
         sb_str(b, "<div class=\"plot\">");
         if (mcp_plot_svg(&p, &svg) == 0) {
             sb_str(b, svg);
+        } else if (strstr(mcp_error_message(), "out of memory")) {
+            b->failed = 1; /* not a plot that cannot be drawn: no page */
         } else {
             sb_str(b, "<div class=\"noimg\">");
             sb_text(b, mcp_error_message());

@@ -43,7 +43,7 @@ histogram_top(const float *v, size_t n, uint64_t *hist)
     memset(hist, 0, BINS * sizeof *hist);
 #pragma omp parallel reduction(+ : failed)
     {
-        uint64_t *mine = calloc(BINS, sizeof *mine);
+        uint64_t *mine = mcp_calloc(BINS, sizeof *mine);
         if (!mine) failed++;
 #pragma omp for schedule(static)
         for (size_t i = 0; i < n; i++)

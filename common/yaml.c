@@ -60,12 +60,12 @@ static int
 append(mcp_node *parent, mcp_node *key, mcp_node *value)
 {
     size_t n = (size_t)parent->count + 1;
-    mcp_node **items = realloc(parent->items, n * sizeof *items);
+    mcp_node **items = mcp_realloc(parent->items, n * sizeof *items);
     if (!items)
         return mcp_error("out of memory reading %s", parent->file);
     parent->items = items;
     if (parent->kind == MCP_NODE_MAP) {
-        mcp_node **keys = realloc(parent->keys, n * sizeof *keys);
+        mcp_node **keys = mcp_realloc(parent->keys, n * sizeof *keys);
         if (!keys)
             return mcp_error("out of memory reading %s", parent->file);
         parent->keys = keys;

@@ -190,7 +190,7 @@ emit(builder *b, int x, int y, int w, int h, const double sums[NQ])
 {
     if (b->count == b->cap) {
         int cap = b->cap ? 2 * b->cap : 256;
-        mcp_block *n = realloc(b->items, (size_t)cap * sizeof *n);
+        mcp_block *n = mcp_realloc(b->items, (size_t)cap * sizeof *n);
         if (!n) {
             b->failed = 1;
             return;

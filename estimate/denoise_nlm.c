@@ -170,11 +170,9 @@ work_alloc(nlm_work *wk, size_t floats)
 {
     if (wk->n_blocks == wk->cap_blocks) {
         int cap = wk->cap_blocks ? 2 * wk->cap_blocks : 16;
-        float **b = realloc(wk->blocks, (size_t)cap * sizeof *b);
-        if (!b) {
-            mcp_error("out of memory (%zu bytes)", (size_t)cap * sizeof *b);
+        float **b = mcp_realloc(wk->blocks, (size_t)cap * sizeof *b);
+        if (!b)
             return NULL;
-        }
         wk->blocks = b;
         wk->cap_blocks = cap;
     }
@@ -601,7 +599,7 @@ run_all(const char *who, const nlm_params *p, const nlm_work *wk, const nlm_out 
     size_t floats = scratch_floats(wk, p->patch_radius);
 #pragma omp parallel if ((size_t)wk->w * wk->h >= PARALLEL_MIN_PIXELS && n_strips > 1)
     {
-        float *buf = malloc(floats * sizeof *buf);
+        float *buf = mcp_malloc(floats * sizeof *buf);
         nlm_scratch s = {0};
         if (!buf) {
 #pragma omp atomic write

@@ -12,26 +12,112 @@
  * MCPOST_UNET_FIXED=1 does for a whole process). The autoexposure scale is
  * computed on the primal colour and held constant in the JVP (unet_internal.h).
  * Weights for colour + albedo + normal need both features; colour + albedo weights
- * need the albedo. */
+ * need the albedo.
+ *
+ * Loaded weights are shared within the process (shared_load below): reading and
+ * checking a .tza costs more than everything else a job's check does, and a job
+ * creates each stage's denoiser twice (to check it, then to run it), a Python
+ * session once per call. */
+#define _POSIX_C_SOURCE 200809L /* struct stat's st_mtim */
 #include <mcpost/denoiser.h>
 
 #include "internal.h"
 #include "unet_internal.h"
 
 #include <math.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 #define WEIGHTS_ENV "MCPOST_OIDN_WEIGHTS"
 /* The weights mcpost ships (weights/, installed to share/mcpost/). */
 #define SHIPPED_WEIGHTS "rt_hdr_alb_nrm.tza"
 
 typedef struct {
-    mcp__unet *net;
+    mcp__unet net;      /* borrows the shared network's tensors; own fixed_bits */
+    mcp__unet *shared;  /* what shared_load gave, for shared_release */
     double input_scale; /* <= 0: autoexposure */
     int tile;           /* 0: as memory allows */
 } unet_state;
+
+/* ---- weights shared within the process ----
+ * A network, once loaded, is never written again, so denoisers can share it. Each
+ * file loaded stays in one of SHARED_SLOTS slots, keyed by what stat says of it
+ * (device, inode, size, modification time): a file rewritten since is a new key and
+ * is read again, and a slot no denoiser uses is reused for the next file. When every
+ * slot is in use the network is the denoiser's own. */
+#define SHARED_SLOTS 4
+
+typedef struct {
+    dev_t dev;
+    ino_t ino;
+    off_t size;
+    struct timespec mtime;
+    mcp__unet *net; /* NULL: a free slot */
+    int users;
+} shared_slot;
+
+static shared_slot shared[SHARED_SLOTS];
+static pthread_mutex_t shared_lock = PTHREAD_MUTEX_INITIALIZER;
+
+static int
+same_file(const shared_slot *s, const struct stat *st)
+{
+    return s->net && s->dev == st->st_dev && s->ino == st->st_ino &&
+           s->size == st->st_size && s->mtime.tv_sec == st->st_mtim.tv_sec &&
+           s->mtime.tv_nsec == st->st_mtim.tv_nsec;
+}
+
+/* mcp__unet_load through the slots; release with shared_release. */
+static int
+shared_load(const char *path, mcp__unet **out)
+{
+    struct stat st;
+    if (stat(path, &st) != 0) /* let the loader say why */
+        return mcp__unet_load(path, out);
+    pthread_mutex_lock(&shared_lock);
+    for (int i = 0; i < SHARED_SLOTS; i++)
+        if (same_file(&shared[i], &st)) {
+            shared[i].users++;
+            *out = shared[i].net;
+            pthread_mutex_unlock(&shared_lock);
+            return 0;
+        }
+    pthread_mutex_unlock(&shared_lock);
+    if (mcp__unet_load(path, out)) /* outside the lock: it is the slow part */
+        return -1;
+    pthread_mutex_lock(&shared_lock);
+    shared_slot *slot = NULL;
+    for (int i = 0; i < SHARED_SLOTS && !slot; i++)
+        if (!shared[i].net)
+            slot = &shared[i];
+    for (int i = 0; i < SHARED_SLOTS && !slot; i++)
+        if (!shared[i].users) {
+            mcp__unet_free(shared[i].net);
+            slot = &shared[i];
+        }
+    if (slot)
+        *slot = (shared_slot){st.st_dev, st.st_ino, st.st_size, st.st_mtim, *out, 1};
+    pthread_mutex_unlock(&shared_lock);
+    return 0;
+}
+
+static void
+shared_release(mcp__unet *net)
+{
+    pthread_mutex_lock(&shared_lock);
+    int kept = 0;
+    for (int i = 0; i < SHARED_SLOTS && !kept; i++)
+        if (shared[i].net == net) {
+            shared[i].users--;
+            kept = 1;
+        }
+    pthread_mutex_unlock(&shared_lock);
+    if (!kept)
+        mcp__unet_free(net);
+}
 
 static const char *const unet_keys[] = {"weights", "input_scale", "tile", "fixed_bits",
                                         NULL};
@@ -47,7 +133,7 @@ unet_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
     /* the features these weights need, and the tangents, mcp__unet_run checks */
     if (mcp__denoise_check_input("unet", at)) return -1;
     if (n > 0 && !out) return mcp_error("unet: no room for %d tangent outputs", n);
-    return mcp__unet_run_tiled(s->net, at->color, at->albedo, at->normal, s->input_scale,
+    return mcp__unet_run_tiled(&s->net, at->color, at->albedo, at->normal, s->input_scale,
                                t, n, s->tile, primal, out);
 }
 
@@ -62,7 +148,7 @@ static void
 unet_destroy(mcp_denoiser *self)
 {
     unet_state *s = self->state;
-    mcp__unet_free(s->net);
+    shared_release(s->shared);
     free(self);
 }
 
@@ -114,18 +200,19 @@ unet_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
     else
         snprintf(path, sizeof path, "%s", weights);
     mcp__unet *net = NULL;
-    if (mcp__unet_load(path, &net)) {
+    if (shared_load(path, &net)) {
         const mcp_node *w = mcp_node_get(settings, "weights");
         return w ? mcp_error_prefix("%s:%d: ", w->file, w->line) : -1;
     }
     mcp_denoiser *d = mcp__denoiser_new("unet", sizeof(unet_state));
     if (!d) {
-        mcp__unet_free(net);
+        shared_release(net);
         return -1;
     }
-    net->fixed_bits = fixed_bits;
     unet_state *s = d->state;
-    s->net = net;
+    s->shared = net;
+    s->net = *net;
+    s->net.fixed_bits = fixed_bits;
     s->input_scale = scale;
     s->tile = tile;
     d->destroy = unet_destroy;

@@ -171,8 +171,8 @@ mcp__buf_reserve(char **buf, size_t *cap, size_t need)
 {
     if (need <= *cap) return 0;
     size_t c = need * 2;
-    char *b = realloc(*buf, c);
-    if (!b) return mcp_error("out of memory (%zu bytes)", c);
+    char *b = mcp_realloc(*buf, c);
+    if (!b) return -1;
     *buf = b;
     *cap = c;
     return 0;

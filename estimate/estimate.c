@@ -244,8 +244,9 @@ mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,
     e->tau = o.tau;
     e->p = o.p;
     e->no_variance = !has_variance(dump);
-    e->stop =
-        mcp_error_should_stop(e->dist, o.tau, o.p, &e->cdf_at_tau) && !e->no_variance;
+    int stop = mcp_error_should_stop(e->dist, o.tau, o.p, &e->cdf_at_tau);
+    if (stop < 0) goto done;
+    e->stop = stop && !e->no_variance;
     double t4 = mcp__now_ms();
     e->n_percentiles = o.n_percentiles;
     memcpy(e->percentiles, o.percentiles, sizeof o.percentiles);
@@ -507,14 +508,16 @@ mcp_estimate_series(const mcp_series *series, const mcp_denoiser *den,
         }
         pt->spp = series->spp && series->spp[i] > 0 ? series->spp[i] : mean_spp(d);
         s->variance_source = d->variance_source; /* the last member's, in the end */
-        for (int j = 0; j < o.n_taus; j++)
-            pt->stop[j] =
-                mcp_error_should_stop(e->dist, o.taus[j], o.est.p, &pt->cdf[j]) &&
-                !e->no_variance;
+        int bad = 0;
+        for (int j = 0; j < o.n_taus && !bad; j++) {
+            int stop = mcp_error_should_stop(e->dist, o.taus[j], o.est.p, &pt->cdf[j]);
+            bad = stop < 0;
+            pt->stop[j] = stop > 0 && !e->no_variance;
+        }
         memcpy(pt->est_percentile, e->percentile_tau, sizeof e->percentile_tau);
         pt->est_mean_error = mcp_error_dist_mean(e->dist);
         pt->true_mean_error = NAN;
-        int bad = reference && member_truth(e, reference, &o, pt);
+        bad = bad || (reference && member_truth(e, reference, &o, pt));
         mcp_estimate_free(e);
         mcp_dump_free(d);
         if (bad) {

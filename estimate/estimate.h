@@ -282,11 +282,12 @@ MCP_API int mcp_error_dist_image(const mcp_error_dist *dist, mcp_image **out);
 /* The image error CDF F(τ) = mean_i F_i(τ) (Eq. 15), in float with a vectorised
  * normal tail (Abramowitz & Stegun 26.2.17): each F_i is within 2e-7 of
  * mcp_ncx2_cdf, far below the 1 - p = 1e-3 that the stopping decision resolves.
- * Sums in double per block row, blocks added in order. */
+ * Sums in double per block row, blocks added in order. NaN, with the error line set,
+ * when memory runs out. */
 MCP_API double mcp_error_cdf(const mcp_error_dist *dist, double tau);
 
-/* The stopping predicate F(τ) >= p (Eq. 16): 1 to stop, 0 to go on. cdf (may be NULL)
- * receives F(τ). */
+/* The stopping predicate F(τ) >= p (Eq. 16): 1 to stop, 0 to go on, -1 (error line
+ * set) when F(τ) is NaN (mcp_error_cdf). cdf (may be NULL) receives F(τ). */
 MCP_API int mcp_error_should_stop(const mcp_error_dist *dist, double tau, double p,
                                   double *cdf);
 

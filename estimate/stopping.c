@@ -281,16 +281,16 @@ mcp_error_cdf(const mcp_error_dist *d, double tau)
     if (!(tau > 0.0)) return 0.0;
     const mcp_blocks *b = d->blocks;
     const mcp_image *var = d->var_rel;
-    double *block_sum = malloc(((size_t)b->count + 1) * sizeof *block_sum);
-    if (!block_sum) return NAN;
+    double *block_sum = mcp_malloc(((size_t)b->count + 1) * sizeof *block_sum);
+    if (!block_sum) return NAN; /* the error line is set */
     float root_tau = (float)sqrt(tau);
     int failed = 0, n_max = 3 * d->max_w;
     int packed = var->pixel_stride == 3;
 #pragma omp parallel reduction(+ : failed)
     {
-        float *lpat = malloc((size_t)(n_max + 1) * sizeof *lpat);
-        float *g = malloc((size_t)(n_max + 1) * sizeof *g);
-        float *row = packed ? NULL : malloc((size_t)(n_max + 1) * sizeof *row);
+        float *lpat = mcp_malloc((size_t)(n_max + 1) * sizeof *lpat);
+        float *g = mcp_malloc((size_t)(n_max + 1) * sizeof *g);
+        float *row = packed ? NULL : mcp_malloc((size_t)(n_max + 1) * sizeof *row);
         if (!lpat || !g || (!packed && !row)) failed++;
 #pragma omp for schedule(dynamic, 1)
         for (int i = 0; i < b->count; i++) {
@@ -321,7 +321,14 @@ mcp_error_cdf(const mcp_error_dist *d, double tau)
     for (int i = 0; i < b->count; i++)
         total += block_sum[i];
     free(block_sum);
-    return failed ? NAN : total / (double)d->n_values;
+    if (failed) {
+        mcp_error("error CDF: out of memory");
+        return NAN;
+    }
+    double f = total / (double)d->n_values;
+    if (isnan(f))
+        mcp_error("error CDF at tau %g is not a number", tau);
+    return f;
 }
 
 int
@@ -329,7 +336,7 @@ mcp_error_should_stop(const mcp_error_dist *d, double tau, double p, double *cdf
 {
     double f = mcp_error_cdf(d, tau);
     if (cdf) *cdf = f;
-    return f >= p;
+    return isnan(f) ? -1 : f >= p;
 }
 
 /* ---- percentiles ----
@@ -392,9 +399,9 @@ static int
 bin_set_alloc(bin_set *b, long n)
 {
     b->n = 0;
-    b->s2 = malloc((size_t)(n + 1) * sizeof *b->s2);
-    b->l = malloc((size_t)(n + 1) * sizeof *b->l);
-    b->count = malloc((size_t)(n + 1) * sizeof *b->count);
+    b->s2 = mcp_malloc((size_t)(n + 1) * sizeof *b->s2);
+    b->l = mcp_malloc((size_t)(n + 1) * sizeof *b->l);
+    b->count = mcp_malloc((size_t)(n + 1) * sizeof *b->count);
     return b->s2 && b->l && b->count ? 0 : -1;
 }
 
@@ -431,7 +438,14 @@ bin_block(const mcp_error_dist *d, int i, uint32_t *hist[3], binned_dist *out)
     memset(out, 0, sizeof *out);
     out->top = 0.0;
     out->s2_min = INFINITY;
-    if (bin_set_alloc(&out->fine, cap) || bin_set_alloc(&out->coarse, cap)) return -1;
+    if (bin_set_alloc(&out->fine, cap) || bin_set_alloc(&out->coarse, cap)) {
+        /* leave the tables zeroed for this thread's next block, which would otherwise
+           find more bins than its capacity */
+        for (int c = 0; c < 3; c++)
+            if (hi[c] >= lo[c])
+                memset(hist[c] + lo[c], 0, (size_t)(hi[c] - lo[c] + 1) * sizeof *hist[c]);
+        return -1;
+    }
     const int merge = COARSE_SHIFT - FINE_SHIFT;
     for (int c = 0; c < 3; c++) {
         float l = d->sqrt_lambda[3 * i + c];
@@ -491,14 +505,14 @@ binned_new(const mcp_error_dist *d, binned_dist *bd)
     bd->n_values = (double)d->n_values;
     bd->top = 0.0;
     bd->s2_min = INFINITY;
-    binned_dist *parts = calloc((size_t)b->count + 1, sizeof *parts);
+    binned_dist *parts = mcp_calloc((size_t)b->count + 1, sizeof *parts);
     if (!parts) return mcp_error("out of memory (error percentiles)");
     int failed = 0;
 #pragma omp parallel reduction(+ : failed)
     {
         uint32_t *hist[3];
         for (int c = 0; c < 3; c++)
-            hist[c] = calloc(FINE_KEYS, sizeof *hist[c]);
+            hist[c] = mcp_calloc(FINE_KEYS, sizeof *hist[c]);
         int ok = hist[0] && hist[1] && hist[2];
         failed += !ok;
 #pragma omp for schedule(dynamic, 1)
@@ -533,7 +547,7 @@ static int
 bin_set_cdf(const bin_set *b, double n_values, int m, const double *tau, double *f)
 {
     long n_chunks = (b->n + BIN_CHUNK - 1) / BIN_CHUNK;
-    double *chunk_sum = malloc((size_t)(n_chunks * m + 1) * sizeof *chunk_sum);
+    double *chunk_sum = mcp_malloc((size_t)(n_chunks * m + 1) * sizeof *chunk_sum);
     if (!chunk_sum) return -1;
 #pragma omp parallel if (n_chunks * m > 4)
     {

@@ -35,8 +35,8 @@ append(char **s, size_t *len, size_t *cap, const char *text, size_t n, int quote
     size_t need = *len + (quote ? 4 * n + 2 : n) + 1;
     if (need > *cap) {
         size_t c = need * 2;
-        char *p = realloc(*s, c);
-        if (!p) return mcp_error("out of memory");
+        char *p = mcp_realloc(*s, c);
+        if (!p) return -1;
         *s = p;
         *cap = c;
     }

@@ -197,12 +197,12 @@ mcp__perc_add_file(mcp__perc_run *r, const mcp_image *img)
     mcp_dump *d = NULL;
     mcp_image *rgb = NULL;
     size_t n = (size_t)r->n_files + 1;
-    mcp_image **files = realloc(r->files, n * sizeof *files);
+    mcp_image **files = mcp_realloc(r->files, n * sizeof *files);
     if (files) r->files = files;
-    mcp_image **albedo = files ? realloc(r->albedos, n * sizeof *albedo) : NULL;
+    mcp_image **albedo = files ? mcp_realloc(r->albedos, n * sizeof *albedo) : NULL;
     if (albedo) r->albedos = albedo;
-    mcp_image **normal = albedo ? realloc(r->normals, n * sizeof *normal) : NULL;
-    if (!normal) return mcp_error("out of memory");
+    mcp_image **normal = albedo ? mcp_realloc(r->normals, n * sizeof *normal) : NULL;
+    if (!normal) return -1;
     r->normals = normal;
     if (mcp_dump_from_image(img, NULL, &d) == 0) { /* the dump's parts are the run's now */
         rgb = d->color;

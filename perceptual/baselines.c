@@ -37,8 +37,8 @@ mcp_perc_histogram(const mcp_image *const *cands, int m, const mcp_perc_options 
     int failed = 0;
 #pragma omp parallel reduction(+ : failed) if (n >= 16384)
     {
-        int *order = malloc((size_t)m * sizeof *order);
-        float *lum = malloc((size_t)m * sizeof *lum);
+        int *order = mcp_malloc((size_t)m * sizeof *order);
+        float *lum = mcp_malloc((size_t)m * sizeof *lum);
         failed += !order || !lum;
 #pragma omp for
         for (int y = 0; y < h; y++)

@@ -116,13 +116,13 @@ mcp_perc_dither(const mcp_image *const *cands, int m, const mcp_image *surrogate
     {
         /* a row at a time: T and luminance of the surrogate (lum[m]) and of every
          * candidate (lum[j]) in contiguous loops, then the selection per pixel */
-        float *tone = malloc((size_t)w * 3 * sizeof *tone);
+        float *tone = mcp_malloc((size_t)w * 3 * sizeof *tone);
         /* rows apart by an odd number of cache lines: at a power-of-two distance the
          * loads of one pixel's luminances would contend for the same cache set */
         size_t lstride = ((size_t)w + 15) / 16 * 16 + 16;
-        float *lum = malloc(((size_t)m + 1) * lstride * sizeof *lum);
-        float *thr = malloc((size_t)w * sizeof *thr);
-        int *pick = malloc((size_t)w * sizeof *pick);
+        float *lum = mcp_malloc(((size_t)m + 1) * lstride * sizeof *lum);
+        float *thr = mcp_malloc((size_t)w * sizeof *thr);
+        int *pick = mcp_malloc((size_t)w * sizeof *pick);
         int ok = tone && lum && thr && pick;
         failed += !ok;
 #pragma omp for schedule(static)

@@ -229,7 +229,7 @@ double
 mcp__state_energy_full(const mcp__perc_state *s)
 {
     int w = s->w, h = s->h, r = s->g.r, side = s->g.side;
-    double *rows = malloc((size_t)h * sizeof *rows), e = 0.0;
+    double *rows = mcp_malloc((size_t)h * sizeof *rows), e = 0.0;
     if (!rows) return NAN;
 #pragma omp parallel for if ((size_t)w * h >= 16384)
     for (int y = 0; y < h; y++) {

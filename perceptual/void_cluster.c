@@ -188,7 +188,7 @@ cache_read(const char *path, int size, int *rank)
     int n = size * size, rc = -1;
     unsigned char *seen = NULL;
     if (mcp_image_read(path, NULL, &img) || img->width != size || img->height != size ||
-        mcp_image_channel(img, "rank") < 0 || !(seen = calloc((size_t)n, 1)))
+        mcp_image_channel(img, "rank") < 0 || !(seen = mcp_calloc((size_t)n, 1)))
         goto done;
     int c = mcp_image_channel(img, "rank");
     for (int y = 0; y < size; y++)

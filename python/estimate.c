@@ -84,7 +84,10 @@ result_dict(mcp_estimate *e, const mcp_estimate_options *o, const double *taus, 
     }
     double cdf[MCP_ESTIMATE_MAX_TAUS];
     for (int j = 0; j < n_taus; j++)
-        cdf[j] = mcp_error_cdf(e->dist, taus[j]);
+        if (isnan(cdf[j] = mcp_error_cdf(e->dist, taus[j]))) {
+            mcp_py_fail();
+            goto fail;
+        }
     double lambda = 0, s2 = 0, n = (double)e->blocks->width * e->blocks->height * 3;
     for (int i = 0; i < e->blocks->count; i++) {
         const mcp_block *k = &e->blocks->items[i];

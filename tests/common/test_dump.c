@@ -338,6 +338,141 @@ test_series_pattern(void **state)
     free(longest);
 }
 
+/* ---- dumps in memory (mcp_dump_read_memory) ---- */
+
+/* The bytes of a file, *size of them; NULL-free (fails the test). */
+static unsigned char *
+slurp(const char *path, size_t *size)
+{
+    FILE *f = fopen(path, "rb");
+    assert_non_null(f);
+    assert_int_equal(fseek(f, 0, SEEK_END), 0);
+    long n = ftell(f);
+    assert_true(n > 0);
+    rewind(f);
+    unsigned char *buf = malloc((size_t)n);
+    assert_non_null(buf);
+    assert_int_equal(fread(buf, 1, (size_t)n, f), (size_t)n);
+    fclose(f);
+    *size = (size_t)n;
+    return buf;
+}
+
+static void
+assert_same_dump(const mcp_dump *a, const mcp_dump *b)
+{
+    assert_same_image(a->color, b->color);
+    assert_same_image(a->var_of_mean, b->var_of_mean);
+    assert_same_image(a->cov_of_mean, b->cov_of_mean);
+    assert_same_image(a->albedo, b->albedo);
+    assert_same_image(a->normal, b->normal);
+    assert_same_image(a->spp_map, b->spp_map);
+    assert_true(a->spp == b->spp);
+    assert_int_equal(a->convention, b->convention);
+    assert_int_equal(a->variance_in_file, b->variance_in_file);
+    assert_int_equal(a->attrs.count, b->attrs.count);
+    assert_string_equal(a->source, b->source);
+}
+
+/* A committed render (Blender's convention: colour, variance, albedo, normal, sample
+ * count in the header) from its path and from its bytes. */
+static void
+test_read_memory_fixture(void **state)
+{
+    (void)state;
+    char path[4096];
+    snprintf(path, sizeof path, "%s/samples/fixtures/cornell/series/cornell_spp0016.exr",
+             MCP_TEST_SOURCE_DIR);
+    size_t size;
+    unsigned char *bytes = slurp(path, &size);
+    mcp_dump *from_file = NULL, *from_memory = NULL;
+    assert_int_equal(mcp_dump_read(path, &from_file), 0);
+    assert_non_null(from_file->var_of_mean);
+    assert_non_null(from_file->albedo);
+    assert_non_null(from_file->normal);
+    mcp_dump_spec spec = mcp_dump_spec_defaults();
+    spec.path = path; /* names it only */
+    mcp_dump_buffers parts = {.main = {bytes, size}};
+    assert_int_equal(mcp_dump_read_memory(&spec, &parts, &from_memory), 0);
+    assert_same_dump(from_file, from_memory);
+    mcp_dump_free(from_memory);
+    /* without a path the buffer is named by its part */
+    assert_int_equal(mcp_dump_read_memory(NULL, &parts, &from_memory), 0);
+    assert_string_equal(from_memory->source, "main (in memory)");
+    assert_same_image(from_file->color, from_memory->color);
+    mcp_dump_free(from_memory);
+
+    /* every separate part, in both formats, from files and from memory */
+    static const char *const files[5] = {"m_main.pfm", "m_var.exr", "m_alb.pfm",
+                                         "m_nrm.exr", "m_spp.pfm"};
+    mcp_image *spp_map = mcp_test_random(from_file->color->width,
+                                         from_file->color->height, 1, 1.0f, 64.0f, 7,
+                                         (const char *[]){"n"});
+    const mcp_image *images[5] = {from_file->color, from_file->var_of_mean,
+                                  from_file->albedo, from_file->normal, spp_map};
+    for (int i = 0; i < 5; i++)
+        assert_int_equal(mcp_image_write(images[i], mcp_test_path(files[i]), NULL), 0);
+    spec = mcp_dump_spec_defaults();
+    spec.variance = MCP_VAR_PER_SAMPLE; /* per-sample, over the map's counts */
+    const char **paths[5] = {&spec.path, &spec.variance_path, &spec.albedo_path,
+                             &spec.normal_path, &spec.spp_map_path};
+    mcp_dump_buffer *bufs[5] = {&parts.main, &parts.variance, &parts.albedo,
+                                &parts.normal, &parts.spp_map};
+    unsigned char *data[5];
+    size_t sizes[5];
+    for (int i = 0; i < 5; i++) {
+        *paths[i] = mcp_test_path(files[i]);
+        data[i] = slurp(*paths[i], &sizes[i]);
+        *bufs[i] = (mcp_dump_buffer){data[i], sizes[i]};
+    }
+    mcp_dump *separate = NULL;
+    assert_int_equal(mcp_dump_load(&spec, &separate), 0);
+    assert_non_null(separate->spp_map);
+    assert_int_equal(mcp_dump_read_memory(&spec, &parts, &from_memory), 0);
+    assert_same_dump(separate, from_memory);
+    mcp_dump_free(from_memory);
+    /* some parts in memory, the others from their files */
+    parts.main = parts.normal = (mcp_dump_buffer){0};
+    assert_int_equal(mcp_dump_read_memory(&spec, &parts, &from_memory), 0);
+    assert_same_dump(separate, from_memory);
+    mcp_dump_free(from_memory);
+    mcp_dump_free(separate);
+
+    /* a truncated or corrupt buffer: one line that names the part */
+    static const char *const roles[5] = {"main", "variance", "albedo", "normal",
+                                         "spp map"};
+    for (int i = 0; i < 5; i++)
+        for (int corrupt = 0; corrupt < 2; corrupt++) {
+            spec = mcp_dump_spec_defaults();
+            spec.spp = 16;
+            mcp_dump_buffers bad = {.main = {data[0], sizes[0]}};
+            mcp_dump_buffer *b = (mcp_dump_buffer *[]){&bad.main, &bad.variance,
+                                                       &bad.albedo, &bad.normal,
+                                                       &bad.spp_map}[i];
+            unsigned char *copy = malloc(sizes[i]);
+            assert_non_null(copy);
+            memcpy(copy, data[i], sizes[i]);
+            size_t n = sizes[i] / 2; /* truncated in its pixels */
+            if (corrupt) /* a PFM header that promises more than it holds */
+                n = (size_t)snprintf((char *)copy, sizes[i], "PF\n3 99999\n-1\n");
+            *b = (mcp_dump_buffer){copy, n};
+            char needle[64];
+            snprintf(needle, sizeof needle, "%s (in memory): ", roles[i]);
+            assert_error_contains(mcp_dump_read_memory(&spec, &bad, &from_memory),
+                                  needle);
+            assert_null(from_memory);
+            assert_null(strchr(mcp_error_message(), '\n'));
+            free(copy);
+        }
+    assert_error_contains(mcp_dump_read_memory(NULL, NULL, &from_memory),
+                          "render dump: no file given");
+    for (int i = 0; i < 5; i++)
+        free(data[i]);
+    mcp_image_free(spp_map);
+    mcp_dump_free(from_file);
+    free(bytes);
+}
+
 int
 main(void)
 {
@@ -351,6 +486,7 @@ main(void)
         cmocka_unit_test(test_plain_with_separate_files),
         cmocka_unit_test(test_bad_values),
         cmocka_unit_test(test_series_pattern),
+        cmocka_unit_test(test_read_memory_fixture),
     };
     return cmocka_run_group_tests_name("common/dump", tests, NULL, NULL);
 }

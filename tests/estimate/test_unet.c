@@ -7,6 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <fcntl.h> /* AT_FDCWD */
 #include <sys/stat.h>
 #include <unistd.h>
 #ifdef _OPENMP
@@ -923,6 +924,53 @@ weights_path(void)
 
 /* The shipped weights are the file weights/README.md names: its SHA-256 (by coreutils'
  * sha256sum), and the same bytes in the build tree's share/mcpost/. */
+/* Denoisers on one weights file share the network loaded once (denoise_unet.c):
+ * freeing one leaves the others whole, and a file rewritten since is read again. */
+static void
+test_shared_weights(void **state)
+{
+    (void)state;
+    const int w = 20, h = 18;
+    const size_t bytes = (size_t)w * h * 3 * sizeof(float);
+    const char *path = mcp_test_path("shared.tza");
+    rnet n1, n2;
+    rnet_make(&n1, 9, tiny, 71);
+    rnet_make(&n2, 9, tiny, 72);
+    mcp_test_tza_write(path, n1.t, 32, 'f');
+    char yaml[8192];
+    snprintf(yaml, sizeof yaml, "{name: unet, weights: '%s', input_scale: 1}", path);
+    inputs in = make_inputs(w, h, 9);
+    mcp_denoise_input at = {in.col, in.alb, in.nrm, NULL};
+    mcp_denoiser *d1 = mcp_test_denoiser(yaml), *d2 = mcp_test_denoiser(yaml);
+    mcp_image *a1 = NULL, *a2 = NULL, *b = NULL, *c = NULL, *want = NULL;
+    assert_int_equal(d1->apply(d1, &at, &a1), 0);
+    mcp_denoiser_free(d1);
+    assert_int_equal(d2->apply(d2, &at, &a2), 0); /* ASan: nothing freed under it */
+    assert_memory_equal(a1->data, a2->data, bytes);
+    /* the same path, other weights, the same size: a later modification time */
+    mcp_test_tza_write(path, n2.t, 32, 'f');
+    struct timespec later[2] = {{0, UTIME_OMIT}, {time(NULL) + 10, 0}};
+    assert_int_equal(utimensat(AT_FDCWD, path, later, 0), 0);
+    mcp_denoiser *d3 = mcp_test_denoiser(yaml);
+    assert_int_equal(d3->apply(d3, &at, &c), 0);
+    mcp__unet *net2 = NULL;
+    assert_int_equal(mcp__unet_load(path, &net2), 0);
+    assert_int_equal(mcp__unet_forward(net2, in.col, in.alb, in.nrm, 1.0, &want), 0);
+    assert_memory_equal(c->data, want->data, bytes);
+    assert_memory_not_equal(c->data, a2->data, bytes);
+    /* the first network still serves the denoiser made before the rewrite */
+    assert_int_equal(d2->apply(d2, &at, &b), 0);
+    assert_memory_equal(b->data, a2->data, bytes);
+    mcp_denoiser_free(d2);
+    mcp_denoiser_free(d3);
+    mcp__unet_free(net2);
+    mcp_image_free(a1), mcp_image_free(a2), mcp_image_free(b), mcp_image_free(c);
+    mcp_image_free(want);
+    free_inputs(&in);
+    rnet_free(&n1);
+    rnet_free(&n2);
+}
+
 static void
 test_shipped_weights_checksum(void **state)
 {
@@ -1360,6 +1408,7 @@ main(void)
         cmocka_unit_test(test_memory_tiles),
         cmocka_unit_test(test_denoiser_kind),
         cmocka_unit_test(test_real_weights_load),
+        cmocka_unit_test(test_shared_weights),
         cmocka_unit_test(test_shipped_weights_checksum),
         cmocka_unit_test(test_real_weights_fixtures),
         cmocka_unit_test(test_real_weights_jvp),

@@ -3,9 +3,9 @@
  *
  * The input is up to five files separated by the line "MCPPART\n": the main file,
  * then the variance, albedo, normal and per-pixel spp files (an empty part is a file
- * not given). Each part is an EXR when it starts with EXR's magic number and a PFM
- * otherwise. The first byte of the main file picks the bad-value policy, so both the
- * failing and the replacing paths are searched. */
+ * not given), all read from memory (mcp_dump_read_memory), which tells EXR from PFM
+ * by the first bytes: no file is written. The first byte of the main file picks the
+ * bad-value policy, so both the failing and the replacing paths are searched. */
 #include "fuzz.h"
 
 #include <mcpost/dump.h>
@@ -18,7 +18,6 @@
 int
 LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
-    static const char *const roles[N_PARTS] = {"main", "var", "albedo", "normal", "spp"};
     const uint8_t *part[N_PARTS] = {0};
     size_t len[N_PARTS] = {0};
     const size_t sep = sizeof SEPARATOR - 1;
@@ -41,21 +40,15 @@ LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 
     mcp_dump_spec spec = mcp_dump_spec_defaults();
     spec.bad_values = (mcp_badval_policy)(part[0][0] % 2);
-    const char **paths[N_PARTS] = {&spec.path, &spec.variance_path, &spec.albedo_path,
-                                   &spec.normal_path, &spec.spp_map_path};
-    for (int i = 0; i < N_PARTS; i++) {
-        if (!part[i] || len[i] == 0)
-            continue;
-        /* files in memory for now; mcp_image_read_memory (and a dump reader on it)
-           replaces them once that reader lands */
-        char name[32];
-        int exr = len[i] >= 4 && memcmp(part[i], "\x76\x2f\x31\x01", 4) == 0;
-        strcpy(name, roles[i]);
-        strcat(name, exr ? ".exr" : ".pfm");
-        *paths[i] = mcp_fuzz_file(i, name, part[i], len[i]);
-    }
+    /* every part from memory (mcp_dump_read_memory), named by its role */
+    mcp_dump_buffers parts = {0};
+    mcp_dump_buffer *bufs[N_PARTS] = {&parts.main, &parts.variance, &parts.albedo,
+                                      &parts.normal, &parts.spp_map};
+    for (int i = 0; i < N_PARTS; i++)
+        if (part[i] && len[i] > 0)
+            *bufs[i] = (mcp_dump_buffer){part[i], len[i]};
     mcp_dump *dump = NULL;
-    int rc = mcp_dump_load(&spec, &dump);
+    int rc = mcp_dump_read_memory(&spec, &parts, &dump);
     mcp_fuzz_check_error(rc, "dump load");
     if (rc == 0) {
         if (!dump || !dump->color)

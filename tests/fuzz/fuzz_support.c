@@ -1,7 +1,6 @@
 /* fuzz_support.c: scratch files and the error contract for the fuzz targets (fuzz.h).
- * The readers under test take paths; the targets write each input to a file in
- * memory (/dev/shm) and read it back. The in-memory readers that are on their way
- * (mcp_image_read_memory) will let the image targets drop this. */
+ * The readers are fuzzed from memory; files (in /dev/shm) remain for what takes a
+ * path: the image targets' check that the file readers agree, and the job check. */
 #define _POSIX_C_SOURCE 200809L
 #include "fuzz.h"
 
