@@ -9,7 +9,9 @@
 #
 # MCPOST_FUZZ_RUNS=N stops each target after N executions instead of the time limit
 # (a campaign: MCPOST_FUZZ_RUNS=10000000 tests/fuzz/run.sh build-fuzz 0).
-# MCPOST_FUZZ_JOBS=N runs N targets at a time [1]. The last line per target is
+# MCPOST_FUZZ_JOBS=N runs N targets at a time [1]. MCPOST_FUZZ_MAX_LEN=N caps the
+# inputs at N bytes [65536]: a job campaign at 4096 stays on job files of a few dozen
+# stages, which the checks take thousands of times a second (docs/testing.md). The last line per target is
 # "fuzz: TARGET: N executions in S s, no findings".
 set -uo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
@@ -19,6 +21,7 @@ shift $(($# > 1 ? 2 : 1))
 targets=("$@")
 [ ${#targets[@]} -gt 0 ] || targets=(pfm exr dump job tza)
 runs=${MCPOST_FUZZ_RUNS:--1}
+max_len=${MCPOST_FUZZ_MAX_LEN:-65536}
 
 run_one() { # run_one TARGET: one target, its log in BUILD_DIR/fuzz/TARGET.log
     local t=$1 bin=$build/tests/fuzz/fuzz_$1 out=$build/fuzz
@@ -34,7 +37,7 @@ run_one() { # run_one TARGET: one target, its log in BUILD_DIR/fuzz/TARGET.log
     local dict=()
     [ -f "$here/$t.dict" ] && dict=(-dict="$here/$t.dict")
     # the regressions are read as seeds too: each run starts by replaying them
-    "$bin" "${limit[@]}" "${dict[@]}" -timeout=10 -rss_limit_mb=2048 -max_len=65536 \
+    "$bin" "${limit[@]}" "${dict[@]}" -timeout=10 -rss_limit_mb=2048 -max_len="$max_len" \
         -print_final_stats=1 -artifact_prefix="$findings/" \
         "$corpus" "$here/corpus/$t" "$here/regressions/$t" >"$log" 2>&1
     local rc=$? execs secs
