@@ -338,3 +338,12 @@ mcp_report_write(mcp_report *r, const char *dir)
     free(html);
     return rc;
 }
+
+void
+mcp_report_add_number(cJSON *o, const char *key, double v)
+{
+    if (isfinite(v))
+        cJSON_AddNumberToObject(o, key, v);
+    else
+        cJSON_AddNullToObject(o, key);
+}

@@ -39,6 +39,9 @@ typedef struct mcp_report mcp_report;
 MCP_API int mcp_report_new(const char *title, mcp_report **out);
 MCP_API void mcp_report_free(mcp_report *r);
 
+/* Adds key: v to o, or key: null when v is not finite (JSON has no NaN or Inf). */
+MCP_API void mcp_report_add_number(cJSON *o, const char *key, double v);
+
 /* The whole JSON document: {"title": ..., "sections": [...]}. */
 MCP_API cJSON *mcp_report_json(mcp_report *r);
 

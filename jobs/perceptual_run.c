@@ -365,27 +365,18 @@ keep_result(void *ctx, mcp_perc_method method, const mcp_perc_result *res,
 }
 
 static void
-add_number(cJSON *o, const char *key, double v)
-{
-    if (isfinite(v))
-        cJSON_AddNumberToObject(o, key, v);
-    else
-        cJSON_AddNullToObject(o, key);
-}
-
-static void
 add_scores(cJSON *o, const char *prefix, const mcp_perc_scores *s, int with_ref)
 {
     char key[128];
     snprintf(key, sizeof key, "%senergy", prefix);
-    add_number(o, key, s->energy);
+    mcp_report_add_number(o, key, s->energy);
     if (!with_ref) return;
     snprintf(key, sizeof key, "%spmse", prefix);
-    add_number(o, key, s->pmse);
+    mcp_report_add_number(o, key, s->pmse);
     snprintf(key, sizeof key, "%smse", prefix);
-    add_number(o, key, s->mse);
+    mcp_report_add_number(o, key, s->mse);
     snprintf(key, sizeof key, "%slow_freq_fraction", prefix);
-    add_number(o, key, s->low_freq_fraction);
+    mcp_report_add_number(o, key, s->low_freq_fraction);
 }
 
 /* The comparison as a report table. */
@@ -526,12 +517,12 @@ mcp__perceptual_run(mcp__perc_args *a, mcp__perc_run *r, cJSON **summary,
     cJSON_AddNumberToObject(s, "height", cands[0]->height);
     cJSON_AddStringToObject(s, "surrogate", surr_desc);
     cJSON_AddStringToObject(s, "tone_map", mcp_tonemap_name(a->opt.model.tone_map));
-    add_number(s, "confidence", r->confidence_map ? NAN : a->opt.model.confidence);
+    mcp_report_add_number(s, "confidence", r->confidence_map ? NAN : a->opt.model.confidence);
     cJSON_AddNumberToObject(s, "passes", res.passes);
     cJSON_AddNumberToObject(s, "changes", (double)res.changes);
-    add_number(s, "seconds", res.seconds);
-    add_number(s, "energy_initial", res.energy_initial);
-    add_number(s, "energy_final", res.energy_final);
+    mcp_report_add_number(s, "seconds", res.seconds);
+    mcp_report_add_number(s, "energy_initial", res.energy_initial);
+    mcp_report_add_number(s, "energy_final", res.energy_final);
     mcp_perc_scores sc, sm;
     const mcp_image *measured = again ? again : res.image;
     if (mcp_perc_score(measured, surr, mean, r->reference, &a->opt.model, a->spectra_tile,
@@ -551,8 +542,8 @@ mcp__perceptual_run(mcp__perc_args *a, mcp__perc_run *r, cJSON **summary,
     add_scores(s, "", &sc, r->reference != NULL);
     add_scores(s, "mean_", &sm, r->reference != NULL);
     if (r->reference) {
-        add_number(s, "pmse_ratio", sc.pmse / sm.pmse);
-        add_number(s, "white_fraction", sc.white_fraction);
+        mcp_report_add_number(s, "pmse_ratio", sc.pmse / sm.pmse);
+        mcp_report_add_number(s, "white_fraction", sc.white_fraction);
     }
     if (spec) {
         char caption[160];

@@ -64,15 +64,6 @@ mcp_perc_compare_defaults(void)
     return o;
 }
 
-static void
-add_number(cJSON *row, const char *key, double v)
-{
-    if (isfinite(v))
-        cJSON_AddNumberToObject(row, key, v);
-    else
-        cJSON_AddNullToObject(row, key);
-}
-
 static int
 add_row(cJSON *table, const char *method, const mcp_image *img,
         const mcp_image *surrogate, const mcp_image *mean,
@@ -85,14 +76,14 @@ add_row(cJSON *table, const char *method, const mcp_image *img,
     cJSON *row = cJSON_CreateObject();
     if (!row) return mcp_error("out of memory");
     cJSON_AddStringToObject(row, "method", method);
-    add_number(row, "energy", sc.energy);
+    mcp_report_add_number(row, "energy", sc.energy);
     if (opt->reference) {
-        add_number(row, "pmse", sc.pmse);
-        add_number(row, "mse", sc.mse);
-        add_number(row, "low_freq_fraction", sc.low_freq_fraction);
+        mcp_report_add_number(row, "pmse", sc.pmse);
+        mcp_report_add_number(row, "mse", sc.mse);
+        mcp_report_add_number(row, "low_freq_fraction", sc.low_freq_fraction);
     }
     if (r) {
-        add_number(row, "seconds", r->seconds);
+        mcp_report_add_number(row, "seconds", r->seconds);
         cJSON_AddNumberToObject(row, "passes", r->passes);
         cJSON_AddNumberToObject(row, "changes", (double)r->changes);
     }
