@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # setup.sh: everything from a fresh Debian 12 machine to results.
 #
-#   ./setup.sh demo    install what is missing, build, run samples/jobs/demo.yaml (and,
+#   ./setup.sh demo    install what is missing, build, run the frame job samples/jobs/
+#                      shot.yaml, the Python sample and samples/jobs/demo.yaml (and,
 #                      with chromium installed, screenshot its page: out/demo/report.png)
 #   ./setup.sh test    install what is missing, build (plain and ASan+UBSan), run all tests,
 #                      build everything with clang, run the SIMD modules' tests once
@@ -72,6 +73,15 @@ demo)
     install_packages
     build build
     link_python
+    # what is not a stage: a shot of frames (run two at a time, then one report over
+    # them; a second demo skips the frames already complete) and the Python module
+    # (estimated against true error over a progressive render, as a figure)
+    ./build/mcpost run samples/jobs/shot.yaml -j 2
+    ./build/mcpost collect out/shot
+    mkdir -p out/python
+    PYTHONPATH=$PWD/build/python "$PYTHON" samples/python/error_vs_spp.py \
+        -o out/python/error_vs_spp.png
+    # every stage, every module: the report ends the demo
     ./build/mcpost run samples/jobs/demo.yaml
     # where Chromium is installed (setup.sh test installs it): the page checked in a
     # real browser and a screenshot of it, out/demo/report.png

@@ -11,7 +11,7 @@ cd "$(dirname "$0")/.."
 RUNS=${1:-5}
 export OMP_NUM_THREADS=${OMP_NUM_THREADS:-2}
 MCPOST=$PWD/build/mcpost
-PROC=$PWD/build/samples/procedural/mcpost-procedural
+PROC=$PWD/build/mcpost-procedural
 WORK=${TMPDIR:-/tmp}/mcpost-e2e
 mkdir -p "$WORK"
 cd "$WORK"

@@ -50,8 +50,8 @@ static const char usage[] =
     "  --quiet                  no line per pass on stderr\n"
     "  --denoiser NAME          " MCP_CLI_DEFAULT_DENOISER "\n" MCP_CLI_DENOISER_USAGE(
         " ") "\n"
-             "examples (from the source folder; mcpost-procedural is built beside mcpost,\n"
-             "in build/samples/procedural/, and must be on the PATH):\n"
+             "examples (mcpost-procedural is built and installed beside mcpost, and mcpost\n"
+             "finds the programs beside it after those on the PATH):\n"
              "  mcpost adaptive --size 64x64 --budget 64 --denoiser nlm -o out/adaptive \\\n"
              "    --render 'mcpost-procedural --sample-counts {counts} --pass {pass} --seed {seed} -o {output}'\n"
              "  mcpost adaptive --size 64x64 --budget 96 --map tonemapped --spp-per-iteration 16 \\\n"

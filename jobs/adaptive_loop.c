@@ -293,6 +293,28 @@ done:
     return rc;
 }
 
+/* The section's verdict: where the loop stopped and what the estimate says of the
+ * result -- good when F(tau) >= p (the error is below tau for the share p of the
+ * values asked for), information otherwise, with the true relMSE when there is a
+ * reference. */
+static int
+adaptive_verdict(const mcp__adaptive_loop *c, const mcp_adaptive_result *r)
+{
+    const mcp_adaptive_iteration *last = &r->iterations[r->count - 1];
+    double tau = c->ao.est.tau, p = c->ao.est.p;
+    int reached = last->cdf_at_tau >= p;
+    char truth[96] = "";
+    if (c->reference)
+        snprintf(truth, sizeof truth, "; relMSE %.3g against the reference", last->relmse);
+    return mcp_report_set_verdict(
+        c->section, reached ? MCP_VERDICT_GOOD : MCP_VERDICT_INFO,
+        "%.1f spp in %d passes, stopped by the %s: F(tau = %g) = %.3f %s p = %g, %s%s",
+        last->mean_spp, r->count, stop_words[r->stopped_by], tau, last->cdf_at_tau,
+        reached ? ">=" : "<", p,
+        reached ? "the estimate says the image is done" : "more samples would still help",
+        truth);
+}
+
 /* Runs the loop and writes every output; *json (may be NULL) receives the figures. */
 int
 mcp__adaptive_run_loop(mcp__adaptive_loop *c, cJSON **json)
@@ -315,7 +337,8 @@ mcp__adaptive_run_loop(mcp__adaptive_loop *c, cJSON **json)
         mcp_dump_write(r->accumulated, path, MCP_CONV_MCPOST, NULL) ||
         path_in(c, path, sizeof path, "denoised.exr", 0) ||
         mcp_image_write(r->denoised, path, NULL) ||
-        write_text(c, "adaptive.json", text) || write_curves(c, r))
+        write_text(c, "adaptive.json", text) || write_curves(c, r) ||
+        (c->section && adaptive_verdict(c, r)))
         goto done;
     if (c->section) { /* the section owns the figures now */
         cJSON_AddItemToObject(c->section, "adaptive", j);

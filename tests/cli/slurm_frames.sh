@@ -16,7 +16,7 @@
 set -euo pipefail
 BUILD=$(cd "$1" && pwd)
 MCPOST=$BUILD/mcpost
-PROCEDURAL=$BUILD/samples/procedural/mcpost-procedural
+PROCEDURAL=$BUILD/mcpost-procedural
 
 T=""
 PIDS=()

@@ -7,7 +7,7 @@ set -euo pipefail
 cd "$(dirname "$0")"
 build=$(cd "$1" && pwd)
 mcpost=$build/mcpost
-procedural=$build/samples/procedural/mcpost-procedural
+procedural=$build/mcpost-procedural
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 mkdir -p corpus/{pfm,exr,dump,job,tza} regressions/{pfm,exr,dump,job,tza}

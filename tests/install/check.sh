@@ -18,6 +18,14 @@ cc -std=c11 "$src/consumer/consumer.c" -o "$work/pc-consumer" $(pkg-config --cfl
     -Wl,-rpath,"$(pkg-config --variable=libdir mcpost)"
 "$work/pc-consumer" "$work"
 test -s "$work/consumer.png"
+# the tool, installed with the procedural renderer beside it: an adaptive loop whose
+# render command names mcpost-procedural without a path finds it there (cli/main.c),
+# with a PATH that holds neither the build nor the prefix
+test -x "$prefix/bin/mcpost-procedural"
+PATH=/usr/bin:/bin "$prefix/bin/mcpost" adaptive --size 16x16 --budget 8 \
+    --spp-per-iteration 4 --denoiser gauss --quiet -o "$work/adaptive" \
+    --render 'mcpost-procedural --sample-counts {counts} --pass {pass} --seed {seed} -o {output}'
+test -s "$work/adaptive/accumulated.exr"
 # the Python module, when it was built: installed under the prefix, it imports from
 # there and finds libmcpost and the U-Net's weights (share/mcpost) relative to itself
 python=$(sed -n 's/^Python3_EXECUTABLE:[A-Z]*=//p' "$build/CMakeCache.txt")
@@ -33,4 +41,4 @@ assert mcpost.denoise(c, albedo=a, normal=n, denoiser="unet").shape == (32, 32, 
 ' "$prefix")
     echo "install check: the Python module imports from $(dirname "$module")"
 fi
-echo "install check: find_package and pkg-config consumers ran"
+echo "install check: find_package and pkg-config consumers ran; the installed tool found mcpost-procedural beside it"
