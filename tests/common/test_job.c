@@ -323,6 +323,18 @@ check_counted(mcp_job *job, const mcp_node *settings)
     return mcp_job_check_input(job, settings, "input", MCP_JOB_DUMP);
 }
 
+/* A frame job over one dump input, probed. */
+static const char *
+frame_job(const char *name, const char *frames, const char *dump)
+{
+    char text[512];
+    snprintf(text, sizeof text,
+             "frames: %s\ninputs:\n  noisy: {dump: %s}\n"
+             "stages:\n  - probe: {input: noisy}\n",
+             frames, dump);
+    return write_job(name, text);
+}
+
 static void
 test_frames_are_checked_by_their_inputs(void **state)
 {
@@ -331,11 +343,7 @@ test_frames_are_checked_by_their_inputs(void **state)
                                       check_counted};
     static const mcp_stage *const counted_table[] = {&counted, NULL};
     setup_input();
-    const char *same = write_job("same.yaml", "frames: 1-50000\n"
-                                              "inputs:\n"
-                                              "  noisy: {dump: in.exr}\n"
-                                              "stages:\n"
-                                              "  - probe: {input: noisy}\n");
+    const char *same = frame_job("same.yaml", "1-50000", "in.exr");
     check_calls = 0;
     assert_int_equal(mcp_job_check(same, counted_table), 0);
     assert_int_equal(check_calls, 1);
@@ -346,20 +354,12 @@ test_frames_are_checked_by_their_inputs(void **state)
         snprintf(cmd, sizeof cmd, "cp '%s' '%s/f_%04d.exr'", from, mcp_test_path(""), f);
         assert_int_equal(system(cmd), 0);
     }
-    const char *token = write_job("token.yaml", "frames: 1-3\n"
-                                                "inputs:\n"
-                                                "  noisy: {dump: f_####.exr}\n"
-                                                "stages:\n"
-                                                "  - probe: {input: noisy}\n");
+    const char *token = frame_job("token.yaml", "1-3", "f_####.exr");
     check_calls = 0;
     assert_error_contains(mcp_job_check(token, counted_table), "frame 3: ");
     assert_error_contains(-1, "f_0003.exr");
     assert_int_equal(check_calls, 1);
-    const char *two = write_job("two.yaml", "frames: 1-2\n"
-                                            "inputs:\n"
-                                            "  noisy: {dump: f_####.exr}\n"
-                                            "stages:\n"
-                                            "  - probe: {input: noisy}\n");
+    const char *two = frame_job("two.yaml", "1-2", "f_####.exr");
     assert_int_equal(mcp_job_check(two, counted_table), 0);
 }
 
