@@ -87,7 +87,7 @@ mcp_cli_shot_free(mcp_cli_shot *s)
 }
 
 int
-mcp_cli_shot_write_manifest(const mcp_cli_shot *s)
+mcp_cli_shot_write_manifest(mcp_cli_shot *s)
 {
     cJSON *m = cJSON_CreateObject(), *list = cJSON_CreateIntArray(s->all, s->n_all);
     char path[4200], *text = NULL;
@@ -104,6 +104,11 @@ mcp_cli_shot_write_manifest(const mcp_cli_shot *s)
     }
     snprintf(path, sizeof path, "%s/frames.json", s->output_dir);
     rc = mcp_make_dirs(s->output_dir) || mcp_write_file_atomic(path, text, strlen(text)) ? -1 : 0;
+    char *real = rc ? NULL : realpath(s->output_dir, NULL);
+    if (real) {
+        free(s->output_dir);
+        s->output_dir = real;
+    }
 done:
     cJSON_Delete(m);
     free(text);

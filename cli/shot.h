@@ -22,8 +22,10 @@ int mcp_cli_shot_open(const char *job, const char *output, const char *select,
 void mcp_cli_shot_free(mcp_cli_shot *s);
 
 /* Writes <output>/frames.json: the job and all its frames, so that collect can list
- * the ones that never ran. Atomic; any number of processes may write it at once. */
-int mcp_cli_shot_write_manifest(const mcp_cli_shot *s);
+ * the ones that never ran. Atomic; any number of processes may write it at once. The
+ * folder made, s->output_dir names it by its real path from then on (no
+ * "jobs/../../out" in messages). */
+int mcp_cli_shot_write_manifest(mcp_cli_shot *s);
 
 /* Runs the chosen frames that are not complete (all of them with force) in `jobs`
  * processes, with a progress line for the set. A failed frame does not stop the

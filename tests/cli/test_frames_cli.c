@@ -181,6 +181,18 @@ test_run_frames_in_parallel_and_resume(void **state)
     assert_int_equal(run("run '%s/shot.yaml' --frames 2,4 --force", dir), 0);
     assert_non_null(strstr(err, "frame 2 (1 of 2)"));
     assert_non_null(strstr(err, "frame 4 (2 of 2)"));
+    /* the output folder is named by its real path, whatever the job calls it */
+    char up[4200];
+    snprintf(up, sizeof up, "%s/r/up.yaml", dir);
+    mcp_test_write_text(up, "frames: 1-2\n"
+                            "inputs:\n"
+                            "  noisy: {dump: shot_####_0000.exr}\n"
+                            "output: ../out/up\n"
+                            "stages:\n"
+                            "  - info: {input: noisy}\n");
+    assert_int_equal(run("run '%s' -j 2", up), 0);
+    assert_non_null(strstr(err, "/out/up (mcpost collect"));
+    assert_null(strstr(err, "/../"));
 
     /* errors: a frame the job lacks, -j on a job without frames */
     assert_int_equal(run("run '%s/shot.yaml' --frames 7", dir), 1);
