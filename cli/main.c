@@ -1,11 +1,8 @@
 /* main.c: `mcpost SUBCOMMAND ...` -- finds the subcommand in the table and runs it. */
-#define _POSIX_C_SOURCE 200809L /* readlink, setenv */
 #include "cli.h"
 
 #include <stdio.h>
-#include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 #ifdef __GLIBC__
 #include <malloc.h>
 #endif
@@ -25,30 +22,6 @@ keep_freed_memory(void)
 #endif
 }
 
-/* The commands mcpost runs (an adaptive stage's render:, an external denoiser) find
- * the programs installed beside it -- mcpost-procedural, the renderer the demo's
- * adaptive stage drives -- as git finds its own: the folder that holds this
- * executable goes at the end of PATH, so that the user's PATH still wins. */
-static void
-find_programs_beside(void)
-{
-    char self[4096];
-    ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
-    if (n <= 0)
-        return;
-    self[n] = '\0';
-    char *slash = strrchr(self, '/');
-    if (!slash)
-        return;
-    *slash = '\0';
-    const char *path = getenv("PATH");
-    char joined[16384];
-    int w = snprintf(joined, sizeof joined, "%s%s%s", path && *path ? path : "",
-                     path && *path ? ":" : "", self);
-    if (w > 0 && (size_t)w < sizeof joined)
-        setenv("PATH", joined, 1);
-}
-
 static void
 print_help(void)
 {
@@ -65,7 +38,6 @@ int
 main(int argc, char **argv)
 {
     keep_freed_memory();
-    find_programs_beside();
     if (argc < 2) {
         print_help();
         return 2;

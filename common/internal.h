@@ -41,6 +41,17 @@ int mcp__find_data_file(const char *name, char *buf, size_t cap);
  * order; NULL with the reason in err when none loads. */
 void *mcp__plugin_open(const char *file, char *err, size_t cap);
 
+/* Runs a command line with /bin/sh as system() does, with mcpost's programs folder
+ * (the one holding the mcpost executable: beside the code, its bin/, the build tree or
+ * the install folder) at the end of the child's PATH, so that mcpost-procedural and
+ * friends are found by name while the user's PATH still wins (shell.c). Returns
+ * system()'s status. */
+int mcp__shell(const char *command);
+/* When status (from mcp__shell) is not a clean exit 0, sets the error "WHAT: ..." --
+ * could not start, killed by signal N, not found (exit 127, with where it was looked
+ * for), or failed with its exit status -- naming the command, and returns -1. */
+int mcp__shell_check(int status, const char *what, const char *command);
+
 /* A series member as its file holds it, whatever the series' variance_from (dump.c). */
 #include <mcpost/dump.h>
 int mcp__series_load_file(const mcp_series *s, int i, mcp_dump **out);

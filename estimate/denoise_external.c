@@ -23,7 +23,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 typedef struct {
@@ -185,22 +184,8 @@ run_external(const external_state *s, const mcp_denoise_input *in, mcp_image **o
     }
     if (substitute(s->command, path_ptrs, &line))
         goto done;
-    fflush(NULL); /* the child shares stdout and stderr */
-    int status = system(line);
-    if (status == -1) {
-        mcp_error("external: command '%s': cannot start /bin/sh", s->command);
+    if (mcp__shell_check(mcp__shell(line), "external: command", s->command))
         goto done;
-    }
-    if (WIFSIGNALED(status)) {
-        mcp_error("external: command '%s' was killed by signal %d", s->command,
-                  WTERMSIG(status));
-        goto done;
-    }
-    if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
-        mcp_error("external: command '%s' failed (exit status %d)", s->command,
-                  WIFEXITED(status) ? WEXITSTATUS(status) : status);
-        goto done;
-    }
     if (access(paths[3], F_OK) != 0) {
         mcp_error("external: command '%s' wrote no {output} file", s->command);
         goto done;

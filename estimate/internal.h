@@ -11,6 +11,10 @@
 
 /* A data file of share/mcpost/ (common/paths.c): 0 and its path in buf, or -1. */
 int mcp__find_data_file(const char *name, char *buf, size_t cap);
+/* A command under /bin/sh with mcpost's programs on the end of its PATH, and its
+ * status checked into one error line (common/shell.c, common/internal.h). */
+int mcp__shell(const char *command);
+int mcp__shell_check(int status, const char *what, const char *command);
 
 /* The built-in kinds; denoisers.c lists them in its table. */
 extern const mcp_denoiser_kind mcp__denoiser_gauss;

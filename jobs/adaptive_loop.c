@@ -2,20 +2,18 @@
  * adaptive` and the `adaptive` job stage alike (estimate/estimate.h, mcp_adaptive_run;
  * Firmino 2023; docs/adaptive.md): each pass renders with a count map through /bin/sh,
  * and the loop writes the accumulated dump, the maps, adaptive.json and the curves. */
-#define _POSIX_C_SOURCE 200809L /* WIFEXITED, WEXITSTATUS of system() */
+#define _POSIX_C_SOURCE 200809L /* access */
 
 #include "internal.h"
 
 #include <mcpost/filter.h>
 #include <mcpost/plot.h>
 
-#include <errno.h>
 #include <inttypes.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 static int
@@ -97,14 +95,9 @@ render_pass(int pass, const mcp_image *counts, mcp_dump **out, void *ctx)
         command_line(c->render, cpath, opath, pass, c->seed, &line))
         return -1;
     remove(opath); /* an old file must not pass for this pass's output */
-    fflush(NULL);
-    int status = system(line);
     int rc = -1;
-    if (status == -1)
-        mcp_error("cannot run the render command '%s' (%s)", line, strerror(errno));
-    else if (!WIFEXITED(status) || WEXITSTATUS(status) != 0)
-        mcp_error("the render command failed (exit status %d): %s",
-                  WIFEXITED(status) ? WEXITSTATUS(status) : -1, line);
+    if (mcp__shell_check(mcp__shell(line), "the render command", c->render))
+        ;
     else if (access(opath, F_OK))
         mcp_error("the render command wrote no {output} file %s: %s", opath, line);
     else

@@ -19,6 +19,13 @@
 #include <stddef.h>
 #include <stdint.h>
 
+/* ---- commands (common/shell.c, declared in common/internal.h) ---- */
+
+/* A command under /bin/sh with mcpost's programs on the end of its PATH, and its
+ * status checked into one error line. */
+int mcp__shell(const char *command);
+int mcp__shell_check(int status, const char *what, const char *command);
+
 /* ---- words.c: values as the flags and the job keys read them ---- */
 
 /* A number / an integer, naming the flag or key on error. */

@@ -180,7 +180,18 @@ test_errors(void **state)
     assert_one_line_error(run("adaptive --size 8x8 --budget 8 -o '%s' --render 'false "
                               "{counts} {output}' --denoiser gauss",
                               dir),
-                          "adaptive: pass 0: the render command failed (exit status 1)");
+                          "failed (exit status 1)");
+    assert_non_null(strstr(err, "adaptive: pass 0: the render command 'false "));
+    /* a program that is nowhere: the shell's own line ("not found"), then ours,
+       which says what 127 means and where mcpost looked besides the PATH */
+    assert_int_equal(run("adaptive --size 8x8 --budget 8 -o '%s' --render "
+                         "'no-such-renderer {counts} {output}' --denoiser gauss",
+                         dir),
+                     1);
+    assert_non_null(strstr(err, "\nmcpost: adaptive: pass 0: the render command "
+                                "'no-such-renderer "));
+    assert_non_null(strstr(err, "failed (exit status 127: a program not found; looked "
+                                "on the PATH, then in "));
     assert_one_line_error(run("adaptive --size 8x8 --budget 8 -o '%s' --render 'true "
                               "{counts} {output}' --denoiser gauss",
                               dir),

@@ -157,6 +157,52 @@ test_run_with_the_builtin_table(void **state)
     mcp_dump_free(d);
 }
 
+/* The library runs a render command that names mcpost-procedural without a path, with
+ * a PATH that lacks the build folder: it is found among mcpost's programs (common/
+ * shell.c), as it is for Python's run_job. A program of the same name on the PATH
+ * comes first. */
+static void
+test_commands_find_mcposts_programs(void **state)
+{
+    (void)state;
+    char *saved = strdup(getenv("PATH") ? getenv("PATH") : "");
+    const char *job = mcp_test_path("programs.yaml");
+    mcp_test_write_text(job, "output: out/programs\n"
+                             "stages:\n"
+                             "  - adaptive:\n"
+                             "      render: \"mcpost-procedural --sample-counts {counts} "
+                             "--pass {pass} --seed {seed} -o {output}\"\n"
+                             "      size: 16x16\n"
+                             "      budget: 8\n"
+                             "      spp_per_iteration: 4\n"
+                             "      denoiser: gauss\n");
+    mcp_job_options o = mcp_job_defaults();
+    o.quiet = 1;
+    setenv("PATH", "/usr/bin:/bin", 1);
+    int rc = mcp_job_run_file(job, NULL, &o);
+    if (rc)
+        fail_msg("%s", mcp_error_message());
+    cJSON *a = read_json(mcp_test_path("out/programs/adaptive/adaptive.json"));
+    const cJSON *its = cJSON_GetObjectItem(a, "iterations");
+    assert_int_equal(cJSON_GetArraySize(its), 2);
+    assert_int_equal((int)number(cJSON_GetArrayItem(its, 1), "total_samples"), 8 * 16 * 16);
+    cJSON_Delete(a);
+
+    /* the user's PATH first: a stand-in of the same name that fails with status 3 */
+    const char *bin = mcp_test_path("fake-bin");
+    char path[4400], cmd[4600];
+    snprintf(cmd, sizeof cmd, "mkdir -p '%s' && printf '#!/bin/sh\\nexit 3\\n' > "
+                              "'%s/mcpost-procedural' && chmod +x '%s/mcpost-procedural'",
+             bin, bin, bin);
+    assert_int_equal(system(cmd), 0);
+    snprintf(path, sizeof path, "%s:/usr/bin:/bin", bin);
+    setenv("PATH", path, 1);
+    rc = mcp_job_run_file(job, NULL, &o);
+    setenv("PATH", saved, 1);
+    free(saved);
+    assert_error_contains(rc, "failed (exit status 3)");
+}
+
 int
 main(void)
 {
@@ -164,6 +210,7 @@ main(void)
         cmocka_unit_test(test_table_lists_every_stage),
         cmocka_unit_test(test_check_with_the_builtin_table),
         cmocka_unit_test(test_run_with_the_builtin_table),
+        cmocka_unit_test(test_commands_find_mcposts_programs),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
