@@ -59,3 +59,24 @@ def test_check_job_passes_a_good_job(tmp):
     assert mcpost.check_job(job_file(tmp, "  - info: {input: noisy}\n")) is None
     with pytest.raises(TypeError):
         mcpost.check_job(3)
+
+
+def test_run_job_finds_mcposts_programs(tmp, monkeypatch):
+    """An adaptive stage whose render command names mcpost-procedural without a path
+    runs from Python with a PATH that lacks the build folder: the library finds the
+    program among mcpost's own (common/shell.c), and it spends the budget."""
+    job = tmp / "adaptive.yaml"
+    job.write_text("output: out\n"
+                   "stages:\n"
+                   "  - adaptive:\n"
+                   "      render: \"mcpost-procedural --sample-counts {counts} --pass {pass}"
+                   " --seed {seed} -o {output}\"\n"
+                   "      size: 16x16\n"
+                   "      budget: 8\n"
+                   "      spp_per_iteration: 4\n"
+                   "      denoiser: gauss\n")
+    monkeypatch.setenv("PATH", "/usr/bin:/bin")
+    out = mcpost.run_job(job, output=tmp / "py")
+    result = json.loads((tmp / "py" / "adaptive" / "adaptive.json").read_text())
+    assert out == str(tmp / "py")
+    assert result["iterations"][-1]["total_samples"] == 8 * 16 * 16
