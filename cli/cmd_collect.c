@@ -310,6 +310,33 @@ by_frame(const void *a, const void *b)
     return (x->frame > y->frame) - (x->frame < y->frame);
 }
 
+/* The shot's verdict: good when every frame is complete, bad otherwise (how many are
+ * not, and that running the job again retries them); either way the worst complete
+ * frame by the ranking figure. */
+static int
+shot_verdict(const shot *s, cJSON *sec, const int counts[4], int rank)
+{
+    const frame_row *worst = NULL;
+    for (int i = 0; rank >= 0 && i < s->n_rows; i++)
+        if (s->rows[i].status == FRAME_COMPLETE && !isnan(s->rows[i].values[rank]) &&
+            (!worst || s->rows[i].values[rank] > worst->values[rank]))
+            worst = &s->rows[i];
+    char worst_text[600] = "";
+    if (worst)
+        snprintf(worst_text, sizeof worst_text, "; the worst by %s is frame %d (%.4g)",
+                 s->figures[rank], worst->frame, worst->values[rank]);
+    int complete = counts[FRAME_COMPLETE];
+    if (complete == s->n_rows)
+        return mcp_report_set_verdict(sec, MCP_VERDICT_GOOD, "all %d frames complete%s",
+                                      s->n_rows, worst_text);
+    return mcp_report_set_verdict(
+        sec, MCP_VERDICT_BAD,
+        "%d of %d frames not complete (%d failed, %d unfinished, %d missing); running "
+        "the job again retries them%s",
+        s->n_rows - complete, s->n_rows, counts[FRAME_FAILED], counts[FRAME_UNFINISHED],
+        counts[FRAME_MISSING], worst_text);
+}
+
 static int
 build_report(shot *s, mcp_report *rep, int counts[4])
 {
@@ -325,8 +352,11 @@ build_report(shot *s, mcp_report *rep, int counts[4])
     if (rank >= 0)
         cJSON_AddStringToObject(sec, "worst_first_by", s->figures[rank]);
 
-    /* every frame, machine-readable: its state, figures and page */
+    /* every frame, machine-readable: its state, figures and page (report.json only:
+       the page's tables show the same) */
     cJSON *list = cJSON_AddArrayToObject(sec, "frame_list");
+    if (!list || mcp_report_json_only(sec, "frame_list"))
+        return -1;
     for (int i = 0; list && i < s->n_rows; i++) {
         const frame_row *r = &s->rows[i];
         cJSON *o = cJSON_CreateObject(), *fig = cJSON_CreateObject();
@@ -415,43 +445,7 @@ build_report(shot *s, mcp_report *rep, int counts[4])
         }
         free(sorted);
     }
-    return 0;
-}
-
-/* report.html, with a line of links to the frames' own pages added at its end. */
-static int
-write_html(shot *s, mcp_report *rep)
-{
-    char *html = NULL, path[4200];
-    if (mcp_report_html(rep, s->dir, &html))
-        return -1;
-    size_t cap = strlen(html) + 256 + (size_t)s->n_rows * 96, len = 0;
-    char *out = malloc(cap);
-    if (!out) {
-        free(html);
-        return mcp_error("out of memory");
-    }
-    char *end = strstr(html, "</body>");
-    size_t head = end ? (size_t)(end - html) : strlen(html);
-    memcpy(out, html, head);
-    len = head;
-    len += (size_t)snprintf(out + len, cap - len,
-                            "<section id=\"frame-pages\"><h2>the frames' pages</h2><p>\n");
-    for (int i = 0; i < s->n_rows; i++) {
-        const frame_row *r = &s->rows[i];
-        len += (size_t)(r->status == FRAME_COMPLETE
-                            ? snprintf(out + len, cap - len,
-                                       "<a href=\"%04d/report.html\">%d</a>\n", r->frame,
-                                       r->frame)
-                            : snprintf(out + len, cap - len, "<s title=\"%s\">%d</s>\n",
-                                       status_names[r->status], r->frame));
-    }
-    len += (size_t)snprintf(out + len, cap - len, "</p></section>\n%s", end ? end : "");
-    free(html);
-    snprintf(path, sizeof path, "%s/report.html", s->dir);
-    int rc = mcp_write_file_atomic(path, out, len);
-    free(out);
-    return rc;
+    return shot_verdict(s, sec, counts, rank);
 }
 
 static int
@@ -460,7 +454,7 @@ collect(const char *dir, int json_stdout)
     shot s = {.dir = dir};
     mcp_report *rep = NULL;
     int rc = -1, counts[4] = {0};
-    char path[4200], *json = NULL;
+    char *json = NULL;
     if (find_frames(&s))
         goto done;
     qsort(s.rows, (size_t)s.n_rows, sizeof *s.rows, by_frame);
@@ -470,17 +464,17 @@ collect(const char *dir, int json_stdout)
     }
     char title[600];
     snprintf(title, sizeof title, "%s: %d frames", s.title ? s.title : dir, s.n_rows);
-    if (mcp_report_new(title, &rep) || build_report(&s, rep, counts) || write_html(&s, rep))
+    /* report.html links each frame's page from the table of frames (page column) */
+    if (mcp_report_new(title, &rep) || build_report(&s, rep, counts) ||
+        mcp_report_write(rep, dir))
         goto done;
-    if (!(json = cJSON_Print(mcp_report_json(rep)))) {
-        mcp_error("out of memory");
-        goto done;
-    }
-    snprintf(path, sizeof path, "%s/report.json", dir);
-    if (mcp_write_file_atomic(path, json, strlen(json)))
-        goto done;
-    if (json_stdout)
+    if (json_stdout) {
+        if (!(json = cJSON_Print(mcp_report_json(rep)))) {
+            mcp_error("out of memory");
+            goto done;
+        }
         puts(json);
+    }
     mcp_note("%d frames: %d complete, %d failed, %d unfinished, %d missing; report in %s "
              "(report.html, report.json)",
              s.n_rows, counts[0], counts[1], counts[2], counts[3], dir);

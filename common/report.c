@@ -150,6 +150,18 @@ mcp_report_set_verdict(cJSON *section, mcp_verdict level, const char *fmt, ...)
     return 0;
 }
 
+int
+mcp_report_json_only(cJSON *section, const char *key)
+{
+    cJSON *keys = section_list(section, "json_only"), *k = cJSON_CreateString(key);
+    if (!keys || !k) {
+        cJSON_Delete(k);
+        return oom();
+    }
+    cJSON_AddItemToArray(keys, k);
+    return 0;
+}
+
 /* ---- tables ---- */
 
 cJSON *

@@ -74,6 +74,12 @@ typedef enum { MCP_VERDICT_INFO, MCP_VERDICT_GOOD, MCP_VERDICT_BAD } mcp_verdict
 MCP_API int mcp_report_set_verdict(cJSON *section, mcp_verdict level, const char *fmt,
                                    ...) MCP_PRINTF(3, 4);
 
+/* Leaves the section's member `key` out of report.html: it stays in report.json, for
+ * programs, while a table of the page shows the same figures for people (e.g. the
+ * adaptive loop's whole result beside its per-pass table). The keys are listed in the
+ * section's "json_only". */
+MCP_API int mcp_report_json_only(cJSON *section, const char *key);
+
 /* Adds a table to a section's "tables" list and returns it (owned by the section),
  * or NULL on failure. */
 MCP_API cJSON *mcp_report_add_table(cJSON *section, const char *title,

@@ -354,13 +354,18 @@ render_value(sbuf *b, const cJSON *v, int depth)
     }
 }
 
+/* 1 for the members a section's figures table leaves out: the lists drawn elsewhere
+ * on the page, and those the section keeps for report.json only (its "json_only"). */
 static int
-is_reserved(const char *key)
+is_reserved(const cJSON *section, const char *key)
 {
-    static const char *const reserved[] = {"title", "stage",  "tables",
-                                           "images", "plots", "verdict"};
+    static const char *const reserved[] = {"title",  "stage",   "tables",   "images",
+                                           "plots",  "verdict", "json_only"};
     for (size_t i = 0; i < sizeof reserved / sizeof *reserved; i++)
         if (!strcmp(key, reserved[i])) return 1;
+    const cJSON *k;
+    cJSON_ArrayForEach(k, cJSON_GetObjectItem(section, "json_only"))
+    if (cJSON_IsString(k) && !strcmp(key, k->valuestring)) return 1;
     return 0;
 }
 
@@ -384,7 +389,7 @@ render_figures(sbuf *b, const cJSON *section)
     int n = 0;
     cJSON_ArrayForEach(m, section)
     {
-        if (!m->string || is_reserved(m->string)) continue;
+        if (!m->string || is_reserved(section, m->string)) continue;
         if (n++ == 0) sb_str(b, "<table class=\"figures\">\n");
         sb_str(b, "<tr><th>");
         sb_text(b, m->string);
@@ -393,6 +398,18 @@ render_figures(sbuf *b, const cJSON *section)
         sb_str(b, "</td></tr>\n");
     }
     if (n) sb_str(b, "</table>\n");
+}
+
+/* A table cell that names a page beside this one ("0017/report.html", as collect's
+ * table of frames has): a relative path ending in .html, shown as a link. */
+static int
+is_page_link(const cJSON *v)
+{
+    if (!cJSON_IsString(v)) return 0;
+    const char *t = v->valuestring;
+    size_t n = strlen(t);
+    return n > 5 && !strcmp(t + n - 5, ".html") && t[0] != '/' && !strchr(t, ':') &&
+           !strpbrk(t, " \t\n\"'<>");
 }
 
 static void
@@ -423,7 +440,15 @@ render_tables(sbuf *b, const cJSON *section)
             cJSON_ArrayForEach(c, r)
             {
                 sb_str(b, cJSON_IsNumber(c) ? "<td class=\"num\">" : "<td>");
-                render_value(b, c, 1);
+                if (is_page_link(c)) { /* another report beside this one */
+                    sb_str(b, "<a href=\"");
+                    sb_text(b, c->valuestring);
+                    sb_str(b, "\">");
+                    sb_text(b, c->valuestring);
+                    sb_str(b, "</a>");
+                } else {
+                    render_value(b, c, 1);
+                }
                 sb_str(b, "</td>");
             }
             sb_str(b, "</tr>\n");

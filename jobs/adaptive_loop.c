@@ -250,12 +250,13 @@ write_curves(const mcp__adaptive_loop *c, const mcp_adaptive_result *r)
         write_text(c, "adaptive.svg", svg))
         goto done;
     if (c->section) {
-        static const char *const cols[] = {"pass", "spp", "relMSE", "estimated error",
-                                           "F(tau)"};
-        cJSON *t = mcp_report_add_table(c->section, "per pass", cols, 5);
+        static const char *const cols[] = {"pass", "spp", "relMSE", "relMSE noisy",
+                                           "estimated error", "F(tau)"};
+        cJSON *t = mcp_report_add_table(c->section, "per pass", cols, 6);
         for (int i = 0; t && i < n; i++)
-            if (mcp_report_table_add_row(t, "idddd", r->iterations[i].pass, x[i], rel[i],
-                                         est[i], r->iterations[i].cdf_at_tau))
+            if (mcp_report_table_add_row(t, "iddddd", r->iterations[i].pass, x[i], rel[i],
+                                         r->iterations[i].relmse_noisy, est[i],
+                                         r->iterations[i].cdf_at_tau))
                 goto done;
         cJSON *p = mcp_report_add_plot(c->section, plot.title, plot.x_label, MCP_AXIS_LOG,
                                        plot.y_label, MCP_AXIS_LOG);
@@ -333,7 +334,16 @@ mcp__adaptive_run_loop(mcp__adaptive_loop *c, cJSON **json)
         write_text(c, "adaptive.json", text) || write_curves(c, r) ||
         (c->section && adaptive_verdict(c, r)))
         goto done;
-    if (c->section) { /* the section owns the figures now */
+    if (c->section) {
+        /* the page shows the settings and the per-pass table (write_curves); the
+           whole result, timings included, is for report.json, which owns it now */
+        if (!cJSON_AddStringToObject(c->section, "map", mcp_adaptive_map_name(c->ao.map)) ||
+            !cJSON_AddStringToObject(c->section, "denoiser", c->den->name) ||
+            !cJSON_AddStringToObject(c->section, "render", c->render) ||
+            mcp_report_json_only(c->section, "adaptive")) {
+            mcp_error("out of memory");
+            goto done;
+        }
         cJSON_AddItemToObject(c->section, "adaptive", j);
         j = NULL;
     }
