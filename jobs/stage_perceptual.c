@@ -34,6 +34,7 @@ static const char *const perceptual_keys[] = {"name",
                                               "compare",
                                               "rerender",
                                               "spectra_tile",
+                                              "title",
                                               NULL};
 
 /* Loads the candidates: a series input (every member a dump or image) or a list of
@@ -88,7 +89,7 @@ parse_perceptual(mcp_job *job, const mcp_node *settings, mcp__perc_args *a,
         const char *key = settings->keys[i]->value;
         const mcp_node *v = settings->items[i];
         if (!strcmp(key, "candidates") || !strcmp(key, "denoiser") ||
-            !strcmp(key, "reference") || !strcmp(key, "name"))
+            !strcmp(key, "reference") || !strcmp(key, "name") || !strcmp(key, "title"))
             continue;
         if (!strcmp(key, "kernel") && v->kind == MCP_NODE_SEQ) {
             double *t = NULL;
@@ -105,7 +106,9 @@ parse_perceptual(mcp_job *job, const mcp_node *settings, mcp__perc_args *a,
             return mcp_node_error(v, "%s", mcp_error_message());
     }
     const mcp_node *n = NULL;
+    const char *title;
     if (mcp_node_opt_string(settings, "name", name) ||
+        mcp_node_opt_string(settings, "title", &title) ||
         mcp_node_require(settings, "candidates", "stage 'perceptual'", &n))
         return -1;
     if (n->kind == MCP_NODE_SCALAR) {
@@ -177,7 +180,12 @@ stage_perceptual(mcp_job *job, const mcp_node *settings)
     snprintf(r.rel, sizeof r.rel, "%s/", name);
     if (mcp_job_output_subdir(job, name, r.out_dir, sizeof r.out_dir)) goto done;
     char title[300];
-    snprintf(title, sizeof title, "%s: %s", name, mcp_perc_method_name(a.opt.method));
+    const char *given = NULL;
+    mcp_node_opt_string(settings, "title", &given); /* checked by parse_perceptual */
+    if (given)
+        snprintf(title, sizeof title, "%s", given);
+    else
+        snprintf(title, sizeof title, "%s: %s", name, mcp_perc_method_name(a.opt.method));
     if (!(r.section = mcp_report_section(mcp_job_report(job), "perceptual", title)) ||
         mcp__perceptual_run(&a, &r, &summary, &img))
         goto done;

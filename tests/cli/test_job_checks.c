@@ -218,10 +218,28 @@ test_results_of_earlier_stages_only(void **state)
         fail_msg("status %d, stdout \"%s\", stderr \"%s\"", status, out, err);
 }
 
+/* Every stage takes title: (its report section's heading), and it must be text. */
+static void
+test_every_stage_title_is_text(void **state)
+{
+    (void)state;
+    static const char *const stages[] = {
+        "  - info: {input: noisy, title: [a, b]}\n",
+        "  - convert: {input: noisy, output: n.png, title: [a, b]}\n",
+        "  - metrics: {input: noisy, reference: reference, title: [a, b]}\n",
+        "  - estimate: {input: noisy, denoiser: gauss, title: [a, b]}\n",
+        "  - blend: {input: progress, denoiser: gauss, title: [a, b]}\n",
+        "  - perceptual: {candidates: [s0, s1], title: [a, b]}\n",
+        "  - adaptive: {render: \"x {counts} {output}\", size: 8x8, title: [a, b]}\n"};
+    for (size_t i = 0; i < sizeof stages / sizeof *stages; i++)
+        assert_fails_up_front(stages[i], 13, "title must be a string, not a list");
+}
+
 int
 main(void)
 {
     const struct CMUnitTest tests[] = {
+        cmocka_unit_test(test_every_stage_title_is_text),
         cmocka_unit_test(test_third_stage_wrong_nothing_runs),
         cmocka_unit_test(test_info_names_a_missing_input),
         cmocka_unit_test(test_convert_bad_pixel_type),

@@ -83,6 +83,13 @@ test_demo_job(void **state)
         assert_string_equal(item(cJSON_GetArrayItem(sections, i), "stage")->valuestring,
                             stages[i]);
 
+    /* every stage takes a title: the report's headings and its links say what each
+       section is about (the inputs' names said "noisy" three times) */
+    assert_string_equal(item(cJSON_GetArrayItem(sections, 0), "title")->valuestring,
+                        "the 64-spp render dump");
+    assert_string_equal(item(cJSON_GetArrayItem(sections, 7), "title")->valuestring,
+                        "64 spp with the U-Net (the default denoiser)");
+
     /* metrics: the 64-spp render against the reference */
     const cJSON *metrics = cJSON_GetArrayItem(sections, 3);
     double want = mse_of_files(
