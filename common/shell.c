@@ -27,14 +27,14 @@ programs_dir(char *buf, size_t cap)
     const char *dirs[] = {from_lib, code, MCP_BIN_BUILD_DIR, MCP_BIN_INSTALL_DIR};
     for (size_t i = 0; i < sizeof dirs / sizeof *dirs; i++) {
         char exe[4300];
-        if (!*dirs[i] || (size_t)snprintf(exe, sizeof exe, "%s/mcpost", dirs[i]) >= sizeof exe)
+        if (!*dirs[i] ||
+            (size_t)snprintf(exe, sizeof exe, "%s/mcpost", dirs[i]) >= sizeof exe)
             continue;
         /* absolute: a relative entry would move with a command's own cd */
         char *real = access(exe, X_OK) == 0 ? realpath(dirs[i], NULL) : NULL;
         int fits = real && (size_t)snprintf(buf, cap, "%s", real) < cap;
         free(real);
-        if (fits)
-            return 0;
+        if (fits) return 0;
     }
     buf[0] = '\0';
     return -1;
@@ -45,14 +45,12 @@ mcp__shell(const char *command)
 {
     char dir[4096];
     fflush(NULL); /* the child shares stdout and stderr */
-    if (programs_dir(dir, sizeof dir) != 0)
-        return system(command);
+    if (programs_dir(dir, sizeof dir) != 0) return system(command);
     /* PATH="${PATH:+$PATH:}"'DIR'; export PATH; COMMAND -- DIR single-quoted, each '
      * inside as '\'' */
     size_t n = strlen(command), cap = 4 * strlen(dir) + n + 64;
     char *line = mcp_malloc(cap), *p = line;
-    if (!line)
-        return -1;
+    if (!line) return -1;
     p += sprintf(p, "PATH=\"${PATH:+$PATH:}\"'");
     for (const char *d = dir; *d; d++)
         p += *d == '\'' ? sprintf(p, "'\\''") : sprintf(p, "%c", *d);
@@ -65,13 +63,11 @@ mcp__shell(const char *command)
 int
 mcp__shell_check(int status, const char *what, const char *command)
 {
-    if (status == -1)
-        return mcp_error("%s '%s': cannot start /bin/sh", what, command);
+    if (status == -1) return mcp_error("%s '%s': cannot start /bin/sh", what, command);
     if (WIFSIGNALED(status))
         return mcp_error("%s '%s' was killed by signal %d", what, command,
                          WTERMSIG(status));
-    if (!WIFEXITED(status))
-        return mcp_error("%s '%s' failed", what, command);
+    if (!WIFEXITED(status)) return mcp_error("%s '%s' failed", what, command);
     int code = WEXITSTATUS(status);
     if (code == 127) { /* the shell's "not found" */
         char dir[4096];
