@@ -32,6 +32,10 @@ mcp_cli_shot_open(const char *job, const char *output, const char *select, mcp_c
     /* the real path: output folders then come out absolute, for scripts run elsewhere */
     if (mcp_job_frames(s->job, &jo, &s->all, &s->n_all, &s->output_dir))
         goto fail;
+    /* a frame job's settings are the same for every frame: a bad key is one error
+       now, not one per frame (or one Slurm task per frame) later */
+    if (s->n_all && mcp_job_check_settings(s->job, mcp_job_stages()))
+        goto fail;
     if (s->output_dir[0] != '/') { /* --output relative to here */
         char cwd[4096], *abs = NULL;
         size_t n = strlen(s->output_dir) + sizeof cwd + 2;

@@ -39,6 +39,7 @@ struct mcp_job {
     mcp_job_options opt;
     int checking; /* the stages' checks are running (job_validate) */
     int frame_paths; /* an input path has changed with the frame (resolve_input) */
+    int skip_input_files; /* mcp_job_check_settings: inputs' files not looked for */
     int *frames, n_frames; /* the job's frames: (none: n_frames 0) */
 };
 
@@ -168,9 +169,11 @@ mcp_job_quiet(const mcp_job *job)
 /* ---- inputs ---- */
 
 static int
-file_exists(const mcp_node *at, const char *path)
+file_exists(const mcp_job *job, const mcp_node *at, const char *path)
 {
     struct stat st;
+    if (job->skip_input_files)
+        return 0;
     if (stat(path, &st) != 0)
         return mcp_node_error(at, "input file %s: %s", path, strerror(errno));
     return 0;
@@ -218,7 +221,7 @@ dump_spec_from(mcp_job *job, const mcp_node *def, mcp_dump_spec *spec, char stor
             continue;
         if (mcp_node_string(n, file_keys[i], &s) ||
             resolve_input(job, n, s, 0, store[i], 4096) ||
-            file_exists(n, store[i]))
+            file_exists(job, n, store[i]))
             return -1;
         *targets[i] = store[i];
     }
@@ -341,7 +344,7 @@ series_from(mcp_job *job, const mcp_node *def, mcp_series **out)
         return -1;
     }
     for (int i = 0; i < (*out)->count; i++)
-        if (file_exists(src, (*out)->paths[i])) {
+        if (file_exists(job, src, (*out)->paths[i])) {
             mcp_series_free(*out);
             *out = NULL;
             return -1;
@@ -362,6 +365,8 @@ replicate_paths(mcp_job *job, const mcp_node *def, char ***out, int *count)
         glob_t g;
         if (resolve_input(job, src, src->value, 0, path, sizeof path))
             return -1;
+        if (job->skip_input_files) /* which files match is for each frame to say */
+            return 0;
         int grc = glob(path, 0, NULL, &g);
         if (grc == GLOB_NOMATCH)
             return mcp_node_error(src, "replicates: no file matches %s", path);
@@ -381,7 +386,7 @@ replicate_paths(mcp_job *job, const mcp_node *def, char ***out, int *count)
             const char *f;
             rc = mcp_node_string(src->items[i], "replicates", &f) ||
                  resolve_input(job, src->items[i], f, 0, path, sizeof path) ||
-                 !(paths[i] = mcp_strdup(path)) || file_exists(src->items[i], path);
+                 !(paths[i] = mcp_strdup(path)) || file_exists(job, src->items[i], path);
         }
     } else {
         return mcp_node_error(src, "replicates must be a list of files or a pattern");
@@ -481,7 +486,7 @@ check_inputs(mcp_job *job)
             if (mcp_node_check_keys(def, dump_keys, what) ||
                 mcp_node_string(mcp_node_get(def, "dump"), "dump", &file) ||
                 resolve_input(job, mcp_node_get(def, "dump"), file, 0, path, sizeof path) ||
-                file_exists(mcp_node_get(def, "dump"), path) ||
+                file_exists(job, mcp_node_get(def, "dump"), path) ||
                 dump_spec_from(job, def, &spec, store))
                 return -1;
         } else if (mcp_node_get(def, "replicates")) {
@@ -500,7 +505,7 @@ check_inputs(mcp_job *job)
             if (mcp_node_check_keys(def, image_keys, what) ||
                 mcp_node_string(mcp_node_get(def, "image"), "image", &file) ||
                 resolve_input(job, mcp_node_get(def, "image"), file, 0, path, sizeof path) ||
-                file_exists(mcp_node_get(def, "image"), path))
+                file_exists(job, mcp_node_get(def, "image"), path))
                 return -1;
         } else if (mcp_node_get(def, "series")) {
             e->kind = ENTRY_SERIES;
@@ -996,6 +1001,23 @@ mcp_job_check(const char *path, const mcp_stage *const *stages)
         return -1;
     const mcp_node *list = NULL;
     int rc = job->n_frames ? check_frames(job, stages) : job_validate(job, stages, &list);
+    job_free(job);
+    return rc;
+}
+
+int
+mcp_job_check_settings(const char *path, const mcp_stage *const *stages)
+{
+    mcp_job *job = NULL;
+    if (!stages)
+        stages = mcp_job_stages();
+    if (job_open(path, NULL, &job))
+        return -1;
+    /* a frame's paths, so that a frame token with a bad conversion is still found */
+    job->skip_input_files = 1;
+    job->opt.frame = job->n_frames ? job->frames[0] : -1;
+    const mcp_node *list = NULL;
+    int rc = job_validate(job, stages, &list);
     job_free(job);
     return rc;
 }

@@ -130,6 +130,13 @@ MCP_API int mcp_job_frames(const char *path, const mcp_job_options *opt, int **f
  * library's own, as for mcp_job_run_file. */
 MCP_API int mcp_job_check(const char *path, const mcp_stage *const *stages);
 
+/* mcp_job_check without looking for the inputs' files (nor expanding a replicates
+ * pattern): for a frame job, everything its frames share -- the stages, their keys
+ * and values, the inputs' definitions and the files the stages read -- checked once,
+ * with its first frame's paths, before any frame starts, when some frames' renders
+ * may not be there yet. `mcpost run` and `submit` call it before starting a shot. */
+MCP_API int mcp_job_check_settings(const char *path, const mcp_stage *const *stages);
+
 /* For stages: the job file (for messages), the folder relative paths resolve to, and
  * the output folder (created on first use). */
 MCP_API const char *mcp_job_path(const mcp_job *job);

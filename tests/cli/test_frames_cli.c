@@ -307,6 +307,32 @@ test_a_failed_frame_is_listed_by_run_and_collect(void **state)
 }
 
 /* A series with both tokens: '#' (or the first %d) is the frame, the other the spp. */
+/* A mistake every frame shares (a misspelt key) is one error before any frame starts,
+ * from run and from submit: no frame's error.txt, no output folder, no Slurm script. */
+static void
+test_a_shared_mistake_stops_the_shot_before_its_frames(void **state)
+{
+    (void)state;
+    char path[4200];
+    snprintf(path, sizeof path, "%s/typo.yaml", dir);
+    mcp_test_write_text(path, "frames: 1-4\n"
+                              "inputs:\n"
+                              "  noisy: {dump: r/shot_####_0000.exr}\n"
+                              "  reference: {image: r/shot_%04d_truth.exr}\n"
+                              "output: out/typo\n"
+                              "stages:\n"
+                              "  - metrics: {input: noisy, reference: reference, flp: [ldr]}\n");
+    const char *cmds[] = {"run '%s' -j 2", "submit '%s' --slurm --dry-run"};
+    for (int i = 0; i < 2; i++) {
+        assert_int_equal(run(cmds[i], path), 1);
+        assert_non_null(strstr(err, "typo.yaml:7: unknown key 'flp' in stage 'metrics'"));
+        assert_null(strstr(err, "mcpost: frame ")); /* not a frame's failure */
+        assert_null(strstr(err, "frames failed"));
+        assert_int_equal((int)(strchr(err, '\n') - err), (int)strlen(err) - 1);
+        assert_false(exists("%s/out/typo", dir));
+    }
+}
+
 static void
 test_series_pattern_holds_frame_and_spp(void **state)
 {
@@ -431,6 +457,7 @@ main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_run_frames_in_parallel_and_resume),
         cmocka_unit_test(test_a_failed_frame_is_listed_by_run_and_collect),
+        cmocka_unit_test(test_a_shared_mistake_stops_the_shot_before_its_frames),
         cmocka_unit_test(test_series_pattern_holds_frame_and_spp),
         cmocka_unit_test(test_submit_writes_an_array_job_and_its_collect_job),
     };

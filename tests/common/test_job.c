@@ -363,6 +363,41 @@ test_frames_are_checked_by_their_inputs(void **state)
     assert_int_equal(mcp_job_check(two, counted_table), 0);
 }
 
+/* mcp_job_check_settings: what every frame shares, without the inputs' files -- a
+ * frame whose render is not there yet passes, a bad key or a bad frame token fails
+ * with its line, and a replicates pattern need match nothing yet. */
+static void
+test_settings_check_skips_the_input_files(void **state)
+{
+    (void)state;
+    static const mcp_stage counted = {"probe", "test stage", probe_keys, stage_probe,
+                                      check_counted};
+    static const mcp_stage *const counted_table[] = {&counted, NULL};
+    const char *later = frame_job("later.yaml", "1-3", "never_####.exr");
+    assert_error_contains(mcp_job_check(later, counted_table), "never_0001.exr");
+    check_calls = 0;
+    assert_int_equal(mcp_job_check_settings(later, counted_table), 0);
+    assert_int_equal(check_calls, 1);
+
+    const char *bad_key = write_job("bad_key.yaml", "frames: 1-3\n"
+                                                    "inputs:\n"
+                                                    "  noisy: {dump: never_####.exr}\n"
+                                                    "stages:\n"
+                                                    "  - probe: {input: noisy, scael: 2}\n");
+    assert_error_contains(mcp_job_check_settings(bad_key, counted_table),
+                          "bad_key.yaml:5: unknown key 'scael'");
+    const char *bad_token = frame_job("bad_token.yaml", "1-3", "never_%s.exr");
+    assert_int_not_equal(mcp_job_check_settings(bad_token, counted_table), 0);
+    assert_error_contains(-1, "bad_token.yaml:3:");
+    const char *glob = write_job("glob.yaml", "frames: 1-3\n"
+                                              "inputs:\n"
+                                              "  noisy: {replicates: \"never_####_s*.exr\"}\n"
+                                              "stages:\n"
+                                              "  - probe: {input: noisy}\n");
+    assert_error_contains(mcp_job_check(glob, counted_table), "no file matches");
+    assert_int_equal(mcp_job_check_settings(glob, counted_table), 0);
+}
+
 /* mcp_job_options.quiet silences the job's own notes ("[1/2] probe", "results in")
  * and its stages' (they print through the process-wide switch), and leaves that
  * switch as the caller had it. */
@@ -576,6 +611,7 @@ main(void)
         cmocka_unit_test(test_series_pattern_is_bounded),
         cmocka_unit_test(test_channel_mapping_overrides_detection),
         cmocka_unit_test(test_frames_are_checked_by_their_inputs),
+        cmocka_unit_test(test_settings_check_skips_the_input_files),
     };
     return cmocka_run_group_tests_name("common/job", tests, NULL, NULL);
 }
