@@ -991,8 +991,11 @@ check_frames(mcp_job *job, const mcp_stage *const *stages)
     return 0;
 }
 
-int
-mcp_job_check(const char *path, const mcp_stage *const *stages)
+/* mcp_job_check, and with settings_only mcp_job_check_settings: the inputs' files not
+ * looked for, the paths those of the first frame (a frame token that does not parse
+ * is still found). */
+static int
+check_job_file(const char *path, const mcp_stage *const *stages, int settings_only)
 {
     mcp_job *job = NULL;
     if (!stages)
@@ -1000,26 +1003,28 @@ mcp_job_check(const char *path, const mcp_stage *const *stages)
     if (job_open(path, NULL, &job))
         return -1;
     const mcp_node *list = NULL;
-    int rc = job->n_frames ? check_frames(job, stages) : job_validate(job, stages, &list);
+    int rc;
+    if (settings_only) {
+        job->skip_input_files = 1;
+        job->opt.frame = job->n_frames ? job->frames[0] : -1;
+        rc = job_validate(job, stages, &list);
+    } else {
+        rc = job->n_frames ? check_frames(job, stages) : job_validate(job, stages, &list);
+    }
     job_free(job);
     return rc;
 }
 
 int
+mcp_job_check(const char *path, const mcp_stage *const *stages)
+{
+    return check_job_file(path, stages, 0);
+}
+
+int
 mcp_job_check_settings(const char *path, const mcp_stage *const *stages)
 {
-    mcp_job *job = NULL;
-    if (!stages)
-        stages = mcp_job_stages();
-    if (job_open(path, NULL, &job))
-        return -1;
-    /* a frame's paths, so that a frame token with a bad conversion is still found */
-    job->skip_input_files = 1;
-    job->opt.frame = job->n_frames ? job->frames[0] : -1;
-    const mcp_node *list = NULL;
-    int rc = job_validate(job, stages, &list);
-    job_free(job);
-    return rc;
+    return check_job_file(path, stages, 1);
 }
 
 int

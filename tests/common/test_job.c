@@ -335,13 +335,14 @@ frame_job(const char *name, const char *frames, const char *dump)
     return write_job(name, text);
 }
 
+static const mcp_stage counted = {"probe", "test stage", probe_keys, stage_probe,
+                                  check_counted};
+static const mcp_stage *const counted_table[] = {&counted, NULL};
+
 static void
 test_frames_are_checked_by_their_inputs(void **state)
 {
     (void)state;
-    static const mcp_stage counted = {"probe", "test stage", probe_keys, stage_probe,
-                                      check_counted};
-    static const mcp_stage *const counted_table[] = {&counted, NULL};
     setup_input();
     const char *same = frame_job("same.yaml", "1-50000", "in.exr");
     check_calls = 0;
@@ -370,9 +371,6 @@ static void
 test_settings_check_skips_the_input_files(void **state)
 {
     (void)state;
-    static const mcp_stage counted = {"probe", "test stage", probe_keys, stage_probe,
-                                      check_counted};
-    static const mcp_stage *const counted_table[] = {&counted, NULL};
     const char *later = frame_job("later.yaml", "1-3", "never_####.exr");
     assert_error_contains(mcp_job_check(later, counted_table), "never_0001.exr");
     check_calls = 0;
