@@ -806,9 +806,7 @@ read_direct(const mcp_dump_spec *spec, const mcp_dump_buffers *parts, mcp_dump *
 static int
 main_is_exr(const mcp_dump_spec *spec, const mcp_dump_buffers *parts)
 {
-    static const unsigned char exr_magic[4] = {0x76, 0x2f, 0x31, 0x01};
-    if (in_memory(&parts->main))
-        return parts->main.size >= 4 && memcmp(parts->main.data, exr_magic, 4) == 0;
+    if (in_memory(&parts->main)) return mcp__exr_magic(parts->main.data, parts->main.size);
     return mcp_format_from_path(spec->path) == MCP_FORMAT_EXR;
 }
 

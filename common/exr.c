@@ -550,6 +550,13 @@ read_memory(const void *data, size_t size, const char *name, mcp__exr_router rou
 }
 
 int
+mcp__exr_magic(const void *data, size_t size)
+{
+    static const unsigned char magic[4] = {0x76, 0x2f, 0x31, 0x01};
+    return data && size >= 4 && memcmp(data, magic, 4) == 0;
+}
+
+int
 mcp__exr_read_memory(const void *data, size_t size, const char *name, mcp_image **out)
 {
     *out = NULL;

@@ -378,9 +378,7 @@ mcp_image_read(const char *path, const mcp_read_options *opt, mcp_image **out)
         if (f) {
             size_t got = fread(magic, 1, 8, f);
             fclose(f);
-            if (got >= 4 && magic[0] == 0x76 && magic[1] == 0x2f && magic[2] == 0x31 &&
-                magic[3] == 0x01)
-                return mcp__exr_read(path, out);
+            if (mcp__exr_magic(magic, got)) return mcp__exr_read(path, out);
             if (got == 8 && memcmp(magic, png, 8) == 0) return mcp__png_read(path, opt, out);
         }
         return oiio_read(path, opt, out);
@@ -402,15 +400,13 @@ name_output_in_error(const char *tmp_path, const char *path)
 int
 mcp_image_read_memory(const void *data, size_t size, const char *name, mcp_image **out)
 {
-    static const unsigned char exr_magic[4] = {0x76, 0x2f, 0x31, 0x01};
     const unsigned char *b = data;
     *out = NULL;
     if (!name)
         name = "(memory)";
     if (!data && size)
         return mcp_error("%s: no data (%zu bytes at NULL)", name, size);
-    if (size >= 4 && memcmp(b, exr_magic, 4) == 0)
-        return mcp__exr_read_memory(data, size, name, out);
+    if (mcp__exr_magic(data, size)) return mcp__exr_read_memory(data, size, name, out);
     if (size >= 2 && b[0] == 'P' && (b[1] == 'F' || b[1] == 'f'))
         return mcp__pfm_read_memory(data, size, name, out);
     /* OpenImageIO's plug-in reads only files: other formats go through a file */

@@ -47,9 +47,9 @@ void *mcp__plugin_open(const char *file, char *err, size_t cap);
  * friends are found by name while the user's PATH still wins (shell.c). Returns
  * system()'s status. */
 int mcp__shell(const char *command);
-/* When status (from mcp__shell) is not a clean exit 0, sets the error "WHAT: ..." --
- * could not start, killed by signal N, not found (exit 127, with where it was looked
- * for), or failed with its exit status -- naming the command, and returns -1. */
+/* When status (from mcp__shell) is not a clean exit 0, sets the error "WHAT 'COMMAND'
+ * ..." -- could not start, killed by signal N, not found (exit 127, with where it was
+ * looked for), or failed with its exit status -- and returns -1. */
 int mcp__shell_check(int status, const char *what, const char *command);
 
 /* A series member as its file holds it, whatever the series' variance_from (dump.c). */
@@ -63,6 +63,8 @@ int mcp__series_load_file(const mcp_series *s, int i, mcp_dump **out);
  * directory, not an image" (imageio.c) */
 int mcp__check_readable(const char *path);
 int mcp__exr_read(const char *path, mcp_image **out);
+/* 1 when the first bytes (size of them) are OpenEXR's magic number. */
+int mcp__exr_magic(const void *data, size_t size);
 /* The same from a buffer (name labels it in messages); the dump loader uses it too. */
 int mcp__exr_read_memory(const void *data, size_t size, const char *name, mcp_image **out);
 int mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *opt);
