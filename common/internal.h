@@ -51,6 +51,11 @@ int mcp__shell(const char *command);
  * ..." -- could not start, killed by signal N, not found (exit 127, with where it was
  * looked for), or failed with its exit status -- and returns -1. */
 int mcp__shell_check(int status, const char *what, const char *command);
+/* A command line from a template (an adaptive loop's render:, an external denoiser's
+ * command): each names[i] ("{output}") in tmpl becomes values[i], single-quoted for
+ * /bin/sh when bit i of quoted is set (paths); other text is kept. *out is malloc'd. */
+int mcp__shell_fill(const char *tmpl, int n, const char *const *names,
+                    const char *const *values, unsigned quoted, char **out);
 
 /* A series member as its file holds it, whatever the series' variance_from (dump.c). */
 #include <mcpost/dump.h>

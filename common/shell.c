@@ -40,21 +40,73 @@ programs_dir(char *buf, size_t cap)
     return -1;
 }
 
+/* Appends text[0..n) to the growing string *s (length *len, capacity *cap),
+ * single-quoted for /bin/sh when quote is set ('\'' for each quote inside). */
+static int
+append(char **s, size_t *len, size_t *cap, const char *text, size_t n, int quote)
+{
+    size_t need = *len + (quote ? 4 * n + 2 : n) + 1;
+    if (need > *cap) {
+        size_t c = need * 2;
+        char *p = mcp_realloc(*s, c);
+        if (!p) return -1;
+        *s = p;
+        *cap = c;
+    }
+    if (quote) (*s)[(*len)++] = '\'';
+    for (size_t i = 0; i < n; i++) {
+        if (quote && text[i] == '\'') {
+            memcpy(*s + *len, "'\\''", 4);
+            *len += 4;
+        } else
+            (*s)[(*len)++] = text[i];
+    }
+    if (quote) (*s)[(*len)++] = '\'';
+    (*s)[*len] = '\0';
+    return 0;
+}
+
+int
+mcp__shell_fill(const char *tmpl, int n, const char *const *names,
+                const char *const *values, unsigned quoted, char **out)
+{
+    char *s = NULL;
+    size_t len = 0, cap = 0;
+    int rc = append(&s, &len, &cap, "", 0, 0);
+    for (const char *p = tmpl; *p && !rc;) {
+        int k = -1;
+        for (int i = 0; i < n && k < 0; i++)
+            if (!strncmp(p, names[i], strlen(names[i]))) k = i;
+        rc = k < 0 ? append(&s, &len, &cap, p, 1, 0)
+                   : append(&s, &len, &cap, values[k], strlen(values[k]),
+                            (quoted >> k) & 1);
+        p += k < 0 ? 1 : strlen(names[k]);
+    }
+    if (rc) {
+        free(s);
+        return -1;
+    }
+    *out = s;
+    return 0;
+}
+
 int
 mcp__shell(const char *command)
 {
     char dir[4096];
     fflush(NULL); /* the child shares stdout and stderr */
     if (programs_dir(dir, sizeof dir) != 0) return system(command);
-    /* PATH="${PATH:+$PATH:}"'DIR'; export PATH; COMMAND -- DIR single-quoted, each '
-     * inside as '\'' */
-    size_t n = strlen(command), cap = 4 * strlen(dir) + n + 64;
-    char *line = mcp_malloc(cap), *p = line;
-    if (!line) return -1;
-    p += sprintf(p, "PATH=\"${PATH:+$PATH:}\"'");
-    for (const char *d = dir; *d; d++)
-        p += *d == '\'' ? sprintf(p, "'\\''") : sprintf(p, "%c", *d);
-    sprintf(p, "'; export PATH; %s", command);
+    /* PATH="${PATH:+$PATH:}"'DIR'; export PATH; COMMAND */
+    static const char head[] = "PATH=\"${PATH:+$PATH:}\"", tail[] = "; export PATH; ";
+    char *line = NULL;
+    size_t len = 0, cap = 0;
+    if (append(&line, &len, &cap, head, strlen(head), 0) ||
+        append(&line, &len, &cap, dir, strlen(dir), 1) ||
+        append(&line, &len, &cap, tail, strlen(tail), 0) ||
+        append(&line, &len, &cap, command, strlen(command), 0)) {
+        free(line);
+        return -1;
+    }
     int status = system(line);
     free(line);
     return status;

@@ -38,57 +38,13 @@ static const char *const external_keys[] = {"command", "format", "delta", "workd
 
 /* ---- running the command ---- */
 
-/* Appends s to the growing buffer *buf (length *len, capacity *cap), single-quoted for
- * /bin/sh when quote is set ('\'' for each quote inside). */
-static int
-append(char **buf, size_t *len, size_t *cap, const char *s, size_t n, int quote)
-{
-    if (mcp__buf_reserve(buf, cap, *len + (quote ? 4 * n + 3 : n) + 1))
-        return -1;
-    char *p = *buf + *len;
-    if (quote)
-        *p++ = '\'';
-    for (size_t i = 0; i < n; i++) {
-        if (quote && s[i] == '\'') {
-            memcpy(p, "'\\''", 4);
-            p += 4;
-        } else {
-            *p++ = s[i];
-        }
-    }
-    if (quote)
-        *p++ = '\'';
-    *p = '\0';
-    *len = (size_t)(p - *buf);
-    return 0;
-}
-
 /* The command line: the template with each {color}, {albedo}, {normal}, {output}
  * replaced by the quoted path (paths[i], in that order); other text is kept. */
 static int
 substitute(const char *tmpl, const char *const paths[4], char **out)
 {
     static const char *const names[4] = {"{color}", "{albedo}", "{normal}", "{output}"};
-    char *buf = NULL;
-    size_t len = 0, cap = 0;
-    const char *p = tmpl;
-    while (*p) {
-        int hit = -1;
-        for (int i = 0; i < 4 && hit < 0; i++)
-            if (strncmp(p, names[i], strlen(names[i])) == 0)
-                hit = i;
-        int rc = hit >= 0 ? append(&buf, &len, &cap, paths[hit], strlen(paths[hit]), 1)
-                          : append(&buf, &len, &cap, p, 1, 0);
-        if (rc) {
-            free(buf);
-            return -1;
-        }
-        p += hit >= 0 ? strlen(names[hit]) : 1;
-    }
-    if (!buf && append(&buf, &len, &cap, "", 0, 0))
-        return -1;
-    *out = buf;
-    return 0;
+    return mcp__shell_fill(tmpl, 4, names, paths, 0xF, out);
 }
 
 /* Removes every file in dir and then dir (best effort; the command may have left

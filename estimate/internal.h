@@ -15,6 +15,8 @@ int mcp__find_data_file(const char *name, char *buf, size_t cap);
  * status checked into one error line (common/shell.c, common/internal.h). */
 int mcp__shell(const char *command);
 int mcp__shell_check(int status, const char *what, const char *command);
+int mcp__shell_fill(const char *tmpl, int n, const char *const *names,
+                    const char *const *values, unsigned quoted, char **out);
 
 /* The built-in kinds; denoisers.c lists them in its table. */
 extern const mcp_denoiser_kind mcp__denoiser_gauss;

@@ -26,31 +26,6 @@ path_in(const mcp__adaptive_loop *c, char *buf, size_t cap, const char *fmt, int
     return 0;
 }
 
-/* Appends text to a growing string, single-quoted for /bin/sh when quote is set. */
-static int
-append(char **s, size_t *len, size_t *cap, const char *text, size_t n, int quote)
-{
-    size_t need = *len + (quote ? 4 * n + 2 : n) + 1;
-    if (need > *cap) {
-        size_t c = need * 2;
-        char *p = mcp_realloc(*s, c);
-        if (!p) return -1;
-        *s = p;
-        *cap = c;
-    }
-    if (quote) (*s)[(*len)++] = '\'';
-    for (size_t i = 0; i < n; i++) {
-        if (quote && text[i] == '\'') {
-            memcpy(*s + *len, "'\\''", 4);
-            *len += 4;
-        } else
-            (*s)[(*len)++] = text[i];
-    }
-    if (quote) (*s)[(*len)++] = '\'';
-    (*s)[*len] = '\0';
-    return 0;
-}
-
 /* The command line of one pass: {counts} and {output} become quoted paths, {pass} and
  * {seed} numbers; other text stays. *out is malloc'd. */
 static int
@@ -60,25 +35,9 @@ command_line(const char *tmpl, const char *counts, const char *output, int pass,
     char pass_text[32], seed_text[32];
     snprintf(pass_text, sizeof pass_text, "%d", pass);
     snprintf(seed_text, sizeof seed_text, "%" PRIu64, seed);
-    const char *names[4] = {"{counts}", "{output}", "{pass}", "{seed}"};
-    const char *values[4] = {counts, output, pass_text, seed_text};
-    char *s = NULL;
-    size_t len = 0, cap = 0;
-    if (append(&s, &len, &cap, "", 0, 0)) return -1;
-    for (const char *p = tmpl; *p;) {
-        int k = -1;
-        for (int i = 0; i < 4 && k < 0; i++)
-            if (!strncmp(p, names[i], strlen(names[i]))) k = i;
-        int bad = k < 0 ? append(&s, &len, &cap, p, 1, 0)
-                        : append(&s, &len, &cap, values[k], strlen(values[k]), k < 2);
-        if (bad) {
-            free(s);
-            return -1;
-        }
-        p += k < 0 ? 1 : strlen(names[k]);
-    }
-    *out = s;
-    return 0;
+    static const char *const names[4] = {"{counts}", "{output}", "{pass}", "{seed}"};
+    const char *const values[4] = {counts, output, pass_text, seed_text};
+    return mcp__shell_fill(tmpl, 4, names, values, 0x3, out);
 }
 
 /* The renderer: writes the counts, runs the command, reads what it wrote. */
@@ -95,12 +54,10 @@ render_pass(int pass, const mcp_image *counts, mcp_dump **out, void *ctx)
         command_line(c->render, cpath, opath, pass, c->seed, &line))
         return -1;
     remove(opath); /* an old file must not pass for this pass's output */
-    int rc = -1;
-    if (mcp__shell_check(mcp__shell(line), "the render command", c->render))
-        ;
-    else if (access(opath, F_OK))
-        mcp_error("the render command wrote no {output} file %s: %s", opath, line);
-    else
+    int rc = mcp__shell_check(mcp__shell(line), "the render command", c->render);
+    if (rc == 0 && access(opath, F_OK))
+        rc = mcp_error("the render command wrote no {output} file %s: %s", opath, line);
+    if (rc == 0)
         rc = mcp_dump_read(opath, out);
     free(line);
     if (!c->keep_passes) {

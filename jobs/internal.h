@@ -25,6 +25,8 @@
  * status checked into one error line. */
 int mcp__shell(const char *command);
 int mcp__shell_check(int status, const char *what, const char *command);
+int mcp__shell_fill(const char *tmpl, int n, const char *const *names,
+                    const char *const *values, unsigned quoted, char **out);
 
 /* ---- words.c: values as the flags and the job keys read them ---- */
 
