@@ -57,6 +57,11 @@ int mcp__shell_check(int status, const char *what, const char *command);
 int mcp__shell_fill(const char *tmpl, int n, const char *const *names,
                     const char *const *values, unsigned quoted, char **out);
 
+/* Until called again with NULL, every section made takes this title (borrowed) in
+ * place of the one its stage gives: a job stage's `title:` (job.c, report.c). */
+#include <mcpost/report.h>
+void mcp__report_set_heading(mcp_report *r, const char *title);
+
 /* A series member as its file holds it, whatever the series' variance_from (dump.c). */
 #include <mcpost/dump.h>
 int mcp__series_load_file(const mcp_series *s, int i, mcp_dump **out);

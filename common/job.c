@@ -8,6 +8,8 @@
 #include <mcpost/progress.h>
 #include <mcpost/stages.h> /* the built-in table, for stages == NULL (jobs/) */
 
+#include "internal.h"
+
 #include <errno.h>
 #include <libgen.h>
 #include <stdio.h>
@@ -953,6 +955,13 @@ job_validate(mcp_job *job, const mcp_stage *const *stages, const mcp_node **list
             rc = -1;
             break;
         }
+        /* title: is the runner's (the heading of the stage's sections), for every
+           stage that lists it */
+        const char *title;
+        if (settings && mcp_node_opt_string(settings, "title", &title)) {
+            rc = -1;
+            break;
+        }
         if (!stage->check)
             continue;
         mcp_node *empty = settings ? NULL : empty_map_at((*list)->items[i]);
@@ -1120,7 +1129,12 @@ mcp_job_run_file(const char *path, const mcp_stage *const *stages,
         if (!settings && !empty)
             goto done;
         mcp_note("[%d/%d] %s", i + 1, list->count, stage->name);
+        /* the stage's title: heads the sections it makes (its type checked before) */
+        const char *title = NULL;
+        if (settings) mcp_node_opt_string(settings, "title", &title);
+        mcp__report_set_heading(job->report, title);
         int failed = stage->run(job, settings ? settings : empty);
+        mcp__report_set_heading(job->report, NULL);
         free(empty);
         if (failed) {
             stage_error_place(job, list->items[i], stage);

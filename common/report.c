@@ -12,6 +12,7 @@
 
 struct mcp_report {
     cJSON *root;
+    const char *heading; /* mcp__report_set_heading: the title of sections made now */
 };
 
 static int
@@ -43,6 +44,12 @@ mcp_report_free(mcp_report *r)
     free(r);
 }
 
+void
+mcp__report_set_heading(mcp_report *r, const char *title)
+{
+    r->heading = title;
+}
+
 cJSON *
 mcp_report_json(mcp_report *r)
 {
@@ -53,6 +60,7 @@ cJSON *
 mcp_report_section(mcp_report *r, const char *stage, const char *title)
 {
     cJSON *s = cJSON_CreateObject();
+    if (r->heading) title = r->heading;
     if (!s || !cJSON_AddStringToObject(s, "stage", stage) ||
         !cJSON_AddStringToObject(s, "title", title)) {
         cJSON_Delete(s);

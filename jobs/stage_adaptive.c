@@ -17,7 +17,7 @@ static const char *const adaptive_keys[] = {
  * (checked against the job's inputs) and the denoiser, created from its settings. */
 typedef struct adaptive_plan {
     mcp__adaptive_loop c;
-    const char *sub, *ref_name, *title;
+    const char *sub, *ref_name;
     int have_size;
     mcp_denoiser *den;
 } adaptive_plan;
@@ -37,7 +37,6 @@ parse_adaptive(mcp_job *job, const mcp_node *s, adaptive_plan *pl)
         mcp_node_opt_string(s, "output", &pl->sub) || mcp_node_opt_string(s, "map", &map) ||
         mcp_node_opt_string(s, "size", &size) ||
         mcp_node_opt_string(s, "reference", &pl->ref_name) ||
-        mcp_node_opt_string(s, "title", &pl->title) ||
         mcp_node_opt_double(s, "spp_per_iteration", &c->ao.spp_per_iteration) ||
         mcp_node_opt_double(s, "initial_spp", &c->ao.initial_spp) ||
         mcp_node_opt_double(s, "budget", &c->ao.budget_spp) ||
@@ -90,8 +89,7 @@ stage_adaptive(mcp_job *job, const mcp_node *s)
     snprintf(c->rel, sizeof c->rel, "%s/", pl.sub);
     if (mcp_job_output_subdir(job, pl.sub, c->dir, sizeof c->dir)) goto done;
     c->den = pl.den;
-    c->section = mcp_report_section(mcp_job_report(job), "adaptive",
-                                    pl.title ? pl.title : "adaptive sampling");
+    c->section = mcp_report_section(mcp_job_report(job), "adaptive", "adaptive sampling");
     rc = c->section ? mcp__adaptive_run_loop(c, NULL) : -1;
 done:
     mcp_denoiser_free(pl.den);

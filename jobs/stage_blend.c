@@ -97,7 +97,7 @@ read_stage_options(const mcp_node *s, mcp_blend_series_options *o)
  * borrowed from the settings; the denoiser is the plan's. */
 typedef struct blend_plan {
     mcp_blend_series_options o;
-    const char *input, *reference, *output, *title;
+    const char *input, *reference, *output;
     int all_images;
     mcp_denoiser *den;
 } blend_plan;
@@ -111,7 +111,6 @@ parse_blend(mcp_job *job, const mcp_node *settings, blend_plan *pl)
     if (mcp_node_opt_string(settings, "input", &pl->input) ||
         mcp_node_opt_string(settings, "reference", &pl->reference) ||
         mcp_node_opt_string(settings, "output", &pl->output) ||
-        mcp_node_opt_string(settings, "title", &pl->title) ||
         mcp_node_opt_bool(settings, "all_images", &pl->all_images) ||
         read_stage_options(settings, &pl->o) ||
         mcp_node_require(settings, "input", "stage 'blend'", &input_node) ||
@@ -143,7 +142,7 @@ stage_blend(mcp_job *job, const mcp_node *settings)
         return -1;
     }
     mcp_blend_series_options o = pl.o;
-    const char *input = pl.input, *output = pl.output, *title = pl.title;
+    const char *input = pl.input, *output = pl.output;
     int all_images = pl.all_images;
     mcp_denoiser *den = pl.den;
     const char *den_name = den->name;
@@ -159,8 +158,7 @@ stage_blend(mcp_job *job, const mcp_node *settings)
         char default_title[600];
         snprintf(default_title, sizeof default_title, "blend: %s with %s", input,
                  den_name);
-        cJSON *section = mcp_report_section(mcp_job_report(job), "blend",
-                                            title ? title : default_title);
+        cJSON *section = mcp_report_section(mcp_job_report(job), "blend", default_title);
         if (section &&
             mcp__blend_run(series, den, ref, &o, den_name, &sink, section) == 0) {
             char *text = cJSON_Print(section);

@@ -15,7 +15,7 @@ static const char *const convert_keys[] = {"input",       "output", "channels", 
  * check before any stage runs): the output file's name and how to write it, and the
  * channels to keep (names borrowed from the settings; free `names`). */
 typedef struct convert_plan {
-    const char *out, *title;
+    const char *out;
     mcp_write_options wo;
     const char **names;
     int count;
@@ -32,8 +32,7 @@ parse_convert(mcp_job *job, const mcp_node *settings, convert_plan *pl)
         mcp_node_require(settings, "output", "stage 'convert'", &out_node) ||
         mcp_node_string(out_node, "output", &pl->out) ||
         mcp_node_opt_string(settings, "pixel", &pixel) ||
-        mcp_node_opt_string(settings, "compression", &comp) ||
-        mcp_node_opt_string(settings, "title", &pl->title))
+        mcp_node_opt_string(settings, "compression", &comp))
         return -1;
     if (mcp_format_from_path(pl->out) == MCP_FORMAT_UNKNOWN)
         return mcp_node_error(out_node, "output: unknown image format '%s'", pl->out);
@@ -95,8 +94,7 @@ stage_convert(mcp_job *job, const mcp_node *settings)
     mcp_image_free(picked);
     if (rc)
         return chan ? mcp_node_error(chan, "%s", mcp_error_message()) : -1;
-    cJSON *section =
-        mcp_report_section(mcp_job_report(job), "convert", pl.title ? pl.title : out);
+    cJSON *section = mcp_report_section(mcp_job_report(job), "convert", out);
     const char *input = NULL, *dot = strrchr(out, '.');
     mcp_node_opt_string(settings, "input", &input);
     int png = dot && !strcmp(dot, ".png");

@@ -107,7 +107,7 @@ done:
  * the denoiser is the plan's. */
 typedef struct estimate_plan {
     mcp_series_estimate_options so;
-    const char *name, *sub, *ref_name, *title;
+    const char *name, *sub, *ref_name;
     mcp_denoiser *den;
 } estimate_plan;
 
@@ -120,7 +120,6 @@ parse_estimate(mcp_job *job, const mcp_node *settings, estimate_plan *pl)
     if (mcp_node_opt_string(settings, "input", &pl->name) ||
         mcp_node_opt_string(settings, "output", &pl->sub) ||
         mcp_node_opt_string(settings, "reference", &pl->ref_name) ||
-        mcp_node_opt_string(settings, "title", &pl->title) ||
         read_settings(settings, &pl->so) ||
         mcp_job_check_input(job, settings, "input", MCP_JOB_SERIES | MCP_JOB_DUMP) ||
         (pl->ref_name && mcp_job_check_input(job, settings, "reference", MCP_JOB_IMAGE)))
@@ -166,8 +165,7 @@ stage_estimate(mcp_job *job, const mcp_node *settings)
     memset(&od, 0, sizeof od);
     snprintf(od.rel, sizeof od.rel, "%s/", sub);
     if (mcp_job_output_subdir(job, sub, od.dir, sizeof od.dir)) goto done;
-    cJSON *section =
-        mcp_report_section(mcp_job_report(job), "estimate", pl.title ? pl.title : name);
+    cJSON *section = mcp_report_section(mcp_job_report(job), "estimate", name);
     if (!section) goto done;
     if (series) {
         cJSON *j = NULL;

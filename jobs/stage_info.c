@@ -15,9 +15,7 @@ static const char *const info_keys[] = {"input", "title", NULL};
 static int
 check_info(mcp_job *job, const mcp_node *settings)
 {
-    const char *title;
-    return mcp_node_opt_string(settings, "title", &title) ||
-           mcp_job_check_input(job, settings, "input", MCP_JOB_IMAGE);
+    return mcp_job_check_input(job, settings, "input", MCP_JOB_IMAGE);
 }
 
 /* The info section's verdict: whether any value would break the later stages (NaN,
@@ -65,13 +63,12 @@ info_verdict(cJSON *section, const cJSON *channels)
 static int
 stage_info(mcp_job *job, const mcp_node *settings)
 {
-    const char *name = NULL, *title = NULL;
+    const char *name = NULL;
     const mcp_image *img = NULL;
     if (check_info(job, settings) || mcp_node_opt_string(settings, "input", &name) ||
-        mcp_node_opt_string(settings, "title", &title) ||
         mcp_job_image(job, settings, "input", &img))
         return -1;
-    cJSON *section = mcp_report_section(mcp_job_report(job), "info", title ? title : name);
+    cJSON *section = mcp_report_section(mcp_job_report(job), "info", name);
     if (!section)
         return -1;
     cJSON_AddNumberToObject(section, "width", img->width);

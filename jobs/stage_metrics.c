@@ -329,7 +329,7 @@ done:
  * settings. */
 typedef struct metrics_plan {
     mcp_metrics_options o;
-    const char *input, *reference, *title, *output, *series_name, *estimate_name;
+    const char *input, *reference, *output, *series_name, *estimate_name;
     int want_maps;
 } metrics_plan;
 
@@ -343,7 +343,6 @@ parse_metrics(mcp_job *job, const mcp_node *settings, metrics_plan *pl)
         mcp_node_opt_string(settings, "reference", &pl->reference) ||
         mcp_node_opt_string(settings, "series", &pl->series_name) ||
         mcp_node_opt_string(settings, "estimate", &pl->estimate_name) ||
-        mcp_node_opt_string(settings, "title", &pl->title) ||
         mcp_node_opt_string(settings, "output", &pl->output) ||
         mcp_node_opt_bool(settings, "maps", &pl->want_maps) ||
         read_options(settings, &pl->o))
@@ -381,9 +380,8 @@ stage_metrics(mcp_job *job, const mcp_node *settings)
     if (parse_metrics(job, settings, &pl))
         return -1;
     mcp_metrics_options o = pl.o;
-    const char *input = pl.input, *reference = pl.reference, *title = pl.title,
-               *output = pl.output, *series_name = pl.series_name,
-               *estimate_name = pl.estimate_name;
+    const char *input = pl.input, *reference = pl.reference, *output = pl.output,
+               *series_name = pl.series_name, *estimate_name = pl.estimate_name;
     int want_maps = pl.want_maps;
 
     const mcp_image *ref = NULL, *test = NULL, *estimate = NULL;
@@ -398,8 +396,7 @@ stage_metrics(mcp_job *job, const mcp_node *settings)
     snprintf(default_title, sizeof default_title, "metrics: %s against %s",
              input ? input : series_name, reference);
     snprintf(prefix, sizeof prefix, "%s/", output ? output : input ? input : series_name);
-    cJSON *section =
-        mcp_report_section(mcp_job_report(job), "metrics", title ? title : default_title);
+    cJSON *section = mcp_report_section(mcp_job_report(job), "metrics", default_title);
     if (!section) return -1;
     cJSON_AddStringToObject(section, "reference", reference);
     cJSON_AddNumberToObject(section, "width", ref->width);

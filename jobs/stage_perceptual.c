@@ -106,9 +106,7 @@ parse_perceptual(mcp_job *job, const mcp_node *settings, mcp__perc_args *a,
             return mcp_node_error(v, "%s", mcp_error_message());
     }
     const mcp_node *n = NULL;
-    const char *title;
     if (mcp_node_opt_string(settings, "name", name) ||
-        mcp_node_opt_string(settings, "title", &title) ||
         mcp_node_require(settings, "candidates", "stage 'perceptual'", &n))
         return -1;
     if (n->kind == MCP_NODE_SCALAR) {
@@ -180,12 +178,7 @@ stage_perceptual(mcp_job *job, const mcp_node *settings)
     snprintf(r.rel, sizeof r.rel, "%s/", name);
     if (mcp_job_output_subdir(job, name, r.out_dir, sizeof r.out_dir)) goto done;
     char title[300];
-    const char *given = NULL;
-    mcp_node_opt_string(settings, "title", &given); /* checked by parse_perceptual */
-    if (given)
-        snprintf(title, sizeof title, "%s", given);
-    else
-        snprintf(title, sizeof title, "%s: %s", name, mcp_perc_method_name(a.opt.method));
+    snprintf(title, sizeof title, "%s: %s", name, mcp_perc_method_name(a.opt.method));
     if (!(r.section = mcp_report_section(mcp_job_report(job), "perceptual", title)) ||
         mcp__perceptual_run(&a, &r, &summary, &img))
         goto done;
