@@ -90,7 +90,10 @@ typedef struct mcp_blend_options {
     /* Cap on W (spp); 0 means the curve's own: none for log, 65536 for powerlaw [0]. */
     double max_weight;
     double powerlaw_offset; /* c of the power law [100] */
-    int js_window;          /* James-Stein window side, odd [7] */
+    int js_window;          /* James-Stein window side, odd [7]; also the safeguard's */
+    /* Caps the weight of d at the James-Stein combiner's over js_window, so that the
+     * blend converges to n whatever SURE says (mcp_blend_safeguard) [1] */
+    int safeguard;
 } mcp_blend_options;
 
 MCP_API mcp_blend_options mcp_blend_defaults(void);
@@ -225,6 +228,18 @@ MCP_API int mcp_blend_james_stein_variance(const mcp_image *rho,
                                            const mcp_image *var_denoised,
                                            const mcp_image *var_of_mean, mcp_image **out);
 
+/* ---- the safeguard (safeguard.c; docs/blend.md "The safeguard") ---- */
+
+/* Caps the share of d in a blend, rho = W / (I + W), at rho_max (an R, G, B image, the
+ * rho of mcp_blend_james_stein: min(1, (p - 2) mean(v) / sum (n - d)^2) over its
+ * window), in place: where the curve weight exceeds the cap, the weight becomes
+ * I rho_max / (1 - rho_max) and the blend n + rho_max (d - n). weights and blend are
+ * packed R, G, B (as mcp_blend_weights and mcp_blend_mix make them). *pulled (may be
+ * NULL) receives the share of values that were pulled back. */
+MCP_API int mcp_blend_safeguard(const mcp_image *noisy, double spp,
+                                const mcp_image *denoised, const mcp_image *rho_max,
+                                mcp_image *weights, mcp_image *blend, double *pulled);
+
 /* ---- one iteration (weights.c) ---- */
 
 typedef struct mcp_blend_input {
@@ -242,10 +257,12 @@ typedef struct mcp_blend_result {
     mcp_image *blend;   /* r */
     mcp_image *weights; /* W */
     mcp_blend_estimates est;
+    double safeguard_pulled; /* share of values the safeguard pulled back (0 when off) */
 } mcp_blend_result;
 
-/* Filtering, curves (unless given), weights and the blend. den is needed only for
- * opt->filter = denoiser. state may be NULL. */
+/* Filtering, curves (unless given), weights, the blend and the safeguard (unless
+ * opt->safeguard is 0). den is needed only for opt->filter = denoiser. state may be
+ * NULL. */
 MCP_API int mcp_blend_step(const mcp_blend_input *in, const mcp_blend_options *opt,
                            const mcp_denoiser *den, mcp_blend_state *state,
                            mcp_blend_result *out);
@@ -291,7 +308,8 @@ typedef struct mcp_blend_row {
     double mean_var, mean_sure; /* raw image means (the rules compare them) */
     int filtered;               /* estimates filtered at this member */
     int magnitude;              /* negative SURE by magnitude (else zeroed) */
-    double mean_rho; /* mean of W / (I + W): the share of d in the curve blend */
+    double mean_rho;         /* mean of W / (I + W): the share of d in the curve blend */
+    double safeguard_pulled; /* share of values the safeguard pulled back (0: off) */
     mcp_blend_errors err[MCP_BLEND_N_METHODS]; /* with a reference; ideal too */
 } mcp_blend_row;
 

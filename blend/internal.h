@@ -39,6 +39,13 @@ int mcp__blend_prepare(const mcp_image *var_of_mean, const mcp_image *sure,
 int mcp__blend_on_the_fly(const mcp_blend_input *in, const mcp_blend_options *o,
                           mcp_blend_estimates *e, mcp_image **weights, mcp_image **blend);
 
+/* The safeguard of one blend (safeguard.c): the James-Stein rho of (noisy, denoised,
+ * var_of_mean) over window, then mcp_blend_safeguard on weights and blend in place. */
+int mcp__blend_safeguard_step(const mcp_image *noisy, double spp,
+                              const mcp_image *denoised, const mcp_image *var_of_mean,
+                              int window, mcp_image *weights, mcp_image *blend,
+                              double *pulled);
+
 /* The value of channel k (0..2) of pixel (x, y). */
 static inline float
 mcp__rgb_at(const mcp__rgb *in, int x, int y, int k)

@@ -24,6 +24,7 @@ mcp_blend_defaults(void)
     o.max_weight = 0;
     o.powerlaw_offset = 100;
     o.js_window = 7;
+    o.safeguard = 1;
     return o;
 }
 
@@ -63,6 +64,8 @@ mcp_blend_options_check(const mcp_blend_options *o)
     if (o->js_window < 3 || o->js_window % 2 == 0 || o->js_window > 255)
         return mcp_error("blend: js_window must be odd and in [3, 255] (got %d)",
                          o->js_window);
+    if (o->safeguard != 0 && o->safeguard != 1)
+        return mcp_error("blend: safeguard must be 0 or 1 (got %d)", o->safeguard);
     return 0;
 }
 

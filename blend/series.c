@@ -182,7 +182,8 @@ finish_member(run *r, int i, const mcp_dump *dump, const mcp_image *curves,
     mcp_blend_row *row = &r->res->rows[i];
     const den_pair *pair = &r->pairs[r->pair_of[i]];
     mcp_blend_estimates *e = &r->est[i];
-    mcp_image *weights = NULL, *img[MCP_BLEND_N_METHODS] = {NULL}, *ideal_w = NULL;
+    mcp_image *weights = NULL, *img[MCP_BLEND_N_METHODS] = {NULL}, *ideal_w = NULL,
+              *js_rho = NULL;
     int rc = -1;
     mcp_blend_input in = {dump->color,    dump->var_of_mean, dump->spp,
                           pair->denoised, pair->sure,        curves};
@@ -194,7 +195,11 @@ finish_member(run *r, int i, const mcp_dump *dump, const mcp_image *curves,
         mcp_blend_easy(dump->color, pair->denoised, e->var_of_mean, e->sure,
                        &img[MCP_BLEND_EASY]) ||
         mcp_blend_james_stein(dump->color, pair->denoised, dump->var_of_mean,
-                              r->o->blend.js_window, &img[MCP_BLEND_JAMES_STEIN], NULL) ||
+                              r->o->blend.js_window, &img[MCP_BLEND_JAMES_STEIN],
+                              &js_rho) ||
+        (r->o->blend.safeguard &&
+         mcp_blend_safeguard(dump->color, dump->spp, pair->denoised, js_rho, weights,
+                             img[MCP_BLEND_CURVES], &row->safeguard_pulled)) ||
         (r->reference && mcp_blend_ideal(dump->color, dump->spp, pair->denoised,
                                          r->reference, &img[MCP_BLEND_IDEAL], &ideal_w)))
         goto fail;
@@ -230,6 +235,7 @@ fail:
 done:
     mcp_image_free(weights);
     mcp_image_free(ideal_w);
+    mcp_image_free(js_rho);
     for (int m = 0; m < MCP_BLEND_N_METHODS; m++)
         mcp_image_free(img[m]);
     return rc;

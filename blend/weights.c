@@ -322,6 +322,10 @@ mcp_blend_step(const mcp_blend_input *in, const mcp_blend_options *opt,
         o.fit = MCP_CURVE_FIT_ON_THE_FLY;
         rc = mcp__blend_on_the_fly(in, &o, &out->est, &out->weights, &out->blend);
     }
+    if (!rc && o.safeguard)
+        rc = mcp__blend_safeguard_step(in->noisy, in->spp, in->denoised, in->var_of_mean,
+                                       o.js_window, out->weights, out->blend,
+                                       &out->safeguard_pulled);
     if (rc) {
         mcp_blend_result_free(out);
         return -1;

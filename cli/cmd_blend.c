@@ -60,7 +60,10 @@ static const char usage[] =
     "                            zero or magnitude [switch]\n"
     "  --n-probes K              SURE probes [1]\n"
     "  --seed S                  SURE probe seed [0]\n"
-    "  --js-window N             James-Stein window [7]\n"
+    "  --js-window N             James-Stein window (also the safeguard's) [7]\n"
+    "  --no-safeguard            let the curve weights stand where the denoised image\n"
+    "                            differs from the noisy one by more than its noise\n"
+    "                            explains (docs/blend.md \"The safeguard\")\n"
     "  --no-flip                 skip HDR-FLIP\n"
     "  --variance-from KIND      file (each member's own variance) or increments (the\n"
     "                            spread between the series' increments: right for\n"
@@ -94,6 +97,7 @@ enum {
     OPT_SEED,
     OPT_JS,
     OPT_NO_FLIP,
+    OPT_NO_SAFEGUARD,
     OPT_VARIANCE_FROM
 };
 
@@ -156,6 +160,7 @@ cmd_blend(int argc, char **argv)
         {"seed", required_argument, 0, OPT_SEED},
         {"js-window", required_argument, 0, OPT_JS},
         {"no-flip", no_argument, 0, OPT_NO_FLIP},
+        {"no-safeguard", no_argument, 0, OPT_NO_SAFEGUARD},
         {"variance-from", required_argument, 0, OPT_VARIANCE_FROM},
         {"help", no_argument, 0, 'h'},
         {0, 0, 0, 0}};
@@ -242,6 +247,7 @@ cmd_blend(int argc, char **argv)
         case OPT_NO_FLIP:
             o.flip = 0;
             break;
+        case OPT_NO_SAFEGUARD: b->safeguard = 0; break;
         case OPT_VARIANCE_FROM:
             rc = mcp__variance_from(optarg, &variance_from);
             break;

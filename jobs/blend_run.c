@@ -177,15 +177,16 @@ fill_section(cJSON *section, const mcp_blend_series_result *r,
     cJSON *table = mcp_report_add_table(
         section, "members",
         (const char *const[]){"spp", "denoised at spp", "mean v", "mean SURE", "filtered",
-                              "negative SURE", "mean W/(I+W)"},
-        7);
+                              "negative SURE", "mean W/(I+W)", "safeguard pulled back"},
+        8);
     if (!table) return -1;
     for (int i = 0; i < r->count; i++) {
         const mcp_blend_row *row = &r->rows[i];
         if (mcp_report_table_add_row(
-                table, "ddddssd", row->spp, row->denoised_spp, row->mean_var,
+                table, "ddddssdd", row->spp, row->denoised_spp, row->mean_var,
                 row->mean_sure, row->filtered ? "yes" : "no",
-                row->magnitude ? "magnitude" : "zero", row->mean_rho))
+                row->magnitude ? "magnitude" : "zero", row->mean_rho,
+                row->safeguard_pulled))
             return -1;
     }
     if (r->has_reference) {

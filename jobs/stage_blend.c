@@ -28,6 +28,7 @@ static const char *const blend_keys[] = {"input",
                                          "n_probes",
                                          "seed",
                                          "js_window",
+                                         "safeguard",
                                          "flip",
                                          NULL};
 
@@ -59,7 +60,7 @@ read_stage_options(const mcp_node *s, mcp_blend_series_options *o)
     mcp_blend_options *b = &o->blend;
     double seed = 0;
     int flip = o->flip, stop_filtering = b->stop_filtering,
-        keeps_zeros = b->denoiser_keeps_zeros;
+        keeps_zeros = b->denoiser_keeps_zeros, safeguard = b->safeguard;
     if (mcp_node_opt_double(s, "stop_denoising_at", &o->stop_denoising_at) ||
         mcp__opt_enum(s, "fit", p_fit, &b->fit) ||
         mcp__opt_enum(s, "curve", p_curve, &b->curve) ||
@@ -74,6 +75,7 @@ read_stage_options(const mcp_node *s, mcp_blend_series_options *o)
         mcp_node_opt_int(s, "n_probes", &o->sure.n_probes) ||
         mcp_node_opt_double(s, "seed", &seed) ||
         mcp_node_opt_int(s, "js_window", &b->js_window) ||
+        mcp_node_opt_bool(s, "safeguard", &safeguard) ||
         mcp_node_opt_bool(s, "flip", &flip))
         return -1;
     if (!(seed >= 0) || seed != floor(seed) || seed > 9007199254740992.0)
@@ -87,6 +89,7 @@ read_stage_options(const mcp_node *s, mcp_blend_series_options *o)
     o->flip = flip;
     b->stop_filtering = stop_filtering;
     b->denoiser_keeps_zeros = keeps_zeros;
+    b->safeguard = safeguard;
     if (mcp_blend_options_check(b)) return mcp_node_error(s, "%s", mcp_error_message());
     return 0;
 }

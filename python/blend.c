@@ -71,7 +71,8 @@ member_dict(member *m, int has_reference, int has_flip)
         mcp_py_set(d, "filtered", PyBool_FromLong(m->row.filtered)) ||
         mcp_py_set(d, "negative_sure",
                    PyUnicode_FromString(m->row.magnitude ? "magnitude" : "zero")) ||
-        mcp_py_set(d, "mean_rho", PyFloat_FromDouble(m->row.mean_rho)))
+        mcp_py_set(d, "mean_rho", PyFloat_FromDouble(m->row.mean_rho)) ||
+        mcp_py_set(d, "safeguard_pulled", PyFloat_FromDouble(m->row.safeguard_pulled)))
         goto fail;
     mcp_image *blend = m->images[MCP_BLEND_CURVES], *w = m->weights;
     m->images[MCP_BLEND_CURVES] = m->weights = NULL;
@@ -133,18 +134,18 @@ py_blend(PyObject *self, PyObject *args, PyObject *kw)
                            "filter",        "filter_window", "filter_sigma_scale",
                            "stop_filtering", "negative_sure", "n_probes",
                            "seed",          "js_window",    "flip",
-                           "variance_from", "all_images",   NULL};
+                           "variance_from", "all_images",   "safeguard", NULL};
     mcp_blend_series_options o = mcp_blend_series_defaults();
     mcp_blend_options *b = &o.blend;
     PyObject *list, *den_obj = Py_None, *ref_obj = Py_None, *seed = NULL;
     const char *fit = NULL, *curve = NULL, *filter = NULL, *neg = NULL, *vfrom = NULL;
     int all_images = 0;
     if (!PyArg_ParseTupleAndKeywords(
-            args, kw, "O|$OOdzzddpzidpziOipzp:blend", keys, &list, &den_obj, &ref_obj,
+            args, kw, "O|$OOdzzddpzidpziOipzpp:blend", keys, &list, &den_obj, &ref_obj,
             &o.stop_denoising_at, &fit, &curve, &b->far_spp, &b->max_weight,
             &b->denoiser_keeps_zeros, &filter, &b->filter_window, &b->filter_sigma_scale,
             &b->stop_filtering, &neg, &o.sure.n_probes, &seed, &b->js_window, &o.flip,
-            &vfrom, &all_images))
+            &vfrom, &all_images, &b->safeguard))
         return NULL;
     if (seed && parse_seed(seed, &o.sure.seed))
         return NULL;
@@ -249,7 +250,7 @@ PyMethodDef mcp_py_blend_methods[] = {
      "      denoiser_keeps_zeros=False, filter='gauss', filter_window=11,\n"
      "      filter_sigma_scale=100, stop_filtering=True, negative_sure='switch',\n"
      "      n_probes=1, seed=0, js_window=7, flip=True, variance_from='file',\n"
-     "      all_images=False) -> dict\n\n"
+     "      all_images=False, safeguard=True) -> dict\n\n"
      "Blends every member of a progressive render (dump paths in increasing spp) with\n"
      "its denoised image (Denisova & Bocchi 2024). 'members': per member 'blend',\n"
      "'weights', 'spp', 'mean_var', 'mean_sure', 'mean_rho', ..., 'images' (every\n"

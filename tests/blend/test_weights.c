@@ -154,6 +154,7 @@ test_step_matches_parts(void **state)
         mcp_blend_options o = mcp_blend_defaults();
         o.curve = c ? MCP_CURVE_POWERLAW : MCP_CURVE_LOG;
         o.filter = MCP_BLEND_FILTER_NONE; /* keeps the zeros where they were put */
+        o.safeguard = 0; /* the parts below do not include it (test_safeguard.c) */
         mcp_blend_input in = {n, v, 32, d, s, NULL};
         mcp_blend_result res;
         assert_int_equal(mcp_blend_step(&in, &o, NULL, NULL, &res), 0);
@@ -329,15 +330,27 @@ proc_series_free(proc_series *ps)
     mcp_image_free(ps->truth);
 }
 
-/* The MSE of the curve blend of point i with the given curves. */
+/* The MSE of the curve blend of point i with the given curves, with the safeguard
+ * (the James-Stein cap over 7x7) or without. */
 static double
-curve_mse(const proc_series *ps, int i, const mcp_image *curves)
+curve_mse(const proc_series *ps, int i, const mcp_image *curves, int safeguard)
 {
     mcp_image *w = NULL, *r = NULL;
     double mse;
+    const mcp_dump *dump = ps->dump[i];
     assert_int_equal(mcp_blend_weights(curves, ps->est[i].sure, NULL, &w), 0);
-    assert_int_equal(
-        mcp_blend_mix(ps->dump[i]->color, ps->spp[i], ps->maps[i].denoised, w, &r), 0);
+    assert_int_equal(mcp_blend_mix(dump->color, ps->spp[i], ps->maps[i].denoised, w, &r), 0);
+    if (safeguard) {
+        mcp_image *js = NULL, *rho = NULL;
+        assert_int_equal(mcp_blend_james_stein(dump->color, ps->maps[i].denoised,
+                                               dump->var_of_mean, 7, &js, &rho),
+                         0);
+        assert_int_equal(mcp_blend_safeguard(dump->color, ps->spp[i], ps->maps[i].denoised,
+                                             rho, w, r, NULL),
+                         0);
+        mcp_image_free(js);
+        mcp_image_free(rho);
+    }
     assert_int_equal(mcp_mse(r, ps->truth, &mse), 0);
     mcp_image_free(w);
     mcp_image_free(r);
@@ -357,15 +370,17 @@ test_series_converges_procedural(void **state)
     retro.fit = MCP_CURVE_FIT_RETROSPECTIVE;
     mcp_image *retro_curves = NULL;
     assert_int_equal(mcp_blend_curves(v, ps.spp, N_POINTS, &retro, &retro_curves), 0);
-    printf("   spp  MSE noisy   denoised   on-the-fly retrospective\n");
+    printf("   spp  MSE noisy   denoised   on-the-fly retrospective safeguarded\n");
     for (int i = 0; i < N_POINTS; i++) {
         mcp_image *otf_curves = NULL;
         double noisy, den;
         assert_int_equal(mcp_blend_curves(&v[i], &ps.spp[i], 1, NULL, &otf_curves), 0);
-        double otf = curve_mse(&ps, i, otf_curves), ret = curve_mse(&ps, i, retro_curves);
+        double otf = curve_mse(&ps, i, otf_curves, 0), ret = curve_mse(&ps, i, retro_curves, 0);
+        double safe = curve_mse(&ps, i, otf_curves, 1);
         assert_int_equal(mcp_mse(ps.dump[i]->color, ps.truth, &noisy), 0);
         assert_int_equal(mcp_mse(ps.maps[i].denoised, ps.truth, &den), 0);
-        printf("  %4g  %.3e  %.3e  %.3e  %.3e\n", ps.spp[i], noisy, den, otf, ret);
+        printf("  %4g  %.3e  %.3e  %.3e  %.3e  %.3e\n", ps.spp[i], noisy, den, otf, ret,
+               safe);
         mcp_image_free(otf_curves);
         /* Early on the blend beats both inputs. */
         if (ps.spp[i] <= 16)
@@ -377,7 +392,12 @@ test_series_converges_procedural(void **state)
          * retrospective curve has the true slope (about -1), W / I ~ v / SURE, and the
          * bias term vanishes faster than v. */
         assert_true(otf <= 2.0 * noisy);
+        /* The safeguard caps rho at the James-Stein weight ~ v / B^2 where the bias
+         * shows (docs/blend.md "The safeguard"): the on-the-fly blend then ends within
+         * 10% of the noisy MSE and is never above 1.5 x min(noisy, denoised). */
+        assert_true(safe <= 1.5 * fmin(noisy, den));
         if (i == N_POINTS - 1) {
+            assert_true(safe <= 1.1 * noisy);
             assert_true(ret <= 1.1 * noisy);
             assert_true(otf < 0.01 * den && ret < 0.01 * den);
         }
