@@ -65,9 +65,10 @@ static const char usage[] =
     "                            differs from the noisy one by more than its noise\n"
     "                            explains (docs/blend.md \"The safeguard\")\n"
     "  --no-flip                 skip HDR-FLIP\n"
-    "  --variance-from KIND      file (each member's own variance) or increments (the\n"
-    "                            spread between the series' increments: right for\n"
-    "                            stratified samplers) [file]\n"
+    "  --variance-from KIND      auto (a member's own variance, or the spread between\n"
+    "                            the series' increments where they show Variance/n\n"
+    "                            off: stratified samplers), file (each member's own)\n"
+    "                            or increments [auto]\n"
     "\n"
     "examples (from the source folder, on the sample renders):\n"
     "  mcpost blend 'samples/fixtures/cornell/series/cornell_spp%04d.exr' --spp 16,32,64,128 --denoiser gauss \\\n"
@@ -170,7 +171,7 @@ cmd_blend(int argc, char **argv)
     mcp_cli_denoiser_flags df = {0};
     int json = 0, all_images = 0, opt, status = 1;
     int *spps = NULL, n_spps = 0;
-    mcp_variance_source variance_from = MCP_VARSRC_NONE;
+    mcp_series_variance variance_from = MCP_SERIES_VARIANCE_AUTO;
     mcp_series *series = NULL;
     mcp_denoiser *den = NULL;
     mcp_image *ref = NULL;

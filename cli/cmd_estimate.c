@@ -154,9 +154,10 @@ static const char usage[] =
     "  --spp LIST               sample counts for --series (e.g. 1,2,4,8)\n"
     "  --taus LIST              thresholds to report [0.05,0.02,0.01; or --tau]\n"
     "  --ref FILE               the reference image: true error and agreement\n"
-    "  --variance-from KIND     file (each member's own variance) or increments (the\n"
-    "                           spread between the series' increments: right for\n"
-    "                           stratified samplers) [file]\n"
+    "  --variance-from KIND     auto (a member's own variance, or the spread between\n"
+    "                           the series' increments where they show Variance/n\n"
+    "                           off: stratified samplers), file (each member's own)\n"
+    "                           or increments [auto]\n"
     "  Reading dumps:\n"
     "  --convention NAME        pbrt, mitsuba, blender, mcpost, plain [auto]\n"
     "  --variance KIND          per-sample or of-mean [per convention]\n"
@@ -241,7 +242,7 @@ cmd_estimate(int argc, char **argv)
                *ref_path = NULL, *convention = NULL, *variance = NULL;
     mcp_cli_denoiser_flags df = {0};
     int json = 0, exit_status = 0, have_taus = 0, have_tau = 0, opt;
-    mcp_variance_source variance_from = MCP_VARSRC_NONE;
+    mcp_series_variance variance_from = MCP_SERIES_VARIANCE_AUTO;
     optind = 1;
     while ((opt = getopt_long(argc, argv, "ho:", longs, NULL)) != -1) {
         int rc = 0;

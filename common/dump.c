@@ -1135,7 +1135,7 @@ mcp_series_load(const mcp_series *s, int i, mcp_dump **out)
     *out = NULL;
     if (i < 0 || i >= s->count)
         return mcp_error("series member %d of %d does not exist", i, s->count);
-    if (s->variance_from == MCP_VARSRC_INCREMENTS && i > 0) {
+    if (s->variance_from == MCP_SERIES_VARIANCE_INCREMENTS && i > 0) {
         /* the increments need two blocks; a member before that keeps its own */
         double ratio;
         if (mcp_series_increment_variance(s, i, &s->increments, out, &ratio) == 0)
@@ -1144,7 +1144,59 @@ mcp_series_load(const mcp_series *s, int i, mcp_dump **out)
             return -1;
         mcp_error_clear();
     }
-    return mcp__series_load_file(s, i, out);
+    if (mcp__series_load_file(s, i, out))
+        return -1;
+    if (s->variance_from != MCP_SERIES_VARIANCE_AUTO || i == 0 ||
+        (*out)->variance_source != MCP_VARSRC_PER_SAMPLE)
+        return 0;
+    /* auto: a per-sample variance is checked against the series' own increments, and
+       replaced by theirs where it is off (docs/variance-sources.md) */
+    mcp_dump *incr = NULL;
+    double ratio = 0;
+    if (mcp_series_increment_variance(s, i, &s->increments, &incr, &ratio)) {
+        if (!strstr(mcp_error_message(), "needs two blocks")) {
+            mcp_dump_free(*out);
+            *out = NULL;
+            return -1;
+        }
+        mcp_error_clear();
+        return 0;
+    }
+    /* only an overstatement (a stratified sampler) is taken as the increments' cue: a
+       Variance/n below their spread can also mean members that are not checkpoints of
+       one render, whose differences are no increments at all */
+    if (mcp_variance_ratio_off(ratio) && ratio > 1) {
+        mcp_dump_free(*out);
+        *out = incr;
+    } else {
+        mcp_dump_free(incr);
+    }
+    return 0;
+}
+
+static const char *const series_variance_names[] = {"auto", "file", "increments"};
+
+const char *
+mcp_series_variance_name(mcp_series_variance v)
+{
+    return (unsigned)v < (unsigned)COUNT(series_variance_names) ? series_variance_names[v]
+                                                                 : "?";
+}
+
+int
+mcp_series_variance_from_name(const char *name, mcp_series_variance *out)
+{
+    int i = name_index(series_variance_names, COUNT(series_variance_names), name);
+    if (i < 0)
+        return mcp_error("variance_from must be auto, file or increments (got '%s')", name);
+    *out = (mcp_series_variance)i;
+    return 0;
+}
+
+int
+mcp_variance_ratio_off(double ratio)
+{
+    return ratio > 0 && (ratio > 1.25 || ratio < 0.8);
 }
 
 int

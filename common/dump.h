@@ -44,9 +44,9 @@ MCP_API const char *mcp_convention_name(mcp_convention c);
 MCP_API int mcp_convention_from_name(const char *name, mcp_convention *out);
 
 typedef enum {
-    MCP_VAR_DEFAULT = 0,  /* what the convention says */
-    MCP_VAR_PER_SAMPLE,   /* variance of one sample: divided by n on load */
-    MCP_VAR_OF_MEAN       /* already the variance of the pixel mean */
+    MCP_VAR_DEFAULT = 0, /* what the convention says */
+    MCP_VAR_PER_SAMPLE,  /* variance of one sample: divided by n on load */
+    MCP_VAR_OF_MEAN      /* already the variance of the pixel mean */
 } mcp_variance_kind;
 
 MCP_API int mcp_variance_kind_from_name(const char *name, mcp_variance_kind *out);
@@ -78,11 +78,11 @@ MCP_API int mcp_variance_source_from_name(const char *name, mcp_variance_source 
 /* How to load a dump. Zero-initialise (or use mcp_dump_spec_defaults()); set only what
  * detection should not decide. Paths in the *_path fields name separate files. */
 typedef struct mcp_dump_spec {
-    const char *path;           /* the main file (colour, and whatever else it holds) */
-    mcp_convention convention;  /* [auto] */
-    mcp_variance_kind variance; /* [per convention] */
+    const char *path;             /* the main file (colour, and whatever else it holds) */
+    mcp_convention convention;    /* [auto] */
+    mcp_variance_kind variance;   /* [per convention] */
     mcp_badval_policy bad_values; /* [fail] */
-    double spp;                 /* sample count when the file has none (0: from file) */
+    double spp;                   /* sample count when the file has none (0: from file) */
     /* explicit channel names in the main file (NULL: detect) */
     const char *color[3];
     const char *var[3];
@@ -92,24 +92,24 @@ typedef struct mcp_dump_spec {
     const char *variance_path;
     const char *albedo_path;
     const char *normal_path;
-    const char *spp_map_path;   /* one channel: per-pixel sample counts */
+    const char *spp_map_path; /* one channel: per-pixel sample counts */
 } mcp_dump_spec;
 
 MCP_API mcp_dump_spec mcp_dump_spec_defaults(void);
 
 typedef struct mcp_dump {
-    mcp_image *color;        /* 3 channels R,G,B: the sample mean */
-    mcp_image *var_of_mean;  /* 3 channels R,G,B, or NULL when the file has none */
-    mcp_image *cov_of_mean;  /* 3 channels RG,RB,GB (off-diagonal), or NULL */
-    mcp_image *albedo;       /* 3 channels R,G,B, or NULL */
-    mcp_image *normal;       /* 3 channels X,Y,Z, or NULL */
-    double spp;              /* scalar sample count; 0 when spp_map is used */
-    mcp_image *spp_map;      /* 1 channel, or NULL */
+    mcp_image *color;       /* 3 channels R,G,B: the sample mean */
+    mcp_image *var_of_mean; /* 3 channels R,G,B, or NULL when the file has none */
+    mcp_image *cov_of_mean; /* 3 channels RG,RB,GB (off-diagonal), or NULL */
+    mcp_image *albedo;      /* 3 channels R,G,B, or NULL */
+    mcp_image *normal;      /* 3 channels X,Y,Z, or NULL */
+    double spp;             /* scalar sample count; 0 when spp_map is used */
+    mcp_image *spp_map;     /* 1 channel, or NULL */
     mcp_convention convention;
     mcp_variance_kind variance_in_file; /* how the file stored it */
-    mcp_attrs attrs;         /* the main file's header */
-    char *source;            /* the main file's path */
-    long n_bad_values;       /* NaN/Inf/negative-variance values replaced (policy zero) */
+    mcp_attrs attrs;                    /* the main file's header */
+    char *source;                       /* the main file's path */
+    long n_bad_values; /* NaN/Inf/negative-variance values replaced (policy zero) */
     /* What var_of_mean rests on. Files that mcpost wrote carry it in the header
      * (mcpost:varianceSource, mcpost:varianceDof, mcpost:replicates). */
     mcp_variance_source variance_source;
@@ -180,16 +180,37 @@ typedef struct mcp_increment_options {
                          [0] */
 } mcp_increment_options;
 
+/* Where a series member's variance comes from (docs/variance-sources.md). */
+typedef enum {
+    /* The file's own, except that a member whose file holds a per-sample variance takes
+     * the spread between the series' increments before it whenever Variance/n
+     * overstates that spread (mcp_variance_ratio_off and > 1: a stratified sampler).
+     * A member with fewer than two blocks keeps its own, and so does one whose
+     * Variance/n is below the spread (correlated samples, or members that are not
+     * checkpoints of one render). The default. */
+    MCP_SERIES_VARIANCE_AUTO = 0,
+    MCP_SERIES_VARIANCE_FILE,      /* the file's own, always */
+    MCP_SERIES_VARIANCE_INCREMENTS /* the increments' (mcp_series_increment_variance),
+                                      from the second block on */
+} mcp_series_variance;
+
+/* "auto", "file", "increments". */
+MCP_API const char *mcp_series_variance_name(mcp_series_variance v);
+MCP_API int mcp_series_variance_from_name(const char *name, mcp_series_variance *out);
+
+/* Whether a ratio of Variance/n to the increments' spread (mcp_series_variance_ratio)
+ * says Variance/n is off: outside [0.8, 1.25]. That band holds the independent
+ * fixtures (0.99-1.04) and excludes the stratified ones (1.27-2.9); 0 (not measured)
+ * is never off. */
+MCP_API int mcp_variance_ratio_off(double ratio);
+
 typedef struct mcp_series {
     int count;
-    char **paths;   /* dump files, in increasing spp */
-    double *spp;    /* their sample counts (0: read from the file) */
+    char **paths;       /* dump files, in increasing spp */
+    double *spp;        /* their sample counts (0: read from the file) */
     mcp_dump_spec spec; /* applied to every member; .path and .spp are per member */
-    /* Where mcp_series_load takes a member's variance from: the file's own [NONE,
-     * the default], or MCP_VARSRC_INCREMENTS, the spread between the increments
-     * before it (mcp_series_increment_variance; a member with fewer than two blocks
-     * keeps its own) */
-    mcp_variance_source variance_from;
+    /* Where mcp_series_load takes a member's variance from [auto] */
+    mcp_series_variance variance_from;
     mcp_increment_options increments;
 } mcp_series;
 
@@ -198,8 +219,8 @@ typedef struct mcp_series {
  * (spp from the files when spps is NULL). */
 MCP_API int mcp_series_from_pattern(const char *pattern, const int *spps, int count,
                                     mcp_series **out);
-MCP_API int mcp_series_from_paths(const char *const *paths, const double *spps,
-                                  int count, mcp_series **out);
+MCP_API int mcp_series_from_paths(const char *const *paths, const double *spps, int count,
+                                  mcp_series **out);
 MCP_API int mcp_series_load(const mcp_series *s, int i, mcp_dump **out);
 MCP_API void mcp_series_free(mcp_series *s);
 

@@ -335,11 +335,8 @@ series_from(mcp_job *job, const mcp_node *def, mcp_series **out)
     const char *from = NULL;
     if (mcp_node_opt_string(def, "variance_from", &from))
         rc = -1;
-    else if (from && !strcmp(from, "increments"))
-        (*out)->variance_from = MCP_VARSRC_INCREMENTS;
-    else if (from && strcmp(from, "file") != 0)
-        rc = mcp_node_error(mcp_node_get(def, "variance_from"),
-                            "variance_from must be file or increments (got '%s')", from);
+    else if (from && mcp_series_variance_from_name(from, &(*out)->variance_from))
+        rc = mcp_node_error(mcp_node_get(def, "variance_from"), "%s", mcp_error_message());
     if (rc) {
         mcp_series_free(*out);
         *out = NULL;

@@ -447,7 +447,7 @@ mcp_series_variance_ratio(const mcp_series *s, double *ratio)
     if (s->count < 2)
         return 0;
     mcp_series plain = *s;
-    plain.variance_from = MCP_VARSRC_NONE; /* the files' own variance is the shape */
+    plain.variance_from = MCP_SERIES_VARIANCE_FILE; /* the files' own variance is the shape */
     mcp_increment_options io = s->increments;
     io.pool_radius = -1; /* the ratio is image-wide: no pooling needed */
     mcp_dump *incr = NULL, *last = NULL;

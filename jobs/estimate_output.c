@@ -435,9 +435,11 @@ mcp__estimate_run_series(const mcp_series *series, const mcp_denoiser *den,
     if (section) {
         cJSON_AddStringToObject(section, "variance_source",
                                 mcp_variance_source_name(s->variance_source));
-        const cJSON *w = cJSON_GetObjectItem(j, "variance_warning");
-        if (w)
-            cJSON_AddStringToObject(section, "variance_warning", w->valuestring);
+        static const char *const lines[2] = {"variance_warning", "variance_choice"};
+        for (int k = 0; k < 2; k++) {
+            const cJSON *w = cJSON_GetObjectItem(j, lines[k]);
+            if (w) cJSON_AddStringToObject(section, lines[k], w->valuestring);
+        }
     }
     char path[4352];
     char *text = cJSON_Print(j);

@@ -54,15 +54,15 @@ int mcp__at_line(const mcp_node *settings, const char *key);
 void mcp__add_variance_source(cJSON *j, mcp_variance_source src, double dof);
 /* The source in words, for the text output. */
 const char *mcp__variance_source_words(mcp_variance_source src);
-/* --variance-from: "file" (the members' own) or "increments". */
-int mcp__variance_from(const char *text, mcp_variance_source *out);
-/* Whether Variance/n over the increments' spread is off 1 by more than its noise
- * allows ([0.8, 1.25] taken as agreement), and the one-line warning that says so. */
-int mcp__variance_ratio_off(double ratio);
+/* --variance-from: "auto", "file" (the members' own) or "increments". */
+int mcp__variance_from(const char *text, mcp_series_variance *out);
+/* The one line that says Variance/n is off the increments' spread
+ * (mcp_variance_ratio_off), and whether the increments are used. */
 const char *mcp__variance_ratio_warning(double ratio, int using_increments);
-/* A series' ratio into its JSON object / report section ("variance_ratio", and
- * "variance_warning" when off), and the warning once on stderr (also when quiet: it
- * says the figures may be off). j may be NULL. */
+/* A series' ratio into its JSON object / report section ("variance_ratio", and when
+ * off "variance_choice" if the increments are used, else "variance_warning"), and that
+ * line once on stderr (also when quiet: it says what the figures rest on). j may be
+ * NULL. */
 void mcp__report_variance_ratio(double ratio, int using_increments, cJSON *j);
 
 /* ---- stage_denoiser.c ---- */

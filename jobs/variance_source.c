@@ -37,14 +37,11 @@ mcp__variance_source_words(mcp_variance_source src)
 }
 
 int
-mcp__variance_from(const char *text, mcp_variance_source *out)
+mcp__variance_from(const char *text, mcp_series_variance *out)
 {
-    if (!strcmp(text, "file"))
-        *out = MCP_VARSRC_NONE;
-    else if (!strcmp(text, "increments"))
-        *out = MCP_VARSRC_INCREMENTS;
-    else
-        return mcp_error("--variance-from must be file or increments (got '%s')", text);
+    if (mcp_series_variance_from_name(text, out))
+        return mcp_error("--variance-from must be auto, file or increments (got '%s')",
+                         text);
     return 0;
 }
 
@@ -55,18 +52,14 @@ mcp__report_variance_ratio(double ratio, int using_increments, cJSON *j)
         return;
     if (j)
         cJSON_AddNumberToObject(j, "variance_ratio", ratio);
-    if (!mcp__variance_ratio_off(ratio))
+    if (!mcp_variance_ratio_off(ratio))
         return;
     const char *w = mcp__variance_ratio_warning(ratio, using_increments);
-    fprintf(stderr, "mcpost: warning: %s\n", w);
+    /* taken care of (the increments are used) is news, not a warning */
+    fprintf(stderr, "mcpost: %s%s\n", using_increments ? "" : "warning: ", w);
     if (j)
-        cJSON_AddStringToObject(j, "variance_warning", w);
-}
-
-int
-mcp__variance_ratio_off(double ratio)
-{
-    return ratio > 0 && (ratio > 1.25 || ratio < 0.8);
+        cJSON_AddStringToObject(j, using_increments ? "variance_choice" : "variance_warning",
+                                w);
 }
 
 const char *
@@ -77,9 +70,13 @@ mcp__variance_ratio_warning(double ratio, int using_increments)
              "Variance/n is %.2fx the spread between this series' increments: the "
              "per-sample variance %s the error (%s)%s",
              ratio, ratio > 1 ? "overstates" : "understates",
-             ratio > 1 ? "stratified samples" : "correlated samples?",
-             using_increments ? "; the estimates use the increments"
-                              : "; use --variance-from increments (job: variance_from: "
-                                "increments)");
+             ratio > 1 ? "stratified samples"
+                       : "correlated samples, or members that are not checkpoints of one "
+                         "render?",
+             using_increments ? "; the estimates use the increments (--variance-from "
+                                "file keeps Variance/n)"
+             : ratio > 1      ? "; use --variance-from increments (job: variance_from: "
+                                "increments)"
+                              : "");
     return text;
 }

@@ -149,21 +149,13 @@ py_blend(PyObject *self, PyObject *args, PyObject *kw)
         return NULL;
     if (seed && parse_seed(seed, &o.sure.seed))
         return NULL;
-    mcp_variance_source vsrc = MCP_VARSRC_NONE;
+    mcp_series_variance vsrc = MCP_SERIES_VARIANCE_AUTO;
     if ((fit && mcp_curve_fit_from_name(fit, &b->fit)) ||
         (curve && mcp_curve_model_from_name(curve, &b->curve)) ||
         (filter && mcp_blend_filter_from_name(filter, &b->filter)) ||
         (neg && mcp_neg_sure_from_name(neg, &b->negative_sure)) ||
-        mcp_blend_options_check(b))
+        (vfrom && mcp_series_variance_from_name(vfrom, &vsrc)) || mcp_blend_options_check(b))
         return mcp_py_fail();
-    if (vfrom && strcmp(vfrom, "file")) {
-        if (strcmp(vfrom, "increments")) {
-            PyErr_Format(mcp_py_error,
-                         "variance_from must be file or increments (got '%s')", vfrom);
-            return NULL;
-        }
-        vsrc = MCP_VARSRC_INCREMENTS;
-    }
     /* the members: paths in increasing spp (the driver loads them one at a time) */
     PyObject *fast = PySequence_Fast(list, "dumps must be a list of paths");
     if (!fast)
@@ -249,7 +241,7 @@ PyMethodDef mcp_py_blend_methods[] = {
      "      fit='on_the_fly', curve='log', far_spp=1e6, max_weight=0,\n"
      "      denoiser_keeps_zeros=False, filter='gauss', filter_window=11,\n"
      "      filter_sigma_scale=100, stop_filtering=True, negative_sure='switch',\n"
-     "      n_probes=1, seed=0, js_window=7, flip=True, variance_from='file',\n"
+     "      n_probes=1, seed=0, js_window=7, flip=True, variance_from='auto',\n"
      "      all_images=False, safeguard=True) -> dict\n\n"
      "Blends every member of a progressive render (dump paths in increasing spp) with\n"
      "its denoised image (Denisova & Bocchi 2024). 'members': per member 'blend',\n"

@@ -400,10 +400,12 @@ test_merge_and_variance_sources(void **state)
     assert_string_equal(cJSON_GetObjectItem(est, "denoiser")->valuestring, "default (unet)");
     cJSON_Delete(j);
     /* blend on the stratified texture series: the source, the measured ratio and the
-       warning in blend.json; with --variance-from increments the source changes */
-    const char *sources[2] = {"", " --variance-from increments"},
-               *want_src[2] = {"per-sample", "increments"};
-    for (int k = 0; k < 2; k++) {
+       line in blend.json. By default (auto) its increments, which show Variance/n 2x
+       too large, are used and said to be (variance_choice, no warning); with
+       --variance-from file the per-sample variance stays and the line is a warning. */
+    const char *sources[3] = {"", " --variance-from increments", " --variance-from file"},
+               *want_src[3] = {"increments", "increments", "per-sample"};
+    for (int k = 0; k < 3; k++) {
         assert_int_equal(run("blend '%s/samples/fixtures/strat/texture/series/"
                              "texture_spp%%04d.exr' --spp 32,64,128 --denoiser gauss "
                              "--no-flip --quiet -o '%s'%s",
@@ -417,10 +419,14 @@ test_merge_and_variance_sources(void **state)
                             want_src[k]);
         double ratio = cJSON_GetObjectItem(b, "variance_ratio")->valuedouble;
         assert_true(ratio > 1.6 && ratio < 2.4);
-        assert_non_null(strstr(cJSON_GetObjectItem(b, "variance_warning")->valuestring,
-                               k ? "the estimates use the increments"
-                                 : "use --variance-from increments"));
-        assert_non_null(strstr(err, "mcpost: warning: Variance/n is"));
+        int used = k < 2;
+        const cJSON *line = cJSON_GetObjectItem(b, used ? "variance_choice" : "variance_warning");
+        assert_non_null(line);
+        assert_null(cJSON_GetObjectItem(b, used ? "variance_warning" : "variance_choice"));
+        assert_non_null(strstr(line->valuestring, used ? "the estimates use the increments"
+                                                       : "use --variance-from increments"));
+        assert_non_null(strstr(err, used ? "mcpost: Variance/n is"
+                                         : "mcpost: warning: Variance/n is"));
         cJSON_Delete(b);
     }
     /* errors: one render; a pattern that matches nothing; a bad variance_from */
@@ -437,7 +443,7 @@ test_merge_and_variance_sources(void **state)
                         "inputs:\n  p: {series: [rep0.exr, merged.exr], variance_from: spread}\n"
                         "stages:\n  - info: {input: p}\n");
     assert_one_line_error(run("run '%s'", mcp_test_path("merge_bad2.yaml")),
-                          "variance_from must be file or increments");
+                          "variance_from must be auto, file or increments");
     mcp_dump_free(want);
     mcp_dump_free(got);
     for (int k = 0; k < 4; k++)

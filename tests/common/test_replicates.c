@@ -351,6 +351,7 @@ test_stratified_sources(void **state)
         mcp_dump *d = NULL, *last = NULL;
         double ratio = 0;
         assert_int_equal(mcp_series_increment_variance(s, 3, &opt, &d, &ratio), 0);
+        s->variance_from = MCP_SERIES_VARIANCE_FILE; /* the render's own Variance/n */
         assert_int_equal(mcp_series_load(s, 3, &last), 0);
         for (int i = 0; i < n; i++)
             incr += d->var_of_mean->data[i], own += last->var_of_mean->data[i];
@@ -429,6 +430,67 @@ test_merge_errors(void **state)
     mcp_dump_free(b);
 }
 
+/* The default choice (MCP_SERIES_VARIANCE_AUTO): a stratified series (the jittered
+ * sampler: Variance/n about 1.5x the truth) takes its increments' variance from the
+ * second block on; an independent one keeps its per-sample variance (ratio near 1);
+ * the first member always keeps its own; `file` and `increments` force either. */
+static void
+test_series_variance_auto(void **state)
+{
+    (void)state;
+    mcp_proc_scene scene = mcp_proc_scene_defaults();
+    scene.width = scene.height = 24;
+    scene.firefly_probability = 0;
+    const int spp[4] = {16, 32, 48, 64};
+    mcp_series *indep = procedural_series(&scene, spp, 4, 41, "auto_iid");
+    scene.sampler = MCP_PROC_SAMPLER_JITTERED;
+    scene.strata = 4;
+    mcp_series *strat = procedural_series(&scene, spp, 4, 42, "auto_strat");
+    assert_int_equal(strat->variance_from, MCP_SERIES_VARIANCE_AUTO);
+    static const struct {
+        int stratified;
+        mcp_series_variance from;
+        mcp_variance_source first, last;
+    } cases[] = {
+        {1, MCP_SERIES_VARIANCE_AUTO, MCP_VARSRC_PER_SAMPLE, MCP_VARSRC_INCREMENTS},
+        {0, MCP_SERIES_VARIANCE_AUTO, MCP_VARSRC_PER_SAMPLE, MCP_VARSRC_PER_SAMPLE},
+        {1, MCP_SERIES_VARIANCE_FILE, MCP_VARSRC_PER_SAMPLE, MCP_VARSRC_PER_SAMPLE},
+        {0, MCP_SERIES_VARIANCE_INCREMENTS, MCP_VARSRC_PER_SAMPLE, MCP_VARSRC_INCREMENTS},
+    };
+    for (size_t c = 0; c < sizeof cases / sizeof *cases; c++) {
+        mcp_series *s = cases[c].stratified ? strat : indep;
+        s->variance_from = cases[c].from;
+        mcp_dump *first = NULL, *last = NULL, *incr = NULL;
+        assert_int_equal(mcp_series_load(s, 0, &first), 0);
+        assert_int_equal(mcp_series_load(s, 3, &last), 0);
+        assert_int_equal(first->variance_source, cases[c].first);
+        assert_int_equal(last->variance_source, cases[c].last);
+        if (cases[c].last == MCP_VARSRC_INCREMENTS) { /* the same as asked directly */
+            assert_int_equal(mcp_series_increment_variance(s, 3, &s->increments, &incr, NULL),
+                             0);
+            assert_true(mcp_test_max_abs_diff(incr->var_of_mean, last->var_of_mean) == 0);
+        }
+        double ratio = 0;
+        assert_int_equal(mcp_series_variance_ratio(s, &ratio), 0);
+        assert_int_equal(mcp_variance_ratio_off(ratio), cases[c].stratified);
+        mcp_dump_free(first);
+        mcp_dump_free(last);
+        mcp_dump_free(incr);
+    }
+    assert_int_equal(mcp_variance_ratio_off(0), 0);
+    assert_int_equal(mcp_variance_ratio_off(1.26), 1);
+    assert_int_equal(mcp_variance_ratio_off(0.79), 1);
+    assert_int_equal(mcp_variance_ratio_off(1.0), 0);
+    mcp_series_variance v;
+    assert_int_equal(mcp_series_variance_from_name("increments", &v), 0);
+    assert_int_equal(v, MCP_SERIES_VARIANCE_INCREMENTS);
+    assert_string_equal(mcp_series_variance_name(MCP_SERIES_VARIANCE_AUTO), "auto");
+    assert_error_contains(mcp_series_variance_from_name("spread", &v),
+                          "variance_from must be auto, file or increments");
+    mcp_series_free(indep);
+    mcp_series_free(strat);
+}
+
 int
 main(void)
 {
@@ -440,6 +502,7 @@ main(void)
         cmocka_unit_test(test_pool_degrees_of_freedom),
         cmocka_unit_test(test_increments_independent),
         cmocka_unit_test(test_stratified_sources),
+        cmocka_unit_test(test_series_variance_auto),
         cmocka_unit_test(test_source_roundtrip),
         cmocka_unit_test(test_merge_errors),
     };

@@ -309,13 +309,15 @@ test_stratified_series(void **state)
     assert_int_equal(mcp_image_read(ref_path, NULL, &ref), 0);
     assert_int_equal(mcp_denoiser_create_from_args("nlm", NULL, 0, &den), 0);
     int agree_own = 0, agree_incr = 0, cases = 0, early = 0;
+    series->variance_from = MCP_SERIES_VARIANCE_FILE;
     assert_int_equal(run_series(series, den, ref, 1, "texture, per-sample", &agree_own,
                                 &cases, &early),
                      0);
-    series->variance_from = MCP_VARSRC_INCREMENTS;
+    series->variance_from = MCP_SERIES_VARIANCE_INCREMENTS;
     assert_int_equal(run_series(series, den, ref, 1, "texture, increments", &agree_incr,
                                 &cases, &early),
                      0);
+    series->variance_from = MCP_SERIES_VARIANCE_AUTO; /* the default picks them itself */
     mcp_series_estimate_options so = mcp_series_estimate_defaults();
     so.n_taus = 1;
     mcp_series_estimate *s = NULL;
