@@ -429,9 +429,9 @@ mcp_image_write(const mcp_image *img, const char *path, const mcp_write_options 
     if (format == MCP_FORMAT_UNKNOWN)
         return mcp_error("%s: unknown output format (use .exr, .pfm, .png, .jpg, .hdr or "
                          ".tif)", path);
-    /* Formats without channel names store colour by place: R, G, B (then alpha) are
-       taken by name wherever they stand (docs/conventions.md, "Channel order"). EXR
-       keeps the names, so it takes the image as it is. */
+    /* Formats without channel names store colour by place: R, G, B go first, taken by
+       name wherever they stand, the other channels (alpha) after them in their order
+       (docs/conventions.md, "Channel order"). EXR keeps the names: the image as it is. */
     mcp_image *ordered = NULL;
     if (format != MCP_FORMAT_EXR) {
         int *order = mcp_calloc((size_t)img->channels, sizeof *order);

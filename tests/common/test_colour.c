@@ -210,6 +210,30 @@ test_colour_order(void **state)
     }
 }
 
+/* In place, names and pixels together (as an OpenImageIO read is reordered), each
+ * pixel's values follow their names. */
+static void
+test_colour_first_in_place(void **state)
+{
+    (void)state;
+    static const char *const names[] = {"Z", "B", "G", "R"}, *const want[] = {"R", "G",
+                                                                              "B", "Z"};
+    mcp_image *img = mcp_test_ramp(W, H, 4, names); /* x + 10 y + 100 c */
+    assert_int_equal(mcp_image_colour_first(img), 0);
+    static const int from[4] = {3, 2, 1, 0}; /* the ramp's channel now at each place */
+    for (int c = 0; c < 4; c++) {
+        assert_string_equal(img->names[c], want[c]);
+        for (int y = 0; y < H; y++)
+            for (int x = 0; x < W; x++)
+                assert_true(mcp_image_px(img, x, y)[c] == x + 10 * y + 100 * from[c]);
+    }
+    /* already in order: nothing moves */
+    assert_int_equal(mcp_image_colour_first(img), 0);
+    assert_string_equal(img->names[0], "R");
+    assert_true(mcp_image_px(img, 1, 1)[0] == 1 + 10 + 300);
+    mcp_image_free(img);
+}
+
 /* Every layout of every primary: written as EXR and read back with R, G, B first;
  * written directly as PNG, PFM and HDR (formats that store colour by place). */
 static void
@@ -312,6 +336,7 @@ main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_colour_order),
+        cmocka_unit_test(test_colour_first_in_place),
         cmocka_unit_test(test_library_round_trips),
         cmocka_unit_test(test_convert_keeps_colour),
         cmocka_unit_test(test_convert_channels_by_name),
