@@ -377,6 +377,18 @@ route_to_image(mcp_image *img, mcp__exr_route **routes)
     return 0;
 }
 
+/* Puts the channel names of a new image, whose pixels are not read yet, in
+ * mcp_image_colour_order. */
+static int
+reorder_names(mcp_image *img)
+{
+    int *order = mcp_calloc((size_t)img->channels, sizeof *order);
+    int moved = order ? mcp_image_colour_order(img, order) : -1;
+    int rc = moved < 0 ? -1 : moved ? mcp__image_permute_names(img, order) : 0;
+    free(order);
+    return rc;
+}
+
 /* Reads part 0 of an opened context f; file_bytes is the size of what it reads, name
  * names it in messages and becomes the image's source. Closes f. Without a router the
  * whole image goes to *out; with one, the header (channel names, attributes, 1x1
@@ -442,6 +454,10 @@ read_context(exr_context_t f, unsigned long long file_bytes, const char *name,
                       &img) ||
         mcp_image_set_source(img, path) || read_attributes(f, &img->attrs))
         goto done;
+    /* EXR lists channels alphabetically (B, G, R): a whole image comes back with its
+       colour first (docs/conventions.md, "Channel order"). Only the names move: the
+       pixels are placed by name below. A router places channels itself, by name. */
+    if (!router && reorder_names(img)) goto done;
     if ((dw.min.x || dw.min.y) &&
         (mcp_attrs_set_int(&img->attrs, "dataWindowX", dw.min.x) ||
          mcp_attrs_set_int(&img->attrs, "dataWindowY", dw.min.y)))

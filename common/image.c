@@ -1,4 +1,5 @@
 /* image.c: the shared float32 interleaved image with named channels (see image.h). */
+#define _POSIX_C_SOURCE 200809L /* strcasecmp */
 #include <mcpost/image.h>
 
 #include <ctype.h>
@@ -7,6 +8,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 
 static int
 names_new(int channels, const char *const *names, char ***out)
@@ -244,6 +246,145 @@ mcp_image_find_triple(const mcp_image *img, const char *const (*triples)[3], int
     for (int c = 0; c < 3; c++)
         index[c] = c;
     return 0;
+}
+
+/* ---- colour by channel name (docs/conventions.md, "Channel order") ---- */
+
+/* The channel called name, else one called so in any case ("r", "g", "b"). */
+static int
+channel_nocase(const mcp_image *img, const char *name)
+{
+    int c = mcp_image_channel(img, name);
+    for (int i = 0; c < 0 && i < img->channels; i++)
+        if (img->names && img->names[i] && !strcasecmp(img->names[i], name)) c = i;
+    return c;
+}
+
+/* The channel whose name ends with suffix (e.g. ".Combined.R"), when exactly one
+ * does. */
+static int
+channel_suffix(const mcp_image *img, const char *suffix)
+{
+    int found = -1, n = 0;
+    size_t ls = strlen(suffix);
+    for (int i = 0; i < img->channels; i++) {
+        const char *name = img->names ? img->names[i] : NULL;
+        size_t ln = name ? strlen(name) : 0;
+        if (ln >= ls && !strcmp(name + ln - ls, suffix)) {
+            found = i;
+            n++;
+        }
+    }
+    return n == 1 ? found : -1;
+}
+
+int
+mcp_image_rgb_by_name(const mcp_image *img, int rgb[3])
+{
+    static const char *const names[3] = {"R", "G", "B"};
+    static const char *const blender[3] = {".Combined.R", ".Combined.G", ".Combined.B"};
+    int n_found = 0, n_blender = 0, bl[3];
+    for (int k = 0; k < 3; k++) {
+        n_found += (rgb[k] = channel_nocase(img, names[k])) >= 0;
+        n_blender += (bl[k] = channel_suffix(img, blender[k])) >= 0;
+    }
+    if (n_found == 0 && n_blender == 3) { /* Blender: <layer>.Combined.R/G/B */
+        memcpy(rgb, bl, sizeof bl);
+        return 3;
+    }
+    return n_found;
+}
+
+/* The channel called "<prefix>.<letter>" where prefix is name[0 .. len). */
+static int
+layer_channel(const mcp_image *img, const char *name, size_t len, char letter)
+{
+    for (int c = 0; c < img->channels; c++) {
+        const char *n = img->names[c];
+        if (!strncmp(n, name, len) && n[len] == '.' && n[len + 1] == letter &&
+            !n[len + 2])
+            return c;
+    }
+    return -1;
+}
+
+int
+mcp_image_colour_order(const mcp_image *img, int *order)
+{
+    int n = img->channels, k = 0, rgb[3], moved = 0;
+    unsigned char *placed = mcp_calloc((size_t)n, 1);
+    if (!placed) return -1;
+    /* the colour first; a duplicated name can make two of R, G, B one channel, and
+       then the order is left alone */
+    if (mcp_image_rgb_by_name(img, rgb) == 3 && rgb[0] != rgb[1] && rgb[0] != rgb[2] &&
+        rgb[1] != rgb[2])
+        for (int j = 0; j < 3; j++) {
+            order[k++] = rgb[j];
+            placed[rgb[j]] = 1;
+        }
+    for (int c = 0; c < n; c++) {
+        if (placed[c]) continue;
+        /* a layer's "<p>.R", "<p>.G", "<p>.B" together as R, G, B, where the first of
+           them stands (EXR lists them B, G, R) */
+        const char *name = img->names[c];
+        size_t len = strlen(name);
+        int t[3] = {-1, -1, -1};
+        if (len > 2 && name[len - 2] == '.' && strchr("RGB", name[len - 1]))
+            for (int j = 0; j < 3; j++)
+                t[j] = layer_channel(img, name, len - 2, "RGB"[j]);
+        if (t[0] >= 0 && t[1] >= 0 && t[2] >= 0 && !placed[t[0]] && !placed[t[1]] &&
+            !placed[t[2]]) {
+            for (int j = 0; j < 3; j++) {
+                order[k++] = t[j];
+                placed[t[j]] = 1;
+            }
+        } else {
+            order[k++] = c;
+            placed[c] = 1;
+        }
+    }
+    free(placed);
+    for (int c = 0; c < n; c++)
+        moved |= order[c] != c;
+    return moved;
+}
+
+int
+mcp__image_permute_names(mcp_image *img, const int *order)
+{
+    char **names = mcp_calloc((size_t)img->channels, sizeof *names);
+    if (!names) return -1;
+    for (int c = 0; c < img->channels; c++)
+        names[c] = img->names[order[c]];
+    free(img->names);
+    img->names = names;
+    return 0;
+}
+
+int
+mcp_image_colour_first(mcp_image *img)
+{
+    int n = img->channels, rc = -1;
+    int *order = mcp_calloc((size_t)n, sizeof *order);
+    float *tmp = mcp_calloc((size_t)n, sizeof *tmp);
+    int moved = order && tmp ? mcp_image_colour_order(img, order) : -1;
+    if (moved == 0)
+        rc = 0;
+    else if (moved > 0 && !mcp__image_permute_names(img, order)) {
+        /* one pixel at a time through tmp: only files whose channels were out of order
+           (an OpenImageIO read) pay for this pass */
+        for (int y = 0; y < img->height; y++)
+            for (int x = 0; x < img->width; x++) {
+                float *p = mcp_image_px(img, x, y);
+                for (int c = 0; c < n; c++)
+                    tmp[c] = p[order[c]];
+                memcpy(p, tmp, (size_t)n * sizeof *tmp);
+            }
+        rc = 0;
+    }
+    free(tmp);
+    free(order);
+    return rc;
 }
 
 int

@@ -103,6 +103,27 @@ MCP_API int mcp_image_channels(const mcp_image *img, const char *const *names,
 MCP_API int mcp_image_find_triple(const mcp_image *img, const char *const (*triples)[3],
                                   int n, int index[3]);
 
+/* Colour by channel name (docs/conventions.md, "Channel order"): R, G, B are the
+ * channels called "R", "G", "B" (exactly, else in any case), else Blender's
+ * "<layer>.Combined.R/G/B" when one layer has each. Returns how many of the three
+ * plain names were found (3 also for Blender's triple, when no plain name is); rgb[k]
+ * is -1 for one not found. No error is set. mcp_rgb_channels (tonemap.h) adds the
+ * fallbacks for unnamed 3- and 1-channel images and the message. */
+MCP_API int mcp_image_rgb_by_name(const mcp_image *img, int rgb[3]);
+
+/* The channel order with colour first: the R, G, B of mcp_image_rgb_by_name (when all
+ * three are distinct channels), then every other channel in its order, except that a
+ * layer's "<p>.R", "<p>.G", "<p>.B" (all three present) come together, as R, G, B, at
+ * the place of the first of them. order[c] (img->channels entries) is the channel
+ * that goes to place c. Returns 1 when that moves a channel, 0 when it is img's own
+ * order, -1 when out of memory. */
+MCP_API int mcp_image_colour_order(const mcp_image *img, int *order);
+
+/* Puts img's channels (names and pixels, in place) in mcp_image_colour_order. EXR
+ * lists channels alphabetically (B, G, R); every image mcp_image_read returns is in
+ * this order, so that code taking channels by position sees R, G, B first. */
+MCP_API int mcp_image_colour_first(mcp_image *img);
+
 /* A new packed image holding the listed channels (by index), in that order. */
 MCP_API int mcp_image_copy_channels(const mcp_image *img, const int *index, int count,
                                     mcp_image **out);

@@ -153,9 +153,13 @@ oiio_read(const char *path, const mcp_read_options *opt, mcp_image **out)
                 for (int k = 0; k < c; k++)
                     if (strcmp(img->names[k], "A") != 0)
                         img->data[i * c + k] = mcp_srgb_to_linear(img->data[i * c + k]);
-        *out = img;
-        img = NULL;
-        rc = 0;
+        /* a TIFF may name its channels in any order: colour first, as every reader
+           gives it (docs/conventions.md, "Channel order") */
+        if (!mcp_image_colour_first(img)) {
+            *out = img;
+            img = NULL;
+            rc = 0;
+        }
     }
     for (int k = 0; k < c; k++)
         free(names[k]);
@@ -425,9 +429,23 @@ mcp_image_write(const mcp_image *img, const char *path, const mcp_write_options 
     if (format == MCP_FORMAT_UNKNOWN)
         return mcp_error("%s: unknown output format (use .exr, .pfm, .png, .jpg, .hdr or "
                          ".tif)", path);
+    /* Formats without channel names store colour by place: R, G, B go first, taken by
+       name wherever they stand, the other channels (alpha) after them in their order
+       (docs/conventions.md, "Channel order"). EXR keeps the names: the image as it is. */
+    mcp_image *ordered = NULL;
+    if (format != MCP_FORMAT_EXR) {
+        int *order = mcp_calloc((size_t)img->channels, sizeof *order);
+        int moved = order ? mcp_image_colour_order(img, order) : -1;
+        if (moved > 0 && !mcp_image_copy_channels(img, order, img->channels, &ordered))
+            img = ordered;
+        free(order);
+        if (moved < 0 || (moved > 0 && !ordered)) return -1;
+    }
     mcp_atomic_file af;
-    if (mcp_atomic_begin(&af, path))
+    if (mcp_atomic_begin(&af, path)) {
+        mcp_image_free(ordered);
         return -1;
+    }
     int rc;
     switch (format) {
     case MCP_FORMAT_EXR: rc = mcp__exr_write(img, af.tmp_path, opt); break;
@@ -435,6 +453,7 @@ mcp_image_write(const mcp_image *img, const char *path, const mcp_write_options 
     case MCP_FORMAT_PNG: rc = mcp__png_write(img, af.tmp_path, opt); break;
     default: rc = oiio_write(img, af.tmp_path, format, opt); break;
     }
+    mcp_image_free(ordered);
     if (rc) {
         name_output_in_error(af.tmp_path, path);
         mcp_atomic_abort(&af);

@@ -8,6 +8,10 @@
 
 #include <mcpost/image.h>
 
+/* Reorders img's channel names only (order as mcp_image_colour_order gives it), for a
+ * reader that has made the image but not yet placed its pixels by name (image.c). */
+int mcp__image_permute_names(mcp_image *img, const int *order);
+
 /* Fault injection, for tests only (alloc.c): allocation number n (0-based) through
  * mcp_malloc, mcp_calloc, mcp_realloc and mcp_strdup from now on fails as if memory
  * were out, the others succeed; n < 0 turns it off. mcp__alloc_count() is how many

@@ -146,58 +146,19 @@ mcp_tonemap_flip_coefficients(mcp_tonemap tm, float k[6])
     return 0;
 }
 
-static int
-channel_nocase(const mcp_image *img, const char *name)
-{
-    int c = mcp_image_channel(img, name);
-    for (int i = 0; c < 0 && i < img->channels; i++)
-        if (img->names && img->names[i] && !strcasecmp(img->names[i], name)) c = i;
-    return c;
-}
-
-/* The channel whose name ends with suffix (e.g. ".Combined.R"), when exactly one
- * does. */
-static int
-channel_suffix(const mcp_image *img, const char *suffix)
-{
-    int found = -1, n = 0;
-    size_t ls = strlen(suffix);
-    for (int i = 0; i < img->channels; i++) {
-        const char *name = img->names ? img->names[i] : NULL;
-        size_t ln = name ? strlen(name) : 0;
-        if (ln >= ls && !strcmp(name + ln - ls, suffix)) {
-            found = i;
-            n++;
-        }
-    }
-    return n == 1 ? found : -1;
-}
-
 int
 mcp_rgb_channels(const mcp_image *img, int rgb[3])
 {
     static const char *const names[3] = {"R", "G", "B"};
-    static const char *const blender[3] = {".Combined.R", ".Combined.G", ".Combined.B"};
-    int found[3], n_found = 0, n_blender = 0, bl[3];
-    for (int k = 0; k < 3; k++) {
-        n_found += (found[k] = channel_nocase(img, names[k])) >= 0;
-        n_blender += (bl[k] = channel_suffix(img, blender[k])) >= 0;
-    }
-    if (n_found == 3) {
-        memcpy(rgb, found, sizeof found);
-        return 0;
-    }
-    if (n_found == 0 && n_blender == 3) { /* Blender: <layer>.Combined.R/G/B */
-        memcpy(rgb, bl, sizeof bl);
-        return 0;
-    }
+    int n_found = mcp_image_rgb_by_name(img, rgb);
+    if (n_found == 3) return 0;
     if (n_found == 0 && (img->channels == 3 || img->channels == 1)) {
         for (int k = 0; k < 3; k++)
             rgb[k] = img->channels == 3 ? k : 0;
         return 0;
     }
     for (int k = 0; k < 3; k++)
-        if (found[k] < 0)
+        if (rgb[k] < 0)
             return mcp_error("%s: no channel '%s'", img->source ? img->source : "image",
                              names[k]);
     return -1;

@@ -60,8 +60,9 @@ mcp_luminance(float r, float g, float b)
     return 0.2126f * r + 0.7152f * g + 0.0722f * b;
 }
 
-/* Finds the R, G, B channels of img: by name ("R", "G", "B", then any case), else
- * Blender's "<layer>.Combined.R/G/B" (when one layer has them), else channels 0, 1, 2
+/* Finds the R, G, B channels of img: by name (mcp_image_rgb_by_name: "R", "G", "B",
+ * then any case, else Blender's "<layer>.Combined.R/G/B" when one layer has them), else
+ * channels 0, 1, 2
  * of a 3-channel image, else channel 0 three times for a 1-channel (grey) image.
  * Fails with "<source>: no channel 'R'" (or 'G', 'B'). */
 MCP_API int mcp_rgb_channels(const mcp_image *img, int rgb[3]);

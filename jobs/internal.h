@@ -81,8 +81,9 @@ void mcp__info_add_dump(cJSON *o, const mcp_dump *d);
 /* ---- stage_convert.c ---- */
 
 /* The channels of img named in `names`, as a new image. With no names: all channels,
- * except that an 8-bit or RGBE output (out_path's format) of a many-channel file (a
- * render dump) gets its colour, which is what a person converting to PNG means. */
+ * except that a PNG, JPEG, HDR or PFM output (out_path's format) of an image with
+ * R, G, B by name gets those (and A, for PNG and JPEG), which is what a person
+ * converting to PNG means (docs/conventions.md, "Channel order"). */
 int mcp__convert_pick_channels(const mcp_image *img, char **names, int count,
                                const char *out_path, mcp_image **out);
 

@@ -113,20 +113,24 @@ const mcp_stage mcp_stage_convert = {"convert", "write an input in another forma
                                                 "chosen channels",
                                      convert_keys, stage_convert, check_convert};
 
-/* The channels of img named in `names`, as a new image. With no names: all channels,
- * except that an 8-bit or RGBE output of a many-channel file (a render dump) gets its
- * colour, which is what a person converting to PNG means. */
+/* The channels of img named in `names`, as a new image. With no names, a format that
+ * stores colour by place gets the colour, found by name (docs/conventions.md, "Channel
+ * order"): R, G, B, and A where PNG or JPEG can keep it. Other channels (a render
+ * dump's, a depth Z) would otherwise land in the alpha slot or fail the write, and
+ * colour is what a person converting to PNG means. */
 int
 mcp__convert_pick_channels(const mcp_image *img, char **names, int count,
                            const char *out_path, mcp_image **out)
 {
     mcp_format f = mcp_format_from_path(out_path);
-    int ldr = f == MCP_FORMAT_PNG || f == MCP_FORMAT_JPEG || f == MCP_FORMAT_HDR;
-    if (count == 0 && ldr && img->channels != 1 && img->channels != 3 &&
-        img->channels != 4) {
-        int rgb[3];
-        if (mcp_rgb_channels(img, rgb) == 0)
-            return mcp_image_copy_channels(img, rgb, 3, out);
+    int alpha_ok = f == MCP_FORMAT_PNG || f == MCP_FORMAT_JPEG;
+    int rgb_only = f == MCP_FORMAT_HDR || f == MCP_FORMAT_PFM;
+    int rgba[4];
+    /* without colour names, every channel goes (by place), as before */
+    if (count == 0 && (alpha_ok || rgb_only) && mcp_image_rgb_by_name(img, rgba) == 3) {
+        int n = 3, a = alpha_ok ? mcp_image_channel(img, "A") : -1;
+        if (a >= 0) rgba[n++] = a;
+        return mcp_image_copy_channels(img, rgba, n, out);
     }
     if (count == 0)
         return mcp_image_copy(img, out);

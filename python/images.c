@@ -167,12 +167,14 @@ PyMethodDef mcp_py_image_methods[] = {
     {"read_image", (PyCFunction)(void (*)(void))py_read_image, METH_VARARGS | METH_KEYWORDS,
      "read_image(path, *, srgb_decode=True) -> (pixels, channels, attributes)\n\n"
      "Every channel of an EXR, PFM, PNG, JPEG, HDR or TIFF file as float32 H x W x C\n"
-     "(H x W for one channel), the channel names and the header attributes. 8-bit\n"
-     "files are sRGB-decoded to linear unless srgb_decode is False."},
+     "(H x W for one channel), the channel names and the header attributes. Colour\n"
+     "comes first, as R, G, B taken by name (an EXR lists B, G, R), then the other\n"
+     "channels. 8-bit files are sRGB-decoded to linear unless srgb_decode is False."},
     {"write_image", (PyCFunction)(void (*)(void))py_write_image,
      METH_VARARGS | METH_KEYWORDS,
      "write_image(path, pixels, *, channels=None, attributes=None, half=False,\n"
      "            compression='zip', srgb_encode=True)\n\n"
      "Writes an image in the format the extension names (to a temporary name, then\n"
-     "renamed). channels names them (default R,G,B for 3, R,G,B,A for 4, else C0...)."},
+     "renamed). channels names them (default R,G,B for 3, R,G,B,A for 4, else C0...);\n"
+     "PNG, PFM and HDR take R, G, B by name, wherever they stand."},
     {NULL, NULL, 0, NULL}};

@@ -67,8 +67,10 @@ def test_metrics_is_the_cli_json(pair, cli_metrics, tmp):
     for name in ("flip_ldr", "flip_hdr"):
         want, _, _ = mcpost.read_image(tmp / f"{name}.exr")
         np.testing.assert_array_equal(maps[name], want)
-    for name in ("relse", "sq_error"):  # EXR files keep channels in name order: B, G, R
-        np.testing.assert_array_equal(maps[name], rgb(tmp / f"{name}.exr"))
+    for name in ("relse", "sq_error"):  # stored B, G, R, read back R, G, B (by name)
+        want, names, _ = mcpost.read_image(tmp / f"{name}.exr")
+        assert names == ["R", "G", "B"]
+        np.testing.assert_array_equal(maps[name], want)
     np.testing.assert_array_equal(mcpost.relse_map(*pair), maps["relse"])
 
 

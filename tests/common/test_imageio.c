@@ -147,8 +147,9 @@ test_exr_incompressible_chunks(void **state)
     for (int size = 8; size <= 72; size += 16)
         for (uint64_t seed = 1; seed <= 6; seed++)
             for (int i = 0; i < 2; i++) {
+                /* stored B, G, R (EXR's order); read back R, G, B as written */
                 mcp_image *img = mcp_test_random(size, size, 3, 0.13f, 1.9f, seed,
-                                                 (const char *[]){"B", "G", "R"});
+                                                 (const char *[]){"R", "G", "B"});
                 mcp_write_options o = mcp_write_defaults();
                 assert_int_equal(mcp_exr_compression_from_name(comps[i], &o.compression), 0);
                 /* every chunk through zlib (not raw by the probe): the workaround is
