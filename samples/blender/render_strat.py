@@ -29,7 +29,7 @@ replicate 0's blocks B, that the single-sample calls average to the
 samples=block_spp call.
 
 The scene builders of cornell and texture are render_dumps.py's, unchanged;
-'interior' is built here.
+'interior' and 'window' are built here.
 """
 
 import argparse
