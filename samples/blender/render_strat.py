@@ -96,11 +96,15 @@ def _slab(name, lo, hi, mat):
 
 def build_window():
     """A closed room lit only through a window opening in its left wall: a
-    sun lamp (6 degrees wide) and a blue sky (the world) outside. Glossy
-    wooden floor, a clear glass sphere and a glass cube (sharp, IOR 1.5)
-    standing in the shade, a brushed-gold metal sphere in the sun patch.
-    Everything inside is lit indirectly or through the opening: slow,
-    glossy and refractive noise."""
+    sun lamp (5 degrees wide) and a constant blue sky (the world) outside,
+    no light inside. Glossy wooden floor (Principled, roughness 0.3) with
+    the sun patch on it, a clear glass sphere and a glass cube on a table
+    (sharp glass, IOR 1.5) and a gold GGX sphere (roughness 0.25). The
+    objects stand out of the direct sun, so there are no sun caustics
+    through glass (cornell has those): everything but the floor patch and
+    the sky seen through the opening is lit indirectly, by light that came
+    in through the opening, and converges slowly; glossy and refracted
+    views of the patch and the sky add noise."""
     white = rdm._diffuse('wall', (0.75, 0.74, 0.7))
     back = rdm._diffuse('back', (0.55, 0.62, 0.7))
     # room x in [-1, 1], y in [-2, 1], z in [0, 2]; planes overlap at the
