@@ -35,6 +35,11 @@
  *                              [--fit on_the_fly|last_two|retrospective]
  *                              [--no-blend | --blend-only] [--curves]
  *
+ * Scenes: any folder of --fixtures with that layout, by name. The default list is
+ * cornell,texture,interior; `window` (sun and sky through a window, glossy floor, glass)
+ * is held out for checking tuned defaults and runs only when named, e.g.
+ * --scenes window or --scenes cornell,texture,interior,window.
+ *
  * It prints figures; it is not a timed test. Run it from the repository root (the
  * defaults are relative to it). */
 #define _POSIX_C_SOURCE 200809L

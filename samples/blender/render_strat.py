@@ -29,7 +29,7 @@ replicate 0's blocks B, that the single-sample calls average to the
 samples=block_spp call.
 
 The scene builders of cornell and texture are render_dumps.py's, unchanged;
-'interior' is built here.
+'interior' and 'window' are built here.
 """
 
 import argparse
@@ -40,6 +40,7 @@ import tempfile
 import time
 
 import bpy
+import mathutils
 import numpy as np
 
 _HERE = os.path.dirname(os.path.abspath(__file__))
@@ -71,8 +72,88 @@ def build_interior():
     rdm._world(0.0)
 
 
+def _principled(name, rgb, roughness, metallic=0.0, specular=0.5):
+    def build(nodes, links):
+        b = nodes.new('ShaderNodeBsdfPrincipled')
+        b.inputs['Base Color'].default_value = (*rgb, 1.0)
+        b.inputs['Roughness'].default_value = roughness
+        b.inputs['Metallic'].default_value = metallic
+        b.inputs['Specular'].default_value = specular
+        return b.outputs['BSDF']
+    return rdm._material(name, build)
+
+
+def _slab(name, lo, hi, mat):
+    """Axis-aligned box from corner lo to corner hi (a cube, scaled)."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=tuple((lo + hi) / 2))
+    ob = bpy.context.active_object
+    ob.name = name
+    ob.scale = tuple(hi - lo)
+    ob.data.materials.append(mat)
+    return ob
+
+
+def build_window():
+    """A closed room lit only through a window opening in its left wall: a
+    sun lamp (5 degrees wide) and a constant blue sky (the world) outside,
+    no light inside. Glossy wooden floor (Principled, roughness 0.3) with
+    the sun patch on it, a clear glass sphere and a glass cube on a table
+    (sharp glass, IOR 1.5) and a gold GGX sphere (roughness 0.25). The
+    objects stand out of the direct sun, so there are no sun caustics
+    through glass (cornell has those): everything but the floor patch and
+    the sky seen through the opening is lit indirectly, by light that came
+    in through the opening, and converges slowly; glossy and refracted
+    views of the patch and the sky add noise."""
+    white = rdm._diffuse('wall', (0.75, 0.74, 0.7))
+    back = rdm._diffuse('back', (0.55, 0.62, 0.7))
+    # room x in [-1, 1], y in [-2, 1], z in [0, 2]; planes overlap at the
+    # edges by e so that no ray leaks through a seam
+    e = 0.02
+    x0, x1, y0, y1, z0, z1 = -1.0, 1.0, -2.0, 1.0, 0.0, 2.0
+    floor = _principled('floor', (0.45, 0.3, 0.18), 0.3)
+    _slab('floor', (x0 - e, y0 - e, z0 - e), (x1 + e, y1 + e, z0), floor)
+    _slab('ceiling', (x0 - e, y0 - e, z1), (x1 + e, y1 + e, z1 + e), white)
+    _slab('back', (x0 - e, y1, z0 - e), (x1 + e, y1 + e, z1 + e), back)
+    _slab('front', (x0 - e, y0 - e, z0 - e), (x1 + e, y0, z1 + e), white)
+    _slab('right', (x1, y0 - e, z0 - e), (x1 + e, y1 + e, z1 + e), white)
+    # left wall with the opening y in [wy0, wy1], z in [wz0, wz1]
+    wy0, wy1, wz0, wz1 = -0.6, 0.6, 0.75, 1.65
+    L = (x0 - e, x0)
+    _slab('left_below', (L[0], y0 - e, z0 - e), (L[1], y1 + e, wz0), white)
+    _slab('left_above', (L[0], y0 - e, wz1), (L[1], y1 + e, z1 + e), white)
+    _slab('left_front', (L[0], y0 - e, wz0), (L[1], wy0, wz1), white)
+    _slab('left_back', (L[0], wy1, wz0), (L[1], y1 + e, wz1), white)
+    # a window cross (mullions) in the opening
+    frame = rdm._diffuse('frame', (0.85, 0.85, 0.82))
+    ym, zm = (wy0 + wy1) / 2, (wz0 + wz1) / 2
+    _slab('mullion_v', (x0 - 0.03, ym - 0.02, wz0), (x0 + 0.01, ym + 0.02, wz1), frame)
+    _slab('mullion_h', (x0 - 0.03, wy0, zm - 0.02), (x0 + 0.01, wy1, zm + 0.02), frame)
+    # objects
+    rdm._sphere('glass_ball', 0.25, (0.3, 0.35, 0.25), rdm._glass('glass', 1.5))
+    bpy.ops.mesh.primitive_cube_add(size=0.3, location=(0.7, 0.75, 0.6),
+                                    rotation=(0, 0, np.radians(35)))
+    cube = bpy.context.active_object
+    cube.name = 'glass_cube'
+    cube.data.materials.append(rdm._glass('glass_cube', 1.5))
+    rdm._sphere('metal_ball', 0.3, (-0.35, 0.7, 0.3),
+                rdm._glossy('gold', (0.9, 0.72, 0.42), 0.25))
+    _slab('table', (0.45, 0.55, 0.0), (0.95, 0.95, 0.45), rdm._diffuse('table', (0.6, 0.3, 0.2)))
+    # sun and sky
+    sun_d = bpy.data.lights.new('sun', 'SUN')
+    sun_d.energy = 10.0
+    sun_d.angle = np.radians(5.0)
+    sun_d.color = (1.0, 0.93, 0.82)
+    sun = bpy.data.objects.new('sun', sun_d)
+    d = mathutils.Vector((0.7, -0.35, -0.6)).normalized()   # direction of travel
+    sun.rotation_euler = (-d).to_track_quat('Z', 'Y').to_euler()
+    bpy.context.scene.collection.objects.link(sun)
+    rdm._camera((0, -1.9, 1.1), (np.radians(78), 0, 0), 62.0)
+    rdm._world(1.5, (0.45, 0.6, 0.9))
+
+
 SCENES = {'cornell': rdm.build_cornell, 'texture': rdm.build_texture,
-          'interior': build_interior}
+          'interior': build_interior, 'window': build_window}
 
 
 def replicate_seed(stream, r):
