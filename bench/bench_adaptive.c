@@ -34,7 +34,7 @@ typedef struct scene_ctx {
     uint64_t seed;
 } scene_ctx;
 
-static int g_probes = 1; /* --probes: the estimate's */
+static int g_probes = 0; /* --probes: the estimate's (0: its default, as users get it) */
 /* what every run's passes spent, per denoiser: mcpost's part and the denoiser's */
 static double g_ms_added, g_ms_denoise;
 static long g_passes;
@@ -66,7 +66,7 @@ run(scene_ctx *s, const mcp_denoiser *den, mcp_adaptive_map map, double budget,
                     ? s->scene.strata * s->scene.strata
                     : 1;
     o.est.sure.seed = s->seed;
-    o.est.sure.n_probes = g_probes;
+    if (g_probes > 0) o.est.sure.n_probes = g_probes;
     mcp_adaptive_result *r = NULL;
     if (mcp_adaptive_run(s->scene.width, s->scene.height, den, &o, render, s, ref, NULL,
                          NULL, &r))

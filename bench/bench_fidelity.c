@@ -339,14 +339,17 @@ reference_floor(const scene *s, double p, double ref_spp)
 
 typedef struct tally {
     int cases, agree, early, never_est, blend_points, blend_good, blend_cases;
-    double worst_final;
+    int blend_near; /* members with the blend <= 1.10 x min(noisy, denoised) */
+    int js_near;    /* the same for the James-Stein combiner, beside it */
+    double js_worst_member, js_worst_final;
+    double worst_final, worst_member; /* over noisy at the end; over min at any member */
     double curves_over_min, oracle_over_min; /* sums over the points, for the means */
 } tally;
 
 /* What every case shares: the settings from the command line. */
 typedef struct run_settings {
     double p;
-    int probes, s2_pool, curves;
+    int probes, s2_pool, curves, safeguard;
     mcp_curve_fit fit;
     double floor;
     const int *tau_it;
@@ -466,18 +469,23 @@ run_blend(const run_settings *rs, const mcp_series *series, const mcp_denoiser *
     mcp_blend_series_options bo = mcp_blend_series_defaults();
     bo.flip = 0;
     bo.blend.fit = rs->fit;
+    bo.blend.safeguard = rs->safeguard;
     oracle_ctx oc = {reference, &bo.blend, calloc((size_t)series->count, sizeof(double))};
     if (!oc.oracle_mse)
         die("out of memory");
     mcp_blend_series_result *br = NULL;
     if (mcp_blend_series(series, den, reference, &bo, oracle_point, &oc, &br))
         die("blend series");
-    int good = 0;
-    double curves_sum = 0, oracle_sum = 0;
+    int good = 0, near = 0, js_near = 0;
+    double curves_sum = 0, oracle_sum = 0, worst = 0, js_worst = 0;
     for (int i = 0; i < br->count; i++) {
         const mcp_blend_errors *e = br->rows[i].err;
         double lo = fmin(e[MCP_BLEND_NOISY].mse, e[MCP_BLEND_DENOISED].mse);
         good += e[MCP_BLEND_CURVES].mse <= lo;
+        near += e[MCP_BLEND_CURVES].mse <= 1.10 * lo;
+        worst = fmax(worst, e[MCP_BLEND_CURVES].mse / lo);
+        js_near += e[MCP_BLEND_JAMES_STEIN].mse <= 1.10 * lo;
+        js_worst = fmax(js_worst, e[MCP_BLEND_JAMES_STEIN].mse / lo);
         curves_sum += e[MCP_BLEND_CURVES].mse / lo;
         oracle_sum += oc.oracle_mse[i] / lo;
     }
@@ -485,15 +493,26 @@ run_blend(const run_settings *rs, const mcp_series *series, const mcp_denoiser *
     double final = last[MCP_BLEND_CURVES].mse / last[MCP_BLEND_NOISY].mse;
     tl->blend_points += br->count;
     tl->blend_good += good;
+    tl->blend_near += near;
+    tl->js_near += js_near;
+    tl->js_worst_member = fmax(tl->js_worst_member, js_worst);
+    tl->js_worst_final = fmax(tl->js_worst_final,
+                              last[MCP_BLEND_JAMES_STEIN].mse / last[MCP_BLEND_NOISY].mse);
     tl->blend_cases++;
+    if (worst > tl->worst_member)
+        tl->worst_member = worst;
     tl->curves_over_min += curves_sum;
     tl->oracle_over_min += oracle_sum;
     if (final > tl->worst_final)
         tl->worst_final = final;
-    printf("| %s blend | | <= min(noisy, denoised) at %d of %d; over min: %.3fx on average "
-           "(window-optimal oracle %.3fx); last: %.3fx noisy MSE (denoised %.3fx) | | |\n",
-           label, good, br->count, curves_sum / br->count, oracle_sum / br->count, final,
-           last[MCP_BLEND_DENOISED].mse / last[MCP_BLEND_NOISY].mse);
+    printf("| %s blend | | <= min(noisy, denoised) at %d of %d, <= 1.10x min at %d; over min: "
+           "%.3fx on average, %.3fx at worst (window-optimal oracle %.3fx); last: %.3fx "
+           "noisy MSE (denoised %.3fx); James-Stein <= 1.10x min at %d, %.3fx at worst, "
+           "last %.3fx noisy | | |\n",
+           label, good, br->count, near, curves_sum / br->count, worst,
+           oracle_sum / br->count, final,
+           last[MCP_BLEND_DENOISED].mse / last[MCP_BLEND_NOISY].mse, js_near, js_worst,
+           last[MCP_BLEND_JAMES_STEIN].mse / last[MCP_BLEND_NOISY].mse);
     mcp_blend_series_result_free(br);
     free(oc.oracle_mse);
 }
@@ -513,7 +532,8 @@ main(int argc, char **argv)
     const char *fixtures = "samples/fixtures/strat", *weights = getenv("MCPOST_OIDN_WEIGHTS");
     char scenes_arg[256] = "cornell,texture,interior", dens_arg[256] = "nlm,bilateral,unet";
     char srcs_arg[256] = "per-sample,increments,replicates4,replicates8,oracle";
-    int iters = MAX_ITER, blend = 1, estimate = 1, curves = 0, probes = 0, s2_pool = -2;
+    int iters = MAX_ITER, blend = 1, estimate = 1, curves = 0, probes = 0, s2_pool = -2,
+        safeguard = 1;
     mcp_curve_fit fit = mcp_blend_defaults().fit;
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
@@ -543,11 +563,13 @@ main(int argc, char **argv)
             blend = 0;
         else if (!strcmp(a, "--curves"))
             curves = 1;
+        else if (!strcmp(a, "--no-safeguard"))
+            safeguard = 0;
         else {
             fprintf(stderr, "usage: bench_fidelity [--scenes LIST] [--denoisers LIST] "
                             "[--sources LIST] [--fixtures DIR] [--weights TZA] "
                             "[--iterations N] [--probes K] [--s2-pool R] [--fit NAME] [--no-blend | "
-                            "--blend-only] [--curves]\n");
+                            "--blend-only] [--curves] [--no-safeguard]\n");
             return 2;
         }
     }
@@ -602,7 +624,7 @@ main(int argc, char **argv)
                     tau_it[t] = 1;
             }
             mcp_series *series = write_series(&s, src, n_it, tmp, &ratio);
-            run_settings run = {p, probes, s2_pool, curves, fit, floor, tau_it};
+            run_settings run = {p, probes, s2_pool, curves, safeguard, fit, floor, tau_it};
             printf("\n### %s, %s%s; reference %.0f spp, its noise floor at p %.3g",
                    s.name, source_names[src],
                    src == SRC_REP4 || src == SRC_REP8 ? " (spp: all renders together)" : "",
@@ -647,9 +669,10 @@ main(int argc, char **argv)
         free_scene(&s);
     }
     printf("\n## Summary over the scenes\n\n| source | denoiser | agree | early stops | "
-           "never stops | blend <= min | blend / min (mean) | oracle / min (mean) | "
-           "blend at the end (worst) |\n"
-           "|---|---|---|---|---|---|---|---|---|\n");
+           "never stops | blend <= min | blend <= 1.10x min | blend / min (mean) | "
+           "blend / min (worst member) | oracle / min (mean) | blend / noisy at the end "
+           "(worst) | James-Stein <= 1.10x min | its worst member | its end |\n"
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (int k = 0; k < n_srcs; k++)
         for (int di = 0; di < n_dens; di++) {
             const tally *t = &total[src_ids[k]][di];
@@ -662,12 +685,18 @@ main(int argc, char **argv)
             else /* --blend-only */
                 printf("| %s | %s | | | |", source_names[src_ids[k]], dens[di]);
             if (t->blend_cases)
-                printf(" %d of %d (%.0f%%) | %.3fx | %.3fx | %.3fx |\n", t->blend_good,
-                       t->blend_points, 100.0 * t->blend_good / t->blend_points,
-                       t->curves_over_min / t->blend_points,
+                printf(" %d of %d (%.0f%%) | %d of %d (%.0f%%) | %.3fx | %.3fx | %.3fx | "
+                       "%.3fx |",
+                       t->blend_good, t->blend_points, 100.0 * t->blend_good / t->blend_points,
+                       t->blend_near, t->blend_points, 100.0 * t->blend_near / t->blend_points,
+                       t->curves_over_min / t->blend_points, t->worst_member,
                        t->oracle_over_min / t->blend_points, t->worst_final);
+            if (t->blend_cases)
+                printf(" %d of %d (%.0f%%) | %.3fx | %.3fx |\n", t->js_near, t->blend_points,
+                       100.0 * t->js_near / t->blend_points, t->js_worst_member,
+                       t->js_worst_final);
             else
-                printf(" | | | |\n");
+                printf(" | | | | | | | | |\n");
         }
     rmdir(tmp);
     return 0;

@@ -42,7 +42,7 @@ static const char usage[] =
     "  --max-iterations N       passes at most [1000]\n"
     "  --quantum Q              counts in multiples of Q: K*K for a renderer that draws\n"
     "                           stratified passes of K*K samples [1]\n"
-    "  --probes N               probes of the estimate [1]\n"
+    "  --probes N               probes of the estimate [4]\n"
     "  --seed S                 the {seed} of the command, and the probes' [1]\n"
     "  --reference REF          the converged image: relMSE per pass\n"
     "  --keep-passes            keep every pass's counts and dump in DIR\n"

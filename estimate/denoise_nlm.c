@@ -734,6 +734,7 @@ create_with(const char *name, nlm_params p, const mcp_node *settings, mcp_denois
     memcpy(d->state, &p, sizeof p);
     d->uses_albedo = p.sigma_albedo > 0;
     d->uses_normal = p.sigma_normal > 0;
+    d->sharp_variance = p.patch_radius == 0;
     d->apply = nlm_apply;
     d->jvp = nlm_jvp;
     *out = d;

@@ -45,6 +45,10 @@ struct mcp_denoiser {
     int exact;            /* 1: jvp is exact forward mode; 0: finite differences */
     int uses_albedo;      /* reads in->albedo when given */
     int uses_normal;      /* reads in->normal when given */
+    /* Var[F] changes pixel by pixel (single-pixel colour weights: bilateral, nlm with
+     * patch_radius 0): the estimate's automatic s² pooling stays off for it where the
+     * variance has many degrees of freedom (docs/fidelity.md) */
+    int sharp_variance;
     /* F(in): a new 3-channel image "R,G,B". */
     int (*apply)(const mcp_denoiser *self, const mcp_denoise_input *in, mcp_image **out);
     /* J·t_k for k < n at the point `at`, in one primal pass: out[k] receives a new

@@ -24,6 +24,9 @@ mcp_estimate_defaults(void)
     mcp_estimate_options o;
     memset(&o, 0, sizeof o);
     o.sure = mcp_sure_defaults();
+    /* four probes with s² pooled agree with the truth as often as eight on the
+       stratified fixtures (docs/fidelity.md "The defaults"), at half the JVPs */
+    o.sure.n_probes = 4;
     o.variance_rademacher = 0;
     o.blocks = mcp_block_defaults();
     o.tau = 0.01;
@@ -32,8 +35,20 @@ mcp_estimate_defaults(void)
     memcpy(o.percentiles, pct, sizeof pct);
     o.sampling = mcp_sampling_defaults();
     o.budget = 0;
-    o.s2_pool = 0;
+    o.s2_pool = -1;
     return o;
+}
+
+int
+mcp_estimate_auto_s2_pool(const mcp_dump *dump, const mcp_denoiser *den)
+{
+    /* A variance from few renders or blocks carries its own χ² noise into s², which
+       pooling takes out; a per-sample variance has many degrees of freedom, and for a
+       denoiser whose Var[F] is sharp pooling then only blurs its pattern (bilateral
+       stops early with it: docs/fidelity.md "The defaults"). */
+    int few_dof = dump->variance_source == MCP_VARSRC_REPLICATES ||
+                  dump->variance_source == MCP_VARSRC_INCREMENTS;
+    return den->sharp_variance && !few_dof ? 0 : 1;
 }
 
 int
@@ -230,7 +245,7 @@ mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,
         e->maps.var_rel = vr;
     }
     /* s² from few probes: pooled so that its χ² spread does not fatten the tail */
-    e->s2_pool = o.s2_pool >= 0 ? o.s2_pool : o.sure.n_probes < 8;
+    e->s2_pool = o.s2_pool >= 0 ? o.s2_pool : mcp_estimate_auto_s2_pool(dump, den);
     if (mcp_pool_window(e->maps.var_rel, NULL, e->s2_pool) ||
         mcp_pool_window(e->maps.var, NULL, e->s2_pool))
         goto done;

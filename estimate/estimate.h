@@ -94,7 +94,8 @@ MCP_API int mcp_probe_rademacher(const mcp_dump *dump, uint64_t seed, int k,
 
 typedef struct mcp_sure_options {
     mcp_error_metric metric; /* [relse] */
-    int n_probes;            /* K >= 1: probes averaged in the Jε terms [1] */
+    int n_probes;            /* K >= 1: probes averaged in the Jε terms [1; 4 in
+                                mcp_estimate_defaults] */
     uint64_t seed;           /* [0] */
     double ppd;      /* relse-perceptual: pixels per degree, 0 = FLIP's 67.02 [0] */
     int mc_sure;     /* 1: Jε by finite differences (Ramani 2008), even when the
@@ -315,10 +316,15 @@ typedef struct mcp_estimate_options {
     int64_t budget; /* samples for the next iteration; 0: no counts [0] */
     /* s² = (Jε)² from K probes is Var[F] times a χ²_K / K draw; its spread fattens the
      * upper tail of the error distribution, so s² is pooled over a (2r + 1)² window
-     * (docs "Variance sources"): -1 automatic (r = 1 below 8 probes, else 0), 0 none,
-     * or r [0: SPEC's per-value s², see the docs for what pooling changes] */
+     * (docs "Variance sources"): -1 automatic (mcp_estimate_auto_s2_pool), 0 none
+     * (SPEC's per-value s²), or r [-1] */
     int s2_pool;
 } mcp_estimate_options;
+
+/* The automatic pooling radius: 1, except 0 for a denoiser with a sharp Var[F]
+ * (den->sharp_variance) on a variance with many degrees of freedom (per-sample, of the
+ * mean); docs/fidelity.md "The defaults" has the figures. */
+MCP_API int mcp_estimate_auto_s2_pool(const mcp_dump *dump, const mcp_denoiser *den);
 
 MCP_API mcp_estimate_options mcp_estimate_defaults(void);
 

@@ -32,6 +32,18 @@ parse_vprobes(const char *s, void *out)
     return mcp__variance_probes_from_name(s, out);
 }
 
+/* s2_pool: a radius, or auto (mcp_estimate_auto_s2_pool), as --s2-pool and Python take */
+static int
+read_s2_pool(const mcp_node *s, int *out)
+{
+    const mcp_node *n = mcp_node_get(s, "s2_pool");
+    if (n && n->kind == MCP_NODE_SCALAR && n->value && !strcmp(n->value, "auto")) {
+        *out = -1;
+        return 0;
+    }
+    return mcp_node_opt_int(s, "s2_pool", out);
+}
+
 static int
 read_settings(const mcp_node *s, mcp_series_estimate_options *so)
 {
@@ -51,7 +63,7 @@ read_settings(const mcp_node *s, mcp_series_estimate_options *so)
         mcp_node_opt_int(s, "tile", &o->blocks.tile_size) ||
         mcp__opt_enum(s, "sampling", parse_sampling, &o->sampling.kind) ||
         mcp_node_opt_double(s, "budget", &budget) ||
-        mcp_node_opt_int(s, "s2_pool", &o->s2_pool) ||
+        read_s2_pool(s, &o->s2_pool) ||
         mcp_node_opt_doubles(s, "taus", &taus, &nt))
         goto done;
     if (seed < 0 || seed != floor(seed) || seed > 9007199254740992.0) {

@@ -246,9 +246,9 @@ py_true_error(PyObject *self, PyObject *args, PyObject *kw)
 PyMethodDef mcp_py_estimate_methods[] = {
     {"estimate", FN(py_estimate), KW,
      "estimate(dump, *, denoiser='default', metric='relse', tau=0.01, percentile=0.999,\n"
-     "         percentiles=(0.5, 0.9, 0.99, 0.999, 0.9999), probes=1, seed=0,\n"
+     "         percentiles=(0.5, 0.9, 0.99, 0.999, 0.9999), probes=4, seed=0,\n"
      "         mc_sure=False, delta=0.1, variance_probes='sure', ppd=0, tile=0,\n"
-     "         sampling='variance', budget=0, s2_pool=0, reference=None, taus=None)\n"
+     "         sampling='variance', budget=0, s2_pool='auto', reference=None, taus=None)\n"
      "    -> dict\n\n"
      "The error estimate of the denoised dump (SURE, Firmino et al. 2024) and the stop\n"
      "decision F(tau) >= p: maps ('denoised', 'sure', 'sure_rel', 'variance',\n"
