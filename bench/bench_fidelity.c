@@ -3,6 +3,9 @@
  * (samples/fixtures/strat: one progressive render as 32 blocks of 32 samples, 7 more
  * renders with other seeds, a 16384-spp reference), for every variance source:
  *
+ *   auto         what a user gets: the render's checkpoints with their per-sample
+ *                variance, read as a series with mcp_series_load's default choice
+ *                (the increments' variance where Variance/n overstates their spread)
  *   per-sample   the renderer's per-sample variance / n (what the render carries)
  *   increments   the spread between the render's 32-spp increments
  *                (mcp_dump_increment_variance)
@@ -62,9 +65,17 @@
 #define RENDERS 8
 #define MAX_ITER 32
 
-typedef enum { SRC_PER_SAMPLE, SRC_INCREMENTS, SRC_REP4, SRC_REP8, SRC_ORACLE, N_SRC } source;
-static const char *const source_names[N_SRC] = {"per-sample", "increments", "replicates4",
-                                                "replicates8", "oracle"};
+typedef enum {
+    SRC_PER_SAMPLE,
+    SRC_INCREMENTS,
+    SRC_REP4,
+    SRC_REP8,
+    SRC_ORACLE,
+    SRC_AUTO,
+    N_SRC
+} source;
+static const char *const source_names[N_SRC] = {"per-sample",  "increments", "replicates4",
+                                                "replicates8", "oracle",     "auto"};
 
 /* One scene's fixture: blocks[r][b] (r = 0 carries Variance), features, reference. */
 typedef struct scene {
@@ -184,7 +195,8 @@ iteration_dump(const scene *s, source src, int j, double *ratio)
     mcp_dump *d = NULL;
     *ratio = 0;
     switch (src) {
-    case SRC_PER_SAMPLE: d = running(s, 0, j); break;
+    case SRC_PER_SAMPLE:
+    case SRC_AUTO: d = running(s, 0, j); break;
     case SRC_INCREMENTS: {
         mcp_dump *m[MAX_ITER];
         for (int k = 0; k < j; k++)
@@ -266,6 +278,9 @@ write_series(const scene *s, source src, int iters, const char *dir, double *rat
     mcp_series *series = NULL;
     if (mcp_series_from_paths((const char *const *)paths, spp, iters, &series))
         die("series");
+    /* each source as it is, except auto: what a user gets from the render's own
+       checkpoints (mcp_series_load's default choice) */
+    series->variance_from = src == SRC_AUTO ? MCP_SERIES_VARIANCE_AUTO : MCP_SERIES_VARIANCE_FILE;
     for (int j = 0; j < iters; j++)
         free(paths[j]);
     free(paths);
@@ -279,7 +294,7 @@ write_series(const scene *s, source src, int iters, const char *dir, double *rat
 static mcp_image *
 reference_for(const scene *s, source src, double *ref_spp)
 {
-    int first_unused = src == SRC_PER_SAMPLE || src == SRC_INCREMENTS ? 1
+    int first_unused = src == SRC_PER_SAMPLE || src == SRC_INCREMENTS || src == SRC_AUTO ? 1
                        : src == SRC_REP4                             ? 4
                                                                      : RENDERS;
     mcp_image *ref = NULL;
@@ -531,7 +546,7 @@ main(int argc, char **argv)
 {
     const char *fixtures = "samples/fixtures/strat", *weights = getenv("MCPOST_OIDN_WEIGHTS");
     char scenes_arg[256] = "cornell,texture,interior", dens_arg[256] = "nlm,bilateral,unet";
-    char srcs_arg[256] = "per-sample,increments,replicates4,replicates8,oracle";
+    char srcs_arg[256] = "auto,per-sample,increments,replicates4,replicates8,oracle";
     int iters = MAX_ITER, blend = 1, estimate = 1, curves = 0, probes = 0, s2_pool = -2,
         safeguard = 1;
     mcp_curve_fit fit = mcp_blend_defaults().fit;

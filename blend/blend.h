@@ -74,6 +74,16 @@ typedef enum {
     MCP_NEG_SURE_MAGNITUDE
 } mcp_neg_sure;
 
+/* Which weights make "the blend" (docs/blend.md "Which weights"). */
+typedef enum {
+    /* the James-Stein weight of d over js_window, min(1, (p - 2) mean(v) / sum (n -
+     * d)^2): needs no estimate of d's error, and meets every convergence target on the
+     * stratified fixtures (the default) */
+    MCP_BLEND_WEIGHTS_JAMES_STEIN = 0,
+    /* Denisova & Bocchi's convergence curves from SURE and v (with the safeguard) */
+    MCP_BLEND_WEIGHTS_CURVES
+} mcp_blend_weighting;
+
 typedef struct mcp_blend_options {
     mcp_curve_fit fit;         /* [on_the_fly] */
     mcp_curve_model curve;     /* [log] */
@@ -94,6 +104,7 @@ typedef struct mcp_blend_options {
     /* Caps the weight of d at the James-Stein combiner's over js_window, so that the
      * blend converges to n whatever SURE says (mcp_blend_safeguard) [1] */
     int safeguard;
+    mcp_blend_weighting weights; /* [james_stein] */
 } mcp_blend_options;
 
 MCP_API mcp_blend_options mcp_blend_defaults(void);
@@ -108,6 +119,9 @@ MCP_API int mcp_curve_fit_from_name(const char *name, mcp_curve_fit *out);
 MCP_API int mcp_curve_model_from_name(const char *name, mcp_curve_model *out);
 MCP_API int mcp_blend_filter_from_name(const char *name, mcp_blend_filter *out);
 MCP_API int mcp_neg_sure_from_name(const char *name, mcp_neg_sure *out);
+/* "james_stein" (also "james-stein"), "curves" */
+MCP_API int mcp_blend_weighting_from_name(const char *name, mcp_blend_weighting *out);
+MCP_API const char *mcp_blend_weighting_name(mcp_blend_weighting w);
 MCP_API const char *mcp_curve_fit_name(mcp_curve_fit f);
 MCP_API const char *mcp_curve_model_name(mcp_curve_model m);
 MCP_API const char *mcp_blend_filter_name(mcp_blend_filter f);
@@ -261,8 +275,9 @@ typedef struct mcp_blend_result {
 } mcp_blend_result;
 
 /* Filtering, curves (unless given), weights, the blend and the safeguard (unless
- * opt->safeguard is 0). den is needed only for opt->filter = denoiser. state may be
- * NULL. */
+ * opt->safeguard is 0); with opt->weights = james_stein the blend and W are then the
+ * James-Stein combiner's (the estimates are still prepared). den is needed only for
+ * opt->filter = denoiser. state may be NULL. */
 MCP_API int mcp_blend_step(const mcp_blend_input *in, const mcp_blend_options *opt,
                            const mcp_denoiser *den, mcp_blend_state *state,
                            mcp_blend_result *out);
@@ -308,7 +323,7 @@ typedef struct mcp_blend_row {
     double mean_var, mean_sure; /* raw image means (the rules compare them) */
     int filtered;               /* estimates filtered at this member */
     int magnitude;              /* negative SURE by magnitude (else zeroed) */
-    double mean_rho;         /* mean of W / (I + W): the share of d in the curve blend */
+    double mean_rho;         /* mean of W / (I + W): the share of d in the blend */
     double safeguard_pulled; /* share of values the safeguard pulled back (0: off) */
     mcp_blend_errors err[MCP_BLEND_N_METHODS]; /* with a reference; ideal too */
 } mcp_blend_row;
@@ -318,6 +333,7 @@ typedef struct mcp_blend_series_result {
     int has_reference;
     int has_flip;
     mcp_variance_source variance_source; /* what the members' variance rests on */
+    mcp_blend_method method; /* the blend: MCP_BLEND_JAMES_STEIN or MCP_BLEND_CURVES */
     mcp_blend_row *rows;
 } mcp_blend_series_result;
 
@@ -331,7 +347,8 @@ typedef struct mcp_blend_point {
     const mcp_blend_row *row;
     /* the images of every method (ideal NULL without a reference) */
     const mcp_image *images[MCP_BLEND_N_METHODS];
-    const mcp_image *weights;       /* W of the curve blend (R, G, B) */
+    mcp_blend_method method;        /* which image is the blend (opt->weights) */
+    const mcp_image *weights;       /* W of the blend (R, G, B) */
     const mcp_image *ideal_weights; /* W of ideal blending, or NULL */
     const mcp_blend_estimates *est; /* filtered v, SURE */
 } mcp_blend_point;

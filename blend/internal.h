@@ -46,6 +46,9 @@ int mcp__blend_safeguard_step(const mcp_image *noisy, double spp,
                               int window, mcp_image *weights, mcp_image *blend,
                               double *pulled);
 
+/* W = I rho / (1 - rho) of a packed R, G, B share of d (rho >= 1: inf), as a new image. */
+int mcp__blend_weights_from_rho(const mcp_image *rho, double spp, mcp_image **out);
+
 /* The value of channel k (0..2) of pixel (x, y). */
 static inline float
 mcp__rgb_at(const mcp__rgb *in, int x, int y, int k)

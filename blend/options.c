@@ -25,6 +25,7 @@ mcp_blend_defaults(void)
     o.powerlaw_offset = 100;
     o.js_window = 7;
     o.safeguard = 1;
+    o.weights = MCP_BLEND_WEIGHTS_JAMES_STEIN;
     return o;
 }
 
@@ -66,6 +67,9 @@ mcp_blend_options_check(const mcp_blend_options *o)
                          o->js_window);
     if (o->safeguard != 0 && o->safeguard != 1)
         return mcp_error("blend: safeguard must be 0 or 1 (got %d)", o->safeguard);
+    if (o->weights != MCP_BLEND_WEIGHTS_JAMES_STEIN && o->weights != MCP_BLEND_WEIGHTS_CURVES)
+        return mcp_error("blend: weights must be james_stein or curves (got %d)",
+                         (int)o->weights);
     return 0;
 }
 
@@ -75,6 +79,7 @@ static const char *const fit_names[] = {"on_the_fly", "retrospective", "last_two
 static const char *const curve_names[] = {"log", "powerlaw"};
 static const char *const filter_names[] = {"gauss", "denoiser", "none"};
 static const char *const neg_names[] = {"switch", "zero", "magnitude"};
+static const char *const weighting_names[] = {"james_stein", "curves"};
 
 /* Looks name up in names[0..n-1] (case-insensitive, '-' read as '_'). */
 static int
@@ -156,4 +161,19 @@ const char *
 mcp_neg_sure_name(mcp_neg_sure n)
 {
     return (unsigned)n < 3 ? neg_names[n] : "?";
+}
+
+int
+mcp_blend_weighting_from_name(const char *name, mcp_blend_weighting *out)
+{
+    int i = 0;
+    if (lookup("blend weights", name, weighting_names, 2, &i)) return -1;
+    *out = (mcp_blend_weighting)i;
+    return 0;
+}
+
+const char *
+mcp_blend_weighting_name(mcp_blend_weighting w)
+{
+    return (unsigned)w < 2 ? weighting_names[w] : "?";
 }

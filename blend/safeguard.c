@@ -74,3 +74,16 @@ mcp__blend_safeguard_step(const mcp_image *noisy, double spp, const mcp_image *d
     mcp_image_free(rho);
     return rc ? -1 : 0;
 }
+
+int
+mcp__blend_weights_from_rho(const mcp_image *rho, double spp, mcp_image **out)
+{
+    *out = NULL;
+    if (mcp__blend_rgb_new(rho->width, rho->height, "blend weights", out)) return -1;
+    size_t n = (size_t)rho->width * rho->height * 3;
+    for (size_t i = 0; i < n; i++) {
+        double r = rho->data[i];
+        (*out)->data[i] = (float)(r >= 1 ? INFINITY : r > 0 ? spp * r / (1 - r) : 0.0);
+    }
+    return 0;
+}

@@ -203,6 +203,15 @@ finish_member(run *r, int i, const mcp_dump *dump, const mcp_image *curves,
         (r->reference && mcp_blend_ideal(dump->color, dump->spp, pair->denoised,
                                          r->reference, &img[MCP_BLEND_IDEAL], &ideal_w)))
         goto fail;
+    mcp_blend_method method = MCP_BLEND_CURVES;
+    if (r->o->blend.weights == MCP_BLEND_WEIGHTS_JAMES_STEIN) {
+        /* the blend is the combiner's: its W replaces the curves' */
+        mcp_image *w = NULL;
+        if (mcp__blend_weights_from_rho(js_rho, dump->spp, &w)) goto fail;
+        mcp_image_free(weights);
+        weights = w;
+        method = MCP_BLEND_JAMES_STEIN;
+    }
     row->mean_rho = mean_rho(weights, dump->spp);
     const mcp_image *all[MCP_BLEND_N_METHODS];
     for (int m = 0; m < MCP_BLEND_N_METHODS; m++)
@@ -223,6 +232,7 @@ finish_member(run *r, int i, const mcp_dump *dump, const mcp_image *curves,
         for (int m = 0; m < MCP_BLEND_N_METHODS; m++)
             p.images[m] = all[m];
         p.weights = weights;
+        p.method = method;
         p.ideal_weights = ideal_w;
         p.est = e;
         rc = on_point(&p, ctx) ? -1 : 0; /* the caller's message, unchanged */
@@ -329,6 +339,8 @@ mcp_blend_series(const mcp_series *series, const mcp_denoiser *den,
     r.res->count = n;
     r.res->has_reference = reference != NULL;
     r.res->has_flip = reference != NULL && o->flip;
+    r.res->method = o->blend.weights == MCP_BLEND_WEIGHTS_JAMES_STEIN ? MCP_BLEND_JAMES_STEIN
+                                                                      : MCP_BLEND_CURVES;
     if (run_series(&r, on_point, ctx)) goto done;
     *out = r.res;
     r.res = NULL;

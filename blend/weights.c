@@ -322,10 +322,27 @@ mcp_blend_step(const mcp_blend_input *in, const mcp_blend_options *opt,
         o.fit = MCP_CURVE_FIT_ON_THE_FLY;
         rc = mcp__blend_on_the_fly(in, &o, &out->est, &out->weights, &out->blend);
     }
-    if (!rc && o.safeguard)
+    if (!rc && o.weights == MCP_BLEND_WEIGHTS_JAMES_STEIN) {
+        /* the James-Stein weight instead of the curves' (docs/blend.md) */
+        mcp_image *js = NULL, *rho = NULL, *w = NULL;
+        rc = mcp_blend_james_stein(in->noisy, in->denoised, in->var_of_mean, o.js_window,
+                                   &js, &rho) ||
+             mcp__blend_weights_from_rho(rho, in->spp, &w);
+        mcp_image_free(rho);
+        if (rc) {
+            mcp_image_free(js);
+            mcp_image_free(w);
+        } else {
+            mcp_image_free(out->blend);
+            mcp_image_free(out->weights);
+            out->blend = js;
+            out->weights = w;
+        }
+    } else if (!rc && o.safeguard) {
         rc = mcp__blend_safeguard_step(in->noisy, in->spp, in->denoised, in->var_of_mean,
                                        o.js_window, out->weights, out->blend,
                                        &out->safeguard_pulled);
+    }
     if (rc) {
         mcp_blend_result_free(out);
         return -1;

@@ -42,6 +42,10 @@ static const char usage[] =
     "  --json                    print the result JSON on stdout\n"
     "  --quiet                   no progress\n"
     "  Curves and weights:\n"
+    "  --weights NAME            james-stein (the weight of d from how far it is from n,\n"
+    "                            against n's noise; needs no error estimate) or curves\n"
+    "                            (Denisova & Bocchi's convergence curves from SURE)\n"
+    "                            [james-stein]\n"
     "  --fit NAME                on_the_fly (newest point + Eq. 11 point, SPEC),\n"
     "                            last_two (the paper's: the last two kept points) or\n"
     "                            retrospective (least squares over every member) "
@@ -99,6 +103,7 @@ enum {
     OPT_JS,
     OPT_NO_FLIP,
     OPT_NO_SAFEGUARD,
+    OPT_WEIGHTS,
     OPT_VARIANCE_FROM
 };
 
@@ -162,6 +167,7 @@ cmd_blend(int argc, char **argv)
         {"js-window", required_argument, 0, OPT_JS},
         {"no-flip", no_argument, 0, OPT_NO_FLIP},
         {"no-safeguard", no_argument, 0, OPT_NO_SAFEGUARD},
+        {"weights", required_argument, 0, OPT_WEIGHTS},
         {"variance-from", required_argument, 0, OPT_VARIANCE_FROM},
         {"help", no_argument, 0, 'h'},
         {0, 0, 0, 0}};
@@ -249,6 +255,7 @@ cmd_blend(int argc, char **argv)
             o.flip = 0;
             break;
         case OPT_NO_SAFEGUARD: b->safeguard = 0; break;
+        case OPT_WEIGHTS: rc = mcp_blend_weighting_from_name(optarg, &b->weights); break;
         case OPT_VARIANCE_FROM:
             rc = mcp__variance_from(optarg, &variance_from);
             break;

@@ -1154,7 +1154,10 @@ mcp_series_load(const mcp_series *s, int i, mcp_dump **out)
     mcp_dump *incr = NULL;
     double ratio = 0;
     if (mcp_series_increment_variance(s, i, &s->increments, &incr, &ratio)) {
-        if (!strstr(mcp_error_message(), "needs two blocks")) {
+        /* no increments to compare with (one block, members out of order, another
+           member unreadable): the file's own variance stands, and whatever is wrong
+           with the series is reported where it is used */
+        if (strstr(mcp_error_message(), "out of memory")) {
             mcp_dump_free(*out);
             *out = NULL;
             return -1;

@@ -45,22 +45,22 @@ on_point(const mcp_blend_point *p, void *ctx)
     cJSON_AddStringToObject(m, "source", p->source);
     cJSON_AddNumberToObject(m, "spp", p->row->spp);
     cJSON *files = cJSON_AddObjectToObject(m, "files");
-    if (write_member_image(s, p->images[MCP_BLEND_CURVES], base, "blend", files) ||
+    if (write_member_image(s, p->images[p->method], base, "blend", files) ||
         write_member_image(s, p->weights, base, "weights", files))
         return -1;
     if (s->all_images) {
         const mcp_blend_method more[] = {MCP_BLEND_DENOISED, MCP_BLEND_EASY,
-                                         MCP_BLEND_JAMES_STEIN, MCP_BLEND_IDEAL};
-        for (int i = 0; i < 4; i++)
-            if (p->images[more[i]] &&
+                                         MCP_BLEND_JAMES_STEIN, MCP_BLEND_CURVES,
+                                         MCP_BLEND_IDEAL};
+        for (int i = 0; i < 5; i++)
+            if (p->images[more[i]] && more[i] != p->method &&
                 write_member_image(s, p->images[more[i]], base,
                                    mcp_blend_method_name(more[i]), files))
                 return -1;
     }
     /* the last member's pictures go into the report */
     if (p->index == p->count - 1) {
-        const mcp_blend_method shown[] = {MCP_BLEND_NOISY, MCP_BLEND_DENOISED,
-                                          MCP_BLEND_CURVES};
+        const mcp_blend_method shown[] = {MCP_BLEND_NOISY, MCP_BLEND_DENOISED, p->method};
         for (int i = 0; i < 3; i++) {
             char name[700], path[4096 + 800];
             mcp_image *ldr = NULL;
@@ -124,28 +124,28 @@ add_error_figures(cJSON *section, const mcp_blend_series_result *r, const char *
     return rc;
 }
 
-/* The blend section's verdict: with a reference, the blend's MSE (method curves) as a
+/* The blend section's verdict: with a reference, the blend's MSE (its method's) as a
  * multiple of the noisy image's at the last member, where it must be at most 1 for
  * the blend to converge, and at the member where the blend helps most. */
 static int
 blend_verdict(cJSON *section, const mcp_blend_series_result *r)
 {
     const mcp_blend_row *last = &r->rows[r->count - 1];
+    const mcp_blend_method m = r->method;
     if (!r->has_reference)
         return mcp_report_set_verdict(section, MCP_VERDICT_INFO,
                                       "blended %d members, %g to %g spp; without a "
                                       "reference there are no error figures to judge "
                                       "convergence by",
                                       r->count, r->rows[0].spp, last->spp);
-    double fin = last->err[MCP_BLEND_CURVES].mse / last->err[MCP_BLEND_NOISY].mse,
+    double fin = last->err[m].mse / last->err[MCP_BLEND_NOISY].mse,
            den = last->err[MCP_BLEND_DENOISED].mse / last->err[MCP_BLEND_NOISY].mse;
     int best = r->count - 1;
     for (int i = 0; i < r->count; i++)
-        if (r->rows[i].err[MCP_BLEND_CURVES].mse / r->rows[i].err[MCP_BLEND_NOISY].mse <
-            r->rows[best].err[MCP_BLEND_CURVES].mse / r->rows[best].err[MCP_BLEND_NOISY].mse)
+        if (r->rows[i].err[m].mse / r->rows[i].err[MCP_BLEND_NOISY].mse <
+            r->rows[best].err[m].mse / r->rows[best].err[MCP_BLEND_NOISY].mse)
             best = i;
-    double best_ratio =
-        r->rows[best].err[MCP_BLEND_CURVES].mse / r->rows[best].err[MCP_BLEND_NOISY].mse;
+    double best_ratio = r->rows[best].err[m].mse / r->rows[best].err[MCP_BLEND_NOISY].mse;
     int converges = fin <= 1.0;
     return mcp_report_set_verdict(
         section, converges ? MCP_VERDICT_GOOD : MCP_VERDICT_BAD,
@@ -164,6 +164,7 @@ fill_section(cJSON *section, const mcp_blend_series_result *r,
     const mcp_blend_options *b = &o->blend;
     cJSON_AddStringToObject(section, "denoiser", denoiser);
     mcp__add_variance_source(section, r->variance_source, 0);
+    cJSON_AddStringToObject(section, "weights", mcp_blend_weighting_name(b->weights));
     cJSON_AddStringToObject(section, "fit", mcp_curve_fit_name(b->fit));
     cJSON_AddStringToObject(section, "curve", mcp_curve_model_name(b->curve));
     cJSON_AddStringToObject(section, "filter", mcp_blend_filter_name(b->filter));
@@ -207,7 +208,7 @@ fill_section(cJSON *section, const mcp_blend_series_result *r,
             return -1;
     }
     if (blend_verdict(section, r)) return -1;
-    const char *shown[] = {"noisy", "denoised", "curves"};
+    const char *shown[] = {"noisy", "denoised", mcp_blend_method_name(r->method)};
     for (int i = 0; i < 3; i++) {
         char rel[1400], caption[700];
         snprintf(rel, sizeof rel, "%s%s.%s.png", s->rel, s->last_base, shown[i]);

@@ -29,6 +29,7 @@ static const char *const blend_keys[] = {"input",
                                          "seed",
                                          "js_window",
                                          "safeguard",
+                                         "weights",
                                          "flip",
                                          NULL};
 
@@ -53,6 +54,11 @@ p_neg(const char *s, void *o)
 {
     return mcp_neg_sure_from_name(s, o);
 }
+static int
+p_weights(const char *s, void *o)
+{
+    return mcp_blend_weighting_from_name(s, o);
+}
 
 static int
 read_stage_options(const mcp_node *s, mcp_blend_series_options *o)
@@ -76,6 +82,7 @@ read_stage_options(const mcp_node *s, mcp_blend_series_options *o)
         mcp_node_opt_double(s, "seed", &seed) ||
         mcp_node_opt_int(s, "js_window", &b->js_window) ||
         mcp_node_opt_bool(s, "safeguard", &safeguard) ||
+        mcp__opt_enum(s, "weights", p_weights, &b->weights) ||
         mcp_node_opt_bool(s, "flip", &flip))
         return -1;
     if (!(seed >= 0) || seed != floor(seed) || seed > 9007199254740992.0)

@@ -15,6 +15,7 @@ typedef struct member {
     mcp_blend_row row;
     mcp_image *images[MCP_BLEND_N_METHODS];
     mcp_image *weights;
+    mcp_blend_method method; /* which image is the blend */
 } member;
 
 typedef struct sink {
@@ -37,10 +38,11 @@ on_point(const mcp_blend_point *p, void *ctx)
     member *m = &s->members[p->index];
     memset(m, 0, sizeof *m);
     m->row = *p->row;
+    m->method = p->method;
     if (!(m->source = mcp_strdup(p->source)) || mcp_image_copy(p->weights, &m->weights))
         return -1;
     for (int k = 0; k < MCP_BLEND_N_METHODS; k++)
-        if (p->images[k] && (s->all_images || k == MCP_BLEND_CURVES) &&
+        if (p->images[k] && (s->all_images || k == (int)p->method) &&
             mcp_image_copy(p->images[k], &m->images[k]))
             return -1;
     s->count = p->index + 1;
@@ -74,8 +76,8 @@ member_dict(member *m, int has_reference, int has_flip)
         mcp_py_set(d, "mean_rho", PyFloat_FromDouble(m->row.mean_rho)) ||
         mcp_py_set(d, "safeguard_pulled", PyFloat_FromDouble(m->row.safeguard_pulled)))
         goto fail;
-    mcp_image *blend = m->images[MCP_BLEND_CURVES], *w = m->weights;
-    m->images[MCP_BLEND_CURVES] = m->weights = NULL;
+    mcp_image *blend = m->images[m->method], *w = m->weights;
+    m->images[m->method] = m->weights = NULL;
     if (mcp_py_set(d, "blend", mcp_py_array(blend)) || mcp_py_set(d, "weights", mcp_py_array(w)))
         goto fail;
     images = PyDict_New();
@@ -134,18 +136,19 @@ py_blend(PyObject *self, PyObject *args, PyObject *kw)
                            "filter",        "filter_window", "filter_sigma_scale",
                            "stop_filtering", "negative_sure", "n_probes",
                            "seed",          "js_window",    "flip",
-                           "variance_from", "all_images",   "safeguard", NULL};
+                           "variance_from", "all_images",   "safeguard", "weights", NULL};
     mcp_blend_series_options o = mcp_blend_series_defaults();
     mcp_blend_options *b = &o.blend;
     PyObject *list, *den_obj = Py_None, *ref_obj = Py_None, *seed = NULL;
-    const char *fit = NULL, *curve = NULL, *filter = NULL, *neg = NULL, *vfrom = NULL;
+    const char *fit = NULL, *curve = NULL, *filter = NULL, *neg = NULL, *vfrom = NULL,
+               *weights = NULL;
     int all_images = 0;
     if (!PyArg_ParseTupleAndKeywords(
-            args, kw, "O|$OOdzzddpzidpziOipzpp:blend", keys, &list, &den_obj, &ref_obj,
+            args, kw, "O|$OOdzzddpzidpziOipzppz:blend", keys, &list, &den_obj, &ref_obj,
             &o.stop_denoising_at, &fit, &curve, &b->far_spp, &b->max_weight,
             &b->denoiser_keeps_zeros, &filter, &b->filter_window, &b->filter_sigma_scale,
             &b->stop_filtering, &neg, &o.sure.n_probes, &seed, &b->js_window, &o.flip,
-            &vfrom, &all_images, &b->safeguard))
+            &vfrom, &all_images, &b->safeguard, &weights))
         return NULL;
     if (seed && parse_seed(seed, &o.sure.seed))
         return NULL;
@@ -154,7 +157,9 @@ py_blend(PyObject *self, PyObject *args, PyObject *kw)
         (curve && mcp_curve_model_from_name(curve, &b->curve)) ||
         (filter && mcp_blend_filter_from_name(filter, &b->filter)) ||
         (neg && mcp_neg_sure_from_name(neg, &b->negative_sure)) ||
-        (vfrom && mcp_series_variance_from_name(vfrom, &vsrc)) || mcp_blend_options_check(b))
+        (vfrom && mcp_series_variance_from_name(vfrom, &vsrc)) ||
+        (weights && mcp_blend_weighting_from_name(weights, &b->weights)) ||
+        mcp_blend_options_check(b))
         return mcp_py_fail();
     /* the members: paths in increasing spp (the driver loads them one at a time) */
     PyObject *fast = PySequence_Fast(list, "dumps must be a list of paths");
@@ -218,9 +223,10 @@ py_blend(PyObject *self, PyObject *args, PyObject *kw)
     }
     if (members)
         result = Py_BuildValue(
-            "{s:N,s:s,s:s,s:O}", "members", members, "denoiser", den->name,
+            "{s:N,s:s,s:s,s:O,s:s}", "members", members, "denoiser", den->name,
             "variance_source", mcp_variance_source_name(r->variance_source), "has_reference",
-            r->has_reference ? Py_True : Py_False);
+            r->has_reference ? Py_True : Py_False, "weights",
+            mcp_blend_weighting_name(b->weights));
 done:
     sink_free(&s, (int)n);
     mcp_blend_series_result_free(r);
@@ -242,7 +248,7 @@ PyMethodDef mcp_py_blend_methods[] = {
      "      denoiser_keeps_zeros=False, filter='gauss', filter_window=11,\n"
      "      filter_sigma_scale=100, stop_filtering=True, negative_sure='switch',\n"
      "      n_probes=1, seed=0, js_window=7, flip=True, variance_from='auto',\n"
-     "      all_images=False, safeguard=True) -> dict\n\n"
+     "      all_images=False, safeguard=True, weights='james_stein') -> dict\n\n"
      "Blends every member of a progressive render (dump paths in increasing spp) with\n"
      "its denoised image (Denisova & Bocchi 2024). 'members': per member 'blend',\n"
      "'weights', 'spp', 'mean_var', 'mean_sure', 'mean_rho', ..., 'images' (every\n"

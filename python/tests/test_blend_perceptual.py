@@ -35,7 +35,18 @@ def test_blend_options_and_errors(tmp):
     got = mcpost.blend(MEMBERS[:2], denoiser="gauss", all_images=True, fit="last_two",
                        flip=False)
     images = got["members"][1]["images"]
-    assert set(images) == {"noisy", "denoised", "easy", "james_stein"}
+    # the blend is the James-Stein combiner's (the default weights); curves beside it
+    assert got["weights"] == "james_stein"
+    assert set(images) == {"noisy", "denoised", "easy", "curves"}
+    curves = mcpost.blend(MEMBERS[:2], denoiser="gauss", all_images=True, fit="last_two",
+                          flip=False, weights="curves")
+    assert curves["weights"] == "curves"
+    assert set(curves["members"][1]["images"]) == {"noisy", "denoised", "easy", "james_stein"}
+    np.testing.assert_array_equal(curves["members"][1]["images"]["james_stein"],
+                                  got["members"][1]["blend"])
+    np.testing.assert_array_equal(curves["members"][1]["blend"], images["curves"])
+    with pytest.raises(mcpost.Error, match="unknown blend weights 'mean'"):
+        mcpost.blend(MEMBERS, weights="mean")
     np.testing.assert_array_equal(images["noisy"], rgb(MEMBERS[1]))
     assert "errors" not in got["members"][1]
     with pytest.raises(mcpost.Error, match="fit"):

@@ -75,6 +75,7 @@ blend_mse(const mcp_image *mu, const mcp_image *n, const mcp_image *d, double si
 {
     mcp_image *v = rgb_constant(W, H, (float)sigma2), *sure = rgb_constant(W, H, 1e-30f);
     mcp_blend_options o = mcp_blend_defaults();
+    o.weights = MCP_BLEND_WEIGHTS_CURVES;
     o.safeguard = safeguard;
     o.filter = MCP_BLEND_FILTER_NONE;
     mcp_blend_input in = {n, v, 64, d, sure, NULL};
@@ -187,15 +188,48 @@ test_good_denoiser_keeps_its_weight(void **state)
     mcp_image_free(mu);
 }
 
-/* The option: on by default, checked, and off gives the curve blend unchanged. */
+/* The options: the safeguard on by default and checked; the James-Stein weights the
+ * default, and mcp_blend_step's blend then the combiner's, with W = I rho / (1 - rho). */
 static void
 test_option(void **state)
 {
     (void)state;
     mcp_blend_options o = mcp_blend_defaults();
     assert_int_equal(o.safeguard, 1);
+    assert_int_equal(o.weights, MCP_BLEND_WEIGHTS_JAMES_STEIN);
     o.safeguard = 2;
     assert_error_contains(mcp_blend_options_check(&o), "safeguard must be 0 or 1");
+    mcp_blend_weighting wt;
+    assert_int_equal(mcp_blend_weighting_from_name("james-stein", &wt), 0);
+    assert_int_equal(wt, MCP_BLEND_WEIGHTS_JAMES_STEIN);
+    assert_int_equal(mcp_blend_weighting_from_name("curves", &wt), 0);
+    assert_string_equal(mcp_blend_weighting_name(wt), "curves");
+    assert_error_contains(mcp_blend_weighting_from_name("mean", &wt),
+                          "unknown blend weights 'mean'");
+
+    mcp_image *mu = texture_truth(), *n = noisy_of(mu, 1e-2, 7), *d = box3(n);
+    mcp_image *v = rgb_constant(W, H, 1e-2f), *sure = rgb_constant(W, H, 1e-3f);
+    mcp_image *js = NULL, *rho = NULL;
+    assert_int_equal(mcp_blend_james_stein(n, d, v, 7, &js, &rho), 0);
+    mcp_blend_input in = {n, v, 64, d, sure, NULL};
+    mcp_blend_result r;
+    assert_int_equal(mcp_blend_step(&in, NULL, NULL, NULL, &r), 0);
+    for (size_t i = 0; i < (size_t)W * H * 3; i++) {
+        assert_true(r.blend->data[i] == js->data[i]);
+        double want = rho->data[i] >= 1 ? INFINITY : 64 * rho->data[i] / (1 - rho->data[i]);
+        if (isinf(want))
+            assert_true(isinf(r.weights->data[i]));
+        else
+            assert_close(r.weights->data[i], want, 1e-6, 1e-9);
+    }
+    mcp_blend_result_free(&r);
+    mcp_image_free(js);
+    mcp_image_free(rho);
+    mcp_image_free(mu);
+    mcp_image_free(n);
+    mcp_image_free(d);
+    mcp_image_free(v);
+    mcp_image_free(sure);
 }
 
 int

@@ -378,9 +378,9 @@ test_cli_and_job(void **state)
     if (rc != 0) fail_msg("mcpost blend: %d: %s", rc, err);
     const char *files[] = {"cornell_spp0004.blend.exr",
                            "cornell_spp0064.weights.exr",
-                           "cornell_spp0016.james_stein.exr",
+                           "cornell_spp0016.curves.exr", /* the other weights' blend */
                            "cornell_spp0064.ideal.exr",
-                           "cornell_spp0064.curves.png",
+                           "cornell_spp0064.james_stein.png", /* the blend, shown */
                            "blend.json",
                            "report.html"};
     for (int i = 0; i < 7; i++) {

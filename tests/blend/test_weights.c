@@ -155,6 +155,7 @@ test_step_matches_parts(void **state)
         o.curve = c ? MCP_CURVE_POWERLAW : MCP_CURVE_LOG;
         o.filter = MCP_BLEND_FILTER_NONE; /* keeps the zeros where they were put */
         o.safeguard = 0; /* the parts below do not include it (test_safeguard.c) */
+        o.weights = MCP_BLEND_WEIGHTS_CURVES;
         mcp_blend_input in = {n, v, 32, d, s, NULL};
         mcp_blend_result res;
         assert_int_equal(mcp_blend_step(&in, &o, NULL, NULL, &res), 0);
@@ -221,6 +222,7 @@ test_step_vector_is_scalar(void **state)
         o.filter = MCP_BLEND_FILTER_NONE;
         o.negative_sure = magnitude ? MCP_NEG_SURE_MAGNITUDE : MCP_NEG_SURE_ZERO;
         o.max_weight = 100; /* the cap in play too */
+        o.weights = MCP_BLEND_WEIGHTS_CURVES; /* the SSE pass (JS: test_safeguard.c) */
         mcp_blend_input packed = {n, v, 32, d, s, NULL}, strided = {n4, v, 32, d4, s, NULL};
         mcp_blend_result a, b;
         assert_int_equal(mcp_blend_step(&packed, &o, NULL, NULL, &a), 0);
