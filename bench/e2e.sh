@@ -90,3 +90,10 @@ time_runs "estimate 1080p dump, nlm" - \
 "$MCPOST" estimate hd_test.exr --denoiser nlm -o "$WORK/est_nlm" 2>/dev/null |
     sed -n 's/^time (ms): */  its steps (ms): /p'
 echo "(target for nlm: the whole command <= 1.2x its 'denoise+jvp' step)"
+# the default estimate with the U-Net (4 probes: one apply and 4 tangents) against one
+# apply, the cost docs/fidelity.md "The defaults" reports
+time_runs "denoise 1080p dump, unet (one apply)" - \
+    "$MCPOST" denoise hd_test.exr --denoiser unet -o "$WORK/den_unet.exr"
+time_runs "estimate 1080p dump, unet, the defaults" - \
+    "$MCPOST" estimate hd_test.exr --denoiser unet -o "$WORK/est_unet"
+echo "(target for unet: the default estimate <= 3x one apply)"

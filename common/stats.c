@@ -127,10 +127,14 @@ mcp_pool_window(mcp_image *values, const mcp_image *shape, int radius)
                 mcp__window_sum(ts, w, h, x, y, radius, ss, &n);
                 const float *sh = mcp_image_px(shape, x, y);
                 for (int c = 0; c < 3; c++)
-                    v[c] = ss[c] > 0 ? (float)(sh[c] * (sv[c] / ss[c])) : (float)(sv[c] / n);
+                    v[c] = ss[c] > 0 ? (float)(sh[c] * (fmax(sv[c], 0) / ss[c]))
+                                     : (float)(fmax(sv[c], 0) / n);
             } else {
+                /* a window sum of non-negative values from the table's differences can
+                   come out a rounding below zero beside large ones (a black region next
+                   to a firefly): a variance must not */
                 for (int c = 0; c < 3; c++)
-                    v[c] = (float)(sv[c] / n);
+                    v[c] = (float)(fmax(sv[c], 0) / n);
             }
         }
     free(tv);

@@ -5,6 +5,7 @@
 #include "testing.h"
 
 #include <mcpost/dump.h>
+#include <mcpost/stats.h>
 #include <math.h>
 #include <procedural.h>
 #include <stdio.h>
@@ -491,6 +492,46 @@ test_series_variance_auto(void **state)
     mcp_series_free(strat);
 }
 
+/* Pooling a variance that is zero beside very large values (a black region next to a
+ * firefly, as the held-out `window` fixture has at 32 spp): the table's differences
+ * must not turn the zeros negative, which the error distribution refuses; every value
+ * is the naive window mean (in double) to the table's rounding. */
+static void
+test_pool_window_beside_large_values(void **state)
+{
+    (void)state;
+    const int w = 40, h = 30;
+    static const char *const names[3] = {"R", "G", "B"};
+    for (int radius = 1; radius <= 3; radius++) {
+        mcp_image *img = mcp_test_constant(w, h, 3, 0, names), *orig = NULL;
+        uint64_t st = 77;
+        for (int y = 0; y < h; y++)
+            for (int x = 0; x < w / 2; x++) /* the left half: values over many scales */
+                for (int c = 0; c < 3; c++)
+                    mcp_image_px(img, x, y)[c] =
+                        (float)(exp(20 * mcp_test_rand_uniform(&st) - 8));
+        mcp_image_px(img, 5, 5)[0] = 3e9f;
+        assert_int_equal(mcp_image_copy(img, &orig), 0);
+        assert_int_equal(mcp_pool_window(img, NULL, radius), 0);
+        for (int y = 0; y < h; y++)
+            for (int x = 0; x < w; x++)
+                for (int c = 0; c < 3; c++) {
+                    double sum = 0;
+                    int n = 0;
+                    for (int j = y - radius; j <= y + radius; j++)
+                        for (int i = x - radius; i <= x + radius; i++)
+                            if (i >= 0 && j >= 0 && i < w && j < h)
+                                sum += mcp_image_px(orig, i, j)[c], n++;
+                    float got = mcp_image_px(img, x, y)[c];
+                    assert_true(got >= 0);
+                    /* the table's sums reach ~1e12: rounding ~1e-4 absolute */
+                    assert_close(got, sum / n, 1e-6, 1e-3);
+                }
+        mcp_image_free(img);
+        mcp_image_free(orig);
+    }
+}
+
 int
 main(void)
 {
@@ -503,6 +544,7 @@ main(void)
         cmocka_unit_test(test_increments_independent),
         cmocka_unit_test(test_stratified_sources),
         cmocka_unit_test(test_series_variance_auto),
+        cmocka_unit_test(test_pool_window_beside_large_values),
         cmocka_unit_test(test_source_roundtrip),
         cmocka_unit_test(test_merge_errors),
     };
