@@ -15,6 +15,9 @@ typedef struct mcp_command {
     const char *name;
     const char *summary;
     int (*run)(int argc, char **argv); /* argv[0] is the subcommand's name */
+    /* 1: it parses --quiet itself; otherwise main takes --quiet for it (no progress
+     * on stderr), so that every subcommand accepts it */
+    int parses_quiet;
 } mcp_command;
 
 /* cli/commands.c: every subcommand, in --help order (NULL-terminated). */

@@ -226,4 +226,4 @@ fail:
 
 const mcp_command mcp_command_adaptive = {
     "adaptive", "the adaptive-sampling loop: render, denoise, map, render more",
-    cmd_adaptive};
+    cmd_adaptive, 1};

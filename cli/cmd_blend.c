@@ -322,4 +322,4 @@ done:
 const mcp_command mcp_command_blend = {"blend",
                                        "blend a progressive render with its denoised "
                                        "images so that it converges (Denisova & Bocchi)",
-                                       cmd_blend};
+                                       cmd_blend, 1};

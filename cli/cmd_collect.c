@@ -526,4 +526,4 @@ cmd_collect(int argc, char **argv)
 }
 
 const mcp_command mcp_command_collect = {"collect", "gather a frame job's reports into one",
-                                         cmd_collect};
+                                         cmd_collect, 1};

@@ -96,4 +96,4 @@ cmd_convert(int argc, char **argv)
 
 const mcp_command mcp_command_convert = {"convert", "convert images and render dumps "
                                                     "between formats and conventions",
-                                         cmd_convert};
+                                         cmd_convert, 0};

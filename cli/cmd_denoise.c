@@ -289,4 +289,4 @@ cmd_denoise(int argc, char **argv)
 const mcp_command mcp_command_denoise = {"denoise",
                                          "run one denoiser (and its "
                                          "Jacobian-vector product) alone",
-                                         cmd_denoise};
+                                         cmd_denoise, 0};

@@ -415,20 +415,8 @@ cmd_estimate(int argc, char **argv)
             mcp_estimate_compute(dump, den, eo, &e))
             goto done;
         summary = mcp__estimate_json(e, path, den->name, eo);
-        if (ref) { /* the truth beside the estimate */
-            mcp_image *err = NULL;
-            double truth[MCP_ESTIMATE_MAX_PERCENTILES];
-            if (mcp_true_error(e->maps.denoised, ref, eo->sure.metric, eo->sure.ppd,
-                               &err) ||
-                mcp_true_percentiles(err, e->percentiles, e->n_percentiles, truth)) {
-                mcp_image_free(err);
-                goto done;
-            }
-            mcp_image_free(err);
-            cJSON *tp = cJSON_AddArrayToObject(summary, "true_percentiles");
-            for (int k = 0; k < e->n_percentiles; k++)
-                cJSON_AddItemToArray(tp, cJSON_CreateNumber(truth[k]));
-        }
+        if (ref && mcp__estimate_add_truth(e, ref, eo, summary)) /* the truth beside it */
+            goto done;
         if (outdir) {
             char path_json[4352];
             char *text = cJSON_Print(summary);
@@ -467,4 +455,4 @@ done:
 
 const mcp_command mcp_command_estimate = {
     "estimate", "estimate the error of a denoised render and decide when to stop",
-    cmd_estimate};
+    cmd_estimate, 0};

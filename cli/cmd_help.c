@@ -79,4 +79,4 @@ cmd_help(int argc, char **argv)
 
 const mcp_command mcp_command_help = {"help", "print a docs page: render dumps, job files, "
                                               "denoisers (mcpost help lists them)",
-                                      cmd_help};
+                                      cmd_help, 0};

@@ -195,4 +195,4 @@ cmd_info(int argc, char **argv)
     return status;
 }
 
-const mcp_command mcp_command_info = {"info", "describe images and render dumps", cmd_info};
+const mcp_command mcp_command_info = {"info", "describe images and render dumps", cmd_info, 0};

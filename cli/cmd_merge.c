@@ -105,4 +105,4 @@ done:
 
 const mcp_command mcp_command_merge = {"merge", "combine renders of one frame into a dump "
                                                 "(variance from replicates)",
-                                       cmd_merge};
+                                       cmd_merge, 0};

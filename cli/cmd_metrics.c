@@ -307,4 +307,4 @@ done:
 const mcp_command mcp_command_metrics = {"metrics",
                                          "compare a test image with a reference "
                                          "(MSE, relMSE, PSNR, pMSE, FLIP, ...)",
-                                         cmd_metrics};
+                                         cmd_metrics, 0};

@@ -291,4 +291,4 @@ done:
 
 const mcp_command mcp_command_perceptual = {
     "perceptual", "perceptual error optimisation of few-sample renders (Chizhov 2022)",
-    cmd_perceptual};
+    cmd_perceptual, 0};

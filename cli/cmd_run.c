@@ -91,4 +91,4 @@ cmd_run(int argc, char **argv)
     return rc ? mcp_cli_fail() : 0;
 }
 
-const mcp_command mcp_command_run = {"run", "run a pipeline from a YAML job file", cmd_run};
+const mcp_command mcp_command_run = {"run", "run a pipeline from a YAML job file", cmd_run, 1};

@@ -352,4 +352,4 @@ cmd_submit(int argc, char **argv)
 }
 
 const mcp_command mcp_command_submit = {"submit", "run a frame job on a Slurm cluster",
-                                        cmd_submit};
+                                        cmd_submit, 0};

@@ -51,9 +51,9 @@ mcp_cli_denoiser_create(const mcp_cli_denoiser_flags *f, mcp_denoiser **out)
 {
     /* the duplicate check (a shorthand and --denoiser-opt naming one key) and the
      * unknown-key check are create_from_args', with its messages. No name: the
-     * default (the U-Net, or nlm without features), or the U-Net when its settings
-     * (--weights, ...) are given */
-    const char *name = f->name ? f->name : f->n_opts ? "unet" : "default";
+     * default (the U-Net, or nlm without features), which create_from_args makes the
+     * U-Net when its settings (--weights, ...) are given */
+    const char *name = f->name ? f->name : "default";
     return mcp_denoiser_create_from_args(name, (const char *const *)f->opts, f->n_opts, out);
 }
 

@@ -31,7 +31,30 @@ print_help(void)
            MCP_VERSION);
     for (const mcp_command *const *c = mcp_commands; *c; c++)
         printf("  %-10s %s\n", (*c)->name, (*c)->summary);
-    printf("\noptions:\n  --help      this text\n  --version   the version\n");
+    printf("\noptions:\n  --help      this text\n  --version   the version\n"
+           "  --quiet     (after any subcommand) no progress on stderr\n");
+}
+
+/* --quiet, which every subcommand accepts: taken out of argv (up to a "--") for the
+ * subcommands that do not parse it themselves, and progress silenced. Returns the new
+ * argc. */
+static int
+take_quiet(int argc, char **argv)
+{
+    int n = 2;
+    for (int i = 2; i < argc; i++) {
+        if (strcmp(argv[i], "--") == 0) {
+            while (i < argc)
+                argv[n++] = argv[i++];
+            break;
+        }
+        if (strcmp(argv[i], "--quiet") == 0)
+            mcp_progress_set_quiet(1);
+        else
+            argv[n++] = argv[i];
+    }
+    argv[n] = NULL;
+    return n;
 }
 
 int
@@ -51,8 +74,10 @@ main(int argc, char **argv)
         return 0;
     }
     for (const mcp_command *const *c = mcp_commands; *c; c++)
-        if (strcmp((*c)->name, argv[1]) == 0)
+        if (strcmp((*c)->name, argv[1]) == 0) {
+            if (!(*c)->parses_quiet) argc = take_quiet(argc, argv);
             return (*c)->run(argc - 1, argv + 1);
+        }
     fprintf(stderr, "mcpost: unknown subcommand '%s'; see 'mcpost --help'\n", argv[1]);
     return 2;
 }

@@ -66,7 +66,8 @@ struct mcp_denoiser {
 MCP_API int mcp_denoiser_create(const mcp_node *settings, const char *base_dir,
                                 mcp_denoiser **out);
 
-/* The same from command-line words: name and "key=value" options. */
+/* The same from command-line words: name and "key=value" options. `default` with
+ * options is the U-Net with them (the options are the U-Net's). */
 MCP_API int mcp_denoiser_create_from_args(const char *name, const char *const *opts,
                                           int n_opts, mcp_denoiser **out);
 

@@ -305,6 +305,9 @@ mcp_denoiser_create_from_args(const char *name, const char *const *opts, int n_o
     }
     if (n_opts < 0 || (n_opts > 0 && !opts))
         return mcp_error("denoiser %s: bad option list", name);
+    /* `default` has no settings of its own: settings with it are the U-Net's, which is
+       what it stands for (the CLI, job files and Python take this one path) */
+    if (!strcmp(name, "default") && n_opts > 0) name = "unet";
     char *text = NULL;
     mcp_node *root = NULL;
     if (args_to_yaml(name, opts, n_opts, &text))

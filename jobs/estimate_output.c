@@ -228,18 +228,30 @@ mcp__estimate_report_single(cJSON *section, const cJSON *summary, const mcp_esti
             e->stop ? "yes" : "no", 100 * e->cdf_at_tau, metric, e->tau, 100 * e->p,
             e->stop ? "" : ": render more samples", mcp_error_dist_mean(e->dist));
     if (rc) return -1;
-    const char *cols[] = {"percentile", "estimated error"};
-    cJSON *t = mcp_report_add_table(section, "estimated error percentiles", cols, 2);
+    /* with a reference, the true percentiles beside the estimated ones */
+    const cJSON *tp = cJSON_GetObjectItem(summary, "true_percentiles");
+    double truth[MCP_ESTIMATE_MAX_PERCENTILES];
+    int has_truth = cJSON_IsArray(tp) && cJSON_GetArraySize(tp) == e->n_percentiles;
+    for (int k = 0; has_truth && k < e->n_percentiles; k++)
+        truth[k] = cJSON_GetArrayItem(tp, k)->valuedouble;
+    const char *cols[] = {"percentile", "estimated error", "true error"};
+    cJSON *t = mcp_report_add_table(section, "estimated error percentiles", cols,
+                                    has_truth ? 3 : 2);
     if (!t) return -1;
     for (int k = 0; k < e->n_percentiles; k++)
-        if (mcp_report_table_add_row(t, "dd", e->percentiles[k], e->percentile_tau[k]))
+        if (has_truth ? mcp_report_table_add_row(t, "ddd", e->percentiles[k],
+                                                 e->percentile_tau[k], truth[k])
+                      : mcp_report_table_add_row(t, "dd", e->percentiles[k],
+                                                 e->percentile_tau[k]))
             return -1;
     cJSON *plot =
         mcp_report_add_plot(section, "estimated error percentiles", "percentile",
                             MCP_AXIS_LOGIT, "error", MCP_AXIS_LOG);
     if (!plot ||
         !mcp_report_plot_add_series(plot, "estimated", MCP_SERIES_LINE_POINTS,
-                                    e->percentiles, e->percentile_tau, e->n_percentiles))
+                                    e->percentiles, e->percentile_tau, e->n_percentiles) ||
+        (has_truth && !mcp_report_plot_add_series(plot, "true", MCP_SERIES_LINE_POINTS,
+                                                  e->percentiles, truth, e->n_percentiles)))
         return -1;
     return 0;
 }
@@ -467,5 +479,21 @@ mcp__variance_probes_from_name(const char *text, int *out)
         *out = 1;
     else
         return mcp_error("variance probes must be sure or rademacher (got '%s')", text);
+    return 0;
+}
+
+int
+mcp__estimate_add_truth(const mcp_estimate *e, const mcp_image *ref,
+                        const mcp_estimate_options *eo, cJSON *summary)
+{
+    mcp_image *err = NULL;
+    double truth[MCP_ESTIMATE_MAX_PERCENTILES];
+    int rc = mcp_true_error(e->maps.denoised, ref, eo->sure.metric, eo->sure.ppd, &err) ||
+             mcp_true_percentiles(err, e->percentiles, e->n_percentiles, truth);
+    mcp_image_free(err);
+    if (rc) return -1;
+    cJSON *tp = cJSON_AddArrayToObject(summary, "true_percentiles");
+    for (int k = 0; k < e->n_percentiles; k++)
+        cJSON_AddItemToArray(tp, cJSON_CreateNumber(truth[k]));
     return 0;
 }

@@ -99,6 +99,11 @@ typedef struct mcp__estimate_dir {
 int mcp__estimate_path(const mcp__estimate_dir *o, const char *name, char *buf,
                        size_t cap);
 /* The figures of one estimate (estimate.json). */
+/* The truth beside a single estimate: "true_percentiles" (the nearest-rank percentiles
+ * of the denoised image's true error against ref, at the estimate's percentiles) into
+ * summary, as `mcpost estimate --ref` and the job stage's `reference:` give them. */
+int mcp__estimate_add_truth(const mcp_estimate *e, const mcp_image *ref,
+                            const mcp_estimate_options *eo, cJSON *summary);
 cJSON *mcp__estimate_json(const mcp_estimate *e, const char *input, const char *denoiser,
                           const mcp_estimate_options *o);
 /* Every image of one estimate and the block pictures into o->dir (made), and with a

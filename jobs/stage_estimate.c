@@ -191,9 +191,11 @@ stage_estimate(mcp_job *job, const mcp_node *settings)
         mcp_estimate *e = NULL;
         if (mcp_estimate_compute(dump, den, &so.est, &e)) goto done;
         cJSON *j = mcp__estimate_json(e, name, den->name, &so.est);
+        /* reference: the truth beside the estimate, as `mcpost estimate --ref` */
+        int bad = ref && mcp__estimate_add_truth(e, ref, &so.est, j);
         char path[4352];
-        char *text = cJSON_Print(j);
-        int bad = !text || mcp__estimate_write_single(e, &od, section, j) ||
+        char *text = bad ? NULL : cJSON_Print(j);
+        bad = bad || !text || mcp__estimate_write_single(e, &od, section, j) ||
                   mcp__estimate_path(&od, "estimate.json", path, sizeof path) ||
                   mcp_write_file_atomic(path, text, strlen(text)) ||
                   mcp__estimate_report_single(section, j, e);

@@ -68,3 +68,12 @@ def test_denoiser_settings_and_errors(dump):
         mcpost.denoise(dump["color"], albedo=dump["albedo"][:, :64], denoiser="nlm")
     with pytest.raises(TypeError, match="denoiser setting 'sigma'"):
         mcpost.denoise(dump["color"], denoiser="gauss", sigma=[1, 2])
+
+
+def test_default_denoiser_takes_the_unets_settings():
+    # `default` has no settings of its own: given some, it is the U-Net with them, as
+    # `mcpost denoise --input-scale` (no --denoiser) is
+    d = mcpost.read_dump(series("cornell", 16))
+    kw = dict(albedo=d["albedo"], normal=d["normal"], input_scale=0.5)
+    np.testing.assert_array_equal(mcpost.denoise(d["color"], **kw),
+                                  mcpost.denoise(d["color"], denoiser="unet", **kw))

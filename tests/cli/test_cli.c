@@ -462,6 +462,22 @@ test_help_and_version(void **state)
     assert_non_null(strstr(out, "run"));
     assert_int_equal(run("run --list"), 0);
     assert_non_null(strstr(out, "convert"));
+    /* every subcommand accepts --quiet (main takes it for those that do not parse it),
+       and a "--quiet" after "--" is left for the subcommand */
+    static const char *const subs[] = {"info",     "convert", "merge",  "run",
+                                       "submit",   "collect", "metrics", "denoise",
+                                       "perceptual", "estimate", "blend", "adaptive"};
+    for (size_t i = 0; i < sizeof subs / sizeof *subs; i++) {
+        int rc = run("%s --quiet --help", subs[i]);
+        if (rc != 0) fail_msg("mcpost %s --quiet --help: %d: %s", subs[i], rc, err);
+        assert_non_null(strstr(out, "usage"));
+    }
+    assert_int_equal(run("estimate '%s/samples/fixtures/cornell/series/cornell_spp0016.exr' "
+                         "--denoiser gauss --probes 1 --quiet --json",
+                         MCP_TEST_SOURCE_DIR),
+                     0);
+    assert_int_equal(run("info --quiet -- --quiet"), 1);
+    assert_non_null(strstr(err, "--quiet"));
 }
 
 int

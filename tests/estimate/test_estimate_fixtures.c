@@ -460,7 +460,8 @@ test_job_stage(void **state)
         "output: job_out\n"
         "stages:\n"
         "  - estimate: {input: noisy, denoiser: {name: gauss}, tau: 0.02,\n"
-        "               budget: 4096, probes: 2, output: one}\n"
+        "               budget: 4096, probes: 2, output: one, reference: truth,\n"
+        "               s2_pool: auto}\n"
         "  - estimate: {input: progress, denoiser: gauss, reference: truth,\n"
         "               taus: [0.05, 0.02], output: series}\n");
     int st = run("run '%s' --quiet", mcp_test_path("estimate.yaml"));
@@ -471,6 +472,25 @@ test_job_stage(void **state)
     char *report = mcp_test_read_text(mcp_test_path("job_out/report.json"));
     assert_non_null(strstr(report, "\"stage\":\t\"estimate\""));
     free(report);
+    /* one dump with reference: the true percentiles, the same as `mcpost estimate
+       --ref` gives for the same dump and settings */
+    char *text = mcp_test_read_text(mcp_test_path("job_out/one/estimate.json"));
+    cJSON *job_json = cJSON_Parse(text);
+    free(text);
+    const cJSON *job_truth = cJSON_GetObjectItem(job_json, "true_percentiles");
+    assert_non_null(job_truth);
+    st = run("estimate '%s' --denoiser gauss --tau 0.02 --probes 2 --ref '%s' --json",
+             mcp_test_path("job_spp0032.exr"), mcp_test_path("job_ref.exr"));
+    assert_int_equal(st, 0);
+    cJSON *cli_json = cJSON_Parse(out);
+    const cJSON *cli_truth = cJSON_GetObjectItem(cli_json, "true_percentiles");
+    assert_non_null(cli_truth);
+    assert_int_equal(cJSON_GetArraySize(job_truth), 5);
+    for (int k = 0; k < 5; k++)
+        assert_true(cJSON_GetArrayItem(job_truth, k)->valuedouble ==
+                    cJSON_GetArrayItem(cli_truth, k)->valuedouble);
+    cJSON_Delete(job_json);
+    cJSON_Delete(cli_json);
     /* an unknown key names the line */
     mcp_test_write_text(mcp_test_path("bad.yaml"),
                         "inputs:\n"
