@@ -283,7 +283,7 @@ test_pbrt_gbuffer(void **state)
     const char *names[] = {"R",
                            "G",
                            "B",
-                           "A",
+
                            "Albedo.R",
                            "Albedo.G",
                            "Albedo.B",
@@ -317,11 +317,11 @@ test_pbrt_gbuffer(void **state)
             for (int c = 0; c < 3; c++) {
                 double per_sample = t.var[y][x][c] * SPP;
                 p[c] = (float)t.mean[y][x][c];
-                p[4 + c] = 0.25f * (c + 1);
-                p[12 + c] = c == 2 ? 1 : 0;
-                p[15 + c] = c == 0 ? 1 : 0;
-                p[20 + c] = (float)per_sample;
-                p[23 + c] = (float)(per_sample / (t.mean[y][x][c] * t.mean[y][x][c]));
+                p[3 + c] = 0.25f * (c + 1);
+                p[11 + c] = c == 2 ? 1 : 0;
+                p[14 + c] = c == 0 ? 1 : 0;
+                p[19 + c] = (float)per_sample;
+                p[22 + c] = (float)(per_sample / (t.mean[y][x][c] * t.mean[y][x][c]));
             }
         }
     assert_int_equal(mcp_attrs_set_int(&img->attrs, "samplesPerPixel", SPP), 0);
