@@ -58,7 +58,8 @@ print_variance_source(const cJSON *o)
                 *k = cJSON_GetObjectItem(o, "replicates"),
                 *pool = cJSON_GetObjectItem(o, "variance_pool");
     mcp_variance_source s;
-    if (strcmp(src->valuestring, "per-sample") == 0 || strcmp(src->valuestring, "of-mean") == 0)
+    if (strcmp(src->valuestring, "per-sample") == 0 || strcmp(src->valuestring, "of-mean") == 0 ||
+        strcmp(src->valuestring, "xyz-moments") == 0)
         printf("  source:    %s\n", mcp_variance_source_from_name(src->valuestring, &s) == 0
                                         ? mcp__variance_source_words(s)
                                         : src->valuestring);

@@ -60,8 +60,8 @@ mcp_variance_kind_from_name(const char *name, mcp_variance_kind *out)
     return 0;
 }
 
-static const char *const variance_source_names[] = {"none", "per-sample", "of-mean",
-                                                     "replicates", "increments"};
+static const char *const variance_source_names[] = {
+    "none", "per-sample", "of-mean", "replicates", "increments", "xyz-moments"};
 
 const char *
 mcp_variance_source_name(mcp_variance_source s)
@@ -187,7 +187,13 @@ find_triple(const mcp_image *img, const char *word, const char *const sfx[3], ch
             continue;
         int plen = (int)(dot - name);
         snprintf(buf, cap, "%.*s", plen, name);
-        if (!contains_ci(buf, word))
+        /* a Mitsuba moment integrator's second-moment twin is no feature */
+        if (strncmp(buf, "m2_", 3) == 0)
+            continue;
+        const char *last = strrchr(buf, '.');
+        last = last ? last + 1 : buf;
+        /* "nn" is the shading normal in Mitsuba 3's own aov example ("nn:sh_normal") */
+        if (!contains_ci(buf, word) && !(strcmp(word, "normal") == 0 && strcmp(last, "nn") == 0))
             continue;
         char other[512];
         int ok = 1;
@@ -201,16 +207,48 @@ find_triple(const mcp_image *img, const char *word, const char *const sfx[3], ch
     return 0;
 }
 
+/* Mitsuba 3's moment integrator: for each nested integrator NAME it writes the
+ * sample's colour in CIE XYZ as NAME.X/Y/Z and its second moment as m2_NAME.X/Y/Z
+ * (the nested integrator's own AOVs are NAME.<aov>.*, with a dot in their prefix).
+ * The first such NAME (channel order) goes into buf. */
+static int
+find_moment_prefix(const mcp_image *img, char *buf, size_t cap)
+{
+    static const char *const xyz[3] = {"X", "Y", "Z"};
+    for (int c = 0; c < img->channels; c++) {
+        const char *name = img->names[c], *dot = strrchr(name, '.');
+        if (strncmp(name, "m2_", 3) != 0 || !dot || strcmp(dot + 1, "X") != 0)
+            continue;
+        int plen = (int)(dot - name) - 3;
+        if (plen <= 0 || memchr(name + 3, '.', (size_t)plen))
+            continue;
+        snprintf(buf, cap, "%.*s", plen, name + 3);
+        char other[600];
+        int ok = 1;
+        for (int k = 0; k < 3; k++) {
+            snprintf(other, sizeof other, "%s.%s", buf, xyz[k]);
+            ok &= has(img, other);
+            snprintf(other, sizeof other, "m2_%s.%s", buf, xyz[k]);
+            ok &= has(img, other);
+        }
+        if (ok)
+            return 1;
+    }
+    return 0;
+}
+
 mcp_convention
 mcp_dump_detect(const mcp_image *img)
 {
+    char moment[512];
     char *layer = blender_layer(img);
     if (layer) {
         free(layer);
         return MCP_CONV_BLENDER;
     }
     const mcp_attr *gen = mcp_attrs_find(&img->attrs, "generatedBy");
-    if (has(img, "m2_R") || (gen && gen->type == MCP_ATTR_STRING && strstr(gen->s, "Mitsuba")))
+    if (has(img, "m2_R") || find_moment_prefix(img, moment, sizeof moment) ||
+        (gen && gen->type == MCP_ATTR_STRING && strstr(gen->s, "Mitsuba")))
         return MCP_CONV_MITSUBA;
     if (has(img, "Covariance.RG") || has(img, "SampleCount"))
         return MCP_CONV_MCPOST;
@@ -233,8 +271,10 @@ typedef struct name3 {
 } name3;
 
 typedef struct layout {
-    name3 color, var, m2, cov, albedo, normal;
+    name3 color, var, m2, cov, albedo, normal, xyz;
     int has_var, has_m2, has_cov, has_albedo, has_normal;
+    int has_xyz;        /* m2 holds Mitsuba 3's XYZ second moments, xyz their mean */
+    int color_from_xyz; /* no R,G,B: the mean colour is the XYZ mean in linear sRGB */
     mcp_variance_kind var_kind;
     double spp;          /* from the header, 0 if none */
     char spp_channel[64];
@@ -302,6 +342,14 @@ layout_for(const mcp_image *img, mcp_convention conv, layout *L)
         set3(&L->m2, "m2_", rgb);
         L->has_m2 = has3(img, &L->m2);
         char p[512];
+        if (!L->has_m2 && find_moment_prefix(img, p, sizeof p)) {
+            snprintf(prefix, sizeof prefix, "%s.", p);
+            set3(&L->xyz, prefix, xyz);
+            snprintf(prefix, sizeof prefix, "m2_%s.", p);
+            set3(&L->m2, prefix, xyz);
+            L->has_m2 = L->has_xyz = 1;
+            L->color_from_xyz = !has3(img, &L->color);
+        }
         if (find_triple(img, "albedo", rgb, p, sizeof p)) {
             snprintf(prefix, sizeof prefix, "%s.", p);
             set3(&L->albedo, prefix, rgb);
@@ -345,7 +393,17 @@ rename3(mcp_image *img, const char *a, const char *b, const char *c)
 /* Where the main file's channels come from: a whole image in memory, whose triples
  * are copied out, or (an EXR file on disk) images the reader decoded those triples
  * straight into (read_direct), with no whole image to copy them from. */
-enum { PART_COLOR, PART_ALBEDO, PART_NORMAL, PART_COV, PART_VAR, PART_M2, PART_SPP, N_PARTS };
+enum {
+    PART_COLOR,
+    PART_ALBEDO,
+    PART_NORMAL,
+    PART_COV,
+    PART_VAR,
+    PART_M2,
+    PART_SPP,
+    PART_XYZ,
+    N_PARTS
+};
 
 typedef struct channel_source {
     const mcp_image *img; /* names, attributes and source; pixels unless header_only */
@@ -526,8 +584,12 @@ load_spp(mcp_dump *d, channel_source *src, const mcp_dump_spec *spec,
         return mcp_error("%s: sample count %g given (must be > 0)", d->source, spec->spp);
     if (d->spp == 0 && (d->var_of_mean || d->cov_of_mean) &&
         d->variance_in_file == MCP_VAR_PER_SAMPLE)
-        return mcp_error("%s: no sample count: the file has none (samplesPerPixel) and "
-                         "none was given (spp)", d->source);
+        return mcp_error("%s: no sample count: the file has none (%s) and none was given "
+                         "(spp, --spp)",
+                         d->source,
+                         d->convention == MCP_CONV_MITSUBA
+                             ? "Mitsuba writes no sample count in its EXR"
+                             : "samplesPerPixel");
     if (d->spp < 0 || !isfinite(d->spp))
         return mcp_error("%s: sample count %g in the file (must be > 0)", d->source, d->spp);
     return 0;
@@ -579,11 +641,89 @@ dump_layout(const mcp_image *img, const mcp_dump_spec *spec, mcp_dump *d, layout
 /* Everything after the layout: the parts from the source (renamed to R,G,B / X,Y,Z),
  * Mitsuba's moments, the separate part files, the sample count, the bad-value
  * checks and the variance of the mean. */
+/* XYZ to linear sRGB (D65), the inverse of the sRGB-to-XYZ matrix that Mitsuba 3
+ * converts with (its srgb_to_xyz, and its film's XYZ output). */
+static const double xyz_to_rgb[3][3] = {{3.240479, -1.537150, -0.498535},
+                                        {-0.969256, 1.875991, 0.041556},
+                                        {0.055648, -0.204043, 1.057311}};
+
+/* Which parts of Mitsuba 3's moment layout dump_fill takes (route_parts must agree). */
+static int
+wants_xyz(const layout *L)
+{
+    return L->has_xyz && (L->color_from_xyz || !L->has_var);
+}
+
+static int
+wants_m2(const layout *L)
+{
+    return L->has_m2 && !L->has_var;
+}
+
+/* Mitsuba 3's moment integrator: the XYZ mean xyz and second moments m2 (both
+ * replaced in place) into the per-sample RGB variance in m2 and, when color_from_xyz,
+ * the RGB mean in xyz. The XYZ covariances are not stored, so the RGB variance is
+ * the one with perfectly correlated X, Y, Z: (sum_j M_rj sd_j)^2, exact when a
+ * pixel's samples share one chromaticity (and for grey), never above the bound
+ * (sum_j |M_rj| sd_j)^2 (docs/conventions.md, "Mitsuba 3"). */
+static void
+xyz_moments_to_rgb(mcp_image *xyz, mcp_image *m2, int color_from_xyz)
+{
+    for (int y = 0; y < xyz->height; y++)
+        for (int x = 0; x < xyz->width; x++) {
+            float *m = mcp_image_px(xyz, x, y), *v = mcp_image_px(m2, x, y);
+            double sd[3], worst = 0;
+            for (int j = 0; j < 3; j++) {
+                /* float rounding can make m2 - m^2 slightly negative at ~0 variance */
+                double var = (double)v[j] - (double)m[j] * m[j];
+                double tol = 1e-6 * fabs((double)v[j]) + 1e-30;
+                if (var < 0 && var > -tol) var = 0;
+                if (var < worst || isnan(var)) worst = isnan(var) ? NAN : var;
+                sd[j] = var > 0 ? sqrt(var) : 0;
+            }
+            double rgb[3];
+            for (int r = 0; r < 3; r++) {
+                double a = 0;
+                rgb[r] = 0;
+                for (int j = 0; j < 3; j++) {
+                    a += xyz_to_rgb[r][j] * sd[j];
+                    rgb[r] += xyz_to_rgb[r][j] * m[j];
+                }
+                /* a negative or NaN XYZ variance stays so, for check_values */
+                v[r] = (float)(worst < 0 || isnan(worst) ? worst : a * a);
+            }
+            if (color_from_xyz)
+                for (int r = 0; r < 3; r++)
+                    m[r] = (float)rgb[r];
+        }
+}
+
 static int
 dump_fill(mcp_dump *d, channel_source *src, const mcp_dump_spec *spec,
           const mcp_dump_buffers *parts, const layout *L)
 {
-    if (take3(src, PART_COLOR, &L->color, &d->color) || rename3(d->color, "R", "G", "B"))
+    if (wants_xyz(L)) {
+        mcp_image *xyz = NULL;
+        if (take3(src, PART_XYZ, &L->xyz, &xyz))
+            return -1;
+        int rc = 0;
+        if (wants_m2(L)) {
+            rc = take3(src, PART_M2, &L->m2, &d->var_of_mean) ||
+                 rename3(d->var_of_mean, "R", "G", "B");
+            if (!rc)
+                xyz_moments_to_rgb(xyz, d->var_of_mean, L->color_from_xyz);
+        }
+        if (!rc && L->color_from_xyz) {
+            d->color = xyz;
+            xyz = NULL;
+            rc = rename3(d->color, "R", "G", "B");
+        }
+        mcp_image_free(xyz);
+        if (rc)
+            return -1;
+    }
+    if (!L->color_from_xyz &&
+        (take3(src, PART_COLOR, &L->color, &d->color) || rename3(d->color, "R", "G", "B")))
         return -1;
     if (L->has_albedo && (take3(src, PART_ALBEDO, &L->albedo, &d->albedo) ||
                           rename3(d->albedo, "R", "G", "B")))
@@ -599,6 +739,8 @@ dump_fill(mcp_dump *d, channel_source *src, const mcp_dump_spec *spec,
         if (take3(src, PART_VAR, &L->var, &d->var_of_mean) ||
             rename3(d->var_of_mean, "R", "G", "B"))
             return -1;
+    } else if (L->has_xyz) {
+        d->variance_in_file = MCP_VAR_PER_SAMPLE; /* taken above, from XYZ */
     } else if (L->has_m2) {
         /* Mitsuba's moment integrator: per-sample variance = E[x^2] - E[x]^2; float
          * rounding can make it slightly negative where the variance is ~0 */
@@ -652,6 +794,9 @@ dump_fill(mcp_dump *d, channel_source *src, const mcp_dump_spec *spec,
     if (d->variance_in_file == MCP_VAR_PER_SAMPLE)
         to_variance_of_mean(d);
     read_variance_source(d);
+    if (wants_m2(L) && L->has_xyz && d->variance_source == MCP_VARSRC_PER_SAMPLE &&
+        !(spec->variance_path || in_memory(&parts->variance)))
+        d->variance_source = MCP_VARSRC_XYZ_MOMENTS;
     return 0;
 }
 
@@ -746,12 +891,13 @@ route_parts(const mcp_image *header, int w, int h, void *ctx, mcp__exr_route *ro
         int part, wanted;
         const name3 *names;
     } parts[] = {
-        {PART_COLOR, 1, &L->color},
+        {PART_COLOR, !L->color_from_xyz, &L->color},
+        {PART_XYZ, wants_xyz(L), &L->xyz},
         {PART_ALBEDO, L->has_albedo, &L->albedo},
         {PART_NORMAL, L->has_normal, &L->normal},
         {PART_COV, L->has_cov, &L->cov},
         {PART_VAR, L->has_var, &L->var},
-        {PART_M2, !L->has_var && L->has_m2, &L->m2},
+        {PART_M2, wants_m2(L), &L->m2},
     };
     for (size_t i = 0; i < sizeof parts / sizeof *parts; i++) {
         const char *n[3] = {parts[i].names->c[0], parts[i].names->c[1],
@@ -972,6 +1118,7 @@ mcp_dump_write(const mcp_dump *d, const char *path, mcp_convention conv,
        later run does not take it for a per-sample variance */
     if (d->var_of_mean && (d->variance_source == MCP_VARSRC_REPLICATES ||
                            d->variance_source == MCP_VARSRC_INCREMENTS ||
+                           d->variance_source == MCP_VARSRC_XYZ_MOMENTS ||
                            d->variance_pool > 0)) {
         if (mcp_attrs_set_string(&img->attrs, ATTR_VARIANCE_SOURCE,
                                  mcp_variance_source_name(d->variance_source)) ||

@@ -11,10 +11,12 @@
  * Conventions recognised from channel names and attributes (notes/libraries.md §4):
  *   pbrt-v4 GBufferFilm: R,G,B; Variance.R/G/B (per-sample); Albedo.*; N.X/Y/Z;
  *                        int samplesPerPixel
- *   Mitsuba 3:           R,G,B; <aov>.R/G/B whose name contains "albedo";
- *                        <aov>.X/Y/Z whose name contains "normal"; moment integrator
- *                        m2_R/m2_G/m2_B (second moments: per-sample var = m2 - mean^2);
- *                        no sample count in the file
+ *   Mitsuba 3:           R,G,B (the film's main image); <aov>.R/G/B whose name
+ *                        contains "albedo"; <aov>.X/Y/Z whose name contains "normal"
+ *                        (or is "nn"); the moment integrator's <nested>.X/Y/Z (the
+ *                        sample in CIE XYZ) with m2_<nested>.X/Y/Z (second moments,
+ *                        no cross terms: variance source "xyz-moments"); mcpost's own
+ *                        older m2_R/m2_G/m2_B; no sample count in the file
  *   Blender Cycles:      <layer>.Combined.R/G/B, <layer>.Denoising Albedo.*,
  *                        <layer>.Denoising Normal.*, string cycles.<layer>.samples;
  *                        <layer>.Variance.R/G/B when present (per-sample)
@@ -67,11 +69,14 @@ typedef enum {
     MCP_VARSRC_PER_SAMPLE, /* per-sample variance / n: assumes independent samples */
     MCP_VARSRC_OF_MEAN,    /* the file stored a variance of the mean, origin unknown */
     MCP_VARSRC_REPLICATES, /* the spread between K independent renders (mcp_dump_merge) */
-    MCP_VARSRC_INCREMENTS  /* the spread between the increments of one progressive
+    MCP_VARSRC_INCREMENTS, /* the spread between the increments of one progressive
                               render (mcp_series_increment_variance) */
+    MCP_VARSRC_XYZ_MOMENTS /* Mitsuba 3's moment integrator: per-sample XYZ variances
+                              without their covariances, turned into RGB as if X, Y, Z
+                              were perfectly correlated, / n (docs/conventions.md) */
 } mcp_variance_source;
 
-/* "none", "per-sample", "of-mean", "replicates", "increments". */
+/* "none", "per-sample", "of-mean", "replicates", "increments", "xyz-moments". */
 MCP_API const char *mcp_variance_source_name(mcp_variance_source s);
 MCP_API int mcp_variance_source_from_name(const char *name, mcp_variance_source *out);
 

@@ -11,6 +11,12 @@ static const char per_sample_note[] =
     "sampler (Cycles, pbrt-v4) makes it an overstatement: give replicates (mcpost "
     "merge) or a series with --variance-from increments";
 
+static const char xyz_moments_note[] =
+    "Mitsuba 3's moment integrator stores XYZ second moments without their "
+    "covariances: the RGB variance takes X, Y, Z as perfectly correlated (exact when a "
+    "pixel's samples share one chromaticity, as grey ones do; at most (sum_j "
+    "|M_rj| sd_j)^2 otherwise), and / n assumes independent samples";
+
 void
 mcp__add_variance_source(cJSON *j, mcp_variance_source src, double dof)
 {
@@ -19,6 +25,8 @@ mcp__add_variance_source(cJSON *j, mcp_variance_source src, double dof)
         cJSON_AddNumberToObject(j, "variance_dof", dof);
     if (src == MCP_VARSRC_PER_SAMPLE)
         cJSON_AddStringToObject(j, "variance_note", per_sample_note);
+    if (src == MCP_VARSRC_XYZ_MOMENTS)
+        cJSON_AddStringToObject(j, "variance_note", xyz_moments_note);
 }
 
 const char *
@@ -32,6 +40,9 @@ mcp__variance_source_words(mcp_variance_source src)
     case MCP_VARSRC_OF_MEAN: return "of the mean, as the file stores it";
     case MCP_VARSRC_REPLICATES: return "the spread between replicates";
     case MCP_VARSRC_INCREMENTS: return "the spread between the series' increments";
+    case MCP_VARSRC_XYZ_MOMENTS:
+        return "per-sample / n from Mitsuba's XYZ moments (no XYZ covariances: X, Y, Z "
+               "taken as perfectly correlated; assumes independent samples)";
     }
     return "?";
 }

@@ -62,6 +62,25 @@ test_info_describes_each_renderer(void **state)
         assert_non_null(strstr(out, cases[i].channel));
         assert_non_null(strstr(out, "size:        16x8"));
     }
+    /* Mitsuba 3's moment integrator layout: the convention and the variance source */
+    {
+        const char *names[] = {"R", "G", "B", "A", "m2_nested.X", "m2_nested.Y", "m2_nested.Z",
+                               "nested.X", "nested.Y", "nested.Z"};
+        mcp_image *img = NULL;
+        assert_int_equal(mcp_image_new(4, 2, 10, names, &img), 0);
+        for (int i = 0; i < 4 * 2 * 10; i++)
+            img->data[i] = i % 10 >= 4 && i % 10 < 7 ? 1.0f : 0.5f;
+        const char *path = mcp_test_path("mitsuba3.exr");
+        assert_int_equal(mcp_image_write(img, path, NULL), 0);
+        mcp_image_free(img);
+        assert_int_equal(run("info --spp 16 '%s'", path), 0);
+        assert_non_null(strstr(out, "convention:  mitsuba"));
+        assert_non_null(strstr(out, "Mitsuba's XYZ moments"));
+        assert_int_equal(run("info --json --spp 16 '%s'", path), 0);
+        assert_non_null(strstr(out, "\"xyz-moments\""));
+        assert_int_equal(run("info --json '%s'", path), 0); /* no count: says why */
+        assert_non_null(strstr(out, "Mitsuba writes no sample count"));
+    }
     /* Mitsuba has no count in the file: --spp gives it */
     assert_int_equal(run("info --spp 128 '%s'", mcp_test_path("mitsuba.exr")), 0);
     assert_non_null(strstr(out, "samples:     128 per pixel"));
