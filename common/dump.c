@@ -1294,7 +1294,8 @@ mcp_series_load(const mcp_series *s, int i, mcp_dump **out)
     if (mcp__series_load_file(s, i, out))
         return -1;
     if (s->variance_from != MCP_SERIES_VARIANCE_AUTO || i == 0 ||
-        (*out)->variance_source != MCP_VARSRC_PER_SAMPLE)
+        ((*out)->variance_source != MCP_VARSRC_PER_SAMPLE &&
+         (*out)->variance_source != MCP_VARSRC_XYZ_MOMENTS))
         return 0;
     /* auto: a per-sample variance is checked against the series' own increments, and
        replaced by theirs where it is off (docs/variance-sources.md) */
