@@ -14,6 +14,9 @@ and takes from there what the module needs at run time. In site-packages that is
                                          beside the library (common/paths.c)
     mcpost.libs/share/mcpost/            its data: the U-Net's weights, found relative
                                          to the library (MCP_DATA_FROM_LIB)
+    mcpost.libs/bin/                     mcpost and mcpost-procedural, which the library
+                                         runs (an adaptive stage's renderer, in
+                                         run_job), found relative to it (common/shell.c)
 
 CMake is configured with the lib and data folders inside mcpost.libs, so the library
 looks for its plug-ins and data there, relative to itself, wherever the wheel is
@@ -86,6 +89,7 @@ class CMakeBuildExt(build_ext):
                 f"-DCMAKE_INSTALL_PREFIX={prefix}",
                 f"-DCMAKE_INSTALL_LIBDIR={LIBS}",
                 f"-DCMAKE_INSTALL_DATADIR={LIBS}/share",
+                f"-DCMAKE_INSTALL_BINDIR={LIBS}/bin",
                 "-DMCPOST_PYTHON_INSTALL_DIR=.",
             ] + shlex.split(os.environ.get("MCPOST_CMAKE_ARGS", ""))
             run(configure)
@@ -108,13 +112,14 @@ class CMakeBuildExt(build_ext):
             # the U-Net (the default denoiser) needs its weights: a wheel without them
             # would fail only at the first denoise
             weights = stage / LIBS / "share" / "mcpost" / "rt_hdr_alb_nrm.tza"
-            for src in [stage / LIBS / soname, weights]:
+            for src in [stage / LIBS / soname, weights, stage / LIBS / "bin" / "mcpost"]:
                 if not src.is_file():
                     sys.exit(f"setup.py: the CMake install in {stage} has no "
                              f"{src.relative_to(stage)}")
             files = [stage / LIBS / soname]
             files += sorted((stage / LIBS / "mcpost").glob("*.so"))  # the plug-ins
             files += sorted(weights.parent.iterdir())  # the data, with the weights
+            files += sorted((stage / LIBS / "bin").iterdir())  # the programs
             for src in files:
                 dst = libs / src.relative_to(stage / LIBS)
                 dst.parent.mkdir(parents=True, exist_ok=True)
