@@ -71,6 +71,12 @@ def run(cmd):
 
 class CMakeBuildExt(build_ext):
     def build_extension(self, ext):
+        if self.inplace or getattr(self, "editable_mode", False):
+            # an editable install would put the module and mcpost.libs/ into the
+            # source tree; the build tree already is the editable form
+            sys.exit("setup.py: `pip install -e` (an in-place build) is not supported: "
+                     "`./setup.sh build` builds build/python, which python3 then imports "
+                     "as it changes (docs/python.md)")
         check_prerequisites()
         version = project_version()
         module = Path(self.get_ext_fullpath(ext.name))
