@@ -24,7 +24,8 @@ cd "$(dirname "$0")"
 PACKAGES=(gcc g++ make cmake pkg-config
           libopenexr-dev libopenimageio-dev libopencv-core-dev libopencv-imgproc-dev
           libyaml-dev libcjson-dev libcmocka-dev libopenblas-dev libpng-dev
-          libdeflate-dev python3-dev python3-numpy python3-pytest python3-matplotlib)
+          libdeflate-dev python3-dev python3-numpy python3-pytest python3-matplotlib
+          python3-pip python3-setuptools python3-wheel python3-venv)
 JOBS=${MCPOST_JOBS:-$(nproc)}
 
 install_packages() { # install_packages [PACKAGE...]: PACKAGES when none are named
