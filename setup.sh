@@ -96,6 +96,9 @@ test)
     install_packages slurm-wlm munge
     # headless Chromium opens report.html in the test report/page_in_chromium
     install_packages chromium
+    # Blender's Cycles renders a tiny .blend through tools/mcpost-cycles-render.py in
+    # the test cli/cycles_render
+    install_packages blender
     build build
     run_tests build
     if [ -z "${MCPOST_NO_ASAN:-}" ]; then

@@ -96,4 +96,8 @@ mcp__otf_weight(const mcp__otf *t, double v, double sure)
 /* The weight cap that o selects: o->max_weight, else none (log) or 65536 (powerlaw). */
 double mcp__max_weight(const mcp_blend_options *o);
 
+/* What to do about a dump without variance: the recipe for a Cycles render, else
+ * `otherwise` (common/dump.c, common/internal.h). */
+const char *mcp__no_variance_hint(const mcp_dump *d, const char *otherwise);
+
 #endif

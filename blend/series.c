@@ -86,14 +86,16 @@ load_member(const run *r, int i, mcp_dump **out)
 {
     mcp_dump *d = NULL;
     if (mcp_series_load(r->series, i, &d)) return -1;
-    const char *why = !d->var_of_mean ? "has no variance (blend needs the variance of "
-                                        "the mean)"
+    const char *why = !d->var_of_mean ? "has no variance"
                       : d->spp_map || !(d->spp > 0) ? "has no scalar sample count"
                                                     : NULL;
+    const char *hint = !d->var_of_mean
+                           ? mcp__no_variance_hint(d, " (blend needs the variance of the mean)")
+                           : "";
     if (!why && r->reference && !mcp_image_same_size(d->color, r->reference))
         why = "does not match the reference's size";
     if (why) {
-        mcp_error("blend: %s %s", d->source, why);
+        mcp_error("blend: %s %s%s", d->source, why, hint);
         mcp_dump_free(d);
         return -1;
     }

@@ -1350,6 +1350,15 @@ mcp_variance_ratio_off(double ratio)
     return ratio > 0 && (ratio > 1.25 || ratio < 0.8);
 }
 
+const char *
+mcp__no_variance_hint(const mcp_dump *d, const char *otherwise)
+{
+    return d && d->convention == MCP_CONV_BLENDER
+               ? ": Cycles writes none; render the .blend with tools/mcpost-cycles-render.py "
+                 "(docs/conventions.md, \"From a .blend to an estimate\")"
+               : otherwise;
+}
+
 int
 mcp__series_load_file(const mcp_series *s, int i, mcp_dump **out)
 {

@@ -69,6 +69,9 @@ void mcp__report_set_heading(mcp_report *r, const char *title);
 /* A series member as its file holds it, whatever the series' variance_from (dump.c). */
 #include <mcpost/dump.h>
 int mcp__series_load_file(const mcp_series *s, int i, mcp_dump **out);
+/* What to do about a dump without variance, for the end of its one-line error: the
+ * recipe for a Cycles render (convention blender), else `otherwise` (dump.c). */
+const char *mcp__no_variance_hint(const mcp_dump *d, const char *otherwise);
 
 /* Format back ends behind mcp_image_read / mcp_image_write (imageio.c). The writers
  * write exactly `path` (imageio.c passes a temporary name and renames). */

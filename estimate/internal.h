@@ -68,6 +68,9 @@ double mcp__rng_normal(mcp__rng *r);
 
 /* Fails naming `who` when the dump lacks colour or the variance of the mean. */
 int mcp__check_dump(const char *who, const mcp_dump *dump);
+/* What to do about a dump without variance: the recipe for a Cycles render, else
+ * `otherwise` (common/dump.c, common/internal.h). */
+const char *mcp__no_variance_hint(const mcp_dump *d, const char *otherwise);
 
 /* The values of given ranks among n floats without sorting them (common/select.c). */
 int mcp__select_ranks(const float *v, size_t n, const size_t *ranks, int k, float *out);
