@@ -670,7 +670,7 @@ main(int argc, char **argv)
                 tally *tl = &total[src][di];
                 if (estimate)
                     run_estimate(&run, series, den, reference, dens[di], tl);
-                if (blend && strcmp(dens[di], "bilateral") != 0)
+                if (blend)
                     run_blend(&run, series, den, reference, dens[di], tl);
                 mcp_denoiser_free(den);
             }

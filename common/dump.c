@@ -1276,6 +1276,36 @@ mcp_series_from_paths(const char *const *paths, const double *spps, int count,
     return 0;
 }
 
+/* The first member of a series without variance (auto): the per-sample spread that
+ * the first two blocks show (member 1's increments' variance, of its mean) scaled to
+ * the first member's count, Var X_0 = Var X_1 n_1 / n_0: the same blocks, the same
+ * estimate of the per-sample variance. Left as it is when that cannot be formed. */
+static int
+first_member_from_increments(const mcp_series *s, mcp_dump *first)
+{
+    mcp_dump *incr = NULL;
+    if (mcp_series_increment_variance(s, 1, &s->increments, &incr, NULL)) {
+        if (strstr(mcp_error_message(), "out of memory")) return -1;
+        mcp_error_clear();
+        return 0;
+    }
+    if (first->spp > 0 && incr->spp > 0 && !first->spp_map && !incr->spp_map &&
+        incr->var_of_mean) {
+        double scale = incr->spp / first->spp;
+        size_t n = (size_t)incr->var_of_mean->width * incr->var_of_mean->height *
+                   incr->var_of_mean->channels;
+        for (size_t k = 0; k < n; k++)
+            incr->var_of_mean->data[k] = (float)(incr->var_of_mean->data[k] * scale);
+        first->var_of_mean = incr->var_of_mean;
+        incr->var_of_mean = NULL;
+        first->variance_source = incr->variance_source;
+        first->variance_dof = incr->variance_dof;
+        first->replicates = incr->replicates;
+    }
+    mcp_dump_free(incr);
+    return 0;
+}
+
 int
 mcp_series_load(const mcp_series *s, int i, mcp_dump **out)
 {
@@ -1293,9 +1323,14 @@ mcp_series_load(const mcp_series *s, int i, mcp_dump **out)
     }
     if (mcp__series_load_file(s, i, out))
         return -1;
+    /* a member without any variance (a plain Cycles render) takes its increments'
+       whatever they say: there is nothing else */
+    int none = !(*out)->var_of_mean;
+    if (s->variance_from == MCP_SERIES_VARIANCE_AUTO && i == 0 && none && s->count > 1)
+        return first_member_from_increments(s, *out);
     if (s->variance_from != MCP_SERIES_VARIANCE_AUTO || i == 0 ||
         ((*out)->variance_source != MCP_VARSRC_PER_SAMPLE &&
-         (*out)->variance_source != MCP_VARSRC_XYZ_MOMENTS))
+         (*out)->variance_source != MCP_VARSRC_XYZ_MOMENTS && !none))
         return 0;
     /* auto: a per-sample variance is checked against the series' own increments, and
        replaced by theirs where it is off (docs/variance-sources.md) */
@@ -1316,7 +1351,7 @@ mcp_series_load(const mcp_series *s, int i, mcp_dump **out)
     /* only an overstatement (a stratified sampler) is taken as the increments' cue: a
        Variance/n below their spread can also mean members that are not checkpoints of
        one render, whose differences are no increments at all */
-    if (mcp_variance_ratio_off(ratio) && ratio > 1) {
+    if (none || (mcp_variance_ratio_off(ratio) && ratio > 1)) {
         mcp_dump_free(*out);
         *out = incr;
     } else {

@@ -311,7 +311,13 @@ def mcpost_commands(a, spps, merged):
     K, out = a.seeds, a.out
     cmds = []
     if K < 2:
-        return ['(one seed: nothing for mcpost to estimate; render --seeds 2 or more)']
+        if len(spps) < 2:
+            return ['(one seed, one checkpoint: nothing gives it a variance; render '
+                    '--seeds 2 or more, or --chunks 2 or more)']
+        pat = "'%s/seed0/%s_spp%%04d.exr'" % (out, a.name)
+        lst = ','.join(str(n) for n in spps)
+        return ['mcpost estimate --series %s --spp %s -o %s/series' % (pat, lst, out),
+                'mcpost blend %s --spp %s -o %s/blend' % (pat, lst, out)]
     if not merged:
         for n in spps:
             cmds.append('mcpost merge %s/seed*/%s_spp%04d.exr -o %s/%s_spp%04d.exr'

@@ -58,6 +58,13 @@ grep -q '"variance_source":[[:space:]]*"replicates"' "$T/est/estimate.json" ||
     -o "$T/series" >"$T/series.log" 2>&1 ||
     { cat "$T/series.log" >&2; fail "estimate --series of the merged checkpoints"; }
 
+# one seed's checkpoints as a series: the variance from its increments, by default
+"$MCPOST" estimate --series "$T/r/seed0/render_spp%04d.exr" --spp 4,8 --denoiser nlm \
+    -o "$T/seed0" >"$T/seed0.log" 2>&1 ||
+    { cat "$T/seed0.log" >&2; fail "estimate --series of one seed's checkpoints"; }
+grep -q '"variance_source":[[:space:]]*"increments"' "$T/seed0/estimate.json" ||
+    fail "one seed's series: variance_source is not increments"
+
 if "$MCPOST" estimate "$T/r/seed0/render_spp0008.exr" -o "$T/one" 2>"$T/one.log"; then
     fail "estimate of one seed's render (no variance) succeeded"
 fi

@@ -532,6 +532,63 @@ test_pool_window_beside_large_values(void **state)
     }
 }
 
+/* A series whose files hold no variance (a plain Cycles render's checkpoints): by
+ * default every member takes its variance from the increments, the first one the
+ * per-sample spread of the first two blocks scaled to its count; unbiased for the
+ * exact variance of the mean (independent samples, Monte Carlo over 12 renders). */
+static void
+test_series_without_variance(void **state)
+{
+    (void)state;
+    mcp_proc_scene scene = mcp_proc_scene_defaults();
+    scene.width = scene.height = 24;
+    scene.firefly_probability = 0;
+    mcp_image *truth_mean = NULL, *truth_var = NULL;
+    assert_int_equal(mcp_proc_truth(&scene, &truth_mean, &truth_var), 0);
+    const int spp[3] = {8, 16, 32};
+    const int n = scene.width * scene.height * 3, trials = 12;
+    double est[3] = {0, 0, 0}, truth = 0;
+    for (int i = 0; i < n; i++)
+        truth += truth_var->data[i];
+    for (int t = 0; t < trials; t++) {
+        mcp_series *s = procedural_series(&scene, spp, 3, 500 + t, "novar");
+        s->increments.pool_radius = -1; /* the raw estimate: unbiased per value */
+        for (int i = 0; i < 3; i++) { /* the files without their variance */
+            mcp_dump *d = NULL;
+            assert_int_equal(mcp_dump_read(s->paths[i], &d), 0);
+            mcp_image_free(d->var_of_mean);
+            mcp_image_free(d->cov_of_mean);
+            d->var_of_mean = d->cov_of_mean = NULL;
+            d->variance_source = MCP_VARSRC_NONE;
+            assert_int_equal(mcp_dump_write(d, s->paths[i], MCP_CONV_MCPOST, NULL), 0);
+            mcp_dump_free(d);
+        }
+        for (int i = 0; i < 3; i++) {
+            mcp_dump *d = NULL;
+            assert_int_equal(mcp_series_load(s, i, &d), 0);
+            assert_non_null(d->var_of_mean);
+            assert_int_equal(d->variance_source, MCP_VARSRC_INCREMENTS);
+            for (int k = 0; k < n; k++)
+                est[i] += d->var_of_mean->data[k] * spp[i]; /* per sample */
+            mcp_dump_free(d);
+        }
+        s->variance_from = MCP_SERIES_VARIANCE_FILE; /* file: no variance at all */
+        mcp_dump *d = NULL;
+        assert_int_equal(mcp_series_load(s, 1, &d), 0);
+        assert_null(d->var_of_mean);
+        mcp_dump_free(d);
+        mcp_series_free(s);
+    }
+    print_message("no variance in the files: the increments' per-sample variance over the "
+                  "truth %.3f, %.3f, %.3f\n",
+                  est[0] / trials / truth, est[1] / trials / truth, est[2] / trials / truth);
+    /* 1-2 dof per value over 12 x 1728 values: a few percent */
+    for (int i = 0; i < 3; i++)
+        assert_close(est[i] / trials / truth, 1.0, 0.05, 0);
+    mcp_image_free(truth_mean);
+    mcp_image_free(truth_var);
+}
+
 int
 main(void)
 {
@@ -545,6 +602,7 @@ main(void)
         cmocka_unit_test(test_stratified_sources),
         cmocka_unit_test(test_series_variance_auto),
         cmocka_unit_test(test_pool_window_beside_large_values),
+        cmocka_unit_test(test_series_without_variance),
         cmocka_unit_test(test_source_roundtrip),
         cmocka_unit_test(test_merge_errors),
     };
