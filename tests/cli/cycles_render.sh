@@ -64,6 +64,10 @@ grep -q '"variance_source":[[:space:]]*"replicates"' "$T/est/estimate.json" ||
     { cat "$T/seed0.log" >&2; fail "estimate --series of one seed's checkpoints"; }
 grep -q '"variance_source":[[:space:]]*"increments"' "$T/seed0/estimate.json" ||
     fail "one seed's series: variance_source is not increments"
+"$MCPOST" blend "$T/r/seed0/render_spp%04d.exr" --spp 4,8 --denoiser nlm --no-flip \
+    -o "$T/blend0" >"$T/blend0.log" 2>&1 ||
+    { cat "$T/blend0.log" >&2; fail "blend of one seed's checkpoints"; }
+[ -f "$T/blend0/render_spp0008.blend.exr" ] || fail "blend0: no blend written"
 
 if "$MCPOST" estimate "$T/r/seed0/render_spp0008.exr" -o "$T/one" 2>"$T/one.log"; then
     fail "estimate of one seed's render (no variance) succeeded"
