@@ -4,7 +4,9 @@
  * the second the reference, as everywhere in mcpost. */
 #include "internal.h"
 
+#include <mcpost/imageio.h>
 #include <mcpost/metrics.h>
+#include <mcpost/tonemap.h>
 
 #include <math.h>
 
@@ -141,6 +143,21 @@ flip_options(double ppd, double distance_m, double width_m, double width_px,
     return 0;
 }
 
+/* A copy of img with its R, G, B channels (by name) decoded from sRGB to linear. */
+static int
+srgb_decoded(const mcp_image *img, mcp_image **out)
+{
+    int rgb[3];
+    if (mcp_rgb_channels(img, rgb) || mcp_image_copy(img, out)) return -1;
+    for (int y = 0; y < img->height; y++)
+        for (int x = 0; x < img->width; x++) {
+            float *p = mcp_image_px(*out, x, y);
+            for (int k = 0; k < 3; k++)
+                p[rgb[k]] = mcp_srgb_to_linear(p[rgb[k]]);
+        }
+    return 0;
+}
+
 static PyObject *
 py_flip(PyObject *self, PyObject *args, PyObject *kw)
 {
@@ -148,26 +165,42 @@ py_flip(PyObject *self, PyObject *args, PyObject *kw)
     static char *keys[] = {"test",          "ref",         "hdr",
                            "ppd",           "distance_m",  "display_width_m",
                            "display_width_px", "tone_mapper", "start_exposure",
-                           "stop_exposure", "num_exposures", "exposure_map", NULL};
+                           "stop_exposure", "num_exposures", "exposure_map", "srgb", NULL};
     PyObject *a, *b;
-    int hdr = 0, num = 0, want_exposure = 0;
+    int hdr = 0, num = 0, want_exposure = 0, srgb = 0;
     double ppd = 0, dist = 0, wm = 0, wpx = 0, start = NAN, stop = NAN;
     const char *tm = NULL;
     mcp_flip_options o;
     mcp_py_image t, r;
-    if (!PyArg_ParseTupleAndKeywords(args, kw, "OO|$pddddzddip:flip", keys, &a, &b, &hdr,
+    if (!PyArg_ParseTupleAndKeywords(args, kw, "OO|$pddddzddipp:flip", keys, &a, &b, &hdr,
                                      &ppd, &dist, &wm, &wpx, &tm, &start, &stop, &num,
-                                     &want_exposure) ||
+                                     &want_exposure, &srgb) ||
         flip_options(ppd, dist, wm, wpx, tm, start, stop, num, &o) ||
         get_pair(a, b, &t, &r))
         return NULL;
+    if (srgb && hdr) {
+        release_pair(&t, &r);
+        PyErr_SetString(mcp_py_error, "flip: srgb=True is for LDR-FLIP (HDR input is linear)");
+        return NULL;
+    }
+    /* srgb: the arrays are sRGB-encoded, as NVIDIA's flip takes them (inputsRGB); the
+       library's FLIP wants linear colour, so decode copies */
+    mcp_image *lin_t = NULL, *lin_r = NULL;
+    if (srgb && (srgb_decoded(t.img, &lin_t) || srgb_decoded(r.img, &lin_r))) {
+        mcp_image_free(lin_t);
+        release_pair(&t, &r);
+        return mcp_py_fail();
+    }
+    const mcp_image *ti = lin_t ? lin_t : t.img, *ri = lin_r ? lin_r : r.img;
     mcp_flip_result res;
     mcp_image *map = NULL, *exposure = NULL;
     int rc;
     Py_BEGIN_ALLOW_THREADS
-    rc = hdr ? mcp_flip_hdr(t.img, r.img, &o, &res, &map, want_exposure ? &exposure : NULL)
-             : mcp_flip_ldr(t.img, r.img, &o, &res, &map);
+    rc = hdr ? mcp_flip_hdr(ti, ri, &o, &res, &map, want_exposure ? &exposure : NULL)
+             : mcp_flip_ldr(ti, ri, &o, &res, &map);
     Py_END_ALLOW_THREADS
+    mcp_image_free(lin_t);
+    mcp_image_free(lin_r);
     release_pair(&t, &r);
     if (mcp_py_check_signals()) {
         mcp_image_free(map);
@@ -425,10 +458,13 @@ PyMethodDef mcp_py_metrics_methods[] = {
     {"flip", FN(py_flip), KW,
      "flip(test, ref, *, hdr=False, ppd=0, distance_m=0.7, display_width_m=0.7,\n"
      "     display_width_px=3840, tone_mapper='aces', start_exposure=nan,\n"
-     "     stop_exposure=nan, num_exposures=0, exposure_map=False) -> (mean, map)\n\n"
+     "     stop_exposure=nan, num_exposures=0, exposure_map=False, srgb=False)\n"
+     "    -> (mean, map)\n\n"
      "LDR-FLIP, or HDR-FLIP with hdr=True, as NVIDIA FLIP v1.6 computes them; the map\n"
-     "is H x W. ppd 0 takes it from the viewing condition; nan exposures are automatic.\n"
-     "With hdr and exposure_map=True: (mean, map, exposure map)."},
+     "is H x W. Arrays are linear; for LDR-FLIP srgb=True takes sRGB-encoded ones, as\n"
+     "NVIDIA's Python API does (inputsRGB). ppd 0 takes it from the viewing condition;\n"
+     "nan exposures are automatic. With hdr and exposure_map=True: (mean, map,\n"
+     "exposure map)."},
     {"relse_percentiles", FN(py_relse_percentiles), KW,
      "relse_percentiles(test, ref, *, percentiles=(0.5, 0.9, 0.99), eps_rel=0.01)\n"
      "    -> ndarray: RelSE = (t - r)^2 / (maxc(t)^2 + eps_rel) at each p (nearest rank)"},

@@ -128,3 +128,23 @@ def test_bad_inputs_raise_clear_errors(pair):
         mcpost.mse("no-such.exr", r)
     with pytest.raises(TypeError):
         mcpost.mse(t, r, eps_rel=1)  # mse takes no eps_rel
+
+
+def test_flip_takes_srgb_encoded_arrays():
+    # srgb=True: the arrays are sRGB-encoded (NVIDIA's inputsRGB); decoding them by the
+    # sRGB formula (an independent numpy one here) and passing linear gives the same
+    rng = np.random.default_rng(3)
+    a = rng.random((24, 32, 3), dtype=np.float32)
+    b = np.clip(a + 0.1 * rng.standard_normal(a.shape).astype(np.float32), 0, 1)
+
+    def decode(c):
+        c = c.astype(np.float64)
+        return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+    got, got_map = mcpost.flip(a, b, srgb=True)
+    want, want_map = mcpost.flip(decode(a), decode(b))
+    assert abs(got - want) <= 1e-6
+    np.testing.assert_allclose(got_map, want_map, atol=1e-5)
+    assert abs(mcpost.flip(a, b)[0] - got) > 1e-3  # the keyword matters
+    with pytest.raises(mcpost.Error, match="srgb=True is for LDR-FLIP"):
+        mcpost.flip(a, b, hdr=True, srgb=True)
