@@ -7,6 +7,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 int
 mcp_cli_fail(void)
@@ -50,4 +51,18 @@ mcp_cli_read_dump(const char *path, const char *spp, const char *convention,
     if (spp && spec.spp <= 0)
         return mcp_error("--spp must be > 0 (got %s)", spp);
     return mcp_dump_load(&spec, out);
+}
+
+int
+mcp_cli_output_is_not_input(const char *cmd, const char *out, const char *const *inputs,
+                            int n)
+{
+    struct stat so, si;
+    if (!out || stat(out, &so) != 0) return 0; /* a new file cannot be an input */
+    for (int i = 0; i < n; i++)
+        if (inputs[i] && stat(inputs[i], &si) == 0 && si.st_dev == so.st_dev &&
+            si.st_ino == so.st_ino)
+            return mcp_error("%s: the output %s is the input %s; give another output", cmd,
+                             out, inputs[i]);
+    return 0;
 }

@@ -28,6 +28,13 @@ int mcp_cli_fail(void);
 /* Prints a usage error "mcpost CMD: <msg>; see mcpost CMD --help" and returns 2. */
 int mcp_cli_usage(const char *cmd, const char *fmt, ...) MCP_PRINTF(2, 3);
 
+/* Refuses an output that is one of the inputs (the same file, by device and inode,
+ * whatever the spelling): "CMD: the output OUT is the input IN; give another
+ * output" as the current error and -1; 0 when out is new or another file. inputs may
+ * hold NULLs. */
+int mcp_cli_output_is_not_input(const char *cmd, const char *out, const char *const *inputs,
+                                int n);
+
 /* Prints JSON on stdout (pretty) and frees it. */
 void mcp_cli_print_json(cJSON *json);
 

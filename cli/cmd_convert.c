@@ -72,6 +72,10 @@ cmd_convert(int argc, char **argv)
         return mcp_cli_usage("convert", "give one input and one output file");
     }
     const char *in = argv[optind], *out = argv[optind + 1];
+    if (mcp_cli_output_is_not_input("convert", out, &in, 1)) {
+        mcp__free_words(channels, n_channels);
+        return mcp_cli_fail();
+    }
     mcp_image *img = NULL, *picked = NULL;
     mcp_dump *dump = NULL;
     mcp_convention conv;

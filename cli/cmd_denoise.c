@@ -275,6 +275,12 @@ cmd_denoise(int argc, char **argv)
     }
     mcp_denoiser *den = NULL;
     mcp_dump *dump = NULL;
+    const char *inputs[6] = {in.dump, in.color, in.albedo, in.normal, in.variance, tangent};
+    if (mcp_cli_output_is_not_input("denoise", out, inputs, 6) ||
+        mcp_cli_output_is_not_input("denoise", tangent_out, inputs, 6)) {
+        mcp_cli_denoiser_flags_free(&df);
+        return mcp_cli_fail();
+    }
     if (!mcp_cli_denoiser_create(&df, &den) &&
         !load_input(&in, &dump) && !run(den, dump, &in, out, tangent, tangent_out))
         status = 0;

@@ -69,6 +69,9 @@ cmd_merge(int argc, char **argv)
         return mcp_cli_usage("merge", "no dumps given");
     if (!out_path)
         return mcp_cli_usage("merge", "no output given (-o OUT)");
+    if (mcp_cli_output_is_not_input("merge", out_path, (const char *const *)argv + optind,
+                                    count))
+        return mcp_cli_fail();
     mcp_dump **parts = mcp_calloc((size_t)count, sizeof *parts);
     mcp_dump *merged = NULL;
     int status = 1;

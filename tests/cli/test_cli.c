@@ -204,6 +204,24 @@ test_every_bad_input_class(void **state)
     /* unwritable output */
     assert_one_line_error(run("convert '%s' /nonexistent-dir/o.exr", good),
                           "/nonexistent-dir/o.exr: cannot write");
+    /* an output that is an input is refused, however it is spelled, and the input
+       stays as it was (a dump denoised onto itself lost its 12 channels) */
+    {
+        mcp_image *before = NULL, *after = NULL;
+        assert_int_equal(mcp_image_read(good, NULL, &before), 0);
+        char same[4200];
+        snprintf(same, sizeof same, "%s/good.exr", mcp_test_path(".")); /* dir/./good.exr */
+        assert_one_line_error(run("denoise '%s' --denoiser gauss -o '%s'", good, same),
+                              "denoise: the output");
+        assert_one_line_error(run("convert '%s' '%s'", good, good), "is the input");
+        assert_one_line_error(run("merge '%s' '%s' -o '%s'", good, good, good),
+                              "merge: the output");
+        assert_int_equal(mcp_image_read(good, NULL, &after), 0);
+        assert_int_equal(after->channels, before->channels);
+        assert_true(mcp_test_max_abs_diff(after, before) == 0);
+        mcp_image_free(before);
+        mcp_image_free(after);
+    }
     /* unknown job key, with its line */
     mcp_test_write_text(mcp_test_path("key.yaml"),
                         "inputs:\n  d: {dump: good.exr}\nstages:\n  - info: {input: d}\n"
