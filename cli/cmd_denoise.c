@@ -146,7 +146,9 @@ run(const mcp_denoiser *den, const mcp_dump *dump, const inputs *ins, const char
     } else if (den->apply(den, &in, &den_img)) {
         goto done;
     }
-    if (mcp_attrs_set_string(&den_img->attrs, "mcpost.denoiser", den->name) ||
+    /* the input's header travels with the result (renderer, camera, sample count...) */
+    if (mcp_attrs_copy(&dump->attrs, &den_img->attrs) ||
+        mcp_attrs_set_string(&den_img->attrs, "mcpost.denoiser", den->name) ||
         mcp_image_write(den_img, out, NULL))
         goto done;
     if (jt && (mcp_attrs_set_string(&jt->attrs, "mcpost.denoiser", den->name) ||

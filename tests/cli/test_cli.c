@@ -219,6 +219,17 @@ test_every_bad_input_class(void **state)
         assert_int_equal(mcp_image_read(good, NULL, &after), 0);
         assert_int_equal(after->channels, before->channels);
         assert_true(mcp_test_max_abs_diff(after, before) == 0);
+        /* denoise keeps the input's header attributes beside its own */
+        mcp_image *den = NULL;
+        assert_int_equal(run("denoise '%s' --denoiser gauss -o '%s'", good,
+                             mcp_test_path("den_attrs.exr")),
+                         0);
+        assert_int_equal(mcp_image_read(mcp_test_path("den_attrs.exr"), NULL, &den), 0);
+        assert_non_null(mcp_attrs_find(&den->attrs, "mcpost.denoiser"));
+        for (int a = 0; a < before->attrs.count; a++)
+            if (strcmp(before->attrs.items[a].name, "channels") != 0)
+                assert_non_null(mcp_attrs_find(&den->attrs, before->attrs.items[a].name));
+        mcp_image_free(den);
         mcp_image_free(before);
         mcp_image_free(after);
     }
