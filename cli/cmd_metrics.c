@@ -60,11 +60,10 @@ static const char usage[] =
     "examples (from the source folder, on the sample renders):\n"
     "  mcpost metrics samples/fixtures/cornell/series/cornell_spp0016.exr samples/fixtures/cornell/cornell_reference.exr\n"
     "  mcpost metrics --json --flip ldr samples/fixtures/cornell/series/cornell_spp0064.exr \\\n"
-    "                 samples/fixtures/cornell/cornell_reference.exr\n"
+    "                 samples/fixtures/cornell/cornell_reference.exr \\\n"
+    "                 --fail 'flip_ldr.mean > 0.2' --warn 'relmse > 0.5'\n"
     "  mcpost metrics samples/fixtures/cornell/series/cornell_spp0016.exr samples/fixtures/cornell/cornell_reference.exr \\\n"
-    "                 -o out/metrics_maps --tone-mapper hable\n"
-    "  mcpost metrics samples/fixtures/cornell/series/cornell_spp0016.exr samples/fixtures/cornell/cornell_reference.exr \\\n"
-    "                 --fail 'flip_ldr.mean > 0.2' --warn 'relmse > 0.1'\n";
+    "                 -o out/metrics_maps --tone-mapper hable\n";
 
 enum {
     OPT_JSON = 256,
