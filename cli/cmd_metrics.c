@@ -47,11 +47,21 @@ static const char usage[] =
     "  --no-spectra              skip the tiled error spectra\n"
     "  --spectra-tile-size N     tile size [32]\n"
     "  --spectra-cutoff X        fraction of Nyquist [0.25]\n"
+    "  Gates (CI; docs/metrics.md, \"Gates\"):\n"
+    "  --fail 'EXPR'             FAILURE when EXPR holds (repeatable)\n"
+    "  --warn 'EXPR'             WARNING when EXPR holds (repeatable)\n"
+    "                            EXPR: FIGURE OP NUMBER, OP one of > >= < <=, FIGURE a\n"
+    "                            number of the --json output, dots for nesting\n"
+    "                            (mse, relmse, psnr, flip_ldr.mean, ...). Prints PASS,\n"
+    "                            WARNING: ... or FAILURE: ... last (--json: a \"gate\"\n"
+    "                            object) and exits 0 pass, 3 warning, 4 failure\n"
+    "                            (1 error, 2 usage error, as always)\n"
     "\n"
     "examples (from the source folder, on the sample renders):\n"
     "  mcpost metrics samples/fixtures/cornell/series/cornell_spp0016.exr samples/fixtures/cornell/cornell_reference.exr\n"
     "  mcpost metrics --json --flip ldr samples/fixtures/cornell/series/cornell_spp0064.exr \\\n"
-    "                 samples/fixtures/cornell/cornell_reference.exr\n"
+    "                 samples/fixtures/cornell/cornell_reference.exr \\\n"
+    "                 --fail 'flip_ldr.mean > 0.2' --warn 'relmse > 0.5'\n"
     "  mcpost metrics samples/fixtures/cornell/series/cornell_spp0016.exr samples/fixtures/cornell/cornell_reference.exr \\\n"
     "                 -o out/metrics_maps --tone-mapper hable\n";
 
@@ -75,7 +85,9 @@ enum {
     OPT_PTONE,
     OPT_NO_SPECTRA,
     OPT_TILE,
-    OPT_CUTOFF
+    OPT_CUTOFF,
+    OPT_FAIL,
+    OPT_WARN
 };
 
 /* "ldr,hdr" / "none" into the two switches. */
@@ -175,8 +187,11 @@ cmd_metrics(int argc, char **argv)
         {"no-spectra", no_argument, 0, OPT_NO_SPECTRA},
         {"spectra-tile-size", required_argument, 0, OPT_TILE},
         {"spectra-cutoff", required_argument, 0, OPT_CUTOFF},
+        {"fail", required_argument, 0, OPT_FAIL},
+        {"warn", required_argument, 0, OPT_WARN},
         {"help", no_argument, 0, 'h'},
         {0, 0, 0, 0}};
+    mcp__gate gate = {0};
     mcp_metrics_options o = mcp_metrics_defaults();
     const char *out_dir = NULL;
     int json = 0, opt;
@@ -249,6 +264,12 @@ cmd_metrics(int argc, char **argv)
         case OPT_CUTOFF:
             rc = mcp__parse_double("--spectra-cutoff", optarg, &o.spectra_opt.cutoff);
             break;
+        case OPT_FAIL:
+        case OPT_WARN:
+            /* a malformed condition is the caller's mistake: a usage error, not a gate */
+            if (mcp__gate_add(&gate, optarg, opt == OPT_FAIL))
+                return mcp_cli_usage("metrics", "%s", mcp_error_message());
+            break;
         case 'h':
             fputs(usage, stdout);
             return 0;
@@ -262,6 +283,14 @@ cmd_metrics(int argc, char **argv)
                              argc - optind);
     if (o.flip_hdr && mcp_tonemap_flip_coefficients(o.flip.tone_mapper, (float[6]){0}))
         return mcp_cli_fail();
+    if (gate.n) {
+        /* Names checked before the images are read: a typo costs no FLIP run, and it
+         * is a usage error (2), never mistaken for a gate's verdict. */
+        cJSON *names = mcp__gate_metrics_names(&o);
+        int bad = !names || mcp__gate_check(&gate, names, NULL);
+        cJSON_Delete(names);
+        if (bad) return mcp_cli_usage("metrics", "%s", mcp_error_message());
+    }
     const char *test_path = argv[optind], *ref_path = argv[optind + 1];
     mcp_image *test = NULL, *ref = NULL;
     mcp_metrics m;
@@ -277,6 +306,14 @@ cmd_metrics(int argc, char **argv)
     cJSON_AddNumberToObject(doc, "width", ref->width);
     cJSON_AddNumberToObject(doc, "height", ref->height);
     if (mcp_metrics_json(&m, &o, doc)) goto done;
+    mcp__gate_verdict verdict = MCP__GATE_PASS;
+    char gate_line[2200] = "";
+    if (gate.n) {
+        cJSON *gj = NULL;
+        if (mcp__gate_eval(&gate, doc, &verdict, &gj, gate_line, sizeof gate_line))
+            goto done;
+        cJSON_AddItemToObject(doc, "gate", gj);
+    }
     if (out_dir) {
         char path[4096];
         char *text = NULL;
@@ -293,10 +330,14 @@ cmd_metrics(int argc, char **argv)
     } else {
         print_table(test_path, ref_path, ref, &m, &o);
         if (out_dir) printf("\nmaps written to %s/\n", out_dir);
+        /* idiff's convention: the verdict is the last line, after the figures */
+        if (gate.n) printf("\n%s\n", gate_line);
     }
-    status = 0;
+    status = mcp__gate_exit_code(verdict);
+    goto out;
 done:
     if (status) status = mcp_cli_fail();
+out:
     cJSON_Delete(doc);
     mcp_metrics_maps_free(&maps);
     mcp_image_free(ref);

@@ -21,6 +21,9 @@ static const char usage[] =
     "  `mcpost collect OUTPUT` then gathers the whole shot into one report.\n"
     "  --frames SET      only these frames (17, 10-20, 1-240:2, 1,5,9)\n"
     "  -j, --jobs N      run N frames at once, in N processes [1]\n"
+    "  Exit status: 0 done, 1 error, 2 usage error; a job whose metrics stage has a\n"
+    "  gate (fail:, warn:) exits with its worst gate: 3 warning, 4 failure, after\n"
+    "  writing every result and the report (docs/jobs.md).\n"
     "  --force           run complete frames again\n"
     "\n"
     "examples (from the source folder, on the sample renders):\n"
@@ -75,6 +78,7 @@ cmd_run(int argc, char **argv)
         return 0;
     }
     mcp_progress_set_quiet(jo.quiet);
+    mcp__gate_reset();
     mcp_cli_shot shot;
     if (mcp_cli_shot_open(argv[optind], jo.output_dir, frames, &shot))
         return mcp_cli_fail();
@@ -88,7 +92,14 @@ cmd_run(int argc, char **argv)
         rc = mcp_cli_shot_write_manifest(&shot) || mcp_cli_shot_run(&shot, &jo, jobs, force);
         mcp_cli_shot_free(&shot);
     }
-    return rc ? mcp_cli_fail() : 0;
+    if (rc) return mcp_cli_fail();
+    /* The job ran to its end; a gate that warned or failed decides the status, as
+     * `mcpost metrics --fail` does, so a CI step can run a whole job as its check. */
+    mcp__gate_verdict worst = mcp__gate_worst();
+    if (worst != MCP__GATE_PASS && !jo.quiet)
+        fprintf(stderr, "mcpost run: gate %s (see the metrics section of the report)\n",
+                worst == MCP__GATE_FAILURE ? "FAILURE" : "WARNING");
+    return mcp__gate_exit_code(worst);
 }
 
 const mcp_command mcp_command_run = {"run", "run a pipeline from a YAML job file", cmd_run, 1};

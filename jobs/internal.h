@@ -11,6 +11,7 @@
 #include <mcpost/estimate.h>
 #include <mcpost/imageio.h>
 #include <mcpost/job.h>
+#include <mcpost/metrics.h>
 #include <mcpost/perceptual.h>
 #include <mcpost/progress.h>
 #include <mcpost/stages.h>
@@ -204,5 +205,56 @@ int mcp__perceptual_run(mcp__perc_args *a, mcp__perc_run *r, cJSON **summary,
                         mcp_image **result);
 /* Copies the summary's members into the report section, with a verdict. */
 void mcp__perc_fill_section(cJSON *section, const cJSON *summary);
+
+/* ---- gate.c: pass/warn/fail conditions on the metrics' figures ---- */
+
+/* A gate is a set of conditions "FIGURE OP NUMBER" (OP one of > >= < <=; FIGURE a
+ * number of the metrics JSON, dots for nesting, e.g. flip_ldr.mean), each a --fail or
+ * a --warn one (job keys fail: and warn:). A condition that holds fails or warns, as
+ * idiff's -fail / -warn thresholds do; none holding is a pass. Shared by
+ * `mcpost metrics` and the metrics stage so both read and judge alike. */
+#define MCP__GATE_MAX 16
+
+typedef enum { MCP__GATE_PASS, MCP__GATE_WARNING, MCP__GATE_FAILURE } mcp__gate_verdict;
+
+/* Exit statuses of a gate. idiff uses 1 (warning) and 2 (failure), which mcpost already
+ * uses for errors (1) and usage errors (2); a script must tell a missing file from a
+ * warning, so gates take the next free numbers (docs/metrics.md, "Gates"). */
+#define MCP__GATE_EXIT_WARNING 3
+#define MCP__GATE_EXIT_FAILURE 4
+
+typedef struct {
+    char figure[128];
+    int op; /* '>', 'G' (>=), '<', 'L' (<=) */
+    double value;
+    int is_fail;   /* 1: --fail / fail:, 0: --warn / warn: */
+    char text[192]; /* normalised: "flip_ldr.mean > 0.05" */
+} mcp__gate_cond;
+
+typedef struct {
+    mcp__gate_cond c[MCP__GATE_MAX];
+    int n;
+} mcp__gate;
+
+/* Parses one expression into the gate; a malformed one is an error naming it. */
+int mcp__gate_add(mcp__gate *g, const char *expr, int is_fail);
+/* The figures that a metrics result with options o will hold (numbers all zero), with
+ * width and height as the CLI's JSON and the report section have them: for checking
+ * the names before anything is computed. The caller deletes it. */
+cJSON *mcp__gate_metrics_names(const mcp_metrics_options *o);
+/* Every condition's figure is a number in figures; else an error naming the first
+ * unknown one and listing known names, and *bad (may be NULL) its index. */
+int mcp__gate_check(const mcp__gate *g, const cJSON *figures, int *bad);
+/* Judges the figures: the verdict, a "gate" object {"verdict", "failed", "warned"}
+ * (may be NULL: not made), and the final line ("PASS", "WARNING: ...", "FAILURE: ...")
+ * into line. A figure missing is an error (-1; check first). */
+int mcp__gate_eval(const mcp__gate *g, const cJSON *figures, mcp__gate_verdict *verdict,
+                   cJSON **gate_json, char *line, size_t cap);
+int mcp__gate_exit_code(mcp__gate_verdict v);
+/* The worst verdict of the gates judged in this process since the last reset: what
+ * `mcpost run` exits with. */
+void mcp__gate_record(mcp__gate_verdict v);
+mcp__gate_verdict mcp__gate_worst(void);
+void mcp__gate_reset(void);
 
 #endif

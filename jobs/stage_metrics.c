@@ -38,6 +38,8 @@ static const char *const metrics_keys[] = {"input",
                                            "spectra",
                                            "spectra_tile_size",
                                            "spectra_cutoff",
+                                           "fail",
+                                           "warn",
                                            NULL};
 
 /* ---- settings ---- */
@@ -203,16 +205,20 @@ member_number(const cJSON *obj, const char *key)
 /* The metrics section's verdict, from its figures: the relative error in percent,
  * FLIP in words, and over a series how fast the MSE falls (1/spp when unbiased). */
 static int
-metrics_verdict(cJSON *section)
+metrics_verdict(cJSON *section, const mcp__gate *gate, mcp__gate_verdict gv,
+                const char *gate_line)
 {
-    char text[700] = "";
+    char text[3000] = "";
     int len = 0;
+    /* A gate decides the colour (pass good, warning info, failure bad) and its line
+     * comes first: it is what the job was asked to check. */
+    if (gate->n) len += snprintf(text, sizeof text, "gate %s", gate_line);
     double relmse = member_number(section, "relmse");
     double fh = member_number(cJSON_GetObjectItem(section, "flip_hdr"), "mean"),
            fl = member_number(cJSON_GetObjectItem(section, "flip_ldr"), "mean");
     if (!isnan(relmse))
         len += snprintf(text + len, sizeof text - len,
-                        "relMSE %.3g (RMS relative error about %.2g%%)", relmse,
+                        "%srelMSE %.3g (RMS relative error about %.2g%%)", len ? "; " : "", relmse,
                         100 * sqrt(relmse));
     if (!isnan(fh) || !isnan(fl))
         len += snprintf(text + len, sizeof text - len, "%s%s mean %.3g on 0..1: %s",
@@ -235,7 +241,11 @@ metrics_verdict(cJSON *section)
                      "spp^-1)",
                      len ? "; " : "", slope, s0, s1);
     }
-    return mcp_report_set_verdict(section, MCP_VERDICT_INFO, "%s",
+    mcp_verdict level = !gate->n                    ? MCP_VERDICT_INFO
+                        : gv == MCP__GATE_FAILURE ? MCP_VERDICT_BAD
+                        : gv == MCP__GATE_WARNING ? MCP_VERDICT_INFO
+                                                  : MCP_VERDICT_GOOD;
+    return mcp_report_set_verdict(section, level, "%s",
                                   *text ? text : "no figure to judge by (see the table)");
 }
 
@@ -331,7 +341,46 @@ typedef struct metrics_plan {
     mcp_metrics_options o;
     const char *input, *reference, *output, *series_name, *estimate_name;
     int want_maps;
+    mcp__gate gate;
 } metrics_plan;
+
+/* fail: / warn: -- one condition or a list of them, each parsed and its figure named
+ * checked against what these options compute, at the item's line, before any stage
+ * runs. */
+/* The gate's error at the item's line, without the flag's "--fail " (the key says it);
+ * copied first, as mcp_node_error rewrites the error line that it would read. */
+static int
+gate_error(const mcp_node *item, const char *key)
+{
+    char msg[1024];
+    const char *m = mcp_error_message();
+    snprintf(msg, sizeof msg, "%s", strncmp(m, "--", 2) ? m : m + 7);
+    return mcp_node_error(item, "%s: %s", key, msg);
+}
+
+static int
+read_gate(const mcp_node *settings, const char *key, metrics_plan *pl)
+{
+    const mcp_node *n = mcp_node_get(settings, key);
+    if (!n) return 0;
+    if (n->kind == MCP_NODE_MAP)
+        return mcp_node_error(n, "%s must be a condition or a list of them", key);
+    int m = n->kind == MCP_NODE_SEQ ? n->count : 1;
+    for (int i = 0; i < m; i++) {
+        const mcp_node *item = n->kind == MCP_NODE_SEQ ? n->items[i] : n;
+        const char *s = NULL;
+        if (mcp_node_string(item, key, &s)) return -1;
+        if (mcp__gate_add(&pl->gate, s, !strcmp(key, "fail")))
+            return gate_error(item, key);
+        cJSON *names = mcp__gate_metrics_names(&pl->o);
+        mcp__gate one = {.n = 1};
+        one.c[0] = pl->gate.c[pl->gate.n - 1];
+        int bad = !names || mcp__gate_check(&one, names, NULL);
+        cJSON_Delete(names);
+        if (bad) return gate_error(item, key);
+    }
+    return 0;
+}
 
 static int
 parse_metrics(mcp_job *job, const mcp_node *settings, metrics_plan *pl)
@@ -345,8 +394,15 @@ parse_metrics(mcp_job *job, const mcp_node *settings, metrics_plan *pl)
         mcp_node_opt_string(settings, "estimate", &pl->estimate_name) ||
         mcp_node_opt_string(settings, "output", &pl->output) ||
         mcp_node_opt_bool(settings, "maps", &pl->want_maps) ||
-        read_options(settings, &pl->o))
+        read_options(settings, &pl->o) || read_gate(settings, "fail", pl) ||
+        read_gate(settings, "warn", pl))
         return -1;
+    if (pl->gate.n && !pl->input)
+        return mcp_node_error(mcp_node_get(settings, mcp_node_get(settings, "fail")
+                                                         ? "fail"
+                                                         : "warn"),
+                              "a gate (fail:, warn:) judges 'input' against the "
+                              "reference; give 'input'");
     if (!pl->reference) {
         const mcp_node *n = NULL;
         return mcp_node_require(settings, "reference", "stage 'metrics'", &n);
@@ -429,7 +485,20 @@ stage_metrics(mcp_job *job, const mcp_node *settings)
         }
     }
     if (series && series_curves(job, settings, series, ref, &o, section)) goto done;
-    if (metrics_verdict(section)) goto done;
+    mcp__gate_verdict gv = MCP__GATE_PASS;
+    char gate_line[2200] = "";
+    if (pl.gate.n) {
+        cJSON *gj = NULL;
+        if (mcp__gate_eval(&pl.gate, section, &gv, &gj, gate_line, sizeof gate_line)) {
+            mcp__at_line(settings, mcp_node_get(settings, "fail") ? "fail" : "warn");
+            goto done;
+        }
+        cJSON_AddItemToObject(section, "gate", gj);
+        mcp_note("metrics: gate %s", gate_line);
+        /* `mcpost run` exits with the job's worst gate (cli/cmd_run.c) */
+        mcp__gate_record(gv);
+    }
+    if (metrics_verdict(section, &pl.gate, gv, gate_line)) goto done;
     rc = 0;
 done:
     mcp_metrics_maps_free(&maps);

@@ -528,6 +528,142 @@ test_help_and_version(void **state)
     assert_non_null(strstr(err, "--quiet"));
 }
 
+/* A usage error: status 2 and one stderr line "mcpost metrics: ...needle...". */
+static void
+assert_usage_error(int status, const char *needle)
+{
+    if (status != 2 || strncmp(err, "mcpost metrics: ", 16) != 0 || !strstr(err, needle) ||
+        strchr(err, '\n') != err + strlen(err) - 1)
+        fail_msg("status %d, stderr \"%s\", wanted a usage error with \"%s\"", status, err,
+                 needle);
+}
+
+/* The last line of out (without its newline). */
+static const char *
+last_line(void)
+{
+    size_t n = strlen(out);
+    while (n && out[n - 1] == '\n')
+        out[--n] = 0;
+    const char *nl = strrchr(out, '\n');
+    return nl ? nl + 1 : out;
+}
+
+#define CORNELL_PAIR                                                                       \
+    "'" MCP_TEST_SOURCE_DIR "/samples/fixtures/cornell/series/cornell_spp0016.exr' '"       \
+    MCP_TEST_SOURCE_DIR "/samples/fixtures/cornell/cornell_reference.exr' --no-spectra "     \
+    "--flip ldr"
+
+/* Gates on the 16-spp Cornell box (LDR-FLIP about 0.135, relMSE about 0.40): the
+ * thresholds sit on both sides of each figure, so holding and not holding are both
+ * seen. Exit statuses: 0 pass, 3 warning, 4 failure (docs/metrics.md, "Gates"). */
+static void
+test_metrics_gates(void **state)
+{
+    (void)state;
+    assert_int_equal(run("metrics " CORNELL_PAIR " --fail 'flip_ldr.mean > 0.15' "
+                         "--warn 'relmse >= 0.5'"),
+                     0);
+    assert_string_equal(last_line(), "PASS");
+    assert_int_equal(run("metrics " CORNELL_PAIR " --fail 'flip_ldr.mean > 0.15' "
+                         "--warn 'relmse >= 0.3' --warn 'psnr<10'"),
+                     3);
+    assert_true(!strncmp(last_line(), "WARNING: relmse >= 0.3 (0.39", strlen("WARNING: relmse >= 0.3 (0.39")));
+    assert_null(strstr(last_line(), "psnr"));
+    assert_int_equal(run("metrics " CORNELL_PAIR " --fail 'flip_ldr.mean > 0.12' "
+                         "--warn 'relmse >= 0.3'"),
+                     4);
+    assert_true(!strncmp(last_line(), "FAILURE: flip_ldr.mean > 0.12 (0.13", strlen("FAILURE: flip_ldr.mean > 0.12 (0.13")));
+    /* --json: the gate object, and still the gate's status */
+    assert_int_equal(run("metrics --json " CORNELL_PAIR " --fail 'flip_ldr.mean<=0.12' "
+                         "--warn 'relse_percentiles.value.0 > 0.001' --warn 'mse > 1'"),
+                     3);
+    cJSON *j = cJSON_Parse(out);
+    assert_non_null(j);
+    const cJSON *g = cJSON_GetObjectItem(j, "gate");
+    assert_string_equal(cJSON_GetObjectItem(g, "verdict")->valuestring, "warning");
+    assert_int_equal(cJSON_GetArraySize(cJSON_GetObjectItem(g, "failed")), 0);
+    const cJSON *warned = cJSON_GetObjectItem(g, "warned");
+    assert_int_equal(cJSON_GetArraySize(warned), 1);
+    assert_string_equal(cJSON_GetArrayItem(warned, 0)->valuestring,
+                        "relse_percentiles.value.0 > 0.001");
+    cJSON_Delete(j);
+    /* usage errors, before anything is computed: an unknown figure (named, with known
+       ones), a malformed expression, and a figure these options do not compute */
+    assert_usage_error(run("metrics " CORNELL_PAIR " --fail 'flip.mean > 0.1'"),
+                       "no figure 'flip.mean' in the metrics (known: width, height, mse");
+    assert_usage_error(run("metrics " CORNELL_PAIR " --warn 'relmse = 0.1'"),
+                       "--warn 'relmse = 0.1': want FIGURE OP NUMBER");
+    assert_usage_error(run("metrics " CORNELL_PAIR " --fail 'psnr > lots'"),
+                       "want FIGURE OP NUMBER");
+    assert_usage_error(run("metrics " CORNELL_PAIR " --fail 'flip_hdr.mean > 0.1'"),
+                       "no figure 'flip_hdr.mean'");
+    assert_int_equal(run("metrics --help"), 0);
+    assert_non_null(strstr(out, "--fail 'EXPR'"));
+}
+
+/* The stage's fail: / warn: keys: a bad figure at its job-file line before anything
+ * runs, and `mcpost run` exiting with the worst gate after writing the report. */
+static void
+test_metrics_gate_job(void **state)
+{
+    (void)state;
+    static const char job[] =
+        "inputs:\n"
+        "  noisy: {image: '%s/samples/fixtures/cornell/series/cornell_spp0016.exr'}\n"
+        "  ref: {image: '%s/samples/fixtures/cornell/cornell_reference.exr'}\n"
+        "output: gate_out\n"
+        "stages:\n"
+        "  - metrics:\n"
+        "      input: noisy\n"
+        "      reference: ref\n"
+        "      maps: false\n"
+        "      spectra: false\n"
+        "      fail: ['%s']\n"
+        "      warn: relmse > 0.3\n";
+    char text[2048], path[1024];
+    /* copied: mcp_test_path's buffer is reused by later calls */
+    snprintf(path, sizeof path, "%s", mcp_test_path("gate.yaml"));
+    snprintf(text, sizeof text, job, MCP_TEST_SOURCE_DIR, MCP_TEST_SOURCE_DIR,
+             "flip_ldr.men > 0.1");
+    mcp_test_write_text(path, text);
+    assert_one_line_error(run("run --check '%s'", path),
+                          "gate.yaml:11: fail: 'flip_ldr.men > 0.1': no figure 'flip_ldr.men'");
+    assert_int_equal(run("run -q '%s'", path), 1);
+    snprintf(text, sizeof text, job, MCP_TEST_SOURCE_DIR, MCP_TEST_SOURCE_DIR,
+             "flip_ldr.mean > 0.12");
+    mcp_test_write_text(path, text);
+    assert_int_equal(run("run -q --json '%s'", path), 4);
+    cJSON *j = cJSON_Parse(out);
+    assert_non_null(j);
+    const cJSON *sec = cJSON_GetArrayItem(cJSON_GetObjectItem(j, "sections"), 0);
+    const cJSON *g = cJSON_GetObjectItem(sec, "gate");
+    assert_string_equal(cJSON_GetObjectItem(g, "verdict")->valuestring, "failure");
+    assert_string_equal(cJSON_GetArrayItem(cJSON_GetObjectItem(g, "failed"), 0)->valuestring,
+                        "flip_ldr.mean > 0.12");
+    assert_string_equal(cJSON_GetObjectItem(cJSON_GetObjectItem(sec, "verdict"), "level")
+                            ->valuestring,
+                        "bad");
+    cJSON_Delete(j);
+    /* only the warning holding: status 3, an info verdict; none: 0, good */
+    snprintf(text, sizeof text, job, MCP_TEST_SOURCE_DIR, MCP_TEST_SOURCE_DIR,
+             "flip_ldr.mean > 0.15");
+    mcp_test_write_text(path, text);
+    assert_int_equal(run("run -q '%s'", path), 3);
+    snprintf(text, sizeof text, job, MCP_TEST_SOURCE_DIR, MCP_TEST_SOURCE_DIR,
+             "flip_ldr.mean > 0.15");
+    char *w = strstr(text, "relmse > 0.3");
+    memcpy(w, "relmse > 0.5", 12);
+    mcp_test_write_text(path, text);
+    assert_int_equal(run("run -q --json '%s'", path), 0);
+    j = cJSON_Parse(out);
+    sec = cJSON_GetArrayItem(cJSON_GetObjectItem(j, "sections"), 0);
+    assert_string_equal(cJSON_GetObjectItem(cJSON_GetObjectItem(sec, "verdict"), "level")
+                            ->valuestring,
+                        "good");
+    cJSON_Delete(j);
+}
+
 int
 main(void)
 {
@@ -540,6 +676,8 @@ main(void)
         cmocka_unit_test(test_denoiser_flags),
         cmocka_unit_test(test_merge_and_variance_sources),
         cmocka_unit_test(test_help_and_version),
+        cmocka_unit_test(test_metrics_gates),
+        cmocka_unit_test(test_metrics_gate_job),
     };
     return cmocka_run_group_tests_name("cli", tests, NULL, NULL);
 }
