@@ -12,6 +12,21 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* The procedural scene at 24x24 without fireflies, with the independent sampler or the
+ * jittered one (4x4 strata per pass of 16 samples): what the series tests render. */
+static mcp_proc_scene
+small_scene(int jittered)
+{
+    mcp_proc_scene scene = mcp_proc_scene_defaults();
+    scene.width = scene.height = 24;
+    scene.firefly_probability = 0;
+    if (jittered) {
+        scene.sampler = MCP_PROC_SAMPLER_JITTERED;
+        scene.strata = 4;
+    }
+    return scene;
+}
+
 static const char *const rgb[3] = {"R", "G", "B"};
 
 /* A dump of constant colour (r, g, b) with spp samples and no variance. */
@@ -119,9 +134,7 @@ static void
 test_merge_replicates_unbiased(void **state)
 {
     (void)state;
-    mcp_proc_scene scene = mcp_proc_scene_defaults();
-    scene.width = scene.height = 24;
-    scene.firefly_probability = 0;
+    mcp_proc_scene scene = small_scene(0);
     mcp_image *truth_mean = NULL, *truth_var = NULL;
     assert_int_equal(mcp_proc_truth(&scene, &truth_mean, &truth_var), 0);
     const int ks[3] = {2, 4, 8};
@@ -281,9 +294,7 @@ static void
 test_increments_independent(void **state)
 {
     (void)state;
-    mcp_proc_scene scene = mcp_proc_scene_defaults();
-    scene.width = scene.height = 24;
-    scene.firefly_probability = 0;
+    mcp_proc_scene scene = small_scene(0);
     mcp_image *truth_mean = NULL, *truth_var = NULL;
     assert_int_equal(mcp_proc_truth(&scene, &truth_mean, &truth_var), 0);
     const int spp[5] = {4, 8, 12, 16, 20};
@@ -332,11 +343,7 @@ static void
 test_stratified_sources(void **state)
 {
     (void)state;
-    mcp_proc_scene scene = mcp_proc_scene_defaults();
-    scene.width = scene.height = 24;
-    scene.firefly_probability = 0;
-    scene.sampler = MCP_PROC_SAMPLER_JITTERED;
-    scene.strata = 4;
+    mcp_proc_scene scene = small_scene(1);
     mcp_image *v64 = NULL, *v16 = NULL;
     assert_int_equal(mcp_proc_truth_var_of_mean(&scene, 64, &v64), 0);
     assert_int_equal(mcp_proc_truth_var_of_mean(&scene, 16, &v16), 0);
@@ -439,13 +446,10 @@ static void
 test_series_variance_auto(void **state)
 {
     (void)state;
-    mcp_proc_scene scene = mcp_proc_scene_defaults();
-    scene.width = scene.height = 24;
-    scene.firefly_probability = 0;
+    mcp_proc_scene scene = small_scene(0);
     const int spp[4] = {16, 32, 48, 64};
     mcp_series *indep = procedural_series(&scene, spp, 4, 41, "auto_iid");
-    scene.sampler = MCP_PROC_SAMPLER_JITTERED;
-    scene.strata = 4;
+    scene = small_scene(1);
     mcp_series *strat = procedural_series(&scene, spp, 4, 42, "auto_strat");
     assert_int_equal(strat->variance_from, MCP_SERIES_VARIANCE_AUTO);
     static const struct {
@@ -540,9 +544,7 @@ static void
 test_series_without_variance(void **state)
 {
     (void)state;
-    mcp_proc_scene scene = mcp_proc_scene_defaults();
-    scene.width = scene.height = 24;
-    scene.firefly_probability = 0;
+    mcp_proc_scene scene = small_scene(0);
     mcp_image *truth_mean = NULL, *truth_var = NULL;
     assert_int_equal(mcp_proc_truth(&scene, &truth_mean, &truth_var), 0);
     const int spp[3] = {8, 16, 32};
