@@ -131,6 +131,9 @@ run_frame(const mcp_cli_shot *s, const mcp_job_options *jo, int frame)
         return -1;
     snprintf(err_path, sizeof err_path, "%s/error.txt", dir);
     unlink(err_path);
+    /* a run of this frame killed outright (SIGKILL, a node lost) left its temporaries */
+    int stale = mcp_frame_clear_temporaries(dir);
+    if (stale > 0) mcp_note("frame %d: removed %d stale temporary files", frame, stale);
     if (mcp_job_run_file(s->job, mcp_job_stages(), &o) == 0)
         return 0;
     mcp_error_prefix("frame %d: ", frame);

@@ -1,5 +1,6 @@
 /* frames.c: frame sets ("1-240:2") and frame tokens ("####", "%04d") in paths (see
  * frames.h and docs/frames.md). */
+#define _XOPEN_SOURCE 700 /* nftw */
 #include <mcpost/frames.h>
 
 #include <ctype.h>
@@ -7,7 +8,10 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <ftw.h>
+#include <signal.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 /* ---- frame sets ---- */
 
@@ -286,4 +290,34 @@ mcp_frame_complete(const char *output_dir, int frame)
         return 0;
     snprintf(path, sizeof path, "%s/report.json", dir);
     return stat(path, &st) == 0 && S_ISREG(st.st_mode);
+}
+
+/* nftw has no user pointer: the count of one walk (frames run one per process). */
+static int cleared;
+
+static int
+clear_one(const char *path, const struct stat *st, int type, struct FTW *ftw)
+{
+    (void)st;
+    if (type != FTW_F) return 0;
+    /* mcp__atomic_open's names: "<stem>.tmp-<pid>-<n><ext>" (common/imageio.c) */
+    const char *tag = strstr(path + ftw->base, ".tmp-");
+    if (!tag) return 0;
+    char *end = NULL;
+    long pid = strtol(tag + 5, &end, 10);
+    if (pid <= 0 || !end || *end != '-') return 0;
+    if (kill((pid_t)pid, 0) == 0 || errno != ESRCH) return 0; /* alive, or not ours */
+    if (unlink(path) == 0) cleared++;
+    return 0;
+}
+
+int
+mcp_frame_clear_temporaries(const char *dir)
+{
+    struct stat st;
+    if (stat(dir, &st) != 0) return 0;
+    cleared = 0;
+    if (nftw(dir, clear_one, 16, FTW_PHYS) != 0)
+        return mcp_error("%s: cannot walk the folder to clear stale temporaries", dir);
+    return cleared;
 }

@@ -62,6 +62,13 @@ MCP_API int mcp_frame_dir(const char *output_dir, int frame, char *buf, size_t c
  * atomically by the job, exists. */
 MCP_API int mcp_frame_complete(const char *output_dir, int frame);
 
+/* Removes, under dir (recursively), the temporary files that an atomic write left
+ * behind when its process was killed (SIGKILL gives it no chance to clean up): names
+ * with ".tmp-PID-" whose PID is no longer running. A live process's temporaries are
+ * kept. Returns the number removed (0 when dir does not exist), or -1 with the error
+ * set. */
+MCP_API int mcp_frame_clear_temporaries(const char *dir);
+
 #ifdef __cplusplus
 }
 #endif

@@ -9,6 +9,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 static void
@@ -174,6 +175,46 @@ test_a_frame_is_complete_when_its_report_json_exists(void **state)
     assert_false(mcp_frame_complete(dir, 18));
 }
 
+/* A frame killed outright leaves "<stem>.tmp-<pid>-<n><ext>" files (the atomic
+ * writes of common/imageio.c); the next run of the frame removes those of processes
+ * that are gone, at any depth, and keeps a live process's and every other file. */
+static void
+test_stale_temporaries_are_cleared(void **state)
+{
+    (void)state;
+    char dir[4096], sub[4200], path[4400];
+    snprintf(dir, sizeof dir, "%s", mcp_test_path("stale-frame"));
+    snprintf(sub, sizeof sub, "%s/estimate", dir);
+    mkdir(dir, 0777);
+    mkdir(sub, 0777);
+    pid_t gone = fork(); /* a pid that has certainly ended */
+    if (gone == 0) _exit(0);
+    assert_true(gone > 0);
+    waitpid(gone, NULL, 0);
+    const char *stale[2] = {"report.tmp-%d-0.json", "estimate/sure.tmp-%d-3.exr"};
+    for (int k = 0; k < 2; k++) {
+        char name[256];
+        snprintf(name, sizeof name, stale[k], (int)gone);
+        snprintf(path, sizeof path, "%s/%s", dir, name);
+        mcp_test_write_text(path, "partial");
+    }
+    char live[4400], plain[4400], odd[4400];
+    snprintf(live, sizeof live, "%s/map.tmp-%d-1.exr", dir, (int)getpid());
+    snprintf(plain, sizeof plain, "%s/estimate/sure.exr", dir);
+    snprintf(odd, sizeof odd, "%s/notes.tmp-x.txt", dir);
+    mcp_test_write_text(live, "writing");
+    mcp_test_write_text(plain, "done");
+    mcp_test_write_text(odd, "kept");
+    assert_int_equal(mcp_frame_clear_temporaries(dir), 2);
+    snprintf(path, sizeof path, "%s/estimate/sure.tmp-%d-3.exr", dir, (int)gone);
+    assert_int_equal(access(path, F_OK), -1);
+    assert_int_equal(access(live, F_OK), 0);
+    assert_int_equal(access(plain, F_OK), 0);
+    assert_int_equal(access(odd, F_OK), 0);
+    assert_int_equal(mcp_frame_clear_temporaries(dir), 0);
+    assert_int_equal(mcp_frame_clear_temporaries(mcp_test_path("no-such-frame")), 0);
+}
+
 int
 main(void)
 {
@@ -184,6 +225,7 @@ main(void)
         cmocka_unit_test(test_tokens_expand_as_written),
         cmocka_unit_test(test_ambiguous_tokens_are_refused),
         cmocka_unit_test(test_a_frame_is_complete_when_its_report_json_exists),
+        cmocka_unit_test(test_stale_temporaries_are_cleared),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
