@@ -46,7 +46,21 @@ int mcp__blend_safeguard_step(const mcp_image *noisy, double spp,
                               int window, mcp_image *weights, mcp_image *blend,
                               double *pulled);
 
-/* W = I rho / (1 - rho) of a packed R, G, B share of d (rho >= 1: inf), as a new image. */
+/* The share of d in r = (I n + W d) / (I + W), rho = W / (I + W), and back: W = inf is
+ * rho = 1, W <= 0 is rho = 0, and the other way round. */
+static inline double
+mcp__rho_of_weight(double spp, double w)
+{
+    return isinf(w) ? 1.0 : w > 0 ? w / (spp + w) : 0.0;
+}
+
+static inline double
+mcp__weight_of_rho(double spp, double rho)
+{
+    return rho >= 1 ? INFINITY : rho > 0 ? spp * rho / (1 - rho) : 0.0;
+}
+
+/* W (mcp__weight_of_rho) of a packed R, G, B share of d, as a new image. */
 int mcp__blend_weights_from_rho(const mcp_image *rho, double spp, mcp_image **out);
 
 /* The value of channel k (0..2) of pixel (x, y). */

@@ -47,14 +47,12 @@ mcp_blend_safeguard(const mcp_image *noisy, double spp, const mcp_image *denoise
         float *wd = mcp_image_px(weights, 0, y), *rd = mcp_image_px(blend, 0, y);
         for (int x = 0; x < w; x++)
             for (int k = 0; k < 3; k++) {
-                double W = wd[3 * x + k];
-                double rho = isinf(W) ? 1.0 : W > 0 ? W / (spp + W) : 0.0;
+                double rho = mcp__rho_of_weight(spp, wd[3 * x + k]);
                 double limit = mcp__rgb_at(&cap, x, y, k);
                 if (!(rho > limit)) continue; /* also a NaN cap: nothing to test */
                 double nv = mcp__rgb_at(&n, x, y, k), dv = mcp__rgb_at(&d, x, y, k);
                 rd[3 * x + k] = (float)(nv + limit * (dv - nv));
-                wd[3 * x + k] =
-                    (float)(limit >= 1 ? INFINITY : spp * limit / (1 - limit));
+                wd[3 * x + k] = (float)mcp__weight_of_rho(spp, limit);
                 count++;
             }
     }
@@ -81,9 +79,7 @@ mcp__blend_weights_from_rho(const mcp_image *rho, double spp, mcp_image **out)
     *out = NULL;
     if (mcp__blend_rgb_new(rho->width, rho->height, "blend weights", out)) return -1;
     size_t n = (size_t)rho->width * rho->height * 3;
-    for (size_t i = 0; i < n; i++) {
-        double r = rho->data[i];
-        (*out)->data[i] = (float)(r >= 1 ? INFINITY : r > 0 ? spp * r / (1 - r) : 0.0);
-    }
+    for (size_t i = 0; i < n; i++)
+        (*out)->data[i] = (float)mcp__weight_of_rho(spp, rho->data[i]);
     return 0;
 }

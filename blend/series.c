@@ -169,10 +169,8 @@ mean_rho(const mcp_image *weights, double spp)
 {
     size_t n = (size_t)weights->width * weights->height * 3;
     double sum = 0;
-    for (size_t i = 0; i < n; i++) {
-        double w = weights->data[i];
-        sum += isinf(w) ? 1.0 : w / (spp + w);
-    }
+    for (size_t i = 0; i < n; i++)
+        sum += mcp__rho_of_weight(spp, weights->data[i]);
     return sum / (double)n;
 }
 
@@ -205,14 +203,12 @@ finish_member(run *r, int i, const mcp_dump *dump, const mcp_image *curves,
         (r->reference && mcp_blend_ideal(dump->color, dump->spp, pair->denoised,
                                          r->reference, &img[MCP_BLEND_IDEAL], &ideal_w)))
         goto fail;
-    mcp_blend_method method = MCP_BLEND_CURVES;
-    if (r->o->blend.weights == MCP_BLEND_WEIGHTS_JAMES_STEIN) {
+    if (r->res->method == MCP_BLEND_JAMES_STEIN) {
         /* the blend is the combiner's: its W replaces the curves' */
         mcp_image *w = NULL;
         if (mcp__blend_weights_from_rho(js_rho, dump->spp, &w)) goto fail;
         mcp_image_free(weights);
         weights = w;
-        method = MCP_BLEND_JAMES_STEIN;
     }
     row->mean_rho = mean_rho(weights, dump->spp);
     const mcp_image *all[MCP_BLEND_N_METHODS];
@@ -234,7 +230,7 @@ finish_member(run *r, int i, const mcp_dump *dump, const mcp_image *curves,
         for (int m = 0; m < MCP_BLEND_N_METHODS; m++)
             p.images[m] = all[m];
         p.weights = weights;
-        p.method = method;
+        p.method = r->res->method;
         p.ideal_weights = ideal_w;
         p.est = e;
         rc = on_point(&p, ctx) ? -1 : 0; /* the caller's message, unchanged */

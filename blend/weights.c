@@ -13,6 +13,9 @@
 #include <emmintrin.h>
 #endif
 
+/* The channels of a curve image (blend.h "curves"). */
+static const char *const curve_channels[6] = {"a.R", "a.G", "a.B", "b.R", "b.G", "b.B"};
+
 static double
 mix(double spp, double n, double d, double w)
 {
@@ -30,9 +33,8 @@ mcp_blend_weights(const mcp_image *curves, const mcp_image *sure,
     const mcp_blend_options *o = opt ? opt : &defaults;
     mcp__rgb s;
     int ab[6];
-    static const char *const ab_names[6] = {"a.R", "a.G", "a.B", "b.R", "b.G", "b.B"};
     if (mcp_blend_options_check(o) || mcp__blend_rgb(sure, "SURE", &s) ||
-        mcp_image_channels(curves, ab_names, 6, ab) ||
+        mcp_image_channels(curves, curve_channels, 6, ab) ||
         mcp__blend_same_size(curves, sure, (const mcp_image *)NULL))
         return -1;
     int w = sure->width, h = sure->height;
@@ -309,12 +311,27 @@ mcp_blend_step(const mcp_blend_input *in, const mcp_blend_options *opt,
     mcp_blend_options o = opt ? *opt : mcp_blend_defaults();
     if (!in->noisy || !in->var_of_mean || !in->denoised || !in->sure)
         return mcp_error("blend: noisy, variance, denoised and SURE images are required");
-    /* on the fly, the fused pass applies the negative-SURE rule */
-    if (mcp__blend_prepare(in->var_of_mean, in->sure, &o, den, state, in->curves != NULL,
-                           &out->est))
+    /* what every weighting needs of the inputs, checked before any work (the
+       James-Stein weights use no curve, but a curve image given must be one) */
+    int ab[6];
+    if (!(in->spp > 0) || !isfinite(in->spp))
+        return mcp_error("blend: spp must be finite and > 0 (got %g)", in->spp);
+    if (in->curves && mcp_image_channels(in->curves, curve_channels, 6, ab)) return -1;
+    /* on the fly, the fused pass applies the negative-SURE rule; the James-Stein
+       weights need no curve, so it is applied here for them */
+    int james_stein = o.weights == MCP_BLEND_WEIGHTS_JAMES_STEIN;
+    if (mcp__blend_prepare(in->var_of_mean, in->sure, &o, den, state,
+                           in->curves != NULL || james_stein, &out->est))
         return -1;
     int rc;
-    if (in->curves) {
+    if (james_stein) {
+        /* the combiner's blend and its W (docs/blend.md "Which weights") */
+        mcp_image *rho = NULL;
+        rc = mcp_blend_james_stein(in->noisy, in->denoised, in->var_of_mean, o.js_window,
+                                   &out->blend, &rho) ||
+             mcp__blend_weights_from_rho(rho, in->spp, &out->weights);
+        mcp_image_free(rho);
+    } else if (in->curves) {
         rc = mcp_blend_weights(in->curves, out->est.sure, &o, &out->weights) ||
              mcp_blend_mix(in->noisy, in->spp, in->denoised, out->weights, &out->blend);
     } else {
@@ -322,23 +339,7 @@ mcp_blend_step(const mcp_blend_input *in, const mcp_blend_options *opt,
         o.fit = MCP_CURVE_FIT_ON_THE_FLY;
         rc = mcp__blend_on_the_fly(in, &o, &out->est, &out->weights, &out->blend);
     }
-    if (!rc && o.weights == MCP_BLEND_WEIGHTS_JAMES_STEIN) {
-        /* the James-Stein weight instead of the curves' (docs/blend.md) */
-        mcp_image *js = NULL, *rho = NULL, *w = NULL;
-        rc = mcp_blend_james_stein(in->noisy, in->denoised, in->var_of_mean, o.js_window,
-                                   &js, &rho) ||
-             mcp__blend_weights_from_rho(rho, in->spp, &w);
-        mcp_image_free(rho);
-        if (rc) {
-            mcp_image_free(js);
-            mcp_image_free(w);
-        } else {
-            mcp_image_free(out->blend);
-            mcp_image_free(out->weights);
-            out->blend = js;
-            out->weights = w;
-        }
-    } else if (!rc && o.safeguard) {
+    if (!rc && !james_stein && o.safeguard) {
         rc = mcp__blend_safeguard_step(in->noisy, in->spp, in->denoised, in->var_of_mean,
                                        o.js_window, out->weights, out->blend,
                                        &out->safeguard_pulled);
