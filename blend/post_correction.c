@@ -52,12 +52,22 @@ build_sats(sat_pair *s, const mcp__rgb *n, const mcp__rgb *d, const mcp__rgb *v,
             ts[x + 1] = as;
         }
     }
+    /* down the columns a row at a time (each row adds the one above it: contiguous,
+       the same additions in the same order as column by column); threads take strips
+       of STRIP columns */
+    enum { STRIP = 256 };
+    int strips = (w + STRIP - 1) / STRIP;
 #pragma omp parallel for schedule(static)
-    for (int x = 1; x <= w; x++)
+    for (int st = 0; st < strips; st++) {
+        size_t x0 = 1 + (size_t)st * STRIP, x1 = x0 + STRIP > W ? W : x0 + STRIP;
         for (int y = 1; y <= h; y++) {
-            s->sum_v[(size_t)y * W + x] += s->sum_v[(size_t)(y - 1) * W + x];
-            s->sum_sq[(size_t)y * W + x] += s->sum_sq[(size_t)(y - 1) * W + x];
+            double *rv = s->sum_v + (size_t)y * W, *rq = s->sum_sq + (size_t)y * W;
+            for (size_t x = x0; x < x1; x++) {
+                rv[x] += rv[x - W];
+                rq[x] += rq[x - W];
+            }
         }
+    }
 }
 
 int
