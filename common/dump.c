@@ -1329,8 +1329,7 @@ mcp_series_load(const mcp_series *s, int i, mcp_dump **out)
     if (s->variance_from == MCP_SERIES_VARIANCE_AUTO && i == 0 && none && s->count > 1)
         return first_member_from_increments(s, *out);
     if (s->variance_from != MCP_SERIES_VARIANCE_AUTO || i == 0 ||
-        ((*out)->variance_source != MCP_VARSRC_PER_SAMPLE &&
-         (*out)->variance_source != MCP_VARSRC_XYZ_MOMENTS && !none))
+        (!mcp__variance_is_per_sample((*out)->variance_source) && !none))
         return 0;
     /* auto: a per-sample variance is checked against the series' own increments, and
        replaced by theirs where it is off (docs/variance-sources.md) */

@@ -66,8 +66,17 @@ int mcp__shell_fill(const char *tmpl, int n, const char *const *names,
 #include <mcpost/report.h>
 void mcp__report_set_heading(mcp_report *r, const char *title);
 
-/* A series member as its file holds it, whatever the series' variance_from (dump.c). */
 #include <mcpost/dump.h>
+
+/* Whether a dump's variance is a renderer's per-sample one divided by n (Mitsuba's XYZ
+ * moments are too): what a stratified sampler makes an overstatement. */
+static inline int
+mcp__variance_is_per_sample(mcp_variance_source s)
+{
+    return s == MCP_VARSRC_PER_SAMPLE || s == MCP_VARSRC_XYZ_MOMENTS;
+}
+
+/* A series member as its file holds it, whatever the series' variance_from (dump.c). */
 int mcp__series_load_file(const mcp_series *s, int i, mcp_dump **out);
 /* What to do about a dump without variance, for the end of its one-line error: the
  * recipe for a Cycles render (convention blender), else `otherwise` (dump.c). */

@@ -249,8 +249,7 @@ mcp_dump_merge(const mcp_dump *const *parts, int count, const mcp_merge_options 
         int have_shape = opt->variance == MCP_MERGE_REPLICATES;
         for (int k = 0; k < count; k++)
             have_shape &= parts[k]->var_of_mean != NULL &&
-                          (parts[k]->variance_source == MCP_VARSRC_PER_SAMPLE ||
-                           parts[k]->variance_source == MCP_VARSRC_XYZ_MOMENTS);
+                          mcp__variance_is_per_sample(parts[k]->variance_source);
         if (have_shape && mcp_dump_merge(parts, count, &pooled, &shape))
             goto fail;
         int rc = mcp_dump_pool_variance(d, shape ? shape->var_of_mean : NULL,
@@ -387,8 +386,7 @@ mcp_dump_increment_variance(const mcp_dump *const *members, int count,
     d->spp = n;
     d->convention = last->convention;
     if (last->var_of_mean &&
-        (last->variance_source == MCP_VARSRC_PER_SAMPLE ||
-         last->variance_source == MCP_VARSRC_XYZ_MOMENTS) &&
+        mcp__variance_is_per_sample(last->variance_source) &&
         mcp_image_copy(last->var_of_mean, &shape))
         goto fail;
 #pragma omp parallel for schedule(static)
