@@ -1335,7 +1335,7 @@ mcp_series_load(const mcp_series *s, int i, mcp_dump **out)
        replaced by theirs where it is off (docs/variance-sources.md) */
     mcp_dump *incr = NULL;
     double ratio = 0;
-    if (mcp_series_increment_variance(s, i, &s->increments, &incr, &ratio)) {
+    if (mcp__series_increments_with(s, i, *out, &s->increments, &incr, &ratio)) {
         /* no increments to compare with (one block, members out of order, another
            member unreadable): the file's own variance stands, and whatever is wrong
            with the series is reported where it is used */

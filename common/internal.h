@@ -78,6 +78,11 @@ mcp__variance_is_per_sample(mcp_variance_source s)
 
 /* A series member as its file holds it, whatever the series' variance_from (dump.c). */
 int mcp__series_load_file(const mcp_series *s, int i, mcp_dump **out);
+/* mcp_series_increment_variance of member i with that member already read (borrowed),
+ * the members before it read from their files (replicates.c). */
+int mcp__series_increments_with(const mcp_series *s, int i, const mcp_dump *member,
+                                const mcp_increment_options *opt, mcp_dump **out,
+                                double *ratio);
 /* What to do about a dump without variance, for the end of its one-line error: the
  * recipe for a Cycles render (convention blender), else `otherwise` (dump.c). */
 const char *mcp__no_variance_hint(const mcp_dump *d, const char *otherwise);

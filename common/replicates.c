@@ -476,15 +476,32 @@ mcp_series_increment_variance(const mcp_series *s, int i, const mcp_increment_op
     *out = NULL;
     if (i < 0 || i >= s->count)
         return mcp_error("series: no member %d (it has %d)", i, s->count);
-    mcp_dump **m = mcp_calloc((size_t)i + 1, sizeof *m);
+    mcp_dump *member = NULL;
+    int rc = mcp__series_load_file(s, i, &member) ||
+             mcp__series_increments_with(s, i, member, opt, out, ratio);
+    mcp_dump_free(member);
+    return rc ? -1 : 0;
+}
+
+int
+mcp__series_increments_with(const mcp_series *s, int i, const mcp_dump *member,
+                            const mcp_increment_options *opt, mcp_dump **out,
+                            double *ratio)
+{
+    *out = NULL;
+    const mcp_dump **m = mcp_calloc((size_t)i + 1, sizeof *m);
     if (!m)
         return -1;
     int rc = 0;
-    for (int k = 0; k <= i && !rc; k++)
-        rc = mcp__series_load_file(s, k, &m[k]);
-    rc = rc || mcp_dump_increment_variance((const mcp_dump *const *)m, i + 1, opt, out, ratio);
-    for (int k = 0; k <= i; k++)
-        mcp_dump_free(m[k]);
+    for (int k = 0; k < i && !rc; k++) {
+        mcp_dump *d = NULL;
+        rc = mcp__series_load_file(s, k, &d);
+        m[k] = d;
+    }
+    m[i] = member; /* borrowed */
+    rc = rc || mcp_dump_increment_variance(m, i + 1, opt, out, ratio);
+    for (int k = 0; k < i; k++)
+        mcp_dump_free((mcp_dump *)m[k]);
     free(m);
     return rc ? -1 : 0;
 }
