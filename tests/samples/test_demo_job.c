@@ -96,6 +96,8 @@ test_demo_job(void **state)
         MCP_TEST_SOURCE_DIR "/samples/fixtures/cornell/series/cornell_spp0064.exr",
         MCP_TEST_SOURCE_DIR "/samples/fixtures/cornell/cornell_reference.exr");
     assert_close(number(metrics, "mse"), want, 1e-9, 0);
+    /* its gate passes (FLIP 0.12 against a failure above 0.5) and says so */
+    assert_string_equal(item(item(metrics, "gate"), "verdict")->valuestring, "pass");
 
     /* estimate: a decision and an error CDF value */
     const cJSON *estimate = cJSON_GetArrayItem(sections, 4);
