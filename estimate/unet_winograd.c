@@ -330,7 +330,7 @@ mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cou
                         const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
                         const int len = tw - tx < nt - j ? tw - tx : nt - j;
                         transform_output(m + (size_t)o * ld + j, ldm, ty, tx, len, h, w,
-                                         k == 0 ? bias[o] : 0.0f, relu, k == 0,
+                                         k == 0 && bias ? bias[o] : 0.0f, relu, k == 0,
                                          out + (size_t)o * hw,
                                          out + ((size_t)k * cout + o) * hw, rows);
                         j += len;
