@@ -567,6 +567,15 @@ conv_task(const conv_layer *l, int k, int y, int c, float *rows)
     }
 }
 
+/* Tangents on F(2x2, 3x3), as the primal: net->exact_tangents, or
+ * MCPOST_UNET_EXACT_TANGENTS set to anything but 0. */
+static int
+exact_tangents(const mcp__unet *net)
+{
+    const char *exact = getenv("MCPOST_UNET_EXACT_TANGENTS");
+    return net->exact_tangents || (exact && *exact && strcmp(exact, "0"));
+}
+
 int
 mcp__unet_fast(const mcp__unet *net)
 {
@@ -574,85 +583,6 @@ mcp__unet_fast(const mcp__unet *net)
     return !net->fixed_bits && !(fixed && *fixed && strcmp(fixed, "0"));
 }
 
-/* out = conv3x3(concat(a, b)), with the bias on image 0 when with_bias, and with relu
- * image 0's ReLU and its mask on the others. */
-static int
-conv_plain(int fast, const mcp__unet_conv *L, const batch *a, const batch *b, int relu,
-           int with_bias, batch *out)
-{
-    const int n = a->n, h = a->h, w = a->w, cb = b ? b->c : 0;
-    const int cin = a->c + cb, cout = L->cout, nob = (cout + OB - 1) / OB;
-    if (cin != L->cin)
-        return mcp_error("unet: layer of %d input channels given %d", L->cin, cin);
-    if (fast) {
-        if (batch_new_unset(out, n, cout, h, w))
-            return -1;
-        if (mcp__unet_conv_winograd(L->weight, with_bias ? L->bias : NULL, cin, cout,
-                                    a->d, a->c, 0, b ? b->d : NULL, n, h, w, relu,
-                                    out->d)) {
-            batch_free(out);
-            return -1;
-        }
-        return 0;
-    }
-    int xb;
-    const conv_block_fn kernel = choose_kernel(&xb);
-    /* tasks of xc columns (the last may have fewer), nxc of them per row */
-    const int xc = w < XC ? (w + XB - 1) / XB * XB : XC, nxc = (w + XC - 1) / XC;
-    /* a buffered row: columns -1 .. xc, and zeros up to the last block's full width */
-    const int rs = (xc + xb + 2 + 3) / 4 * 4;
-    const size_t block_floats = (size_t)cin * 9 * OB * WL;
-    const size_t rows_floats = (size_t)cin * 3 * rs;
-    int n_threads = 1;
-#ifdef _OPENMP
-    n_threads = omp_get_max_threads();
-#endif
-    float *wb = mcp_calloc((size_t)nob * block_floats + (size_t)nob * OB, sizeof(float));
-    float *scratch =
-        wb ? mcp_malloc((size_t)n_threads * rows_floats * sizeof(float)) : NULL;
-    if (!scratch || batch_new(out, n, cout, h, w)) {
-        free(wb), free(scratch);
-        return -1;
-    }
-    float *bias = wb + (size_t)nob * block_floats; /* 0 past cout, as the weights */
-    memcpy(bias, L->bias, (size_t)cout * sizeof(float));
-#pragma omp parallel for schedule(static) num_threads(n_threads)
-    for (int ob = 0; ob < nob; ob++)
-        for (int i = 0; i < cin; i++)
-            for (int t = 0; t < 9; t++)
-                for (int o = ob * OB; o < ob * OB + OB && o < cout; o++) {
-                    const float wt = L->weight[((size_t)o * cin + i) * 9 + t];
-                    float *dst = wb + (size_t)ob * block_floats +
-                                 (((size_t)i * 9 + t) * OB + o - ob * OB) * WL;
-                    for (int lane = 0; lane < WL; lane++)
-                        dst[lane] = wt;
-                }
-    const conv_layer l = {.a = a, .b = b, .out = out, .wb = wb, .bias = with_bias ? bias : NULL,
-                          .block_floats = block_floats, .kernel = kernel, .xb = xb,
-                          .cin = cin, .cout = cout,
-                          .nob = nob, .nic = (cin + IC - 1) / IC, .xc = xc, .rs = rs,
-                          .relu = relu};
-#pragma omp parallel num_threads(n_threads)
-    {
-        int thread = 0;
-#ifdef _OPENMP
-        thread = omp_get_thread_num();
-#endif
-        float *rows = scratch + (size_t)thread * rows_floats;
-        /* the primal, then (after the loop's barrier) the tangents */
-#pragma omp for collapse(2) schedule(dynamic, 1)
-        for (int y = 0; y < h; y++)
-            for (int c = 0; c < nxc; c++)
-                conv_task(&l, 0, y, c, rows);
-#pragma omp for collapse(3) schedule(dynamic, 1)
-        for (int k = 1; k < n; k++)
-            for (int y = 0; y < h; y++)
-                for (int c = 0; c < nxc; c++)
-                    conv_task(&l, k, y, c, rows);
-    }
-    free(wb), free(scratch);
-    return 0;
-}
 
 /* ---- the primal's trace: what the tangents' passes need of it ----
  * A tangent passes through each layer's linearisation at the primal, which needs only
@@ -687,9 +617,19 @@ trace_free(primal_trace *tr)
  * primal alone: a plain apply records nothing). */
 typedef struct pass {
     const mcp__unet *net;
-    int fast;
+    int fast;   /* Winograd products */
+    int coarse; /* F(4x4, 3x3): a tangents' pass, unless exact_tangents */
     primal_trace *trace;
 } pass;
+
+/* The Winograd convolution a pass runs. */
+static int
+winograd(const pass *ps, const mcp__unet_conv *L, const float *bias, const float *a,
+         int ca, int a_up, const float *b, int n, int h, int w, int relu, float *out)
+{
+    return (ps->coarse ? mcp__unet_conv_winograd4 : mcp__unet_conv_winograd)(
+        L->weight, bias, L->cin, L->cout, a, ca, a_up, b, n, h, w, relu, out);
+}
 
 static int
 layer_of(const pass *ps, const mcp__unet_conv *L)
@@ -761,6 +701,85 @@ replay_relu(batch *out, const unsigned char *bits)
     }
 }
 
+/* out = conv3x3(concat(a, b)), with the bias on image 0 when with_bias, and with relu
+ * image 0's ReLU and its mask on the others. */
+static int
+conv_plain(const pass *ps, const mcp__unet_conv *L, const batch *a, const batch *b,
+           int relu, int with_bias, batch *out)
+{
+    const int n = a->n, h = a->h, w = a->w, cb = b ? b->c : 0;
+    const int cin = a->c + cb, cout = L->cout, nob = (cout + OB - 1) / OB;
+    if (cin != L->cin)
+        return mcp_error("unet: layer of %d input channels given %d", L->cin, cin);
+    if (ps->fast) {
+        if (batch_new_unset(out, n, cout, h, w))
+            return -1;
+        if (winograd(ps, L, with_bias ? L->bias : NULL, a->d, a->c, 0, b ? b->d : NULL, n,
+                     h, w, relu, out->d)) {
+            batch_free(out);
+            return -1;
+        }
+        return 0;
+    }
+    int xb;
+    const conv_block_fn kernel = choose_kernel(&xb);
+    /* tasks of xc columns (the last may have fewer), nxc of them per row */
+    const int xc = w < XC ? (w + XB - 1) / XB * XB : XC, nxc = (w + XC - 1) / XC;
+    /* a buffered row: columns -1 .. xc, and zeros up to the last block's full width */
+    const int rs = (xc + xb + 2 + 3) / 4 * 4;
+    const size_t block_floats = (size_t)cin * 9 * OB * WL;
+    const size_t rows_floats = (size_t)cin * 3 * rs;
+    int n_threads = 1;
+#ifdef _OPENMP
+    n_threads = omp_get_max_threads();
+#endif
+    float *wb = mcp_calloc((size_t)nob * block_floats + (size_t)nob * OB, sizeof(float));
+    float *scratch =
+        wb ? mcp_malloc((size_t)n_threads * rows_floats * sizeof(float)) : NULL;
+    if (!scratch || batch_new(out, n, cout, h, w)) {
+        free(wb), free(scratch);
+        return -1;
+    }
+    float *bias = wb + (size_t)nob * block_floats; /* 0 past cout, as the weights */
+    memcpy(bias, L->bias, (size_t)cout * sizeof(float));
+#pragma omp parallel for schedule(static) num_threads(n_threads)
+    for (int ob = 0; ob < nob; ob++)
+        for (int i = 0; i < cin; i++)
+            for (int t = 0; t < 9; t++)
+                for (int o = ob * OB; o < ob * OB + OB && o < cout; o++) {
+                    const float wt = L->weight[((size_t)o * cin + i) * 9 + t];
+                    float *dst = wb + (size_t)ob * block_floats +
+                                 (((size_t)i * 9 + t) * OB + o - ob * OB) * WL;
+                    for (int lane = 0; lane < WL; lane++)
+                        dst[lane] = wt;
+                }
+    const conv_layer l = {.a = a, .b = b, .out = out, .wb = wb, .bias = with_bias ? bias : NULL,
+                          .block_floats = block_floats, .kernel = kernel, .xb = xb,
+                          .cin = cin, .cout = cout,
+                          .nob = nob, .nic = (cin + IC - 1) / IC, .xc = xc, .rs = rs,
+                          .relu = relu};
+#pragma omp parallel num_threads(n_threads)
+    {
+        int thread = 0;
+#ifdef _OPENMP
+        thread = omp_get_thread_num();
+#endif
+        float *rows = scratch + (size_t)thread * rows_floats;
+        /* the primal, then (after the loop's barrier) the tangents */
+#pragma omp for collapse(2) schedule(dynamic, 1)
+        for (int y = 0; y < h; y++)
+            for (int c = 0; c < nxc; c++)
+                conv_task(&l, 0, y, c, rows);
+#pragma omp for collapse(3) schedule(dynamic, 1)
+        for (int k = 1; k < n; k++)
+            for (int y = 0; y < h; y++)
+                for (int c = 0; c < nxc; c++)
+                    conv_task(&l, k, y, c, rows);
+    }
+    free(wb), free(scratch);
+    return 0;
+}
+
 static int
 is_replay(const pass *ps)
 {
@@ -798,7 +817,7 @@ conv_into(const pass *ps, const mcp__unet_conv *L, const batch *a, const batch *
           int relu, batch *out)
 {
     const int replay = is_replay(ps);
-    if (conv_plain(ps->fast, L, a, b, relu && !replay, !replay, out) ||
+    if (conv_plain(ps, L, a, b, relu && !replay, !replay, out) ||
         trace_relu(ps, L, relu, out))
         return -1;
     return 0;
@@ -941,8 +960,8 @@ conv_up_replace(const pass *ps, const mcp__unet_conv *L, batch *t, batch *skip, 
     if (batch_new_unset(&out, n, L->cout, h, w))
         return -1;
     const int replay = is_replay(ps);
-    if (mcp__unet_conv_winograd(L->weight, replay ? NULL : L->bias, cin, L->cout, t->d,
-                                t->c, 1, skip->d, n, h, w, relu && !replay, out.d)) {
+    if (winograd(ps, L, replay ? NULL : L->bias, t->d, t->c, 1, skip->d, n, h, w,
+                 relu && !replay, out.d)) {
         batch_free(&out);
         return -1;
     }
@@ -966,7 +985,9 @@ network(const mcp__unet *net, batch *x, batch *t, primal_trace *tr)
     *t = (batch){0};
     if (tr)
         tr->pools = 0;
-    const pass ps_ = {net, mcp__unet_fast(net), tr}, *ps = &ps_;
+    const int fast = mcp__unet_fast(net);
+    const pass ps_ = {net, fast, fast && tr && tr->replay && !exact_tangents(net), tr},
+               *ps = &ps_;
     int rc = conv_into(ps, &c[E0], x, NULL, 1, t) || conv_replace(ps, &c[E1], t, NULL, 1) ||
              pool_to(ps, t, &p1) || conv_into(ps, &c[E2], &p1, NULL, 1, t) ||
              pool_to(ps, t, &p2) || conv_into(ps, &c[E3], &p2, NULL, 1, t) ||
@@ -1210,10 +1231,24 @@ paste(const mcp_image *src, int ox, int oy, int x0, int y0, int w, int h, mcp_im
  * what a pixel's value depends on, rounding included: the receptive field of the 3x3
  * convolutions and 2x2 pooling over five levels has a radius of ~110 pixels, and a
  * Winograd tile's outputs each depend on all 4 x 4 of its inputs (a radius of 2 per
- * convolution instead of 1), ~190 in all. A tile's pixels then see what they see in the
- * whole image, and the result is the same bits (the tests compare). */
+ * convolution instead of 1), ~190 in all. The tangents' F(4x4, 3x3) tiles (4 x 4
+ * outputs from 6 x 6 inputs: a radius of 4 per convolution) need crops on multiples of
+ * 64 and ~330 pixels (16 convolutions' radii at their levels' scales, 4 (5 + 3 x 2 +
+ * 3 x 4 + 3 x 8) + 4 x 2 x 16, and the pools'). A tile's pixels then see what they see
+ * in the whole image, and the result is the same bits (the tests compare). */
 #define TILE_OVERLAP 192
 #define TILE_ALIGN 32
+#define TILE_OVERLAP_COARSE 352
+#define TILE_ALIGN_COARSE 64
+
+/* The overlap and alignment of a run's tiles: wider where tangents run on F(4x4, 3x3). */
+static void
+tile_margins(const mcp__unet *net, int n, int *overlap, int *align)
+{
+    const int coarse = n > 0 && mcp__unet_fast(net) && !exact_tangents(net);
+    *overlap = coarse ? TILE_OVERLAP_COARSE : TILE_OVERLAP;
+    *align = coarse ? TILE_ALIGN_COARSE : TILE_ALIGN;
+}
 
 static int
 run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
@@ -1221,6 +1256,8 @@ run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
           int tile, mcp_image **out, mcp_image **jt)
 {
     const int W = color->width, H = color->height;
+    int overlap, align;
+    tile_margins(net, n, &overlap, &align);
     int rc = 0;
     if (out) rc = mcp__rgb_new(W, H, "unet", out);
     for (int k = 0; k < n && !rc; k++)
@@ -1231,10 +1268,10 @@ run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
     if (!views || !res || (n && !tt)) rc = -1;
     for (int ty = 0; ty < H && !rc; ty += tile)
         for (int tx = 0; tx < W && !rc; tx += tile) {
-            const int x0 = tx > TILE_OVERLAP ? (tx - TILE_OVERLAP) / TILE_ALIGN * TILE_ALIGN : 0;
-            const int y0 = ty > TILE_OVERLAP ? (ty - TILE_OVERLAP) / TILE_ALIGN * TILE_ALIGN : 0;
-            const int x1 = tx + tile + TILE_OVERLAP < W ? tx + tile + TILE_OVERLAP : W;
-            const int y1 = ty + tile + TILE_OVERLAP < H ? ty + tile + TILE_OVERLAP : H;
+            const int x0 = tx > overlap ? (tx - overlap) / align * align : 0;
+            const int y0 = ty > overlap ? (ty - overlap) / align * align : 0;
+            const int x1 = tx + tile + overlap < W ? tx + tile + overlap : W;
+            const int y1 = ty + tile + overlap < H ? ty + tile + overlap : H;
             /* views of the crop: the inputs (k = 0), then each tangent's parts */
             for (int k = 0; k <= n && !rc; k++) {
                 const mcp_image *src[3] = {k ? t[k - 1].color : color,
@@ -1294,7 +1331,9 @@ mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_imag
     if (have > 0 && batch_bytes(W, H, 1 + n) > have) {
         /* the largest tile whose crop fits in half of what is available (the
          * results and the inputs take the rest) */
-        const int margin = 2 * TILE_OVERLAP + TILE_ALIGN; /* a crop's largest extension */
+        int overlap, align;
+        tile_margins(net, n, &overlap, &align);
+        const int margin = 2 * overlap + align; /* a crop's largest extension */
         for (tile = (W > H ? W : H) / 16 * 16; tile >= 16; tile -= 16)
             if (batch_bytes(tile + margin, tile + margin, 1 + n) <= have / 2)
                 break;
