@@ -46,7 +46,7 @@ static const char usage[] =
     "                            against n's noise; needs no error estimate) or curves\n"
     "                            (Denisova & Bocchi's convergence curves from SURE)\n"
     "                            [james-stein]\n"
-    "  --fit NAME                on_the_fly (newest point + Eq. 11 point, SPEC),\n"
+    "  --fit NAME                on_the_fly (newest point + Eq. 11 point),\n"
     "                            last_two (the paper's: the last two kept points) or\n"
     "                            retrospective (least squares over every member) "
     "[on_the_fly]\n"

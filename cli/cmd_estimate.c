@@ -1,5 +1,5 @@
 /* cmd_estimate.c: `mcpost estimate` -- how wrong a denoised render is and whether to
- * stop (estimate/estimate.h; SPEC "estimate"). The flags parsed here; the outputs
+ * stop (estimate/estimate.h; docs/mathematics.md §2). The flags parsed here; the outputs
  * (images, estimate.json, the report section) are the library's, shared with the
  * `estimate` job stage (jobs/estimate_output.c, jobs/stage_estimate.c).
  *

@@ -1,11 +1,11 @@
-/* unet.c: OIDN's RT U-Net forward pass (notes/oidn.md 1.2, 3): HDR pre-processing
- * (input scale or autoexposure, PU transfer function, albedo/normal clamps), the 16
- * 3x3 convolutions with ReLU, 2x2 max pools, nearest 2x upsampling and skip concats,
- * then the inverse transfer function. Whole image as one tile, padded to 16.
- * Activations are planar (CHW) float32; each is freed as soon as it is consumed.
- * Convolutions are Winograd F(2x2, 3x3) products by default (unet_winograd.c); the
- * direct loops here, register-blocked over output channels and columns, OpenMP over
- * (image, row, column chunk), are the fixed-bit mode (MCPOST_UNET_FIXED=1). */
+/* unet.c: OIDN's RT U-Net forward pass (docs/oidn-network.md §1.2, §3): HDR
+ * pre-processing (input scale or autoexposure, PU transfer function, albedo/normal
+ * clamps), the 16 3x3 convolutions with ReLU, 2x2 max pools, nearest 2x upsampling and
+ * skip concats, then the inverse transfer function. Whole image as one tile, padded to
+ * 16. Activations are planar (CHW) float32; each is freed as soon as it is consumed.
+ * Convolutions are Winograd F(2x2, 3x3) products by default (unet_winograd.c); the direct
+ * loops here, register-blocked over output channels and columns, OpenMP over (image, row,
+ * column chunk), are the fixed-bit mode (MCPOST_UNET_FIXED=1). */
 #define _DEFAULT_SOURCE /* madvise, MADV_HUGEPAGE */
 #include "unet_internal.h"
 #include "internal.h"
@@ -28,7 +28,7 @@ static const char *const conv_names[MCP__UNET_NCONV] = {
 
 enum { E0, E1, E2, E3, E4, E5A, E5B, D4A, D4B, D3A, D3B, D2A, D2B, D1A, D1B, D0 };
 
-/* ---- transfer function (notes 3.2, 3.6) ---- */
+/* ---- transfer function (docs/oidn-network.md §3.2, §3.6) ---- */
 
 #define PU_A 1.41283765e+03f
 #define PU_B 1.64593172e+00f
@@ -62,7 +62,7 @@ pu_raw_inverse(float x)
     return expf((x - PU_G) / PU_E) - PU_F;
 }
 
-/* dPU/dy: C1 at both breakpoints (notes 3.2) */
+/* dPU/dy: C1 at both breakpoints (docs/oidn-network.md §3.2) */
 static float
 pu_slope(float y)
 {
@@ -207,7 +207,7 @@ mcp__unet_load(const char *path, mcp__unet **out)
  * A batch holds n images of c x h x w: image 0 is the primal, images 1 .. n-1 are
  * tangents at it. A layer passes tangents through its linearisation at the primal:
  * convolutions without the bias, the primal's ReLU mask, the primal's max-pool choice;
- * upsampling and concatenation copy (notes/oidn.md 3.7). */
+ * upsampling and concatenation copy (docs/oidn-network.md §3.7). */
 
 typedef struct batch {
     int n, c, h, w;
@@ -1075,8 +1075,8 @@ clamp_slope(float v, float lo, float hi)
 }
 
 /* The input batch: with primal, image 0 the pre-processed colour | albedo | normal
- * (notes 3.2, 3.4) and image 1 + k its tangent along t[k]; without, image k the
- * tangent alone. Padding is 0 in every image. */
+ * (docs/oidn-network.md §3.2, §3.4) and image 1 + k its tangent along t[k]; without,
+ * image k the tangent alone. Padding is 0 in every image. */
 static int
 preprocess(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
            const mcp_image *normal, float s_in, int primal, const mcp_denoise_tangent *t,
@@ -1128,9 +1128,9 @@ preprocess(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo
     return 0;
 }
 
-/* Crops the network's output to H x W and maps it back (notes 3.6): without t the
- * primal (y0's image 0) through the clamp and PU^-1, else t's image k, a tangent,
- * through their derivatives at the primal. */
+/* Crops the network's output to H x W and maps it back (docs/oidn-network.md §3.6):
+ * without t the primal (y0's image 0) through the clamp and PU^-1, else t's image k, a
+ * tangent, through their derivatives at the primal. */
 static int
 postprocess(const batch *y0, const batch *t, int k, int W, int H, float s_out,
             mcp_image **out)
@@ -1344,8 +1344,8 @@ mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_imag
     }
     if (tile >= W && tile >= H) tile = 0;
     /* The exposure is a constant of F, also for its JVP: it is computed once on the
-     * primal colour, as a renderer fixes the exposure of a frame (notes 3.7); the
-     * tiles share it. */
+     * primal colour, as a renderer fixes the exposure of a frame (docs/oidn-network.md
+     * §3.7); the tiles share it. */
     const double scale_in =
         input_scale > 0 ? input_scale : mcp__unet_autoexposure(color, net->v2);
     if (!(scale_in > 0 && scale_in < 1e30))

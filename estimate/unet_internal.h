@@ -1,6 +1,6 @@
 /* unet_internal.h: OIDN's RT U-Net in plain C -- the .tza weight archive (tza.c) and
  * the network's forward pass with OIDN's HDR pre-/post-processing (unet.c).
- * Not installed; see notes/oidn.md for the format, the layer list and the transfer
+ * Not installed; see docs/oidn-network.md for the format, the layer list and the transfer
  * function. The denoiser kind `unet` over them is denoise_unet.c. */
 #ifndef MCP_ESTIMATE_UNET_INTERNAL_H
 #define MCP_ESTIMATE_UNET_INTERNAL_H
@@ -10,7 +10,7 @@
 
 #include <stddef.h>
 
-/* ---- .tza archive (tza.c; notes/oidn.md section 2) ---- */
+/* ---- .tza archive (tza.c; docs/oidn-network.md §2) ---- */
 
 typedef struct mcp__tza_tensor {
     char *name;
@@ -39,7 +39,7 @@ void mcp__tza_free(mcp__tza *tza);
 /* float16 bits to float (exact; subnormals, infinities and NaN included). */
 float mcp__half_to_float(unsigned short h);
 
-/* ---- the U-Net (unet.c; notes/oidn.md sections 1 and 3) ---- */
+/* ---- the U-Net (unet.c; docs/oidn-network.md §1, §3) ---- */
 
 #define MCP__UNET_NCONV 16
 
@@ -64,7 +64,7 @@ int mcp__unet_load(const char *path, mcp__unet **out);
 int mcp__unet_from_tza(const mcp__tza *tza, const char *source, mcp__unet **out);
 void mcp__unet_free(mcp__unet *net);
 
-/* OIDN's autoexposure scale of an RGB image (notes 3.3; v2 selects 2.x bins). */
+/* OIDN's autoexposure scale of an RGB image (docs/oidn-network.md §3.3; v2: 2.x bins). */
 double mcp__unet_autoexposure(const mcp_image *color, int v2);
 
 /* HDR denoise of colour (3 channels) with albedo and normal as the net needs them

@@ -158,7 +158,7 @@ clampd(double v, double lo, double hi)
     return isnan(v) ? 0 : v < lo ? lo : v > hi ? hi : v;
 }
 
-/* OIDN 1.4 autoexposure, plainly (notes 3.3) */
+/* OIDN 1.4 autoexposure, plainly (docs/oidn-network.md §3.3) */
 static double
 ref_autoexposure(const mcp_image *c)
 {
@@ -367,7 +367,7 @@ static void
 test_transfer_function(void **state)
 {
     (void)state;
-    /* the values of notes/oidn.md 3.2 */
+    /* the values of docs/oidn-network.md §3.2 */
     assert_close(mcp__pu_forward(0.18f), 0.2153, 5e-4, 0);
     assert_close(mcp__pu_forward(1.0f), 0.3189, 5e-4, 0);
     assert_close(mcp__pu_forward(100.0f), 0.6015, 5e-4, 0);
@@ -1079,7 +1079,7 @@ read_fixture(const char *scene, int spp, mcp_dump **dump, mcp_image **ref, int r
 /* The official weights denoise both fixtures at 16 and 64 spp. On the Cornell box
  * relMSE against the reference falls below a quarter of the noisy input's (issue 6).
  * The texture scene is made to be hard for denoisers (fine albedo detail that they
- * blur, SPEC samples): there it must still improve on the noisy input. */
+ * blur, docs/samples.md): there it must still improve on the noisy input. */
 static void
 test_real_weights_fixtures(void **state)
 {
