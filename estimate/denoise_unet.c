@@ -124,7 +124,8 @@ shared_release(mcp__unet *net)
 }
 
 static const char *const unet_keys[] = {"weights",    "input_scale",    "tile",
-                                        "fixed_bits", "exact_tangents", NULL};
+                                        "fixed_bits", "exact_tangents", "max_memory_mb",
+                                        NULL};
 
 static int
 unet_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
@@ -177,12 +178,18 @@ unet_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
     *out = NULL;
     const char *weights = NULL;
     double scale = 0.0;
-    int tile = 0, fixed_bits = 0, exact_tangents = 0;
+    int tile = 0, fixed_bits = 0, exact_tangents = 0, max_memory_mb = 0;
     if (mcp_node_opt_string(settings, "weights", &weights) ||
         read_input_scale(settings, &scale) || mcp_node_opt_int(settings, "tile", &tile) ||
         mcp_node_opt_bool(settings, "fixed_bits", &fixed_bits) ||
-        mcp_node_opt_bool(settings, "exact_tangents", &exact_tangents))
+        mcp_node_opt_bool(settings, "exact_tangents", &exact_tangents) ||
+        mcp_node_opt_int(settings, "max_memory_mb", &max_memory_mb))
         return -1;
+    if (max_memory_mb < 0)
+        return mcp_node_error(mcp_node_get(settings, "max_memory_mb"),
+                              "unet: max_memory_mb must be > 0, or 0 for the default "
+                              "(got %d)",
+                              max_memory_mb);
     if (tile < 0 || tile % 16)
         return mcp_node_error(mcp_node_get(settings, "tile"),
                               "unet: tile must be 0 (as memory allows) or a multiple of 16 "
@@ -219,6 +226,7 @@ unet_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
     s->net = *net;
     s->net.fixed_bits = fixed_bits;
     s->net.exact_tangents = exact_tangents;
+    s->net.max_memory_mb = max_memory_mb;
     s->input_scale = scale;
     s->tile = tile;
     d->destroy = unet_destroy;
@@ -236,7 +244,8 @@ const mcp_denoiser_kind mcp__denoiser_unet = {
     "exact JVP (weights [$" WEIGHTS_ENV "], input_scale [auto] or a number, tile [0: as "
     "memory allows] or a multiple of 16, fixed_bits [false]: the direct loops, the same "
     "bits on every x86-64, exact_tangents [false]: the JVP's convolutions as the "
-    "primal's, Winograd F(2x2,3x3), instead of F(4x4,3x3))",
+    "primal's, Winograd F(2x2,3x3), instead of F(4x4,3x3), max_memory_mb [2048]: the "
+    "network's working memory at most, in tiles beyond)",
     unet_keys,
     unet_create,
 };

@@ -1175,6 +1175,18 @@ memory_available(void)
     return kb * 1024.0;
 }
 
+/* The network's working memory at most, in bytes: net->max_memory_mb, else
+ * MCPOST_UNET_MAX_MEMORY_MB, else MCP__UNET_MAX_MEMORY_MB. */
+static double
+memory_bound(const mcp__unet *net)
+{
+    const char *env = getenv("MCPOST_UNET_MAX_MEMORY_MB");
+    const double mb = net->max_memory_mb > 0 ? net->max_memory_mb
+                      : env && *env && atof(env) > 0 ? atof(env)
+                                                     : MCP__UNET_MAX_MEMORY_MB;
+    return mb * 1048576.0;
+}
+
 /* The bytes a batch of n_images needs for a w x h image (padded to 16). */
 static double
 batch_bytes(int w, int h, int n_images)
@@ -1327,20 +1339,29 @@ mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_imag
                          "(got %d)",
                          tile);
     const int W = color->width, H = color->height;
+    /* The tangents run one at a time after the primal (its trace, above), so the
+     * network holds one image's activations whatever n is. */
+    const double bound = memory_bound(net);
     const double have = tile == 0 ? memory_available() : 0; /* asked only when needed */
-    if (have > 0 && batch_bytes(W, H, 1 + n) > have) {
-        /* the largest tile whose crop fits in half of what is available (the
-         * results and the inputs take the rest) */
+    const int short_of_memory = have > 0 && have < bound;
+    if (tile == 0 && batch_bytes(W, H, 1) > (short_of_memory ? have : bound)) {
+        /* the largest tile whose crop fits in the bound, and in half of what is
+         * available (the results and the inputs take the rest) */
+        const double limit = have > 0 && have / 2 < bound ? have / 2 : bound;
         int overlap, align;
         tile_margins(net, n, &overlap, &align);
         const int margin = 2 * overlap + align; /* a crop's largest extension */
         for (tile = (W > H ? W : H) / 16 * 16; tile >= 16; tile -= 16)
-            if (batch_bytes(tile + margin, tile + margin, 1 + n) <= have / 2)
+            if (batch_bytes(tile + margin, tile + margin, 1) <= limit)
                 break;
         if (tile < 16)
-            return mcp_error("unet: a %dx%d image with %d tangent(s) does not fit even in "
-                             "16x16 tiles: %.0f MB are available",
-                             W, H, n, have / 1048576.0);
+            return short_of_memory
+                       ? mcp_error("unet: a %dx%d image with %d tangent(s) does not fit "
+                                   "even in 16x16 tiles: %.0f MB are available",
+                                   W, H, n, have / 1048576.0)
+                       : mcp_error("unet: a %dx%d image does not fit even in 16x16 tiles "
+                                   "within max_memory_mb %.0f",
+                                   W, H, bound / 1048576.0);
     }
     if (tile >= W && tile >= H) tile = 0;
     /* The exposure is a constant of F, also for its JVP: it is computed once on the

@@ -54,6 +54,7 @@ typedef struct mcp__unet {
     int v2;       /* 1 for float16 (OIDN 2.x) files: autoexposure bins by ceil */
     int fixed_bits; /* 1: the direct loops (a setting, not read from the file) */
     int exact_tangents; /* 1: tangents on F(2x2, 3x3) as the primal, not F(4x4, 3x3) */
+    int max_memory_mb;  /* the network's working memory at most (0: the default) */
     mcp__unet_conv conv[MCP__UNET_NCONV]; /* enc_conv0 ... dec_conv0 in order */
 } mcp__unet;
 
@@ -82,6 +83,10 @@ int mcp__unet_forward(const mcp__unet *net, const mcp_image *color,
 int mcp__unet_run(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
                   const mcp_image *normal, double input_scale, const mcp_denoise_tangent *t,
                   int n, mcp_image **out, mcp_image **jt);
+
+/* The network's working memory at most, by default: beyond it the image runs in tiles
+ * (MCPOST_UNET_MAX_MEMORY_MB or the denoiser's max_memory_mb set another). */
+#define MCP__UNET_MAX_MEMORY_MB 2048
 
 /* mcp__unet_run in tiles of tile x tile pixels (a multiple of 16), each run on a crop
  * about 192 pixels larger on every side, starting on a multiple of 32 (unet.c's
