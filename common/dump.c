@@ -1360,21 +1360,19 @@ mcp_series_load(const mcp_series *s, int i, mcp_dump **out)
 }
 
 static const char *const series_variance_names[] = {"auto", "file", "increments"};
+const mcp_wordlist mcp_series_variance_words = {"variance_from", series_variance_names, 3};
 
 const char *
 mcp_series_variance_name(mcp_series_variance v)
 {
-    return (unsigned)v < (unsigned)COUNT(series_variance_names) ? series_variance_names[v]
-                                                                 : "?";
+    return mcp_wordlist_name(&mcp_series_variance_words, (int)v);
 }
 
 int
 mcp_series_variance_from_name(const char *name, mcp_series_variance *out)
 {
-    int i = name_index(series_variance_names, COUNT(series_variance_names), name);
-    if (i < 0)
+    if (mcp_wordlist_find(&mcp_series_variance_words, name, (int *)out))
         return mcp_error("variance_from must be auto, file or increments (got '%s')", name);
-    *out = (mcp_series_variance)i;
     return 0;
 }
 

@@ -28,6 +28,7 @@
 #define MCP_DUMP_H
 
 #include <mcpost/image.h>
+#include <mcpost/wordlist.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -200,6 +201,7 @@ typedef enum {
 } mcp_series_variance;
 
 /* "auto", "file", "increments". */
+MCP_API extern const mcp_wordlist mcp_series_variance_words;
 MCP_API const char *mcp_series_variance_name(mcp_series_variance v);
 MCP_API int mcp_series_variance_from_name(const char *name, mcp_series_variance *out);
 
