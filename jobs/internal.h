@@ -12,6 +12,8 @@
 #include <mcpost/imageio.h>
 #include <mcpost/job.h>
 #include <mcpost/metrics.h>
+#include <mcpost/operations.h>
+#include <mcpost/options.h>
 #include <mcpost/perceptual.h>
 #include <mcpost/progress.h>
 #include <mcpost/stages.h>
@@ -44,6 +46,21 @@ void mcp__free_words(char **words, int count);
  * fails at the key's line. Absent: *out unchanged. */
 int mcp__opt_enum(const mcp_node *settings, const char *key,
                   int (*parse)(const char *, void *), void *out);
+/* The keys of a stage that reads its settings through op's table: every option a job
+ * takes (and the shared ones op takes, e.g. output), then extras (NULL-terminated, may
+ * be NULL), into keys[cap] (NULL-terminated). */
+void mcp__op_job_keys(const mcp_operation *op, const char *const *extras, const char **keys,
+                      int cap);
+/* A stage's settings map read through op's table into out (op's settings struct, set
+ * to the defaults first) and sh (may be NULL; the shared output:), in the file's order:
+ * a bad value fails at its line with the table's message ("job.yaml:7: tau must be >
+ * 0 (got -1)"), and op's finish (the library's check) at the stage's line. Keys that
+ * are not op's options (title) and the denoiser are left to the stage. */
+int mcp__job_settings(const mcp_operation *op, const mcp_node *map, mcp_shared_settings *sh,
+                      void *out);
+/* Room for a stage's keys (mcp__op_job_keys). */
+#define MCP__STAGE_KEYS_MAX 64
+
 /* The current error put at the line of settings' key ("FILE:LINE: ..."); -1, and the
  * error unchanged when settings has no such key. */
 int mcp__at_line(const mcp_node *settings, const char *key);
@@ -55,8 +72,6 @@ int mcp__at_line(const mcp_node *settings, const char *key);
 void mcp__add_variance_source(cJSON *j, mcp_variance_source src, double dof);
 /* The source in words, for the text output. */
 const char *mcp__variance_source_words(mcp_variance_source src);
-/* --variance-from: "auto", "file" (the members' own) or "increments". */
-int mcp__variance_from(const char *text, mcp_series_variance *out);
 /* The one line that says Variance/n is off the increments' spread
  * (mcp_variance_ratio_off), and whether the increments are used. */
 const char *mcp__variance_ratio_warning(double ratio, int using_increments);
@@ -120,8 +135,6 @@ int mcp__estimate_run_series(const mcp_series *series, const mcp_denoiser *den,
                              const mcp_series_estimate_options *so, const mcp_image *ref,
                              const mcp__estimate_dir *o, cJSON *section, cJSON **json_out,
                              mcp_series_estimate **out);
-/* variance probes: sure (0) or rademacher (1). */
-int mcp__variance_probes_from_name(const char *text, int *out);
 
 /* ---- blend_run.c: a blend over a series, its files and its report section ---- */
 

@@ -1,0 +1,51 @@
+/* operations.h: the settings of each operation with an option table (options.h) --
+ * what the command line, a job stage and the Python module fill through the table,
+ * field for field the same, before the operation runs (docs/library.md, "Adding an
+ * option"). A settings struct holds the library's own options struct and what the
+ * front ends add around it (inputs, a reference, the denoiser's place). */
+#ifndef MCP_OPERATIONS_H
+#define MCP_OPERATIONS_H
+
+#include <mcpost/blend.h>
+#include <mcpost/dump.h>
+#include <mcpost/estimate.h>
+#include <mcpost/options.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* `estimate`: one dump, or a series (several dumps, a pattern with --spp, or a
+ * job's series input). */
+typedef struct mcp_estimate_settings {
+    mcp_series_estimate_options so;  /* so.taus: a single tau when given alone */
+    mcp_series_variance variance_from;
+    const char *input;      /* a job's input: a dump or a series */
+    const char *reference;  /* a file (command line), an input (job) */
+    const char *series;     /* command line: a printf pattern, with spp */
+    const char *spp;        /* command line: the pattern's sample counts, "1,2,4" */
+    const char *convention; /* command line: how to read the dumps */
+    const char *variance;
+    int exit_status;        /* command line: exit 0 to stop, 10 to go on */
+    uint64_t given;
+} mcp_estimate_settings;
+
+/* `blend`: a series blended with its denoised images. */
+typedef struct mcp_blend_settings {
+    mcp_blend_series_options o;
+    mcp_series_variance variance_from;
+    const char *input;     /* a job's series input */
+    const char *reference; /* a file (command line), an input (job), array or path */
+    const char *spp;       /* command line: the pattern's sample counts */
+    int all_images;        /* also the denoised, easy, James-Stein and ideal images */
+    uint64_t given;
+} mcp_blend_settings;
+
+/* The operations' tables (ops/op_*.c). */
+MCP_API const mcp_operation *mcp_operation_estimate(void);
+MCP_API const mcp_operation *mcp_operation_blend(void);
+
+#ifdef __cplusplus
+}
+#endif
+#endif
