@@ -207,4 +207,5 @@ const mcp_denoiser_kind mcp__denoiser_james_stein = {
     "the inner denoiser",
     js_keys,
     js_create,
+    NULL, /* reads its own keys: the inner denoiser's */
 };

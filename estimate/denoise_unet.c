@@ -25,6 +25,7 @@
 #include "unet_internal.h"
 
 #include <math.h>
+#include <stddef.h>
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -119,8 +120,47 @@ shared_release(mcp__unet *net)
         mcp__unet_free(net);
 }
 
-static const char *const unet_keys[] = {"weights", "input_scale", "tile", "fixed_bits",
-                                        NULL};
+/* ---- settings: the table (<mcpost/options.h>; docs/denoisers.md) ---- */
+
+typedef struct {
+    const char *weights; /* a .tza; NULL: $MCPOST_OIDN_WEIGHTS, else the shipped ones */
+    double input_scale;  /* 0: auto (OIDN's autoexposure) */
+    int tile;            /* 0: as memory allows; else a multiple of 16 */
+    int fixed_bits;
+} unet_settings;
+
+static const mcp_option unet_options[] = {
+    {.name = "weights", .type = MCP_OPT_TEXT,
+     .offset = offsetof(unet_settings, weights), .meta = "PATH",
+     .doc = "the .tza file (relative paths: to the job file's folder); --weights [$"
+            WEIGHTS_ENV ", else the shipped share/mcpost/rt_hdr_alb_nrm.tza]"},
+    {.name = "input_scale", .type = MCP_OPT_NUMBER,
+     .offset = offsetof(unet_settings, input_scale), .def = "auto",
+     .doc = "auto: OIDN's autoexposure; or the number that maps the colour to 1 = 100 "
+            "cd/m^2; --input-scale",
+     .bounds = MCP_OPT_LO_OPEN, .auto_word = "auto", .auto_value = 0},
+    {.name = "tile", .type = MCP_OPT_INT,
+     .offset = offsetof(unet_settings, tile), .def = "0",
+     .doc = "0: the whole image when it fits in the memory available, else the largest "
+            "tiles that fit; or a multiple of 16: tiles of that size"},
+    {.name = "fixed_bits", .type = MCP_OPT_FLAG,
+     .offset = offsetof(unet_settings, fixed_bits), .def = "false",
+     .doc = "true: the direct-loop convolutions, the same bits on every x86-64 "
+            "(MCPOST_UNET_FIXED=1 does it for the whole process); false: Winograd, 2-3x "
+            "faster"},
+    {0}};
+
+const mcp_operation mcp__op_unet = {
+    .name = "unet",
+    .denoiser = 1,
+    .summary = "OIDN's RT U-Net with .tza weights, exact JVP",
+    .options = unet_options,
+    .size = sizeof(unet_settings),
+};
+
+/* The keys, from the table (denoisers.c fills them in before the kinds are handed
+ * out). */
+const char *mcp__unet_keys[MCP__DENOISER_KEYS_MAX];
 
 static int
 unet_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
@@ -152,32 +192,15 @@ unet_destroy(mcp_denoiser *self)
     free(self);
 }
 
-/* input_scale: "auto" (returns 0) or a positive number. */
-static int
-read_input_scale(const mcp_node *settings, double *scale)
-{
-    *scale = 0.0;
-    const mcp_node *n = mcp_node_get(settings, "input_scale");
-    if (!n) return 0;
-    if (n->kind == MCP_NODE_SCALAR && strcmp(n->value, "auto") == 0) return 0;
-    if (mcp_node_double(n, "input_scale", scale)) return -1;
-    if (!(*scale > 0) || !isfinite(*scale))
-        return mcp_node_error(
-            n, "unet: input_scale must be auto or a number > 0 (got %g)", *scale);
-    return 0;
-}
-
 static int
 unet_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
 {
     *out = NULL;
-    const char *weights = NULL;
-    double scale = 0.0;
-    int tile = 0, fixed_bits = 0;
-    if (mcp_node_opt_string(settings, "weights", &weights) ||
-        read_input_scale(settings, &scale) || mcp_node_opt_int(settings, "tile", &tile) ||
-        mcp_node_opt_bool(settings, "fixed_bits", &fixed_bits))
-        return -1;
+    unet_settings u;
+    if (mcp__options_from_node(&mcp__op_unet, settings, NULL, &u)) return -1;
+    const char *weights = u.weights;
+    double scale = u.input_scale;
+    int tile = u.tile, fixed_bits = u.fixed_bits;
     if (tile < 0 || tile % 16)
         return mcp_node_error(mcp_node_get(settings, "tile"),
                               "unet: tile must be 0 (as memory allows) or a multiple of 16 "
@@ -230,6 +253,7 @@ const mcp_denoiser_kind mcp__denoiser_unet = {
     "exact JVP (weights [$" WEIGHTS_ENV "], input_scale [auto] or a number, tile [0: as "
     "memory allows] or a multiple of 16, fixed_bits [false]: the direct loops, the same "
     "bits on every x86-64)",
-    unet_keys,
+    mcp__unet_keys,
     unet_create,
+    &mcp__op_unet,
 };

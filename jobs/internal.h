@@ -18,6 +18,8 @@
 #include <mcpost/progress.h>
 #include <mcpost/stages.h>
 
+#include "../ops/internal.h"
+
 #include <cjson/cJSON.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -46,20 +48,10 @@ void mcp__free_words(char **words, int count);
  * fails at the key's line. Absent: *out unchanged. */
 int mcp__opt_enum(const mcp_node *settings, const char *key,
                   int (*parse)(const char *, void *), void *out);
-/* The keys of a stage that reads its settings through op's table: every option a job
- * takes (and the shared ones op takes, e.g. output), then extras (NULL-terminated, may
- * be NULL), into keys[cap] (NULL-terminated). */
-void mcp__op_job_keys(const mcp_operation *op, const char *const *extras, const char **keys,
-                      int cap);
-/* A stage's settings map read through op's table into out (op's settings struct, set
- * to the defaults first) and sh (may be NULL; the shared output:), in the file's order:
- * a bad value fails at its line with the table's message ("job.yaml:7: tau must be >
- * 0 (got -1)"), and op's finish (the library's check) at the stage's line. Keys that
- * are not op's options (title) and the denoiser are left to the stage. */
-int mcp__job_settings(const mcp_operation *op, const mcp_node *map, mcp_shared_settings *sh,
-                      void *out);
-/* Room for a stage's keys (mcp__op_job_keys). */
-#define MCP__STAGE_KEYS_MAX 64
+/* A stage's settings through its operation's table: ops/internal.h's
+ * mcp__options_from_node and mcp__options_node_keys. */
+#define mcp__job_settings mcp__options_from_node
+#define mcp__op_job_keys mcp__options_node_keys
 
 /* The current error put at the line of settings' key ("FILE:LINE: ..."); -1, and the
  * error unchanged when settings has no such key. */

@@ -9,7 +9,7 @@
 
 /* The keys: the options of the blend's table that a job takes (ops/op_blend.c),
  * filled in by stages.c before the table is first handed out. */
-const char *mcp__blend_keys[MCP__STAGE_KEYS_MAX];
+const char *mcp__blend_keys[MCP__OPTION_KEYS_MAX];
 
 /* The stage's settings, read before anything is loaded (by the run, and by the job's
  * check before any stage runs): the options through the blend's table, the series and

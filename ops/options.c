@@ -60,8 +60,11 @@ range_text(const mcp_option *o, char *buf, size_t cap)
     int has_lo = (o->bounds & MCP_OPT_LO) != 0, has_hi = (o->bounds & MCP_OPT_HI) != 0;
     int lo_open = (o->bounds & (MCP_OPT_LO_OPEN & ~MCP_OPT_LO)) != 0;
     int hi_open = (o->bounds & (MCP_OPT_HI_OPEN & ~MCP_OPT_HI)) != 0;
-    if (has_lo && has_hi)
+    if (has_lo && has_hi && o->type == MCP_OPT_INT)
         snprintf(buf, cap, "in %c%s, %s%c", lo_open ? '(' : '[', lo, hi, hi_open ? ')' : ']');
+    else if (has_lo && has_hi)
+        snprintf(buf, cap, "%s %s and %s %s", lo_open ? ">" : ">=", lo, hi_open ? "<" : "<=",
+                 hi);
     else if (has_lo)
         snprintf(buf, cap, "%s %s", lo_open ? ">" : ">=", lo);
     else if (has_hi)
@@ -80,32 +83,46 @@ in_range(const mcp_option *o, double v)
     return 1;
 }
 
+/* "OP: LABEL must be RANGE (got TEXT)", as the library's own checks say it
+ * ("estimate: tau must be > 0"); with an auto word "... must be auto or a number ..." */
 static int
-out_of_range(const mcp_option *o, const char *label, const char *text)
+out_of_range(const mcp_operation *op, const mcp_option *o, const char *label,
+             const char *text)
 {
     char r[96];
     range_text(o, r, sizeof r);
-    return mcp_error("%s must be %s (got %s)", label, r, text);
+    return mcp_error("%s%s%s must be %s%s%s (got %s)", op ? op->name : "", op ? ": " : "",
+                     label, o->auto_word ? o->auto_word : "",
+                     o->auto_word ? " or a number " : "", r, text);
 }
 
 static int
-parse_number(const mcp_option *o, const char *label, const char *text, double *out)
+parse_number(const mcp_operation *op, const mcp_option *o, const char *label,
+             const char *text, double *out)
 {
+    if (o->auto_word && !strcasecmp(text, o->auto_word)) {
+        *out = o->auto_value;
+        return 0;
+    }
     char *end;
     errno = 0;
     double v = strtod(text, &end);
-    if (end == text || *end || errno || !isfinite(v))
+    if (end == text || *end || errno || !isfinite(v)) {
+        if (o->auto_word)
+            return mcp_error("%s must be %s or a number (got '%s')", label, o->auto_word, text);
         return mcp_error("%s must be a number (got '%s')", label, text);
-    if (!in_range(o, v)) return out_of_range(o, label, text);
+    }
+    if (!in_range(o, v)) return out_of_range(op, o, label, text);
     *out = v;
     return 0;
 }
 
 static int
-parse_int(const mcp_option *o, const char *label, const char *text, int *out)
+parse_int(const mcp_operation *op, const mcp_option *o, const char *label, const char *text,
+          int *out)
 {
     if (o->auto_word && !strcasecmp(text, o->auto_word)) {
-        *out = o->auto_value;
+        *out = (int)o->auto_value;
         return 0;
     }
     char *end;
@@ -117,7 +134,7 @@ parse_int(const mcp_option *o, const char *label, const char *text, int *out)
                              text);
         return mcp_error("%s must be an integer (got '%s')", label, text);
     }
-    if (!in_range(o, (double)v)) return out_of_range(o, label, text);
+    if (!in_range(o, (double)v)) return out_of_range(op, o, label, text);
     *out = (int)v;
     return 0;
 }
@@ -160,7 +177,8 @@ parse_flag(const char *label, const char *text, int *out)
 }
 
 static int
-parse_list(const mcp_option *o, const char *label, const char *text, double *out, int *count)
+parse_list(const mcp_operation *op, const mcp_option *o, const char *label, const char *text,
+           double *out, int *count)
 {
     double v[64];
     int n = 0, max = o->max_count < 64 ? o->max_count : 64;
@@ -177,7 +195,7 @@ parse_list(const mcp_option *o, const char *label, const char *text, double *out
         memcpy(word, p, len);
         word[len] = '\0';
         if (n < 64) {
-            if (parse_number(o, label, word, &v[n])) return -1;
+            if (parse_number(op, o, label, word, &v[n])) return -1;
         }
         n++;
         if (!comma) break;
@@ -198,8 +216,8 @@ mcp_operation_set(const mcp_operation *op, const mcp_option *o, const char *labe
     int rc = 0;
     if (!text) return mcp_error("%s: no value given", label);
     switch (o->type) {
-    case MCP_OPT_NUMBER: rc = parse_number(o, label, text, f); break;
-    case MCP_OPT_INT: rc = parse_int(o, label, text, f); break;
+    case MCP_OPT_NUMBER: rc = parse_number(op, o, label, text, f); break;
+    case MCP_OPT_INT: rc = parse_int(op, o, label, text, f); break;
     case MCP_OPT_SEED: rc = parse_seed(label, text, f); break;
     case MCP_OPT_WHOLE: rc = parse_whole(label, text, f); break;
     case MCP_OPT_FLAG: rc = parse_flag(label, text, f); break;
@@ -210,7 +228,7 @@ mcp_operation_set(const mcp_operation *op, const mcp_option *o, const char *labe
         break;
     }
     case MCP_OPT_LIST:
-        rc = parse_list(o, label, text, f, field(settings, o->count_offset));
+        rc = parse_list(op, o, label, text, f, field(settings, o->count_offset));
         break;
     case MCP_OPT_TEXT:
     case MCP_OPT_INPUT: *(const char **)f = text; break;
@@ -265,7 +283,12 @@ mcp_option_format(const mcp_option *o, const void *settings, char *buf, size_t c
     if (!cap) return;
     buf[0] = '\0';
     switch (o->type) {
-    case MCP_OPT_NUMBER: format_double(*(const double *)f, buf, cap); break;
+    case MCP_OPT_NUMBER:
+        if (o->auto_word && *(const double *)f == o->auto_value)
+            snprintf(buf, cap, "%s", o->auto_word);
+        else
+            format_double(*(const double *)f, buf, cap);
+        break;
     case MCP_OPT_INT:
         if (o->auto_word && *(const int *)f == o->auto_value)
             snprintf(buf, cap, "%s", o->auto_word);
@@ -379,10 +402,17 @@ add_cell(strbuf *b, const char *text)
 
 /* One row of the docs' table. */
 static int
-markdown_row(strbuf *b, const mcp_option *o, const char *doc, const char *def)
+markdown_row(strbuf *b, const mcp_operation *op, const mcp_option *o, const char *doc,
+             const char *def)
 {
     char flag[96] = "—", meta[96] = "", range[96] = "";
-    if (mcp_option_takes(o, MCP_OPT_CLI)) {
+    const char *value = o->meta                    ? o->meta
+                        : o->type == MCP_OPT_FLAG  ? "true|false"
+                        : o->type == MCP_OPT_INT   ? "N"
+                                                   : "X";
+    if (op->denoiser)
+        snprintf(flag, sizeof flag, "`--denoiser-opt %s=%s`", o->name, value);
+    else if (mcp_option_takes(o, MCP_OPT_CLI)) {
         char f[80];
         mcp_option_flag(o->name, f, sizeof f);
         if (o->type == MCP_OPT_FLAG && def && !strcmp(def, "true"))
@@ -390,7 +420,7 @@ markdown_row(strbuf *b, const mcp_option *o, const char *doc, const char *def)
         else if (o->type == MCP_OPT_FLAG)
             snprintf(flag, sizeof flag, "`%s`", f);
         else
-            snprintf(flag, sizeof flag, "`%s %s`%s%s%s", f, o->meta ? o->meta : "X",
+            snprintf(flag, sizeof flag, "`%s %s`%s%s%s", f, value,
                      o->alias ? ", `--" : "", o->alias ? o->alias : "", o->alias ? "`" : "");
         if (o->letter) {
             snprintf(meta, sizeof meta, "`-%c`, ", o->letter);
@@ -423,7 +453,7 @@ mcp_operation_markdown(const mcp_operation *op)
     strbuf b = {0};
     int rc = add(&b, "| option | command line | default | meaning |\n|---|---|---|---|\n");
     for (const mcp_option *o = op->options; o->name && !rc; o++)
-        rc = markdown_row(&b, o, o->doc, o->def);
+        rc = markdown_row(&b, op, o, o->doc, o->def);
     const mcp_operation *sh = mcp_shared_operation();
     for (const mcp_option *o = sh->options; o->name && !rc; o++) {
         unsigned bit = 0;
@@ -431,7 +461,7 @@ mcp_operation_markdown(const mcp_operation *op)
             if (mcp_shared_option(k) == o) bit = k;
         if (!(op->shared & bit)) continue;
         int is_output = bit == MCP_SHARED_OUTPUT;
-        rc = markdown_row(&b, o, is_output && op->output_doc ? op->output_doc : o->doc,
+        rc = markdown_row(&b, op, o, is_output && op->output_doc ? op->output_doc : o->doc,
                           is_output ? op->output_def : o->def);
     }
     if (rc) {

@@ -13,7 +13,8 @@
  * Every front end turns a value into text and hands it to mcp_operation_set, which
  * parses it by type into the settings: `--tau 0.02`, `tau: 0.02` and `tau=0.02` give
  * the same bits, and the same bad values fail with the same message (the front end
- * puts its own label in it: "--tau", "job.yaml:7: tau", "tau"). */
+ * puts its own label in it: "--tau", "job.yaml:7: tau", "tau"; a value out of range
+ * names the operation too, as the library's checks do: "estimate: tau must be > 0"). */
 #ifndef MCP_OPTIONS_H
 #define MCP_OPTIONS_H
 
@@ -28,7 +29,7 @@ extern "C" {
 
 /* What a value is, and the C type of its field in the settings struct. */
 typedef enum {
-    MCP_OPT_NUMBER,   /* double; lo/hi per bounds */
+    MCP_OPT_NUMBER,   /* double; lo/hi per bounds; auto_word may stand for auto_value */
     MCP_OPT_INT,      /* int; lo/hi per bounds; auto_word may stand for auto_value */
     MCP_OPT_SEED,     /* uint64_t, a non-negative integer */
     MCP_OPT_WHOLE,    /* int64_t, a whole number >= 0 (up to 2^52: exact as a double) */
@@ -64,8 +65,9 @@ typedef struct mcp_option {
     unsigned bounds;
     size_t count_offset; /* MCP_OPT_LIST: offsetof the count */
     int max_count;       /* MCP_OPT_LIST: at most this many values (at least 1) */
-    const char *auto_word; /* MCP_OPT_INT: a word that stands for auto_value ("auto") */
-    int auto_value;
+    /* MCP_OPT_INT, MCP_OPT_NUMBER: a word that stands for auto_value ("auto") */
+    const char *auto_word;
+    double auto_value;
     const char *alias;   /* another command-line spelling ("ref" for reference) */
     char letter;         /* a one-letter flag ('o'), or 0 */
     const char *group;   /* the --help heading it is listed under (NULL: the first) */
@@ -84,6 +86,10 @@ typedef struct mcp_operation {
     size_t given_offset;        /* offsetof a uint64_t: bit i set when options[i] was
                                  * given (0: not kept) */
     unsigned shared;            /* the shared flags it takes (MCP_SHARED_*) */
+    /* 1: a denoiser's settings (<mcpost/denoiser.h> mcp_denoiser_kind.options), which
+     * every front end gives as a map: --denoiser-opt KEY=VALUE, a job's denoiser: map,
+     * a Python dict */
+    int denoiser;
     const char *output_doc;     /* what -o / output is for this operation */
     const char *output_def;     /* and its default as the docs say it (NULL: none) */
 } mcp_operation;

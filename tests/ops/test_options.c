@@ -13,6 +13,7 @@
 
 #include "../../cli/cli.h"
 
+#include <mcpost/denoiser.h>
 #include <mcpost/job.h>
 #include <mcpost/options.h>
 #include <mcpost/stages.h>
@@ -260,12 +261,12 @@ test_cli_and_job_read_alike(void **state)
     printf("compared %d values\n", compared);
 }
 
-/* Each default, as the docs and --help say it, reads back as the library's default. */
+/* Each default, as the docs and --help say it, reads back as the library's default:
+ * the operations' and the denoisers' settings. */
 static void
-test_defaults_read_back(void **state)
+defaults_read_back(const mcp_operation *const *op)
 {
-    (void)state;
-    for (const mcp_operation *const *op = mcp_operations(); *op; op++) {
+    {
         void *d = calloc(1, (*op)->size), *s = calloc(1, (*op)->size);
         mcp_operation_defaults(*op, d);
         for (const mcp_option *o = (*op)->options; o->name; o++) {
@@ -290,6 +291,28 @@ test_defaults_read_back(void **state)
         free(d);
         free(s);
     }
+}
+
+static void
+test_defaults_read_back(void **state)
+{
+    (void)state;
+    int n = 0;
+    for (const mcp_operation *const *op = mcp_operations(); *op; op++, n++)
+        defaults_read_back(op);
+    for (const mcp_denoiser_kind *const *k = mcp_denoiser_kinds(); *k; k++)
+        if ((*k)->options) {
+            assert_string_equal((*k)->options->name, (*k)->name);
+            assert_true((*k)->options->denoiser);
+            defaults_read_back(&(*k)->options);
+            /* the kind's keys are its table's */
+            int i = 0;
+            for (const mcp_option *o = (*k)->options->options; o->name; o++, i++)
+                assert_string_equal((*k)->keys[i], o->name);
+            assert_null((*k)->keys[i]);
+            n++;
+        }
+    assert_int_equal(n, 7); /* estimate, blend; gauss, nlm, bilateral, external, unet */
 }
 
 /* The estimate and blend stages take exactly their table's job options, the shared
