@@ -446,6 +446,7 @@ typedef enum {
     MCP_ADAPTIVE_UNIFORM       /* "uniform"    */
 } mcp_adaptive_map;
 
+MCP_API extern const mcp_wordlist mcp_adaptive_map_words;
 MCP_API int mcp_adaptive_map_from_name(const char *name, mcp_adaptive_map *out);
 MCP_API const char *mcp_adaptive_map_name(mcp_adaptive_map map);
 

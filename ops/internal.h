@@ -8,6 +8,7 @@
 
 extern const mcp_operation mcp__op_estimate;
 extern const mcp_operation mcp__op_blend;
+extern const mcp_operation mcp__op_adaptive;
 
 
 /* ---- node.c ---- */

@@ -3,7 +3,8 @@
 
 #include <string.h>
 
-static const mcp_operation *const list[] = {&mcp__op_estimate, &mcp__op_blend, NULL};
+static const mcp_operation *const list[] = {&mcp__op_estimate, &mcp__op_blend,
+                                            &mcp__op_adaptive, NULL};
 
 const mcp_operation *const *
 mcp_operations(void)

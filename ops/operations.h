@@ -41,9 +41,21 @@ typedef struct mcp_blend_settings {
     uint64_t given;
 } mcp_blend_settings;
 
+/* `adaptive`: the adaptive-sampling loop around a render command. */
+typedef struct mcp_adaptive_settings {
+    mcp_adaptive_options ao;
+    const char *render;    /* the command template */
+    const char *size;      /* "WxH", or NULL: the reference's */
+    const char *reference; /* a file (command line), an input (job) */
+    uint64_t seed;         /* {seed}, and the probes' (ao.est.sure.seed) */
+    int keep_passes;
+    uint64_t given;
+} mcp_adaptive_settings;
+
 /* The operations' tables (ops/op_*.c). */
 MCP_API const mcp_operation *mcp_operation_estimate(void);
 MCP_API const mcp_operation *mcp_operation_blend(void);
+MCP_API const mcp_operation *mcp_operation_adaptive(void);
 
 #ifdef __cplusplus
 }

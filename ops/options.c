@@ -442,8 +442,11 @@ markdown_row(strbuf *b, const mcp_operation *op, const mcp_option *o, const char
         mcp_wordlist_join(o->words, "`, `", words, sizeof words);
         rc = add(b, "; one of `%s`", words);
     }
-    if (!rc && o->where && (o->where & MCP_OPT_ALL) != MCP_OPT_ALL)
-        rc = add(b, " (%s)", where_text(o->where));
+    /* which front ends it misses, of those the operation has at all */
+    unsigned all = 0;
+    for (const mcp_option *p = op->options; p->name; p++) all |= p->where ? p->where : MCP_OPT_ALL;
+    if (!rc && o->where && (o->where & all) != all)
+        rc = add(b, " (%s)", where_text(o->where | (MCP_OPT_ALL & ~all)));
     return rc || add(b, " |\n");
 }
 

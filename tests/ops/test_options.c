@@ -145,6 +145,15 @@ assert_settings_equal(const mcp_operation *op, const void *a, const void *b)
     for (const mcp_option *o = op->options; o->name; o++) assert_field_equal(o, a, b);
 }
 
+/* What an operation needs besides the option under test for its finish (the library's
+ * check) to pass: adaptive needs a stop rule, a budget or stop (a flag). */
+static const char *
+base_option(const mcp_operation *op, const mcp_option *o)
+{
+    if (strcmp(op->name, "adaptive")) return NULL;
+    return strcmp(o->name, "budget") ? "budget" : "stop";
+}
+
 /* The CLI's reader on one option: -1 accepted, else the status. */
 static int
 cli_read(const mcp_operation *op, const mcp_option *o, const char *value, void *settings,
@@ -153,13 +162,16 @@ cli_read(const mcp_operation *op, const mcp_option *o, const char *value, void *
     char flag[96], no[96];
     mcp_option_flag(o->name, flag, sizeof flag);
     snprintf(no, sizeof no, "--no-%s", flag + 2);
-    char *argv[4] = {(char *)op->name, flag, (char *)value, NULL};
+    char *argv[6] = {(char *)op->name, flag, (char *)value, NULL, NULL, NULL};
     int argc = 3;
     if (o->type == MCP_OPT_FLAG) {
         argv[1] = strcmp(value, "false") ? flag : no;
         argv[2] = NULL;
         argc = 2;
     }
+    const char *base = base_option(op, o);
+    if (base && !strcmp(base, "budget")) argv[argc++] = "--budget", argv[argc++] = "8";
+    else if (base) argv[argc++] = "--stop";
     mcp_shared_settings sh;
     mcp_cli_denoiser_flags df = {0};
     int first = 0;
@@ -187,6 +199,12 @@ job_read(const mcp_operation *op, const mcp_option *o, const char *value, void *
         snprintf(yaml, sizeof yaml, "{%s: [%s]}", o->name, items);
     } else {
         snprintf(yaml, sizeof yaml, "{%s: %s}", o->name, *value ? value : "''");
+    }
+    const char *base = base_option(op, o);
+    if (base) { /* ", budget: 8}" or ", stop: true}" */
+        size_t n = strlen(yaml) - 1;
+        snprintf(yaml + n, sizeof yaml - n, ", %s}", strcmp(base, "budget") ? "stop: true"
+                                                                           : "budget: 8");
     }
     mcp_node *root = NULL;
     assert_int_equal(mcp_yaml_parse_string(yaml, "job.yaml", &root), 0);
@@ -312,7 +330,8 @@ test_defaults_read_back(void **state)
             assert_null((*k)->keys[i]);
             n++;
         }
-    assert_int_equal(n, 7); /* estimate, blend; gauss, nlm, bilateral, external, unet */
+    assert_int_equal(n, 8); /* estimate, blend, adaptive; gauss, nlm, bilateral, external,
+                               unet */
 }
 
 /* The estimate and blend stages take exactly their table's job options, the shared
