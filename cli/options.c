@@ -71,7 +71,8 @@ add_rows(long_table *t, const mcp_operation *op, const mcp_operation *table, int
 {
     int i = 0;
     for (const mcp_option *o = table->options; o->name; o++, i++) {
-        if (table == op ? !mcp_option_takes(o, MCP_OPT_CLI) : !shared_takes(op, o)) continue;
+        if (table == op ? !mcp_option_takes(o, MCP_OPT_CLI) : !shared_takes(op, o))
+            continue;
         if (o->type == MCP_OPT_DENOISER) continue;
         if (o->type == MCP_OPT_FLAG) {
             char no[80];
@@ -96,7 +97,8 @@ build_longs(const mcp_operation *op, long_table *t, char *shorts, size_t cap)
         static const struct option den[] = {MCP_CLI_DENOISER_LONGOPTS};
         for (size_t k = 0; k < sizeof den / sizeof *den; k++) {
             int taken = 0; /* an option of the table spelt the same comes first */
-            for (int j = 0; j < t->n; j++) taken |= !strcmp(t->longs[j].name, den[k].name);
+            for (int j = 0; j < t->n; j++)
+                taken |= !strcmp(t->longs[j].name, den[k].name);
             if (!taken) add_long(t, den[k].name, den[k].has_arg, den[k].val);
         }
     }
@@ -105,7 +107,8 @@ build_longs(const mcp_operation *op, long_table *t, char *shorts, size_t cap)
     for (const mcp_option *o = sh->options; o->name; o++)
         if (o->letter && shared_takes(op, o)) {
             size_t n = strlen(shorts);
-            if (n + 3 < cap) shorts[n] = o->letter, shorts[n + 1] = ':', shorts[n + 2] = '\0';
+            if (n + 3 < cap)
+                shorts[n] = o->letter, shorts[n + 1] = ':', shorts[n + 2] = '\0';
         }
     t->longs[t->n] = (struct option){0, 0, 0, 0};
 }
@@ -137,7 +140,8 @@ print_wrapped(const char *head, const char *text)
         printf("%.*s", len, p);
         col += len;
         p += len;
-        while (*p == ' ') p++;
+        while (*p == ' ')
+            p++;
     }
     printf("\n");
 }
@@ -150,7 +154,8 @@ print_option(const mcp_option *o, const char *doc, const char *def)
     int on = o->type == MCP_OPT_FLAG && def && !strcmp(def, "true");
     const char *letter = o->letter ? (char[]){'-', o->letter, ',', ' ', '\0'} : "";
     if (o->type == MCP_OPT_FLAG)
-        snprintf(head, sizeof head, "  %s%s%s", letter, on ? "--no-" : flag, on ? flag + 2 : "");
+        snprintf(head, sizeof head, "  %s%s%s", letter, on ? "--no-" : flag,
+                 on ? flag + 2 : "");
     else
         snprintf(head, sizeof head, "  %s%s%s%s %s", letter, flag, o->alias ? ", --" : "",
                  o->alias ? o->alias : "", o->meta ? o->meta : "X");
@@ -181,7 +186,8 @@ mcp_cli_print_help(const mcp_operation *op, const char *head, const char *exampl
         if (o->group && (!group || strcmp(group, o->group))) printf("  %s:\n", o->group);
         group = o->group;
         if (o->type == MCP_OPT_DENOISER) {
-            print_wrapped("  --denoiser NAME", "the denoiser (see 'mcpost denoise --list')");
+            print_wrapped("  --denoiser NAME",
+                          "the denoiser (see 'mcpost denoise --list')");
             printf("%*s%s\n", HELP_COLUMN, "", MCP_CLI_DEFAULT_DENOISER);
             fputs(MCP_CLI_DENOISER_USAGE(" "), stdout);
             continue;
@@ -208,7 +214,8 @@ set_row(const mcp_operation *table, const mcp_option *o, int negated, const char
 {
     char label[96];
     mcp_option_flag(o->name, label, sizeof label);
-    if (o->type == MCP_OPT_FLAG) return mcp_operation_set(table, o, label, negated ? "false" : "true", dst);
+    if (o->type == MCP_OPT_FLAG)
+        return mcp_operation_set(table, o, label, negated ? "false" : "true", dst);
     return mcp_operation_set(table, o, label, arg, dst);
 }
 

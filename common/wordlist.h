@@ -19,8 +19,8 @@ extern "C" {
 #endif
 
 typedef struct mcp_wordlist {
-    const char *what;          /* what a word names, for messages: "curve fit" */
-    const char *const *words;  /* words[value], the spellings written out */
+    const char *what;         /* what a word names, for messages: "curve fit" */
+    const char *const *words; /* words[value], the spellings written out */
     int count;
 } mcp_wordlist;
 

@@ -10,7 +10,6 @@ extern const mcp_operation mcp__op_estimate;
 extern const mcp_operation mcp__op_blend;
 extern const mcp_operation mcp__op_adaptive;
 
-
 /* ---- node.c ---- */
 
 /* The keys of a map read through op's table: every option a job takes (and the shared

@@ -8,8 +8,8 @@
 #include <string.h>
 
 void
-mcp__options_node_keys(const mcp_operation *op, const char *const *extras, const char **keys,
-                 int cap)
+mcp__options_node_keys(const mcp_operation *op, const char *const *extras,
+                       const char **keys, int cap)
 {
     int n = 0;
     for (const mcp_option *o = op->options; o->name && n < cap - 1; o++)
@@ -20,7 +20,8 @@ mcp__options_node_keys(const mcp_operation *op, const char *const *extras, const
             if ((op->shared & bit) && mcp_shared_option(bit) == o &&
                 mcp_option_takes(o, MCP_OPT_JOB))
                 keys[n++] = o->name;
-    for (const char *const *e = extras; e && *e && n < cap - 1; e++) keys[n++] = *e;
+    for (const char *const *e = extras; e && *e && n < cap - 1; e++)
+        keys[n++] = *e;
     keys[n] = NULL;
 }
 
@@ -37,10 +38,9 @@ node_text(const mcp_node *n, const mcp_option *o, const char *key, char **joined
     }
     if (n->kind == MCP_NODE_MAP || o->type != MCP_OPT_LIST) {
         /* as mcp_node_int and its kin say it */
-        static const char *const what[] = {"a number",  "an integer", "an integer",
-                                           "a number",  "true or false", "a word",
-                                           "a list of numbers", "a string", "a string",
-                                           "a denoiser"};
+        static const char *const what[] = {
+            "a number", "an integer",        "an integer", "a number", "true or false",
+            "a word",   "a list of numbers", "a string",   "a string", "a denoiser"};
         return mcp_node_error(n, "%s must be %s, not a %s", key, what[o->type],
                               n->kind == MCP_NODE_MAP ? "map" : "list");
     }
@@ -63,8 +63,8 @@ node_text(const mcp_node *n, const mcp_option *o, const char *key, char **joined
 }
 
 int
-mcp__options_from_node(const mcp_operation *op, const mcp_node *map, mcp_shared_settings *sh,
-                  void *out)
+mcp__options_from_node(const mcp_operation *op, const mcp_node *map,
+                       mcp_shared_settings *sh, void *out)
 {
     mcp_operation_defaults(op, out);
     if (sh) mcp_operation_defaults(mcp_shared_operation(), sh);

@@ -18,7 +18,7 @@ extern "C" {
 /* `estimate`: one dump, or a series (several dumps, a pattern with --spp, or a
  * job's series input). */
 typedef struct mcp_estimate_settings {
-    mcp_series_estimate_options so;  /* so.taus: a single tau when given alone */
+    mcp_series_estimate_options so; /* so.taus: a single tau when given alone */
     mcp_series_variance variance_from;
     const char *input;      /* a job's input: a dump or a series */
     const char *reference;  /* a file (command line), an input (job) */
@@ -26,7 +26,7 @@ typedef struct mcp_estimate_settings {
     const char *spp;        /* command line: the pattern's sample counts, "1,2,4" */
     const char *convention; /* command line: how to read the dumps */
     const char *variance;
-    int exit_status;        /* command line: exit 0 to stop, 10 to go on */
+    int exit_status; /* command line: exit 0 to stop, 10 to go on */
     uint64_t given;
 } mcp_estimate_settings;
 

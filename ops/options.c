@@ -61,10 +61,11 @@ range_text(const mcp_option *o, char *buf, size_t cap)
     int lo_open = (o->bounds & (MCP_OPT_LO_OPEN & ~MCP_OPT_LO)) != 0;
     int hi_open = (o->bounds & (MCP_OPT_HI_OPEN & ~MCP_OPT_HI)) != 0;
     if (has_lo && has_hi && o->type == MCP_OPT_INT)
-        snprintf(buf, cap, "in %c%s, %s%c", lo_open ? '(' : '[', lo, hi, hi_open ? ')' : ']');
+        snprintf(buf, cap, "in %c%s, %s%c", lo_open ? '(' : '[', lo, hi,
+                 hi_open ? ')' : ']');
     else if (has_lo && has_hi)
-        snprintf(buf, cap, "%s %s and %s %s", lo_open ? ">" : ">=", lo, hi_open ? "<" : "<=",
-                 hi);
+        snprintf(buf, cap, "%s %s and %s %s", lo_open ? ">" : ">=", lo,
+                 hi_open ? "<" : "<=", hi);
     else if (has_lo)
         snprintf(buf, cap, "%s %s", lo_open ? ">" : ">=", lo);
     else if (has_hi)
@@ -109,7 +110,8 @@ parse_number(const mcp_operation *op, const mcp_option *o, const char *label,
     double v = strtod(text, &end);
     if (end == text || *end || errno || !isfinite(v)) {
         if (o->auto_word)
-            return mcp_error("%s must be %s or a number (got '%s')", label, o->auto_word, text);
+            return mcp_error("%s must be %s or a number (got '%s')", label, o->auto_word,
+                             text);
         return mcp_error("%s must be a number (got '%s')", label, text);
     }
     if (!in_range(o, v)) return out_of_range(op, o, label, text);
@@ -118,8 +120,8 @@ parse_number(const mcp_operation *op, const mcp_option *o, const char *label,
 }
 
 static int
-parse_int(const mcp_operation *op, const mcp_option *o, const char *label, const char *text,
-          int *out)
+parse_int(const mcp_operation *op, const mcp_option *o, const char *label,
+          const char *text, int *out)
 {
     if (o->auto_word && !strcasecmp(text, o->auto_word)) {
         *out = (int)o->auto_value;
@@ -130,8 +132,8 @@ parse_int(const mcp_operation *op, const mcp_option *o, const char *label, const
     long v = strtol(text, &end, 10);
     if (end == text || *end || errno || v < -2147483647L || v > 2147483647L) {
         if (o->auto_word)
-            return mcp_error("%s must be an integer or %s (got '%s')", label, o->auto_word,
-                             text);
+            return mcp_error("%s must be an integer or %s (got '%s')", label,
+                             o->auto_word, text);
         return mcp_error("%s must be an integer (got '%s')", label, text);
     }
     if (!in_range(o, (double)v)) return out_of_range(op, o, label, text);
@@ -167,8 +169,9 @@ parse_whole(const char *label, const char *text, int64_t *out)
 static int
 parse_flag(const char *label, const char *text, int *out)
 {
-    static const char *const yes[] = {"true", "yes", "on", "1"},
-                             *const no[] = {"false", "no", "off", "0"};
+    static const char *const yes[] = {"true", "yes", "on", "1"}, *const no[] = {
+                                                                     "false", "no", "off",
+                                                                     "0"};
     for (int i = 0; i < 4; i++) {
         if (!strcasecmp(text, yes[i])) return *out = 1, 0;
         if (!strcasecmp(text, no[i])) return *out = 0, 0;
@@ -177,8 +180,8 @@ parse_flag(const char *label, const char *text, int *out)
 }
 
 static int
-parse_list(const mcp_operation *op, const mcp_option *o, const char *label, const char *text,
-           double *out, int *count)
+parse_list(const mcp_operation *op, const mcp_option *o, const char *label,
+           const char *text, double *out, int *count)
 {
     double v[64];
     int n = 0, max = o->max_count < 64 ? o->max_count : 64;
@@ -187,8 +190,10 @@ parse_list(const mcp_operation *op, const mcp_option *o, const char *label, cons
         const char *comma = strchr(p, ',');
         size_t len = comma ? (size_t)(comma - p) : strlen(p);
         char word[64];
-        while (len && *p == ' ') p++, len--;
-        while (len && p[len - 1] == ' ') len--;
+        while (len && *p == ' ')
+            p++, len--;
+        while (len && p[len - 1] == ' ')
+            len--;
         if (len == 0 && !comma && n == 0 && !*text) break; /* "": no values */
         if (len >= sizeof word)
             return mcp_error("%s must be a number (got '%.*s')", label, (int)len, p);
@@ -216,11 +221,21 @@ mcp_operation_set(const mcp_operation *op, const mcp_option *o, const char *labe
     int rc = 0;
     if (!text) return mcp_error("%s: no value given", label);
     switch (o->type) {
-    case MCP_OPT_NUMBER: rc = parse_number(op, o, label, text, f); break;
-    case MCP_OPT_INT: rc = parse_int(op, o, label, text, f); break;
-    case MCP_OPT_SEED: rc = parse_seed(label, text, f); break;
-    case MCP_OPT_WHOLE: rc = parse_whole(label, text, f); break;
-    case MCP_OPT_FLAG: rc = parse_flag(label, text, f); break;
+    case MCP_OPT_NUMBER:
+        rc = parse_number(op, o, label, text, f);
+        break;
+    case MCP_OPT_INT:
+        rc = parse_int(op, o, label, text, f);
+        break;
+    case MCP_OPT_SEED:
+        rc = parse_seed(label, text, f);
+        break;
+    case MCP_OPT_WHOLE:
+        rc = parse_whole(label, text, f);
+        break;
+    case MCP_OPT_FLAG:
+        rc = parse_flag(label, text, f);
+        break;
     case MCP_OPT_ENUM: {
         int v = 0;
         rc = mcp_wordlist_find(o->words, text, &v);
@@ -231,14 +246,17 @@ mcp_operation_set(const mcp_operation *op, const mcp_option *o, const char *labe
         rc = parse_list(op, o, label, text, f, field(settings, o->count_offset));
         break;
     case MCP_OPT_TEXT:
-    case MCP_OPT_INPUT: *(const char **)f = text; break;
+    case MCP_OPT_INPUT:
+        *(const char **)f = text;
+        break;
     case MCP_OPT_DENOISER:
         return mcp_error("%s: a denoiser is read by the front end, not as text", label);
     }
     if (rc) return -1;
     if (op && op->given_offset) {
         long i = o - op->options;
-        if (i >= 0 && i < 64) *(uint64_t *)field(settings, op->given_offset) |= UINT64_C(1) << i;
+        if (i >= 0 && i < 64)
+            *(uint64_t *)field(settings, op->given_offset) |= UINT64_C(1) << i;
     }
     return 0;
 }
@@ -298,8 +316,12 @@ mcp_option_format(const mcp_option *o, const void *settings, char *buf, size_t c
     case MCP_OPT_SEED:
         snprintf(buf, cap, "%llu", (unsigned long long)*(const uint64_t *)f);
         break;
-    case MCP_OPT_WHOLE: snprintf(buf, cap, "%lld", (long long)*(const int64_t *)f); break;
-    case MCP_OPT_FLAG: snprintf(buf, cap, "%s", *(const int *)f ? "true" : "false"); break;
+    case MCP_OPT_WHOLE:
+        snprintf(buf, cap, "%lld", (long long)*(const int64_t *)f);
+        break;
+    case MCP_OPT_FLAG:
+        snprintf(buf, cap, "%s", *(const int *)f ? "true" : "false");
+        break;
     case MCP_OPT_ENUM:
         snprintf(buf, cap, "%s", mcp_wordlist_name(o->words, *(const int *)f));
         break;
@@ -320,7 +342,9 @@ mcp_option_format(const mcp_option *o, const void *settings, char *buf, size_t c
         snprintf(buf, cap, "%s", s ? s : "~");
         break;
     }
-    case MCP_OPT_DENOISER: snprintf(buf, cap, "~"); break;
+    case MCP_OPT_DENOISER:
+        snprintf(buf, cap, "~");
+        break;
     }
 }
 
@@ -331,8 +355,7 @@ typedef struct {
     size_t len, cap;
 } strbuf;
 
-static int
-add(strbuf *b, const char *fmt, ...) MCP_PRINTF(2, 3);
+static int add(strbuf *b, const char *fmt, ...) MCP_PRINTF(2, 3);
 
 static int
 add(strbuf *b, const char *fmt, ...)
@@ -406,10 +429,10 @@ markdown_row(strbuf *b, const mcp_operation *op, const mcp_option *o, const char
              const char *def)
 {
     char flag[96] = "—", meta[96] = "", range[96] = "";
-    const char *value = o->meta                    ? o->meta
-                        : o->type == MCP_OPT_FLAG  ? "true|false"
-                        : o->type == MCP_OPT_INT   ? "N"
-                                                   : "X";
+    const char *value = o->meta                   ? o->meta
+                        : o->type == MCP_OPT_FLAG ? "true|false"
+                        : o->type == MCP_OPT_INT  ? "N"
+                                                  : "X";
     if (op->denoiser)
         snprintf(flag, sizeof flag, "`--denoiser-opt %s=%s`", o->name, value);
     else if (mcp_option_takes(o, MCP_OPT_CLI)) {
@@ -421,7 +444,8 @@ markdown_row(strbuf *b, const mcp_operation *op, const mcp_option *o, const char
             snprintf(flag, sizeof flag, "`%s`", f);
         else
             snprintf(flag, sizeof flag, "`%s %s`%s%s%s", f, value,
-                     o->alias ? ", `--" : "", o->alias ? o->alias : "", o->alias ? "`" : "");
+                     o->alias ? ", `--" : "", o->alias ? o->alias : "",
+                     o->alias ? "`" : "");
         if (o->letter) {
             snprintf(meta, sizeof meta, "`-%c`, ", o->letter);
             size_t n = strlen(meta);
@@ -444,7 +468,8 @@ markdown_row(strbuf *b, const mcp_operation *op, const mcp_option *o, const char
     }
     /* which front ends it misses, of those the operation has at all */
     unsigned all = 0;
-    for (const mcp_option *p = op->options; p->name; p++) all |= p->where ? p->where : MCP_OPT_ALL;
+    for (const mcp_option *p = op->options; p->name; p++)
+        all |= p->where ? p->where : MCP_OPT_ALL;
     if (!rc && o->where && (o->where & all) != all)
         rc = add(b, " (%s)", where_text(o->where | (MCP_OPT_ALL & ~all)));
     return rc || add(b, " |\n");
@@ -454,7 +479,8 @@ char *
 mcp_operation_markdown(const mcp_operation *op)
 {
     strbuf b = {0};
-    int rc = add(&b, "| option | command line | default | meaning |\n|---|---|---|---|\n");
+    int rc =
+        add(&b, "| option | command line | default | meaning |\n|---|---|---|---|\n");
     for (const mcp_option *o = op->options; o->name && !rc; o++)
         rc = markdown_row(&b, op, o, o->doc, o->def);
     const mcp_operation *sh = mcp_shared_operation();
@@ -464,8 +490,9 @@ mcp_operation_markdown(const mcp_operation *op)
             if (mcp_shared_option(k) == o) bit = k;
         if (!(op->shared & bit)) continue;
         int is_output = bit == MCP_SHARED_OUTPUT;
-        rc = markdown_row(&b, op, o, is_output && op->output_doc ? op->output_doc : o->doc,
-                          is_output ? op->output_def : o->def);
+        rc =
+            markdown_row(&b, op, o, is_output && op->output_doc ? op->output_doc : o->doc,
+                         is_output ? op->output_def : o->def);
     }
     if (rc) {
         free(b.text);

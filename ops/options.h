@@ -29,21 +29,21 @@ extern "C" {
 
 /* What a value is, and the C type of its field in the settings struct. */
 typedef enum {
-    MCP_OPT_NUMBER,   /* double; lo/hi per bounds; auto_word may stand for auto_value */
-    MCP_OPT_INT,      /* int; lo/hi per bounds; auto_word may stand for auto_value */
-    MCP_OPT_SEED,     /* uint64_t, a non-negative integer */
-    MCP_OPT_WHOLE,    /* int64_t, a whole number >= 0 (up to 2^52: exact as a double) */
-    MCP_OPT_FLAG,     /* int, 0 or 1: true/false, yes/no, on/off; the command line takes
-                       * --NAME (1) and --no-NAME (0) */
-    MCP_OPT_ENUM,     /* an enum (int-sized): one of words' words */
-    MCP_OPT_LIST,     /* double[max_count] at offset, the count (int) at count_offset;
-                       * comma-separated on the command line, a YAML list in a job */
-    MCP_OPT_TEXT,     /* const char *, borrowed from the front end's text */
-    MCP_OPT_INPUT,    /* const char *: a file on the command line, an input's name in a
-                       * job, an array or a path in Python (each front end reads it) */
-    MCP_OPT_DENOISER  /* the denoiser and its settings: each front end reads it
-                       * (--denoiser and --denoiser-opt, a job's denoiser map, a
-                       * Python name or dict); declared here for the docs and keys */
+    MCP_OPT_NUMBER,  /* double; lo/hi per bounds; auto_word may stand for auto_value */
+    MCP_OPT_INT,     /* int; lo/hi per bounds; auto_word may stand for auto_value */
+    MCP_OPT_SEED,    /* uint64_t, a non-negative integer */
+    MCP_OPT_WHOLE,   /* int64_t, a whole number >= 0 (up to 2^52: exact as a double) */
+    MCP_OPT_FLAG,    /* int, 0 or 1: true/false, yes/no, on/off; the command line takes
+                      * --NAME (1) and --no-NAME (0) */
+    MCP_OPT_ENUM,    /* an enum (int-sized): one of words' words */
+    MCP_OPT_LIST,    /* double[max_count] at offset, the count (int) at count_offset;
+                      * comma-separated on the command line, a YAML list in a job */
+    MCP_OPT_TEXT,    /* const char *, borrowed from the front end's text */
+    MCP_OPT_INPUT,   /* const char *: a file on the command line, an input's name in a
+                      * job, an array or a path in Python (each front end reads it) */
+    MCP_OPT_DENOISER /* the denoiser and its settings: each front end reads it
+                      * (--denoiser and --denoiser-opt, a job's denoiser map, a
+                      * Python name or dict); declared here for the docs and keys */
 } mcp_opt_type;
 
 /* Where an option is taken (the `where` bits; 0 means all three). */
@@ -53,61 +53,61 @@ enum { MCP_OPT_CLI = 1, MCP_OPT_JOB = 2, MCP_OPT_PY = 4, MCP_OPT_ALL = 7 };
 enum { MCP_OPT_LO = 1, MCP_OPT_HI = 2, MCP_OPT_LO_OPEN = 4 | 1, MCP_OPT_HI_OPEN = 8 | 2 };
 
 typedef struct mcp_option {
-    const char *name;  /* job key and Python keyword; the flag is --name with '-' */
+    const char *name; /* job key and Python keyword; the flag is --name with '-' */
     mcp_opt_type type;
-    unsigned where;    /* MCP_OPT_CLI | MCP_OPT_JOB | MCP_OPT_PY; 0: all */
-    size_t offset;     /* offsetof the field in the operation's settings */
-    const char *meta;  /* the value's name in --help: "T", "LIST", "NAME" */
-    const char *def;   /* the default as the docs say it (NULL: none) */
-    const char *doc;   /* one line */
+    unsigned where;            /* MCP_OPT_CLI | MCP_OPT_JOB | MCP_OPT_PY; 0: all */
+    size_t offset;             /* offsetof the field in the operation's settings */
+    const char *meta;          /* the value's name in --help: "T", "LIST", "NAME" */
+    const char *def;           /* the default as the docs say it (NULL: none) */
+    const char *doc;           /* one line */
     const mcp_wordlist *words; /* MCP_OPT_ENUM */
-    double lo, hi;     /* MCP_OPT_NUMBER, MCP_OPT_INT: the range, per bounds */
+    double lo, hi;             /* MCP_OPT_NUMBER, MCP_OPT_INT: the range, per bounds */
     unsigned bounds;
     size_t count_offset; /* MCP_OPT_LIST: offsetof the count */
     int max_count;       /* MCP_OPT_LIST: at most this many values (at least 1) */
     /* MCP_OPT_INT, MCP_OPT_NUMBER: a word that stands for auto_value ("auto") */
     const char *auto_word;
     double auto_value;
-    const char *alias;   /* another command-line spelling ("ref" for reference) */
-    char letter;         /* a one-letter flag ('o'), or 0 */
-    const char *group;   /* the --help heading it is listed under (NULL: the first) */
+    const char *alias; /* another command-line spelling ("ref" for reference) */
+    char letter;       /* a one-letter flag ('o'), or 0 */
+    const char *group; /* the --help heading it is listed under (NULL: the first) */
 } mcp_option;
 
 /* One operation: its options and its settings struct. */
 typedef struct mcp_operation {
-    const char *name;           /* "estimate" */
-    const char *summary;        /* one line */
-    const mcp_option *options;  /* ended by a row with name NULL */
-    size_t size;                /* sizeof the settings struct */
+    const char *name;          /* "estimate" */
+    const char *summary;       /* one line */
+    const mcp_option *options; /* ended by a row with name NULL */
+    size_t size;               /* sizeof the settings struct */
     void (*defaults)(void *settings);
     /* After every option is read: what follows from several of them (e.g. estimate's
      * taus from a single tau) and the library's own check. NULL: nothing. */
     int (*finish)(void *settings);
-    size_t given_offset;        /* offsetof a uint64_t: bit i set when options[i] was
-                                 * given (0: not kept) */
-    unsigned shared;            /* the shared flags it takes (MCP_SHARED_*) */
+    size_t given_offset; /* offsetof a uint64_t: bit i set when options[i] was
+                          * given (0: not kept) */
+    unsigned shared;     /* the shared flags it takes (MCP_SHARED_*) */
     /* 1: a denoiser's settings (<mcpost/denoiser.h> mcp_denoiser_kind.options), which
      * every front end gives as a map: --denoiser-opt KEY=VALUE, a job's denoiser: map,
      * a Python dict */
     int denoiser;
-    const char *output_doc;     /* what -o / output is for this operation */
-    const char *output_def;     /* and its default as the docs say it (NULL: none) */
+    const char *output_doc; /* what -o / output is for this operation */
+    const char *output_def; /* and its default as the docs say it (NULL: none) */
 } mcp_operation;
 
 /* ---- the flags every command shares ---- */
 
 enum {
-    MCP_SHARED_QUIET = 1,   /* --quiet: no progress on stderr */
-    MCP_SHARED_JSON = 2,    /* --json: the result's JSON on stdout */
-    MCP_SHARED_OUTPUT = 4,  /* -o, --output (a job's output: key) */
-    MCP_SHARED_THREADS = 8  /* --threads N: OpenMP threads */
+    MCP_SHARED_QUIET = 1,  /* --quiet: no progress on stderr */
+    MCP_SHARED_JSON = 2,   /* --json: the result's JSON on stdout */
+    MCP_SHARED_OUTPUT = 4, /* -o, --output (a job's output: key) */
+    MCP_SHARED_THREADS = 8 /* --threads N: OpenMP threads */
 };
 
 typedef struct mcp_shared_settings {
     int quiet, json;
     const char *output;
-    int threads;         /* 0: OpenMP's default */
-    int print_settings;  /* print the settings as read and stop (every command) */
+    int threads;        /* 0: OpenMP's default */
+    int print_settings; /* print the settings as read and stop (every command) */
 } mcp_shared_settings;
 
 /* The shared flags' table (settings: mcp_shared_settings). */

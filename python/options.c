@@ -91,7 +91,8 @@ value_text(const char *fn, const mcp_option *o, PyObject *v, char *buf, size_t c
                 Py_DECREF(fast);
                 return -1;
             }
-            n += (size_t)snprintf(buf + n, n < cap ? cap - n : 0, "%s%s", i ? "," : "", one);
+            n += (size_t)snprintf(buf + n, n < cap ? cap - n : 0, "%s%s", i ? "," : "",
+                                  one);
         }
         Py_DECREF(fast);
         return 0;
@@ -104,17 +105,20 @@ value_text(const char *fn, const mcp_option *o, PyObject *v, char *buf, size_t c
         *text = PyBytes_AS_STRING(b);
         return 0;
     }
-    case MCP_OPT_DENOISER: break;
+    case MCP_OPT_DENOISER:
+        break;
     }
     return type_error(fn, o->name, "read by the function itself");
 }
 
 int
-mcp_py_settings(const mcp_operation *op, const char *fn, PyObject *kw, const char *const *own,
-                PyObject **own_values, void *settings, PyObject *keep)
+mcp_py_settings(const mcp_operation *op, const char *fn, PyObject *kw,
+                const char *const *own, PyObject **own_values, void *settings,
+                PyObject *keep)
 {
     mcp_operation_defaults(op, settings);
-    for (int k = 0; own && own[k]; k++) own_values[k] = NULL;
+    for (int k = 0; own && own[k]; k++)
+        own_values[k] = NULL;
     PyObject *key, *value;
     Py_ssize_t pos = 0;
     while (kw && PyDict_Next(kw, &pos, &key, &value)) {
@@ -130,8 +134,8 @@ mcp_py_settings(const mcp_operation *op, const char *fn, PyObject *kw, const cha
         const mcp_option *o = mcp_operation_option(op, name);
         /* the table's spelling only: '-' is not a Python name */
         if (!o || strcmp(o->name, name) || !mcp_option_takes(o, MCP_OPT_PY)) {
-            PyErr_Format(PyExc_TypeError, "%s() got an unexpected keyword argument '%s'", fn,
-                         name);
+            PyErr_Format(PyExc_TypeError, "%s() got an unexpected keyword argument '%s'",
+                         fn, name);
             return -1;
         }
         if (value == Py_None) continue; /* None: the default */
@@ -190,7 +194,8 @@ mcp_py_doc(const mcp_operation *op, const char *positional, const char *returns,
         python_default(o, def, sizeof def);
         int len = snprintf(item, sizeof item, ", %s=%s", o->name, def);
         if (line + (size_t)len > 84) { /* wrap under the opening parenthesis */
-            n += (size_t)snprintf(doc + n, cap - n, ",\n%*s", (int)strlen(op->name) + 1, "");
+            n += (size_t)snprintf(doc + n, cap - n, ",\n%*s", (int)strlen(op->name) + 1,
+                                  "");
             line = strlen(op->name) + 1;
             n += (size_t)snprintf(doc + n, cap - n, "%s", item + 2);
             line += (size_t)len - 2;
@@ -199,7 +204,9 @@ mcp_py_doc(const mcp_operation *op, const char *positional, const char *returns,
             line += (size_t)len;
         }
     }
-    if (n < cap) n += (size_t)snprintf(doc + n, cap - n, ") -> %s\n\n%s\n\nKeywords:\n", returns, prose);
+    if (n < cap)
+        n += (size_t)snprintf(doc + n, cap - n, ") -> %s\n\n%s\n\nKeywords:\n", returns,
+                              prose);
     for (const mcp_option *o = op->options; o->name && n < cap; o++) {
         if (!mcp_option_takes(o, MCP_OPT_PY)) continue;
         n += (size_t)snprintf(doc + n, cap - n, "  %s: %s", o->name, o->doc);
@@ -252,8 +259,8 @@ static PyObject *
 py_options(PyObject *self, PyObject *args)
 {
     (void)self;
-    static const char *const types[] = {"number", "int",  "seed",  "whole", "flag",
-                                        "enum",   "list", "text",  "input", "denoiser"};
+    static const char *const types[] = {"number", "int",  "seed", "whole", "flag",
+                                        "enum",   "list", "text", "input", "denoiser"};
     const char *name;
     if (!PyArg_ParseTuple(args, "s:options", &name)) return NULL;
     const mcp_operation *op = mcp_operation_find(name);
@@ -280,14 +287,16 @@ py_options(PyObject *self, PyObject *args)
                 if (!w || PyList_Append(where, w)) Py_CLEAR(where);
                 Py_XDECREF(w);
             }
-        PyObject *d = words && where
-            ? Py_BuildValue("{s:s,s:s,s:N,s:z,s:s,s:N,s:d,s:d,s:O,s:O,s:i,s:z}", "name", o->name,
-                            "type", types[o->type], "where", where, "default", o->def, "doc",
-                            o->doc, "words", words, "lo", o->lo, "hi", o->hi, "has_lo",
-                            (o->bounds & MCP_OPT_LO) ? Py_True : Py_False, "has_hi",
-                            (o->bounds & MCP_OPT_HI) ? Py_True : Py_False, "max_count",
-                            o->max_count, "auto", o->auto_word)
-            : NULL;
+        PyObject *d =
+            words && where
+                ? Py_BuildValue("{s:s,s:s,s:N,s:z,s:s,s:N,s:d,s:d,s:O,s:O,s:i,s:z}",
+                                "name", o->name, "type", types[o->type], "where", where,
+                                "default", o->def, "doc", o->doc, "words", words, "lo",
+                                o->lo, "hi", o->hi, "has_lo",
+                                (o->bounds & MCP_OPT_LO) ? Py_True : Py_False, "has_hi",
+                                (o->bounds & MCP_OPT_HI) ? Py_True : Py_False,
+                                "max_count", o->max_count, "auto", o->auto_word)
+                : NULL;
         if (!d) {
             Py_XDECREF(words);
             Py_XDECREF(where);

@@ -49,7 +49,8 @@ main(int argc, char **argv)
         return rc;
     }
     const mcp_operation *op = argc == 2 ? mcp_operation_find(argv[1]) : NULL;
-    for (const mcp_denoiser_kind *const *k = mcp_denoiser_kinds(); !op && argc == 2 && *k; k++)
+    for (const mcp_denoiser_kind *const *k = mcp_denoiser_kinds(); !op && argc == 2 && *k;
+         k++)
         if ((*k)->options && !strcmp((*k)->options->name, argv[1])) op = (*k)->options;
     if (!op) {
         fprintf(stderr, "usage: mcpost-optdoc NAME | --write DIR (NAME: ");

@@ -53,10 +53,15 @@ values_for(const mcp_option *o, values *vs)
     case MCP_OPT_NUMBER:
     case MCP_OPT_INT: {
         const char *f = o->type == MCP_OPT_INT ? "%.0f" : "%.17g";
-        if (lo) add_value(vs, f, o->lo), add_value(vs, f, o->lo - 1), add_value(vs, f, o->lo + 3);
-        if (hi) add_value(vs, f, o->hi), add_value(vs, f, o->hi + 1), add_value(vs, f, o->hi - 3);
+        if (lo)
+            add_value(vs, f, o->lo), add_value(vs, f, o->lo - 1),
+                add_value(vs, f, o->lo + 3);
+        if (hi)
+            add_value(vs, f, o->hi), add_value(vs, f, o->hi + 1),
+                add_value(vs, f, o->hi - 3);
         if (lo && hi) add_value(vs, f, floor((o->lo + o->hi) / 2) + 1);
-        if (lo && hi && o->type == MCP_OPT_NUMBER) add_value(vs, "%.17g", (o->lo + o->hi) / 3);
+        if (lo && hi && o->type == MCP_OPT_NUMBER)
+            add_value(vs, "%.17g", (o->lo + o->hi) / 3);
         if (!lo && !hi) add_value(vs, f, 37), add_value(vs, f, -2);
         add_value(vs, "%g", o->type == MCP_OPT_INT ? 2.5 : 0.375);
         add_text(vs, "x");
@@ -87,7 +92,8 @@ values_for(const mcp_option *o, values *vs)
             char w[64];
             snprintf(w, sizeof w, "%s", o->words->words[i]);
             add_text(vs, w);
-            for (char *c = w; *c; c++) *c = *c == '_' ? '-' : *c == '-' ? '_' : (char)(*c & ~0x20);
+            for (char *c = w; *c; c++)
+                *c = *c == '_' ? '-' : *c == '-' ? '_' : (char)(*c & ~0x20);
             add_text(vs, w);
         }
         add_text(vs, "nope");
@@ -104,7 +110,8 @@ values_for(const mcp_option *o, values *vs)
         if (lo) add_value(vs, "%.17g,0.25", o->lo - 1);
         break;
     }
-    default: break;
+    default:
+        break;
     }
 }
 
@@ -116,7 +123,8 @@ assert_field_equal(const mcp_option *o, const void *a, const void *b)
     switch (o->type) {
     case MCP_OPT_NUMBER:
         if (*(const double *)pa != *(const double *)pb)
-            fail_msg("%s: %.17g against %.17g", o->name, *(const double *)pa, *(const double *)pb);
+            fail_msg("%s: %.17g against %.17g", o->name, *(const double *)pa,
+                     *(const double *)pb);
         break;
     case MCP_OPT_INT:
     case MCP_OPT_FLAG:
@@ -135,14 +143,16 @@ assert_field_equal(const mcp_option *o, const void *a, const void *b)
         if (memcmp(pa, pb, (size_t)na * sizeof(double))) fail_msg("%s differs", o->name);
         break;
     }
-    default: break; /* texts are the front ends' own strings; inputs and the denoiser */
+    default:
+        break; /* texts are the front ends' own strings; inputs and the denoiser */
     }
 }
 
 static void
 assert_settings_equal(const mcp_operation *op, const void *a, const void *b)
 {
-    for (const mcp_option *o = op->options; o->name; o++) assert_field_equal(o, a, b);
+    for (const mcp_option *o = op->options; o->name; o++)
+        assert_field_equal(o, a, b);
 }
 
 /* What an operation needs besides the option under test for its finish (the library's
@@ -170,8 +180,10 @@ cli_read(const mcp_operation *op, const mcp_option *o, const char *value, void *
         argc = 2;
     }
     const char *base = base_option(op, o);
-    if (base && !strcmp(base, "budget")) argv[argc++] = "--budget", argv[argc++] = "8";
-    else if (base) argv[argc++] = "--stop";
+    if (base && !strcmp(base, "budget"))
+        argv[argc++] = "--budget", argv[argc++] = "8";
+    else if (base)
+        argv[argc++] = "--stop";
     mcp_shared_settings sh;
     mcp_cli_denoiser_flags df = {0};
     int first = 0;
@@ -193,8 +205,10 @@ job_read(const mcp_operation *op, const mcp_option *o, const char *value, void *
         for (const char *p = value; *p; p++) {
             size_t n = strlen(items);
             if (n + 3 >= sizeof items) break;
-            if (*p == ',') strcat(items, ", ");
-            else items[n] = *p, items[n + 1] = '\0';
+            if (*p == ',')
+                strcat(items, ", ");
+            else
+                items[n] = *p, items[n + 1] = '\0';
         }
         snprintf(yaml, sizeof yaml, "{%s: [%s]}", o->name, items);
     } else {
@@ -203,8 +217,8 @@ job_read(const mcp_operation *op, const mcp_option *o, const char *value, void *
     const char *base = base_option(op, o);
     if (base) { /* ", budget: 8}" or ", stop: true}" */
         size_t n = strlen(yaml) - 1;
-        snprintf(yaml + n, sizeof yaml - n, ", %s}", strcmp(base, "budget") ? "stop: true"
-                                                                           : "budget: 8");
+        snprintf(yaml + n, sizeof yaml - n, ", %s}",
+                 strcmp(base, "budget") ? "stop: true" : "budget: 8");
     }
     mcp_node *root = NULL;
     assert_int_equal(mcp_yaml_parse_string(yaml, "job.yaml", &root), 0);
@@ -245,8 +259,9 @@ test_cli_and_job_read_alike(void **state)
                 int job = job_read(*op, o, vs.v[i], b, job_msg, sizeof job_msg);
                 if ((cli == -1) != (job == 0))
                     fail_msg("%s %s '%s': the command line %s (%s), the job %s (%s)",
-                             (*op)->name, o->name, vs.v[i], cli == -1 ? "takes it" : "refuses it",
-                             cli_msg, job ? "refuses it" : "takes it", job_msg);
+                             (*op)->name, o->name, vs.v[i],
+                             cli == -1 ? "takes it" : "refuses it", cli_msg,
+                             job ? "refuses it" : "takes it", job_msg);
                 if (cli == -1) {
                     assert_settings_equal(*op, a, b);
                     accepted++;
@@ -257,13 +272,14 @@ test_cli_and_job_read_alike(void **state)
                     mcp_option_flag(o->name, flag, sizeof flag);
                     const char *at = strstr(cli_msg, flag);
                     if (at)
-                        snprintf(want, sizeof want, "job.yaml:1: %.*s%s%s", (int)(at - cli_msg),
-                                 cli_msg, o->name, at + strlen(flag));
+                        snprintf(want, sizeof want, "job.yaml:1: %.*s%s%s",
+                                 (int)(at - cli_msg), cli_msg, o->name,
+                                 at + strlen(flag));
                     else
                         snprintf(want, sizeof want, "job.yaml:1: %s", cli_msg);
                     if (strcmp(want, job_msg))
-                        fail_msg("%s %s '%s': the messages differ:\n  %s\n  %s", (*op)->name,
-                                 o->name, vs.v[i], want, job_msg);
+                        fail_msg("%s %s '%s': the messages differ:\n  %s\n  %s",
+                                 (*op)->name, o->name, vs.v[i], want, job_msg);
                     refused++;
                 }
                 compared++;
@@ -293,8 +309,8 @@ defaults_read_back(const mcp_operation *const *op)
                 continue;
             mcp_operation_defaults(*op, s);
             if (mcp_operation_set(*op, o, o->name, o->def, s))
-                fail_msg("%s %s: the default '%s' does not read: %s", (*op)->name, o->name,
-                         o->def, mcp_error_message());
+                fail_msg("%s %s: the default '%s' does not read: %s", (*op)->name,
+                         o->name, o->def, mcp_error_message());
             assert_field_equal(o, d, s);
             /* and the text written back is the text declared */
             char text[256];
@@ -370,10 +386,12 @@ test_flags_are_spelt_once(void **state)
         const mcp_operation *tables[] = {*op, mcp_shared_operation()};
         for (int t = 0; t < 2; t++)
             for (const mcp_option *o = tables[t]->options; o->name; o++) {
-                if (!mcp_option_takes(o, MCP_OPT_CLI) || o->type == MCP_OPT_DENOISER) continue;
+                if (!mcp_option_takes(o, MCP_OPT_CLI) || o->type == MCP_OPT_DENOISER)
+                    continue;
                 const char *spell[3] = {o->name, o->alias, NULL};
                 char no[80];
-                if (o->type == MCP_OPT_FLAG) snprintf(no, sizeof no, "no_%s", o->name), spell[1] = no;
+                if (o->type == MCP_OPT_FLAG)
+                    snprintf(no, sizeof no, "no_%s", o->name), spell[1] = no;
                 for (int k = 0; k < 2 && spell[k]; k++) {
                     mcp_option_flag(spell[k], store[n], sizeof store[n]);
                     for (int j = 0; j < n; j++)
