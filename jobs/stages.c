@@ -23,11 +23,12 @@ static const mcp_stage *const stages[] = {
 };
 
 /* The keys of the stages that read their settings through an operation's table
- * (stage_estimate.c, stage_blend.c, stage_adaptive.c): derived from the table, once, before the stage
+ * (stage_estimate.c, stage_blend.c, stage_adaptive.c, stage_info.c): derived from the table, once, before the stage
  * table is handed out. */
 extern const char *mcp__estimate_keys[MCP__OPTION_KEYS_MAX];
 extern const char *mcp__blend_keys[MCP__OPTION_KEYS_MAX];
 extern const char *mcp__adaptive_keys[MCP__OPTION_KEYS_MAX];
+extern const char *mcp__info_keys[MCP__OPTION_KEYS_MAX];
 static const char *const stage_extras[] = {"title", NULL};
 
 static void
@@ -38,6 +39,7 @@ fill_keys(void)
     mcp__op_job_keys(mcp_operation_blend(), stage_extras, mcp__blend_keys, MCP__OPTION_KEYS_MAX);
     mcp__op_job_keys(mcp_operation_adaptive(), stage_extras, mcp__adaptive_keys,
                      MCP__OPTION_KEYS_MAX);
+    mcp__op_job_keys(mcp_operation_info(), stage_extras, mcp__info_keys, MCP__OPTION_KEYS_MAX);
 }
 
 const mcp_stage *const *

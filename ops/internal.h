@@ -9,6 +9,7 @@
 extern const mcp_operation mcp__op_estimate;
 extern const mcp_operation mcp__op_blend;
 extern const mcp_operation mcp__op_adaptive;
+extern const mcp_operation mcp__op_info;
 
 /* ---- node.c ---- */
 

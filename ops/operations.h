@@ -52,10 +52,17 @@ typedef struct mcp_adaptive_settings {
     uint64_t given;
 } mcp_adaptive_settings;
 
+/* `info`: images and render dumps described. */
+typedef struct mcp_info_settings {
+    mcp_dump_spec spec;  /* how the command line reads a dump: spp, convention, variance */
+    const char *input;   /* a job's input */
+} mcp_info_settings;
+
 /* The operations' tables (ops/op_*.c). */
 MCP_API const mcp_operation *mcp_operation_estimate(void);
 MCP_API const mcp_operation *mcp_operation_blend(void);
 MCP_API const mcp_operation *mcp_operation_adaptive(void);
+MCP_API const mcp_operation *mcp_operation_info(void);
 
 #ifdef __cplusplus
 }
