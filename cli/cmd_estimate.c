@@ -131,8 +131,7 @@ cmd_estimate(int argc, char **argv)
     mcp_series_estimate_options so = st.so;
     mcp_estimate_options *eo = &so.est;
     const char *outdir = sh.output, *pattern = st.series, *spp_text = st.spp,
-               *ref_path = st.reference, *convention = st.convention,
-               *variance = st.variance;
+               *ref_path = st.reference;
     int json = sh.json, exit_status = st.exit_status;
     mcp_series_variance variance_from = st.variance_from;
     optind = first;
@@ -176,10 +175,8 @@ cmd_estimate(int argc, char **argv)
                                          n_files, &series)) {
             goto done;
         }
-        if ((convention &&
-             mcp_convention_from_name(convention, &series->spec.convention)) ||
-            (variance && mcp_variance_kind_from_name(variance, &series->spec.variance)))
-            goto done;
+        series->spec.convention = st.convention;
+        series->spec.variance = st.variance;
         series->variance_from = variance_from;
         if (mcp__estimate_run_series(series, den, &so, ref, outdir ? &od : NULL, section,
                                      &summary, &s))
@@ -193,7 +190,11 @@ cmd_estimate(int argc, char **argv)
         }
     } else {
         const char *path = argv[optind];
-        if (mcp_cli_read_dump(path, NULL, convention, variance, &dump) ||
+        mcp_dump_spec spec = mcp_dump_spec_defaults();
+        spec.path = path;
+        spec.convention = st.convention;
+        spec.variance = st.variance;
+        if (mcp_dump_load(&spec, &dump) ||
             mcp_estimate_compute(dump, den, eo, &e))
             goto done;
         summary = mcp__estimate_json(e, path, den->name, eo);

@@ -177,20 +177,24 @@ static const mcp_option estimate_options[] = {
             "series input's variance_from)",
      .words = &mcp_series_variance_words},
     {.name = "convention",
-     .type = MCP_OPT_TEXT,
+     .type = MCP_OPT_ENUM,
      .where = MCP_OPT_CLI,
      .offset = offsetof(S, convention),
      .meta = "NAME",
      .def = "auto",
      .group = "Reading dumps",
-     .doc = "pbrt, mitsuba, blender, mcpost or plain (a job: the input's)"},
+     .doc = "the render-dump convention (a job: the input's)",
+     .words = &mcp_convention_words},
     {.name = "variance",
-     .type = MCP_OPT_TEXT,
+     .type = MCP_OPT_ENUM,
      .where = MCP_OPT_CLI,
      .offset = offsetof(S, variance),
      .meta = "KIND",
+     .def = "default",
      .group = "Reading dumps",
-     .doc = "per-sample or of-mean [per convention] (a job: the input's)"},
+     .doc = "per-sample or of-mean: overrides what the convention says (a job: the "
+            "input's)",
+     .words = &mcp_variance_kind_words},
     {0}};
 
 static void

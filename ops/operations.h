@@ -24,8 +24,8 @@ typedef struct mcp_estimate_settings {
     const char *reference;  /* a file (command line), an input (job) */
     const char *series;     /* command line: a printf pattern, with spp */
     const char *spp;        /* command line: the pattern's sample counts, "1,2,4" */
-    const char *convention; /* command line: how to read the dumps */
-    const char *variance;
+    mcp_convention convention; /* command line: how to read the dumps */
+    mcp_variance_kind variance;
     int exit_status; /* command line: exit 0 to stop, 10 to go on */
     uint64_t given;
 } mcp_estimate_settings;
