@@ -10,6 +10,7 @@ extern const mcp_operation mcp__op_estimate;
 extern const mcp_operation mcp__op_blend;
 extern const mcp_operation mcp__op_adaptive;
 extern const mcp_operation mcp__op_info;
+extern const mcp_operation mcp__op_merge;
 
 /* ---- node.c ---- */
 

@@ -58,11 +58,19 @@ typedef struct mcp_info_settings {
     const char *input;   /* a job's input */
 } mcp_info_settings;
 
+/* `merge`: render dumps of one frame combined into one (command line only). */
+typedef struct mcp_merge_settings {
+    mcp_merge_options mo;
+    mcp_dump_spec spec; /* how to read the inputs: spp, convention */
+    int half;           /* store half floats */
+} mcp_merge_settings;
+
 /* The operations' tables (ops/op_*.c). */
 MCP_API const mcp_operation *mcp_operation_estimate(void);
 MCP_API const mcp_operation *mcp_operation_blend(void);
 MCP_API const mcp_operation *mcp_operation_adaptive(void);
 MCP_API const mcp_operation *mcp_operation_info(void);
+MCP_API const mcp_operation *mcp_operation_merge(void);
 
 #ifdef __cplusplus
 }
