@@ -11,6 +11,7 @@ extern const mcp_operation mcp__op_blend;
 extern const mcp_operation mcp__op_adaptive;
 extern const mcp_operation mcp__op_info;
 extern const mcp_operation mcp__op_merge;
+extern const mcp_operation mcp__op_denoise;
 
 /* ---- node.c ---- */
 

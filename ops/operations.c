@@ -4,7 +4,8 @@
 #include <string.h>
 
 static const mcp_operation *const list[] = {&mcp__op_estimate, &mcp__op_blend,
-                                            &mcp__op_adaptive, &mcp__op_info, &mcp__op_merge, NULL};
+                                            &mcp__op_adaptive, &mcp__op_info, &mcp__op_merge,
+                                            &mcp__op_denoise, NULL};
 
 const mcp_operation *const *
 mcp_operations(void)

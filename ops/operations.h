@@ -65,12 +65,23 @@ typedef struct mcp_merge_settings {
     int half;           /* store half floats */
 } mcp_merge_settings;
 
+/* `denoise`: one denoiser alone (command line only; Python's denoise and jvp take
+ * arrays). */
+typedef struct mcp_denoise_settings {
+    const char *tangent, *tangent_out;
+    const char *color, *albedo, *normal, *variance_of_mean; /* instead of a dump */
+    int no_albedo, no_normal, no_variance;
+    const char *spp, *convention, *variance; /* how to read a dump */
+    int list;
+} mcp_denoise_settings;
+
 /* The operations' tables (ops/op_*.c). */
 MCP_API const mcp_operation *mcp_operation_estimate(void);
 MCP_API const mcp_operation *mcp_operation_blend(void);
 MCP_API const mcp_operation *mcp_operation_adaptive(void);
 MCP_API const mcp_operation *mcp_operation_info(void);
 MCP_API const mcp_operation *mcp_operation_merge(void);
+MCP_API const mcp_operation *mcp_operation_denoise(void);
 
 #ifdef __cplusplus
 }

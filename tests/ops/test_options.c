@@ -346,8 +346,8 @@ test_defaults_read_back(void **state)
             assert_null((*k)->keys[i]);
             n++;
         }
-    assert_int_equal(n, 10); /* estimate, blend, adaptive, info, merge; gauss, nlm,
-                                bilateral, external, unet */
+    assert_int_equal(n, 11); /* estimate, blend, adaptive, info, merge, denoise; gauss,
+                                nlm, bilateral, external, unet */
 }
 
 /* Every operation's stage takes exactly its table's job options, the shared output
@@ -359,7 +359,7 @@ test_stage_keys_are_the_tables(void **state)
     int stages = 0;
     for (const mcp_operation *const *op = mcp_operations(); *op; op++) {
         const mcp_stage *st = mcp_job_stage_find((*op)->name);
-        if (!st) { /* merge: the command line's alone */
+        if (!st) { /* merge, denoise: the command line's alone */
             for (const mcp_option *o = (*op)->options; o->name; o++)
                 assert_false(mcp_option_takes(o, MCP_OPT_JOB));
             continue;
