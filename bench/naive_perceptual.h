@@ -1,7 +1,7 @@
 /* naive_perceptual.h: straightforward versions of the perceptual methods, the yardstick
  * of bench_perceptual.c (included by it; bench/ builds each bench_*.c alone).
  *
- * Same algorithms and defaults as perceptual/ (SPEC "perceptual": 3-tap kernel g,
+ * Same algorithms and defaults as perceptual/ (docs/mathematics.md §4: 3-tap kernel g,
  * h = delta, clamp tone map, C = 1, replicate borders, serpentine order), written the
  * obvious way: every decision recomputes the local energy sum_q |(g * T(O))(q) -
  * T(I')(q)|^2 over the pixels q it can affect, from scratch, by direct convolution;

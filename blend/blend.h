@@ -1,6 +1,6 @@
-/* blend.h: converging blends of a noisy render with its denoised image (SPEC "blend";
- * Denisova & Bocchi 2024, "Converging Algorithm-Agnostic Denoising for Monte Carlo
- * Rendering").
+/* blend.h: converging blends of a noisy render with its denoised image
+ * (docs/mathematics.md §3; Denisova & Bocchi 2024, "Converging Algorithm-Agnostic
+ * Denoising for Monte Carlo Rendering").
  *
  * Per pixel and channel, the noisy mean n(I) at I samples per pixel and a denoised
  * image d(I') (I' <= I: denoising may have stopped earlier) are mixed as
@@ -43,7 +43,7 @@ extern "C" {
 
 /* How curves are fitted. */
 typedef enum {
-    MCP_CURVE_FIT_ON_THE_FLY = 0, /* newest point + Eq. 11 point (SPEC default) */
+    MCP_CURVE_FIT_ON_THE_FLY = 0, /* newest point + Eq. 11 point (§3.1 default) */
     MCP_CURVE_FIT_RETROSPECTIVE,  /* least squares over every stored point */
     /* The paper's on-the-fly curve (Section 2.5; the authors' code): the last two
      * points that the retrospective selection keeps, and the Eq. 11 point only where
@@ -53,7 +53,8 @@ typedef enum {
 
 /* Which curve. */
 typedef enum {
-    /* log v = a log I + b; log W = (log SURE - b) / a (paper Eqs. 7, 14; SPEC) */
+    /* log v = a log I + b; log W = (log SURE - b) / a (paper Eqs. 7, 14;
+     * docs/mathematics.md §3.4) */
     MCP_CURVE_LOG = 0,
     /* The authors' code (MCPTBlender, curvepredictor.cpp): ln v + c = a I^b with
      * c = 100, W = ((ln SURE + c) / a)^(1/b), W capped at 65536. */
@@ -69,7 +70,7 @@ typedef enum {
 
 /* What to do with negative SURE values. */
 typedef enum {
-    /* zero them while mean(v) >= mean(SURE), their magnitude after that (SPEC) */
+    /* zero them while mean(v) >= mean(SURE), their magnitude after that (§3.3) */
     MCP_NEG_SURE_SWITCH = 0,
     MCP_NEG_SURE_ZERO,
     MCP_NEG_SURE_MAGNITUDE
@@ -96,7 +97,7 @@ typedef struct mcp_blend_options {
     int stop_filtering;
     mcp_neg_sure negative_sure; /* [switch] */
     /* The denoiser keeps all-black pixels black, so W there may be anything: 1 gives
-     * them W = inf (r = d); 0 gives W = 0 (r = n), SPEC's rule [0]. */
+     * them W = inf (r = d); 0 gives W = 0 (r = n), docs/mathematics.md §3.4 [0]. */
     int denoiser_keeps_zeros;
     /* Cap on W (spp); 0 means the curve's own: none for log, 65536 for powerlaw [0]. */
     double max_weight;
@@ -152,9 +153,9 @@ MCP_API int mcp_curve_fit_points(mcp_curve_model model, double powerlaw_offset,
                                  const double *spp, const double *var_of_mean, int n,
                                  double *a, double *b);
 
-/* The retrospective selection (SPEC): walking back from the newest of n points
- * (ordered by increasing I), keep a point when its v is positive and larger than the
- * last point kept; zeros and the rest are dropped. keep[i] receives 0 or 1; returns
+/* The retrospective selection (docs/mathematics.md §3.1): walking back from the newest of
+ * n points (ordered by increasing I), keep a point when its v is positive and larger than
+ * the last point kept; zeros and the rest are dropped. keep[i] receives 0 or 1; returns
  * the number kept. */
 MCP_API int mcp_curve_select_points(const double *var_of_mean, int n,
                                     unsigned char *keep);
@@ -183,9 +184,9 @@ typedef struct mcp_blend_state {
     int magnitude;         /* ditto: negative SURE by magnitude from now on */
 } mcp_blend_state;
 
-/* The filter of SPEC (or opt->filter): Gaussian blur of img (window, sigma from
- * mean_var) or the denoiser applied to img as a colour image (den required then), or
- * a copy for none. */
+/* The filter of docs/mathematics.md §3.2 (or opt->filter): Gaussian blur of img (window,
+ * sigma from mean_var) or the denoiser applied to img as a colour image (den required
+ * then), or a copy for none. */
 MCP_API int mcp_blend_filter_image(const mcp_image *img, double mean_var,
                                    const mcp_blend_options *opt, const mcp_denoiser *den,
                                    mcp_image **out);

@@ -1,12 +1,12 @@
 /* curves.c: convergence curves of the variance of the mean, per pixel and channel, and
- * the weight they give a denoised value (SPEC "blend"; Denisova & Bocchi 2024 Eqs. 7,
- * 11, 14, Sections 2.4-2.5).
+ * the weight they give a denoised value (docs/mathematics.md §3.1; Denisova & Bocchi 2024
+ * Eqs. 7, 11, 14, Sections 2.4-2.5).
  *
- * On the fly, SPEC departs from the paper: SPEC takes the newest point and the Eq. 11
- * point; the paper (Section 2.5: "we accept only the last variance value ... [then] we
- * need to calculate the second point") and the authors' code take the last two points
- * that the retrospective selection keeps, and Eq. 11 only where one survives. SPEC's
- * is the default (MCP_CURVE_FIT_ON_THE_FLY), the paper's an option
+ * On the fly, mcpost departs from the paper (docs/mathematics.md §3.1): it takes the
+ * newest point and the Eq. 11 point; the paper (Section 2.5: "we accept only the last
+ * variance value ... [then] we need to calculate the second point") and the authors' code
+ * take the last two points that the retrospective selection keeps, and Eq. 11 only where
+ * one survives. Ours is the default (MCP_CURVE_FIT_ON_THE_FLY), the paper's an option
  * (MCP_CURVE_FIT_LAST_TWO).
  *
  * Log curve: log v = a log I + b. On the fly the second point comes from Eq. 11,
@@ -21,7 +21,8 @@
  * squares, where the code regresses ln(ln v + c)/ln I on 1/ln I (the same line through
  * two points, but a weighted fit through more, and undefined at I = 1); W stays a real
  * number (the code truncates it to an int) and a zero SURE gets the cap (the code's
- * "minimum weight" from a second curve with N = 1e20 is not in the paper or SPEC). */
+ * "minimum weight" from a second curve with N = 1e20 is not in the paper or
+ * docs/mathematics.md). */
 #include "blend.h"
 #include "internal.h"
 
@@ -95,11 +96,11 @@ mcp_curve_fit_points(mcp_curve_model model, double powerlaw_offset, const double
 int
 mcp_curve_select_points(const double *var_of_mean, int n, unsigned char *keep)
 {
-    /* SPEC: "walking back from the newest point keeping only points larger than the
-     * one after them". We compare with the last point kept (not the raw neighbour), so
-     * the kept points always fall strictly with I and their fitted slope is negative;
-     * a point that is not larger is skipped and the walk goes on (the authors' code
-     * stops at the first such point instead). */
+    /* docs/mathematics.md §3.1 (first written as "walking back from the newest point
+     * keeping only points larger than the one after them"). We compare with the last
+     * point kept (not the raw neighbour), so the kept points always fall strictly with I
+     * and their fitted slope is negative; a point that is not larger is skipped and the
+     * walk goes on (the authors' code stops at the first such point instead). */
     int kept = 0;
     double last = 0;
     for (int i = n - 1; i >= 0; i--) {

@@ -1,4 +1,4 @@
-/* filtering.c: the estimates before curves and weights (SPEC "blend": Filtering,
+/* filtering.c: the estimates before curves and weights (docs/mathematics.md §3.2, §3.3:
  * Negative SURE; Denisova & Bocchi 2024 Sections 2.5-2.6).
  *
  * v and SURE are blurred with a Gaussian (window 11, sigma = min(sqrt(mean v), 1) x
@@ -7,12 +7,12 @@
  * and replaced by its magnitude after that.
  *
  * Departures, on purpose:
- *  - SPEC's rule stops filtering for the Gaussian blur too; the authors' code
+ *  - Our rule (§3.2) stops filtering for the Gaussian blur too; the authors' code
  *    (MCPTBlender main.cpp step 9) stops it only for OIDN filtering.
- *  - Once the rule has fired in a series it stays fired ("once", SPEC), through
+ *  - Once the rule has fired in a series it stays fired ("once", §3.2), through
  *    mcp_blend_state; the authors' code tests each iteration afresh.
  *  - The authors' code floors sigma at 1e-3 x 100 rather than capping it at 100; we
- *    follow SPEC (min) and skip the blur when sigma is 0 (v all zero).
+ *    follow §3.2 (min) and skip the blur when sigma is 0 (v all zero).
  *  - Negative values are fixed after filtering, as in the authors' code (the blur sees
  *    the signed SURE, whose negative part carries information about the estimate's
  *    noise); the paper does not say which comes first. */
@@ -227,7 +227,7 @@ mcp__blend_prepare(const mcp_image *var_of_mean, const mcp_image *sure,
     /* The one rule behind both switches: the noisy image has become better than the
      * denoised one on average. An all-zero v (one sample per pixel: no variance
      * estimate yet) cannot tell, and must not end filtering for the whole series (our
-     * addition: SPEC does not say). */
+     * addition, stated in docs/mathematics.md §3.2). */
     int crossed = out->mean_var > 0 && out->mean_var < out->mean_sure;
     if (state && crossed) {
         state->filtering_stopped = 1;

@@ -1,5 +1,5 @@
-/* options.c: the blend options, their defaults (SPEC "blend" [brackets]), checks and
- * names. */
+/* options.c: the blend options, their defaults (docs/mathematics.md §3 [brackets]),
+ * checks and names. */
 #include "blend.h"
 
 #include <math.h>

@@ -1,5 +1,5 @@
 /* post_correction.c: the James-Stein combiner of a noisy and a denoised image, without
- * a network (SPEC "blend" Post-correction; Gu et al. 2022). Its rho, the weight of the
+ * a network (docs/mathematics.md §3.8; Gu et al. 2022). Its rho, the weight of the
  * denoised input, gives the output's variance through estimate's
  * mcp_postcorrection_variance (Firmino 2023 Eq. 4), for a sampling map:
  * Var[r] = rho^2 Var[d] + (1 - rho)^2 v.

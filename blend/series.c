@@ -1,5 +1,5 @@
 /* series.c: the blend of a whole progressive render and the comparison of the paper's
- * Fig. 4 (SPEC "blend"; Denisova & Bocchi 2024 Sections 2-3).
+ * Fig. 4 (docs/mathematics.md §3; Denisova & Bocchi 2024 Sections 2-3).
  *
  * For each member I of the series: d(I) and SURE(I) from one denoiser evaluation with
  * probes (estimate's mcp_error_maps_compute, plain SURE), or d(I') and SURE(I') kept

@@ -1,5 +1,6 @@
-/* weights.c: the weight of the denoised image and the blends (SPEC "blend": Weight,
- * Blend, Easy blending, Ideal blending; Denisova & Bocchi 2024 Eqs. 2, 4, 8, 14).
+/* weights.c: the weight of the denoised image and the blends (docs/mathematics.md
+ * §3.4-§3.6: Weight, Blend, Easy blending, Ideal blending; Denisova & Bocchi 2024 Eqs. 2,
+ * 4, 8, 14).
  *
  * r = (I n + W d) / (I + W), computed in double. W is a sample count: 0 keeps the
  * noisy value, inf takes the denoised one. All-black values (no curve: v = 0) get
@@ -146,7 +147,7 @@ mcp_blend_ideal(const mcp_image *noisy, double spp, const mcp_image *denoised,
             for (int k = 0; k < 3; k++) {
                 double nv = mcp__rgb_at(&n, x, y, k), dv = mcp__rgb_at(&d, x, y, k);
                 double rv = mcp__rgb_at(&r, x, y, k);
-                /* Eq. 4, W = I (R - n) / (d - R). SPEC clamps it at 0 where the paper
+                /* Eq. 4, W = I (R - n) / (d - R). We clamp it at 0 (§3.6) where the paper
                  * does not: where R is not between n and d we keep n, even where R lies
                  * beyond d and W = inf (d) would be closer. d = R needs W = inf. */
                 double wt = dv == rv ? INFINITY : fmax(0.0, spp * (rv - nv) / (dv - rv));

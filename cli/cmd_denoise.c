@@ -1,7 +1,7 @@
 /* cmd_denoise.c: `mcpost denoise` -- runs one denoiser alone on a render dump or on
  * separate colour/albedo/normal files, and with --tangent also writes its
  * Jacobian-vector product J·T: the way to check a denoiser and its derivative from
- * outside (SPEC estimate, "Denoisers"). The flags are the denoise table's
+ * outside (docs/mathematics.md §2.1). The flags are the denoise table's
  * (ops/op_denoise.c), read by cli/options.c. */
 #include "cli.h"
 

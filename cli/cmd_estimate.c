@@ -1,6 +1,6 @@
 /* cmd_estimate.c: `mcpost estimate` -- how wrong a denoised render is and whether to
- * stop (estimate/estimate.h; SPEC "estimate"). The flags are the estimate's table
- * (ops/op_estimate.c), read by cli/options.c; the outputs
+ * stop (estimate/estimate.h; docs/mathematics.md §2). The flags are the estimate's
+ * table (ops/op_estimate.c), read by cli/options.c; the outputs
  * (images, estimate.json, the report section) are the library's, shared with the
  * `estimate` job stage (jobs/estimate_output.c, jobs/stage_estimate.c).
  *

@@ -1,11 +1,11 @@
 /* cmd_perceptual.c: `mcpost perceptual` -- perceptual error optimisation of M candidate
- * renders (SPEC "perceptual"; perceptual.h). Writes the optimised image (for horizontal
- * methods the prediction and the permutation map, and the re-rendered image when a
- * re-render command is given), the surrogate, the scores against a reference (pMSE,
- * MSE, the blue-noise spectrum), and with --compare the table of every method on the
- * same input (Chizhov et al. 2022 Table 1). The settings and the run are the library's,
- * shared with the `perceptual` job stage (jobs/perceptual_run.c). Flags and job keys
- * are the same words ('-' in flags, '_' in keys). */
+ * renders (docs/mathematics.md §4; perceptual.h). Writes the optimised image (for
+ * horizontal methods the prediction and the permutation map, and the re-rendered image
+ * when a re-render command is given), the surrogate, the scores against a reference
+ * (pMSE, MSE, the blue-noise spectrum), and with --compare the table of every method on
+ * the same input (Chizhov et al. 2022 Table 1). The settings and the run are the
+ * library's, shared with the `perceptual` job stage (jobs/perceptual_run.c). Flags and
+ * job keys are the same words ('-' in flags, '_' in keys). */
 #include "cli.h"
 
 #include <mcpost/perceptual.h>

@@ -1,4 +1,4 @@
-/* colormap.c: false colour for one channel as 8-bit RGB (SPEC perceptual: the
+/* colormap.c: false colour for one channel as 8-bit RGB (docs/mathematics.md §4.11: the
  * blue-noise spectra; FLIP: error maps and the viridis exposure map).
  *
  * Values are scaled so lo -> level 0 and hi -> level 255 (rounded, clamped; NaN -> 0),

@@ -1,11 +1,12 @@
 // cv_plugin.cpp: the OpenCV plug-in (mcpost_cv.so): the C ABI over OpenCV core +
-// imgproc that filter.c and colormap.c use (SPEC perceptual, blend and FLIP filters;
-// notes/libraries.md 2c), through cv.c, which loads it on first use (OpenCV and what it
+// imgproc that filter.c and colormap.c use (the perceptual, blend and FLIP filters;
+// docs/libraries.md §4), through cv.c, which loads it on first use (OpenCV and what it
 // links cost every process ~10 ms of relocations at start, most of `mcpost --version`).
 // C++17 stays in this file. Caller buffers are wrapped as cv::Mat without copies (const_cast for inputs;
 // OpenCV never writes through src). Every entry point catches every exception: none may
-// cross extern "C". Borders are BORDER_REPLICATE (clamp to edge) everywhere, as SPEC
-// asks ("Borders: replicate"); filters are correlations with the anchor at the centre.
+// cross extern "C". Borders are BORDER_REPLICATE (clamp to edge) everywhere, as
+// docs/mathematics.md §4.3 and docs/flip.md §3 ask; filters are correlations with the
+// anchor at the centre.
 #include "cv_shim.h"
 
 #include <opencv2/core.hpp>

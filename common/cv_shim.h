@@ -1,4 +1,4 @@
-/* cv_shim.h: the private C ABI over OpenCV (core + imgproc; notes/libraries.md 2c).
+/* cv_shim.h: the private C ABI over OpenCV (core + imgproc; docs/libraries.md §4).
  * cv_plugin.cpp, the only file in mcpost that talks to OpenCV, implements it in the
  * plug-in mcpost_cv.so; cv.c implements the functions below by loading that plug-in
  * on first use and calling through its table. Not installed.

@@ -1,5 +1,5 @@
 /* dump.c: render dumps -- recognising renderer conventions, loading, checking and
- * writing them (see dump.h; the conventions are in notes/libraries.md §4). */
+ * writing them (see dump.h; the conventions are in docs/conventions.md). */
 #define _POSIX_C_SOURCE 200809L
 #include <mcpost/dump.h>
 

@@ -6,9 +6,9 @@
  * count (scalar or per-pixel map), optional albedo and normal, and the header
  * attributes. Variance is ALWAYS stored as variance of the mean in memory; files that
  * store per-sample variance (pbrt-v4, Mitsuba's moments) are divided by the sample
- * count on load. SPEC "Notation".
+ * count on load. docs/mathematics.md §1.
  *
- * Conventions recognised from channel names and attributes (notes/libraries.md §4):
+ * Conventions recognised from channel names and attributes (docs/conventions.md):
  *   pbrt-v4 GBufferFilm: R,G,B; Variance.R/G/B (per-sample); Albedo.*; N.X/Y/Z;
  *                        int samplesPerPixel
  *   Mitsuba 3:           R,G,B (the film's main image); <aov>.R/G/B whose name

@@ -7,7 +7,7 @@
  * header attributes, from a file or from memory (read_fn). Writes scanline or tiled,
  * float or half. Chunks are decoded and encoded in parallel (OpenMP), each thread with
  * its own Core pipeline; zip chunks that would not shrink enough are stored raw
- * (store_raw_after_probe). notes/libraries.md 2a lists the Core pitfalls this file
+ * (store_raw_after_probe). docs/libraries.md §2 lists the Core pitfalls this file
  * works around; docs/benchmarks.md ("EXR speed") has the measurements. */
 #define _POSIX_C_SOURCE 200809L
 #include "internal.h"
@@ -867,7 +867,7 @@ mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *
 {
     if (opt->compression == MCP_EXR_DWAA || opt->compression == MCP_EXR_DWAB ||
         opt->compression == MCP_EXR_B44 || opt->compression == MCP_EXR_B44A)
-        /* Core 3.1.5 cannot encode DWA and writes corrupt B44 (notes/libraries.md) */
+        /* Core 3.1.5 cannot encode DWA and writes corrupt B44 (docs/libraries.md §2) */
         return mcp_error("%s: cannot write %s compression with the OpenEXR Core library; "
                          "use zip, piz, rle, zips, pxr24 or none",
                          path, compression_name(compression_of[opt->compression]));

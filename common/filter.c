@@ -1,8 +1,9 @@
 /* filter.c: separable and 2D filters, Gaussian kernels and blur, and tile power spectra
- * (SPEC perceptual: kernel g and the blue-noise analysis; SPEC blend: Gaussian blur of v
+ * (mathematics.md §4.1, §4.11: kernel g, blue-noise analysis; §3.2: Gaussian blur of v
  * and SURE; FLIP's filters). The arithmetic is OpenCV's, behind cv_shim.cpp.
  *
- * Borders are replicate (clamp to edge, BORDER_REPLICATE) everywhere, as SPEC asks.
+ * Borders are replicate (clamp to edge, BORDER_REPLICATE) everywhere, as
+ * docs/mathematics.md asks.
  * Filters are correlations, sum_i k[i] * img[x + i - r] (filter.h), always computed
  * directly: cv_shim.cpp keeps OpenCV off its DFT method, so an Inf or NaN pixel (common
  * in renders) only reaches the outputs whose kernel footprint covers it.
@@ -13,11 +14,11 @@
  * channel group by channel group into a packed scratch buffer first.
  *
  * Parallelism: OpenCV 4.6 runs these filters single-threaded for CV_32F
- * (notes/libraries.md 2c), so rows are cut into fixed strips of STRIP_ROWS and the
+ * (docs/libraries.md §4), so rows are cut into fixed strips of STRIP_ROWS and the
  * strips run under OpenMP. Each strip is a row range of a Mat over the whole image, so
  * OpenCV reads the real neighbouring rows and the result equals the whole-image call
  * bit for bit. The split depends only on the image height, never on the thread count,
- * so results are reproducible (STYLE 12). */
+ * so results are reproducible for any thread count. */
 #include <mcpost/filter.h>
 
 #include "cv_shim.h"

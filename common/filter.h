@@ -1,7 +1,7 @@
 /* filter.h: separable and 2D filtering, Gaussian blur, tile DFTs and false colour,
  * over OpenCV (core + imgproc) behind a C++ shim.
  *
- * Border rule everywhere: replicate (clamp-to-edge), as FLIP and SPEC ask.
+ * Border rule everywhere: replicate (clamp-to-edge), as FLIP and docs/mathematics.md ask.
  * Filters compute correlation, sum_i k[i] * img[x + i - r]; for the symmetric kernels
  * mcpost uses this equals convolution. Kernels have odd length 2r+1.
  * All functions filter every channel independently and accept views (any strides);

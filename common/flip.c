@@ -1,4 +1,4 @@
-/* flip.c: LDR-FLIP and HDR-FLIP (SPEC "FLIP"; notes/flip.md §1-3, §8), matching
+/* flip.c: LDR-FLIP and HDR-FLIP (docs/flip.md §1-3, §6), matching
  * NVlabs/flip v1.6 src/cpp/FLIP.h operation for operation in float32.
  *
  * Layout: each image is held as planes (Y, Cx, Cz, normalised Y) so that every filter
@@ -1024,7 +1024,7 @@ auto_exposures(const mcp_image *ref, const int rgb[3], mcp_tonemap tm, float *st
         }
     float ymedian = select_kth(lum, n, n / 2);
     free(lum);
-    /* Departure from v1.6 (SPEC "FLIP"): a zero median would make stop infinite and
+    /* Departure from v1.6 (docs/flip.md §5): a zero median would make stop infinite and
      * the result silently 0; clamp it (and a zero maximum) to FLT_EPSILON, as v1.7. */
     ymedian = ymedian > FLT_EPSILON ? ymedian : FLT_EPSILON;
     ymax = ymax > FLT_EPSILON ? ymax : FLT_EPSILON;

@@ -4,13 +4,14 @@
  *
  * Everything runs in float32 with FLIP's order of operations: separable x-then-y
  * passes with clamp-to-edge borders, tap sums taken sequentially from -r to r, and the
- * mean as a float running sum in row-major order (notes/flip.md §3, §8). Where libm's
+ * mean as a float running sum in row-major order (docs/flip.md §3, §6). Where libm's
  * expf/powf agree with the reference build's, the numbers are the reference's own
- * (e.g. 0.169141844 for flat grey 128 vs 140, float artefacts included); SPEC asks
+ * (e.g. 0.169141844 for flat grey 128 vs 140, float artefacts included); docs/flip.md
+ * §6 asks
  * for 1e-5 on means and 1e-4 per pixel. Per-pixel results depend neither on the thread
  * count nor on the SIMD width (AVX2 or not).
  *
- * Two deliberate departures from v1.6 (SPEC "FLIP"):
+ * Two deliberate departures from v1.6 (docs/flip.md §5):
  *  - HDR-FLIP clamps a zero median (and maximum) reference luminance to FLT_EPSILON
  *    before choosing exposures (v1.6 silently returns 0; v1.7 has the same fix);
  *  - HDR-FLIP clamps negative input values to 0 before anything else (v1.6 tone-maps
@@ -113,7 +114,7 @@ MCP_API int mcp_flip_exposure_xmax(mcp_tonemap tm, float *xmax);
 MCP_API int mcp_flip_auto_exposures(const mcp_image *ref, mcp_tonemap tm, float *start,
                                     float *stop);
 
-/* ---- the CSF operator M of SURE_M (SPEC "Perceptual SURE_M", notes/flip.md §4) ----
+/* ---- the CSF operator M of SURE_M (docs/mathematics.md §2.3, docs/flip.md §4) ----
  *
  * M = T^-1 blkdiag(K_Y, K_Cx, K_Cz) T: linear RGB -> YCxCz (without FLIP's -16 offset,
  * which the unit-DC filters pass through, so M is exactly linear) -> FLIP's CSF filter

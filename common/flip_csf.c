@@ -1,5 +1,5 @@
 /* flip_csf.c: FLIP's contrast-sensitivity filter as a linear operator M on linear RGB,
- * and its exact adjoint (SPEC "Perceptual SURE_M"; notes/flip.md §4).
+ * and its exact adjoint (docs/mathematics.md §2.3; docs/flip.md §4).
  *
  *   M = T^-1 blkdiag(K_Y, K_Cx, K_Cz) T,   M^T = T^T blkdiag(K_Y^T, K_Cx^T, K_Cz^T) T^-T
  *

@@ -1,6 +1,6 @@
 /* metrics.c: MSE, RMSE, relMSE, PSNR, pMSE, RelSE percentiles and both FLIPs of a
- * test image against a reference (SPEC "metrics", "perceptual", estimate "Error
- * distribution"; definitions in metrics.h). */
+ * test image against a reference (docs/mathematics.md §5, §4.3,
+ * §2.9; definitions in metrics.h). */
 #define _POSIX_C_SOURCE 200809L /* mkdir */
 #include <mcpost/metrics.h>
 
@@ -253,8 +253,8 @@ pmse_checked(const mcp_image *test, const int *it, const mcp_image *ref, const i
     int radius, rc = -1;
     mcp_image *tt = NULL, *tr = NULL, *gt = NULL, *hr = NULL;
     if (mcp_pkernel_taps(&opt->kernel, &taps, &radius)) return -1;
-    /* E = sum_c |g * T(O_c) - h * T(I_c)|^2 with replicate borders (SPEC perceptual;
-     * the borders are our choice, stated there). */
+    /* E = sum_c |g * T(O_c) - h * T(I_c)|^2 with replicate borders (docs/mathematics.md
+     * §4.3; the borders are our choice, stated there). */
     if (tone_rgb(test, it, opt->tone_map, &tt) || tone_rgb(ref, ir, opt->tone_map, &tr) ||
         mcp_pkernel_filter(tt, taps, radius, &gt))
         goto done;

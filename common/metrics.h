@@ -1,4 +1,4 @@
-/* metrics.h: how far a test image is from a reference (SPEC "metrics").
+/* metrics.h: how far a test image is from a reference (docs/mathematics.md §5).
  *
  * Over pixels x channels (R, G, B; see mcp_rgb_channels):
  *   MSE     mean (t - r)^2                RMSE sqrt(MSE)
@@ -6,10 +6,11 @@
  *   PSNR    10 log10(1 / MSE) of the displayed images: clamped to [0, 1] and
  *           sRGB-encoded, so that for 8-bit files it is the usual PSNR of the file
  *           values (peak 1 = 255); +inf for identical images
- *   pMSE    E / (N C), E = sum_c |g * T(t_c) - h * T(r_c)|^2 (SPEC "perceptual":
+ *   pMSE    E / (N C), E = sum_c |g * T(t_c) - h * T(r_c)|^2 (docs/mathematics.md §4:
  *           kernel g, h = delta or g, tone map T, replicate borders)
  *   RelSE percentiles  RelSE_i = (t_i - r_i)^2 / (maxc(t)^2 + eps), maxc(t) the
- *           largest of the test image's three channels at the pixel (SPEC estimate:
+ *           largest of the test image's three channels at the pixel
+ *           (docs/mathematics.md §2.9:
  *           maxc of the denoised image F, the image under test); the value at p is
  *           element ceil(p n) - 1 of the ascending sort (nearest rank)
  *   LDR-FLIP, HDR-FLIP (flip.h)

@@ -1,6 +1,6 @@
 // oiio_plugin.cpp: the OpenImageIO plug-in (mcpost_oiio.so), dlopen()ed by imageio.c
 // only when a PNG/JPEG/HDR/TIFF file is used, since linking OpenImageIO costs about
-// 0.5 s per process start (notes/libraries.md 2b). No exception crosses the C ABI.
+// 0.5 s per process start (docs/libraries.md §3). No exception crosses the C ABI.
 #include <OpenImageIO/imageio.h>
 
 #include <cstdio>

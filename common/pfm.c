@@ -1,5 +1,5 @@
 /* pfm.c: Portable Float Map read/write, done by hand because OpenImageIO 2.4 cannot
- * write PFM (notes/libraries.md 2b). Rows are stored bottom to top; a negative scale
+ * write PFM (docs/libraries.md §3). Rows are stored bottom to top; a negative scale
  * means little-endian. Colour files ("PF") hold R,G,B; grey files ("Pf") hold Y. */
 #define _POSIX_C_SOURCE 200809L /* fmemopen */
 #include "internal.h"

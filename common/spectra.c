@@ -1,5 +1,5 @@
 /* spectra.c: tiled power spectra of an error image and its low-frequency energy
- * fraction (SPEC "perceptual", blue-noise analysis). The DFTs come from
+ * fraction (docs/mathematics.md §4.11). The DFTs come from
  * mcp_tile_power_spectra (filter.h), which centres the zero frequency at n/2. */
 #include <mcpost/spectra.h>
 #include <mcpost/filter.h>

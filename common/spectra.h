@@ -1,4 +1,4 @@
-/* spectra.h: blue-noise analysis of an error image (SPEC "perceptual", blue-noise
+/* spectra.h: blue-noise analysis of an error image (docs/mathematics.md §4.11, blue-noise
  * analysis; Chizhov et al. 2022).
  *
  * The error eps = T(test) - T(reference) (per RGB channel, T the tone map) is cut into

@@ -1,5 +1,5 @@
-/* tonemap.c: tone maps, RGB channel lookup and the perceptual kernel g (SPEC
- * "perceptual": kernel g and tone map T; notes/flip.md §2 for FLIP's tone curves). */
+/* tonemap.c: tone maps, RGB channel lookup and the perceptual kernel g
+ * (docs/mathematics.md §4.1-§4.2; docs/flip.md §2 for FLIP's tone curves). */
 #define _POSIX_C_SOURCE 200809L /* strcasecmp */
 #include <mcpost/tonemap.h>
 
@@ -251,7 +251,7 @@ mcp_pkernel_filter(const mcp_image *img, const double *taps, int radius, mcp_ima
         free(tmp);
         return -1;
     }
-    /* x pass into double, then y pass; replicate (clamp-to-edge) borders as SPEC asks. */
+    /* x pass into double, then y pass; replicate (clamp-to-edge) borders (§4.3). */
 #pragma omp parallel for if (n > 65536)
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++)

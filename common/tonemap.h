@@ -1,12 +1,12 @@
-/* tonemap.h: tone maps, luminance, and the perceptual kernel g of SPEC "perceptual".
+/* tonemap.h: tone maps, luminance, and the perceptual kernel g of docs/mathematics.md §4.
  *
  * Tone maps T act per channel on linear values (Reinhard on luminance, as FLIP does):
  *   none      T(x) = x
- *   clamp     T(x) = min(max(x, 0), 1)                     (SPEC perceptual default)
+ *   clamp     T(x) = min(max(x, 0), 1)                     (§4.2 default)
  *   aces      Narkowicz's fit x(2.51x + 0.03) / (x(2.43x + 0.59) + 0.14), clamped
- *             to [0, 1] (SPEC estimate "ACES (Narkowicz fit)"; no pre-exposure)
+ *             to [0, 1] (§2.6 "ACES (Narkowicz's fit)"; no pre-exposure)
  *   hable     Uncharted 2 with white point 11.2 and exposure bias 2, clamped, in
- *             the rational form FLIP uses (notes/flip.md §2)
+ *             the rational form FLIP uses (docs/flip.md §2)
  *   reinhard  x / (1 + x) per channel, clamped
  * Negative inputs are clamped to 0 before every map except none.
  *

@@ -1,11 +1,11 @@
-/* blockavg.c: kd-tree block averaging of SURE (SPEC "Block averaging"; Firmino 2024
+/* blockavg.c: kd-tree block averaging of SURE (docs/mathematics.md §2.7; Firmino 2024
  * Alg. 1, Eq. 13).
  *
  * A block whose longest side is > 1 is cut at the middle of that side (the width on
  * ties; the paper does not say) and the cut is kept when both halves pass, for all
  * three channels, Σ Σ̂^r / sqrt(|B_j ∩ C_k|) < Σ SURE^r.
  *
- * Sums: SPEC asks for per-channel summed-area tables in double so that each test is
+ * Sums: §2.7 asks for per-channel summed-area tables in double so that each test is
  * O(1). A full-resolution table of the 6 quantities is 48 bytes a pixel (50 MB at
  * 1024²), and writing it costs more than everything else here, so the table is kept
  * over CELL x CELL cells (3 MB at 1024²) and the few rows and columns of partial

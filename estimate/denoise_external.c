@@ -1,6 +1,6 @@
 /* denoise_external.c: the `external` denoiser -- any command that reads image files and
- * writes one, e.g. Open Image Denoise's oidnDenoise (SPEC estimate, "Denoisers";
- * notes/oidn.md section 5). It is a black box, so its Jacobian-vector product is the
+ * writes one, e.g. Open Image Denoise's oidnDenoise (docs/mathematics.md §2.1;
+ * docs/oidn-network.md §5). It is a black box, so its Jacobian-vector product is the
  * finite difference (F(X + delta t) - F(X)) / delta, where t already carries the noise
  * scale and delta is unitless (exact = 0).
  *

@@ -1,6 +1,6 @@
-/* denoise_gauss.c: the `gauss` denoiser -- a Gaussian blur of the colour (SPEC
- * estimate, "Denoisers"). It is linear, so its Jacobian-vector product is the same blur
- * applied to the tangent, exactly. A baseline and a test object for SURE: it ignores
+/* denoise_gauss.c: the `gauss` denoiser -- a Gaussian blur of the colour
+ * (docs/mathematics.md §2.1). It is linear, so its Jacobian-vector product is the same
+ * blur applied to the tangent, exactly. A baseline and a test object for SURE: it ignores
  * albedo, normal and variance.
  *
  * Settings (the table below, docs/denoisers.md): sigma [2] (px, > 0), radius

@@ -1,5 +1,5 @@
 /* denoise_nlm.c: the `nlm` denoiser -- feature-guided non-local means with an exact
- * forward-mode Jacobian-vector product (SPEC estimate, "Denoisers"). Colour distance
+ * forward-mode Jacobian-vector product (docs/mathematics.md §2.1). Colour distance
  * of Rousselle, Knaus & Zwicker 2012 ("Adaptive rendering with non-local means
  * filtering", Eq. 5), feature weights as in a cross-bilateral filter.
  *

@@ -1,5 +1,5 @@
 /* denoiser.h: the denoiser interface -- F(colour, albedo?, normal?) and its
- * Jacobian-vector products J·t, several tangents at once (SPEC "estimate/Denoisers").
+ * Jacobian-vector products J·t, several tangents at once (docs/mathematics.md §2.1).
  *
  * Built-in denoisers compute J·t exactly by forward-mode differentiation (a tangent is
  * propagated through every operation). A black box (an external command, issue 6)

@@ -1,6 +1,6 @@
-/* denoisers.c: the table of denoiser kinds and creation by name (SPEC estimate,
- * "Denoisers"). A kind is one table entry: its name, a summary, its settings keys and a
- * create function; the external command and OIDN's U-Net join as more entries.
+/* denoisers.c: the table of denoiser kinds and creation by name (docs/mathematics.md
+ * §2.1). A kind is one table entry: its name, a summary, its settings keys and a create
+ * function; the external command and OIDN's U-Net join as more entries.
  *
  * Settings come from a job file (`denoiser: nlm` or `denoiser: {name: nlm, radius: 5}`)
  * or from command-line words (`--denoiser nlm --denoiser-opt radius=5`), which are

@@ -1,5 +1,5 @@
 /* estimate.c: the whole error-estimation pipeline on one dump and over a progressive
- * series (SPEC "estimate"; Firmino 2024 Alg. 2 and Table 1, Firmino 2023 Eq. 3).
+ * series (docs/mathematics.md §2; Firmino 2024 Alg. 2 and Table 1, Firmino 2023 Eq. 3).
  *
  * One dump: probes -> denoiser with J·ε (one call, all probes) -> SURE, Var, Σ̂ maps
  * -> sampling map and counts -> blocks (Alg. 1) -> λ, s² (Eq. 14) -> F(τ), the stop

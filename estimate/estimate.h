@@ -1,5 +1,5 @@
 /* estimate.h: how wrong a denoised render still is, where to put the next samples, and
- * when to stop rendering (SPEC "estimate"; Firmino et al. 2023 and 2024, Li 2017).
+ * when to stop rendering (docs/mathematics.md §2; Firmino et al. 2023 and 2024, Li 2017).
  *
  * The pieces, in the order the pipeline (mcp_estimate_compute) runs them:
  *   probes        ε ~ N(0, Σ̂) per pixel (3x3 colour covariance, or the joint
@@ -29,7 +29,7 @@
 extern "C" {
 #endif
 
-/* Relative quantities divide by maxc(p)² + EPS_REL (SPEC "Notation"). metrics.h
+/* Relative quantities divide by maxc(p)² + EPS_REL (docs/mathematics.md §1). metrics.h
  * defines the same constant. */
 #ifndef MCP_EPS_REL
 #define MCP_EPS_REL 1e-2
@@ -83,13 +83,14 @@ MCP_API void mcp_probe_clear(mcp_probe *p); /* frees the parts, sets them to NUL
 /* Probe k of a Gaussian stream: ε ~ N(0, Σ̂_p) per pixel from the dump's variance of
  * the mean and, when present, its colour covariance (and from features when given,
  * drawing colour and features jointly). Negative eigenvalues of Σ̂_p are clamped to 0
- * (SPEC "SURE"). Deterministic in (seed, k, pixel). */
+ * (docs/mathematics.md §2.2). Deterministic in (seed, k, pixel). */
 MCP_API int mcp_probe_gaussian(const mcp_dump *dump,
                                const mcp_feature_covariance *features, uint64_t seed,
                                int k, mcp_probe *out);
 
 /* Probe k of a Rademacher stream: v_p = L_p r_p with L_p L_pᵀ = Σ̂_p (clamped) and
- * r_p a vector of independent ±1 (SPEC "Variance", Firmino 2023 Eq. 2). Colour only. */
+ * r_p a vector of independent ±1 (docs/mathematics.md §2.5, Firmino 2023 Eq. 2).
+ * Colour only. */
 MCP_API int mcp_probe_rademacher(const mcp_dump *dump, uint64_t seed, int k,
                                  mcp_image **out);
 
@@ -104,7 +105,7 @@ typedef struct mcp_sure_options {
     int mc_sure;     /* 1: Jε by finite differences (Ramani 2008), even when the
                         denoiser has an exact jvp [0] */
     double fd_delta; /* δ of the finite differences, unitless: the probe already
-                        carries the noise scale (SPEC "Denoisers") [0.1] */
+                        carries the noise scale (docs/mathematics.md §2.1) [0.1] */
     const mcp_feature_covariance *features; /* joint SURE; NULL: plain SURE [NULL] */
 } mcp_sure_options;
 
@@ -162,7 +163,7 @@ MCP_API int mcp_variance(const mcp_dump *dump, const mcp_denoiser *den,
 
 /* J t_k for k < n by finite differences, (F(X + δ t) - F(X)) / δ, with the colour
  * and feature parts of t moved together; primal (may be NULL) receives F(X). The
- * black-box route of SPEC "Denoisers", usable with any denoiser. */
+ * black-box route of docs/mathematics.md §2.1, usable with any denoiser. */
 MCP_API int mcp_jvp_finite_difference(const mcp_denoiser *den,
                                       const mcp_denoise_input *at,
                                       const mcp_denoise_tangent *t, int n, double delta,
@@ -321,7 +322,7 @@ typedef struct mcp_estimate_options {
     /* s² = (Jε)² from K probes is Var[F] times a χ²_K / K draw; its spread fattens the
      * upper tail of the error distribution, so s² is pooled over a (2r + 1)² window
      * (docs "Variance sources"): -1 automatic (mcp_estimate_auto_s2_pool), 0 none
-     * (SPEC's per-value s²), or r [-1] */
+     * (the per-value s² of docs/mathematics.md §2.8), or r [-1] */
     int s2_pool;
 } mcp_estimate_options;
 
@@ -366,7 +367,7 @@ MCP_API int mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,
 MCP_API void mcp_estimate_free(mcp_estimate *est);
 
 /* The true per-value error of a denoised image against the reference μ in a metric
- * (SPEC "Ground truth for evaluation"): (F - μ)², scaled by maxc(F)² + EPS_REL for
+ * (docs/mathematics.md §2.9): (F - μ)², scaled by maxc(F)² + EPS_REL for
  * relse, or (M(F - μ))² / (maxc(MF)² + EPS_REL) for relse-perceptual. */
 MCP_API int mcp_true_error(const mcp_image *denoised, const mcp_image *reference,
                            mcp_error_metric metric, double ppd, mcp_image **out);

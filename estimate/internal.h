@@ -9,7 +9,7 @@
 
 #include <stddef.h>
 
-/* ---- denoisers (denoisers.c, denoise_*.c; SPEC estimate/Denoisers) ---- */
+/* ---- denoisers (denoisers.c, denoise_*.c; docs/mathematics.md §2.1) ---- */
 
 /* A data file of share/mcpost/ (common/paths.c): 0 and its path in buf, or -1. */
 int mcp__find_data_file(const char *name, char *buf, size_t cap);
@@ -59,7 +59,7 @@ int mcp__buf_reserve(char **buf, size_t *cap, size_t need);
 mcp_denoiser *mcp__denoiser_new(const char *name, size_t state_size);
 
 /* ---- error estimation (probes.c, sure.c, variance.c, sampling_map.c, blockavg.c,
- *      stopping.c, estimate.c; SPEC estimate/SURE to estimate/Error distribution) ---- */
+ *      stopping.c, estimate.c; docs/mathematics.md §2.2-§2.8) ---- */
 
 #include <stdint.h>
 #include <mcpost/estimate.h>

@@ -1,7 +1,7 @@
-/* probes.c: random probes for SURE and the JVP variance (SPEC "SURE", "Variance";
+/* probes.c: random probes for SURE and the JVP variance (docs/mathematics.md §2.2, §2.5;
  * Firmino 2024 §3.3, Firmino 2023 Eq. 2, Li 2017 for the joint colour-feature draw).
  *
- * Gaussian probes ε ~ N(0, Σ̂_p) per pixel. SPEC asks for a draw through the 3x3
+ * Gaussian probes ε ~ N(0, Σ̂_p) per pixel. §2.2 asks for a draw through the 3x3
  * block's eigen-decomposition with negative eigenvalues clamped to 0, because Σ̂ may
  * not be positive semi-definite. Where Σ̂_p is positive definite its Cholesky factor
  * gives the same distribution N(0, Σ̂_p) at a fraction of the cost, so we try Cholesky

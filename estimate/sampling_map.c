@@ -1,5 +1,5 @@
-/* sampling_map.c: denoising-aware adaptive sampling (SPEC "Denoising-aware sampling
- * map"; Firmino 2023 Eqs. 3-5 and §4.1).
+/* sampling_map.c: denoising-aware adaptive sampling
+ * (docs/mathematics.md §2.6; Firmino 2023 Eqs. 3-5 and §4.1).
  *
  * Per pixel s_p = mean_c Var[F_c] / ((n_p + 1)(F_c² + EPS_REL)), clipped at 0, blurred
  * (Gaussian σ 0.5 in 5x5) and normalised to sum 1. Variants: tone-mapped,

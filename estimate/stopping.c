@@ -1,5 +1,5 @@
 /* stopping.c: the error distribution of a denoised image and the stopping criterion
- * (SPEC "Error distribution and stopping"; Firmino 2024 Eqs. 3, 14-16).
+ * (docs/mathematics.md §2.8; Firmino 2024 Eqs. 3, 14-16).
  *
  * The scaled error of value i is modelled as s_i² (Z + √λ_i)², Z ~ N(0, 1): a scaled
  * noncentral χ² with one degree of freedom, whose CDF is closed-form,

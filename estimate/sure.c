@@ -1,5 +1,5 @@
-/* sure.c: Stein's unbiased risk estimate of a denoised render (SPEC "SURE",
- * "Perceptual SURE_M", "Joint SURE"; Firmino 2024 Alg. 2 and Eqs. 6-12, Li 2017,
+/* sure.c: Stein's unbiased risk estimate of a denoised render
+ * (docs/mathematics.md §2.2-§2.4; Firmino 2024 Alg. 2 and Eqs. 6-12, Li 2017,
  * Ramani 2008 for MC-SURE).
  *
  * Per value i, with K probes ε_k ~ N(0, Σ̂):

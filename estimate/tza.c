@@ -1,4 +1,4 @@
-/* tza.c: reader of OIDN's .tza tensor archives (notes/oidn.md section 2): version 2.x
+/* tza.c: reader of OIDN's .tza tensor archives (docs/oidn-network.md §2): version 2.x
  * archives with float32 ('f', OIDN 1.x) or float16 ('h', OIDN 2.x) tensors. The whole
  * file is read, every tensor is converted to float32, and the file buffer is dropped. */
 #include "unet_internal.h"

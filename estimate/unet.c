@@ -1,11 +1,11 @@
-/* unet.c: OIDN's RT U-Net forward pass (notes/oidn.md 1.2, 3): HDR pre-processing
- * (input scale or autoexposure, PU transfer function, albedo/normal clamps), the 16
- * 3x3 convolutions with ReLU, 2x2 max pools, nearest 2x upsampling and skip concats,
- * then the inverse transfer function. Whole image as one tile, padded to 16.
- * Activations are planar (CHW) float32; each is freed as soon as it is consumed.
- * Convolutions are Winograd F(2x2, 3x3) products by default (unet_winograd.c); the
- * direct loops here, register-blocked over output channels and columns, OpenMP over
- * (image, row, column chunk), are the fixed-bit mode (MCPOST_UNET_FIXED=1). */
+/* unet.c: OIDN's RT U-Net forward pass (docs/oidn-network.md §1.2, §3): HDR
+ * pre-processing (input scale or autoexposure, PU transfer function, albedo/normal
+ * clamps), the 16 3x3 convolutions with ReLU, 2x2 max pools, nearest 2x upsampling and
+ * skip concats, then the inverse transfer function. Whole image as one tile, padded to
+ * 16. Activations are planar (CHW) float32; each is freed as soon as it is consumed.
+ * Convolutions are Winograd F(2x2, 3x3) products by default (unet_winograd.c); the direct
+ * loops here, register-blocked over output channels and columns, OpenMP over (image, row,
+ * column chunk), are the fixed-bit mode (MCPOST_UNET_FIXED=1). */
 #define _DEFAULT_SOURCE /* madvise, MADV_HUGEPAGE */
 #include "unet_internal.h"
 #include "internal.h"
@@ -28,7 +28,7 @@ static const char *const conv_names[MCP__UNET_NCONV] = {
 
 enum { E0, E1, E2, E3, E4, E5A, E5B, D4A, D4B, D3A, D3B, D2A, D2B, D1A, D1B, D0 };
 
-/* ---- transfer function (notes 3.2, 3.6) ---- */
+/* ---- transfer function (docs/oidn-network.md §3.2, §3.6) ---- */
 
 #define PU_A 1.41283765e+03f
 #define PU_B 1.64593172e+00f
@@ -62,7 +62,7 @@ pu_raw_inverse(float x)
     return expf((x - PU_G) / PU_E) - PU_F;
 }
 
-/* dPU/dy: C1 at both breakpoints (notes 3.2) */
+/* dPU/dy: C1 at both breakpoints (docs/oidn-network.md §3.2) */
 static float
 pu_slope(float y)
 {
@@ -207,11 +207,12 @@ mcp__unet_load(const char *path, mcp__unet **out)
  * A batch holds n images of c x h x w: image 0 is the primal, images 1 .. n-1 are
  * tangents at it. A layer passes tangents through its linearisation at the primal:
  * convolutions without the bias, the primal's ReLU mask, the primal's max-pool choice;
- * upsampling and concatenation copy (notes/oidn.md 3.7). */
+ * upsampling and concatenation copy (docs/oidn-network.md §3.7). */
 
 typedef struct batch {
     int n, c, h, w;
-    float *d; /* image k, channel i: d + ((size_t)k * c + i) * h * w */
+    float *d;   /* image k, channel i: d + ((size_t)k * c + i) * h * w */
+    size_t cap; /* bytes the block holds (it may be larger than n c h w floats) */
 } batch;
 
 static size_t
@@ -249,12 +250,90 @@ mcp__unet_alloc(size_t bytes)
     return p;
 }
 
+/* Blocks freed during one run of the network, kept for its next layers. Every layer
+ * writes a fresh output, and the kernel clears each fresh page on its first touch: at
+ * 1080p with four tangents that clearing took a quarter of the run (`perf record` on
+ * `mcpost estimate`: clear_page_erms 25%). The cache belongs to the calling thread
+ * (the network's layers are called from one thread; OpenMP's workers never allocate
+ * batches), and it is emptied when the run ends (block_cache_drain), so nothing is
+ * held between calls. A request takes the smallest cached block that holds it; a full
+ * cache frees its smallest block. When none holds it, a plain apply empties the cache
+ * first (its blocks would only raise the peak), while a run with tangents keeps them:
+ * each tangent's pass repeats the primal's requests, so they all find their blocks.
+ * Replaying the requests of a 1080p run with 4 tangents: 1.17 GB of fresh blocks
+ * (one pass's worth) at a peak of 1.16 GB held, against 9.75 GB fresh at 0.77 GB
+ * without the cache; one apply: 1.17 GB fresh at 0.82 GB, against 1.95 GB at 0.75. */
+#define CACHE_SLOTS 6
+
+typedef struct cached_block {
+    void *p;
+    size_t cap;
+} cached_block;
+
+static _Thread_local cached_block block_cache[CACHE_SLOTS];
+static _Thread_local int block_cache_keeps; /* 1: tangents follow the primal */
+
+static void block_cache_drain(void);
+
+static void *
+block_take(size_t bytes, size_t *cap)
+{
+    int best = -1;
+    for (int i = 0; i < CACHE_SLOTS; i++)
+        if (block_cache[i].p && block_cache[i].cap >= bytes &&
+            (best < 0 || block_cache[i].cap < block_cache[best].cap))
+            best = i;
+    if (best >= 0) {
+        void *p = block_cache[best].p;
+        *cap = block_cache[best].cap;
+        block_cache[best] = (cached_block){0};
+        return p;
+    }
+    /* none holds it: in a plain apply, the cached blocks would only raise the peak */
+    if (!block_cache_keeps)
+        block_cache_drain();
+    *cap = bytes < 2 * HUGE_PAGE ? bytes : (bytes + HUGE_PAGE - 1) / HUGE_PAGE * HUGE_PAGE;
+    return mcp__unet_alloc(bytes);
+}
+
+static void
+block_give(void *p, size_t cap)
+{
+    if (!p)
+        return;
+    int slot = -1;
+    for (int i = 0; i < CACHE_SLOTS && slot < 0; i++)
+        if (!block_cache[i].p)
+            slot = i;
+    if (slot < 0) { /* full: the smallest of the cache's blocks and this one goes */
+        slot = 0;
+        for (int i = 1; i < CACHE_SLOTS; i++)
+            if (block_cache[i].cap < block_cache[slot].cap)
+                slot = i;
+        if (block_cache[slot].cap >= cap) {
+            free(p);
+            return;
+        }
+        free(block_cache[slot].p);
+    }
+    block_cache[slot] = (cached_block){p, cap};
+}
+
+static void
+block_cache_drain(void)
+{
+    for (int i = 0; i < CACHE_SLOTS; i++) {
+        free(block_cache[i].p);
+        block_cache[i] = (cached_block){0};
+    }
+}
+
 /* A batch whose every value the caller writes (no zeroing pass over fresh memory). */
 static int
 batch_new_unset(batch *b, int n, int c, int h, int w)
 {
-    *b = (batch){n, c, h, w, NULL};
-    b->d = mcp__unet_alloc((size_t)n * c * h * w * sizeof(float));
+    *b = (batch){n, c, h, w, NULL, 0};
+    b->d = block_take((size_t)n * c * h * w * sizeof(float), &b->cap);
     return b->d ? 0 : -1;
 }
 
@@ -271,7 +350,7 @@ batch_new(batch *b, int n, int c, int h, int w)
 static void
 batch_free(batch *b)
 {
-    free(b->d);
+    block_give(b->d, b->cap);
     b->d = NULL;
 }
 
@@ -440,7 +519,7 @@ choose_kernel(int *width)
 typedef struct conv_layer {
     const batch *a, *b; /* the input: concat(a, b), b may be NULL */
     batch *out;
-    const float *wb, *bias; /* repacked weights (nob blocks of block_floats), bias */
+    const float *wb, *bias; /* repacked weights (nob blocks of block_floats), bias or NULL */
     size_t block_floats;
     conv_block_fn kernel;
     int xb; /* the kernel's columns */
@@ -480,12 +559,21 @@ conv_task(const conv_layer *l, int k, int y, int c, float *rows)
         for (int j = 0; j < nic; j++) {
             const int i0 = cin * j / nic, i1 = cin * (j + 1) / nic;
             const int mode = i1 < cin ? 3 : l->relu ? k == 0 ? 1 : 2 : 0;
-            const float *init = i0 > 0 ? NULL : k == 0 ? l->bias + o0 : zeros;
+            const float *init = i0 > 0 ? NULL : k == 0 && l->bias ? l->bias + o0 : zeros;
             for (int xs = 0; xs < xn; xs += l->xb)
                 l->kernel(rows + xs, rs, i0, i1, ky0, ky1, wo, init, dst + xs, p0 + xs, hw,
                           on, xn - xs < l->xb ? xn - xs : l->xb, mode);
         }
     }
+}
+
+/* Tangents on F(2x2, 3x3), as the primal: net->exact_tangents, or
+ * MCPOST_UNET_EXACT_TANGENTS set to anything but 0. */
+static int
+exact_tangents(const mcp__unet *net)
+{
+    const char *exact = getenv("MCPOST_UNET_EXACT_TANGENTS");
+    return net->exact_tangents || (exact && *exact && strcmp(exact, "0"));
 }
 
 int
@@ -495,23 +583,139 @@ mcp__unet_fast(const mcp__unet *net)
     return !net->fixed_bits && !(fixed && *fixed && strcmp(fixed, "0"));
 }
 
-/* out = conv3x3(concat(a, b)) (b may be NULL), the bias on image 0 only; then, with
- * relu, every image is zeroed where image 0's pre-activation is not > 0 (as it is
- * stored: the primal is done first, and its ReLU is > 0 where it was). Winograd
- * products by default (unet_winograd.c), else the direct loops below. */
+
+/* ---- the primal's trace: what the tangents' passes need of it ----
+ * A tangent passes through each layer's linearisation at the primal, which needs only
+ * the primal's ReLU masks and max-pool choices, not its activations. The primal runs
+ * first and records them (a bit per activation, a byte per pooled value: about 30
+ * bytes per pixel, against ~550 for the activations); each tangent then runs alone
+ * through the network, replaying them. The peak memory of apply + K tangents is then
+ * that of one apply, where a batch of 1 + K images held K + 1 times as much (4.85 GB
+ * at 1080p with 4 tangents). Each tangent's operations are the same as in a batch, in
+ * the same order: the bits do not change. */
+
+#define N_POOLS 4
+
+typedef struct primal_trace {
+    int replay;                            /* 0: record the primal; 1: replay */
+    unsigned char *relu[MCP__UNET_NCONV]; /* bit i of plane c: value > 0 */
+    unsigned char *pick[N_POOLS];          /* per pooled value: 0 .. 3 */
+    int pools;                             /* pools passed in this pass */
+} primal_trace;
+
+static void
+trace_free(primal_trace *tr)
+{
+    for (int k = 0; k < MCP__UNET_NCONV; k++)
+        free(tr->relu[k]);
+    for (int k = 0; k < N_POOLS; k++)
+        free(tr->pick[k]);
+    *tr = (primal_trace){0};
+}
+
+/* One pass through the network: the convolutions' kind, and the trace (NULL for the
+ * primal alone: a plain apply records nothing). */
+typedef struct pass {
+    const mcp__unet *net;
+    int fast;   /* Winograd products */
+    int coarse; /* F(4x4, 3x3): a tangents' pass, unless exact_tangents */
+    primal_trace *trace;
+} pass;
+
+/* The Winograd convolution a pass runs. */
 static int
-conv_into(int fast, const mcp__unet_conv *L, const batch *a, const batch *b, int relu,
-          batch *out)
+winograd(const pass *ps, const mcp__unet_conv *L, const float *bias, const float *a,
+         int ca, int a_up, const float *b, int n, int h, int w, int relu, float *out)
+{
+    return (ps->coarse ? mcp__unet_conv_winograd4 : mcp__unet_conv_winograd)(
+        L->weight, bias, L->cin, L->cout, a, ca, a_up, b, n, h, w, relu, out);
+}
+
+static int
+layer_of(const pass *ps, const mcp__unet_conv *L)
+{
+    return (int)(L - ps->net->conv);
+}
+
+/* Records image 0's ReLU mask (out > 0) as bits, value i at bit i % 8 of byte i / 8. */
+static int
+record_relu(const batch *out, unsigned char **bits)
+{
+    const size_t count = (size_t)out->c * plane_size(out), whole = count / 8;
+    if (!(*bits = mcp_calloc(whole + 1, 1)))
+        return -1;
+    unsigned char *restrict m = *bits;
+    const float *restrict v = out->d;
+#pragma omp parallel for schedule(static)
+    for (size_t j = 0; j < whole; j++) {
+        unsigned byte = 0;
+        for (int b = 0; b < 8; b++)
+            byte |= (unsigned)(v[8 * j + b] > 0.0f) << b;
+        m[j] = (unsigned char)byte;
+    }
+    for (size_t i = 8 * whole; i < count; i++) /* the last few, at the coarsest level */
+        m[whole] |= (unsigned char)((v[i] > 0.0f) << (i % 8));
+    return 0;
+}
+
+#if defined(__GNUC__) && defined(__x86_64__)
+#include <immintrin.h>
+/* 16 values per masked move, the mask read as two bytes (x86-64 is little-endian:
+ * value 16 j + i is bit i); a byte-wise loop took 7% of a run with tangents. */
+__attribute__((target("avx512f"))) static void
+replay_relu_avx512(float *restrict v, const unsigned char *restrict bits, size_t count)
+{
+#pragma omp parallel for schedule(static)
+    for (size_t j = 0; j < count / 16; j++) {
+        unsigned short m;
+        memcpy(&m, bits + 2 * j, sizeof m);
+        _mm512_storeu_ps(v + 16 * j, _mm512_maskz_mov_ps(m, _mm512_loadu_ps(v + 16 * j)));
+    }
+    for (size_t i = count / 16 * 16; i < count; i++)
+        v[i] = bits[i / 8] >> (i % 8) & 1u ? v[i] : 0.0f;
+}
+#define HAVE_REPLAY_AVX512 1
+#endif
+
+/* Zeroes every image of out where the recorded mask is 0. */
+static void
+replay_relu(batch *out, const unsigned char *bits)
+{
+    const size_t count = (size_t)out->c * plane_size(out), whole = count / 8;
+    for (int k = 0; k < out->n; k++) {
+        float *restrict v = out->d + (size_t)k * count;
+#ifdef HAVE_REPLAY_AVX512
+        if (__builtin_cpu_supports("avx512f")) {
+            replay_relu_avx512(v, bits, count);
+            continue;
+        }
+#endif
+#pragma omp parallel for schedule(static)
+        for (size_t j = 0; j < whole; j++) {
+            const unsigned byte = bits[j];
+            for (int b = 0; b < 8; b++)
+                v[8 * j + b] = byte >> b & 1u ? v[8 * j + b] : 0.0f;
+        }
+        for (size_t i = 8 * whole; i < count; i++)
+            v[i] = bits[whole] >> (i % 8) & 1u ? v[i] : 0.0f;
+    }
+}
+
+/* out = conv3x3(concat(a, b)), with the bias on image 0 when with_bias, and with relu
+ * image 0's ReLU and its mask on the others. */
+static int
+conv_plain(const pass *ps, const mcp__unet_conv *L, const batch *a, const batch *b,
+           int relu, int with_bias, batch *out)
 {
     const int n = a->n, h = a->h, w = a->w, cb = b ? b->c : 0;
     const int cin = a->c + cb, cout = L->cout, nob = (cout + OB - 1) / OB;
     if (cin != L->cin)
         return mcp_error("unet: layer of %d input channels given %d", L->cin, cin);
-    if (fast) {
+    if (ps->fast) {
         if (batch_new_unset(out, n, cout, h, w))
             return -1;
-        if (mcp__unet_conv_winograd(L->weight, L->bias, cin, cout, a->d, a->c, 0,
-                                    b ? b->d : NULL, n, h, w, relu, out->d)) {
+        if (winograd(ps, L, with_bias ? L->bias : NULL, a->d, a->c, 0, b ? b->d : NULL, n,
+                     h, w, relu, out->d)) {
             batch_free(out);
             return -1;
         }
@@ -549,7 +753,7 @@ conv_into(int fast, const mcp__unet_conv *L, const batch *a, const batch *b, int
                     for (int lane = 0; lane < WL; lane++)
                         dst[lane] = wt;
                 }
-    const conv_layer l = {.a = a, .b = b, .out = out, .wb = wb, .bias = bias,
+    const conv_layer l = {.a = a, .b = b, .out = out, .wb = wb, .bias = with_bias ? bias : NULL,
                           .block_floats = block_floats, .kernel = kernel, .xb = xb,
                           .cin = cin, .cout = cout,
                           .nob = nob, .nic = (cin + IC - 1) / IC, .xc = xc, .rs = rs,
@@ -576,12 +780,55 @@ conv_into(int fast, const mcp__unet_conv *L, const batch *a, const batch *b, int
     return 0;
 }
 
+static int
+is_replay(const pass *ps)
+{
+    return ps->trace && ps->trace->replay;
+}
+
+/* After a convolution with relu: the primal's pass records its mask, a replay applies
+ * it (its convolution ran without bias and ReLU). out is freed on failure. */
+static int
+trace_relu(const pass *ps, const mcp__unet_conv *L, int relu, batch *out)
+{
+    primal_trace *tr = ps->trace;
+    if (!tr || !relu)
+        return 0;
+    const int layer = layer_of(ps, L);
+    if (tr->replay) {
+        replay_relu(out, tr->relu[layer]);
+        return 0;
+    }
+    if (record_relu(out, &tr->relu[layer])) {
+        batch_free(out);
+        return -1;
+    }
+    return 0;
+}
+
+/* out = conv3x3(concat(a, b)) (b may be NULL), the bias on image 0 only; then, with
+ * relu, every image is zeroed where image 0's pre-activation is not > 0 (as it is
+ * stored: the primal is done first, and its ReLU is > 0 where it was). Winograd
+ * products by default (unet_winograd.c), else the direct loops below. With a trace,
+ * the primal pass records its mask, and a replay (tangents alone: no bias) applies
+ * it. */
+static int
+conv_into(const pass *ps, const mcp__unet_conv *L, const batch *a, const batch *b,
+          int relu, batch *out)
+{
+    const int replay = is_replay(ps);
+    if (conv_plain(ps, L, a, b, relu && !replay, !replay, out) ||
+        trace_relu(ps, L, relu, out))
+        return -1;
+    return 0;
+}
+
 /* *t = conv(concat(*t, skip)); the old *t and the skip (when given) are freed. */
 static int
-conv_replace(int fast, const mcp__unet_conv *L, batch *t, batch *skip, int relu)
+conv_replace(const pass *ps, const mcp__unet_conv *L, batch *t, batch *skip, int relu)
 {
     batch out;
-    if (conv_into(fast, L, t, skip, relu, &out))
+    if (conv_into(ps, L, t, skip, relu, &out))
         return -1;
     batch_free(t);
     if (skip)
@@ -593,12 +840,24 @@ conv_replace(int fast, const mcp__unet_conv *L, batch *t, batch *skip, int relu)
 /* 2x2 max pool of every image at image 0's arg-max (the first maximum in scan order,
  * as PyTorch picks it). Per output row, the primal's choice (0 .. 3: top left, top
  * right, bottom left, bottom right) is found first, in selects that vectorise; every
- * image then takes its value there. */
+ * image then takes its value there. With a trace, the primal's pass records the
+ * choices, and a replay (tangents alone) takes them from it. */
 static int
-maxpool_into(const batch *in, batch *out)
+maxpool_into(const pass *ps, const batch *in, batch *out)
 {
     enum { RUN = 256 }; /* outputs per run of choices */
     const int h2 = in->h / 2, w2 = in->w / 2, w = in->w;
+    primal_trace *tr = ps->trace;
+    if (tr && tr->pools >= N_POOLS)
+        return mcp_error("unet: more pools than the network has");
+    unsigned char *picks = NULL;
+    const int replay = tr && tr->replay;
+    if (tr) {
+        if (!replay &&
+            !(tr->pick[tr->pools] = mcp_malloc((size_t)in->c * h2 * w2)))
+            return -1;
+        picks = tr->pick[tr->pools++];
+    }
     if (batch_new_unset(out, in->n, in->c, h2, w2))
         return -1;
 #pragma omp parallel for collapse(2) schedule(static)
@@ -609,7 +868,19 @@ maxpool_into(const batch *in, batch *out)
                 const float *restrict top = plane(in, 0, i) + (size_t)2 * y * w + 2 * x0;
                 const float *restrict bottom = top + w;
                 float *restrict dst0 = plane(out, 0, i) + (size_t)y * w2 + x0;
-                unsigned char pick[RUN];
+                unsigned char buf[RUN];
+                unsigned char *restrict pick =
+                    picks ? picks + ((size_t)i * h2 + y) * w2 + x0 : buf;
+                if (replay) { /* every image is a tangent */
+                    for (int t = 0; t < in->n; t++) {
+                        const float *restrict src =
+                            plane(in, t, i) + (size_t)2 * y * w + 2 * x0;
+                        float *restrict dst = plane(out, t, i) + (size_t)y * w2 + x0;
+                        for (int x = 0; x < xn; x++)
+                            dst[x] = src[(pick[x] >> 1) * (size_t)w + 2 * x + (pick[x] & 1)];
+                    }
+                    continue;
+                }
 #pragma omp simd
                 for (int x = 0; x < xn; x++) {
                     const float a = top[2 * x], b = top[2 * x + 1], c = bottom[2 * x],
@@ -635,19 +906,19 @@ maxpool_into(const batch *in, batch *out)
 
 /* *skip = maxpool(*t), and *t is freed. */
 static int
-pool_to(batch *t, batch *skip)
+pool_to(const pass *ps, batch *t, batch *skip)
 {
-    if (maxpool_into(t, skip))
+    if (maxpool_into(ps, t, skip))
         return -1;
     batch_free(t);
     return 0;
 }
 
 static int
-pool_replace(batch *t)
+pool_replace(const pass *ps, batch *t)
 {
     batch out;
-    if (pool_to(t, &out))
+    if (pool_to(ps, t, &out))
         return -1;
     *t = out;
     return 0;
@@ -678,21 +949,24 @@ upsample_replace(batch *t)
  * freed. The Winograd path reads *t upsampled as it transforms it, so the upsampled
  * batch (as large as the skip's level, and more channels) is never stored. */
 static int
-conv_up_replace(int fast, const mcp__unet_conv *L, batch *t, batch *skip, int relu)
+conv_up_replace(const pass *ps, const mcp__unet_conv *L, batch *t, batch *skip, int relu)
 {
-    if (!fast)
-        return upsample_replace(t) || conv_replace(0, L, t, skip, relu);
+    if (!ps->fast)
+        return upsample_replace(t) || conv_replace(ps, L, t, skip, relu);
     const int n = t->n, h = skip->h, w = skip->w, cin = t->c + skip->c;
     if (cin != L->cin || 2 * t->h != h || 2 * t->w != w)
         return mcp_error("unet: layer of %d input channels given %d", L->cin, cin);
     batch out;
     if (batch_new_unset(&out, n, L->cout, h, w))
         return -1;
-    if (mcp__unet_conv_winograd(L->weight, L->bias, cin, L->cout, t->d, t->c, 1, skip->d,
-                                n, h, w, relu, out.d)) {
+    const int replay = is_replay(ps);
+    if (winograd(ps, L, replay ? NULL : L->bias, t->d, t->c, 1, skip->d, n, h, w,
+                 relu && !replay, out.d)) {
         batch_free(&out);
         return -1;
     }
+    if (trace_relu(ps, L, relu, &out))
+        return -1;
     batch_free(t);
     batch_free(skip);
     *t = out;
@@ -700,28 +974,34 @@ conv_up_replace(int fast, const mcp__unet_conv *L, batch *t, batch *skip, int re
 }
 
 /* The network on a pre-processed input batch x (consumed); *t receives dec_conv0's
- * output, before the output clamp. */
+ * output, before the output clamp. With a trace, the primal's pass (tr->replay 0,
+ * x of one image) records it, and a tangents' pass (tr->replay 1, x of tangents only)
+ * replays it. */
 static int
-network(const mcp__unet *net, batch *x, batch *t)
+network(const mcp__unet *net, batch *x, batch *t, primal_trace *tr)
 {
     const mcp__unet_conv *c = net->conv;
     batch p1 = {0}, p2 = {0}, p3 = {0};
     *t = (batch){0};
+    if (tr)
+        tr->pools = 0;
     const int fast = mcp__unet_fast(net);
-    int rc = conv_into(fast, &c[E0], x, NULL, 1, t) || conv_replace(fast, &c[E1], t, NULL, 1) ||
-             pool_to(t, &p1) || conv_into(fast, &c[E2], &p1, NULL, 1, t) ||
-             pool_to(t, &p2) || conv_into(fast, &c[E3], &p2, NULL, 1, t) ||
-             pool_to(t, &p3) || conv_into(fast, &c[E4], &p3, NULL, 1, t) ||
-             pool_replace(t) || conv_replace(fast, &c[E5A], t, NULL, 1) ||
-             conv_replace(fast, &c[E5B], t, NULL, 1) ||
+    const pass ps_ = {net, fast, fast && tr && tr->replay && !exact_tangents(net), tr},
+               *ps = &ps_;
+    int rc = conv_into(ps, &c[E0], x, NULL, 1, t) || conv_replace(ps, &c[E1], t, NULL, 1) ||
+             pool_to(ps, t, &p1) || conv_into(ps, &c[E2], &p1, NULL, 1, t) ||
+             pool_to(ps, t, &p2) || conv_into(ps, &c[E3], &p2, NULL, 1, t) ||
+             pool_to(ps, t, &p3) || conv_into(ps, &c[E4], &p3, NULL, 1, t) ||
+             pool_replace(ps, t) || conv_replace(ps, &c[E5A], t, NULL, 1) ||
+             conv_replace(ps, &c[E5B], t, NULL, 1) ||
              /* decoder: concat(upsampled, skip) */
-             conv_up_replace(fast, &c[D4A], t, &p3, 1) || conv_replace(fast, &c[D4B], t, NULL, 1) ||
-             conv_up_replace(fast, &c[D3A], t, &p2, 1) || conv_replace(fast, &c[D3B], t, NULL, 1) ||
-             conv_up_replace(fast, &c[D2A], t, &p1, 1) || conv_replace(fast, &c[D2B], t, NULL, 1) ||
-             conv_up_replace(fast, &c[D1A], t, x, 1) ||
-             conv_replace(fast, &c[D1B], t, NULL, 1) ||
+             conv_up_replace(ps, &c[D4A], t, &p3, 1) || conv_replace(ps, &c[D4B], t, NULL, 1) ||
+             conv_up_replace(ps, &c[D3A], t, &p2, 1) || conv_replace(ps, &c[D3B], t, NULL, 1) ||
+             conv_up_replace(ps, &c[D2A], t, &p1, 1) || conv_replace(ps, &c[D2B], t, NULL, 1) ||
+             conv_up_replace(ps, &c[D1A], t, x, 1) ||
+             conv_replace(ps, &c[D1B], t, NULL, 1) ||
              /* no ReLU on the last conv (1.4); the output clamp makes 2.x's ReLU moot */
-             conv_replace(fast, &c[D0], t, NULL, 0);
+             conv_replace(ps, &c[D0], t, NULL, 0);
     batch_free(&p1), batch_free(&p2), batch_free(&p3), batch_free(x);
     if (rc)
         batch_free(t);
@@ -794,15 +1074,16 @@ clamp_slope(float v, float lo, float hi)
     return v >= lo && v <= hi ? 1.0f : 0.0f;
 }
 
-/* The input batch: image 0 the pre-processed colour | albedo | normal (notes 3.2,
- * 3.4), image 1 + k its tangent along t[k]; padding is 0 in every image. */
+/* The input batch: with primal, image 0 the pre-processed colour | albedo | normal
+ * (docs/oidn-network.md §3.2, §3.4) and image 1 + k its tangent along t[k]; without,
+ * image k the tangent alone. Padding is 0 in every image. */
 static int
 preprocess(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
-           const mcp_image *normal, float s_in, const mcp_denoise_tangent *t, int n,
-           batch *x)
+           const mcp_image *normal, float s_in, int primal, const mcp_denoise_tangent *t,
+           int n, batch *x)
 {
-    const int H = color->height, W = color->width, ic = net->ic;
-    if (batch_new(x, 1 + n, ic, (H + 15) / 16 * 16, (W + 15) / 16 * 16))
+    const int H = color->height, W = color->width, ic = net->ic, o = primal ? 1 : 0;
+    if (batch_new(x, o + n, ic, (H + 15) / 16 * 16, (W + 15) / 16 * 16))
         return -1;
     const float ns = norm_scale();
     const int wp = x->w;
@@ -813,30 +1094,33 @@ preprocess(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo
             const float *p = mcp_image_px(color, px, y);
             for (int ch = 0; ch < 3; ch++) {
                 const float v = p[ch] * s_in, yv = sanitize(v, 0.0f, FLT_MAX);
-                plane(x, 0, ch)[at] = pu_raw(yv) * ns;
+                if (primal)
+                    plane(x, 0, ch)[at] = pu_raw(yv) * ns;
                 const float slope = clamp_slope(v, 0.0f, FLT_MAX) * s_in * ns * pu_slope(yv);
                 for (int k = 0; k < n; k++)
-                    plane(x, 1 + k, ch)[at] = slope * mcp_image_px(t[k].color, px, y)[ch];
+                    plane(x, o + k, ch)[at] = slope * mcp_image_px(t[k].color, px, y)[ch];
             }
             if (ic >= 6) {
                 const float *q = mcp_image_px(albedo, px, y);
                 for (int ch = 0; ch < 3; ch++) {
-                    plane(x, 0, 3 + ch)[at] = sanitize(q[ch], 0.0f, 1.0f);
+                    if (primal)
+                        plane(x, 0, 3 + ch)[at] = sanitize(q[ch], 0.0f, 1.0f);
                     const float slope = clamp_slope(q[ch], 0.0f, 1.0f);
                     for (int k = 0; k < n; k++)
                         if (t[k].albedo)
-                            plane(x, 1 + k, 3 + ch)[at] =
+                            plane(x, o + k, 3 + ch)[at] =
                                 slope * mcp_image_px(t[k].albedo, px, y)[ch];
                 }
             }
             if (ic >= 9) {
                 const float *q = mcp_image_px(normal, px, y);
                 for (int ch = 0; ch < 3; ch++) {
-                    plane(x, 0, 6 + ch)[at] = sanitize(q[ch], -1.0f, 1.0f) * 0.5f + 0.5f;
+                    if (primal)
+                        plane(x, 0, 6 + ch)[at] = sanitize(q[ch], -1.0f, 1.0f) * 0.5f + 0.5f;
                     const float slope = 0.5f * clamp_slope(q[ch], -1.0f, 1.0f);
                     for (int k = 0; k < n; k++)
                         if (t[k].normal)
-                            plane(x, 1 + k, 6 + ch)[at] =
+                            plane(x, o + k, 6 + ch)[at] =
                                 slope * mcp_image_px(t[k].normal, px, y)[ch];
                 }
             }
@@ -844,10 +1128,12 @@ preprocess(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo
     return 0;
 }
 
-/* Crops image k of the network output to H x W and maps it back (notes 3.6): the
- * primal through the clamp and PU^-1, a tangent through their derivatives there. */
+/* Crops the network's output to H x W and maps it back (docs/oidn-network.md §3.6):
+ * without t the primal (y0's image 0) through the clamp and PU^-1, else t's image k, a
+ * tangent, through their derivatives at the primal. */
 static int
-postprocess(const batch *t, int k, int W, int H, float s_out, mcp_image **out)
+postprocess(const batch *y0, const batch *t, int k, int W, int H, float s_out,
+            mcp_image **out)
 {
     if (mcp__rgb_new(W, H, "unet", out))
         return -1;
@@ -856,10 +1142,10 @@ postprocess(const batch *t, int k, int W, int H, float s_out, mcp_image **out)
     for (int y = 0; y < H; y++)
         for (int px = 0; px < W; px++) {
             float *dst = mcp_image_px(*out, px, y);
-            const size_t at = (size_t)y * t->w + px;
+            const size_t at = (size_t)y * y0->w + px;
             for (int ch = 0; ch < 3; ch++) {
-                const float v = plane(t, 0, ch)[at], xs = sanitize(v, 0.0f, FLT_MAX) / ns;
-                dst[ch] = k == 0 ? pu_raw_inverse(xs) * s_out
+                const float v = plane(y0, 0, ch)[at], xs = sanitize(v, 0.0f, FLT_MAX) / ns;
+                dst[ch] = !t ? pu_raw_inverse(xs) * s_out
                                  : clamp_slope(v, 0.0f, FLT_MAX) * s_out *
                                        pu_inverse_slope(xs) / ns * plane(t, k, ch)[at];
             }
@@ -903,16 +1189,29 @@ run_whole(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
           mcp_image **out, mcp_image **jt)
 {
     const float s_in = (float)scale_in, s_out = 1.0f / s_in;
-    batch x, y;
-    if (preprocess(net, color, albedo, normal, s_in, t, n, &x) || network(net, &x, &y))
-        return -1;
-    int rc = 0;
-    if (out)
-        rc = postprocess(&y, 0, color->width, color->height, s_out, out);
-    for (int k = 0; k < n && !rc; k++)
-        rc = postprocess(&y, 1 + k, color->width, color->height, s_out, &jt[k]);
-    batch_free(&y);
-    return rc;
+    const int W = color->width, H = color->height;
+    primal_trace trace = {0}, *tr = n ? &trace : NULL;
+    block_cache_keeps = n > 0;
+    batch x, y0 = {0}, y;
+    /* the primal, recording what the tangents need; then each tangent alone */
+    int rc = preprocess(net, color, albedo, normal, s_in, 1, NULL, 0, &x) ||
+             network(net, &x, &y0, tr);
+    if (!rc && out)
+        rc = postprocess(&y0, NULL, 0, W, H, s_out, out);
+    if (tr)
+        trace.replay = 1;
+    for (int k = 0; k < n && !rc; k++) {
+        rc = preprocess(net, color, albedo, normal, s_in, 0, t + k, 1, &x) ||
+             network(net, &x, &y, tr);
+        if (!rc) {
+            rc = postprocess(&y0, &y, 0, W, H, s_out, &jt[k]);
+            batch_free(&y);
+        }
+    }
+    batch_free(&y0);
+    trace_free(&trace);
+    block_cache_drain();
+    return rc ? -1 : 0;
 }
 
 /* rows [y0, y0 + h) x columns [x0, x0 + w) of src (a tile's result, whose pixel (0, 0)
@@ -932,10 +1231,24 @@ paste(const mcp_image *src, int ox, int oy, int x0, int y0, int w, int h, mcp_im
  * what a pixel's value depends on, rounding included: the receptive field of the 3x3
  * convolutions and 2x2 pooling over five levels has a radius of ~110 pixels, and a
  * Winograd tile's outputs each depend on all 4 x 4 of its inputs (a radius of 2 per
- * convolution instead of 1), ~190 in all. A tile's pixels then see what they see in the
- * whole image, and the result is the same bits (the tests compare). */
+ * convolution instead of 1), ~190 in all. The tangents' F(4x4, 3x3) tiles (4 x 4
+ * outputs from 6 x 6 inputs: a radius of 4 per convolution) need crops on multiples of
+ * 64 and ~330 pixels (16 convolutions' radii at their levels' scales, 4 (5 + 3 x 2 +
+ * 3 x 4 + 3 x 8) + 4 x 2 x 16, and the pools'). A tile's pixels then see what they see
+ * in the whole image, and the result is the same bits (the tests compare). */
 #define TILE_OVERLAP 192
 #define TILE_ALIGN 32
+#define TILE_OVERLAP_COARSE 352
+#define TILE_ALIGN_COARSE 64
+
+/* The overlap and alignment of a run's tiles: wider where tangents run on F(4x4, 3x3). */
+static void
+tile_margins(const mcp__unet *net, int n, int *overlap, int *align)
+{
+    const int coarse = n > 0 && mcp__unet_fast(net) && !exact_tangents(net);
+    *overlap = coarse ? TILE_OVERLAP_COARSE : TILE_OVERLAP;
+    *align = coarse ? TILE_ALIGN_COARSE : TILE_ALIGN;
+}
 
 static int
 run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
@@ -943,6 +1256,8 @@ run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
           int tile, mcp_image **out, mcp_image **jt)
 {
     const int W = color->width, H = color->height;
+    int overlap, align;
+    tile_margins(net, n, &overlap, &align);
     int rc = 0;
     if (out) rc = mcp__rgb_new(W, H, "unet", out);
     for (int k = 0; k < n && !rc; k++)
@@ -953,10 +1268,10 @@ run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
     if (!views || !res || (n && !tt)) rc = -1;
     for (int ty = 0; ty < H && !rc; ty += tile)
         for (int tx = 0; tx < W && !rc; tx += tile) {
-            const int x0 = tx > TILE_OVERLAP ? (tx - TILE_OVERLAP) / TILE_ALIGN * TILE_ALIGN : 0;
-            const int y0 = ty > TILE_OVERLAP ? (ty - TILE_OVERLAP) / TILE_ALIGN * TILE_ALIGN : 0;
-            const int x1 = tx + tile + TILE_OVERLAP < W ? tx + tile + TILE_OVERLAP : W;
-            const int y1 = ty + tile + TILE_OVERLAP < H ? ty + tile + TILE_OVERLAP : H;
+            const int x0 = tx > overlap ? (tx - overlap) / align * align : 0;
+            const int y0 = ty > overlap ? (ty - overlap) / align * align : 0;
+            const int x1 = tx + tile + overlap < W ? tx + tile + overlap : W;
+            const int y1 = ty + tile + overlap < H ? ty + tile + overlap : H;
             /* views of the crop: the inputs (k = 0), then each tangent's parts */
             for (int k = 0; k <= n && !rc; k++) {
                 const mcp_image *src[3] = {k ? t[k - 1].color : color,
@@ -1016,7 +1331,9 @@ mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_imag
     if (have > 0 && batch_bytes(W, H, 1 + n) > have) {
         /* the largest tile whose crop fits in half of what is available (the
          * results and the inputs take the rest) */
-        const int margin = 2 * TILE_OVERLAP + TILE_ALIGN; /* a crop's largest extension */
+        int overlap, align;
+        tile_margins(net, n, &overlap, &align);
+        const int margin = 2 * overlap + align; /* a crop's largest extension */
         for (tile = (W > H ? W : H) / 16 * 16; tile >= 16; tile -= 16)
             if (batch_bytes(tile + margin, tile + margin, 1 + n) <= have / 2)
                 break;
@@ -1027,8 +1344,8 @@ mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_imag
     }
     if (tile >= W && tile >= H) tile = 0;
     /* The exposure is a constant of F, also for its JVP: it is computed once on the
-     * primal colour, as a renderer fixes the exposure of a frame (notes 3.7); the
-     * tiles share it. */
+     * primal colour, as a renderer fixes the exposure of a frame (docs/oidn-network.md
+     * §3.7); the tiles share it. */
     const double scale_in =
         input_scale > 0 ? input_scale : mcp__unet_autoexposure(color, net->v2);
     if (!(scale_in > 0 && scale_in < 1e30))

@@ -1,6 +1,6 @@
 /* unet_internal.h: OIDN's RT U-Net in plain C -- the .tza weight archive (tza.c) and
  * the network's forward pass with OIDN's HDR pre-/post-processing (unet.c).
- * Not installed; see notes/oidn.md for the format, the layer list and the transfer
+ * Not installed; see docs/oidn-network.md for the format, the layer list and the transfer
  * function. The denoiser kind `unet` over them is denoise_unet.c. */
 #ifndef MCP_ESTIMATE_UNET_INTERNAL_H
 #define MCP_ESTIMATE_UNET_INTERNAL_H
@@ -10,7 +10,7 @@
 
 #include <stddef.h>
 
-/* ---- .tza archive (tza.c; notes/oidn.md section 2) ---- */
+/* ---- .tza archive (tza.c; docs/oidn-network.md §2) ---- */
 
 typedef struct mcp__tza_tensor {
     char *name;
@@ -39,7 +39,7 @@ void mcp__tza_free(mcp__tza *tza);
 /* float16 bits to float (exact; subnormals, infinities and NaN included). */
 float mcp__half_to_float(unsigned short h);
 
-/* ---- the U-Net (unet.c; notes/oidn.md sections 1 and 3) ---- */
+/* ---- the U-Net (unet.c; docs/oidn-network.md §1, §3) ---- */
 
 #define MCP__UNET_NCONV 16
 
@@ -53,6 +53,7 @@ typedef struct mcp__unet {
     int ic;       /* input channels: 3 colour, 6 + albedo, 9 + albedo + normal */
     int v2;       /* 1 for float16 (OIDN 2.x) files: autoexposure bins by ceil */
     int fixed_bits; /* 1: the direct loops (a setting, not read from the file) */
+    int exact_tangents; /* 1: tangents on F(2x2, 3x3) as the primal, not F(4x4, 3x3) */
     mcp__unet_conv conv[MCP__UNET_NCONV]; /* enc_conv0 ... dec_conv0 in order */
 } mcp__unet;
 
@@ -63,7 +64,7 @@ int mcp__unet_load(const char *path, mcp__unet **out);
 int mcp__unet_from_tza(const mcp__tza *tza, const char *source, mcp__unet **out);
 void mcp__unet_free(mcp__unet *net);
 
-/* OIDN's autoexposure scale of an RGB image (notes 3.3; v2 selects 2.x bins). */
+/* OIDN's autoexposure scale of an RGB image (docs/oidn-network.md §3.3; v2: 2.x bins). */
 double mcp__unet_autoexposure(const mcp_image *color, int v2);
 
 /* HDR denoise of colour (3 channels) with albedo and normal as the net needs them
@@ -102,6 +103,15 @@ int mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color,
 int mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cout,
                             const float *a, int ca, int a_up, const float *b, int n, int h,
                             int w, int relu, float *out);
+/* The same as F(4x4, 3x3) (unet_winograd4.c): 1.78 times fewer multiply-adds, a
+ * relative error ~1e-4 instead of ~1e-6; for the tangents' passes. */
+int mcp__unet_conv_winograd4(const float *weight, const float *bias, int cin, int cout,
+                             const float *a, int ca, int a_up, const float *b, int n,
+                             int h, int w, int relu, float *out);
+/* Prefetches the input rows that tiles [t0, t0 + nt) of m x m outputs read from one
+ * channel (unet_winograd.c). */
+void mcp__unet_prefetch_rows(const float *src, int up, int h, int w, size_t t0, int nt,
+                             int tw, int m);
 /* 1 when the convolutions run as Winograd products (the default), 0 for the direct
  * loops whose bits are the same on every x86-64 (net->fixed_bits, the denoiser's
  * fixed_bits setting, or MCPOST_UNET_FIXED set to anything but 0). */

@@ -131,16 +131,17 @@ load_row_up(const float *src, int h, int w, int y, int tx0, int nt, float *restr
     }
 }
 
-/* Asks for the input rows that the tiles [t0, t0 + nt) (row-major) of one channel
- * read, one cache line at a time: the rows of a task are short runs in planes far
- * apart, too short for the hardware prefetcher to find. */
-static void
-prefetch_rows(const float *src, int up, int h, int w, size_t t0, int nt, int tw)
+/* Asks for the input rows that the tiles [t0, t0 + nt) (row-major, tw per row, m x m
+ * outputs each) of one channel read, one cache line at a time: the rows of a task are
+ * short runs in planes far apart, too short for the hardware prefetcher to find. */
+void
+mcp__unet_prefetch_rows(const float *src, int up, int h, int w, size_t t0, int nt, int tw,
+                        int m)
 {
     const int ty0 = (int)(t0 / tw), ty1 = (int)((t0 + nt - 1) / tw);
-    int x0 = ty0 == ty1 ? 2 * (int)(t0 % tw) - 1 : 0;
-    int x1 = ty0 == ty1 ? 2 * (int)((t0 + nt - 1) % tw) + 2 : w - 1;
-    int y0 = 2 * ty0 - 1, y1 = 2 * ty1 + 2;
+    int x0 = ty0 == ty1 ? m * (int)(t0 % tw) - 1 : 0;
+    int x1 = ty0 == ty1 ? m * (int)((t0 + nt - 1) % tw) + m : w - 1;
+    int y0 = m * ty0 - 1, y1 = m * ty1 + m;
     if (up) /* the source's own rows and columns */
         h /= 2, w /= 2, x0 /= 2, x1 /= 2, y0 /= 2, y1 /= 2;
     for (int y = y0 > 0 ? y0 : 0; y <= y1 && y < h; y++) {
@@ -304,10 +305,10 @@ mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cou
                     const float *src = i < ca ? a + ((size_t)k * ca + i) * a_hw
                                               : b + ((size_t)k * cb + (i - ca)) * hw;
                     if (i + 1 < cin) /* the next channel's rows, while this one runs */
-                        prefetch_rows(i + 1 < ca
+                        mcp__unet_prefetch_rows(i + 1 < ca
                                           ? a + ((size_t)k * ca + i + 1) * a_hw
                                           : b + ((size_t)k * cb + (i + 1 - ca)) * hw,
-                                      i + 1 < ca && a_up, h, w, t0, nt, tw);
+                                      i + 1 < ca && a_up, h, w, t0, nt, tw, 2);
                     /* the chunk's pieces of tile rows */
                     for (int j = 0; j < nt;) {
                         const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
@@ -330,7 +331,7 @@ mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cou
                         const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
                         const int len = tw - tx < nt - j ? tw - tx : nt - j;
                         transform_output(m + (size_t)o * ld + j, ldm, ty, tx, len, h, w,
-                                         k == 0 ? bias[o] : 0.0f, relu, k == 0,
+                                         k == 0 && bias ? bias[o] : 0.0f, relu, k == 0,
                                          out + (size_t)o * hw,
                                          out + ((size_t)k * cout + o) * hw, rows);
                         j += len;

@@ -1,5 +1,5 @@
-/* variance.c: the variance of the denoised image by Jacobian-vector products (SPEC
- * "Variance of the denoised image"; Firmino 2023 Eqs. 1-2).
+/* variance.c: the variance of the denoised image by Jacobian-vector products
+ * (docs/mathematics.md §2.5; Firmino 2023 Eqs. 1-2).
  *
  * With Rademacher probes v (v_p = L_p r_p, L_p L_pᵀ = Σ̂_p), E[(Jv)_i²] = (J Σ̂ Jᵀ)_ii,
  * the first-order (delta-method) variance of F_i. K probes are averaged. The SURE

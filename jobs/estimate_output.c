@@ -1,5 +1,5 @@
 /* estimate_output.c: what an estimate writes, for `mcpost estimate` and the `estimate`
- * job stage alike (estimate/estimate.h; SPEC "estimate"): one dump's images, block
+ * job stage alike (estimate/estimate.h; docs/mathematics.md §2): one dump's images, block
  * pictures, estimate.json and report section; a series' first spp per tau (Firmino 2024
  * Table 1), its estimate.json and report section. */
 #include "internal.h"

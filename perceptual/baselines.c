@@ -1,5 +1,5 @@
 /* baselines.c: the a-posteriori methods of Heitz & Belcour 2019, for comparison
- * (SPEC "perceptual", baselines).
+ * (docs/mathematics.md §4.10).
  *
  * histogram (vertical): sort a pixel's M estimates by luminance and take the one at
  *   index floor(B_p M) (B the blue-noise threshold in [0, 1)).

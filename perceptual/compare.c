@@ -1,6 +1,6 @@
 /* compare.c: scoring an optimised image and comparing every method on one input
- * (Chizhov et al. 2022 Table 1; SPEC "perceptual": pMSE = E / (N C) against the ground
- * truth, and the blue-noise analysis of the error). pMSE, MSE and the spectra come
+ * (Chizhov et al. 2022 Table 1; docs/mathematics.md §4.3: pMSE = E / (N C) against the
+ * ground truth, and the blue-noise analysis of the error). pMSE, MSE and the spectra come
  * from common/ (metrics.h, spectra.h); only a user kernel, which metrics.h does not
  * know, is scored with this module's own energy (the same formula). */
 #include "internal.h"

@@ -1,4 +1,4 @@
-/* diffusion.c: error diffusion in the vertical search space (SPEC "perceptual";
+/* diffusion.c: error diffusion in the vertical search space (docs/mathematics.md §4.7;
  * Chizhov et al. 2022 Alg. 1 lines 8-15; Floyd & Steinberg 1976).
  *
  * O := I' (the surrogate); serpentine scan; each pixel takes the candidate nearest

@@ -1,5 +1,5 @@
 /* dither.c: threshold dithering in the vertical search space with a blue-noise mask
- * (SPEC "perceptual"; Chizhov et al. 2022 Alg. 1 lines 16-23).
+ * (docs/mathematics.md §4.8; Chizhov et al. 2022 Alg. 1 lines 16-23).
  *
  * On luminance: s = lum(T(I'_p)), l_j = lum(T(Q_j)); lower = the candidate with the
  * largest l_j <= s, upper = the one with the smallest l_j > s (ties: the first); take

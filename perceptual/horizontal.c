@@ -1,5 +1,5 @@
 /* horizontal.c: iterative minimisation in the horizontal search space -- pixel swaps
- * (SPEC "perceptual", horizontal; Chizhov et al. 2022 Sec. 4.2, Alg. 2, Eq. 10b).
+ * (docs/mathematics.md §4.9; Chizhov et al. 2022 Sec. 4.2, Alg. 2, Eq. 10b).
  *
  * One estimate Q per pixel; the search space is permutations pi, pixel p showing
  * Q(pi(p)) (and, once re-rendered, using pi(p)'s random seed). Energy

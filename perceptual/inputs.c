@@ -1,6 +1,6 @@
 /* inputs.c: checking and packing the perceptual methods' inputs -- candidates,
- * surrogate and confidence map -- into tone-mapped float buffers (SPEC "perceptual":
- * the error lives in display space, T applied per channel), and building their
+ * surrogate and confidence map -- into tone-mapped float buffers (docs/mathematics.md
+ * §4.2: the error lives in display space, T applied per channel), and building their
  * outputs (the chosen candidates, the index map). */
 #include "internal.h"
 

@@ -1,6 +1,7 @@
 /* internal.h: what the perceptual module's files share -- the kernel g as a 2D array,
  * pixel footprints under replicate borders, tone-mapped pixel buffers, and the
- * incremental energy state of direct binary search (SPEC "perceptual"). Not installed. */
+ * incremental energy state of direct binary search (docs/mathematics.md §4.6).
+ * Not installed. */
 #ifndef MCP_PERCEPTUAL_INTERNAL_H
 #define MCP_PERCEPTUAL_INTERNAL_H
 
@@ -113,7 +114,7 @@ mcp__seconds(void)
  *   E_C = sum_p u_p |o_p - qinit_p|^2 + sum_q C_q |r_q|^2,  u_p = (1 - C_p) |g|_1^2.
  * Changing o_p by D changes E_C by
  *   sum_c [2 D_c <a_p, C r_c> + D_c^2 <a_p, C a_p>] + u_p (|o_p + D - qi|^2 - |o_p -
- * qi|^2) (SPEC: 2D (g * r)_p + D^2 |g|^2 for C = 1 away from the borders): O(1) per
+ * qi|^2) (§4.6: 2D (g * r)_p + D^2 |g|^2 for C = 1 away from the borders): O(1) per
  * candidate once <a_p, C r> is known (O(|g|)), and an accepted change updates r in
  * O(|g|). All sums are in double. */
 typedef struct mcp__perc_state {

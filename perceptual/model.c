@@ -1,10 +1,10 @@
-/* model.c: the perceptual error model and its incremental form (SPEC "perceptual",
- * Chizhov et al. 2022 Eqs. 15, 16, 21).
+/* model.c: the perceptual error model and its incremental form (docs/mathematics.md
+ * §4.3-§4.4, Chizhov et al. 2022 Eqs. 15, 16, 21).
  *
  *   E_C(O) = sum_p (1 - C_p) |g|_1^2 |T(O_p) - T(Q_init,p)|^2
  *          + sum_q C_q |(g * T(O))_q - (h * T(I'))_q|^2
  *
- * Borders replicate (clamp to edge), as SPEC asks. SPEC writes the confidence term as
+ * Borders replicate (clamp to edge), as §4.3 asks. §4.4 writes the confidence term as
  * |O - Q_init|^2; we take it in display space, T(O) - T(Q_init), like the rest of the
  * energy (with T = none the two agree), so that one firefly cannot outweigh the whole
  * perceptual term.

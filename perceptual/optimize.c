@@ -1,5 +1,5 @@
 /* optimize.c: the perceptual options, their checks, method names, and running a
- * method by name (SPEC "perceptual"). */
+ * method by name (docs/mathematics.md §4). */
 #define _POSIX_C_SOURCE 200809L /* strcasecmp */
 #include "internal.h"
 

@@ -1,5 +1,5 @@
-/* perceptual.h: perceptual error optimisation of Monte Carlo renders (SPEC
- * "perceptual"; Chizhov et al. 2022).
+/* perceptual.h: perceptual error optimisation of Monte Carlo renders
+ * (docs/mathematics.md §4; Chizhov et al. 2022).
  *
  * The error model (Eq. 15 with Eq. 16/21):
  *

@@ -1,5 +1,5 @@
-/* powerset.c: the power-set search space (SPEC "perceptual": the means of all 2^M - 1
- * non-empty subsets of the M per-pixel estimates, capped by max_subsets; Chizhov et
+/* powerset.c: the power-set search space (docs/mathematics.md §4.5: the means of all 2^M
+ * - 1 non-empty subsets of the M per-pixel estimates, capped by max_subsets; Chizhov et
  * al. 2022 Sec. 4.3) searched by the vertical iterative minimisation.
  *
  * Under a cap, the subsets kept are the M single estimates, the mean of all M, then

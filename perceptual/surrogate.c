@@ -1,5 +1,5 @@
-/* surrogate.c: surrogates for the ground truth (SPEC "perceptual": I' is a denoised
- * average, any image the user gives, or the ground truth for best-case studies;
+/* surrogate.c: surrogates for the ground truth (docs/mathematics.md §4.3: I' is a
+ * denoised average, any image the user gives, or the ground truth for best-case studies;
  * Chizhov et al. 2022 Sec. 5.1, 7.1). The user's image and the truth need no code;
  * this builds the candidates' mean and its denoised version. */
 #include "internal.h"

@@ -1,5 +1,5 @@
 /* vertical.c: iterative minimisation in the vertical search space by direct binary
- * search (SPEC "perceptual", vertical iterative; Chizhov et al. 2022 Alg. 1 lines
+ * search (docs/mathematics.md §4.6; Chizhov et al. 2022 Alg. 1 lines
  * 1-7, Analoui & Allebach 1992).
  *
  * Start from a random candidate per pixel (seeded by (seed, pixel)) or from the

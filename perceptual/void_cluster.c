@@ -1,5 +1,5 @@
 /* void_cluster.c: blue-noise dither masks by the void-and-cluster method (Ulichney
- * 1993; SPEC "perceptual", dithering: [128x128, sigma = 1.5, toroidal]), generated
+ * 1993; docs/mathematics.md §4.8: [128x128, sigma = 1.5, toroidal]), generated
  * deterministically from a seed and cached on disk.
  *
  * Energy E(p) = sum over minority pixels q of exp(-|p - q|^2 / (2 sigma^2)), distances

@@ -1,5 +1,5 @@
 /* estimate.c: estimate(dump, ...) -- how wrong the denoised render still is and whether
- * to stop (estimate/estimate.h; SPEC "estimate"): the error maps, the blocks, the
+ * to stop (estimate/estimate.h; docs/mathematics.md §2): the error maps, the blocks, the
  * distribution's λ and s², F(τ) and the decision F(τ) >= p, the estimated percentile
  * curve, the sampling map and, with a reference, the true percentiles beside it. The
  * keywords are the estimate's table (ops/op_estimate.c), as the CLI's flags ('-' as
@@ -230,5 +230,5 @@ PyMethodDef mcp_py_estimate_methods[] = {
      "'name' and its settings."},
     {"true_error", FN(py_true_error), KW,
      "true_error(denoised, reference, *, metric='relse', ppd=0) -> ndarray H x W x 3:\n"
-     "the true per-value error in the metric (SPEC 'Ground truth for evaluation')"},
+     "the true per-value error in the metric (docs/mathematics.md section 2.9)"},
     {NULL, NULL, 0, NULL}};

@@ -11,7 +11,7 @@
  * every pixel, the per-sample variance and the variance of the pixel mean under either
  * sampler are computed by deterministic quadrature to about 1e-12. README.md beside
  * this file describes the scene. Tests and the perceptual
- * evaluation draw realizations from it (SPEC perceptual, "horizontal search space"). */
+ * evaluation draw realizations from it (docs/mathematics.md §4.9). */
 #ifndef MCP_PROCEDURAL_H
 #define MCP_PROCEDURAL_H
 

@@ -1,5 +1,5 @@
 /* render.c: Monte Carlo rendering of the procedural scene from per-pixel random
- * streams, optionally with permuted seeds (SPEC perceptual, "horizontal search space":
+ * streams, optionally with permuted seeds (docs/mathematics.md §4.9:
  * a renderer re-renders pixel p with pixel pi(p)'s seed), with independent or
  * jittered (stratified) footprint points.
  *

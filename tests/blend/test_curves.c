@@ -1,5 +1,5 @@
-/* test_curves.c: blend/curves.c against closed forms (SPEC "blend": convergence curve,
- * Eq. 11, weight; Denisova & Bocchi 2024 Eqs. 7, 11, 14). */
+/* test_curves.c: blend/curves.c against closed forms (docs/mathematics.md §3.1, §3.4:
+ * convergence curve, Eq. 11, weight; Denisova & Bocchi 2024 Eqs. 7, 11, 14). */
 #include "blend_testing.h"
 
 #include <math.h>

@@ -1,6 +1,6 @@
 /* test_filtering.c: blend/filtering.c -- the Gaussian rule for sigma, the denoiser
- * option, the stopping rule and the negative-SURE rule (SPEC "blend": Filtering,
- * Negative SURE). */
+ * option, the stopping rule and the negative-SURE rule
+ * (docs/mathematics.md §3.2, §3.3). */
 #include "blend_testing.h"
 
 #include <math.h>

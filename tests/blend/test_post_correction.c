@@ -1,6 +1,6 @@
 /* test_post_correction.c: blend/post_correction.c -- the James-Stein combiner against
  * its closed form on constant images and a naive window loop on random ones, and its
- * rho in estimate's post-correction variance (SPEC "blend" Post-correction). */
+ * rho in estimate's post-correction variance (docs/mathematics.md §3.8). */
 #include "blend_testing.h"
 
 #include <math.h>

@@ -1,8 +1,8 @@
 /* test_series.c: blend/series.c -- the driver on the fixture series (Cornell box and
- * texture, 1..1024 spp, Blender renders) against their 16384-spp references: the
- * curve blend converges and beats both inputs from 16 spp (SPEC "blend"; Denisova &
- * Bocchi 2024 Fig. 4), denoising that stops early, retrospective curves, the errors
- * of bad series, and the driver through `mcpost blend` and the `blend` job stage. */
+ * texture, 1..1024 spp, Blender renders) against their 16384-spp references: the curve
+ * blend converges and beats both inputs from 16 spp (docs/mathematics.md §3; Denisova &
+ * Bocchi 2024 Fig. 4), denoising that stops early, retrospective curves, the errors of
+ * bad series, and the driver through `mcpost blend` and the `blend` job stage. */
 #include "blend_testing.h"
 
 #include <mcpost/imageio.h>
@@ -124,8 +124,8 @@ test_fixtures_converge(void **state)
             /* the gauss denoiser is biased: far worse than noisy at the top */
             assert_true(sc.top_den < 0.5);
             if (fits[f] == MCP_CURVE_FIT_ON_THE_FLY) {
-                /* SPEC's on-the-fly curve has slope -2 (Eq. 11): W / I = sqrt(v / SURE),
-                 * and where d is biased (B^2 >> v) the blend's error tends to
+                /* The on-the-fly curve (§3.1) has slope -2 (Eq. 11): W / I = sqrt(v /
+                 * SURE), and where d is biased (B^2 >> v) the blend's error tends to
                  * (1 - rho)^2 v + rho^2 B^2 ~ 2 v (test_weights.c). It converges at the
                  * noisy image's rate but may stay up to twice above it; on the texture
                  * scene, biased almost everywhere, it ends 1.5x above. */

@@ -1,6 +1,6 @@
 /* test_weights.c: blend/weights.c -- weights from curves, the blend formula, easy and
  * ideal blending, and one iteration (mcp_blend_step) on a procedural render with a
- * known truth (SPEC "blend"; Denisova & Bocchi 2024 Eqs. 2, 4, 8, 14). */
+ * known truth (docs/mathematics.md §3; Denisova & Bocchi 2024 Eqs. 2, 4, 8, 14). */
 #include "blend_testing.h"
 
 #include <mcpost/estimate.h>
@@ -88,7 +88,7 @@ test_ideal_reproduces_reference(void **state)
     (void)state;
     /* Random n, d, R: wherever R lies strictly between n and d (so W = I (R - n)/(d - R)
      * is positive and finite), r = R up to float rounding of the inputs; where d = R,
-     * r = d = R; elsewhere W = 0 and r = n (SPEC clamps W at 0). */
+     * r = d = R; elsewhere W = 0 and r = n (§3.6 clamps W at 0). */
     const int w = 64, h = 48;
     mcp_image *n = mcp_test_random(w, h, 3, 0, 2, 11, RGB);
     mcp_image *d = mcp_test_random(w, h, 3, 0, 2, 12, RGB);

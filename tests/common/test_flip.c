@@ -1,5 +1,5 @@
 /* test_flip.c: common/flip.c and common/flip_csf.c against independent truths:
- * the constants and filter taps measured from NVlabs/flip v1.6 (notes/flip.md), the
+ * the constants and filter taps measured from NVlabs/flip v1.6 (docs/flip.md), the
  * flat-grey value 0.169141844, and a straightforward double-precision implementation
  * with full 2D kernels written here from the formulas (notes §1; float and double
  * differ by at most ~3.4e-5 per pixel there, so 1e-4 per pixel and 5e-5 on means). */
@@ -559,7 +559,7 @@ test_hdr_zero_median(void **state)
 {
     (void)state;
     /* More than half of the reference black: v1.6 returns 0 (stop = inf); we clamp
-     * the median to FLT_EPSILON (SPEC departure) and get a finite schedule. */
+     * the median to FLT_EPSILON (docs/flip.md §5) and get a finite schedule. */
     mcp_image *ref = mcp_test_constant(16, 16, 3, 0.0f, RGB);
     mcp_image *test = mcp_test_constant(16, 16, 3, 0.0f, RGB);
     for (int y = 0; y < 6; y++)
@@ -593,7 +593,7 @@ static void
 test_hdr_negative_clamped(void **state)
 {
     (void)state;
-    /* Negative values act as 0 (SPEC departure), not as ACES's near-white. */
+    /* Negative values act as 0 (docs/flip.md §5), not as ACES's near-white. */
     mcp_image *ref = mcp_test_random(20, 20, 3, 0.1f, 3.0f, 9, RGB);
     mcp_image *t0 = NULL, *t1 = NULL;
     assert_int_equal(mcp_image_copy(ref, &t0), 0);

@@ -1,5 +1,5 @@
 /* test_denoisers.c: the denoiser table and the built-in denoisers (estimate/denoisers.c,
- * denoise_gauss.c, denoise_nlm.c; SPEC estimate, "Denoisers").
+ * denoise_gauss.c, denoise_nlm.c; docs/mathematics.md §2.1).
  *
  * Truth comes from closed forms and naive versions: gauss against a direct 2D
  * convolution and linearity; nlm against a naive double-precision transcription of its

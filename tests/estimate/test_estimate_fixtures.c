@@ -235,10 +235,10 @@ test_series_synthetic_agreement(void **state)
                   "(%.0f%%, %d early); the paper: 87%%\n",
                   agree, cases, 100.0 * agree / cases, early, agree4, cases4,
                   100.0 * agree4 / cases4, early4);
-    /* K = 1 (SPEC's default) stops late rather than early: s_i² = (Jε)_i² from one
-     * probe is itself spread like χ²_1 around the true variance, which fattens the
-     * model's upper tail. So: no early misses, and at least half agree; K = 4
-     * tightens the tail: at most one miss in 12. */
+    /* K = 1 (the base model, docs/mathematics.md §2.8) stops late rather than early:
+     * s_i² = (Jε)_i² from one probe is itself spread like χ²_1 around the true variance,
+     * which fattens the model's upper tail. So: no early misses, and at least half
+     * agree; K = 4 tightens the tail: at most one miss in 12. */
     assert_int_equal(early, 0);
     assert_true(agree * 2 >= cases);
     assert_int_equal(early4, 0);

@@ -1,9 +1,10 @@
-/* test_external.c: the `external` denoiser (estimate/denoise_external.c; SPEC estimate,
- * "Denoisers"). The external command is mcpost's own gauss denoiser run through
- * tests/estimate/external_gauss.sh, so the truth is the built-in gauss: apply must give
- * the same pixels (PFM is float32), and the finite-difference JVP must match gauss's
- * exact JVP (gauss is linear, so only float rounding divided by delta separates them).
- * Also: failing commands, missing albedo, unknown keys, and no temporary files left. */
+/* test_external.c: the `external` denoiser (estimate/denoise_external.c;
+ * docs/mathematics.md §2.1). The external command is mcpost's own gauss denoiser run
+ * through tests/estimate/external_gauss.sh, so the truth is the built-in gauss: apply
+ * must give the same pixels (PFM is float32), and the finite-difference JVP must match
+ * gauss's exact JVP (gauss is linear, so only float rounding divided by delta separates
+ * them). Also: failing commands, missing albedo, unknown keys, and no temporary files
+ * left. */
 #define _POSIX_C_SOURCE 200809L
 #include "denoiser_settings.h"
 #include "testing.h"

@@ -158,7 +158,7 @@ clampd(double v, double lo, double hi)
     return isnan(v) ? 0 : v < lo ? lo : v > hi ? hi : v;
 }
 
-/* OIDN 1.4 autoexposure, plainly (notes 3.3) */
+/* OIDN 1.4 autoexposure, plainly (docs/oidn-network.md §3.3) */
 static double
 ref_autoexposure(const mcp_image *c)
 {
@@ -367,7 +367,7 @@ static void
 test_transfer_function(void **state)
 {
     (void)state;
-    /* the values of notes/oidn.md 3.2 */
+    /* the values of docs/oidn-network.md §3.2 */
     assert_close(mcp__pu_forward(0.18f), 0.2153, 5e-4, 0);
     assert_close(mcp__pu_forward(1.0f), 0.3189, 5e-4, 0);
     assert_close(mcp__pu_forward(100.0f), 0.6015, 5e-4, 0);
@@ -1079,7 +1079,7 @@ read_fixture(const char *scene, int spp, mcp_dump **dump, mcp_image **ref, int r
 /* The official weights denoise both fixtures at 16 and 64 spp. On the Cornell box
  * relMSE against the reference falls below a quarter of the noisy input's (issue 6).
  * The texture scene is made to be hard for denoisers (fine albedo detail that they
- * blur, SPEC samples): there it must still improve on the noisy input. */
+ * blur, docs/samples.md): there it must still improve on the noisy input. */
 static void
 test_real_weights_fixtures(void **state)
 {
@@ -1256,19 +1256,32 @@ check_kernels(const mcp__unet *net, const rnet *n, const mcp_image *col,
         mcp__unet_gemm g;
         mcp__unet_gemm_choose(&g);
         assert_string_equal(g.name, names[i]);
-        mcp_image *out = NULL, *jt = NULL;
-        assert_int_equal(mcp__unet_run(net, col, alb, nrm, scale, t, 1, &out, &jt), 0);
-        const double e_out = rel_err(out, ref), e_jvp = rel_err(jt, fp);
-        const double d_out = rel_l2(out, fixed), d_jvp = rel_l2(jt, fixed_jt);
-        print_message("%s: kernel %s: relative L2 against double: output %.2e, JVP %.2e; "
-                      "against the fixed-bit loops: %.2e, %.2e\n",
-                      what, names[i], e_out, e_jvp, d_out, d_jvp);
-        assert_true(e_out < 1e-5 && e_jvp < 1e-5);
-        /* the JVP is piecewise: where a pre-activation or a pooling choice lies within
-         * rounding of a tie, the two paths may take other sides (both right for their
-         * primal), so the bound against the fixed-bit path is issue 6's 1e-3 */
-        assert_true(d_out < 1e-5 && d_jvp < 1e-3);
-        mcp_image_free(out), mcp_image_free(jt);
+        /* the tangents on F(4x4, 3x3) (the default), then on F(2x2, 3x3) as the
+         * primal (exact_tangents): both within the bound, and not the same bits (the
+         * coarse path did run) */
+        mcp_image *jt_mode[2] = {NULL, NULL};
+        for (int exact = 0; exact < 2; exact++) {
+            setenv("MCPOST_UNET_EXACT_TANGENTS", exact ? "1" : "0", 1);
+            mcp_image *out = NULL, *jt = NULL;
+            assert_int_equal(mcp__unet_run(net, col, alb, nrm, scale, t, 1, &out, &jt), 0);
+            const double e_out = rel_err(out, ref), e_jvp = rel_err(jt, fp);
+            const double d_out = rel_l2(out, fixed), d_jvp = rel_l2(jt, fixed_jt);
+            print_message("%s: kernel %s, tangents %s: relative L2 against double: output "
+                          "%.2e, JVP %.2e; against the fixed-bit loops: %.2e, %.2e\n",
+                          what, names[i], exact ? "F(2x2,3x3)" : "F(4x4,3x3)", e_out,
+                          e_jvp, d_out, d_jvp);
+            assert_true(e_out < 1e-5 && e_jvp < 1e-5);
+            /* the JVP is piecewise: where a pre-activation or a pooling choice lies
+             * within rounding of a tie, the two paths may take other sides (both right
+             * for their primal), so the bound against the fixed-bit path is issue 6's
+             * 1e-3 */
+            assert_true(d_out < 1e-5 && d_jvp < 1e-3);
+            mcp_image_free(out);
+            jt_mode[exact] = jt;
+        }
+        unsetenv("MCPOST_UNET_EXACT_TANGENTS");
+        assert_true(rel_l2(jt_mode[0], jt_mode[1]) > 0.0);
+        mcp_image_free(jt_mode[0]), mcp_image_free(jt_mode[1]);
         tried++;
     }
     assert_true(tried >= 1); /* generic, at least */

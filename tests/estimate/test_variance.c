@@ -3,7 +3,7 @@
  *
  * The JVP variance of a linear filter A is exact in expectation, E[(Av)_i²] =
  * (A Σ Aᵀ)_ii, and agrees with the empirical variance of the denoised output over
- * realizations of the noise (SPEC asks for an image-mean ratio within [0.8, 1.25]).
+ * realizations of the noise (the bound asked: an image-mean ratio within [0.8, 1.25]).
  * The sampling map is checked against Eq. 3 computed by hand, and the counts must sum
  * exactly to the budget and stay within one sample of budget × weight. */
 #include "box_denoiser.h"

@@ -26,7 +26,7 @@ const char *mcp_fuzz_dir(void);
  * one per slot 0..7); aborts on failure. */
 const char *mcp_fuzz_file(int slot, const char *name, const void *data, size_t size);
 
-/* The error contract (SPEC, STYLE 5): a failed call returns -1 with one non-empty line
+/* The error contract (docs/library.md): a failed call returns -1 with one non-empty line
  * set; aborts (a finding) otherwise. rc is the call's return value. */
 void mcp_fuzz_check_error(int rc, const char *what);
 

@@ -17,7 +17,7 @@ LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
                     (img->channels != 1 && img->channels != 3)))
         __builtin_trap();
     if (rc != 0 && img)
-        __builtin_trap(); /* *out stays NULL on failure (STYLE 6) */
+        __builtin_trap(); /* *out stays NULL on failure (docs/library.md) */
     mcp_image_free(img);
     return 0;
 }

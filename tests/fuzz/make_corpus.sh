@@ -58,7 +58,7 @@ stages:
   - blend: {input: s}
 YAML
 
-# ---- weights: small archives in OIDN's .tza layout (notes/oidn.md section 2) ----
+# ---- weights: small archives in OIDN's .tza layout (docs/oidn-network.md §2) ----
 python3 - corpus/tza <<'PY'
 import struct, sys
 def tza(path, tensors):

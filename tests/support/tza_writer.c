@@ -1,5 +1,6 @@
 /* tza_writer.c: a test-only .tza writer following OIDN's training/tza.py layout
- * (notes/oidn.md 2): 12-byte header, 64-aligned tensors, 64-aligned table at the end. */
+ * (docs/oidn-network.md §2): 12-byte header, 64-aligned tensors, 64-aligned table at
+ * the end. */
 #include "tza_writer.h"
 
 #include <stdint.h>

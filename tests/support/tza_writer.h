@@ -1,4 +1,4 @@
-/* tza_writer.h: a test-only writer of OIDN .tza archives (notes/oidn.md section 2),
+/* tza_writer.h: a test-only writer of OIDN .tza archives (docs/oidn-network.md §2),
  * and the float16 rounding the writer uses. */
 #ifndef MCP_TEST_TZA_WRITER_H
 #define MCP_TEST_TZA_WRITER_H

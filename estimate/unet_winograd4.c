@@ -1,0 +1,348 @@
+/* unet_winograd4.c: the U-Net's 3x3 convolutions as Winograd F(4x4, 3x3) (Lavin &
+ * Gray 2016), for the tangents' passes: each 4x4 block of outputs from its 6x6 block
+ * of inputs with 36 multiplies per input channel instead of 144, so 1.78 times fewer
+ * multiply-adds than F(2x2, 3x3) (unet_winograd.c) and 4 times fewer than the direct
+ * loops, and 2.25 transformed values per output instead of 4, so that the transforms
+ * move less memory too.
+ *
+ * Its transforms have coefficients up to 8 (interpolation at 0, +-1, +-2 and infinity),
+ * so a value's rounding grows with them: the JVP through the whole network differs
+ * from central differences of the double reference by 1.2e-6 (official weights) to
+ * 2.1e-6 (a random network) in relative L2, against 0.5-0.8e-6 on F(2x2, 3x3)
+ * (tests/estimate/test_unet.c, test_fast_kernels, measures both against 1e-5). The
+ * primal, which the user sees, stays on F(2x2, 3x3), bit for bit what it was; the
+ * tangents feed s^2, the variance of the denoised image and SURE's divergence, which
+ * need ~10%. The denoiser's exact_tangents setting (or MCPOST_UNET_EXACT_TANGENTS=1)
+ * keeps the tangents on F(2x2, 3x3).
+ *
+ * Per 4x4 tile and input channel: V = B^T d B; per element e of 36: M_e = U_e V_e with
+ * U = G g G^T (per layer and call, in double); Y = A^T M A, with
+ *   B^T = [4 0 -5 0 1 0; 0 -4 -4 1 1 0; 0 4 -4 -1 1 0; 0 -2 -1 2 1 0; 0 2 -1 -2 1 0;
+ *          0 4 0 -5 0 1],
+ *   G = [1/4 0 0; -1/6 -1/6 -1/6; -1/6 1/6 -1/6; 1/24 1/12 1/6; 1/24 -1/12 1/6; 0 0 1],
+ *   A^T = [1 1 1 1 1 0; 0 1 -1 2 -2 0; 0 1 1 4 4 0; 0 1 -1 8 -8 1].
+ * The tasks, the matrix kernels and the determinism (each output one fixed sequence of
+ * operations whatever the thread count or where the image was cut) are as in
+ * unet_winograd.c. */
+#include "unet_internal.h"
+#include "internal.h"
+
+#include <stdlib.h>
+#include <string.h>
+#if defined(__x86_64__)
+#include <xmmintrin.h>
+#endif
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+#if defined(__GNUC__) && defined(__x86_64__)
+#define TRANSFORM_KERNEL __attribute__((target_clones("avx2", "default")))
+#else
+#define TRANSFORM_KERNEL
+#endif
+
+#define ALPHA 6            /* input tile side */
+#define ELEMS 36           /* ALPHA x ALPHA transformed elements */
+#define CHUNK4 64          /* tiles per task: 36 x (cin + cout) x CHUNK4 floats */
+
+/* U[e][o][i] = (G g_oi G^T)[e]. */
+static void
+transform_weights(const float *weight, int cin, int cout, float *u)
+{
+    static const double G[ALPHA][3] = {{0.25, 0, 0},
+                                       {-1.0 / 6, -1.0 / 6, -1.0 / 6},
+                                       {-1.0 / 6, 1.0 / 6, -1.0 / 6},
+                                       {1.0 / 24, 1.0 / 12, 1.0 / 6},
+                                       {1.0 / 24, -1.0 / 12, 1.0 / 6},
+                                       {0, 0, 1}};
+    const size_t plane = (size_t)cout * cin;
+#pragma omp parallel for schedule(static)
+    for (int o = 0; o < cout; o++)
+        for (int i = 0; i < cin; i++) {
+            const float *g = weight + ((size_t)o * cin + i) * 9;
+            double t[ALPHA][3]; /* G g */
+            for (int a = 0; a < ALPHA; a++)
+                for (int c = 0; c < 3; c++)
+                    t[a][c] = G[a][0] * g[c] + G[a][1] * g[3 + c] + G[a][2] * g[6 + c];
+            for (int a = 0; a < ALPHA; a++)
+                for (int b = 0; b < ALPHA; b++) {
+                    const double s = G[b][0] * t[a][0] + G[b][1] * t[a][1] + G[b][2] * t[a][2];
+                    u[(size_t)(a * ALPHA + b) * plane + (size_t)o * cin + i] = (float)s;
+                }
+        }
+}
+
+/* Input row y of one channel for tiles [tx0, tx0 + nt), split by column phase:
+ * ph[q][j] = column 4 (tx0 + j) - 1 + q for j <= nt, so that tile tx0 + j's six
+ * columns are ph[0..3][j], ph[0][j + 1], ph[1][j + 1]; zeros outside the image. With
+ * up, the source is at half resolution and read upsampled (nearest, 2x). */
+static inline void
+load_row4(const float *src, int up, int h, int w, int y, int tx0, int nt, float *ph[4])
+{
+    const int n = nt + 1;
+    if (y < 0 || y >= h) {
+        for (int q = 0; q < 4; q++)
+            memset(ph[q], 0, (size_t)n * sizeof(float));
+        return;
+    }
+    const int x0 = 4 * tx0 - 1;
+    const float *r = up ? src + (size_t)(y / 2) * (w / 2) : src + (size_t)y * w;
+    /* j in [lo, hi): all four columns inside the image */
+    const int lo = x0 < 0 ? 1 : 0;
+    int hi = w - 4 - x0 >= 0 ? (w - 4 - x0) / 4 + 1 : 0;
+    hi = hi < n ? hi : n;
+    int j = lo;
+    if (!up) {
+#if defined(__x86_64__)
+        for (; j + 4 <= hi; j += 4) { /* 4 x 4 transposes */
+            const float *s = r + x0 + 4 * j;
+            __m128 c0 = _mm_loadu_ps(s), c1 = _mm_loadu_ps(s + 4), c2 = _mm_loadu_ps(s + 8),
+                   c3 = _mm_loadu_ps(s + 12);
+            _MM_TRANSPOSE4_PS(c0, c1, c2, c3);
+            _mm_storeu_ps(ph[0] + j, c0), _mm_storeu_ps(ph[1] + j, c1);
+            _mm_storeu_ps(ph[2] + j, c2), _mm_storeu_ps(ph[3] + j, c3);
+        }
+#endif
+        for (; j < hi; j++)
+            for (int q = 0; q < 4; q++)
+                ph[q][j] = r[x0 + 4 * j + q];
+    } else {
+        /* columns 4 k - 1 .. 4 k + 2 (k = tx0 + j) read source columns 2 k - 1, 2 k,
+         * 2 k, 2 k + 1 */
+        float *restrict p0 = ph[0], *restrict p1 = ph[1], *restrict p2 = ph[2],
+                        *restrict p3 = ph[3];
+        const float *restrict rs = r + 2 * tx0;
+#pragma omp simd
+        for (int i = lo; i < hi; i++) {
+            p0[i] = rs[2 * i - 1];
+            p1[i] = rs[2 * i];
+            p2[i] = rs[2 * i];
+            p3[i] = rs[2 * i + 1];
+        }
+        j = hi > lo ? hi : lo;
+    }
+    /* the edges: at most one value on the left, a few on the right */
+    for (int e = 0; e < n; e++) {
+        if (e >= lo && e < hi)
+            continue;
+        for (int q = 0; q < 4; q++) {
+            const int x = x0 + 4 * e + q;
+            ph[q][e] = x >= 0 && x < w ? r[up ? x / 2 : x] : 0.0f;
+        }
+    }
+}
+
+/* V for tiles [tx0, tx0 + nt) of tile row ty, one channel: v[e * ld + j], e = 6 a + b,
+ * from input rows 4 ty - 1 .. 4 ty + 4: first B^T down the rows (whole phase arrays at
+ * a time), then B across each tile. rows holds 24 (nt + 1) floats. */
+TRANSFORM_KERNEL static void
+transform_input4(const float *src, int up, int h, int w, int ty, int tx0, int nt,
+                 float *rows, float *v, size_t ld)
+{
+    const size_t n = (size_t)nt + 1;
+    float *ph[ALPHA][4];
+    for (int r = 0; r < ALPHA; r++) {
+        for (int q = 0; q < 4; q++)
+            ph[r][q] = rows + (size_t)(4 * r + q) * n;
+        load_row4(src, up, h, w, 4 * ty - 1 + r, tx0, nt, ph[r]);
+    }
+    /* rows of B^T d, in place, phase by phase */
+    for (int q = 0; q < 4; q++) {
+        float *restrict d0 = ph[0][q], *restrict d1 = ph[1][q], *restrict d2 = ph[2][q];
+        float *restrict d3 = ph[3][q], *restrict d4 = ph[4][q], *restrict d5 = ph[5][q];
+#pragma omp simd
+        for (size_t j = 0; j < n; j++) {
+            const float x0 = d0[j], x1 = d1[j], x2 = d2[j], x3 = d3[j], x4 = d4[j],
+                        x5 = d5[j];
+            d0[j] = 4.0f * x0 - 5.0f * x2 + x4;
+            d1[j] = x3 + x4 - 4.0f * (x1 + x2);
+            d2[j] = 4.0f * (x1 - x2) + x4 - x3;
+            d3[j] = 2.0f * (x3 - x1) + x4 - x2;
+            d4[j] = 2.0f * (x1 - x3) + x4 - x2;
+            d5[j] = 4.0f * x1 - 5.0f * x3 + x5;
+        }
+    }
+    /* times B across each tile */
+    for (int a = 0; a < ALPHA; a++) {
+        const float *restrict p0 = ph[a][0], *restrict p1 = ph[a][1],
+                              *restrict p2 = ph[a][2], *restrict p3 = ph[a][3];
+        float *restrict v0 = v + (size_t)(ALPHA * a) * ld, *restrict v1 = v0 + ld,
+                        *restrict v2 = v1 + ld, *restrict v3 = v2 + ld,
+                        *restrict v4 = v3 + ld, *restrict v5 = v4 + ld;
+#pragma omp simd
+        for (int j = 0; j < nt; j++) {
+            const float c0 = p0[j], c1 = p1[j], c2 = p2[j], c3 = p3[j], c4 = p0[j + 1],
+                        c5 = p1[j + 1];
+            v0[j] = 4.0f * c0 - 5.0f * c2 + c4;
+            v1[j] = c3 + c4 - 4.0f * (c1 + c2);
+            v2[j] = 4.0f * (c1 - c2) + c4 - c3;
+            v3[j] = 2.0f * (c3 - c1) + c4 - c2;
+            v4[j] = 2.0f * (c1 - c3) + c4 - c2;
+            v5[j] = 4.0f * c1 - 5.0f * c3 + c5;
+        }
+    }
+}
+
+/* Y = A^T m A for tiles [tx0, tx0 + nt) of tile row ty, channel o (m[e * ld + j]);
+ * the bias (image 0), and the ReLU (image 0) or image 0's mask (the others), stored
+ * where inside the image. The 16 outputs of a tile are computed in 16 streams over the
+ * tiles (o[4 a + q][j]: row a, column q), which vectorise, then interleaved into the
+ * rows by 4 x 4 transposes. row holds 32 nt floats. */
+TRANSFORM_KERNEL static void
+transform_output4(const float *m, size_t ld, int ty, int tx0, int nt, int h, int w,
+                  float bias, int relu, int primal, const float *p0, float *dst,
+                  float *row)
+{
+    float *restrict o = row;               /* 16 streams of nt */
+    float *restrict line = row + 16 * (size_t)nt; /* one output row, 4 nt */
+#define M(e) m[(size_t)(e) * ld + j]
+#pragma omp simd
+    for (int j = 0; j < nt; j++) {
+        /* A^T down the columns: s_a_b for column b */
+        float s0[ALPHA], s1[ALPHA], s2[ALPHA], s3[ALPHA];
+#pragma GCC unroll 6
+        for (int b = 0; b < ALPHA; b++) {
+            const float m0 = M(b), m1 = M(6 + b), m2 = M(12 + b), m3 = M(18 + b),
+                        m4 = M(24 + b), m5 = M(30 + b);
+            s0[b] = m0 + m1 + m2 + m3 + m4;
+            s1[b] = m1 - m2 + 2.0f * (m3 - m4);
+            s2[b] = m1 + m2 + 4.0f * (m3 + m4);
+            s3[b] = m1 - m2 + 8.0f * (m3 - m4) + m5;
+        }
+#define ACROSS(a, t)                                                                     \
+    o[(4 * (a) + 0) * (size_t)nt + j] = t[0] + t[1] + t[2] + t[3] + t[4] + bias;          \
+    o[(4 * (a) + 1) * (size_t)nt + j] = t[1] - t[2] + 2.0f * (t[3] - t[4]) + bias;        \
+    o[(4 * (a) + 2) * (size_t)nt + j] = t[1] + t[2] + 4.0f * (t[3] + t[4]) + bias;        \
+    o[(4 * (a) + 3) * (size_t)nt + j] = t[1] - t[2] + 8.0f * (t[3] - t[4]) + t[5] + bias;
+        ACROSS(0, s0)
+        ACROSS(1, s1)
+        ACROSS(2, s2)
+        ACROSS(3, s3)
+#undef ACROSS
+    }
+#undef M
+    const int x0 = 4 * tx0, xn = w - x0 < 4 * nt ? w - x0 : 4 * nt;
+    for (int a = 0; a < 4 && 4 * ty + a < h; a++) {
+        const float *q0 = o + (size_t)(4 * a) * nt, *q1 = q0 + nt, *q2 = q1 + nt,
+                    *q3 = q2 + nt;
+        int j = 0;
+#if defined(__x86_64__)
+        for (; j + 4 <= nt; j += 4) {
+            __m128 c0 = _mm_loadu_ps(q0 + j), c1 = _mm_loadu_ps(q1 + j),
+                   c2 = _mm_loadu_ps(q2 + j), c3 = _mm_loadu_ps(q3 + j);
+            _MM_TRANSPOSE4_PS(c0, c1, c2, c3);
+            _mm_storeu_ps(line + 4 * j, c0), _mm_storeu_ps(line + 4 * j + 4, c1);
+            _mm_storeu_ps(line + 4 * j + 8, c2), _mm_storeu_ps(line + 4 * j + 12, c3);
+        }
+#endif
+        for (; j < nt; j++) {
+            line[4 * j] = q0[j], line[4 * j + 1] = q1[j];
+            line[4 * j + 2] = q2[j], line[4 * j + 3] = q3[j];
+        }
+        const size_t at = (size_t)(4 * ty + a) * w + x0;
+        const float *restrict mask = p0 + at;
+        if (relu && primal) {
+#pragma omp simd
+            for (int x = 0; x < xn; x++)
+                line[x] = line[x] > 0.0f ? line[x] : 0.0f;
+        } else if (relu) {
+#pragma omp simd
+            for (int x = 0; x < xn; x++)
+                line[x] = mask[x] > 0.0f ? line[x] : 0.0f;
+        }
+        memcpy(dst + at, line, (size_t)xn * sizeof(float));
+    }
+}
+
+int
+mcp__unet_conv_winograd4(const float *weight, const float *bias, int cin, int cout,
+                         const float *a, int ca, int a_up, const float *b, int n, int h,
+                         int w, int relu, float *out)
+{
+    mcp__unet_gemm g;
+    mcp__unet_gemm_choose(&g);
+    const int cb = cin - ca, th = (h + 3) / 4, tw = (w + 3) / 4;
+    const size_t n_tiles = (size_t)th * tw;
+    const int chunk = (CHUNK4 + g.nr / 2) / g.nr * g.nr > 0 ? (CHUNK4 + g.nr / 2) / g.nr * g.nr
+                                                            : g.nr;
+    const int chunks = (int)((n_tiles + chunk - 1) / chunk);
+    const int mp = (cout + g.mr - 1) / g.mr * g.mr;
+    const size_t ld_max = (size_t)chunk;
+    const size_t hw = (size_t)h * w, plane = (size_t)cout * cin;
+    const size_t a_hw = a_up ? hw / 4 : hw;
+    int n_threads = 1;
+#ifdef _OPENMP
+    n_threads = omp_get_max_threads();
+#endif
+    /* per thread: V (36 x cin x ld), M (36 x mp x ld), rows for the transforms */
+    const size_t row_floats = 24 * ((size_t)chunk + 1) > 20 * (size_t)chunk
+                                  ? 24 * ((size_t)chunk + 1)
+                                  : 20 * (size_t)chunk;
+    const size_t per_thread = ELEMS * ld_max * ((size_t)cin + mp) + row_floats;
+    float *u = mcp_malloc(ELEMS * plane * sizeof(float));
+    float *packed = u ? mcp_malloc((size_t)ELEMS * mp * cin * sizeof(float)) : NULL;
+    float *scratch =
+        packed ? mcp__unet_alloc((size_t)n_threads * per_thread * sizeof(float)) : NULL;
+    if (!scratch) {
+        free(u), free(packed);
+        return -1;
+    }
+    transform_weights(weight, cin, cout, u);
+    for (int e = 0; e < ELEMS; e++)
+        mcp__unet_gemm_pack(&g, u + e * plane, cout, cin, packed + (size_t)e * mp * cin);
+#pragma omp parallel num_threads(n_threads)
+    {
+        int thread = 0;
+#ifdef _OPENMP
+        thread = omp_get_thread_num();
+#endif
+        float *v = scratch + (size_t)thread * per_thread;
+        float *m = v + ELEMS * ld_max * (size_t)cin;
+        float *rows = m + ELEMS * ld_max * (size_t)mp;
+#pragma omp for schedule(dynamic, 1)
+        for (int c = 0; c < chunks; c++)
+            for (int k = 0; k < n; k++) {
+                const size_t t0 = (size_t)c * chunk;
+                const int nt =
+                    (int)(n_tiles - t0 < (size_t)chunk ? n_tiles - t0 : (size_t)chunk);
+                const int ld = (nt + g.nr - 1) / g.nr * g.nr;
+                const size_t ldv = (size_t)cin * ld, ldm = (size_t)mp * ld;
+                for (int i = 0; i < cin; i++) {
+                    const int up = i < ca && a_up;
+                    const float *src = i < ca ? a + ((size_t)k * ca + i) * a_hw
+                                              : b + ((size_t)k * cb + (i - ca)) * hw;
+                    if (i + 1 < cin) /* the next channel's rows, while this one runs */
+                        mcp__unet_prefetch_rows(i + 1 < ca
+                                                    ? a + ((size_t)k * ca + i + 1) * a_hw
+                                                    : b + ((size_t)k * cb + (i + 1 - ca)) * hw,
+                                                i + 1 < ca && a_up, h, w, t0, nt, tw, 4);
+                    for (int j = 0; j < nt;) {
+                        const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
+                        const int len = tw - tx < nt - j ? tw - tx : nt - j;
+                        transform_input4(src, up, h, w, ty, tx, len, rows,
+                                         v + (size_t)i * ld + j, ldv);
+                        j += len;
+                    }
+                    for (int e = 0; e < ELEMS; e++) /* padding columns: zeros */
+                        memset(v + e * ldv + (size_t)i * ld + nt, 0,
+                               (size_t)(ld - nt) * sizeof(float));
+                }
+                for (int e = 0; e < ELEMS; e++)
+                    mcp__unet_gemm_run(&g, packed + (size_t)e * mp * cin, cout, cin,
+                                       v + e * ldv, ld, ld, m + e * ldm, ld);
+                for (int o = 0; o < cout; o++)
+                    for (int j = 0; j < nt;) {
+                        const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
+                        const int len = tw - tx < nt - j ? tw - tx : nt - j;
+                        transform_output4(m + (size_t)o * ld + j, ldm, ty, tx, len, h, w,
+                                          k == 0 && bias ? bias[o] : 0.0f, relu, k == 0,
+                                          out + (size_t)o * hw,
+                                          out + ((size_t)k * cout + o) * hw, rows);
+                        j += len;
+                    }
+            }
+    }
+    free(u), free(packed), free(scratch);
+    return 0;
+}
