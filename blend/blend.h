@@ -33,6 +33,7 @@
 #include <mcpost/dump.h>
 #include <mcpost/estimate.h>
 #include <mcpost/flip.h>
+#include <mcpost/wordlist.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -115,7 +116,13 @@ MCP_API int mcp_blend_options_check(const mcp_blend_options *o);
 
 /* Names for the CLI and job files: "on_the_fly" (also "on-the-fly"),
  * "retrospective", "last_two"; "log", "powerlaw"; "gauss", "denoiser", "none";
- * "switch", "zero", "magnitude". */
+ * "switch", "zero", "magnitude". Each enum's words are a wordlist, which its from_name
+ * and name functions read and write (and the operation table's enum options). */
+MCP_API extern const mcp_wordlist mcp_curve_fit_words;
+MCP_API extern const mcp_wordlist mcp_curve_model_words;
+MCP_API extern const mcp_wordlist mcp_blend_filter_words;
+MCP_API extern const mcp_wordlist mcp_neg_sure_words;
+MCP_API extern const mcp_wordlist mcp_blend_weighting_words;
 MCP_API int mcp_curve_fit_from_name(const char *name, mcp_curve_fit *out);
 MCP_API int mcp_curve_model_from_name(const char *name, mcp_curve_model *out);
 MCP_API int mcp_blend_filter_from_name(const char *name, mcp_blend_filter *out);

@@ -197,8 +197,8 @@ static const char *const js_keys[] = {
     "inner",        "window",       "sigma",         "radius",        "patch_radius",
     "k_color",      "alpha",        "epsilon",       "sigma_color",   "use_variance",
     "variance_blur", "sigma_albedo", "sigma_normal", "sigma_spatial", "weights",
-    "input_scale",  "tile",         "fixed_bits",    "command",       "format",
-    "delta",        "workdir",      NULL};
+    "input_scale",  "tile",         "fixed_bits",    "exact_tangents", "command",
+    "format",       "delta",        "workdir",       NULL};
 
 const mcp_denoiser_kind mcp__denoiser_james_stein = {
     "james-stein",
@@ -207,4 +207,5 @@ const mcp_denoiser_kind mcp__denoiser_james_stein = {
     "the inner denoiser",
     js_keys,
     js_create,
+    NULL, /* reads its own keys: the inner denoiser's */
 };

@@ -1,11 +1,9 @@
 /* options.c: the blend options, their defaults (docs/mathematics.md §3 [brackets]),
  * checks and names. */
-#define _POSIX_C_SOURCE 200809L /* strcasecmp */
 #include "blend.h"
 
 #include <math.h>
 #include <string.h>
-#include <strings.h>
 
 mcp_blend_options
 mcp_blend_defaults(void)
@@ -73,7 +71,7 @@ mcp_blend_options_check(const mcp_blend_options *o)
     return 0;
 }
 
-/* ---- names ---- */
+/* ---- names: the enums' words (<mcpost/wordlist.h>) ---- */
 
 static const char *const fit_names[] = {"on_the_fly", "retrospective", "last_two"};
 static const char *const curve_names[] = {"log", "powerlaw"};
@@ -81,99 +79,68 @@ static const char *const filter_names[] = {"gauss", "denoiser", "none"};
 static const char *const neg_names[] = {"switch", "zero", "magnitude"};
 static const char *const weighting_names[] = {"james_stein", "curves"};
 
-/* Looks name up in names[0..n-1] (case-insensitive, '-' read as '_'). */
-static int
-lookup(const char *what, const char *name, const char *const *names, int n, int *out)
-{
-    char buf[64];
-    size_t len = strlen(name);
-    if (len < sizeof buf) {
-        for (size_t i = 0; i <= len; i++)
-            buf[i] = name[i] == '-' ? '_' : name[i];
-        for (int i = 0; i < n; i++)
-            if (!strcasecmp(buf, names[i])) {
-                *out = i;
-                return 0;
-            }
-    }
-    if (n == 2)
-        return mcp_error("unknown %s '%s' (known: %s, %s)", what, name, names[0],
-                         names[1]);
-    return mcp_error("unknown %s '%s' (known: %s, %s, %s)", what, name, names[0],
-                     names[1], names[2]);
-}
+const mcp_wordlist mcp_curve_fit_words = {"curve fit", fit_names, 3};
+const mcp_wordlist mcp_curve_model_words = {"curve", curve_names, 2};
+const mcp_wordlist mcp_blend_filter_words = {"estimate filter", filter_names, 3};
+const mcp_wordlist mcp_neg_sure_words = {"negative-SURE rule", neg_names, 3};
+const mcp_wordlist mcp_blend_weighting_words = {"blend weights", weighting_names, 2};
 
 int
 mcp_curve_fit_from_name(const char *name, mcp_curve_fit *out)
 {
-    int i = 0;
-    if (lookup("curve fit", name, fit_names, 3, &i)) return -1;
-    *out = (mcp_curve_fit)i;
-    return 0;
+    return mcp_wordlist_find(&mcp_curve_fit_words, name, (int *)out);
 }
 
 int
 mcp_curve_model_from_name(const char *name, mcp_curve_model *out)
 {
-    int i = 0;
-    if (lookup("curve", name, curve_names, 2, &i)) return -1;
-    *out = (mcp_curve_model)i;
-    return 0;
+    return mcp_wordlist_find(&mcp_curve_model_words, name, (int *)out);
 }
 
 int
 mcp_blend_filter_from_name(const char *name, mcp_blend_filter *out)
 {
-    int i = 0;
-    if (lookup("estimate filter", name, filter_names, 3, &i)) return -1;
-    *out = (mcp_blend_filter)i;
-    return 0;
+    return mcp_wordlist_find(&mcp_blend_filter_words, name, (int *)out);
 }
 
 int
 mcp_neg_sure_from_name(const char *name, mcp_neg_sure *out)
 {
-    int i = 0;
-    if (lookup("negative-SURE rule", name, neg_names, 3, &i)) return -1;
-    *out = (mcp_neg_sure)i;
-    return 0;
-}
-
-const char *
-mcp_curve_fit_name(mcp_curve_fit f)
-{
-    return (unsigned)f < 3 ? fit_names[f] : "?";
-}
-
-const char *
-mcp_curve_model_name(mcp_curve_model m)
-{
-    return (unsigned)m < 2 ? curve_names[m] : "?";
-}
-
-const char *
-mcp_blend_filter_name(mcp_blend_filter f)
-{
-    return (unsigned)f < 3 ? filter_names[f] : "?";
-}
-
-const char *
-mcp_neg_sure_name(mcp_neg_sure n)
-{
-    return (unsigned)n < 3 ? neg_names[n] : "?";
+    return mcp_wordlist_find(&mcp_neg_sure_words, name, (int *)out);
 }
 
 int
 mcp_blend_weighting_from_name(const char *name, mcp_blend_weighting *out)
 {
-    int i = 0;
-    if (lookup("blend weights", name, weighting_names, 2, &i)) return -1;
-    *out = (mcp_blend_weighting)i;
-    return 0;
+    return mcp_wordlist_find(&mcp_blend_weighting_words, name, (int *)out);
+}
+
+const char *
+mcp_curve_fit_name(mcp_curve_fit f)
+{
+    return mcp_wordlist_name(&mcp_curve_fit_words, (int)f);
+}
+
+const char *
+mcp_curve_model_name(mcp_curve_model m)
+{
+    return mcp_wordlist_name(&mcp_curve_model_words, (int)m);
+}
+
+const char *
+mcp_blend_filter_name(mcp_blend_filter f)
+{
+    return mcp_wordlist_name(&mcp_blend_filter_words, (int)f);
+}
+
+const char *
+mcp_neg_sure_name(mcp_neg_sure n)
+{
+    return mcp_wordlist_name(&mcp_neg_sure_words, (int)n);
 }
 
 const char *
 mcp_blend_weighting_name(mcp_blend_weighting w)
 {
-    return (unsigned)w < 2 ? weighting_names[w] : "?";
+    return mcp_wordlist_name(&mcp_blend_weighting_words, (int)w);
 }

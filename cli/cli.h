@@ -7,6 +7,8 @@
 #include <mcpost/job.h>
 #include <mcpost/imageio.h>
 #include <mcpost/denoiser.h>
+#include <mcpost/operations.h>
+#include <mcpost/options.h>
 #include <cjson/cJSON.h>
 
 #include "../jobs/internal.h"
@@ -105,5 +107,22 @@ int mcp_cli_denoiser_create(const mcp_cli_denoiser_flags *f, mcp_denoiser **out)
 
 /* Frees the options (the name is borrowed); safe on a zeroed struct, and twice. */
 void mcp_cli_denoiser_flags_free(mcp_cli_denoiser_flags *f);
+
+/* cli/options.c: a subcommand's flags through its operation's table
+ * (<mcpost/options.h>): every option the command line takes (--NAME with '-' for '_',
+ * --no-NAME for a flag, the alias), the shared flags op takes (--quiet, --json,
+ * -o/--output, --threads, and --print-settings), and the denoiser flags when op has a
+ * denoiser. argv's values go through mcp_operation_set into settings (defaults first)
+ * and sh; then op's finish. An option of the table spelt like a denoiser shorthand
+ * (blend's --weights) takes its own words, and any other value goes to the shorthand
+ * (--weights PATH). Returns -1 to go on (*first: the first positional argument), or
+ * the status to exit with: 0 after --help (head, the options, examples) or
+ * --print-settings (the settings as read, mcp_operation_dump), 1 or 2 after an error
+ * (printed). Quiet and threads take effect here. */
+int mcp_cli_parse(const mcp_operation *op, const char *head, const char *examples, int argc,
+                  char **argv, void *settings, mcp_shared_settings *sh,
+                  mcp_cli_denoiser_flags *df, int *first);
+/* The --help text: head, the option list from op's table, examples. */
+void mcp_cli_print_help(const mcp_operation *op, const char *head, const char *examples);
 
 #endif

@@ -1,40 +1,27 @@
 /* cmd_denoise.c: `mcpost denoise` -- runs one denoiser alone on a render dump or on
  * separate colour/albedo/normal files, and with --tangent also writes its
  * Jacobian-vector product J·T: the way to check a denoiser and its derivative from
- * outside (docs/mathematics.md §2.1). */
+ * outside (docs/mathematics.md §2.1). The flags are the denoise table's
+ * (ops/op_denoise.c), read by cli/options.c. */
 #include "cli.h"
 
 #include <mcpost/denoiser.h>
 
-#include <getopt.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #define PATH_CAP 4096
 
-static const char usage[] =
+static const char head[] =
     "usage: mcpost denoise DUMP [--denoiser NAME] [options]\n"
     "       mcpost denoise --color FILE [--albedo FILE] [--normal FILE]\n"
     "                      [--variance-of-mean FILE] [--denoiser NAME] [options]\n"
     "       mcpost denoise --list\n"
     "  Runs one denoiser on a render dump (colour, and the albedo, normal and variance\n"
-    "  it holds) or on separate files, and writes the denoised colour as R,G,B.\n"
-    "  --denoiser NAME         which denoiser (see --list)\n"
-    "                          " MCP_CLI_DEFAULT_DENOISER "\n"
-    MCP_CLI_DENOISER_USAGE("")
-    "  -o, --output FILE       the denoised image [<input stem>_<NAME>.exr, here]\n"
-    "  --tangent FILE          also write J·T, the Jacobian-vector product of the\n"
-    "                          denoiser at the input in direction T (channels R,G,B,\n"
-    "                          or 3 channels), computed in the same pass\n"
-    "  --tangent-out FILE      where J·T goes [<output stem>_jvp.exr]\n"
-    "  --color, --albedo, --normal FILE   separate inputs (R,G,B / X,Y,Z channels, or\n"
-    "                          exactly 3 channels) instead of DUMP\n"
-    "  --variance-of-mean FILE the variance of the colour mean, R,G,B (separate inputs)\n"
-    "  --no-albedo, --no-normal, --no-variance   ignore that part of the input\n"
-    "  --spp N, --convention NAME, --variance KIND   how to read DUMP, as for info\n"
-    "  --list                  print the denoisers and their settings\n"
-    "\n"
+    "  it holds) or on separate files, and writes the denoised colour as R,G,B.\n";
+
+static const char examples[] =
     "examples (from the source folder, on the sample renders):\n"
     "  mcpost denoise samples/fixtures/cornell/series/cornell_spp0064.exr --denoiser nlm -o /tmp/cornell_nlm.exr\n"
     "  mcpost denoise samples/fixtures/cornell/series/cornell_spp0016.exr -o /tmp/cornell_unet.exr   # the U-Net\n"
@@ -166,87 +153,39 @@ done:
 static int
 cmd_denoise(int argc, char **argv)
 {
-    enum {
-        O_TANGENT = 256,
-        O_TANGENT_OUT,
-        O_COLOR,
-        O_ALBEDO,
-        O_NORMAL,
-        O_VAR_FILE,
-        O_NO_ALBEDO,
-        O_NO_NORMAL,
-        O_NO_VARIANCE,
-        O_SPP,
-        O_CONVENTION,
-        O_VARIANCE,
-        O_LIST
-    };
-    static const struct option longs[] = {
-        MCP_CLI_DENOISER_LONGOPTS,
-        {"output", required_argument, 0, 'o'},
-        {"tangent", required_argument, 0, O_TANGENT},
-        {"tangent-out", required_argument, 0, O_TANGENT_OUT},
-        {"color", required_argument, 0, O_COLOR},
-        {"albedo", required_argument, 0, O_ALBEDO},
-        {"normal", required_argument, 0, O_NORMAL},
-        {"variance-of-mean", required_argument, 0, O_VAR_FILE},
-        {"no-albedo", no_argument, 0, O_NO_ALBEDO},
-        {"no-normal", no_argument, 0, O_NO_NORMAL},
-        {"no-variance", no_argument, 0, O_NO_VARIANCE},
-        {"spp", required_argument, 0, O_SPP},
-        {"convention", required_argument, 0, O_CONVENTION},
-        {"variance", required_argument, 0, O_VARIANCE},
-        {"list", no_argument, 0, O_LIST},
-        {"help", no_argument, 0, 'h'},
-        {0, 0, 0, 0}};
-    inputs in = {0};
-    const char *out = NULL, *tangent = NULL, *tangent_out = NULL;
+    mcp_denoise_settings st;
+    mcp_shared_settings sh;
     mcp_cli_denoiser_flags df = {0};
-    int opt, list = 0;
-    optind = 1;
-    while ((opt = getopt_long(argc, argv, "ho:", longs, NULL)) != -1) {
-        int taken = mcp_cli_denoiser_flag(&df, opt, optarg);
-        if (taken < 0) {
-            mcp_cli_denoiser_flags_free(&df);
-            return mcp_cli_fail();
-        }
-        if (taken)
-            continue;
-        switch (opt) {
-        case 'o': out = optarg; break;
-        case O_TANGENT: tangent = optarg; break;
-        case O_TANGENT_OUT: tangent_out = optarg; break;
-        case O_COLOR: in.color = optarg; break;
-        case O_ALBEDO: in.albedo = optarg; break;
-        case O_NORMAL: in.normal = optarg; break;
-        case O_VAR_FILE: in.variance = optarg; break;
-        case O_NO_ALBEDO: in.no_albedo = 1; break;
-        case O_NO_NORMAL: in.no_normal = 1; break;
-        case O_NO_VARIANCE: in.no_variance = 1; break;
-        case O_SPP: in.spp = optarg; break;
-        case O_CONVENTION: in.convention = optarg; break;
-        case O_VARIANCE: in.variance_kind = optarg; break;
-        case O_LIST: list = 1; break;
-        case 'h':
-            mcp_cli_denoiser_flags_free(&df);
-            fputs(usage, stdout);
-            return 0;
-        default:
-            mcp_cli_denoiser_flags_free(&df);
-            return mcp_cli_usage("denoise", "bad option");
-        }
+    int first = 0;
+    int parsed = mcp_cli_parse(mcp_operation_denoise(), head, examples, argc, argv, &st, &sh,
+                               &df, &first);
+    if (parsed >= 0) {
+        mcp_cli_denoiser_flags_free(&df);
+        return parsed;
     }
+    inputs in = {.color = st.color,
+                 .albedo = st.albedo,
+                 .normal = st.normal,
+                 .variance = st.variance_of_mean,
+                 .spp = st.spp,
+                 .convention = st.convention,
+                 .variance_kind = st.variance,
+                 .no_albedo = st.no_albedo,
+                 .no_normal = st.no_normal,
+                 .no_variance = st.no_variance};
+    const char *out = sh.output, *tangent = st.tangent, *tangent_out = st.tangent_out;
+    int list = st.list;
     int status = 2;
     if (list) {
         print_kinds();
         mcp_cli_denoiser_flags_free(&df);
         return 0;
     }
-    if (argc - optind > 1)
-        mcp_cli_usage("denoise", "give one DUMP (got %d inputs)", argc - optind);
-    else if (argc - optind == 1 && in.color)
+    if (argc - first > 1)
+        mcp_cli_usage("denoise", "give one DUMP (got %d inputs)", argc - first);
+    else if (argc - first == 1 && in.color)
         mcp_cli_usage("denoise", "give either DUMP or --color, not both");
-    else if (argc - optind == 0 && !in.color)
+    else if (argc - first == 0 && !in.color)
         mcp_cli_usage("denoise", "no input: give DUMP or --color FILE");
     else if (!in.color && (in.albedo || in.normal || in.variance))
         mcp_cli_usage("denoise", "--albedo, --normal and --variance-of-mean go with "
@@ -261,8 +200,8 @@ cmd_denoise(int argc, char **argv)
         mcp_cli_denoiser_flags_free(&df);
         return 2;
     }
-    if (argc - optind == 1)
-        in.dump = argv[optind];
+    if (argc - first == 1)
+        in.dump = argv[first];
     char out_buf[PATH_CAP], jvp_buf[PATH_CAP], stem[PATH_CAP];
     if (!out) {
         stem_of(in.dump ? in.dump : in.color, 1, stem, sizeof stem);
@@ -297,4 +236,4 @@ cmd_denoise(int argc, char **argv)
 const mcp_command mcp_command_denoise = {"denoise",
                                          "run one denoiser (and its "
                                          "Jacobian-vector product) alone",
-                                         cmd_denoise, 0};
+                                         cmd_denoise, 1};

@@ -1,5 +1,6 @@
 /* cmd_estimate.c: `mcpost estimate` -- how wrong a denoised render is and whether to
- * stop (estimate/estimate.h; docs/mathematics.md §2). The flags parsed here; the outputs
+ * stop (estimate/estimate.h; docs/mathematics.md §2). The flags are the estimate's
+ * table (ops/op_estimate.c), read by cli/options.c; the outputs
  * (images, estimate.json, the report section) are the library's, shared with the
  * `estimate` job stage (jobs/estimate_output.c, jobs/stage_estimate.c).
  *
@@ -8,15 +9,13 @@
  * written to a folder with estimate.json and a report. A series (several dumps, or a
  * pattern with --spp): the first spp at which each τ is reached and, with a reference,
  * the true one beside it (Firmino 2024 Table 1) with the estimated and true percentile
- * curves. Flags and job keys are the same words (--denoiser-opt is the denoiser map in
- * a job). */
+ * curves. Flags, job keys and Python keywords are the table's words (--denoiser-opt is
+ * the denoiser map in a job). */
 #include "cli.h"
 
 #include <mcpost/estimate.h>
 
-#include <errno.h>
 #include <getopt.h>
-#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -24,21 +23,6 @@
 #define EXIT_CONTINUE 10 /* --exit-status: keep rendering */
 
 /* ---- flag values ---- */
-
-static int
-parse_list(const char *flag, const char *text, double *out, int max, int *n)
-{
-    char **words = NULL;
-    int count = 0, rc = 0;
-    if (mcp__split_words(text, &words, &count)) return -1;
-    if (count < 1 || count > max)
-        rc = mcp_error("%s: needs 1 to %d values (got %d)", flag, max, count);
-    for (int i = 0; i < count && !rc; i++)
-        rc = mcp__parse_double(flag, words[i], &out[i]);
-    mcp__free_words(words, count);
-    if (!rc) *n = count;
-    return rc;
-}
 
 static int
 parse_int_list(const char *flag, const char *text, int **out, int *n)
@@ -118,237 +102,39 @@ print_series(const mcp_series_estimate *s)
 
 /* ---- the subcommand ---- */
 
-static const char usage[] =
+static const char head[] =
     "usage: mcpost estimate DUMP... [--denoiser NAME] [options]\n"
     "  Estimates the error of the denoised DUMP (SURE, Firmino et al. 2024) and decides\n"
     "  whether rendering can stop: F(tau) >= p, F the estimated CDF of the per-value\n"
     "  error. Several DUMPs, or --series, make a progressive series: then it reports\n"
-    "  the first spp at which each tau is reached (and the true one with --ref).\n"
-    "\n"
-    "  --denoiser NAME          the denoiser (see `mcpost denoise --list`)\n"
-    "                           " MCP_CLI_DEFAULT_DENOISER "\n"
-    MCP_CLI_DENOISER_USAGE(" ")
-    "  --metric NAME            relse, relse-perceptual or se [relse]\n"
-    "  --tau T                  error threshold [0.01]\n"
-    "  --percentile P           fraction of values that must be below tau [0.999]\n"
-    "  --percentiles LIST       the estimated percentile curve "
-    "[0.5,0.9,0.99,0.999,0.9999]\n"
-    "  --probes K               random probes for SURE and the variance [4]\n"
-    "  --seed S                 seed of the probes [0]\n"
-    "  --mc-sure                J.eps by finite differences (MC-SURE)\n"
-    "  --delta D                finite-difference step, unitless [0.1]\n"
-    "  --variance-probes KIND   sure (reuse the SURE probes) or rademacher [sure]\n"
-    "  --ppd X                  relse-perceptual: pixels per degree [67.02]\n"
-    "  --tile N                 pre-split into NxN tiles before block averaging [none]\n"
-    "  --sampling KIND          sampling map: variance, tonemapped or mc-sure "
-    "[variance]\n"
-    "  --budget N               samples for the next iteration: write integer counts\n"
-    "  --s2-pool R|auto         pool s^2 = (J eps)^2 over (2R+1)^2 pixels; auto: 1, or 0\n"
-    "                           for bilateral on a per-sample variance [auto]\n"
-    "  -o, --output DIR         write images, blocks.png, estimate.json and a report\n"
-    "  --json                   print estimate.json on stdout\n"
-    "  --exit-status            exit 0 to stop, 10 to continue rendering (a series: the\n"
-    "                           last member and every tau)\n"
-    "  Series:\n"
-    "  --series PATTERN         dump files from a printf pattern, with --spp LIST\n"
-    "  --spp LIST               sample counts for --series (e.g. 1,2,4,8)\n"
-    "  --taus LIST              thresholds to report [0.05,0.02,0.01; or --tau]\n"
-    "  --ref FILE               the reference image: true error and agreement\n"
-    "  --variance-from KIND     auto (a member's own variance, or the spread between\n"
-    "                           the series' increments where they show Variance/n\n"
-    "                           off: stratified samplers), file (each member's own)\n"
-    "                           or increments [auto]\n"
-    "  Reading dumps:\n"
-    "  --convention NAME        pbrt, mitsuba, blender, mcpost, plain [auto]\n"
-    "  --variance KIND          per-sample or of-mean [per convention]\n"
-    "\n"
+    "  the first spp at which each tau is reached (and the true one with --ref).\n";
+
+static const char examples[] =
     "examples (from the source folder, on the sample renders):\n"
     "  mcpost estimate samples/fixtures/cornell/series/cornell_spp0064.exr --denoiser nlm -o out/estimate\n"
     "  mcpost estimate --series 'samples/fixtures/cornell/series/cornell_spp%04d.exr' --spp 16,32,64,128 \\\n"
     "                  --denoiser bilateral --ref samples/fixtures/cornell/cornell_reference.exr\n";
 
-enum {
-    OPT_METRIC = 256,
-    OPT_TAU,
-    OPT_PERCENTILE,
-    OPT_PERCENTILES,
-    OPT_PROBES,
-    OPT_SEED,
-    OPT_MC,
-    OPT_DELTA,
-    OPT_VPROBES,
-    OPT_PPD,
-    OPT_TILE,
-    OPT_SAMPLING,
-    OPT_BUDGET,
-    OPT_JSON,
-    OPT_EXIT,
-    OPT_SERIES,
-    OPT_SPP,
-    OPT_TAUS,
-    OPT_REF,
-    OPT_CONVENTION,
-    OPT_VARIANCE,
-    OPT_VARIANCE_FROM,
-    OPT_S2_POOL
-};
-
-static int
-parse_seed(const char *flag, const char *text, uint64_t *out)
-{
-    char *end;
-    errno = 0;
-    unsigned long long v = strtoull(text, &end, 10);
-    if (end == text || *end || errno || text[0] == '-')
-        return mcp_error("%s must be a non-negative integer (got '%s')", flag, text);
-    *out = v;
-    return 0;
-}
-
 static int
 cmd_estimate(int argc, char **argv)
 {
-    static const struct option longs[] = {
-        MCP_CLI_DENOISER_LONGOPTS,
-        {"metric", required_argument, 0, OPT_METRIC},
-        {"tau", required_argument, 0, OPT_TAU},
-        {"percentile", required_argument, 0, OPT_PERCENTILE},
-        {"percentiles", required_argument, 0, OPT_PERCENTILES},
-        {"probes", required_argument, 0, OPT_PROBES},
-        {"seed", required_argument, 0, OPT_SEED},
-        {"mc-sure", no_argument, 0, OPT_MC},
-        {"delta", required_argument, 0, OPT_DELTA},
-        {"variance-probes", required_argument, 0, OPT_VPROBES},
-        {"ppd", required_argument, 0, OPT_PPD},
-        {"tile", required_argument, 0, OPT_TILE},
-        {"sampling", required_argument, 0, OPT_SAMPLING},
-        {"budget", required_argument, 0, OPT_BUDGET},
-        {"output", required_argument, 0, 'o'},
-        {"json", no_argument, 0, OPT_JSON},
-        {"exit-status", no_argument, 0, OPT_EXIT},
-        {"series", required_argument, 0, OPT_SERIES},
-        {"spp", required_argument, 0, OPT_SPP},
-        {"taus", required_argument, 0, OPT_TAUS},
-        {"ref", required_argument, 0, OPT_REF},
-        {"convention", required_argument, 0, OPT_CONVENTION},
-        {"variance", required_argument, 0, OPT_VARIANCE},
-        {"variance-from", required_argument, 0, OPT_VARIANCE_FROM},
-        {"s2-pool", required_argument, 0, OPT_S2_POOL},
-        {"help", no_argument, 0, 'h'},
-        {0, 0, 0, 0}};
-    mcp_series_estimate_options so = mcp_series_estimate_defaults();
-    mcp_estimate_options *eo = &so.est;
-    const char *outdir = NULL, *pattern = NULL, *spp_text = NULL,
-               *ref_path = NULL, *convention = NULL, *variance = NULL;
+    mcp_estimate_settings st;
+    mcp_shared_settings sh;
     mcp_cli_denoiser_flags df = {0};
-    int json = 0, exit_status = 0, have_taus = 0, have_tau = 0, opt;
-    mcp_series_variance variance_from = MCP_SERIES_VARIANCE_AUTO;
-    optind = 1;
-    while ((opt = getopt_long(argc, argv, "ho:", longs, NULL)) != -1) {
-        int rc = 0;
-        double b = 0;
-        int taken = mcp_cli_denoiser_flag(&df, opt, optarg);
-        if (taken < 0) {
-            mcp_cli_denoiser_flags_free(&df);
-            return mcp_cli_fail();
-        }
-        if (taken) continue;
-        switch (opt) {
-        case OPT_METRIC:
-            rc = mcp_error_metric_from_name(optarg, &eo->sure.metric);
-            break;
-        case OPT_TAU:
-            rc = mcp__parse_double("--tau", optarg, &eo->tau);
-            have_tau = 1;
-            break;
-        case OPT_PERCENTILE:
-            rc = mcp__parse_double("--percentile", optarg, &eo->p);
-            break;
-        case OPT_PERCENTILES:
-            rc = parse_list("--percentiles", optarg, eo->percentiles,
-                            MCP_ESTIMATE_MAX_PERCENTILES, &eo->n_percentiles);
-            break;
-        case OPT_PROBES:
-            rc = mcp__parse_int("--probes", optarg, &eo->sure.n_probes);
-            break;
-        case OPT_SEED:
-            rc = parse_seed("--seed", optarg, &eo->sure.seed);
-            break;
-        case OPT_MC:
-            eo->sure.mc_sure = 1;
-            break;
-        case OPT_DELTA:
-            rc = mcp__parse_double("--delta", optarg, &eo->sure.fd_delta);
-            break;
-        case OPT_VPROBES:
-            rc = mcp__variance_probes_from_name(optarg, &eo->variance_rademacher);
-            break;
-        case OPT_PPD:
-            rc = mcp__parse_double("--ppd", optarg, &eo->sure.ppd);
-            break;
-        case OPT_TILE:
-            rc = mcp__parse_int("--tile", optarg, &eo->blocks.tile_size);
-            break;
-        case OPT_SAMPLING:
-            rc = mcp_sampling_kind_from_name(optarg, &eo->sampling.kind);
-            break;
-        case OPT_BUDGET:
-            rc = mcp__parse_double("--budget", optarg, &b);
-            if (!rc && (b < 0 || b != floor(b) || b > 4503599627370496.0))
-                rc = mcp_error("--budget must be a whole number of samples (got %s)",
-                               optarg);
-            eo->budget = (int64_t)b;
-            break;
-        case 'o':
-            outdir = optarg;
-            break;
-        case OPT_JSON:
-            json = 1;
-            break;
-        case OPT_EXIT:
-            exit_status = 1;
-            break;
-        case OPT_SERIES:
-            pattern = optarg;
-            break;
-        case OPT_SPP:
-            spp_text = optarg;
-            break;
-        case OPT_TAUS:
-            rc = parse_list("--taus", optarg, so.taus, MCP_ESTIMATE_MAX_TAUS, &so.n_taus);
-            have_taus = 1;
-            break;
-        case OPT_REF:
-            ref_path = optarg;
-            break;
-        case OPT_CONVENTION:
-            convention = optarg;
-            break;
-        case OPT_VARIANCE:
-            variance = optarg;
-            break;
-        case OPT_VARIANCE_FROM:
-            rc = mcp__variance_from(optarg, &variance_from);
-            break;
-        case OPT_S2_POOL:
-            if (!strcmp(optarg, "auto"))
-                eo->s2_pool = -1;
-            else
-                rc = mcp__parse_int("--s2-pool", optarg, &eo->s2_pool);
-            break;
-        case 'h':
-            fputs(usage, stdout);
-            mcp_cli_denoiser_flags_free(&df);
-            return 0;
-        default:
-            mcp_cli_denoiser_flags_free(&df);
-            return mcp_cli_usage("estimate", "bad option");
-        }
-        if (rc) {
-            mcp_cli_denoiser_flags_free(&df);
-            return mcp_cli_fail();
-        }
+    int first = 0;
+    int parsed = mcp_cli_parse(mcp_operation_estimate(), head, examples, argc, argv, &st,
+                               &sh, &df, &first);
+    if (parsed >= 0) {
+        mcp_cli_denoiser_flags_free(&df);
+        return parsed;
     }
+    mcp_series_estimate_options so = st.so;
+    mcp_estimate_options *eo = &so.est;
+    const char *outdir = sh.output, *pattern = st.series, *spp_text = st.spp,
+               *ref_path = st.reference;
+    int json = sh.json, exit_status = st.exit_status;
+    mcp_series_variance variance_from = st.variance_from;
+    optind = first;
     int n_files = argc - optind;
     if (!n_files && !pattern) {
         mcp_cli_denoiser_flags_free(&df);
@@ -357,10 +143,6 @@ cmd_estimate(int argc, char **argv)
     if (pattern && (n_files || !spp_text)) {
         mcp_cli_denoiser_flags_free(&df);
         return mcp_cli_usage("estimate", "--series needs --spp and no other dumps");
-    }
-    if (have_tau && !have_taus) { /* a series checks the one --tau */
-        so.n_taus = 1;
-        so.taus[0] = eo->tau;
     }
     int status = 1, is_series = pattern || n_files > 1;
     mcp_denoiser *den = NULL;
@@ -374,8 +156,7 @@ cmd_estimate(int argc, char **argv)
     mcp__estimate_dir od;
     memset(&od, 0, sizeof od);
     if (outdir) snprintf(od.dir, sizeof od.dir, "%s", outdir);
-    if (mcp_estimate_check(eo) ||
-        mcp_cli_denoiser_create(&df, &den) ||
+    if (mcp_cli_denoiser_create(&df, &den) ||
         (ref_path && mcp_image_read(ref_path, NULL, &ref)))
         goto done;
     if (outdir && (mcp_report_new("mcpost estimate", &report) ||
@@ -394,10 +175,8 @@ cmd_estimate(int argc, char **argv)
                                          n_files, &series)) {
             goto done;
         }
-        if ((convention &&
-             mcp_convention_from_name(convention, &series->spec.convention)) ||
-            (variance && mcp_variance_kind_from_name(variance, &series->spec.variance)))
-            goto done;
+        series->spec.convention = st.convention;
+        series->spec.variance = st.variance;
         series->variance_from = variance_from;
         if (mcp__estimate_run_series(series, den, &so, ref, outdir ? &od : NULL, section,
                                      &summary, &s))
@@ -411,7 +190,11 @@ cmd_estimate(int argc, char **argv)
         }
     } else {
         const char *path = argv[optind];
-        if (mcp_cli_read_dump(path, NULL, convention, variance, &dump) ||
+        mcp_dump_spec spec = mcp_dump_spec_defaults();
+        spec.path = path;
+        spec.convention = st.convention;
+        spec.variance = st.variance;
+        if (mcp_dump_load(&spec, &dump) ||
             mcp_estimate_compute(dump, den, eo, &e))
             goto done;
         summary = mcp__estimate_json(e, path, den->name, eo);
@@ -455,4 +238,4 @@ done:
 
 const mcp_command mcp_command_estimate = {
     "estimate", "estimate the error of a denoised render and decide when to stop",
-    cmd_estimate, 0};
+    cmd_estimate, 1};

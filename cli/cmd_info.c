@@ -3,7 +3,6 @@
  * the library's, shared with the `info` job stage: jobs/stage_info.c). */
 #include "cli.h"
 
-#include <getopt.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -119,13 +118,13 @@ print_text(const cJSON *o)
     }
 }
 
-static const char usage[] =
-    "usage: mcpost info FILE [--json] [--spp N] [--convention NAME] [--variance KIND]\n"
+static const char head[] =
+    "usage: mcpost info FILE... [--json] [--spp N] [--convention NAME] [--variance KIND]\n"
     "  Prints size, channels with min/mean/max and NaN/Inf/negative counts, the\n"
     "  render-dump convention (pbrt, mitsuba, blender, mcpost, plain) and the sample\n"
-    "  count. --spp gives the count for files that hold none (Mitsuba);\n"
-    "  --variance per-sample|of-mean overrides what the convention says.\n"
-    "\n"
+    "  count.\n";
+
+static const char examples[] =
     "examples (from the source folder, on the sample renders):\n"
     "  mcpost info samples/fixtures/cornell/series/cornell_spp0016.exr\n"
     "  mcpost info --json samples/fixtures/cornell/cornell_reference.exr\n";
@@ -133,37 +132,21 @@ static const char usage[] =
 static int
 cmd_info(int argc, char **argv)
 {
-    static const struct option longs[] = {{"json", no_argument, 0, 'j'},
-                                          {"spp", required_argument, 0, 's'},
-                                          {"convention", required_argument, 0, 'c'},
-                                          {"variance", required_argument, 0, 'v'},
-                                          {"help", no_argument, 0, 'h'},
-                                          {0, 0, 0, 0}};
-    int json = 0, opt;
-    mcp_dump_spec spec = mcp_dump_spec_defaults();
-    optind = 1;
-    while ((opt = getopt_long(argc, argv, "h", longs, NULL)) != -1) {
-        int rc = 0;
-        switch (opt) {
-        case 'j': json = 1; break;
-        case 's':
-            rc = mcp__parse_double("--spp", optarg, &spec.spp);
-            if (!rc && spec.spp <= 0)
-                rc = mcp_error("--spp must be > 0 (got %s)", optarg);
-            break;
-        case 'c': rc = mcp_convention_from_name(optarg, &spec.convention); break;
-        case 'v': rc = mcp_variance_kind_from_name(optarg, &spec.variance); break;
-        case 'h': fputs(usage, stdout); return 0;
-        default: return mcp_cli_usage("info", "bad option");
-        }
-        if (rc)
-            return mcp_cli_fail();
-    }
-    if (optind >= argc)
+    mcp_info_settings st;
+    mcp_shared_settings sh;
+    mcp_cli_denoiser_flags df = {0}; /* info takes no denoiser */
+    int first = 0;
+    int parsed =
+        mcp_cli_parse(mcp_operation_info(), head, examples, argc, argv, &st, &sh, &df, &first);
+    mcp_cli_denoiser_flags_free(&df);
+    if (parsed >= 0) return parsed;
+    mcp_dump_spec spec = st.spec;
+    int json = sh.json;
+    if (first >= argc)
         return mcp_cli_usage("info", "no file given");
     int status = 0;
     cJSON *all = cJSON_CreateArray();
-    for (int i = optind; i < argc; i++) {
+    for (int i = first; i < argc; i++) {
         mcp_image *img = NULL;
         if (mcp_image_read(argv[i], NULL, &img)) {
             status = mcp_cli_fail();
@@ -178,13 +161,13 @@ cmd_info(int argc, char **argv)
         if (json) {
             cJSON_AddItemToArray(all, o);
         } else {
-            if (i > optind)
+            if (i > first)
                 printf("\n");
             print_text(o);
             cJSON_Delete(o);
         }
     }
-    if (json && cJSON_GetArraySize(all) == 1 && argc - optind == 1) {
+    if (json && cJSON_GetArraySize(all) == 1 && argc - first == 1) {
         cJSON *one = cJSON_DetachItemFromArray(all, 0);
         cJSON_Delete(all);
         all = one;
@@ -196,4 +179,4 @@ cmd_info(int argc, char **argv)
     return status;
 }
 
-const mcp_command mcp_command_info = {"info", "describe images and render dumps", cmd_info, 0};
+const mcp_command mcp_command_info = {"info", "describe images and render dumps", cmd_info, 1};

@@ -40,17 +40,14 @@ level_of(double v, double lo, double scale)
     return (unsigned char)(t + 0.5);
 }
 
+/* in mcp_colormap's order */
+static const char *const colormap_names[] = {"viridis", "magma", "inferno", "turbo", "gray"};
+const mcp_wordlist mcp_colormap_words = {"colour map", colormap_names, 5};
+
 int
 mcp_colormap_from_name(const char *name, mcp_colormap *map)
 {
-    for (int i = 0; i < N_COLORMAPS; i++)
-        if (name && strcmp(name, colormaps[i].name) == 0) {
-            *map = colormaps[i].map;
-            return 0;
-        }
-    return mcp_error("unknown colour map '%s' (expected viridis, magma, inferno, turbo "
-                     "or gray)",
-                     name ? name : "(null)");
+    return mcp_wordlist_find(&mcp_colormap_words, name, (int *)map);
 }
 
 const char *

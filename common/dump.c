@@ -18,16 +18,6 @@
 
 #define COUNT(a) ((int)(sizeof(a) / sizeof *(a)))
 
-/* The index of name in a table of names (case-insensitive), or -1. */
-static int
-name_index(const char *const *names, int count, const char *name)
-{
-    for (int i = 0; i < count; i++)
-        if (strcasecmp(name, names[i]) == 0)
-            return i;
-    return -1;
-}
-
 static const char *const convention_names[] = {"auto",    "pbrt",   "mitsuba",
                                                "blender", "mcpost", "plain"};
 
@@ -37,31 +27,28 @@ mcp_convention_name(mcp_convention c)
     return (unsigned)c < (unsigned)COUNT(convention_names) ? convention_names[c] : "unknown";
 }
 
+const mcp_wordlist mcp_convention_words = {"convention", convention_names,
+                                           (int)COUNT(convention_names)};
+
 int
 mcp_convention_from_name(const char *name, mcp_convention *out)
 {
-    int i = name_index(convention_names, COUNT(convention_names), name);
-    if (i < 0)
-        return mcp_error("unknown convention '%s' (auto, pbrt, mitsuba, blender, mcpost, "
-                         "plain)", name);
-    *out = (mcp_convention)i;
-    return 0;
+    return mcp_wordlist_find(&mcp_convention_words, name, (int *)out);
 }
+
+static const char *const variance_kind_names[] = {"default", "per-sample", "of-mean"};
+const mcp_wordlist mcp_variance_kind_words = {"variance semantics", variance_kind_names, 3};
 
 int
 mcp_variance_kind_from_name(const char *name, mcp_variance_kind *out)
 {
-    if (strcmp(name, "per-sample") == 0)
-        *out = MCP_VAR_PER_SAMPLE;
-    else if (strcmp(name, "of-mean") == 0)
-        *out = MCP_VAR_OF_MEAN;
-    else
-        return mcp_error("unknown variance semantics '%s' (per-sample or of-mean)", name);
-    return 0;
+    return mcp_wordlist_find(&mcp_variance_kind_words, name, (int *)out);
 }
 
 static const char *const variance_source_names[] = {
     "none", "per-sample", "of-mean", "replicates", "increments", "xyz-moments"};
+const mcp_wordlist mcp_variance_source_words = {"variance source", variance_source_names,
+                                                (int)COUNT(variance_source_names)};
 
 const char *
 mcp_variance_source_name(mcp_variance_source s)
@@ -73,13 +60,7 @@ mcp_variance_source_name(mcp_variance_source s)
 int
 mcp_variance_source_from_name(const char *name, mcp_variance_source *out)
 {
-    int i = name_index(variance_source_names, COUNT(variance_source_names), name);
-    if (i < 0)
-        return mcp_error("unknown variance source '%s' (known: none, per-sample, of-mean, "
-                         "replicates, increments)",
-                         name);
-    *out = (mcp_variance_source)i;
-    return 0;
+    return mcp_wordlist_find(&mcp_variance_source_words, name, (int *)out);
 }
 
 /* The header attributes that carry a dump's variance source through a file. */
@@ -118,16 +99,13 @@ read_variance_source(mcp_dump *d)
     d->variance_pool = attr_number(&d->attrs, ATTR_VARIANCE_POOL);
 }
 
+static const char *const badval_names[] = {"fail", "zero"};
+const mcp_wordlist mcp_badval_policy_words = {"bad-value policy", badval_names, 2};
+
 int
 mcp_badval_policy_from_name(const char *name, mcp_badval_policy *out)
 {
-    if (strcmp(name, "fail") == 0)
-        *out = MCP_BADVAL_FAIL;
-    else if (strcmp(name, "zero") == 0)
-        *out = MCP_BADVAL_ZERO;
-    else
-        return mcp_error("unknown bad-value policy '%s' (fail or zero)", name);
-    return 0;
+    return mcp_wordlist_find(&mcp_badval_policy_words, name, (int *)out);
 }
 
 mcp_dump_spec
@@ -1360,21 +1338,19 @@ mcp_series_load(const mcp_series *s, int i, mcp_dump **out)
 }
 
 static const char *const series_variance_names[] = {"auto", "file", "increments"};
+const mcp_wordlist mcp_series_variance_words = {"variance_from", series_variance_names, 3};
 
 const char *
 mcp_series_variance_name(mcp_series_variance v)
 {
-    return (unsigned)v < (unsigned)COUNT(series_variance_names) ? series_variance_names[v]
-                                                                 : "?";
+    return mcp_wordlist_name(&mcp_series_variance_words, (int)v);
 }
 
 int
 mcp_series_variance_from_name(const char *name, mcp_series_variance *out)
 {
-    int i = name_index(series_variance_names, COUNT(series_variance_names), name);
-    if (i < 0)
+    if (mcp_wordlist_find(&mcp_series_variance_words, name, (int *)out))
         return mcp_error("variance_from must be auto, file or increments (got '%s')", name);
-    *out = (mcp_series_variance)i;
     return 0;
 }
 

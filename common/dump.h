@@ -28,6 +28,7 @@
 #define MCP_DUMP_H
 
 #include <mcpost/image.h>
+#include <mcpost/wordlist.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -43,6 +44,9 @@ typedef enum {
 } mcp_convention;
 
 MCP_API const char *mcp_convention_name(mcp_convention c);
+/* The words of the dump enums (their from_name functions read them). */
+MCP_API extern const mcp_wordlist mcp_convention_words, mcp_variance_kind_words,
+    mcp_variance_source_words, mcp_badval_policy_words, mcp_merge_variance_words;
 MCP_API int mcp_convention_from_name(const char *name, mcp_convention *out);
 
 typedef enum {
@@ -200,6 +204,7 @@ typedef enum {
 } mcp_series_variance;
 
 /* "auto", "file", "increments". */
+MCP_API extern const mcp_wordlist mcp_series_variance_words;
 MCP_API const char *mcp_series_variance_name(mcp_series_variance v);
 MCP_API int mcp_series_variance_from_name(const char *name, mcp_series_variance *out);
 

@@ -61,18 +61,14 @@ mcp_write_defaults(void)
                                .srgb_encode = 1};
 }
 
+static const char *const exr_compression_names[] = {"none",  "rle", "zips", "zip",  "piz",
+                                                    "pxr24", "b44", "b44a", "dwaa", "dwab"};
+const mcp_wordlist mcp_exr_compression_words = {"EXR compression", exr_compression_names, 10};
+
 int
 mcp_exr_compression_from_name(const char *name, mcp_exr_compression *out)
 {
-    static const char *names[] = {"none", "rle",  "zips", "zip",  "piz",
-                                  "pxr24", "b44", "b44a", "dwaa", "dwab"};
-    for (int i = 0; i < (int)(sizeof names / sizeof *names); i++)
-        if (strcasecmp(name, names[i]) == 0) {
-            *out = (mcp_exr_compression)i;
-            return 0;
-        }
-    return mcp_error("unknown EXR compression '%s' (none, rle, zips, zip, piz, pxr24)",
-                     name);
+    return mcp_wordlist_find(&mcp_exr_compression_words, name, (int *)out);
 }
 
 float

@@ -11,6 +11,7 @@
 #define MCP_IMAGEIO_H
 
 #include <mcpost/image.h>
+#include <mcpost/wordlist.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -97,6 +98,7 @@ typedef struct mcp_write_options {
 #define MCP_EXR_MIN_SAVING_DEFAULT (1.0 / 8)
 
 MCP_API mcp_write_options mcp_write_defaults(void);
+MCP_API extern const mcp_wordlist mcp_exr_compression_words;
 MCP_API int mcp_exr_compression_from_name(const char *name, mcp_exr_compression *out);
 
 /* Writes img (any strides) in the format the extension names. EXR keeps every

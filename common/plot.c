@@ -17,16 +17,13 @@
 static const char *const scale_names[] = {"linear", "log", "logit"};
 static const char *const style_names[] = {"line", "scatter", "line+points"};
 
+const mcp_wordlist mcp_axis_scale_words = {"axis scale", scale_names, 3};
+const mcp_wordlist mcp_series_style_words = {"series style", style_names, 3};
+
 int
 mcp_axis_scale_from_name(const char *name, mcp_axis_scale *out)
 {
-    for (int i = 0; i < 3; i++)
-        if (name && !strcasecmp(name, scale_names[i])) {
-            *out = (mcp_axis_scale)i;
-            return 0;
-        }
-    return mcp_error("unknown axis scale '%s' (known: linear, log, logit)",
-                     name ? name : "");
+    return mcp_wordlist_find(&mcp_axis_scale_words, name, (int *)out);
 }
 
 const char *
@@ -38,13 +35,7 @@ mcp_axis_scale_name(mcp_axis_scale s)
 int
 mcp_series_style_from_name(const char *name, mcp_series_style *out)
 {
-    for (int i = 0; i < 3; i++)
-        if (name && !strcasecmp(name, style_names[i])) {
-            *out = (mcp_series_style)i;
-            return 0;
-        }
-    return mcp_error("unknown series style '%s' (known: line, scatter, line+points)",
-                     name ? name : "");
+    return mcp_wordlist_find(&mcp_series_style_words, name, (int *)out);
 }
 
 const char *

@@ -11,6 +11,7 @@
 #define MCP_PLOT_H
 
 #include <mcpost/error.h>
+#include <mcpost/wordlist.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -19,6 +20,7 @@ extern "C" {
 typedef enum { MCP_AXIS_LINEAR, MCP_AXIS_LOG, MCP_AXIS_LOGIT } mcp_axis_scale;
 
 /* "linear", "log", "logit". */
+MCP_API extern const mcp_wordlist mcp_axis_scale_words, mcp_series_style_words;
 MCP_API int mcp_axis_scale_from_name(const char *name, mcp_axis_scale *out);
 MCP_API const char *mcp_axis_scale_name(mcp_axis_scale s);
 

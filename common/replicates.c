@@ -12,16 +12,13 @@
 #include <stdlib.h>
 #include <string.h>
 
+static const char *const merge_variance_names[] = {"replicates", "pooled"};
+const mcp_wordlist mcp_merge_variance_words = {"merge variance", merge_variance_names, 2};
+
 int
 mcp_merge_variance_from_name(const char *name, mcp_merge_variance *out)
 {
-    if (strcmp(name, "replicates") == 0)
-        *out = MCP_MERGE_REPLICATES;
-    else if (strcmp(name, "pooled") == 0)
-        *out = MCP_MERGE_POOLED;
-    else
-        return mcp_error("unknown merge variance '%s' (known: replicates, pooled)", name);
-    return 0;
+    return mcp_wordlist_find(&mcp_merge_variance_words, name, (int *)out);
 }
 
 mcp_merge_options

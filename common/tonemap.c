@@ -20,16 +20,12 @@ static const float flip_coeffs[3][6] = {
 
 static const char *const tonemap_names[] = {"none", "clamp", "aces", "hable", "reinhard"};
 
+const mcp_wordlist mcp_tonemap_words = {"tone map", tonemap_names, 5};
+
 int
 mcp_tonemap_from_name(const char *name, mcp_tonemap *out)
 {
-    for (int i = 0; i < 5; i++)
-        if (name && !strcasecmp(name, tonemap_names[i])) {
-            *out = (mcp_tonemap)i;
-            return 0;
-        }
-    return mcp_error("unknown tone map '%s' (known: none, clamp, aces, hable, reinhard)",
-                     name ? name : "");
+    return mcp_wordlist_find(&mcp_tonemap_words, name, (int *)out);
 }
 
 const char *
@@ -174,17 +170,13 @@ mcp_pkernel_defaults(void)
     return (mcp_pkernel){.kind = MCP_PKERNEL_TAP3, .dpi = 300.0, .distance_in = 16.0};
 }
 
+static const char *const pkernel_names[] = {"tap3", "gaussian"};
+const mcp_wordlist mcp_pkernel_kind_words = {"perceptual kernel", pkernel_names, 2};
+
 int
 mcp_pkernel_kind_from_name(const char *name, mcp_pkernel_kind *out)
 {
-    if (name && !strcasecmp(name, "tap3"))
-        *out = MCP_PKERNEL_TAP3;
-    else if (name && !strcasecmp(name, "gaussian"))
-        *out = MCP_PKERNEL_GAUSSIAN;
-    else
-        return mcp_error("unknown perceptual kernel '%s' (known: tap3, gaussian)",
-                         name ? name : "");
-    return 0;
+    return mcp_wordlist_find(&mcp_pkernel_kind_words, name, (int *)out);
 }
 
 const char *

@@ -20,6 +20,7 @@
 #define MCP_TONEMAP_H
 
 #include <mcpost/image.h>
+#include <mcpost/wordlist.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -35,6 +36,7 @@ typedef enum {
 
 /* "none", "clamp", "aces", "hable", "reinhard" (case-insensitive). Fails with
  * "unknown tone map 'X' (known: ...)". */
+MCP_API extern const mcp_wordlist mcp_tonemap_words;
 MCP_API int mcp_tonemap_from_name(const char *name, mcp_tonemap *out);
 MCP_API const char *mcp_tonemap_name(mcp_tonemap tm);
 
@@ -83,6 +85,7 @@ typedef struct mcp_pkernel {
 MCP_API mcp_pkernel mcp_pkernel_defaults(void);
 
 /* "tap3" or "gaussian". */
+MCP_API extern const mcp_wordlist mcp_pkernel_kind_words;
 MCP_API int mcp_pkernel_kind_from_name(const char *name, mcp_pkernel_kind *out);
 MCP_API const char *mcp_pkernel_kind_name(mcp_pkernel_kind kind);
 

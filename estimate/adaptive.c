@@ -20,16 +20,12 @@
 
 static const char *const map_names[] = {"variance", "tonemapped", "mc-sure", "uniform"};
 
+const mcp_wordlist mcp_adaptive_map_words = {"map", map_names, 4};
+
 int
 mcp_adaptive_map_from_name(const char *name, mcp_adaptive_map *out)
 {
-    for (int i = 0; i < 4; i++)
-        if (name && strcasecmp(name, map_names[i]) == 0) {
-            *out = (mcp_adaptive_map)i;
-            return 0;
-        }
-    return mcp_error("unknown map '%s' (known: variance, tonemapped, mc-sure, uniform)",
-                     name ? name : "");
+    return mcp_wordlist_find(&mcp_adaptive_map_words, name, (int *)out);
 }
 
 const char *

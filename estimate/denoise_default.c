@@ -98,4 +98,5 @@ const mcp_denoiser_kind mcp__denoiser_default = {
     "inputs without albedo and normal (said once)",
     default_keys,
     default_create,
+    NULL, /* no settings */
 };

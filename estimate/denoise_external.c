@@ -20,6 +20,7 @@
 
 #include <dirent.h>
 #include <math.h>
+#include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -33,8 +34,50 @@ typedef struct {
     int needs_albedo, needs_normal;
 } external_state;
 
-static const char *const external_keys[] = {"command", "format", "delta", "workdir",
-                                             NULL};
+/* ---- settings: the table (<mcpost/options.h>; docs/denoisers.md) ---- */
+
+typedef struct {
+    const char *command, *format, *workdir;
+    double delta;
+} external_settings;
+
+static const mcp_option external_options[] = {
+    {.name = "command", .type = MCP_OPT_TEXT,
+     .offset = offsetof(external_settings, command), .meta = "CMD",
+     .doc = "a /bin/sh command with {color} {albedo} {normal} {output} for its files "
+            "(required); --denoiser-command"},
+    {.name = "format", .type = MCP_OPT_TEXT,
+     .offset = offsetof(external_settings, format), .def = "pfm",
+     .doc = "the files' format: pfm or exr"},
+    {.name = "delta", .type = MCP_OPT_NUMBER,
+     .offset = offsetof(external_settings, delta), .def = "0.1",
+     .doc = "finite-difference step of the JVP, in units of the tangent",
+     .bounds = MCP_OPT_LO_OPEN},
+    {.name = "workdir", .type = MCP_OPT_TEXT,
+     .offset = offsetof(external_settings, workdir),
+     .doc = "where the private folders go (relative to the job file) [$TMPDIR or /tmp]"},
+    {0}};
+
+static void
+external_defaults(void *p)
+{
+    external_settings *e = p;
+    e->format = "pfm";
+    e->delta = 0.1;
+}
+
+const mcp_operation mcp__op_external = {
+    .name = "external",
+    .denoiser = 1,
+    .summary = "any command that reads and writes image files; finite-difference JVP",
+    .options = external_options,
+    .size = sizeof(external_settings),
+    .defaults = external_defaults,
+};
+
+/* The keys, from the table (denoisers.c fills them in before the kinds are handed
+ * out). */
+const char *mcp__external_keys[MCP__DENOISER_KEYS_MAX];
 
 /* ---- running the command ---- */
 
@@ -197,17 +240,15 @@ external_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **o
 {
     *out = NULL;
     const mcp_node *cmd_node = NULL;
-    const char *command = NULL, *format = "pfm", *workdir = NULL;
-    double delta = 0.1;
+    external_settings e;
     if (settings->kind != MCP_NODE_MAP)
         return mcp_node_error(settings, "external: needs settings: a map with 'command' "
                                         "(e.g. --denoiser-opt 'command=...')");
     if (mcp_node_require(settings, "command", "denoiser 'external'", &cmd_node) ||
-        mcp_node_string(cmd_node, "command", &command) ||
-        mcp_node_opt_string(settings, "format", &format) ||
-        mcp_node_opt_double(settings, "delta", &delta) ||
-        mcp_node_opt_string(settings, "workdir", &workdir))
+        mcp__options_from_node(&mcp__op_external, settings, NULL, &e))
         return -1;
+    const char *command = e.command, *format = e.format, *workdir = e.workdir;
+    double delta = e.delta;
     if (!strstr(command, "{color}") || !strstr(command, "{output}"))
         return mcp_node_error(cmd_node,
                               "external: command '%s' must name {color} and {output}",
@@ -262,6 +303,7 @@ const mcp_denoiser_kind mcp__denoiser_external = {
     "any command that reads and writes image files, e.g. oidnDenoise; "
     "finite-difference JVP (command with {color} {albedo} {normal} {output}, "
     "format [pfm], delta [0.1], workdir [$TMPDIR])",
-    external_keys,
+    mcp__external_keys,
     external_create,
+    &mcp__op_external,
 };

@@ -3,8 +3,9 @@
  * blur applied to the tangent, exactly. A baseline and a test object for SURE: it ignores
  * albedo, normal and variance.
  *
- * Settings: sigma [2] (px, > 0), radius [ceil(3 sigma)] (px, >= 0; the window is
- * 2 radius + 1 wide). Borders replicate (common/filter.h). */
+ * Settings (the table below, docs/denoisers.md): sigma [2] (px, > 0), radius
+ * [auto: ceil(3 sigma)] (px, >= 0; the window is 2 radius + 1 wide). Borders replicate
+ * (common/filter.h). */
 #include <mcpost/denoiser.h>
 
 #include "internal.h"
@@ -12,6 +13,8 @@
 #include <mcpost/filter.h>
 
 #include <math.h>
+#include <stddef.h>
+#include <stdint.h>
 #include <stdlib.h>
 
 /* Radii beyond this cannot be meant: an image side is at most MCP_MAX_DIM. */
@@ -23,7 +26,63 @@ typedef struct {
     float *kernel; /* 2 radius + 1 taps, normalised */
 } gauss_state;
 
-static const char *const gauss_keys[] = {"sigma", "radius", NULL};
+/* ---- settings: the table (<mcpost/options.h>) ---- */
+
+typedef struct {
+    double sigma; /* px */
+    int radius;   /* px; when not given, ceil(3 sigma) */
+    uint64_t given;
+} gauss_settings;
+
+static const mcp_option gauss_options[] = {
+    {.name = "sigma", .type = MCP_OPT_NUMBER,
+     .offset = offsetof(gauss_settings, sigma), .def = "2",
+     .doc = "standard deviation of the blur, px", .lo = 0, .hi = RADIUS_MAX,
+     .bounds = MCP_OPT_LO_OPEN | MCP_OPT_HI},
+    {.name = "radius", .type = MCP_OPT_INT,
+     .offset = offsetof(gauss_settings, radius), .meta = "N",
+     .doc = "the window is 2 radius + 1 px wide [ceil(3 sigma)]"},
+    {0}};
+
+static void
+gauss_defaults(void *p)
+{
+    gauss_settings *g = p;
+    g->sigma = 2.0;
+}
+
+const mcp_operation mcp__op_gauss;
+
+/* The radius from sigma when none is given, and a given one checked (in px, as the
+ * docs say it). */
+static int
+gauss_finish(void *p)
+{
+    gauss_settings *g = p;
+    if (!mcp_operation_given(&mcp__op_gauss, &gauss_options[1], g)) {
+        g->radius = g->sigma * 3 < RADIUS_MAX ? (int)ceil(3 * g->sigma) : RADIUS_MAX;
+        return 0;
+    }
+    if (g->radius < 0 || g->radius > RADIUS_MAX)
+        return mcp_error("gauss: radius must be in [0, %d] px (got %d)", RADIUS_MAX,
+                         g->radius);
+    return 0;
+}
+
+const mcp_operation mcp__op_gauss = {
+    .name = "gauss",
+    .denoiser = 1,
+    .summary = "Gaussian blur of the colour; linear, exact JVP",
+    .options = gauss_options,
+    .size = sizeof(gauss_settings),
+    .defaults = gauss_defaults,
+    .finish = gauss_finish,
+    .given_offset = offsetof(gauss_settings, given),
+};
+
+/* The keys, from the table (denoisers.c fills them in before the kinds are handed
+ * out). */
+const char *mcp__gauss_keys[MCP__DENOISER_KEYS_MAX];
 
 /* The blur of a 3-channel image, as a new R,G,B image. */
 static int
@@ -97,20 +156,10 @@ gauss_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
 {
     (void)base_dir;
     *out = NULL;
-    double sigma = 2.0;
-    if (mcp_node_opt_double(settings, "sigma", &sigma))
-        return -1;
-    if (!(sigma > 0) || sigma > RADIUS_MAX)
-        return mcp_node_error(mcp_node_get(settings, "sigma"),
-                              "gauss: sigma must be > 0 and <= %d px (got %g)",
-                              RADIUS_MAX, sigma);
-    int radius = sigma * 3 < RADIUS_MAX ? (int)ceil(3 * sigma) : RADIUS_MAX;
-    const mcp_node *radius_node = mcp_node_get(settings, "radius");
-    if (radius_node && mcp_node_int(radius_node, "radius", &radius))
-        return -1;
-    if (radius < 0 || radius > RADIUS_MAX)
-        return mcp_node_error(radius_node, "gauss: radius must be in [0, %d] px (got %d)",
-                              RADIUS_MAX, radius);
+    gauss_settings g;
+    if (mcp__options_from_node(&mcp__op_gauss, settings, NULL, &g)) return -1;
+    double sigma = g.sigma;
+    int radius = g.radius;
     mcp_denoiser *d = mcp__denoiser_new("gauss", sizeof(gauss_state));
     if (!d)
         return -1;
@@ -133,6 +182,7 @@ const mcp_denoiser_kind mcp__denoiser_gauss = {
     "gauss",
     "Gaussian blur of the colour; linear, exact JVP "
     "(sigma [2] px, radius [ceil(3 sigma)] px)",
-    gauss_keys,
+    mcp__gauss_keys,
     gauss_create,
+    &mcp__op_gauss,
 };

@@ -114,11 +114,64 @@ typedef struct {
     float **tangent; /* nt outputs */
 } nlm_out;
 
-static const char *const nlm_keys[] = {
-    "radius",       "patch_radius", "k_color",       "alpha",
-    "epsilon",      "sigma_color",  "use_variance",  "variance_blur",
-    "sigma_albedo", "sigma_normal", "sigma_spatial", NULL,
-};
+/* ---- settings: one table for nlm and bilateral, which differ in their defaults
+ * (<mcpost/options.h>; docs/denoisers.md) ---- */
+
+#define P(f) offsetof(nlm_params, f)
+#define NLM_OPTIONS(RADIUS, PATCH, K_COLOR, SIGMA_SPATIAL)                                 \
+    {.name = "radius", .type = MCP_OPT_INT, .offset = P(radius),     \
+     .def = RADIUS, .doc = "search window half width R, px", .lo = 0, .hi = RADIUS_MAX,          \
+     .bounds = MCP_OPT_LO | MCP_OPT_HI},                                                   \
+        {.name = "patch_radius", .type = MCP_OPT_INT,                \
+         .offset = P(patch_radius), .def = PATCH,                                        \
+         .doc = "patch half width f, px; 0 compares single pixels", .lo = 0,      \
+         .hi = PATCH_RADIUS_MAX, .bounds = MCP_OPT_LO | MCP_OPT_HI},                       \
+        {.name = "k_color", .type = MCP_OPT_NUMBER,                  \
+         .offset = P(k_color), .def = K_COLOR,                                             \
+         .doc = "colour bandwidth, in noise standard deviations", .lo = 0, .hi = 1e6,      \
+         .bounds = MCP_OPT_LO_OPEN | MCP_OPT_HI},                                          \
+        {.name = "alpha", .type = MCP_OPT_NUMBER, .offset = P(alpha), \
+         .def = "1",                                                                       \
+         .doc = "how much of the expected noise to subtract from the squared difference", \
+         .lo = 0, .hi = 16,   \
+         .bounds = MCP_OPT_LO | MCP_OPT_HI},                                               \
+        {.name = "epsilon", .type = MCP_OPT_NUMBER,                  \
+         .offset = P(epsilon), .def = "0.0001",                                            \
+         .doc = "added to the normaliser, squared colour units", .lo = 0, .hi = 1e30,      \
+         .bounds = MCP_OPT_LO_OPEN | MCP_OPT_HI},                                          \
+        {.name = "sigma_color", .type = MCP_OPT_NUMBER,              \
+         .offset = P(sigma_color), .def = "0.05",                                          \
+         .doc = "noise standard deviation assumed where no variance is given", .lo = 0,    \
+         .hi = 1e15, .bounds = MCP_OPT_LO | MCP_OPT_HI},                                   \
+        {.name = "use_variance", .type = MCP_OPT_FLAG,               \
+         .offset = P(use_variance), .def = "true",                                         \
+         .doc = "use the input's variance; false: a constant sigma_color^2"},         \
+        {.name = "variance_blur", .type = MCP_OPT_NUMBER,            \
+         .offset = P(variance_blur), .def = "1",                                           \
+         .doc = "Gaussian prefilter of the variance, sigma in px (0: none)", .lo = 0,      \
+         .hi = 100, .bounds = MCP_OPT_LO | MCP_OPT_HI},                                    \
+        {.name = "sigma_albedo", .type = MCP_OPT_NUMBER,             \
+         .offset = P(sigma_albedo), .def = "0.2",                                          \
+         .doc = "albedo bandwidth (0: ignore albedo)", .lo = 0, .hi = 1e15,                \
+         .bounds = MCP_OPT_LO | MCP_OPT_HI},                                               \
+        {.name = "sigma_normal", .type = MCP_OPT_NUMBER,             \
+         .offset = P(sigma_normal), .def = "0.3",                                          \
+         .doc = "normal bandwidth (0: ignore normals)", .lo = 0, .hi = 1e15,               \
+         .bounds = MCP_OPT_LO | MCP_OPT_HI},                                               \
+        {.name = "sigma_spatial", .type = MCP_OPT_NUMBER,            \
+         .offset = P(sigma_spatial), .def = SIGMA_SPATIAL,                                 \
+         .doc = "Gaussian falloff over the window, px (0: a uniform window)", .lo = 0,     \
+         .hi = 1e15, .bounds = MCP_OPT_LO | MCP_OPT_HI},                                   \
+    {                                                                                      \
+        0                                                                                  \
+    }
+
+static const mcp_option nlm_options[] = {NLM_OPTIONS("7", "2", "0.6", "0")};
+static const mcp_option bilateral_options[] = {NLM_OPTIONS("6", "0", "2", "2")};
+
+/* The keys, from the table (denoisers.c fills them in before the kinds are handed
+ * out); nlm and bilateral share them. */
+const char *mcp__nlm_keys[MCP__DENOISER_KEYS_MAX];
 
 static int
 clampi(int v, int lo, int hi)
@@ -680,54 +733,15 @@ nlm_apply(const mcp_denoiser *self, const mcp_denoise_input *in, mcp_image **out
     return nlm_jvp(self, in, NULL, 0, out, NULL);
 }
 
-/* Reads a number setting and checks lo <= v <= hi, naming the key's line. */
+/* Reads the settings through op's table (its defaults first) and makes a denoiser
+ * called op's name. */
 static int
-read_double(const char *who, const mcp_node *settings, const char *key, double lo,
-            double hi, int lo_open, double *v)
-{
-    const mcp_node *n = mcp_node_get(settings, key);
-    if (!n)
-        return 0;
-    if (mcp_node_double(n, key, v))
-        return -1;
-    if ((lo_open ? !(*v > lo) : !(*v >= lo)) || *v > hi)
-        return mcp_node_error(n, "%s: %s must be %s %g and <= %g (got %g)", who, key,
-                              lo_open ? ">" : ">=", lo, hi, *v);
-    return 0;
-}
-
-static int
-read_int(const char *who, const mcp_node *settings, const char *key, int lo, int hi,
-         int *v)
-{
-    const mcp_node *n = mcp_node_get(settings, key);
-    if (!n)
-        return 0;
-    if (mcp_node_int(n, key, v))
-        return -1;
-    if (*v < lo || *v > hi)
-        return mcp_node_error(n, "%s: %s must be in [%d, %d] (got %d)", who, key, lo, hi,
-                              *v);
-    return 0;
-}
-
-/* Reads the settings over the defaults *p and makes a denoiser called name. */
-static int
-create_with(const char *name, nlm_params p, const mcp_node *settings, mcp_denoiser **out)
+create_with(const mcp_operation *op, const mcp_node *settings, mcp_denoiser **out)
 {
     *out = NULL;
-    if (read_int(name, settings, "radius", 0, RADIUS_MAX, &p.radius) ||
-        read_int(name, settings, "patch_radius", 0, PATCH_RADIUS_MAX, &p.patch_radius) ||
-        read_double(name, settings, "k_color", 0, 1e6, 1, &p.k_color) ||
-        read_double(name, settings, "alpha", 0, 16, 0, &p.alpha) ||
-        read_double(name, settings, "epsilon", 0, 1e30, 1, &p.epsilon) ||
-        read_double(name, settings, "sigma_color", 0, 1e15, 0, &p.sigma_color) ||
-        mcp_node_opt_bool(settings, "use_variance", &p.use_variance) ||
-        read_double(name, settings, "variance_blur", 0, 100, 0, &p.variance_blur) ||
-        read_double(name, settings, "sigma_albedo", 0, 1e15, 0, &p.sigma_albedo) ||
-        read_double(name, settings, "sigma_normal", 0, 1e15, 0, &p.sigma_normal) ||
-        read_double(name, settings, "sigma_spatial", 0, 1e15, 0, &p.sigma_spatial))
-        return -1;
+    const char *name = op->name;
+    nlm_params p;
+    if (mcp__options_from_node(op, settings, NULL, &p)) return -1;
     mcp_denoiser *d = mcp__denoiser_new(name, sizeof p);
     if (!d)
         return -1;
@@ -743,10 +757,9 @@ create_with(const char *name, nlm_params p, const mcp_node *settings, mcp_denois
 
 /* Defaults tuned on the Cornell-box fixtures (1-1024 spp) and the procedural scene;
  * docs/denoisers.md and docs/benchmarks.md give the figures. */
-static int
-nlm_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
+static void
+nlm_defaults(void *out)
 {
-    (void)base_dir;
     nlm_params p = {
         .radius = 7,
         .patch_radius = 2,
@@ -760,44 +773,69 @@ nlm_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
         .sigma_normal = 0.3,
         .sigma_spatial = 0,
     };
-    return create_with("nlm", p, settings, out);
+    memcpy(out, &p, sizeof p);
 }
 
 /* The cross-bilateral filter is the same computation with one-pixel patches and a
  * spatial Gaussian; its single-pixel colour distances are noisier, hence a wider
  * colour bandwidth. */
+static void
+bilateral_defaults(void *out)
+{
+    nlm_defaults(out);
+    nlm_params *p = out;
+    p->radius = 6;
+    p->patch_radius = 0;
+    p->k_color = 2.0;
+    p->sigma_spatial = 2.0;
+}
+
+const mcp_operation mcp__op_nlm = {
+    .name = "nlm",
+    .denoiser = 1,
+    .summary = "feature-guided non-local means",
+    .options = nlm_options,
+    .size = sizeof(nlm_params),
+    .defaults = nlm_defaults,
+};
+
+const mcp_operation mcp__op_bilateral = {
+    .name = "bilateral",
+    .denoiser = 1,
+    .summary = "feature-guided cross-bilateral filter",
+    .options = bilateral_options,
+    .size = sizeof(nlm_params),
+    .defaults = bilateral_defaults,
+};
+
+static int
+nlm_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
+{
+    (void)base_dir;
+    return create_with(&mcp__op_nlm, settings, out);
+}
+
 static int
 bilateral_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
 {
     (void)base_dir;
-    nlm_params p = {
-        .radius = 6,
-        .patch_radius = 0,
-        .k_color = 2.0,
-        .alpha = 1.0,
-        .epsilon = 1e-4,
-        .sigma_color = 0.05,
-        .use_variance = 1,
-        .variance_blur = 1.0,
-        .sigma_albedo = 0.2,
-        .sigma_normal = 0.3,
-        .sigma_spatial = 2.0,
-    };
-    return create_with("bilateral", p, settings, out);
+    return create_with(&mcp__op_bilateral, settings, out);
 }
 
 const mcp_denoiser_kind mcp__denoiser_nlm = {
     "nlm",
     "feature-guided non-local means: weights from colour patch distances (scaled by "
     "the variance), albedo and normal; exact JVP",
-    nlm_keys,
+    mcp__nlm_keys,
     nlm_create,
+    &mcp__op_nlm,
 };
 
 const mcp_denoiser_kind mcp__denoiser_bilateral = {
     "bilateral",
     "feature-guided cross-bilateral filter: nlm with one-pixel patches and a spatial "
     "Gaussian (sigma_spatial [2] px); exact JVP",
-    nlm_keys,
+    mcp__nlm_keys,
     bilateral_create,
+    &mcp__op_bilateral,
 };

@@ -29,6 +29,7 @@
 #include "unet_internal.h"
 
 #include <math.h>
+#include <stddef.h>
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -123,9 +124,60 @@ shared_release(mcp__unet *net)
         mcp__unet_free(net);
 }
 
-static const char *const unet_keys[] = {"weights",    "input_scale",    "tile",
-                                        "fixed_bits", "exact_tangents", "max_memory_mb",
-                                        NULL};
+/* ---- settings: the table (<mcpost/options.h>; docs/denoisers.md) ---- */
+
+typedef struct {
+    const char *weights; /* a .tza; NULL: $MCPOST_OIDN_WEIGHTS, else the shipped ones */
+    double input_scale;  /* 0: auto (OIDN's autoexposure) */
+    int tile;            /* 0: as memory allows; else a multiple of 16 */
+    int fixed_bits;
+    int exact_tangents;
+    int max_memory_mb; /* 0: the default */
+} unet_settings;
+
+static const mcp_option unet_options[] = {
+    {.name = "weights", .type = MCP_OPT_TEXT,
+     .offset = offsetof(unet_settings, weights), .meta = "PATH",
+     .doc = "the .tza file (relative paths: to the job file's folder); --weights [$"
+            WEIGHTS_ENV ", else the shipped share/mcpost/rt_hdr_alb_nrm.tza]"},
+    {.name = "input_scale", .type = MCP_OPT_NUMBER,
+     .offset = offsetof(unet_settings, input_scale), .def = "auto",
+     .doc = "auto: OIDN's autoexposure; or the number that maps the colour to 1 = 100 "
+            "cd/m^2; --input-scale",
+     .bounds = MCP_OPT_LO_OPEN, .auto_word = "auto", .auto_value = 0},
+    {.name = "tile", .type = MCP_OPT_INT,
+     .offset = offsetof(unet_settings, tile), .def = "0",
+     .doc = "0: the whole image when it fits in the memory available, else the largest "
+            "tiles that fit; or a multiple of 16: tiles of that size"},
+    {.name = "fixed_bits", .type = MCP_OPT_FLAG,
+     .offset = offsetof(unet_settings, fixed_bits), .def = "false",
+     .doc = "true: the direct-loop convolutions, the same bits on every x86-64 "
+            "(MCPOST_UNET_FIXED=1 does it for the whole process); false: Winograd, 2-3x "
+            "faster"},
+    {.name = "exact_tangents", .type = MCP_OPT_FLAG,
+     .offset = offsetof(unet_settings, exact_tangents), .def = "false",
+     .doc = "true: the JVP's convolutions as the primal's, Winograd F(2x2, 3x3); false: "
+            "the tangents' convolutions as Winograd F(4x4, 3x3), 1.78x fewer "
+            "multiply-adds (JVP within 2.1e-6 of the double reference against 0.8e-6; "
+            "MCPOST_UNET_EXACT_TANGENTS=1 for a process)"},
+    {.name = "max_memory_mb", .type = MCP_OPT_INT,
+     .offset = offsetof(unet_settings, max_memory_mb), .def = "2048", .meta = "MB",
+     .doc = "the network's working memory at most: beyond it the image runs in tiles with "
+            "the same bits (MCPOST_UNET_MAX_MEMORY_MB for a process); 0: the default",
+     .lo = 0, .bounds = MCP_OPT_LO},
+    {0}};
+
+const mcp_operation mcp__op_unet = {
+    .name = "unet",
+    .denoiser = 1,
+    .summary = "OIDN's RT U-Net with .tza weights, exact JVP",
+    .options = unet_options,
+    .size = sizeof(unet_settings),
+};
+
+/* The keys, from the table (denoisers.c fills them in before the kinds are handed
+ * out). */
+const char *mcp__unet_keys[MCP__DENOISER_KEYS_MAX];
 
 static int
 unet_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
@@ -157,39 +209,16 @@ unet_destroy(mcp_denoiser *self)
     free(self);
 }
 
-/* input_scale: "auto" (returns 0) or a positive number. */
-static int
-read_input_scale(const mcp_node *settings, double *scale)
-{
-    *scale = 0.0;
-    const mcp_node *n = mcp_node_get(settings, "input_scale");
-    if (!n) return 0;
-    if (n->kind == MCP_NODE_SCALAR && strcmp(n->value, "auto") == 0) return 0;
-    if (mcp_node_double(n, "input_scale", scale)) return -1;
-    if (!(*scale > 0) || !isfinite(*scale))
-        return mcp_node_error(
-            n, "unet: input_scale must be auto or a number > 0 (got %g)", *scale);
-    return 0;
-}
-
 static int
 unet_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
 {
     *out = NULL;
-    const char *weights = NULL;
-    double scale = 0.0;
-    int tile = 0, fixed_bits = 0, exact_tangents = 0, max_memory_mb = 0;
-    if (mcp_node_opt_string(settings, "weights", &weights) ||
-        read_input_scale(settings, &scale) || mcp_node_opt_int(settings, "tile", &tile) ||
-        mcp_node_opt_bool(settings, "fixed_bits", &fixed_bits) ||
-        mcp_node_opt_bool(settings, "exact_tangents", &exact_tangents) ||
-        mcp_node_opt_int(settings, "max_memory_mb", &max_memory_mb))
-        return -1;
-    if (max_memory_mb < 0)
-        return mcp_node_error(mcp_node_get(settings, "max_memory_mb"),
-                              "unet: max_memory_mb must be > 0, or 0 for the default "
-                              "(got %d)",
-                              max_memory_mb);
+    unet_settings u;
+    if (mcp__options_from_node(&mcp__op_unet, settings, NULL, &u)) return -1;
+    const char *weights = u.weights;
+    double scale = u.input_scale;
+    int tile = u.tile, fixed_bits = u.fixed_bits;
+    int exact_tangents = u.exact_tangents, max_memory_mb = u.max_memory_mb;
     if (tile < 0 || tile % 16)
         return mcp_node_error(mcp_node_get(settings, "tile"),
                               "unet: tile must be 0 (as memory allows) or a multiple of 16 "
@@ -246,6 +275,7 @@ const mcp_denoiser_kind mcp__denoiser_unet = {
     "bits on every x86-64, exact_tangents [false]: the JVP's convolutions as the "
     "primal's, Winograd F(2x2,3x3), instead of F(4x4,3x3), max_memory_mb [2048]: the "
     "network's working memory at most, in tiles beyond)",
-    unet_keys,
+    mcp__unet_keys,
     unet_create,
+    &mcp__op_unet,
 };

@@ -12,6 +12,7 @@
 
 #include <mcpost/dump.h>
 #include <mcpost/job.h>
+#include <mcpost/options.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -83,6 +84,10 @@ typedef struct mcp_denoiser_kind {
     const char *summary;
     const char *const *keys; /* settings keys besides `name`, NULL-terminated */
     int (*create)(const mcp_node *settings, const char *base_dir, mcp_denoiser **out);
+    /* Its settings' table (<mcpost/options.h>: names, types, ranges, defaults, docs),
+     * which create reads them through and keys come from; NULL: none (create reads
+     * its keys itself) */
+    const mcp_operation *options;
 } mcp_denoiser_kind;
 
 /* The table of kinds (NULL-terminated), for --help and `mcpost denoise --list`. */

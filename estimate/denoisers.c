@@ -9,6 +9,7 @@
 
 #include "internal.h"
 
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -27,9 +28,30 @@ static const mcp_denoiser_kind *const kinds[] = {
 /* Keys a settings map may hold at most (name + a kind's own keys). */
 #define MAX_KEYS 64
 
+/* The keys of the kinds with a settings table come from it, once, before a kind is
+ * handed out (nlm and bilateral share theirs). The arrays are the kinds' files'
+ * (internal.h), not const. */
+static void
+fill_keys(void)
+{
+    mcp__options_node_keys(&mcp__op_gauss, NULL, mcp__gauss_keys, MCP__DENOISER_KEYS_MAX);
+    mcp__options_node_keys(&mcp__op_nlm, NULL, mcp__nlm_keys, MCP__DENOISER_KEYS_MAX);
+    mcp__options_node_keys(&mcp__op_unet, NULL, mcp__unet_keys, MCP__DENOISER_KEYS_MAX);
+    mcp__options_node_keys(&mcp__op_external, NULL, mcp__external_keys,
+                           MCP__DENOISER_KEYS_MAX);
+}
+
+static void
+keys_ready(void)
+{
+    static pthread_once_t once = PTHREAD_ONCE_INIT;
+    pthread_once(&once, fill_keys);
+}
+
 static const mcp_denoiser_kind *
 find_kind(const char *name)
 {
+    keys_ready();
     for (int i = 0; kinds[i]; i++)
         if (strcmp(kinds[i]->name, name) == 0)
             return kinds[i];
@@ -251,6 +273,7 @@ mcp__denoiser_new(const char *name, size_t state_size)
 const mcp_denoiser_kind *const *
 mcp_denoiser_kinds(void)
 {
+    keys_ready();
     return kinds;
 }
 

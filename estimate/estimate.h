@@ -23,6 +23,7 @@
 #include <mcpost/denoiser.h>
 #include <mcpost/dump.h>
 #include <mcpost/tonemap.h>
+#include <mcpost/wordlist.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -46,6 +47,8 @@ typedef enum {
 } mcp_error_metric;
 
 /* "relse", "relse-perceptual", "se"; fails with "unknown metric 'X' (known: ...)". */
+/* "relse", "relse-perceptual", "se" (the words: mcp_error_metric_words) */
+MCP_API extern const mcp_wordlist mcp_error_metric_words;
 MCP_API int mcp_error_metric_from_name(const char *name, mcp_error_metric *out);
 MCP_API const char *mcp_error_metric_name(mcp_error_metric metric);
 
@@ -174,6 +177,7 @@ typedef enum {
     MCP_SAMPLING_MC_SURE     /* SURE / ((n+1)(F² + EPS_REL)), wider blur  "mc-sure" */
 } mcp_sampling_kind;
 
+MCP_API extern const mcp_wordlist mcp_sampling_kind_words;
 MCP_API int mcp_sampling_kind_from_name(const char *name, mcp_sampling_kind *out);
 MCP_API const char *mcp_sampling_kind_name(mcp_sampling_kind kind);
 
@@ -329,6 +333,9 @@ MCP_API int mcp_estimate_auto_s2_pool(const mcp_dump *dump, const mcp_denoiser *
 
 MCP_API mcp_estimate_options mcp_estimate_defaults(void);
 
+/* variance_rademacher's words: "sure" (0), "rademacher" (1). */
+MCP_API extern const mcp_wordlist mcp_variance_probes_words;
+
 /* Checks every field, naming it ("estimate: tau must be > 0 (got -1)"). */
 MCP_API int mcp_estimate_check(const mcp_estimate_options *opt);
 
@@ -440,6 +447,7 @@ typedef enum {
     MCP_ADAPTIVE_UNIFORM       /* "uniform"    */
 } mcp_adaptive_map;
 
+MCP_API extern const mcp_wordlist mcp_adaptive_map_words;
 MCP_API int mcp_adaptive_map_from_name(const char *name, mcp_adaptive_map *out);
 MCP_API const char *mcp_adaptive_map_name(mcp_adaptive_map map);
 

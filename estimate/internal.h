@@ -5,6 +5,8 @@
 
 #include <mcpost/denoiser.h>
 
+#include "../ops/internal.h"
+
 #include <stddef.h>
 
 /* ---- denoisers (denoisers.c, denoise_*.c; docs/mathematics.md §2.1) ---- */
@@ -20,6 +22,15 @@ int mcp__shell_fill(const char *tmpl, int n, const char *const *names,
 
 /* The built-in kinds; denoisers.c lists them in its table. */
 extern const mcp_denoiser_kind mcp__denoiser_gauss;
+/* The settings' tables of the kinds that have one, and the keys taken from them
+ * (filled in by denoisers.c before a kind is handed out). */
+#define MCP__DENOISER_KEYS_MAX 32
+extern const mcp_operation mcp__op_gauss, mcp__op_nlm, mcp__op_bilateral, mcp__op_unet,
+    mcp__op_external;
+extern const char *mcp__gauss_keys[MCP__DENOISER_KEYS_MAX];
+extern const char *mcp__nlm_keys[MCP__DENOISER_KEYS_MAX];
+extern const char *mcp__unet_keys[MCP__DENOISER_KEYS_MAX];
+extern const char *mcp__external_keys[MCP__DENOISER_KEYS_MAX];
 extern const mcp_denoiser_kind mcp__denoiser_nlm;
 /* The James-Stein post-correction around another kind; it lives with the combiner in
  * blend/ (blend/denoise_james_stein.c). */

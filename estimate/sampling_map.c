@@ -19,17 +19,12 @@
 #include <strings.h>
 
 static const char *const kind_names[] = {"variance", "tonemapped", "mc-sure"};
+const mcp_wordlist mcp_sampling_kind_words = {"sampling map", kind_names, 3};
 
 int
 mcp_sampling_kind_from_name(const char *name, mcp_sampling_kind *out)
 {
-    for (int i = 0; i < 3; i++)
-        if (name && strcasecmp(name, kind_names[i]) == 0) {
-            *out = (mcp_sampling_kind)i;
-            return 0;
-        }
-    return mcp_error("unknown sampling map '%s' (known: variance, tonemapped, mc-sure)",
-                     name ? name : "");
+    return mcp_wordlist_find(&mcp_sampling_kind_words, name, (int *)out);
 }
 
 const char *

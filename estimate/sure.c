@@ -23,17 +23,12 @@
 #include <time.h>
 
 static const char *const metric_names[] = {"relse", "relse-perceptual", "se"};
+const mcp_wordlist mcp_error_metric_words = {"metric", metric_names, 3};
 
 int
 mcp_error_metric_from_name(const char *name, mcp_error_metric *out)
 {
-    for (int i = 0; i < 3; i++)
-        if (name && strcasecmp(name, metric_names[i]) == 0) {
-            *out = (mcp_error_metric)i;
-            return 0;
-        }
-    return mcp_error("unknown metric '%s' (known: relse, relse-perceptual, se)",
-                     name ? name : "");
+    return mcp_wordlist_find(&mcp_error_metric_words, name, (int *)out);
 }
 
 const char *

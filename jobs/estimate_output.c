@@ -471,18 +471,6 @@ mcp__estimate_run_series(const mcp_series *series, const mcp_denoiser *den,
 }
 
 int
-mcp__variance_probes_from_name(const char *text, int *out)
-{
-    if (!strcmp(text, "sure"))
-        *out = 0;
-    else if (!strcmp(text, "rademacher"))
-        *out = 1;
-    else
-        return mcp_error("variance probes must be sure or rademacher (got '%s')", text);
-    return 0;
-}
-
-int
 mcp__estimate_add_truth(const mcp_estimate *e, const mcp_image *ref,
                         const mcp_estimate_options *eo, cJSON *summary)
 {

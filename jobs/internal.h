@@ -12,9 +12,13 @@
 #include <mcpost/imageio.h>
 #include <mcpost/job.h>
 #include <mcpost/metrics.h>
+#include <mcpost/operations.h>
+#include <mcpost/options.h>
 #include <mcpost/perceptual.h>
 #include <mcpost/progress.h>
 #include <mcpost/stages.h>
+
+#include "../ops/internal.h"
 
 #include <cjson/cJSON.h>
 #include <stddef.h>
@@ -44,6 +48,11 @@ void mcp__free_words(char **words, int count);
  * fails at the key's line. Absent: *out unchanged. */
 int mcp__opt_enum(const mcp_node *settings, const char *key,
                   int (*parse)(const char *, void *), void *out);
+/* A stage's settings through its operation's table: ops/internal.h's
+ * mcp__options_from_node and mcp__options_node_keys. */
+#define mcp__job_settings mcp__options_from_node
+#define mcp__op_job_keys mcp__options_node_keys
+
 /* The current error put at the line of settings' key ("FILE:LINE: ..."); -1, and the
  * error unchanged when settings has no such key. */
 int mcp__at_line(const mcp_node *settings, const char *key);
@@ -55,8 +64,6 @@ int mcp__at_line(const mcp_node *settings, const char *key);
 void mcp__add_variance_source(cJSON *j, mcp_variance_source src, double dof);
 /* The source in words, for the text output. */
 const char *mcp__variance_source_words(mcp_variance_source src);
-/* --variance-from: "auto", "file" (the members' own) or "increments". */
-int mcp__variance_from(const char *text, mcp_series_variance *out);
 /* The one line that says Variance/n is off the increments' spread
  * (mcp_variance_ratio_off), and whether the increments are used. */
 const char *mcp__variance_ratio_warning(double ratio, int using_increments);
@@ -120,8 +127,6 @@ int mcp__estimate_run_series(const mcp_series *series, const mcp_denoiser *den,
                              const mcp_series_estimate_options *so, const mcp_image *ref,
                              const mcp__estimate_dir *o, cJSON *section, cJSON **json_out,
                              mcp_series_estimate **out);
-/* variance probes: sure (0) or rademacher (1). */
-int mcp__variance_probes_from_name(const char *text, int *out);
 
 /* ---- blend_run.c: a blend over a series, its files and its report section ---- */
 

@@ -1,20 +1,19 @@
 /* stage_adaptive.c: the `adaptive` job stage -- the adaptive-sampling loop against a
- * render command (adaptive_loop.c; docs/adaptive.md). */
+ * render command (adaptive_loop.c; docs/adaptive.md). The keys are the options of
+ * the adaptive table (ops/op_adaptive.c), as `mcpost adaptive` reads them. */
 #include "internal.h"
 
-#include <math.h>
 #include <stdio.h>
 #include <string.h>
 
-static const char *const adaptive_keys[] = {
-    "render",         "output",   "size",   "map",  "spp_per_iteration",
-    "initial_spp",    "budget",   "stop",   "tau",  "p",
-    "max_iterations", "quantum",  "probes", "seed", "reference",
-    "keep_passes",    "denoiser", "title",  NULL};
+/* The keys: the options of the adaptive table that a job takes (ops/op_adaptive.c),
+ * filled in by stages.c before the table is first handed out. */
+const char *mcp__adaptive_keys[MCP__OPTION_KEYS_MAX];
 
 /* The stage's settings, read before anything is loaded (by the run, and by the job's
- * check before any stage runs): the loop's options, the size, the reference by name
- * (checked against the job's inputs) and the denoiser, created from its settings. */
+ * check before any stage runs): the loop's options through the adaptive table, the
+ * size, the reference by name (checked against the job's inputs) and the denoiser,
+ * created from its settings. */
 typedef struct adaptive_plan {
     mcp__adaptive_loop c;
     const char *sub, *ref_name;
@@ -27,43 +26,25 @@ parse_adaptive(mcp_job *job, const mcp_node *s, adaptive_plan *pl)
 {
     memset(pl, 0, sizeof *pl);
     mcp__adaptive_loop *c = &pl->c;
-    c->ao = mcp_adaptive_defaults();
-    pl->sub = "adaptive";
-    const char *map = NULL, *size = NULL;
-    double seed = 1;
+    mcp_adaptive_settings st;
+    mcp_shared_settings sh;
     const mcp_node *render = NULL;
     if (mcp_node_require(s, "render", "adaptive", &render) ||
-        mcp_node_string(render, "render", &c->render) ||
-        mcp_node_opt_string(s, "output", &pl->sub) || mcp_node_opt_string(s, "map", &map) ||
-        mcp_node_opt_string(s, "size", &size) ||
-        mcp_node_opt_string(s, "reference", &pl->ref_name) ||
-        mcp_node_opt_double(s, "spp_per_iteration", &c->ao.spp_per_iteration) ||
-        mcp_node_opt_double(s, "initial_spp", &c->ao.initial_spp) ||
-        mcp_node_opt_double(s, "budget", &c->ao.budget_spp) ||
-        mcp_node_opt_bool(s, "stop", &c->ao.stop_on_estimate) ||
-        mcp_node_opt_double(s, "tau", &c->ao.est.tau) ||
-        mcp_node_opt_double(s, "p", &c->ao.est.p) ||
-        mcp_node_opt_int(s, "max_iterations", &c->ao.max_iterations) ||
-        mcp_node_opt_int(s, "quantum", &c->ao.quantum) ||
-        mcp_node_opt_int(s, "probes", &c->ao.est.sure.n_probes) ||
-        mcp_node_opt_double(s, "seed", &seed) ||
-        mcp_node_opt_bool(s, "keep_passes", &c->keep_passes))
+        mcp__job_settings(mcp_operation_adaptive(), s, &sh, &st))
         return -1;
-    if (map && mcp_adaptive_map_from_name(map, &c->ao.map))
-        return mcp_node_error(mcp_node_get(s, "map"), "%s", mcp_error_message());
-    if (seed < 0 || seed != floor(seed) || seed > 9007199254740992.0)
-        return mcp_node_error(mcp_node_get(s, "seed"),
-                              "seed must be a whole number >= 0 (got %g)", seed);
-    c->seed = (uint64_t)seed;
-    c->ao.est.sure.seed = c->seed;
-    if (size && mcp__parse_size(size, &c->width, &c->height))
+    c->ao = st.ao;
+    c->render = st.render;
+    c->seed = st.seed;
+    c->keep_passes = st.keep_passes;
+    pl->sub = sh.output ? sh.output : "adaptive";
+    pl->ref_name = st.reference;
+    if (st.size && mcp__parse_size(st.size, &c->width, &c->height))
         return mcp_node_error(mcp_node_get(s, "size"), "%s", mcp_error_message());
-    pl->have_size = size != NULL;
+    pl->have_size = st.size != NULL;
     if (pl->ref_name && mcp_job_check_input(job, s, "reference", MCP_JOB_IMAGE)) return -1;
-    if (!size && !pl->ref_name)
+    if (!st.size && !pl->ref_name)
         return mcp_node_error(s, "adaptive: give the image size (size: WxH) or a "
                                  "reference");
-    if (mcp_adaptive_check(&c->ao)) return mcp_node_error(s, "%s", mcp_error_message());
     return mcp__stage_denoiser(job, s, &pl->den);
 }
 
@@ -98,4 +79,4 @@ done:
 
 const mcp_stage mcp_stage_adaptive = {
     "adaptive", "the adaptive-sampling loop against a render command (Firmino 2023)",
-    adaptive_keys, stage_adaptive, check_adaptive};
+    mcp__adaptive_keys, stage_adaptive, check_adaptive};

@@ -8,14 +8,18 @@
 #include <stdio.h>
 #include <string.h>
 
-static const char *const info_keys[] = {"input", "title", NULL};
+/* The keys: the options of the info table that a job takes (ops/op_info.c), filled
+ * in by stages.c before the table is first handed out. */
+const char *mcp__info_keys[MCP__OPTION_KEYS_MAX];
 
 /* The stage's settings: one input, an image or a dump (read by the run, before it
  * loads anything, and by the job's check before any stage runs). */
 static int
 check_info(mcp_job *job, const mcp_node *settings)
 {
-    return mcp_job_check_input(job, settings, "input", MCP_JOB_IMAGE);
+    mcp_info_settings st;
+    return mcp__job_settings(mcp_operation_info(), settings, NULL, &st) ||
+           mcp_job_check_input(job, settings, "input", MCP_JOB_IMAGE);
 }
 
 /* The info section's verdict: whether any value would break the later stages (NaN,
@@ -96,7 +100,7 @@ stage_info(mcp_job *job, const mcp_node *settings)
 
 const mcp_stage mcp_stage_info = {"info", "describe an input (channels, statistics, "
                                           "convention, sample count) in the report",
-                                  info_keys, stage_info, check_info};
+                                  mcp__info_keys, stage_info, check_info};
 
 /* Appends statistics of every channel of img to the array, names prefixed. */
 int

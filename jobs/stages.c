@@ -1,6 +1,7 @@
 /* stages.c: the job-stage table. A module adds its stage here, one line. */
 #include "internal.h"
 
+#include <pthread.h>
 #include <string.h>
 
 extern const mcp_stage mcp_stage_info, mcp_stage_convert;
@@ -21,16 +22,38 @@ static const mcp_stage *const stages[] = {
     NULL,
 };
 
+/* The keys of the stages that read their settings through an operation's table
+ * (stage_estimate.c, stage_blend.c, stage_adaptive.c, stage_info.c): derived from the table, once, before the stage
+ * table is handed out. */
+extern const char *mcp__estimate_keys[MCP__OPTION_KEYS_MAX];
+extern const char *mcp__blend_keys[MCP__OPTION_KEYS_MAX];
+extern const char *mcp__adaptive_keys[MCP__OPTION_KEYS_MAX];
+extern const char *mcp__info_keys[MCP__OPTION_KEYS_MAX];
+static const char *const stage_extras[] = {"title", NULL};
+
+static void
+fill_keys(void)
+{
+    mcp__op_job_keys(mcp_operation_estimate(), stage_extras, mcp__estimate_keys,
+                     MCP__OPTION_KEYS_MAX);
+    mcp__op_job_keys(mcp_operation_blend(), stage_extras, mcp__blend_keys, MCP__OPTION_KEYS_MAX);
+    mcp__op_job_keys(mcp_operation_adaptive(), stage_extras, mcp__adaptive_keys,
+                     MCP__OPTION_KEYS_MAX);
+    mcp__op_job_keys(mcp_operation_info(), stage_extras, mcp__info_keys, MCP__OPTION_KEYS_MAX);
+}
+
 const mcp_stage *const *
 mcp_job_stages(void)
 {
+    static pthread_once_t once = PTHREAD_ONCE_INIT;
+    pthread_once(&once, fill_keys);
     return stages;
 }
 
 const mcp_stage *
 mcp_job_stage_find(const char *name)
 {
-    for (const mcp_stage *const *s = stages; name && *s; s++)
+    for (const mcp_stage *const *s = mcp_job_stages(); name && *s; s++)
         if (!strcmp((*s)->name, name))
             return *s;
     return NULL;

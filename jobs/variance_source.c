@@ -47,15 +47,6 @@ mcp__variance_source_words(mcp_variance_source src)
     return "?";
 }
 
-int
-mcp__variance_from(const char *text, mcp_series_variance *out)
-{
-    if (mcp_series_variance_from_name(text, out))
-        return mcp_error("--variance-from must be auto, file or increments (got '%s')",
-                         text);
-    return 0;
-}
-
 void
 mcp__report_variance_ratio(double ratio, int using_increments, cJSON *j)
 {

@@ -11,18 +11,13 @@ static const char *const method_names[MCP_PERC_N_METHODS] = {
     "vertical-iterative", "power-set", "error-diffusion", "dither",
     "horizontal",         "histogram", "permutation"};
 
+const mcp_wordlist mcp_perc_method_words = {"perceptual method", method_names,
+                                            MCP_PERC_N_METHODS};
+
 int
 mcp_perc_method_from_name(const char *name, mcp_perc_method *out)
 {
-    for (int i = 0; name && i < MCP_PERC_N_METHODS; i++)
-        if (!strcasecmp(name, method_names[i])) {
-            *out = (mcp_perc_method)i;
-            return 0;
-        }
-    return mcp_error(
-        "unknown perceptual method '%s' (known: vertical-iterative, power-set, "
-        "error-diffusion, dither, horizontal, histogram, permutation)",
-        name ? name : "");
+    return mcp_wordlist_find(&mcp_perc_method_words, name, (int *)out);
 }
 
 const char *
@@ -37,16 +32,13 @@ mcp_perc_method_is_horizontal(mcp_perc_method method)
     return method == MCP_PERC_HORIZONTAL || method == MCP_PERC_PERMUTATION;
 }
 
+static const char *const init_names[] = {"random", "mean"};
+const mcp_wordlist mcp_perc_init_words = {"start", init_names, 2};
+
 int
 mcp_perc_init_from_name(const char *name, mcp_perc_init *out)
 {
-    if (name && !strcasecmp(name, "random"))
-        *out = MCP_PERC_INIT_RANDOM;
-    else if (name && !strcasecmp(name, "mean"))
-        *out = MCP_PERC_INIT_MEAN;
-    else
-        return mcp_error("unknown start '%s' (known: random, mean)", name ? name : "");
-    return 0;
+    return mcp_wordlist_find(&mcp_perc_init_words, name, (int *)out);
 }
 
 const char *

@@ -91,6 +91,7 @@ typedef enum {
     MCP_PERC_N_METHODS
 } mcp_perc_method;
 
+MCP_API extern const mcp_wordlist mcp_perc_method_words;
 MCP_API int mcp_perc_method_from_name(const char *name, mcp_perc_method *out);
 MCP_API const char *mcp_perc_method_name(mcp_perc_method method);
 /* 1 for the horizontal methods (their result is a permutation to re-render). */
@@ -101,6 +102,7 @@ typedef enum {
     MCP_PERC_INIT_MEAN    /* the candidates' mean (not itself a candidate) */
 } mcp_perc_init;
 
+MCP_API extern const mcp_wordlist mcp_perc_init_words;
 MCP_API int mcp_perc_init_from_name(const char *name, mcp_perc_init *out);
 MCP_API const char *mcp_perc_init_name(mcp_perc_init init);
 

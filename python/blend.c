@@ -116,51 +116,33 @@ fail:
     return NULL;
 }
 
-static int
-parse_seed(PyObject *v, uint64_t *out)
-{
-    unsigned long long s = PyLong_AsUnsignedLongLong(v);
-    if (s == (unsigned long long)-1 && PyErr_Occurred())
-        return -1;
-    *out = s;
-    return 0;
-}
-
 static PyObject *
 py_blend(PyObject *self, PyObject *args, PyObject *kw)
 {
     (void)self;
-    static char *keys[] = {"dumps",         "denoiser",     "reference",
-                           "stop_denoising_at", "fit",      "curve",
-                           "far_spp",       "max_weight",   "denoiser_keeps_zeros",
-                           "filter",        "filter_window", "filter_sigma_scale",
-                           "stop_filtering", "negative_sure", "n_probes",
-                           "seed",          "js_window",    "flip",
-                           "variance_from", "all_images",   "safeguard", "weights", NULL};
-    mcp_blend_series_options o = mcp_blend_series_defaults();
+    /* the keywords are the blend's table (ops/op_blend.c); these are read here: the
+       dumps, the reference (an array or a path) and the denoiser */
+    static const char *const own[] = {"dumps", "denoiser", "reference", NULL};
+    PyObject *vals[3], *list = NULL, *keep = PyList_New(0);
+    mcp_blend_settings st;
+    if (!keep) return NULL;
+    int bad = mcp_py_settings(mcp_operation_blend(), "blend", kw, own, vals, &st, keep);
+    Py_DECREF(keep); /* no path of the settings is used below */
+    if (bad) return NULL;
+    if (!PyArg_UnpackTuple(args, "blend", 0, 1, &list)) return NULL;
+    if (list && vals[0]) {
+        PyErr_SetString(PyExc_TypeError, "blend() got multiple values for argument 'dumps'");
+        return NULL;
+    }
+    if (!list && !(list = vals[0])) {
+        PyErr_SetString(PyExc_TypeError, "blend() missing required argument 'dumps'");
+        return NULL;
+    }
+    PyObject *den_obj = vals[1] ? vals[1] : Py_None, *ref_obj = vals[2] ? vals[2] : Py_None;
+    mcp_blend_series_options o = st.o;
     mcp_blend_options *b = &o.blend;
-    PyObject *list, *den_obj = Py_None, *ref_obj = Py_None, *seed = NULL;
-    const char *fit = NULL, *curve = NULL, *filter = NULL, *neg = NULL, *vfrom = NULL,
-               *weights = NULL;
-    int all_images = 0;
-    if (!PyArg_ParseTupleAndKeywords(
-            args, kw, "O|$OOdzzddpzidpziOipzppz:blend", keys, &list, &den_obj, &ref_obj,
-            &o.stop_denoising_at, &fit, &curve, &b->far_spp, &b->max_weight,
-            &b->denoiser_keeps_zeros, &filter, &b->filter_window, &b->filter_sigma_scale,
-            &b->stop_filtering, &neg, &o.sure.n_probes, &seed, &b->js_window, &o.flip,
-            &vfrom, &all_images, &b->safeguard, &weights))
-        return NULL;
-    if (seed && parse_seed(seed, &o.sure.seed))
-        return NULL;
-    mcp_series_variance vsrc = MCP_SERIES_VARIANCE_AUTO;
-    if ((fit && mcp_curve_fit_from_name(fit, &b->fit)) ||
-        (curve && mcp_curve_model_from_name(curve, &b->curve)) ||
-        (filter && mcp_blend_filter_from_name(filter, &b->filter)) ||
-        (neg && mcp_neg_sure_from_name(neg, &b->negative_sure)) ||
-        (vfrom && mcp_series_variance_from_name(vfrom, &vsrc)) ||
-        (weights && mcp_blend_weighting_from_name(weights, &b->weights)) ||
-        mcp_blend_options_check(b))
-        return mcp_py_fail();
+    mcp_series_variance vsrc = st.variance_from;
+    int all_images = st.all_images;
     /* the members: paths in increasing spp (the driver loads them one at a time) */
     PyObject *fast = PySequence_Fast(list, "dumps must be a list of paths");
     if (!fast)
@@ -243,12 +225,6 @@ done:
 
 PyMethodDef mcp_py_blend_methods[] = {
     {"blend", (PyCFunction)(void (*)(void))py_blend, METH_VARARGS | METH_KEYWORDS,
-     "blend(dumps, *, denoiser='default', reference=None, stop_denoising_at=0,\n"
-     "      fit='on_the_fly', curve='log', far_spp=1e6, max_weight=0,\n"
-     "      denoiser_keeps_zeros=False, filter='gauss', filter_window=11,\n"
-     "      filter_sigma_scale=100, stop_filtering=True, negative_sure='switch',\n"
-     "      n_probes=1, seed=0, js_window=7, flip=True, variance_from='auto',\n"
-     "      all_images=False, safeguard=True, weights='james_stein') -> dict\n\n"
      "Blends every member of a progressive render (dump paths in increasing spp) with\n"
      "its denoised image (Denisova & Bocchi 2024). 'members': per member 'blend',\n"
      "'weights', 'spp', 'mean_var', 'mean_sure', 'mean_rho', ..., 'images' (every\n"

@@ -2,59 +2,14 @@
  * to stop (estimate/estimate.h; docs/mathematics.md §2): the error maps, the blocks, the
  * distribution's λ and s², F(τ) and the decision F(τ) >= p, the estimated percentile
  * curve, the sampling map and, with a reference, the true percentiles beside it. The
- * keywords are the CLI's flags ('-' as '_'). */
+ * keywords are the estimate's table (ops/op_estimate.c), as the CLI's flags ('-' as
+ * '_') and the job stage's keys; the docstring's signature comes from it (module.c). */
 #include "internal.h"
 
 #include <mcpost/estimate.h>
 
 #include <math.h>
 #include <stdlib.h>
-
-static int
-parse_vprobes(const char *s, int *out)
-{
-    if (!strcmp(s, "sure"))
-        *out = 0;
-    else if (!strcmp(s, "rademacher"))
-        *out = 1;
-    else
-        return mcp_error("variance probes must be sure or rademacher (got '%s')", s);
-    return 0;
-}
-
-/* The keywords into o; 0 or -1 with an exception. */
-static int
-options(const char *metric, PyObject *plist, unsigned long long seed, const char *vprobes,
-        const char *sampling, double budget, PyObject *s2_pool, mcp_estimate_options *o)
-{
-    if ((metric && mcp_error_metric_from_name(metric, &o->sure.metric)) ||
-        (vprobes && parse_vprobes(vprobes, &o->variance_rademacher)) ||
-        (sampling && mcp_sampling_kind_from_name(sampling, &o->sampling.kind)))
-        return mcp_py_fail_int();
-    o->sure.seed = seed;
-    if (plist && mcp_py_doubles(plist, "percentiles", o->percentiles,
-                                MCP_ESTIMATE_MAX_PERCENTILES, &o->n_percentiles))
-        return -1;
-    if (budget < 0 || budget != floor(budget) || budget > 4503599627370496.0) {
-        PyErr_Format(mcp_py_error, "budget must be a whole number of samples (got %g)", budget);
-        return -1;
-    }
-    o->budget = (int64_t)budget;
-    if (s2_pool) {
-        if (PyUnicode_Check(s2_pool) && !strcmp(PyUnicode_AsUTF8(s2_pool), "auto")) {
-            o->s2_pool = -1;
-        } else {
-            long r = PyLong_AsLong(s2_pool);
-            if (r == -1 && PyErr_Occurred()) {
-                PyErr_Clear();
-                PyErr_SetString(PyExc_TypeError, "s2_pool must be an int or 'auto'");
-                return -1;
-            }
-            o->s2_pool = (int)r;
-        }
-    }
-    return mcp_estimate_check(o) ? mcp_py_fail_int() : 0;
-}
 
 /* Takes an image out of a slot into d[key] (None when it is NULL). */
 static int
@@ -150,31 +105,51 @@ fail:
     return NULL;
 }
 
+/* A function's one positional argument, given by position or by keyword (own_value). */
+static int
+positional(const char *fn, const char *name, PyObject *args, PyObject *own_value,
+           PyObject **out)
+{
+    PyObject *given = NULL;
+    if (!PyArg_UnpackTuple(args, fn, 0, 1, &given)) return -1;
+    if (given && own_value) {
+        PyErr_Format(PyExc_TypeError, "%s() got multiple values for argument '%s'", fn, name);
+        return -1;
+    }
+    if (!given && !(given = own_value)) {
+        PyErr_Format(PyExc_TypeError, "%s() missing required argument '%s'", fn, name);
+        return -1;
+    }
+    *out = given;
+    return 0;
+}
+
 static PyObject *
 py_estimate(PyObject *self, PyObject *args, PyObject *kw)
 {
     (void)self;
-    static char *keys[] = {"dump",     "denoiser", "metric",  "tau",     "percentile",
-                           "percentiles", "probes", "seed",   "mc_sure", "delta",
-                           "variance_probes", "ppd", "tile",  "sampling", "budget",
-                           "s2_pool",  "reference", "taus",  NULL};
-    PyObject *dump_obj, *den_obj = Py_None, *plist = NULL, *s2 = NULL, *ref_obj = Py_None,
-                        *tlist = NULL;
-    const char *metric = NULL, *vprobes = NULL, *sampling = NULL;
-    unsigned long long seed = 0;
-    double budget = 0;
-    mcp_estimate_options o = mcp_estimate_defaults();
-    if (!PyArg_ParseTupleAndKeywords(
-            args, kw, "O|$OzddOiKpdzdizdOOO:estimate", keys, &dump_obj, &den_obj, &metric,
-            &o.tau, &o.p, &plist, &o.sure.n_probes, &seed, &o.sure.mc_sure, &o.sure.fd_delta,
-            &vprobes, &o.sure.ppd, &o.blocks.tile_size, &sampling, &budget, &s2, &ref_obj,
-            &tlist) ||
-        options(metric, plist, seed, vprobes, sampling, budget, s2, &o))
+    /* the keywords are the estimate's table (ops/op_estimate.c); these three are read
+       here: the dump and the reference (arrays or paths) and the denoiser */
+    static const char *const own[] = {"dump", "denoiser", "reference", NULL};
+    PyObject *vals[3], *dump_obj = NULL, *keep = PyList_New(0);
+    mcp_estimate_settings st;
+    if (!keep) return NULL;
+    if (mcp_py_settings(mcp_operation_estimate(), "estimate", kw, own, vals, &st, keep) ||
+        positional("estimate", "dump", args, vals[0], &dump_obj)) {
+        Py_DECREF(keep);
         return NULL;
-    double taus[MCP_ESTIMATE_MAX_TAUS] = {o.tau};
+    }
+    Py_DECREF(keep); /* no path of the settings is used below */
+    PyObject *den_obj = vals[1] ? vals[1] : Py_None, *ref_obj = vals[2] ? vals[2] : Py_None;
+    mcp_estimate_options o = st.so.est;
+    /* one dump: F at the taus given, else at tau */
+    const mcp_operation *op = mcp_operation_estimate();
     int n_taus = 1;
-    if (tlist && mcp_py_doubles(tlist, "taus", taus, MCP_ESTIMATE_MAX_TAUS, &n_taus))
-        return NULL;
+    double taus[MCP_ESTIMATE_MAX_TAUS] = {o.tau};
+    if (mcp_operation_given(op, mcp_operation_option(op, "taus"), &st)) {
+        n_taus = st.so.n_taus;
+        memcpy(taus, st.so.taus, (size_t)n_taus * sizeof *taus);
+    }
     mcp_py_dump dump;
     mcp_py_image ref = {0};
     mcp_denoiser *den = NULL;
@@ -245,11 +220,6 @@ py_true_error(PyObject *self, PyObject *args, PyObject *kw)
 #define FN(f) (PyCFunction)(void (*)(void))(f)
 PyMethodDef mcp_py_estimate_methods[] = {
     {"estimate", FN(py_estimate), KW,
-     "estimate(dump, *, denoiser='default', metric='relse', tau=0.01, percentile=0.999,\n"
-     "         percentiles=(0.5, 0.9, 0.99, 0.999, 0.9999), probes=4, seed=0,\n"
-     "         mc_sure=False, delta=0.1, variance_probes='sure', ppd=0, tile=0,\n"
-     "         sampling='variance', budget=0, s2_pool='auto', reference=None, taus=None)\n"
-     "    -> dict\n\n"
      "The error estimate of the denoised dump (SURE, Firmino et al. 2024) and the stop\n"
      "decision F(tau) >= p: maps ('denoised', 'sure', 'sure_rel', 'variance',\n"
      "'variance_rel', 'sigma_rel', 'denominator', 'blocks_sure_rel', 'sampling_map',\n"

@@ -18,6 +18,8 @@
 #include <mcpost/denoiser.h>
 #include <mcpost/dump.h>
 #include <mcpost/image.h>
+#include <mcpost/operations.h>
+#include <mcpost/options.h>
 
 /* mcpost.Error, a ValueError: the library's one-line message. */
 extern PyObject *mcp_py_error;
@@ -85,6 +87,22 @@ int mcp_py_denoiser(const char *name, PyObject *settings, mcp_denoiser **out);
  * job file's `denoiser:` map; None: "default". */
 int mcp_py_denoiser_arg(PyObject *arg, mcp_denoiser **out);
 
+/* ---- options (python/options.c) ---- */
+
+/* Reads kw (may be NULL) through op's table into settings (the defaults first, then
+ * op's finish): each keyword that names an option Python takes, its value turned into
+ * the command line's text (TypeError for a wrong type; mcpost.Error with the table's
+ * message for a bad value; None: the default). The keywords in own (NULL-terminated)
+ * are the caller's: their values come back in own_values (borrowed, NULL when absent).
+ * Paths the settings borrow are kept alive in the list keep. 0, or -1 with an
+ * exception. fn names the function in messages. */
+int mcp_py_settings(const mcp_operation *op, const char *fn, PyObject *kw, const char *const *own,
+                    PyObject **own_values, void *settings, PyObject *keep);
+/* The docstring of op's function: "NAME(POSITIONAL, *, keyword=default, ...) -> RETURNS",
+ * prose, and a line per keyword from the table. malloc'd. */
+char *mcp_py_doc(const mcp_operation *op, const char *positional, const char *returns,
+                 const char *prose);
+
 /* ---- numbers ---- */
 
 /* A sequence of up to max floats into out; *n receives the count. */
@@ -107,5 +125,6 @@ extern PyMethodDef mcp_py_estimate_methods[];
 extern PyMethodDef mcp_py_blend_methods[];
 extern PyMethodDef mcp_py_perceptual_methods[];
 extern PyMethodDef mcp_py_jobs_methods[];
+extern PyMethodDef mcp_py_options_methods[];
 
 #endif

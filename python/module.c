@@ -129,7 +129,8 @@ join_tables(void)
                              mcp_py_estimate_methods,
                              mcp_py_blend_methods,
                              mcp_py_perceptual_methods,
-                             mcp_py_jobs_methods};
+                             mcp_py_jobs_methods,
+                             mcp_py_options_methods};
     size_t n = 0;
     for (size_t t = 0; t < sizeof tables / sizeof *tables; t++)
         for (PyMethodDef *m = tables[t]; m->ml_name; m++) {
@@ -138,6 +139,21 @@ join_tables(void)
             all_methods[n++] = *m;
         }
     all_methods[n] = (PyMethodDef){NULL, NULL, 0, NULL};
+    /* the functions of operations with a table: their signature and keywords come from
+       it (python/options.c), before the prose their file gives */
+    static const struct {
+        const char *name, *positional, *returns;
+    } ops[] = {{"estimate", "dump", "dict"}, {"blend", "dumps", "dict"}};
+    for (size_t i = 0; i < n; i++)
+        for (size_t k = 0; k < sizeof ops / sizeof *ops; k++)
+            if (!strcmp(all_methods[i].ml_name, ops[k].name)) {
+                const mcp_operation *op = mcp_operation_find(ops[k].name);
+                char *doc = op ? mcp_py_doc(op, ops[k].positional, ops[k].returns,
+                                            all_methods[i].ml_doc)
+                               : NULL;
+                if (!doc) return -1;
+                all_methods[i].ml_doc = doc; /* the module's, for the process */
+            }
     return 0;
 }
 
