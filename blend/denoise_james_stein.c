@@ -197,7 +197,7 @@ static const char *const js_keys[] = {
     "inner",        "window",       "sigma",         "radius",        "patch_radius",
     "k_color",      "alpha",        "epsilon",       "sigma_color",   "use_variance",
     "variance_blur", "sigma_albedo", "sigma_normal", "sigma_spatial", "weights",
-    "input_scale",  "tile",         "fixed_bits",    "exact_tangents", "command",
+    "input_scale",  "tile",         "fixed_bits",    "exact_tangents", "max_memory_mb", "command",
     "format",       "delta",        "workdir",       NULL};
 
 const mcp_denoiser_kind mcp__denoiser_james_stein = {

@@ -161,9 +161,9 @@ static const mcp_option unet_options[] = {
             "multiply-adds (JVP within 2.1e-6 of the double reference against 0.8e-6; "
             "MCPOST_UNET_EXACT_TANGENTS=1 for a process)"},
     {.name = "max_memory_mb", .type = MCP_OPT_INT,
-     .offset = offsetof(unet_settings, max_memory_mb), .def = "2048", .meta = "MB",
+     .offset = offsetof(unet_settings, max_memory_mb), .def = "0", .meta = "MB",
      .doc = "the network's working memory at most: beyond it the image runs in tiles with "
-            "the same bits (MCPOST_UNET_MAX_MEMORY_MB for a process); 0: the default",
+            "the same bits; 0: $MCPOST_UNET_MAX_MEMORY_MB, else 2048",
      .lo = 0, .bounds = MCP_OPT_LO},
     {0}};
 
