@@ -135,8 +135,12 @@ mcp__gate_metrics_names(const mcp_metrics_options *o)
     m.has_flip_ldr = o->flip_ldr;
     m.has_flip_hdr = o->flip_hdr;
     m.has_spectra = o->spectra;
-    m.n_above = o->n_above;
-    memcpy(m.above, o->above, sizeof m.above);
+    /* shares of pixels only of the maps these options compute: a percent condition
+     * on a FLIP that is off is then named as unknown, before anything runs */
+    for (int k = 0; k < o->n_above; k++)
+        if ((o->above[k].map != MCP_ABOVE_FLIP_LDR || o->flip_ldr) &&
+            (o->above[k].map != MCP_ABOVE_FLIP_HDR || o->flip_hdr))
+            m.above[m.n_above++] = o->above[k];
     cJSON *doc = cJSON_CreateObject();
     if (!doc) return NULL;
     cJSON_AddNumberToObject(doc, "width", 0);
