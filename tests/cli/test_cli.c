@@ -775,6 +775,84 @@ test_metrics_several_tests(void **state)
 
 /* The stage's fail: / warn: keys: a bad figure at its job-file line before anything
  * runs, and `mcpost run` exiting with the worst gate after writing the report. */
+/* The stage's fail_percent: / warn_percent: and compare:. A bad map is named at its
+ * job-file line before anything runs; the shares, the compared test's FLIP and the
+ * histograms are those `mcpost metrics` gives for the same images. */
+static void
+test_metrics_percent_job(void **state)
+{
+    (void)state;
+    static const char job[] =
+        "inputs:\n"
+        "  noisy: {image: '%s/samples/fixtures/cornell/series/cornell_spp0016.exr'}\n"
+        "  better: {image: '%s/samples/fixtures/cornell/series/cornell_spp0256.exr'}\n"
+        "  ref: {image: '%s/samples/fixtures/cornell/cornell_reference.exr'}\n"
+        "output: percent_out\n"
+        "stages:\n"
+        "  - metrics:\n"
+        "      input: noisy\n"
+        "      reference: ref\n"
+        "      compare: better\n"
+        "      maps: false\n"
+        "      spectra: false\n"
+        "      flip: ldr\n"
+        "      fail_percent: ['%s']\n";
+    char text[2048], path[1024];
+    snprintf(path, sizeof path, "%s", mcp_test_path("percent.yaml"));
+    snprintf(text, sizeof text, job, MCP_TEST_SOURCE_DIR, MCP_TEST_SOURCE_DIR,
+             MCP_TEST_SOURCE_DIR, "flip_hdr 0.3 1%");
+    mcp_test_write_text(path, text);
+    assert_one_line_error(run("run --check '%s'", path),
+                          "percent.yaml:14: fail_percent: 'flip_hdr > 0.3 on more than 1% of "
+                          "the pixels': the metrics have no share of pixels above 0.3 in "
+                          "flip_hdr");
+    snprintf(text, sizeof text, job, MCP_TEST_SOURCE_DIR, MCP_TEST_SOURCE_DIR,
+             MCP_TEST_SOURCE_DIR, "flip_ldr 0.3 1%");
+    mcp_test_write_text(path, text);
+    assert_int_equal(run("run -q --json '%s'", path), 4);
+    cJSON *j = cJSON_Parse(out);
+    const cJSON *sec = cJSON_GetArrayItem(cJSON_GetObjectItem(j, "sections"), 0);
+    assert_string_equal(
+        cJSON_GetArrayItem(cJSON_GetObjectItem(cJSON_GetObjectItem(sec, "gate"), "failed"), 0)
+            ->valuestring,
+        "flip_ldr > 0.3 on more than 1% of the pixels");
+    double share = cJSON_GetObjectItem(cJSON_GetArrayItem(cJSON_GetObjectItem(sec, "pixels_above"), 0),
+                                       "percent")->valuedouble;
+    double cmp_median = cJSON_GetObjectItem(
+        cJSON_GetObjectItem(cJSON_GetObjectItem(sec, "compare"), "flip_ldr"),
+        "weighted_median")->valuedouble;
+    /* two histogram plots' worth of bars: input and compare on the LDR-FLIP plot */
+    const cJSON *plot = cJSON_GetArrayItem(cJSON_GetObjectItem(sec, "plots"), 0);
+    assert_string_equal(cJSON_GetObjectItem(plot, "title")->valuestring,
+                        "weighted LDR-FLIP histogram");
+    const cJSON *series = cJSON_GetObjectItem(plot, "series");
+    assert_int_equal(cJSON_GetArraySize(series), 2);
+    assert_string_equal(cJSON_GetObjectItem(cJSON_GetArrayItem(series, 1), "name")->valuestring,
+                        "better");
+    assert_string_equal(cJSON_GetObjectItem(cJSON_GetArrayItem(series, 0), "style")->valuestring,
+                        "bars");
+    assert_string_equal(cJSON_GetArrayItem(cJSON_GetObjectItem(sec, "json_only"), 0)->valuestring,
+                        "flip_histogram");
+    cJSON_Delete(j);
+    /* the same numbers from the command */
+    assert_int_equal(run("metrics --json --no-spectra --flip ldr "
+                         "'%s/samples/fixtures/cornell/series/cornell_spp0016.exr' "
+                         "'%s/samples/fixtures/cornell/series/cornell_spp0256.exr' "
+                         "'%s/samples/fixtures/cornell/cornell_reference.exr' "
+                         "--fail-percent 'flip_ldr 0.3 1'",
+                         MCP_TEST_SOURCE_DIR, MCP_TEST_SOURCE_DIR, MCP_TEST_SOURCE_DIR),
+                     4);
+    j = cJSON_Parse(out);
+    const cJSON *tests = cJSON_GetObjectItem(j, "tests");
+    assert_true(cJSON_GetObjectItem(cJSON_GetArrayItem(cJSON_GetObjectItem(
+                    cJSON_GetArrayItem(tests, 0), "pixels_above"), 0), "percent")
+                    ->valuedouble == share);
+    assert_true(cJSON_GetObjectItem(cJSON_GetObjectItem(cJSON_GetArrayItem(tests, 1),
+                                                        "flip_ldr"),
+                                    "weighted_median")->valuedouble == cmp_median);
+    cJSON_Delete(j);
+}
+
 static void
 test_metrics_gate_job(void **state)
 {
@@ -851,6 +929,7 @@ main(void)
         cmocka_unit_test(test_metrics_percent_gates),
         cmocka_unit_test(test_metrics_several_tests),
         cmocka_unit_test(test_metrics_gate_job),
+        cmocka_unit_test(test_metrics_percent_job),
     };
     return cmocka_run_group_tests_name("cli", tests, NULL, NULL);
 }
