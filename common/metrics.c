@@ -104,15 +104,24 @@ static double
 percent_above(const mcp_image *img, double t)
 {
     size_t n = (size_t)img->width * img->height, above = 0;
-    int ch = img->channels;
-    for (size_t i = 0; i < n; i++) {
-        const float *px = img->data + i * (size_t)ch;
-        int hit = 0;
-        for (int c = 0; c < ch; c++)
-            hit |= px[c] > t;
-        above += (size_t)hit;
-    }
+    for (int y = 0; y < img->height; y++)
+        for (int x = 0; x < img->width; x++) {
+            const float *px = mcp_image_px(img, x, y);
+            int hit = 0;
+            for (int c = 0; c < img->channels; c++)
+                hit |= px[c] > t;
+            above += (size_t)hit;
+        }
     return 100.0 * (double)above / (double)n;
+}
+
+int
+mcp_image_percent_above(const mcp_image *img, double t, double *percent)
+{
+    if (!img || img->width < 1 || img->height < 1)
+        return mcp_error("percent above: no pixels");
+    *percent = percent_above(img, t);
+    return 0;
 }
 
 /* ---- checks ---- */

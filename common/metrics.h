@@ -152,6 +152,10 @@ MCP_API int mcp_metrics_json(const mcp_metrics *m, const mcp_metrics_options *op
 MCP_API int mcp_metrics_write_maps(const mcp_metrics_maps *maps, const char *dir,
                                    const char *prefix, cJSON *section);
 
+/* The percentage of pixels of img above t: a pixel counts when any of its channels
+ * is above (a FLIP map has one; RelSE three), as for pixels_above. */
+MCP_API int mcp_image_percent_above(const mcp_image *img, double t, double *percent);
+
 /* Asks for the share of pixels of map above threshold (once: a pair already asked
  * for is kept). Fails when the threshold is not finite or MCP_METRICS_MAX_ABOVE pairs
  * are asked for already; mcp_metrics_compute fails when the map is a FLIP that opt
