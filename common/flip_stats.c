@@ -31,59 +31,78 @@ value_of(uint32_t k)
     return v;
 }
 
-/* The n values in ascending order (a radix sort on the keys: 8 bits a pass, passes
- * whose byte is the same everywhere skipped -- FLIP's values share their top byte). */
-static float *
-sorted_copy(const float *values, size_t n)
+/* Radix sort of n keys (a, with scratch b) in three passes of 11 bits, each pass's
+ * counts taken in one read beforehand; a pass whose digit is the same for every key is
+ * skipped. Returns the array that holds the sorted keys (a or b). */
+#define DIGIT_BITS 11
+#define DIGITS (1u << DIGIT_BITS)
+
+static uint32_t *
+radix_sort(uint32_t *a, uint32_t *b, size_t n, size_t (*count)[DIGITS])
 {
-    uint32_t *a = mcp_malloc(n * sizeof *a), *b = mcp_malloc(n * sizeof *b);
-    if (!a || !b) {
-        free(a), free(b);
-        return NULL;
-    }
-    for (size_t i = 0; i < n; i++)
-        a[i] = key_of(values[i]);
-    for (int shift = 0; shift < 32; shift += 8) {
-        size_t count[257] = {0};
+    for (int pass = 0; pass < 3; pass++) {
+        const int shift = pass * DIGIT_BITS;
+        size_t *c = count[pass];
+        if (c[(a[0] >> shift) & (DIGITS - 1)] == n) continue;
+        size_t at = 0;
+        for (unsigned d = 0; d < DIGITS; d++) { /* counts -> first index of each digit */
+            size_t k = c[d];
+            c[d] = at;
+            at += k;
+        }
         for (size_t i = 0; i < n; i++)
-            count[((a[i] >> shift) & 0xffu) + 1]++;
-        if (count[((a[0] >> shift) & 0xffu) + 1] == n) continue;
-        for (int d = 0; d < 256; d++)
-            count[d + 1] += count[d];
-        for (size_t i = 0; i < n; i++)
-            b[count[(a[i] >> shift) & 0xffu]++] = a[i];
+            b[c[(a[i] >> shift) & (DIGITS - 1)]++] = a[i];
         uint32_t *t = a;
         a = b, b = t;
     }
-    free(b);
-    float *out = (float *)a; /* same size: the keys turn back into values in place */
-    for (size_t i = 0; i < n; i++)
-        out[i] = value_of(a[i]);
-    return out;
+    return a;
 }
 
-/* The tool's weighted percentile (pooling.h getPercentile, weighted): the first sorted
- * value at which the float running sum exceeds p * total, all in float. */
-static double
-weighted_at(const float *sorted, size_t n, float total, float p)
+/* The tool's weighted percentiles at the k ascending p (pooling.h getPercentile,
+ * weighted): for each, the first sorted value at which the float running sum exceeds
+ * p * total, all in float; 0 when none does. One running sum serves all k: it is the
+ * same sequence of float additions the tool makes for each. */
+static void
+weighted_from_keys(const uint32_t *sorted, size_t n, float total, const float *p,
+                   double *out, int k)
 {
-    const float target = p * total;
     float running = 0.0f;
-    for (size_t i = 0; i < n; i++) {
-        running += sorted[i];
-        if (running > target) return sorted[i];
+    int next = 0;
+    for (int j = 0; j < k; j++)
+        out[j] = 0.0;
+    for (size_t i = 0; i < n && next < k; i++) {
+        const float v = value_of(sorted[i]);
+        running += v;
+        while (next < k && running > p[next] * total)
+            out[next++] = v;
     }
-    return 0.0;
 }
 
-/* The tool's total: a float running sum in row-major order (pooling.h update). */
-static float
-float_total(const float *values, size_t n)
+/* Keys, counts of their digits, and the float total in row-major order (pooling.h
+ * update) in one read of the values. NULL when out of memory. */
+static uint32_t *
+sorted_keys(const float *values, size_t n, float *total, uint32_t **scratch)
 {
+    uint32_t *a = mcp_malloc(n * sizeof *a), *b = mcp_malloc(n * sizeof *b);
+    size_t(*count)[DIGITS] = mcp_calloc(3, sizeof *count);
+    if (!a || !b || !count) {
+        free(a), free(b), free(count);
+        return NULL;
+    }
     float sum = 0.0f;
-    for (size_t i = 0; i < n; i++)
+    for (size_t i = 0; i < n; i++) {
+        const uint32_t k = key_of(values[i]);
+        a[i] = k;
         sum += values[i];
-    return sum;
+        count[0][k & (DIGITS - 1)]++;
+        count[1][(k >> DIGIT_BITS) & (DIGITS - 1)]++;
+        count[2][k >> (2 * DIGIT_BITS)]++;
+    }
+    uint32_t *sorted = radix_sort(a, b, n, count);
+    free(count);
+    *total = sum;
+    *scratch = sorted == a ? b : a;
+    return sorted;
 }
 
 static int
@@ -102,10 +121,12 @@ mcp_flip_weighted_percentile(const float *values, size_t n, double p, double *ou
     if (!(p >= 0.0 && p <= 1.0))
         return mcp_error("flip statistics: p must be in [0, 1] (got %g)", p);
     if (check_values(values, n)) return -1;
-    float *sorted = sorted_copy(values, n);
+    float total, fp = (float)p;
+    uint32_t *scratch, *sorted = sorted_keys(values, n, &total, &scratch);
     if (!sorted) return mcp_error("flip statistics: out of memory (%zu values)", n);
-    *out = weighted_at(sorted, n, float_total(values, n), (float)p);
+    weighted_from_keys(sorted, n, total, &fp, out, 1);
     free(sorted);
+    free(scratch);
     return 0;
 }
 
@@ -130,13 +151,18 @@ mcp_flip_statistics(const float *values, size_t n, mcp_flip_stats *out)
     out->min = lo;
     out->max = hi;
     out->pixels = (long long)n;
-    float *sorted = sorted_copy(values, n);
+    float total;
+    uint32_t *scratch, *sorted = sorted_keys(values, n, &total, &scratch);
     if (!sorted) return mcp_error("flip statistics: out of memory (%zu values)", n);
-    const float total = float_total(values, n);
-    out->weighted_median = weighted_at(sorted, n, total, 0.5f);
-    out->weighted_q1 = weighted_at(sorted, n, total, 0.25f);
-    out->weighted_q3 = weighted_at(sorted, n, total, 0.75f);
+    /* the tool asks for 0.5f, 0.25f and 0.75f; ascending here for one running sum */
+    const float p[3] = {0.25f, 0.5f, 0.75f};
+    double q[3];
+    weighted_from_keys(sorted, n, total, p, q, 3);
+    out->weighted_q1 = q[0];
+    out->weighted_median = q[1];
+    out->weighted_q3 = q[2];
     free(sorted);
+    free(scratch);
     return 0;
 }
 
