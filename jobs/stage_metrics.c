@@ -307,6 +307,7 @@ series_curves(mcp_job *job, const mcp_node *settings, const mcp_series *series,
     mcp_metrics_options o = *opt;
     o.n_percentiles = 0;
     o.spectra = 0;
+    o.n_above = 0; /* the gates judge the input, not the series */
     double *v = mcp_calloc((size_t)n * 8, sizeof *v);
     if (!v) return -1;
     double *spp = v, *mse = v + n, *rmse = v + 2 * n, *rel = v + 3 * n, *psnr = v + 4 * n,
@@ -406,7 +407,8 @@ gate_error(const mcp_node *item, const char *key)
     char msg[1024];
     const char *m = mcp_error_message();
     /* "--fail-percent 'x': ..." -> "'x': ..." */
-    snprintf(msg, sizeof msg, "%s", strncmp(m, "--", 2) || !strchr(m, ' ') ? m : strchr(m, ' ') + 1);
+    const char *after_flag = strncmp(m, "--", 2) || !strchr(m, ' ') ? m : strchr(m, ' ') + 1;
+    snprintf(msg, sizeof msg, "%s", after_flag);
     return mcp_node_error(item, "%s: %s", key, msg);
 }
 
@@ -557,9 +559,9 @@ stage_metrics(mcp_job *job, const mcp_node *settings)
             if (o.flip_ldr) add_flip_figures(c, "flip_ldr", &cmp[0]);
             if (o.flip_hdr) add_flip_figures(c, "flip_hdr", &cmp[1]);
         }
-        if (flip_histograms(section, &m, input, cmp, compare ? pl.compare_name : NULL))
+        if (percentile_plot(section, maps.relse, estimate, estimate_name) ||
+            flip_histograms(section, &m, input, cmp, compare ? pl.compare_name : NULL))
             goto done;
-        if (percentile_plot(section, maps.relse, estimate, estimate_name)) goto done;
         if (want_maps) {
             char rel_t[1200], rel_r[1200], path[4096];
             snprintf(rel_t, sizeof rel_t, "%stest.png", prefix);
