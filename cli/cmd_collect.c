@@ -5,7 +5,9 @@
  * (MSE, relMSE, FLIP, estimated error, stop spp of every metrics and estimate section),
  * and writes OUT_DIR/report.json and report.html: each figure plotted against the
  * frame number, a table with the worst frames first, a link to each frame's page, and
- * the frames that are missing, failed or unfinished, listed by name. */
+ * the frames that are missing, failed or unfinished, listed by name. Gates (--fail,
+ * --warn, --fail-percent, --warn-percent; jobs/gate.c) judge each frame's metrics
+ * sections as `mcpost metrics` judges a test. */
 #include "cli.h"
 
 #include <mcpost/frames.h>
@@ -24,7 +26,7 @@
 #include <sys/stat.h>
 
 static const char usage[] =
-    "usage: mcpost collect OUT_DIR [--json] [--quiet]\n"
+    "usage: mcpost collect OUT_DIR [--json] [--quiet] [gates]\n"
     "  Gathers the frames of a frame job (OUT_DIR/0001/report.json, ...) into one\n"
     "  report, OUT_DIR/report.json and report.html: every figure (MSE, relMSE, FLIP,\n"
     "  estimated error, stop spp) against the frame number, the worst frames first\n"
@@ -33,10 +35,17 @@ static const char usage[] =
     "  The expected frames come from OUT_DIR/frames.json, which mcpost run and submit\n"
     "  write. Exits 1 when any frame is not complete (the report is written anyway).\n"
     "  --json prints the report on stdout.\n"
+    "  Gates judge every frame's metrics sections (those with an input) as\n"
+    "  `mcpost metrics` judges a test (docs/metrics.md, \"Gates\"): --fail 'EXPR',\n"
+    "  --warn 'EXPR', --fail-percent 'MAP T P', --warn-percent 'MAP T P' (repeatable;\n"
+    "  a share of pixels comes from the section's pixels_above or its map's EXR).\n"
+    "  PASS, WARNING: ... or FAILURE: ... is the last line; exit 3 warning, 4 failure\n"
+    "  (1 when a frame is not complete).\n"
     "\n"
     "examples (from the source folder, on the sample renders):\n"
     "  mcpost run samples/jobs/shot.yaml -j 2 && mcpost collect out/shot\n"
-    "  mcpost collect out/shot --json > out/shot_figures.json\n";
+    "  mcpost collect out/shot --json > out/shot_figures.json\n"
+    "  mcpost collect out/shot --quiet --warn 'relmse > 1' --fail-percent 'flip_ldr 0.9 1%'\n";
 
 #define MAX_FIGURES 64
 
@@ -48,6 +57,10 @@ typedef struct frame_row {
     frame_status status;
     char message[1024];
     double values[MAX_FIGURES];
+    /* with gates: the frame's worst verdict over its metrics sections, and what held
+     * ("noisy: relmse > 1 (1.3); ...") */
+    mcp__gate_verdict verdict;
+    char gate_text[1024];
 } frame_row;
 
 typedef struct shot {
@@ -58,6 +71,8 @@ typedef struct shot {
     int n_rows, cap;
     char *figures[MAX_FIGURES];
     int n_figures;
+    const mcp__gate *gate; /* NULL: no gates */
+    int gate_failed;       /* a frame could not be judged (an error, already said) */
 } shot;
 
 static char *
@@ -228,6 +243,98 @@ section_figures(shot *s, frame_row *r, const cJSON *sec)
     }
 }
 
+/* A percent condition's share for a section that did not measure it: counted over
+ * the section's map as its job wrote it (<prefix>MAP.exr beside <prefix>MAP.png) and
+ * added to its pixels_above, so that the gate reads it as the stage's own. */
+static int
+add_share_from_map(cJSON *sec, const char *frame_dir, const mcp__gate_cond *c)
+{
+    const cJSON *a;
+    cJSON_ArrayForEach(a, cJSON_GetObjectItem(sec, "pixels_above"))
+    {
+        const cJSON *map = cJSON_GetObjectItem(a, "map"), *t = cJSON_GetObjectItem(a, "threshold");
+        if (cJSON_IsString(map) && !strcmp(map->valuestring, c->figure) &&
+            cJSON_IsNumber(t) && t->valuedouble == c->threshold)
+            return 0; /* measured by the stage */
+    }
+    char png[64], path[4400];
+    snprintf(png, sizeof png, "%s.png", c->figure);
+    const cJSON *img;
+    cJSON_ArrayForEach(img, cJSON_GetObjectItem(sec, "images"))
+    {
+        const cJSON *p = cJSON_GetObjectItem(img, "path");
+        size_t n = cJSON_IsString(p) ? strlen(p->valuestring) : 0;
+        if (n < strlen(png) || strcmp(p->valuestring + n - strlen(png), png) ||
+            (n > strlen(png) && p->valuestring[n - strlen(png) - 1] != '/' &&
+             p->valuestring[n - strlen(png) - 1] != '.'))
+            continue;
+        snprintf(path, sizeof path, "%s/%.*s.exr", frame_dir, (int)(n - 4), p->valuestring);
+        mcp_image *map = NULL;
+        double percent;
+        if (mcp_image_read(path, NULL, &map) || mcp_image_percent_above(map, c->threshold, &percent)) {
+            mcp_image_free(map);
+            return -1;
+        }
+        mcp_image_free(map);
+        cJSON *list = cJSON_GetObjectItem(sec, "pixels_above");
+        if (!list) list = cJSON_AddArrayToObject(sec, "pixels_above");
+        cJSON *e = cJSON_CreateObject();
+        if (!list || !e) return mcp_error("out of memory");
+        cJSON_AddStringToObject(e, "map", c->figure);
+        cJSON_AddNumberToObject(e, "threshold", c->threshold);
+        cJSON_AddNumberToObject(e, "percent", percent);
+        cJSON_AddItemToArray(list, e);
+        return 0;
+    }
+    return 0; /* neither: the gate names what is missing */
+}
+
+/* Judges a complete frame's metrics sections (those that compared an input). */
+static void
+judge_frame(shot *s, frame_row *r, cJSON *rep, const char *frame_dir)
+{
+    cJSON *sec;
+    int judged = 0;
+    size_t len = 0;
+    cJSON_ArrayForEach(sec, cJSON_GetObjectItem(rep, "sections"))
+    {
+        const cJSON *stage = cJSON_GetObjectItem(sec, "stage"),
+                    *input = cJSON_GetObjectItem(sec, "input");
+        if (!cJSON_IsString(stage) || strcmp(stage->valuestring, "metrics") ||
+            !cJSON_IsString(input))
+            continue;
+        judged++;
+        mcp__gate_verdict v;
+        char line[2200];
+        int failed = 0;
+        for (int i = 0; i < s->gate->n && !failed; i++)
+            if (s->gate->c[i].percent)
+                failed = add_share_from_map(sec, frame_dir, &s->gate->c[i]);
+        if (failed || mcp__gate_eval(s->gate, sec, &v, NULL, line, sizeof line)) {
+            char why[1024]; /* copied: mcp_error rewrites the line it would read */
+            snprintf(why, sizeof why, "%s", mcp_error_message());
+            mcp_error("frame %d, metrics of %s: %s", r->frame, input->valuestring, why);
+            s->gate_failed = 1;
+            return;
+        }
+        if (v > r->verdict) {
+            r->verdict = v;
+            len = 0;
+            r->gate_text[0] = '\0';
+        }
+        if (v == r->verdict && v != MCP__GATE_PASS && len < sizeof r->gate_text) {
+            const char *why = strchr(line, ':');
+            len += (size_t)snprintf(r->gate_text + len, sizeof r->gate_text - len, "%s%s:%s",
+                                    len ? "; " : "", input->valuestring, why ? why + 1 : "");
+        }
+    }
+    if (!judged) {
+        mcp_error("frame %d: no metrics section with an input to judge (%s/report.json)",
+                  r->frame, frame_dir);
+        s->gate_failed = 1;
+    }
+}
+
 /* One frame's state and figures. */
 static void
 read_frame(shot *s, frame_row *r)
@@ -249,6 +356,7 @@ read_frame(shot *s, frame_row *r)
         const cJSON *sec, *title = cJSON_GetObjectItem(rep, "title");
         cJSON_ArrayForEach(sec, cJSON_GetObjectItem(rep, "sections"))
             section_figures(s, r, sec);
+        if (s->gate && !s->gate_failed) judge_frame(s, r, rep, dir);
         if (!s->title && cJSON_IsString(title) && (s->title = mcp_strdup(title->valuestring))) {
             char *cut = strstr(s->title, ", frame ");
             if (cut)
@@ -310,6 +418,35 @@ by_frame(const void *a, const void *b)
     return (x->frame > y->frame) - (x->frame < y->frame);
 }
 
+static const char *
+verdict_name(mcp__gate_verdict v)
+{
+    return v == MCP__GATE_FAILURE ? "failure" : v == MCP__GATE_WARNING ? "warning" : "pass";
+}
+
+/* The gates' verdict over the complete frames, the worst, and its line: "PASS", or
+ * "FAILURE: frame 3: noisy: relmse > 1 (1.3); frame 7: ..." naming each frame that has
+ * the worst verdict. */
+static mcp__gate_verdict
+gate_line(const shot *s, char *line, size_t cap)
+{
+    mcp__gate_verdict worst = MCP__GATE_PASS;
+    for (int i = 0; i < s->n_rows; i++)
+        if (s->rows[i].status == FRAME_COMPLETE && s->rows[i].verdict > worst)
+            worst = s->rows[i].verdict;
+    size_t len = (size_t)snprintf(line, cap, "%s",
+                                  worst == MCP__GATE_FAILURE   ? "FAILURE"
+                                  : worst == MCP__GATE_WARNING ? "WARNING"
+                                                               : "PASS");
+    int shown = 0;
+    for (int i = 0; worst != MCP__GATE_PASS && i < s->n_rows && len < cap; i++)
+        if (s->rows[i].status == FRAME_COMPLETE && s->rows[i].verdict == worst)
+            len += (size_t)snprintf(line + len, cap - len, "%s frame %d: %s",
+                                    shown++ ? ";" : ":", s->rows[i].frame,
+                                    s->rows[i].gate_text);
+    return worst;
+}
+
 /* The shot's verdict: good when every frame is complete, bad otherwise (how many are
  * not, and that running the job again retries them); either way the worst complete
  * frame by the ranking figure. */
@@ -326,6 +463,17 @@ shot_verdict(const shot *s, cJSON *sec, const int counts[4], int rank)
         snprintf(worst_text, sizeof worst_text, "; the worst by %s is frame %d (%.4g)",
                  s->figures[rank], worst->frame, worst->values[rank]);
     int complete = counts[FRAME_COMPLETE];
+    if (s->gate && complete == s->n_rows) {
+        /* the gate decides the colour, as on a metrics section: its line first */
+        char line[3000];
+        mcp__gate_verdict v = gate_line(s, line, sizeof line);
+        return mcp_report_set_verdict(sec,
+                                      v == MCP__GATE_FAILURE   ? MCP_VERDICT_BAD
+                                      : v == MCP__GATE_WARNING ? MCP_VERDICT_INFO
+                                                               : MCP_VERDICT_GOOD,
+                                      "gate %s; all %d frames complete%s", line, s->n_rows,
+                                      worst_text);
+    }
     if (complete == s->n_rows)
         return mcp_report_set_verdict(sec, MCP_VERDICT_GOOD, "all %d frames complete%s",
                                       s->n_rows, worst_text);
@@ -369,6 +517,11 @@ build_report(shot *s, mcp_report *rep, int counts[4])
             cJSON_AddStringToObject(o, "page", page);
         else
             cJSON_AddStringToObject(o, "message", r->message);
+        if (s->gate && r->status == FRAME_COMPLETE) {
+            cJSON_AddStringToObject(o, "gate", verdict_name(r->verdict));
+            if (r->verdict != MCP__GATE_PASS)
+                cJSON_AddStringToObject(o, "gate_why", r->gate_text);
+        }
         cJSON_AddItemToObject(o, "figures", fig);
         for (int k = 0; k < s->n_figures; k++)
             if (!isnan(r->values[k]))
@@ -413,11 +566,12 @@ build_report(shot *s, mcp_report *rep, int counts[4])
 
     /* the complete frames, worst first */
     if (counts[FRAME_COMPLETE]) {
-        const char *cols[MAX_FIGURES + 2];
+        const char *cols[MAX_FIGURES + 3];
         int n = 0;
         cols[n++] = "frame";
         for (int k = 0; k < s->n_figures; k++)
             cols[n++] = s->figures[k];
+        if (s->gate) cols[n++] = "gate";
         cols[n++] = "page";
         rank_by = rank;
         frame_row *sorted = mcp_calloc((size_t)s->n_rows, sizeof *sorted);
@@ -441,6 +595,8 @@ build_report(shot *s, mcp_report *rep, int counts[4])
                 cJSON_AddItemToArray(row, isnan(sorted[i].values[k])
                                               ? cJSON_CreateNull()
                                               : cJSON_CreateNumber(sorted[i].values[k]));
+            if (s->gate)
+                cJSON_AddItemToArray(row, cJSON_CreateString(verdict_name(sorted[i].verdict)));
             cJSON_AddItemToArray(row, cJSON_CreateString(page));
         }
         free(sorted);
@@ -448,10 +604,11 @@ build_report(shot *s, mcp_report *rep, int counts[4])
     return shot_verdict(s, sec, counts, rank);
 }
 
+/* Returns 0, -1 on an error (said), or a gate's exit status (3, 4). */
 static int
-collect(const char *dir, int json_stdout)
+collect(const char *dir, int json_stdout, const mcp__gate *gate)
 {
-    shot s = {.dir = dir};
+    shot s = {.dir = dir, .gate = gate && gate->n ? gate : NULL};
     mcp_report *rep = NULL;
     int rc = -1, counts[4] = {0};
     char *json = NULL;
@@ -462,6 +619,7 @@ collect(const char *dir, int json_stdout)
         read_frame(&s, &s.rows[i]);
         counts[s.rows[i].status]++;
     }
+    if (s.gate_failed) goto done; /* a frame that cannot be judged: said, exit 1 */
     char title[600];
     snprintf(title, sizeof title, "%s: %d frames", s.title ? s.title : dir, s.n_rows);
     /* report.html links each frame's page from the table of frames (page column) */
@@ -479,6 +637,13 @@ collect(const char *dir, int json_stdout)
              "(report.html, report.json)",
              s.n_rows, counts[0], counts[1], counts[2], counts[3], dir);
     rc = 0;
+    if (s.gate && counts[FRAME_COMPLETE] == s.n_rows) {
+        char line[3000];
+        mcp__gate_verdict v = gate_line(&s, line, sizeof line);
+        /* idiff's convention: the verdict is the last line */
+        if (!json_stdout) printf("%s\n", line);
+        rc = mcp__gate_exit_code(v);
+    }
     if (counts[FRAME_COMPLETE] < s.n_rows) {
         char list[256] = "";
         size_t len = 0;
@@ -506,23 +671,40 @@ done:
 static int
 cmd_collect(int argc, char **argv)
 {
+    enum { OPT_FAIL = 256, OPT_WARN, OPT_FAIL_PERCENT, OPT_WARN_PERCENT };
     static const struct option longs[] = {{"json", no_argument, 0, 'j'},
                                           {"quiet", no_argument, 0, 'q'},
+                                          {"fail", required_argument, 0, OPT_FAIL},
+                                          {"warn", required_argument, 0, OPT_WARN},
+                                          {"fail-percent", required_argument, 0, OPT_FAIL_PERCENT},
+                                          {"warn-percent", required_argument, 0, OPT_WARN_PERCENT},
                                           {"help", no_argument, 0, 'h'},
                                           {0, 0, 0, 0}};
     int opt, json = 0;
+    mcp__gate gate = {0};
     optind = 1;
     while ((opt = getopt_long(argc, argv, "qh", longs, NULL)) != -1) {
         switch (opt) {
         case 'j': json = 1; break;
         case 'q': mcp_progress_set_quiet(1); break;
+        case OPT_FAIL:
+        case OPT_WARN:
+            if (mcp__gate_add(&gate, optarg, opt == OPT_FAIL))
+                return mcp_cli_usage("collect", "%s", mcp_error_message());
+            break;
+        case OPT_FAIL_PERCENT:
+        case OPT_WARN_PERCENT:
+            if (mcp__gate_add_percent(&gate, optarg, opt == OPT_FAIL_PERCENT))
+                return mcp_cli_usage("collect", "%s", mcp_error_message());
+            break;
         case 'h': fputs(usage, stdout); return 0;
         default: return mcp_cli_usage("collect", "bad option");
         }
     }
     if (argc - optind != 1)
         return mcp_cli_usage("collect", "give one output folder (of a job with frames:)");
-    return collect(argv[optind], json) ? mcp_cli_fail() : 0;
+    int rc = collect(argv[optind], json, &gate);
+    return rc < 0 ? mcp_cli_fail() : rc;
 }
 
 const mcp_command mcp_command_collect = {"collect", "gather a frame job's reports into one",

@@ -935,6 +935,7 @@ mcp_flip_ldr(const mcp_image *test, const mcp_image *ref, const mcp_flip_options
         memset(res, 0, sizeof *res);
         res->mean = float_mean(out, (size_t)w * h);
         res->ppd = ppd;
+        if (mcp_flip_statistics(out, (size_t)w * h, &res->stats)) goto done;
     }
     if (map) {
         *map = m;
@@ -1228,6 +1229,7 @@ mcp_flip_hdr(const mcp_image *test, const mcp_image *ref, const mcp_flip_options
         res->start_exposure = start;
         res->stop_exposure = stop;
         res->num_exposures = n_exp;
+        if (mcp_flip_statistics(m->data, n, &res->stats)) goto done;
     }
     if (map) {
         *map = m;

@@ -59,12 +59,46 @@ MCP_API mcp_flip_options mcp_flip_defaults(void);
  * the field when it is not positive and finite. */
 MCP_API int mcp_flip_ppd(const mcp_flip_options *opt, float *ppd);
 
+/* FLIP's statistics of a per-pixel error map, as NVIDIA's tool (v1.6, tool/pooling.h)
+ * defines and prints them (docs/metrics.md, "FLIP's statistics"):
+ *  - the weighted percentile at p (median p = 0.5, quartiles 0.25 and 0.75) weighs
+ *    each pixel by its own error: with the errors sorted ascending, it is the first
+ *    one at which the running sum exceeds p times the total, both float sums (the
+ *    total in row-major order) as the tool takes them; 0 when none does (all zero);
+ *  - min and max of the map (the tool starts max at FLT_MIN, so an all-zero map
+ *    prints 1.2e-38 there; here it is 0);
+ *  - the histogram: MCP_FLIP_HISTOGRAM_BUCKETS buckets over [0, 1] of width 0.01f,
+ *    pixel v in bucket floor(double(v) / double(0.01f)), 1.0 in the last; the
+ *    weighted histogram (what the tool plots) multiplies bucket i's count by its
+ *    centre (i + 0.5) / 100 and divides by the megapixels, n / 2^20. */
+#define MCP_FLIP_HISTOGRAM_BUCKETS 100
+
+typedef struct mcp_flip_stats {
+    double weighted_median, weighted_q1, weighted_q3;
+    double min, max;
+    long long pixels;                                /* n */
+    long long histogram[MCP_FLIP_HISTOGRAM_BUCKETS]; /* pixel counts */
+} mcp_flip_stats;
+
+/* The statistics of n per-pixel FLIP values (row-major). Values must be finite;
+ * those outside [0, 1] count in no bucket, as in the tool. n >= 1. */
+MCP_API int mcp_flip_statistics(const float *values, size_t n, mcp_flip_stats *out);
+
+/* FLIP's weighted percentile (as above) of n values at p in [0, 1]. */
+MCP_API int mcp_flip_weighted_percentile(const float *values, size_t n, double p,
+                                         double *out);
+
+/* Bucket i of the weighted histogram: count_i (i + 0.5) / 100 / (n / 2^20), the
+ * weighted FLIP sum per megapixel that the tool plots. */
+MCP_API double mcp_flip_weighted_bucket(const mcp_flip_stats *s, int i);
+
 typedef struct mcp_flip_result {
     double mean; /* the FLIP value: arithmetic mean of the per-pixel map */
     float ppd;   /* pixels per degree used */
     /* HDR-FLIP only (0 for LDR-FLIP): the exposures used, in stops. */
     float start_exposure, stop_exposure;
     int num_exposures;
+    mcp_flip_stats stats; /* the map's statistics (above) */
 } mcp_flip_result;
 
 /* LDR-FLIP of test against ref. Both are clamped to [0, 1] first, as the reference

@@ -68,6 +68,62 @@ mcp_metrics_set_percentiles(mcp_metrics_options *opt, const double *p, int n_p)
     return 0;
 }
 
+const char *
+mcp_above_map_name(mcp_above_map m)
+{
+    return m == MCP_ABOVE_FLIP_LDR ? "flip_ldr" : m == MCP_ABOVE_FLIP_HDR ? "flip_hdr" : "relse";
+}
+
+int
+mcp_above_map_from_name(const char *name, mcp_above_map *out)
+{
+    for (int m = MCP_ABOVE_FLIP_LDR; m <= MCP_ABOVE_RELSE; m++)
+        if (!strcmp(name, mcp_above_map_name((mcp_above_map)m))) {
+            *out = (mcp_above_map)m;
+            return 0;
+        }
+    return mcp_error("unknown per-pixel map '%s' (use flip_ldr, flip_hdr or relse)", name);
+}
+
+int
+mcp_metrics_add_above(mcp_metrics_options *opt, mcp_above_map map, double threshold)
+{
+    if (!isfinite(threshold))
+        return mcp_error("%s: the threshold must be finite", mcp_above_map_name(map));
+    for (int k = 0; k < opt->n_above; k++)
+        if (opt->above[k].map == map && opt->above[k].threshold == threshold) return 0;
+    if (opt->n_above >= MCP_METRICS_MAX_ABOVE)
+        return mcp_error("at most %d per-pixel thresholds", MCP_METRICS_MAX_ABOVE);
+    opt->above[opt->n_above++] = (mcp_metrics_above){map, threshold};
+    return 0;
+}
+
+/* The percentage of pixels of a map above t: FLIP maps have one channel; RelSE has
+ * three and a pixel counts when any of them is above (idiff's per-pixel rule). */
+static double
+percent_above(const mcp_image *img, double t)
+{
+    size_t n = (size_t)img->width * img->height, above = 0;
+    for (int y = 0; y < img->height; y++)
+        for (int x = 0; x < img->width; x++) {
+            const float *px = mcp_image_px(img, x, y);
+            int hit = 0;
+            for (int c = 0; c < img->channels; c++)
+                hit |= px[c] > t;
+            above += (size_t)hit;
+        }
+    return 100.0 * (double)above / (double)n;
+}
+
+int
+mcp_image_percent_above(const mcp_image *img, double t, double *percent)
+{
+    if (!img || img->width < 1 || img->height < 1)
+        return mcp_error("percent above: no pixels");
+    *percent = percent_above(img, t);
+    return 0;
+}
+
 /* ---- checks ---- */
 
 int
@@ -482,7 +538,24 @@ mcp_metrics_compute(const mcp_image *test, const mcp_image *ref,
     int rc = -1, w = test->width, h = test->height;
     out->n_values = (long)w * h * 3;
     /* MSE, relMSE, the display MSE and the maps in one pass */
-    int want_relse = maps || opt->n_percentiles;
+    int want_relse = maps || opt->n_percentiles, above_ldr = 0, above_hdr = 0;
+    for (int k = 0; k < opt->n_above; k++) {
+        mcp_above_map am = opt->above[k].map;
+        want_relse |= am == MCP_ABOVE_RELSE;
+        above_ldr |= am == MCP_ABOVE_FLIP_LDR;
+        above_hdr |= am == MCP_ABOVE_FLIP_HDR;
+        if ((am == MCP_ABOVE_FLIP_LDR && !opt->flip_ldr) ||
+            (am == MCP_ABOVE_FLIP_HDR && !opt->flip_hdr))
+            return mcp_error("metrics: pixels above %g in %s asked for, but %s is not "
+                             "computed",
+                             opt->above[k].threshold, mcp_above_map_name(am),
+                             am == MCP_ABOVE_FLIP_LDR ? "LDR-FLIP" : "HDR-FLIP");
+    }
+    if (opt->n_above < 0 || opt->n_above > MCP_METRICS_MAX_ABOVE)
+        return mcp_error("metrics: n_above must be in [0, %d] (got %d)",
+                         MCP_METRICS_MAX_ABOVE, opt->n_above);
+    /* FLIP maps kept here when the caller wants no maps but a share above a threshold */
+    mcp_image *own_ldr = NULL, *own_hdr = NULL;
     if ((want_relse && mcp_image_new(w, h, 3, rgb, &relse)) ||
         (maps && mcp_image_new(w, h, 3, rgb, &sq)))
         goto done;
@@ -506,16 +579,26 @@ mcp_metrics_compute(const mcp_image *test, const mcp_image *ref,
         goto done;
     if (opt->flip_ldr) {
         if (mcp_flip_ldr(test, ref, &opt->flip, &out->flip_ldr,
-                         maps ? &maps->flip_ldr : NULL))
+                         maps ? &maps->flip_ldr : above_ldr ? &own_ldr : NULL))
             goto done;
         out->has_flip_ldr = 1;
     }
     if (opt->flip_hdr) {
         if (mcp_flip_hdr(test, ref, &opt->flip, &out->flip_hdr,
-                         maps ? &maps->flip_hdr : NULL,
+                         maps ? &maps->flip_hdr : above_hdr ? &own_hdr : NULL,
                          maps ? &maps->flip_hdr_exposure : NULL))
             goto done;
         out->has_flip_hdr = 1;
+    }
+    out->n_above = opt->n_above;
+    for (int k = 0; k < opt->n_above; k++) {
+        const mcp_metrics_above *a = &opt->above[k];
+        const mcp_image *img = a->map == MCP_ABOVE_RELSE ? relse
+                               : a->map == MCP_ABOVE_FLIP_LDR
+                                   ? (maps ? maps->flip_ldr : own_ldr)
+                                   : (maps ? maps->flip_hdr : own_hdr);
+        out->above[k] = *a;
+        out->above_percent[k] = percent_above(img, a->threshold);
     }
     if (opt->spectra && test->width >= opt->spectra_opt.tile_size &&
         test->height >= opt->spectra_opt.tile_size) {
@@ -531,6 +614,8 @@ mcp_metrics_compute(const mcp_image *test, const mcp_image *ref,
     }
     rc = 0;
 done:
+    mcp_image_free(own_ldr);
+    mcp_image_free(own_hdr);
     mcp_image_free(sq);
     mcp_image_free(relse);
     if (rc && maps) mcp_metrics_maps_free(maps);
@@ -547,6 +632,27 @@ add_number(cJSON *obj, const char *key, double v)
                              : cJSON_CreateNumber(v);
     if (!item) return mcp_error("out of memory for the report");
     cJSON_AddItemToObject(obj, key, item);
+    return 0;
+}
+
+/* FLIP's statistics beside its mean (flip.h; named as the tool prints them). */
+static void
+add_flip_stats(cJSON *f, const mcp_flip_stats *s)
+{
+    cJSON_AddNumberToObject(f, "weighted_median", s->weighted_median);
+    cJSON_AddNumberToObject(f, "weighted_q1", s->weighted_q1);
+    cJSON_AddNumberToObject(f, "weighted_q3", s->weighted_q3);
+    cJSON_AddNumberToObject(f, "min", s->min);
+    cJSON_AddNumberToObject(f, "max", s->max);
+}
+
+static int
+add_counts(cJSON *h, const char *key, const mcp_flip_stats *s)
+{
+    cJSON *a = cJSON_AddArrayToObject(h, key);
+    if (!a) return mcp_error("out of memory for the report");
+    for (int i = 0; i < MCP_FLIP_HISTOGRAM_BUCKETS; i++)
+        cJSON_AddItemToArray(a, cJSON_CreateNumber((double)s->histogram[i]));
     return 0;
 }
 
@@ -586,12 +692,14 @@ mcp_metrics_json(const mcp_metrics *m, const mcp_metrics_options *opt, cJSON *ob
         cJSON *f = cJSON_AddObjectToObject(obj, "flip_ldr");
         if (!f) return mcp_error("out of memory for the report");
         cJSON_AddNumberToObject(f, "mean", m->flip_ldr.mean);
+        add_flip_stats(f, &m->flip_ldr.stats);
         cJSON_AddNumberToObject(f, "ppd", m->flip_ldr.ppd);
     }
     if (m->has_flip_hdr) {
         cJSON *f = cJSON_AddObjectToObject(obj, "flip_hdr");
         if (!f) return mcp_error("out of memory for the report");
         cJSON_AddNumberToObject(f, "mean", m->flip_hdr.mean);
+        add_flip_stats(f, &m->flip_hdr.stats);
         cJSON_AddNumberToObject(f, "ppd", m->flip_hdr.ppd);
         cJSON_AddStringToObject(f, "tone_mapper",
                                 mcp_tonemap_name(opt->flip.tone_mapper));
@@ -609,6 +717,27 @@ mcp_metrics_json(const mcp_metrics *m, const mcp_metrics_options *opt, cJSON *ob
         cJSON_AddNumberToObject(b, "cutoff", opt->spectra_opt.cutoff);
         cJSON_AddStringToObject(b, "tone_map",
                                 mcp_tonemap_name(opt->spectra_opt.tone_map));
+    }
+    if (m->has_flip_ldr || m->has_flip_hdr) {
+        /* apart from the figures: a report's page draws it rather than listing it */
+        cJSON *h = cJSON_AddObjectToObject(obj, "flip_histogram");
+        if (!h) return mcp_error("out of memory for the report");
+        cJSON_AddNumberToObject(h, "bucket_width", 1.0 / MCP_FLIP_HISTOGRAM_BUCKETS);
+        if ((m->has_flip_ldr && add_counts(h, "flip_ldr", &m->flip_ldr.stats)) ||
+            (m->has_flip_hdr && add_counts(h, "flip_hdr", &m->flip_hdr.stats)))
+            return -1;
+    }
+    if (m->n_above) {
+        cJSON *list = cJSON_AddArrayToObject(obj, "pixels_above");
+        if (!list) return mcp_error("out of memory for the report");
+        for (int k = 0; k < m->n_above; k++) {
+            cJSON *a = cJSON_CreateObject();
+            if (!a) return mcp_error("out of memory for the report");
+            cJSON_AddItemToArray(list, a);
+            cJSON_AddStringToObject(a, "map", mcp_above_map_name(m->above[k].map));
+            cJSON_AddNumberToObject(a, "threshold", m->above[k].threshold);
+            cJSON_AddNumberToObject(a, "percent", m->above_percent[k]);
+        }
     }
     return 0;
 }

@@ -42,6 +42,23 @@ typedef struct mcp_pmse_options {
 
 MCP_API mcp_pmse_options mcp_pmse_defaults(void);
 
+/* The share of pixels above a per-pixel threshold (idiff's -failpercent, with FLIP
+ * or RelSE in place of the absolute difference; docs/metrics.md "Gates"): a pixel is
+ * above when its FLIP value exceeds the threshold, or for RelSE when any of its three
+ * channels' RelSE does (idiff counts a pixel when any channel fails). */
+#define MCP_METRICS_MAX_ABOVE 16
+
+typedef enum { MCP_ABOVE_FLIP_LDR, MCP_ABOVE_FLIP_HDR, MCP_ABOVE_RELSE } mcp_above_map;
+
+typedef struct mcp_metrics_above {
+    mcp_above_map map;
+    double threshold;
+} mcp_metrics_above;
+
+/* "flip_ldr", "flip_hdr", "relse" (the names of the figures in the JSON). */
+MCP_API const char *mcp_above_map_name(mcp_above_map m);
+MCP_API int mcp_above_map_from_name(const char *name, mcp_above_map *out);
+
 typedef struct mcp_metrics_options {
     double eps_rel;                                  /* [1e-2] */
     int n_percentiles;                               /* [3] */
@@ -53,6 +70,9 @@ typedef struct mcp_metrics_options {
      * than one tile. */
     int spectra;
     mcp_spectra_options spectra_opt;
+    /* Shares of pixels above thresholds to measure [none]; mcp_metrics_add_above. */
+    int n_above;
+    mcp_metrics_above above[MCP_METRICS_MAX_ABOVE];
 } mcp_metrics_options;
 
 MCP_API mcp_metrics_options mcp_metrics_defaults(void);
@@ -67,6 +87,10 @@ typedef struct mcp_metrics {
     mcp_flip_result flip_ldr, flip_hdr;
     int has_spectra;
     mcp_spectra_result spectra;
+    /* opt->above[k]'s share of the pixels, in percent */
+    int n_above;
+    mcp_metrics_above above[MCP_METRICS_MAX_ABOVE];
+    double above_percent[MCP_METRICS_MAX_ABOVE];
 } mcp_metrics;
 
 /* Per-pixel maps that mcp_metrics_compute returns when given the struct (FLIP maps
@@ -112,9 +136,11 @@ MCP_API int mcp_metrics_check_pair(const mcp_image *test, const mcp_image *ref,
 
 /* The figures as members of obj (a JSON object): mse, rmse, relmse, psnr (the
  * string "inf" for identical displays), pmse (with its settings), relse_percentiles
- * {p: [...], value: [...]}, flip_ldr {mean, ppd}, flip_hdr {mean, ppd, tone_mapper,
- * start_exposure, stop_exposure, num_exposures}, blue_noise {low_fraction,
- * white_fraction, energy, tile_size, cutoff}. */
+ * {p: [...], value: [...]}, flip_ldr {mean, weighted_median, weighted_q1,
+ * weighted_q3, min, max, ppd}, flip_hdr {the same, tone_mapper, start_exposure,
+ * stop_exposure, num_exposures}, flip_histogram {bucket_width, flip_ldr: [counts],
+ * flip_hdr: [counts]} (flip.h's histogram), blue_noise {low_fraction, white_fraction,
+ * energy, tile_size, cutoff}, pixels_above [{map, threshold, percent}]. */
 MCP_API int mcp_metrics_json(const mcp_metrics *m, const mcp_metrics_options *opt,
                              cJSON *obj);
 
@@ -126,6 +152,17 @@ MCP_API int mcp_metrics_json(const mcp_metrics *m, const mcp_metrics_options *op
  * added to its images as "<prefix>NAME.png". */
 MCP_API int mcp_metrics_write_maps(const mcp_metrics_maps *maps, const char *dir,
                                    const char *prefix, cJSON *section);
+
+/* The percentage of pixels of img above t: a pixel counts when any of its channels
+ * is above (a FLIP map has one; RelSE three), as for pixels_above. */
+MCP_API int mcp_image_percent_above(const mcp_image *img, double t, double *percent);
+
+/* Asks for the share of pixels of map above threshold (once: a pair already asked
+ * for is kept). Fails when the threshold is not finite or MCP_METRICS_MAX_ABOVE pairs
+ * are asked for already; mcp_metrics_compute fails when the map is a FLIP that opt
+ * does not compute. */
+MCP_API int mcp_metrics_add_above(mcp_metrics_options *opt, mcp_above_map map,
+                                  double threshold);
 
 /* Sets opt->percentiles (1 to MCP_METRICS_MAX_PERCENTILES values, each in [0, 1]). */
 MCP_API int mcp_metrics_set_percentiles(mcp_metrics_options *opt, const double *p,

@@ -15,10 +15,10 @@
 /* ---- names ---- */
 
 static const char *const scale_names[] = {"linear", "log", "logit"};
-static const char *const style_names[] = {"line", "scatter", "line+points"};
+static const char *const style_names[] = {"line", "scatter", "line+points", "bars"};
 
 const mcp_wordlist mcp_axis_scale_words = {"axis scale", scale_names, 3};
-const mcp_wordlist mcp_series_style_words = {"series style", style_names, 3};
+const mcp_wordlist mcp_series_style_words = {"series style", style_names, 4};
 
 int
 mcp_axis_scale_from_name(const char *name, mcp_axis_scale *out)
@@ -41,7 +41,20 @@ mcp_series_style_from_name(const char *name, mcp_series_style *out)
 const char *
 mcp_series_style_name(mcp_series_style s)
 {
-    return (unsigned)s < 3 ? style_names[s] : "?";
+    return (unsigned)s < 4 ? style_names[s] : "?";
+}
+
+/* A bar series' bar width: the smallest gap between neighbouring valid x (1 when it
+ * has one point). */
+static double
+bar_width(const mcp_plot_series *ps)
+{
+    double w = INFINITY;
+    for (int i = 1; i < ps->n; i++) {
+        double d = fabs(ps->x[i] - ps->x[i - 1]);
+        if (isfinite(d) && d > 0 && d < w) w = d;
+    }
+    return isfinite(w) ? w : 1.0;
 }
 
 double
@@ -293,6 +306,13 @@ mcp_plot_svg(const mcp_plot *p, char **svg)
             ylo = fy < ylo ? fy : ylo;
             yhi = fy > yhi ? fy : yhi;
             shown++;
+            if (p->series[s].style == MCP_SERIES_BARS && p->x_scale == MCP_AXIS_LINEAR) {
+                /* the bars' full width, and on a linear y axis their foot at 0 */
+                double half = 0.5 * bar_width(&p->series[s]);
+                xlo = x - half < xlo ? x - half : xlo;
+                xhi = x + half > xhi ? x + half : xhi;
+                if (p->y_scale == MCP_AXIS_LINEAR) ylo = ylo > 0 ? 0 : ylo;
+            }
         }
     if (!shown)
         return mcp_error("plot '%s': no points to show on %s/%s axes", title,
@@ -395,6 +415,25 @@ mcp_plot_svg(const mcp_plot *p, char **svg)
     for (int s = 0; s < p->n_series; s++) {
         const mcp_plot_series *ps = &p->series[s];
         const char *colour = palette[s % 10];
+        if (ps->style == MCP_SERIES_BARS) {
+            double half = 0.5 * bar_width(ps);
+            double foot = p->y_scale == MCP_AXIS_LINEAR ? to_px(&ay, 0.0) : ay.a0;
+            sb_printf(&b, "<g fill=\"%s\" fill-opacity=\"0.45\" stroke=\"%s\" "
+                          "stroke-width=\"0.6\">\n",
+                      colour, colour);
+            for (int i = 0; i < ps->n; i++) {
+                if (!valid(p->x_scale, ps->x[i]) || !valid(p->y_scale, ps->y[i]) ||
+                    (p->y_scale == MCP_AXIS_LINEAR && ps->y[i] == 0))
+                    continue;
+                double x0 = to_px(&ax, ps->x[i] - half), x1 = to_px(&ax, ps->x[i] + half);
+                double y = to_px(&ay, ps->y[i]);
+                sb_printf(&b,
+                          "<rect x=\"%.2f\" y=\"%.2f\" width=\"%.2f\" height=\"%.2f\"/>\n",
+                          x0, y < foot ? y : foot, x1 - x0, fabs(foot - y));
+            }
+            sb_printf(&b, "</g>\n");
+            continue;
+        }
         if (ps->style != MCP_SERIES_SCATTER) {
             sb_printf(&b, "<path fill=\"none\" stroke=\"%s\" stroke-width=\"1.8\"%s d=\"",
                       colour, ps->dashed ? " stroke-dasharray=\"6 4\"" : "");
@@ -473,13 +512,18 @@ mcp_plot_svg(const mcp_plot *p, char **svg)
             if (!ps->name || !*ps->name) continue;
             double y = ly + 14 + 16 * row++;
             const char *colour = palette[s % 10];
-            if (ps->style != MCP_SERIES_SCATTER)
+            if (ps->style == MCP_SERIES_BARS)
+                sb_printf(&b,
+                          "<rect x=\"%.2f\" y=\"%.2f\" width=\"12\" height=\"9\" "
+                          "fill=\"%s\" fill-opacity=\"0.45\" stroke=\"%s\"/>\n",
+                          lx + 10, y - 9, colour, colour);
+            else if (ps->style != MCP_SERIES_SCATTER)
                 sb_printf(&b,
                           "<line x1=\"%.2f\" y1=\"%.2f\" x2=\"%.2f\" y2=\"%.2f\" "
                           "stroke=\"%s\" stroke-width=\"1.8\"%s/>\n",
                           lx + 6, y - 4, lx + 26, y - 4, colour,
                           ps->dashed ? " stroke-dasharray=\"6 4\"" : "");
-            if (ps->style != MCP_SERIES_LINE)
+            if (ps->style != MCP_SERIES_LINE && ps->style != MCP_SERIES_BARS)
                 sb_printf(&b, "<circle cx=\"%.2f\" cy=\"%.2f\" r=\"3\" fill=\"%s\"/>\n",
                           lx + 16, y - 4, colour);
             sb_printf(&b, "<text x=\"%.2f\" y=\"%.2f\">", lx + 32, y);

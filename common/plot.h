@@ -1,4 +1,4 @@
-/* plot.h: small line and scatter plots as standalone SVG text, for report.html.
+/* plot.h: small line, scatter and bar plots as standalone SVG text, for report.html.
  *
  * Our own code rather than a plotting library: it adds no dependency, the SVG goes
  * inline into a self-contained page that needs no network or scripts, and vector
@@ -24,13 +24,18 @@ MCP_API extern const mcp_wordlist mcp_axis_scale_words, mcp_series_style_words;
 MCP_API int mcp_axis_scale_from_name(const char *name, mcp_axis_scale *out);
 MCP_API const char *mcp_axis_scale_name(mcp_axis_scale s);
 
+/* BARS: a histogram, one bar per point centred on x, as wide as the smallest gap
+ * between neighbouring x, up from 0 on a linear y axis (the axis bottom otherwise);
+ * translucent, so that bars of several series overlap visibly (FLIP's overlapped
+ * histogram of two tests). */
 typedef enum {
     MCP_SERIES_LINE,
     MCP_SERIES_SCATTER,
-    MCP_SERIES_LINE_POINTS
+    MCP_SERIES_LINE_POINTS,
+    MCP_SERIES_BARS
 } mcp_series_style;
 
-/* "line", "scatter", "line+points". */
+/* "line", "scatter", "line+points", "bars". */
 MCP_API int mcp_series_style_from_name(const char *name, mcp_series_style *out);
 MCP_API const char *mcp_series_style_name(mcp_series_style s);
 

@@ -308,7 +308,7 @@ mcp_report_plot_add_series(cJSON *plot, const char *name, mcp_series_style style
         mcp_error("report: not a plot");
         return NULL;
     }
-    if ((unsigned)style > MCP_SERIES_LINE_POINTS || n < 0) {
+    if ((unsigned)style > MCP_SERIES_BARS || n < 0) {
         mcp_error("report: series '%s': bad style or count", name ? name : "");
         return NULL;
     }

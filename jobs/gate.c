@@ -1,7 +1,9 @@
 /* gate.c: pass / warning / failure conditions on the figures of `mcpost metrics` and
  * of the metrics stage (docs/metrics.md, "Gates"). CI jobs gate image comparisons on
  * a threshold, as idiff's -fail / -warn and flip's --exit-on-test do; here a condition
- * names any figure of the metrics JSON, so one syntax covers FLIP, relMSE, PSNR, ... */
+ * names any figure of the metrics JSON, so one syntax covers FLIP, relMSE, PSNR, ...
+ * A percent condition bounds the share of pixels above a per-pixel threshold, as
+ * idiff's -failpercent does, read from the metrics' pixels_above. */
 #include "internal.h"
 
 #include <ctype.h>
@@ -60,6 +62,67 @@ bad:
                      what, expr);
 }
 
+static const char *
+flag_of(const mcp__gate_cond *c)
+{
+    return c->percent ? (c->is_fail ? "--fail-percent" : "--warn-percent")
+                      : (c->is_fail ? "--fail" : "--warn");
+}
+
+int
+mcp__gate_add_percent(mcp__gate *g, const char *expr, int is_fail)
+{
+    const char *what = is_fail ? "--fail-percent" : "--warn-percent";
+    if (g->n >= MCP__GATE_MAX)
+        return mcp_error("%s: at most %d conditions in all", what, MCP__GATE_MAX);
+    mcp__gate_cond *c = &g->c[g->n];
+    memset(c, 0, sizeof *c);
+    char map[32];
+    int used = 0;
+    mcp_above_map m;
+    /* MAP THRESHOLD PERCENT[%], as idiff's -fail T -failpercent P in one argument */
+    if (sscanf(expr, " %31s %lf %lf%n", map, &c->threshold, &c->value, &used) != 3)
+        goto bad;
+    const char *rest = expr + used;
+    if (*rest == '%') rest++;
+    while (isspace((unsigned char)*rest))
+        rest++;
+    if (*rest || !isfinite(c->threshold) || !(c->value >= 0.0 && c->value <= 100.0))
+        goto bad;
+    if (mcp_above_map_from_name(map, &m))
+        return mcp_error("%s '%s': unknown map '%s' (use flip_ldr, flip_hdr or relse)",
+                         what, expr, map);
+    snprintf(c->figure, sizeof c->figure, "%s", map);
+    c->percent = 1;
+    c->op = '>';
+    c->is_fail = is_fail;
+    snprintf(c->text, sizeof c->text, "%s > %g on more than %g%% of the pixels", map,
+             c->threshold, c->value);
+    g->n++;
+    return 0;
+bad:
+    return mcp_error("%s '%s': want MAP THRESHOLD PERCENT, MAP one of flip_ldr, "
+                     "flip_hdr, relse, PERCENT in [0, 100] (e.g. 'flip_ldr 0.1 1%%')",
+                     what, expr);
+}
+
+int
+mcp__gate_request(const mcp__gate *g, mcp_metrics_options *o)
+{
+    for (int i = 0; i < g->n; i++) {
+        const mcp__gate_cond *c = &g->c[i];
+        mcp_above_map m;
+        if (!c->percent) continue;
+        if (mcp_above_map_from_name(c->figure, &m) ||
+            mcp_metrics_add_above(o, m, c->threshold)) {
+            char why[512]; /* copied: mcp_error rewrites the line it would read */
+            snprintf(why, sizeof why, "%s", mcp_error_message());
+            return mcp_error("%s '%s': %s", flag_of(c), c->text, why);
+        }
+    }
+    return 0;
+}
+
 cJSON *
 mcp__gate_metrics_names(const mcp_metrics_options *o)
 {
@@ -72,6 +135,12 @@ mcp__gate_metrics_names(const mcp_metrics_options *o)
     m.has_flip_ldr = o->flip_ldr;
     m.has_flip_hdr = o->flip_hdr;
     m.has_spectra = o->spectra;
+    /* shares of pixels only of the maps these options compute: a percent condition
+     * on a FLIP that is off is then named as unknown, before anything runs */
+    for (int k = 0; k < o->n_above; k++)
+        if ((o->above[k].map != MCP_ABOVE_FLIP_LDR || o->flip_ldr) &&
+            (o->above[k].map != MCP_ABOVE_FLIP_HDR || o->flip_hdr))
+            m.above[m.n_above++] = o->above[k];
     cJSON *doc = cJSON_CreateObject();
     if (!doc) return NULL;
     cJSON_AddNumberToObject(doc, "width", 0);
@@ -125,17 +194,46 @@ known_names(const cJSON *obj, const char *prefix, char *buf, size_t cap, int *co
     }
 }
 
+/* The share of pixels above a percent condition's threshold, from pixels_above. */
+static const cJSON *
+share_of(const cJSON *figures, const mcp__gate_cond *c)
+{
+    const cJSON *a;
+    cJSON_ArrayForEach(a, cJSON_GetObjectItemCaseSensitive(figures, "pixels_above"))
+    {
+        const cJSON *map = cJSON_GetObjectItemCaseSensitive(a, "map"),
+                    *t = cJSON_GetObjectItemCaseSensitive(a, "threshold");
+        if (cJSON_IsString(map) && !strcmp(map->valuestring, c->figure) &&
+            cJSON_IsNumber(t) && t->valuedouble == c->threshold)
+            return cJSON_GetObjectItemCaseSensitive(a, "percent");
+    }
+    return NULL;
+}
+
+static const cJSON *
+value_of(const cJSON *figures, const mcp__gate_cond *c)
+{
+    return c->percent ? share_of(figures, c) : lookup(figures, c->figure);
+}
+
 int
 mcp__gate_check(const mcp__gate *g, const cJSON *figures, int *bad)
 {
     for (int i = 0; i < g->n; i++) {
-        if (cJSON_IsNumber(lookup(figures, g->c[i].figure))) continue;
+        if (cJSON_IsNumber(value_of(figures, &g->c[i]))) continue;
+        if (bad) *bad = i;
+        if (g->c[i].percent)
+            return mcp_error("%s '%s': the metrics have no share of pixels above %g in "
+                             "%s%s",
+                             flag_of(&g->c[i]), g->c[i].text, g->c[i].threshold,
+                             g->c[i].figure,
+                             strcmp(g->c[i].figure, "relse") ? " (is that FLIP computed?)"
+                                                             : "");
         char names[600] = "";
         int count = 0;
         known_names(figures, "", names, sizeof names, &count);
-        if (bad) *bad = i;
         return mcp_error("%s '%s': no figure '%s' in the metrics (known: %s%s)",
-                         g->c[i].is_fail ? "--fail" : "--warn", g->c[i].text,
+                         flag_of(&g->c[i]), g->c[i].text,
                          g->c[i].figure, names, count >= 12 ? ", ..." : "");
     }
     return 0;
@@ -168,14 +266,14 @@ mcp__gate_eval(const mcp__gate *g, const cJSON *figures, mcp__gate_verdict *verd
     cJSON *jw = j ? cJSON_AddArrayToObject(j, "warned") : NULL;
     for (int i = 0; i < g->n; i++) {
         const mcp__gate_cond *c = &g->c[i];
-        double v = lookup(figures, c->figure)->valuedouble;
+        double v = value_of(figures, c)->valuedouble;
         if (!holds(c, v)) continue;
         char *buf = c->is_fail ? failed : warned;
         int *n = c->is_fail ? &n_failed : &n_warned;
         size_t len = strlen(buf);
         /* the figure's value beside the condition: what the CI log reader wants next */
-        snprintf(buf + len, sizeof failed - len, "%s%s (%.6g)", *n ? "; " : "", c->text,
-                 v);
+        snprintf(buf + len, sizeof failed - len, "%s%s (%.6g%s)", *n ? "; " : "", c->text,
+                 v, c->percent ? "%" : "");
         ++*n;
         if (j) cJSON_AddItemToArray(c->is_fail ? jf : jw, cJSON_CreateString(c->text));
     }

@@ -229,11 +229,17 @@ typedef enum { MCP__GATE_PASS, MCP__GATE_WARNING, MCP__GATE_FAILURE } mcp__gate_
 #define MCP__GATE_EXIT_FAILURE 4
 
 typedef struct {
-    char figure[128];
+    char figure[128]; /* a percent condition: the map, flip_ldr, flip_hdr or relse */
     int op; /* '>', 'G' (>=), '<', 'L' (<=) */
-    double value;
+    double value;     /* a percent condition: the share allowed, in percent */
     int is_fail;   /* 1: --fail / fail:, 0: --warn / warn: */
-    char text[192]; /* normalised: "flip_ldr.mean > 0.05" */
+    /* A percent condition (--fail-percent 'MAP THRESHOLD PERCENT', idiff's
+     * -failpercent): it holds when more than value percent of the pixels have the
+     * map above threshold (the metrics' pixels_above). */
+    int percent;
+    double threshold;
+    char text[192]; /* normalised: "flip_ldr.mean > 0.05",
+                       "flip_ldr > 0.1 on more than 1% of the pixels" */
 } mcp__gate_cond;
 
 typedef struct {
@@ -243,6 +249,12 @@ typedef struct {
 
 /* Parses one expression into the gate; a malformed one is an error naming it. */
 int mcp__gate_add(mcp__gate *g, const char *expr, int is_fail);
+/* The same for a percent condition, "MAP THRESHOLD PERCENT" with an optional '%'
+ * (--fail-percent / --warn-percent, fail_percent: / warn_percent:). */
+int mcp__gate_add_percent(mcp__gate *g, const char *expr, int is_fail);
+/* Asks o for the shares of pixels that the percent conditions judge
+ * (mcp_metrics_add_above); an error names the condition. */
+int mcp__gate_request(const mcp__gate *g, mcp_metrics_options *o);
 /* The figures that a metrics result with options o will hold (numbers all zero), with
  * width and height as the CLI's JSON and the report section have them: for checking
  * the names before anything is computed. The caller deletes it. */

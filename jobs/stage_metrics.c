@@ -1,6 +1,7 @@
 /* stage_metrics.c: the `metrics` job stage -- the figures of `mcpost metrics` for an
- * input against a reference, with maps, previews and the error-percentile plot
- * (Firmino et al. 2024) in the report, and error-vs-spp curves for a series.
+ * input against a reference, with maps, previews, FLIP's weighted histograms (another
+ * test's overlapped with compare:) and the error-percentile plot (Firmino et al. 2024)
+ * in the report, and error-vs-spp curves for a series.
  * Job keys are the flags of `mcpost metrics` with '_' for '-'. */
 #include "internal.h"
 
@@ -40,6 +41,9 @@ static const char *const metrics_keys[] = {"input",
                                            "spectra_cutoff",
                                            "fail",
                                            "warn",
+                                           "fail_percent",
+                                           "warn_percent",
+                                           "compare",
                                            NULL};
 
 /* ---- settings ---- */
@@ -158,6 +162,52 @@ percentile_plot(cJSON *section, const mcp_image *relse, const mcp_image *estimat
     return 0;
 }
 
+/* FLIP's statistics of a second test (compare:) beside the input's. */
+static void
+add_flip_figures(cJSON *obj, const char *key, const mcp_flip_result *f)
+{
+    cJSON *o = cJSON_AddObjectToObject(obj, key);
+    if (!o) return;
+    cJSON_AddNumberToObject(o, "mean", f->mean);
+    cJSON_AddNumberToObject(o, "weighted_median", f->stats.weighted_median);
+    cJSON_AddNumberToObject(o, "weighted_q1", f->stats.weighted_q1);
+    cJSON_AddNumberToObject(o, "weighted_q3", f->stats.weighted_q3);
+    cJSON_AddNumberToObject(o, "min", f->stats.min);
+    cJSON_AddNumberToObject(o, "max", f->stats.max);
+}
+
+/* FLIP's weighted histogram as its tool plots it (each bucket's count times its
+ * centre, per megapixel; flip.h), a plot per FLIP; with a second test (compare:) its
+ * bars overlap the input's, as the tool's overlapped histogram of two tests. The
+ * counts stay in report.json (flip_histogram), not in the figures table. */
+static int
+flip_histograms(cJSON *section, const mcp_metrics *m, const char *input,
+                const mcp_flip_result cmp[2], const char *compare_name)
+{
+    enum { B = MCP_FLIP_HISTOGRAM_BUCKETS };
+    double x[B], y[B];
+    for (int i = 0; i < B; i++)
+        x[i] = (i + 0.5) / B;
+    for (int hdr = 0; hdr < 2; hdr++) {
+        if (!(hdr ? m->has_flip_hdr : m->has_flip_ldr)) continue;
+        cJSON *plot = mcp_report_add_plot(
+            section, hdr ? "weighted HDR-FLIP histogram" : "weighted LDR-FLIP histogram",
+            "FLIP error", MCP_AXIS_LINEAR, "weighted FLIP sum per megapixel",
+            MCP_AXIS_LINEAR);
+        if (!plot) return -1;
+        for (int t = 0; t < (compare_name ? 2 : 1); t++) {
+            const mcp_flip_stats *st =
+                t ? &cmp[hdr].stats : hdr ? &m->flip_hdr.stats : &m->flip_ldr.stats;
+            for (int i = 0; i < B; i++)
+                y[i] = mcp_flip_weighted_bucket(st, i);
+            if (!mcp_report_plot_add_series(plot, t ? compare_name : input,
+                                            MCP_SERIES_BARS, x, y, B))
+                return -1;
+        }
+    }
+    return mcp_report_json_only(section, "flip_histogram");
+}
+
 static int
 write_preview(mcp_job *job, const mcp_image *img, const char *rel, cJSON *section,
               const char *caption)
@@ -257,6 +307,7 @@ series_curves(mcp_job *job, const mcp_node *settings, const mcp_series *series,
     mcp_metrics_options o = *opt;
     o.n_percentiles = 0;
     o.spectra = 0;
+    o.n_above = 0; /* the gates judge the input, not the series */
     double *v = mcp_calloc((size_t)n * 8, sizeof *v);
     if (!v) return -1;
     double *spp = v, *mse = v + n, *rmse = v + 2 * n, *rel = v + 3 * n, *psnr = v + 4 * n,
@@ -340,6 +391,7 @@ done:
 typedef struct metrics_plan {
     mcp_metrics_options o;
     const char *input, *reference, *output, *series_name, *estimate_name;
+    const char *compare_name; /* a second test whose FLIP histograms overlap input's */
     int want_maps;
     mcp__gate gate;
 } metrics_plan;
@@ -354,7 +406,9 @@ gate_error(const mcp_node *item, const char *key)
 {
     char msg[1024];
     const char *m = mcp_error_message();
-    snprintf(msg, sizeof msg, "%s", strncmp(m, "--", 2) ? m : m + 7);
+    /* "--fail-percent 'x': ..." -> "'x': ..." */
+    const char *after_flag = strncmp(m, "--", 2) || !strchr(m, ' ') ? m : strchr(m, ' ') + 1;
+    snprintf(msg, sizeof msg, "%s", after_flag);
     return mcp_node_error(item, "%s: %s", key, msg);
 }
 
@@ -369,12 +423,16 @@ read_gate(const mcp_node *settings, const char *key, metrics_plan *pl)
     for (int i = 0; i < m; i++) {
         const mcp_node *item = n->kind == MCP_NODE_SEQ ? n->items[i] : n;
         const char *s = NULL;
+        int percent = !strncmp(key + 4, "_percent", 8), is_fail = key[0] == 'f';
         if (mcp_node_string(item, key, &s)) return -1;
-        if (mcp__gate_add(&pl->gate, s, !strcmp(key, "fail")))
+        if (percent ? mcp__gate_add_percent(&pl->gate, s, is_fail)
+                    : mcp__gate_add(&pl->gate, s, is_fail))
             return gate_error(item, key);
-        cJSON *names = mcp__gate_metrics_names(&pl->o);
         mcp__gate one = {.n = 1};
         one.c[0] = pl->gate.c[pl->gate.n - 1];
+        /* a percent condition asks the metrics for its share of pixels */
+        if (mcp__gate_request(&one, &pl->o)) return gate_error(item, key);
+        cJSON *names = mcp__gate_metrics_names(&pl->o);
         int bad = !names || mcp__gate_check(&one, names, NULL);
         cJSON_Delete(names);
         if (bad) return gate_error(item, key);
@@ -394,15 +452,26 @@ parse_metrics(mcp_job *job, const mcp_node *settings, metrics_plan *pl)
         mcp_node_opt_string(settings, "estimate", &pl->estimate_name) ||
         mcp_node_opt_string(settings, "output", &pl->output) ||
         mcp_node_opt_bool(settings, "maps", &pl->want_maps) ||
+        mcp_node_opt_string(settings, "compare", &pl->compare_name) ||
         read_options(settings, &pl->o) || read_gate(settings, "fail", pl) ||
-        read_gate(settings, "warn", pl))
+        read_gate(settings, "warn", pl) || read_gate(settings, "fail_percent", pl) ||
+        read_gate(settings, "warn_percent", pl))
         return -1;
-    if (pl->gate.n && !pl->input)
-        return mcp_node_error(mcp_node_get(settings, mcp_node_get(settings, "fail")
-                                                         ? "fail"
-                                                         : "warn"),
-                              "a gate (fail:, warn:) judges 'input' against the "
-                              "reference; give 'input'");
+    if (pl->gate.n && !pl->input) {
+        static const char *const keys[] = {"fail", "warn", "fail_percent", "warn_percent"};
+        const mcp_node *at = NULL;
+        for (int k = 0; k < 4 && !at; k++)
+            at = mcp_node_get(settings, keys[k]);
+        return mcp_node_error(at,
+                              "a gate (fail:, warn:, fail_percent:, warn_percent:) judges "
+                              "'input' against the reference; give 'input'");
+    }
+    if (pl->compare_name && !pl->input)
+        return mcp_node_error(mcp_node_get(settings, "compare"),
+                              "'compare' needs 'input' (the image it is drawn beside)");
+    if (pl->compare_name && !pl->o.flip_ldr && !pl->o.flip_hdr)
+        return mcp_node_error(mcp_node_get(settings, "compare"),
+                              "'compare' overlaps FLIP histograms, but flip is none");
     if (!pl->reference) {
         const mcp_node *n = NULL;
         return mcp_node_require(settings, "reference", "stage 'metrics'", &n);
@@ -417,6 +486,8 @@ parse_metrics(mcp_job *job, const mcp_node *settings, metrics_plan *pl)
            (pl->input && mcp_job_check_input(job, settings, "input", MCP_JOB_IMAGE)) ||
            (pl->estimate_name &&
             mcp_job_check_input(job, settings, "estimate", MCP_JOB_IMAGE)) ||
+           (pl->compare_name &&
+            mcp_job_check_input(job, settings, "compare", MCP_JOB_IMAGE)) ||
            (pl->series_name && mcp_job_check_input(job, settings, "series", MCP_JOB_SERIES))
                ? -1
                : 0;
@@ -440,10 +511,11 @@ stage_metrics(mcp_job *job, const mcp_node *settings)
                *series_name = pl.series_name, *estimate_name = pl.estimate_name;
     int want_maps = pl.want_maps;
 
-    const mcp_image *ref = NULL, *test = NULL, *estimate = NULL;
+    const mcp_image *ref = NULL, *test = NULL, *estimate = NULL, *compare = NULL;
     const mcp_series *series = NULL;
     if (mcp_job_image(job, settings, "reference", &ref) ||
         (input && mcp_job_image(job, settings, "input", &test)) ||
+        (pl.compare_name && mcp_job_image(job, settings, "compare", &compare)) ||
         (estimate_name && mcp_job_image(job, settings, "estimate", &estimate)) ||
         (series_name && mcp_job_series(job, settings, "series", &series)))
         return -1;
@@ -471,7 +543,25 @@ stage_metrics(mcp_job *job, const mcp_node *settings)
         if (mcp_metrics_compute(test, ref, &o, &m, &maps) ||
             mcp_metrics_json(&m, &o, section))
             goto done;
-        if (percentile_plot(section, maps.relse, estimate, estimate_name)) goto done;
+        mcp_flip_result cmp[2];
+        memset(cmp, 0, sizeof cmp);
+        if (compare) {
+            /* the second test's FLIPs only: its histogram and statistics */
+            cJSON *c = cJSON_AddObjectToObject(section, "compare");
+            if (!c) goto done;
+            cJSON_AddStringToObject(c, "input", pl.compare_name);
+            mcp_note("metrics: FLIP of %s against %s", pl.compare_name, reference);
+            if ((o.flip_ldr && mcp_flip_ldr(compare, ref, &o.flip, &cmp[0], NULL)) ||
+                (o.flip_hdr && mcp_flip_hdr(compare, ref, &o.flip, &cmp[1], NULL, NULL))) {
+                mcp__at_line(settings, "compare");
+                goto done;
+            }
+            if (o.flip_ldr) add_flip_figures(c, "flip_ldr", &cmp[0]);
+            if (o.flip_hdr) add_flip_figures(c, "flip_hdr", &cmp[1]);
+        }
+        if (percentile_plot(section, maps.relse, estimate, estimate_name) ||
+            flip_histograms(section, &m, input, cmp, compare ? pl.compare_name : NULL))
+            goto done;
         if (want_maps) {
             char rel_t[1200], rel_r[1200], path[4096];
             snprintf(rel_t, sizeof rel_t, "%stest.png", prefix);

@@ -1,5 +1,6 @@
 /* metrics.c: how far a test image is from a reference (common/metrics.h) -- mse, relmse,
- * psnr, pmse, flip (the mean and the map), relse_percentiles, blue_noise, and metrics(),
+ * psnr, pmse, flip (the mean and the map), flip_stats, relse_percentiles, blue_noise,
+ * and metrics(),
  * every figure at once in the CLI's JSON layout. The first image is the test image,
  * the second the reference, as everywhere in mcpost. */
 #include "internal.h"
@@ -342,6 +343,76 @@ from_json(const cJSON *j)
     Py_RETURN_NONE;
 }
 
+/* FLIP's statistics of a map (flip.h: NVIDIA's tool's definitions). */
+static PyObject *
+py_flip_stats(PyObject *self, PyObject *args, PyObject *kw)
+{
+    (void)self;
+    static char *keys[] = {"map", NULL};
+    PyObject *a;
+    mcp_py_image m;
+    if (!PyArg_ParseTupleAndKeywords(args, kw, "O:flip_stats", keys, &a) ||
+        mcp_py_image_get(a, "map", 1, (const char *const[]){"FLIP"}, &m))
+        return NULL;
+    size_t n = (size_t)m.img->width * m.img->height, k = 0;
+    float *v = PyMem_Malloc(n ? n * sizeof *v : 1);
+    if (!v) {
+        mcp_py_image_release(&m);
+        return PyErr_NoMemory();
+    }
+    for (int y = 0; y < m.img->height; y++) /* row-major: the order the tool sums in */
+        for (int x = 0; x < m.img->width; x++)
+            v[k++] = mcp_image_px(m.img, x, y)[0];
+    mcp_py_image_release(&m);
+    mcp_flip_stats st;
+    int rc;
+    Py_BEGIN_ALLOW_THREADS
+    rc = mcp_flip_statistics(v, n, &st);
+    Py_END_ALLOW_THREADS
+    PyMem_Free(v);
+    if (rc) return mcp_py_fail();
+    PyObject *counts = PyList_New(MCP_FLIP_HISTOGRAM_BUCKETS),
+             *weighted = PyList_New(MCP_FLIP_HISTOGRAM_BUCKETS);
+    for (int i = 0; counts && weighted && i < MCP_FLIP_HISTOGRAM_BUCKETS; i++) {
+        PyList_SET_ITEM(counts, i, PyLong_FromLongLong(st.histogram[i]));
+        PyList_SET_ITEM(weighted, i, PyFloat_FromDouble(mcp_flip_weighted_bucket(&st, i)));
+    }
+    if (!counts || !weighted) {
+        Py_XDECREF(counts);
+        Py_XDECREF(weighted);
+        return NULL;
+    }
+    return Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:N,s:N}", "weighted_median",
+                         st.weighted_median, "weighted_q1", st.weighted_q1, "weighted_q3",
+                         st.weighted_q3, "min", st.min, "max", st.max, "histogram", counts,
+                         "weighted_histogram", weighted);
+}
+
+/* pixels_above=[(map, threshold), ...] into the options. */
+static int
+above_options(PyObject *list, mcp_metrics_options *o)
+{
+    PyObject *seq = PySequence_Fast(list, "pixels_above: want a list of (map, threshold)");
+    if (!seq) return -1;
+    for (Py_ssize_t i = 0; i < PySequence_Fast_GET_SIZE(seq); i++) {
+        const char *name;
+        double t;
+        mcp_above_map map;
+        if (!PyArg_ParseTuple(PySequence_Fast_GET_ITEM(seq, i), "sd:pixels_above", &name,
+                              &t)) {
+            Py_DECREF(seq);
+            return -1;
+        }
+        if (mcp_above_map_from_name(name, &map) || mcp_metrics_add_above(o, map, t)) {
+            Py_DECREF(seq);
+            mcp_py_fail();
+            return -1;
+        }
+    }
+    Py_DECREF(seq);
+    return 0;
+}
+
 static PyObject *
 py_metrics(PyObject *self, PyObject *args, PyObject *kw)
 {
@@ -353,18 +424,19 @@ py_metrics(PyObject *self, PyObject *args, PyObject *kw)
                            "num_exposures", "pmse_kernel",   "pmse_dpi",
                            "pmse_distance_in", "pmse_filter_reference", "pmse_tone_map",
                            "spectra",       "spectra_tile_size", "spectra_cutoff",
-                           "maps",          NULL};
-    PyObject *a, *b, *plist = NULL, *flip = NULL;
+                           "maps",          "pixels_above", NULL};
+    PyObject *a, *b, *plist = NULL, *flip = NULL, *above = NULL;
     mcp_metrics_options o = mcp_metrics_defaults();
     double ppd = 0, dist = 0, wm = 0, wpx = 0, start = NAN, stop = NAN, pdpi = 0, pdist = 0;
     int num = 0, pfilter = 0, want_maps = 0;
     const char *tm = NULL, *pkernel = NULL, *ptone = NULL;
     if (!PyArg_ParseTupleAndKeywords(
-            args, kw, "OO|$OdOddddzddizddpzpidp:metrics", keys, &a, &b, &plist, &o.eps_rel,
+            args, kw, "OO|$OdOddddzddizddpzpidpO:metrics", keys, &a, &b, &plist, &o.eps_rel,
             &flip, &ppd, &dist, &wm, &wpx, &tm, &start, &stop, &num, &pkernel, &pdpi,
             &pdist, &pfilter, &ptone, &o.spectra, &o.spectra_opt.tile_size,
-            &o.spectra_opt.cutoff, &want_maps))
+            &o.spectra_opt.cutoff, &want_maps, &above))
         return NULL;
+    if (above && above != Py_None && above_options(above, &o)) return NULL;
     if (flip_options(ppd, dist, wm, wpx, tm, start, stop, num, &o.flip) ||
         pmse_options(pkernel, pdpi, pdist, pfilter, ptone, &o.pmse))
         return NULL;
@@ -477,6 +549,15 @@ PyMethodDef mcp_py_metrics_methods[] = {
     {"metrics", FN(py_metrics), KW,
      "metrics(test, ref, *, percentiles=None, eps_rel=0.01, flip='ldr,hdr', ppd=0, ...,\n"
      "        pmse_kernel='tap3', ..., spectra=True, spectra_tile_size=32,\n"
-     "        spectra_cutoff=0.25, maps=False) -> dict (or (dict, maps) with maps=True)\n\n"
-     "Every figure of `mcpost metrics --json`, with its keys and keywords."},
+     "        spectra_cutoff=0.25, maps=False, pixels_above=None)\n"
+     "    -> dict (or (dict, maps) with maps=True)\n\n"
+     "Every figure of `mcpost metrics --json`, with its keys and keywords: FLIP's\n"
+     "statistics beside each mean, the histogram counts in flip_histogram, and with\n"
+     "pixels_above=[('flip_ldr', 0.1), ('relse', 0.5)] the percentage of pixels above\n"
+     "each threshold (pixels_above)."},
+    {"flip_stats", FN(py_flip_stats), KW,
+     "flip_stats(map) -> dict: FLIP's statistics of an H x W map as NVIDIA's tool\n"
+     "defines them: weighted_median, weighted_q1, weighted_q3 (each pixel weighted by\n"
+     "its error), min, max, histogram (100 counts over [0, 1]) and weighted_histogram\n"
+     "(count x bucket centre per megapixel, what the tool plots)."},
     {NULL, NULL, 0, NULL}};

@@ -148,3 +148,56 @@ def test_flip_takes_srgb_encoded_arrays():
     assert abs(mcpost.flip(a, b)[0] - got) > 1e-3  # the keyword matters
     with pytest.raises(mcpost.Error, match="srgb=True is for LDR-FLIP"):
         mcpost.flip(a, b, hdr=True, srgb=True)
+
+
+def tool_weighted_percentile(values, p):
+    """NVIDIA's tool's weighted percentile (pooling.h), written with numpy: the first
+    sorted value at which the float32 running sum exceeds p times the float32 total
+    summed in row-major order (numpy's cumsum is sequential)."""
+    flat = values.ravel().astype(np.float32)
+    total = np.cumsum(flat, dtype=np.float32)[-1]
+    running = np.cumsum(np.sort(flat), dtype=np.float32)
+    hit = np.nonzero(running > np.float32(p) * total)[0]
+    return float(np.sort(flat)[hit[0]]) if hit.size else 0.0
+
+
+def test_flip_stats_are_the_tools(pair):
+    _, fmap = mcpost.flip(*pair)
+    st = mcpost.flip_stats(fmap)
+    for key, p in (("weighted_median", 0.5), ("weighted_q1", 0.25), ("weighted_q3", 0.75)):
+        assert st[key] == tool_weighted_percentile(fmap, p)
+    assert st["min"] == fmap.min() and st["max"] == fmap.max()
+    # buckets of width 0.01f, the index divided in double as the tool does
+    idx = np.minimum((fmap.astype(np.float64) / np.float64(np.float32(0.01))).astype(int), 99)
+    np.testing.assert_array_equal(st["histogram"], np.bincount(idx.ravel(), minlength=100))
+    n = fmap.size
+    assert_close(st["weighted_histogram"],
+                 [c * (i + 0.5) * 0.01 / (n / 2 ** 20) for i, c in enumerate(st["histogram"])],
+                 rtol=1e-12)
+    # metrics() carries the same numbers
+    m = mcpost.metrics(*pair, flip="ldr", spectra=False)
+    assert m["flip_ldr"]["weighted_median"] == st["weighted_median"]
+    assert m["flip_histogram"]["flip_ldr"] == st["histogram"]
+
+
+def test_flip_stats_closed_form():
+    # uniform errors weighted by themselves: density 2v, median sqrt(1/2), quartiles
+    # sqrt(1/4) and sqrt(3/4), within the grid's 1/n and float sums' ~1e-5
+    n = 256 * 256
+    v = ((np.arange(n) + 0.5) / n).astype(np.float32)
+    np.random.default_rng(3).shuffle(v)
+    st = mcpost.flip_stats(v.reshape(256, 256))
+    assert_close(st["weighted_median"], math.sqrt(0.5), atol=1e-4)
+    assert_close(st["weighted_q1"], 0.5, atol=1e-4)
+    assert_close(st["weighted_q3"], math.sqrt(0.75), atol=1e-4)
+
+
+def test_pixels_above_counts_the_maps(pair):
+    m, maps = mcpost.metrics(*pair, spectra=False, maps=True,
+                             pixels_above=[("flip_ldr", 0.2), ("relse", 0.05)])
+    got = {a["map"]: a["percent"] for a in m["pixels_above"]}
+    assert got["flip_ldr"] == 100 * np.count_nonzero(maps["flip_ldr"] > np.float32(0.2)) / maps["flip_ldr"].size
+    relse = maps["relse"]
+    assert got["relse"] == 100 * np.count_nonzero((relse > 0.05).any(axis=2)) / relse.shape[0] / relse.shape[1]
+    with pytest.raises(mcpost.Error, match="unknown per-pixel map 'flip'"):
+        mcpost.metrics(*pair, pixels_above=[("flip", 0.1)])

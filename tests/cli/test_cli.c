@@ -6,6 +6,7 @@
 #include <cjson/cJSON.h>
 #include <mcpost/denoiser.h>
 #include <mcpost/dump.h>
+#include <mcpost/flip.h>
 #include <mcpost/imageio.h>
 #include <math.h>
 #include <stdio.h>
@@ -602,8 +603,258 @@ test_metrics_gates(void **state)
     assert_non_null(strstr(out, "--fail 'EXPR'"));
 }
 
+/* Percent gates with a closed-form truth: against a reference of ones, a test of ones
+ * with 7 of its 100 pixels at 2 has RelSE (2 - 1)^2 / (2^2 + 0.01) = 0.249 there and
+ * 0 elsewhere, so exactly 7% of the pixels are above 0.1 (and none above 0.3). idiff's
+ * rule is strict: more than P% fails, so 7% fails at 5% and passes at 7%. */
+static void
+test_metrics_percent_gates(void **state)
+{
+    (void)state;
+    static const char *const rgb[] = {"R", "G", "B"};
+    mcp_image *ref = mcp_test_constant(10, 10, 3, 1.0f, rgb),
+              *test = mcp_test_constant(10, 10, 3, 1.0f, rgb);
+    for (int i = 0; i < 7; i++) /* spread over rows and columns */
+        mcp_image_px(test, (3 * i) % 10, (7 * i + 1) % 10)[i % 3] = 2.0f;
+    char t_path[4200], r_path[4200];
+    snprintf(t_path, sizeof t_path, "%s", mcp_test_path("pct_test.exr"));
+    snprintf(r_path, sizeof r_path, "%s", mcp_test_path("pct_ref.exr"));
+    assert_int_equal(mcp_image_write(test, t_path, NULL), 0);
+    assert_int_equal(mcp_image_write(ref, r_path, NULL), 0);
+    mcp_image_free(test);
+    mcp_image_free(ref);
+#define PCT_PAIR "'%s' '%s' --no-spectra --flip ldr"
+    assert_int_equal(run("metrics " PCT_PAIR " --fail-percent 'relse 0.1 5%%'", t_path,
+                         r_path),
+                     4);
+    assert_string_equal(last_line(),
+                        "FAILURE: relse > 0.1 on more than 5% of the pixels (7%)");
+    assert_int_equal(run("metrics " PCT_PAIR " --fail-percent 'relse 0.1 7' "
+                         "--warn-percent 'relse 0.3 0%%'",
+                         t_path, r_path),
+                     0);
+    assert_string_equal(last_line(), "PASS");
+    assert_int_equal(run("metrics " PCT_PAIR " --fail-percent 'relse 0.3 0' "
+                         "--warn-percent 'relse 0.2 6.5%%'",
+                         t_path, r_path),
+                     3);
+    assert_string_equal(last_line(),
+                        "WARNING: relse > 0.2 on more than 6.5% of the pixels (7%)");
+    /* --json: the measured shares beside the figures */
+    assert_int_equal(run("metrics --json " PCT_PAIR " --warn-percent 'relse 0.1 50' "
+                         "--warn-percent 'relse 0.3 50'",
+                         t_path, r_path),
+                     0);
+    cJSON *j = cJSON_Parse(out);
+    const cJSON *above = cJSON_GetObjectItem(j, "pixels_above");
+    assert_int_equal(cJSON_GetArraySize(above), 2);
+    assert_string_equal(cJSON_GetObjectItem(cJSON_GetArrayItem(above, 0), "map")->valuestring,
+                        "relse");
+    assert_true(cJSON_GetObjectItem(cJSON_GetArrayItem(above, 0), "percent")->valuedouble == 7.0);
+    assert_true(cJSON_GetObjectItem(cJSON_GetArrayItem(above, 1), "percent")->valuedouble == 0.0);
+    cJSON_Delete(j);
+
+    /* FLIP: the share agrees with a count over the FLIP map written by -o */
+    const char *dir = mcp_test_path("pct_maps");
+    assert_int_equal(run("metrics --json " CORNELL_PAIR " -o '%s' "
+                         "--warn-percent 'flip_ldr 0.2 100'",
+                         dir),
+                     0);
+    j = cJSON_Parse(out);
+    double share = cJSON_GetObjectItem(cJSON_GetArrayItem(cJSON_GetObjectItem(j, "pixels_above"), 0),
+                                       "percent")->valuedouble;
+    char path[4300];
+    snprintf(path, sizeof path, "%s/flip_ldr.exr", dir);
+    mcp_image *map = NULL;
+    assert_int_equal(mcp_image_read(path, NULL, &map), 0);
+    long above_n = 0, n = (long)map->width * map->height;
+    for (long i = 0; i < n; i++)
+        above_n += map->data[i] > 0.2f;
+    assert_true(share == 100.0 * above_n / n);
+    assert_true(above_n > 0 && above_n < n); /* a threshold inside the map's range */
+    /* and the statistics in the JSON are those of that map */
+    mcp_flip_stats st;
+    assert_int_equal(mcp_flip_statistics(map->data, (size_t)n, &st), 0);
+    const cJSON *fl = cJSON_GetObjectItem(j, "flip_ldr");
+    assert_true(cJSON_GetObjectItem(fl, "weighted_median")->valuedouble == st.weighted_median);
+    assert_true(cJSON_GetObjectItem(fl, "max")->valuedouble == st.max);
+    const cJSON *counts =
+        cJSON_GetObjectItem(cJSON_GetObjectItem(j, "flip_histogram"), "flip_ldr");
+    assert_int_equal(cJSON_GetArraySize(counts), MCP_FLIP_HISTOGRAM_BUCKETS);
+    for (int i = 0; i < MCP_FLIP_HISTOGRAM_BUCKETS; i++)
+        assert_true(cJSON_GetArrayItem(counts, i)->valuedouble == (double)st.histogram[i]);
+    mcp_image_free(map);
+    cJSON_Delete(j);
+
+    /* usage errors before anything is computed */
+    assert_usage_error(run("metrics " CORNELL_PAIR " --fail-percent 'flip 0.1 1%%'"),
+                       "--fail-percent 'flip 0.1 1%': unknown map 'flip'");
+    assert_usage_error(run("metrics " CORNELL_PAIR " --warn-percent 'flip_ldr 0.1'"),
+                       "want MAP THRESHOLD PERCENT");
+    assert_usage_error(run("metrics " CORNELL_PAIR " --fail-percent 'relse 0.1 120'"),
+                       "PERCENT in [0, 100]");
+    assert_usage_error(run("metrics " CORNELL_PAIR " --fail-percent 'flip_hdr 0.1 1'"),
+                       "no share of pixels above 0.1 in flip_hdr (is that FLIP computed?)");
+#undef PCT_PAIR
+}
+
+/* Several tests against one reference: a row each in the text, the CSV and the JSON;
+ * the verdict is the worst (16 spp fails LDR-FLIP > 0.13, 64 spp at 0.117 passes), the
+ * last line names the failing test, and each row carries its own verdict. The CSV's
+ * numbers are the JSON's (printed to 9 digits). */
+static void
+test_metrics_several_tests(void **state)
+{
+    (void)state;
+    const char *csv = mcp_test_path("several.csv"), *dir = mcp_test_path("several");
+#define SERIES MCP_TEST_SOURCE_DIR "/samples/fixtures/cornell/series/"
+#define THREE "'" SERIES "cornell_spp0016.exr' '" SERIES "cornell_spp0064.exr' '" \
+    SERIES "cornell_spp0256.exr' '" MCP_TEST_SOURCE_DIR \
+    "/samples/fixtures/cornell/cornell_reference.exr' --no-spectra --flip ldr"
+    assert_int_equal(run("metrics " THREE " --fail 'flip_ldr.mean > 0.13' --csv '%s' -o '%s'",
+                         csv, dir),
+                     4);
+    assert_string_equal(last_line(), "FAILURE: " SERIES "cornell_spp0016.exr: "
+                                     "flip_ldr.mean > 0.13 (0.135066)");
+    /* the text: a header and a row per test, each with its verdict */
+    assert_non_null(strstr(out, "LDR-FLIP median"));
+    const char *row16 = strstr(out, "cornell_spp0016.exr "), *row64 = strstr(out, "cornell_spp0064.exr ");
+    assert_non_null(row16);
+    assert_non_null(row64);
+    assert_non_null(strstr(row16, "FAILURE\n"));
+    assert_true(strstr(row64, "PASS\n") < strstr(row64, "\n") + 1);
+    /* the CSV: header + 3 rows, the gate column last */
+    char *text = mcp_test_read_text(csv);
+    int lines = 0;
+    for (char *c = text; *c; c++)
+        lines += *c == '\n';
+    assert_int_equal(lines, 4);
+    assert_true(!strncmp(text, "test,reference,mse,rmse,relmse,psnr,pmse,", 41));
+    assert_non_null(strstr(text, ",flip_ldr_mean,flip_ldr_weighted_median,"
+                                 "flip_ldr_weighted_q1,flip_ldr_weighted_q3,flip_ldr_min,"
+                                 "flip_ldr_max,gate\n"));
+    /* the JSON: tests[] with the same numbers, and the worst verdict */
+    assert_int_equal(run("metrics --json " THREE " --fail 'flip_ldr.mean > 0.13'"), 4);
+    cJSON *j = cJSON_Parse(out);
+    const cJSON *tests = cJSON_GetObjectItem(j, "tests");
+    assert_int_equal(cJSON_GetArraySize(tests), 3);
+    const cJSON *g = cJSON_GetObjectItem(j, "gate");
+    assert_string_equal(cJSON_GetObjectItem(g, "verdict")->valuestring, "failure");
+    assert_int_equal(cJSON_GetArraySize(cJSON_GetObjectItem(g, "failed_tests")), 1);
+    char *row = strchr(text, '\n') + 1; /* the CSV's first test */
+    for (int t = 0; t < 3; t++) {
+        const cJSON *one = cJSON_GetArrayItem(tests, t);
+        const cJSON *fl = cJSON_GetObjectItem(one, "flip_ldr");
+        char want[200];
+        snprintf(want, sizeof want, ",%.9g,%.9g,", cJSON_GetObjectItem(fl, "mean")->valuedouble,
+                 cJSON_GetObjectItem(fl, "weighted_median")->valuedouble);
+        char *end = strchr(row, '\n');
+        *end = '\0';
+        assert_non_null(strstr(row, want));
+        assert_non_null(strstr(row, t == 0 ? ",FAILURE" : ",PASS"));
+        row = end + 1;
+        assert_string_equal(cJSON_GetObjectItem(cJSON_GetObjectItem(one, "gate"), "verdict")->valuestring,
+                            t == 0 ? "failure" : "pass");
+    }
+    free(text);
+    cJSON_Delete(j);
+    /* -o: each test's maps under its name, and the overlapped histogram */
+    char path[4300];
+    snprintf(path, sizeof path, "%s/cornell_spp0064.flip_ldr.exr", dir);
+    assert_int_equal(access(path, R_OK), 0);
+    snprintf(path, sizeof path, "%s/flip_ldr_histogram.svg", dir);
+    text = mcp_test_read_text(path);
+    assert_non_null(strstr(text, "cornell_spp0016.exr"));
+    assert_non_null(strstr(text, "cornell_spp0256.exr"));
+    assert_non_null(strstr(text, "fill-opacity=\"0.45\""));
+    free(text);
+    assert_usage_error(run("metrics '" SERIES "cornell_spp0016.exr'"), "give TEST... and REF");
+#undef THREE
+#undef SERIES
+}
+
 /* The stage's fail: / warn: keys: a bad figure at its job-file line before anything
  * runs, and `mcpost run` exiting with the worst gate after writing the report. */
+/* The stage's fail_percent: / warn_percent: and compare:. A bad map is named at its
+ * job-file line before anything runs; the shares, the compared test's FLIP and the
+ * histograms are those `mcpost metrics` gives for the same images. */
+static void
+test_metrics_percent_job(void **state)
+{
+    (void)state;
+    static const char job[] =
+        "inputs:\n"
+        "  noisy: {image: '%s/samples/fixtures/cornell/series/cornell_spp0016.exr'}\n"
+        "  better: {image: '%s/samples/fixtures/cornell/series/cornell_spp0256.exr'}\n"
+        "  ref: {image: '%s/samples/fixtures/cornell/cornell_reference.exr'}\n"
+        "output: percent_out\n"
+        "stages:\n"
+        "  - metrics:\n"
+        "      input: noisy\n"
+        "      reference: ref\n"
+        "      compare: better\n"
+        "      maps: false\n"
+        "      spectra: false\n"
+        "      flip: ldr\n"
+        "      fail_percent: ['%s']\n";
+    char text[2048], path[1024];
+    snprintf(path, sizeof path, "%s", mcp_test_path("percent.yaml"));
+    snprintf(text, sizeof text, job, MCP_TEST_SOURCE_DIR, MCP_TEST_SOURCE_DIR,
+             MCP_TEST_SOURCE_DIR, "flip_hdr 0.3 1%");
+    mcp_test_write_text(path, text);
+    assert_one_line_error(run("run --check '%s'", path),
+                          "percent.yaml:14: fail_percent: 'flip_hdr > 0.3 on more than 1% of "
+                          "the pixels': the metrics have no share of pixels above 0.3 in "
+                          "flip_hdr");
+    snprintf(text, sizeof text, job, MCP_TEST_SOURCE_DIR, MCP_TEST_SOURCE_DIR,
+             MCP_TEST_SOURCE_DIR, "flip_ldr 0.3 1%");
+    mcp_test_write_text(path, text);
+    assert_int_equal(run("run -q --json '%s'", path), 4);
+    cJSON *j = cJSON_Parse(out);
+    const cJSON *sec = cJSON_GetArrayItem(cJSON_GetObjectItem(j, "sections"), 0);
+    assert_string_equal(
+        cJSON_GetArrayItem(cJSON_GetObjectItem(cJSON_GetObjectItem(sec, "gate"), "failed"), 0)
+            ->valuestring,
+        "flip_ldr > 0.3 on more than 1% of the pixels");
+    double share = cJSON_GetObjectItem(cJSON_GetArrayItem(cJSON_GetObjectItem(sec, "pixels_above"), 0),
+                                       "percent")->valuedouble;
+    double cmp_median = cJSON_GetObjectItem(
+        cJSON_GetObjectItem(cJSON_GetObjectItem(sec, "compare"), "flip_ldr"),
+        "weighted_median")->valuedouble;
+    /* the LDR-FLIP histogram's bars: input and compare overlapped */
+    const cJSON *plot = NULL, *p;
+    cJSON_ArrayForEach(p, cJSON_GetObjectItem(sec, "plots"))
+    if (!strcmp(cJSON_GetObjectItem(p, "title")->valuestring, "weighted LDR-FLIP histogram"))
+        plot = p;
+    assert_non_null(plot);
+    const cJSON *series = cJSON_GetObjectItem(plot, "series");
+    assert_int_equal(cJSON_GetArraySize(series), 2);
+    assert_string_equal(cJSON_GetObjectItem(cJSON_GetArrayItem(series, 1), "name")->valuestring,
+                        "better");
+    assert_string_equal(cJSON_GetObjectItem(cJSON_GetArrayItem(series, 0), "style")->valuestring,
+                        "bars");
+    assert_string_equal(cJSON_GetArrayItem(cJSON_GetObjectItem(sec, "json_only"), 0)->valuestring,
+                        "flip_histogram");
+    cJSON_Delete(j);
+    /* the same numbers from the command */
+    assert_int_equal(run("metrics --json --no-spectra --flip ldr "
+                         "'%s/samples/fixtures/cornell/series/cornell_spp0016.exr' "
+                         "'%s/samples/fixtures/cornell/series/cornell_spp0256.exr' "
+                         "'%s/samples/fixtures/cornell/cornell_reference.exr' "
+                         "--fail-percent 'flip_ldr 0.3 1'",
+                         MCP_TEST_SOURCE_DIR, MCP_TEST_SOURCE_DIR, MCP_TEST_SOURCE_DIR),
+                     4);
+    j = cJSON_Parse(out);
+    const cJSON *tests = cJSON_GetObjectItem(j, "tests");
+    assert_true(cJSON_GetObjectItem(cJSON_GetArrayItem(cJSON_GetObjectItem(
+                    cJSON_GetArrayItem(tests, 0), "pixels_above"), 0), "percent")
+                    ->valuedouble == share);
+    assert_true(cJSON_GetObjectItem(cJSON_GetObjectItem(cJSON_GetArrayItem(tests, 1),
+                                                        "flip_ldr"),
+                                    "weighted_median")->valuedouble == cmp_median);
+    cJSON_Delete(j);
+}
+
 static void
 test_metrics_gate_job(void **state)
 {
@@ -677,7 +928,10 @@ main(void)
         cmocka_unit_test(test_merge_and_variance_sources),
         cmocka_unit_test(test_help_and_version),
         cmocka_unit_test(test_metrics_gates),
+        cmocka_unit_test(test_metrics_percent_gates),
+        cmocka_unit_test(test_metrics_several_tests),
         cmocka_unit_test(test_metrics_gate_job),
+        cmocka_unit_test(test_metrics_percent_job),
     };
     return cmocka_run_group_tests_name("cli", tests, NULL, NULL);
 }

@@ -306,6 +306,79 @@ test_a_failed_frame_is_listed_by_run_and_collect(void **state)
     assert_non_null(strstr(err, "r: no frames here"));
 }
 
+/* collect's gates judge each frame's metrics section as `mcpost metrics` judges a test:
+ * a relMSE threshold between the frames' own values warns for exactly the frames
+ * above it; a share of pixels above a FLIP threshold, counted here over each frame's
+ * flip_ldr.exr, fails exactly the frames whose share exceeds P (taken from their own
+ * counts, so both verdicts are seen); the last line names them; a figure the sections
+ * lack is one error naming the frame. */
+static void
+test_collect_gates(void **state)
+{
+    (void)state;
+    write_job("gates.yaml", "1-4");
+    assert_int_equal(run("run '%s/gates.yaml' --quiet", dir), 0);
+    double rel[5], share[5];
+    for (int f = 1; f <= 4; f++) {
+        cJSON *own = read_json("%s/out/gates.yaml/%04d/report.json", dir, f);
+        rel[f] = frame_figure(own, "relmse");
+        cJSON_Delete(own);
+        char path[4300];
+        snprintf(path, sizeof path, "%s/out/gates.yaml/%04d/noisy/flip_ldr.exr", dir, f);
+        mcp_image *map = NULL;
+        assert_int_equal(mcp_image_read(path, NULL, &map), 0);
+        long above = 0, n = (long)map->width * map->height;
+        for (int y = 0; y < map->height; y++)
+            for (int x = 0; x < map->width; x++)
+                above += mcp_image_px(map, x, y)[0] > 0.4f;
+        share[f] = 100.0 * above / n;
+        mcp_image_free(map);
+    }
+    /* thresholds between the frames' values: the middle of the sorted four */
+    double r_sorted[4] = {rel[1], rel[2], rel[3], rel[4]}, s_sorted[4] = {share[1], share[2], share[3], share[4]};
+    for (int i = 0; i < 4; i++)
+        for (int j = i + 1; j < 4; j++) {
+            if (r_sorted[j] < r_sorted[i]) { double t = r_sorted[i]; r_sorted[i] = r_sorted[j]; r_sorted[j] = t; }
+            if (s_sorted[j] < s_sorted[i]) { double t = s_sorted[i]; s_sorted[i] = s_sorted[j]; s_sorted[j] = t; }
+        }
+    double r_cut = 0.5 * (r_sorted[1] + r_sorted[2]), s_cut = 0.5 * (s_sorted[1] + s_sorted[2]);
+    assert_true(r_sorted[1] < r_sorted[2]);
+    assert_true(s_sorted[1] < s_sorted[2]);
+    assert_int_equal(run("collect '%s/out/gates.yaml' --quiet --warn 'relmse > %.9g'", dir, r_cut), 3);
+    char want[512];
+    int len = snprintf(want, sizeof want, "WARNING");
+    for (int f = 1, shown = 0; f <= 4; f++)
+        if (rel[f] > r_cut)
+            len += snprintf(want + len, sizeof want - len, "%s frame %d: noisy: relmse > %g (%.6g)",
+                            shown++ ? ";" : ":", f, r_cut, rel[f]);
+    assert_string_equal(out, (strcat(want, "\n"), want));
+    /* a failure outranks it: only the failing frames are named */
+    assert_int_equal(run("collect '%s/out/gates.yaml' --quiet --warn 'relmse > %.9g' "
+                         "--fail-percent 'flip_ldr 0.4 %.9g'",
+                         dir, r_cut, s_cut),
+                     4);
+    cJSON *rep = read_json("%s/out/gates.yaml/report.json", dir);
+    cJSON *sec = cJSON_GetArrayItem(cJSON_GetObjectItem(rep, "sections"), 0), *f;
+    cJSON_ArrayForEach(f, cJSON_GetObjectItem(sec, "frame_list"))
+    {
+        int n = cJSON_GetObjectItem(f, "frame")->valueint;
+        const char *g = cJSON_GetObjectItem(f, "gate")->valuestring;
+        assert_string_equal(g, share[n] > s_cut ? "failure" : rel[n] > r_cut ? "warning" : "pass");
+        snprintf(want, sizeof want, "frame %d: noisy: flip_ldr > 0.4 on more than", n);
+        assert_true((strstr(out, want) != NULL) == (share[n] > s_cut));
+    }
+    assert_string_equal(cJSON_GetObjectItem(cJSON_GetObjectItem(sec, "verdict"), "level")->valuestring,
+                        "bad");
+    cJSON_Delete(rep);
+    /* every frame within bounds: PASS and 0 */
+    assert_int_equal(run("collect '%s/out/gates.yaml' --quiet --fail 'relmse > 1e9'", dir), 0);
+    assert_string_equal(out, "PASS\n");
+    /* a figure no section has: exit 1, naming the frame */
+    assert_int_equal(run("collect '%s/out/gates.yaml' --quiet --fail 'flip_ldr.median > 0.1'", dir), 1);
+    assert_non_null(strstr(err, "frame 1, metrics of noisy: --fail 'flip_ldr.median > 0.1': no figure"));
+    assert_int_equal(run("collect '%s/out/gates.yaml' --fail-percent 'flip 1 2'", dir), 2);
+}
+
 /* A series with both tokens: '#' (or the first %d) is the frame, the other the spp. */
 /* A mistake every frame shares (a misspelt key) is one error before any frame starts,
  * from run and from submit: no frame's error.txt, no output folder, no Slurm script. */
@@ -457,6 +530,7 @@ main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_run_frames_in_parallel_and_resume),
         cmocka_unit_test(test_a_failed_frame_is_listed_by_run_and_collect),
+        cmocka_unit_test(test_collect_gates),
         cmocka_unit_test(test_a_shared_mistake_stops_the_shot_before_its_frames),
         cmocka_unit_test(test_series_pattern_holds_frame_and_spp),
         cmocka_unit_test(test_submit_writes_an_array_job_and_its_collect_job),

@@ -507,7 +507,7 @@ test_cli(void **state)
     snprintf(args, sizeof args, "metrics '%s'", test_path);
     assert_int_equal(
         mcp_test_run_mcpost(args, out_buf, sizeof out_buf, err_buf, sizeof err_buf), 2);
-    assert_non_null(strstr(err_buf, "give TEST and REF"));
+    assert_non_null(strstr(err_buf, "give TEST... and REF"));
 }
 
 static void

@@ -314,6 +314,43 @@ test_plot_axes(void **state)
     assert_close(mcp_logistic(mcp_logit(0.99)), 0.99, 1e-12, 0);
 }
 
+/* Bars (histograms): each bar centred on its x and as wide as the gap between the
+ * x's, standing on y = 0, its height proportional to y; a zero bar is not drawn; the
+ * translucent fill lets a second series' bars show through. */
+static void
+test_plot_bars(void **state)
+{
+    (void)state;
+    const double x[3] = {0.25, 0.5, 0.75}, y[3] = {2, 0, 4};
+    mcp_plot_series s[2] = {{"a", MCP_SERIES_BARS, x, y, 3, 0},
+                            {"b", MCP_SERIES_BARS, x, y, 3, 0}};
+    mcp_plot plot = {"h", "x", "y", MCP_AXIS_LINEAR, MCP_AXIS_LINEAR, s, 2, 0, 0};
+    char *svg = NULL;
+    assert_int_equal(mcp_plot_svg(&plot, &svg), 0);
+    const char *g = strstr(svg, "fill-opacity=\"0.45\"");
+    assert_non_null(g);
+    double bx[2], by[2], bw[2], bh[2];
+    const char *r = g;
+    for (int i = 0; i < 2; i++) {
+        r = strstr(r, "<rect x=");
+        assert_non_null(r);
+        assert_int_equal(sscanf(r, "<rect x=\"%lf\" y=\"%lf\" width=\"%lf\" height=\"%lf\"",
+                                &bx[i], &by[i], &bw[i], &bh[i]),
+                         4);
+        r++;
+    }
+    assert_close(bw[0], bw[1], 0, 0.011);                   /* both 0.25 wide */
+    assert_close(bx[1] - bx[0], 2 * bw[0], 0, 0.011);       /* centres 0.5 apart */
+    assert_close(bh[1], 2 * bh[0], 0, 0.011);               /* 4 against 2 */
+    assert_close(by[0] + bh[0], by[1] + bh[1], 0, 0.011);   /* one foot: y = 0 */
+    assert_int_equal(count(svg, "fill-opacity=\"0.45\" stroke="), 2 + 2); /* groups, legend */
+    mcp_series_style st;
+    assert_int_equal(mcp_series_style_from_name("bars", &st), 0);
+    assert_int_equal(st, MCP_SERIES_BARS);
+    assert_string_equal(mcp_series_style_name(MCP_SERIES_BARS), "bars");
+    free(svg);
+}
+
 int
 main(void)
 {
@@ -322,6 +359,7 @@ main(void)
         cmocka_unit_test(test_html_self_contained),
         cmocka_unit_test(test_html_values_maps_verdicts),
         cmocka_unit_test(test_plot_axes),
+        cmocka_unit_test(test_plot_bars),
     };
     return cmocka_run_group_tests_name("common/report", tests, NULL, NULL);
 }
