@@ -272,4 +272,11 @@ void mcp__gate_record(mcp__gate_verdict v);
 mcp__gate_verdict mcp__gate_worst(void);
 void mcp__gate_reset(void);
 
+/* The metrics section's verdict from its figures (stage_metrics.c): the gate's line
+ * first when there is a gate (its colour: pass good, warning info, failure bad), then
+ * relMSE as a relative error, FLIP in words and a series' MSE slope; `mcpost compare`
+ * gives its sections the same line. */
+int mcp__metrics_verdict(cJSON *section, const mcp__gate *gate, mcp__gate_verdict gv,
+                         const char *gate_line);
+
 #endif

@@ -41,11 +41,13 @@ count_named(const char *dir, const char *prefix)
     return n;
 }
 
-/* A fresh empty folder under the scratch directory. */
+/* A fresh empty folder under the scratch directory (a copy: mcp_test_path's buffers
+ * rotate, and run() takes some). */
 static const char *
 fresh_dir(const char *name)
 {
-    const char *dir = mcp_test_path(name);
+    static char dir[4096];
+    snprintf(dir, sizeof dir, "%s", mcp_test_path(name));
     char cmd[4200];
     snprintf(cmd, sizeof cmd, "rm -rf '%s' && mkdir -p '%s'", dir, dir);
     assert_int_equal(system(cmd), 0);
