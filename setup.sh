@@ -85,9 +85,13 @@ demo)
     # every stage, every module: the report ends the demo
     ./build/mcpost run samples/jobs/demo.yaml
     # where Chromium is installed (setup.sh test installs it): the page checked in a
-    # real browser and a screenshot of it, out/demo/report.png
+    # real browser and a screenshot of it, out/demo/report.png; the check's own lines
+    # only when it fails (the demo prints mcpost's lines)
     if command -v chromium >/dev/null; then
-        tests/report/check_page.sh out/demo 1280 || echo "setup: report.html check failed" >&2
+        if ! check=$(tests/report/check_page.sh out/demo 1280 2>&1); then
+            printf '%s\n' "$check" >&2
+            echo "setup: report.html check failed" >&2
+        fi
     fi
     ;;
 test)

@@ -75,9 +75,11 @@ cmp_float(const void *a, const void *b)
 }
 
 /* A one-channel image as a false-colour PNG, scaled to its 99th percentile: a few
- * pixels far above the rest (a firefly's) would otherwise leave the picture black. */
+ * pixels far above the rest (a firefly's) would otherwise leave the picture black.
+ * *top receives the value at the scale's top (the colour bar's end). */
 static int
-write_png(const mcp__adaptive_loop *c, const mcp_image *img, const char *fmt, int pass)
+write_png(const mcp__adaptive_loop *c, const mcp_image *img, const char *fmt, int pass,
+          double *top)
 {
     char path[4352];
     size_t n = (size_t)img->width * img->height;
@@ -90,6 +92,7 @@ write_png(const mcp__adaptive_loop *c, const mcp_image *img, const char *fmt, in
     double hi = v[(size_t)(0.99 * (double)(n - 1))];
     if (!(hi > 0)) hi = v[n - 1];
     free(v);
+    *top = hi > 0 ? hi : 1.0;
     unsigned char *rgb = mcp_malloc(n * 3);
     int rc =
         !rgb || path_in(c, path, sizeof path, fmt, pass) ||
@@ -102,11 +105,13 @@ write_png(const mcp__adaptive_loop *c, const mcp_image *img, const char *fmt, in
 static int
 on_iteration(const mcp_adaptive_state *st, void *ctx)
 {
-    const mcp__adaptive_loop *c = ctx;
+    mcp__adaptive_loop *c = ctx;
     const mcp_adaptive_iteration *it = st->it;
-    if (write_png(c, st->counts, "maps/counts_%04d.png", it->pass) ||
+    c->prev_map_hi = c->map_hi;
+    if (write_png(c, st->counts, "maps/counts_%04d.png", it->pass, &c->counts_hi) ||
         (c->ao.map != MCP_ADAPTIVE_UNIFORM &&
-         write_png(c, st->est->sampling_map, "maps/sampling_map_%04d.png", it->pass)))
+         write_png(c, st->est->sampling_map, "maps/sampling_map_%04d.png", it->pass,
+                   &c->map_hi)))
         return -1;
     char rel[64] = "";
     if (c->reference) snprintf(rel, sizeof rel, ", relMSE %.4g", it->relmse);
@@ -226,11 +231,21 @@ write_curves(const mcp__adaptive_loop *c, const mcp_adaptive_result *r)
             goto done;
         char relp[512];
         snprintf(relp, sizeof relp, "%smaps/counts_%04d.png", c->rel, n - 1);
-        if (mcp_report_add_image(c->section, relp, "the last pass's sample counts"))
+        /* the colours run from 0 to the 99th percentile (write_png) */
+        if (!mcp_report_add_map(c->section, relp, "the last pass's sample counts",
+                                MCP_COLORMAP_INFERNO, 0.0, c->counts_hi, MCP_AXIS_LINEAR,
+                                "samples per pixel in the pass (brightest: its 99th "
+                                "percentile and above)"))
             goto done;
         if (n > 1 && c->ao.map != MCP_ADAPTIVE_UNIFORM) {
+            /* the map's weights sum to 1: shown as multiples of the mean weight */
+            double mean = 1.0 / ((double)c->width * c->height);
             snprintf(relp, sizeof relp, "%smaps/sampling_map_%04d.png", c->rel, n - 2);
-            if (mcp_report_add_image(c->section, relp, "the sampling map it came from"))
+            if (!mcp_report_add_map(c->section, relp, "the sampling map it came from",
+                                    MCP_COLORMAP_INFERNO, 0.0, c->prev_map_hi / mean,
+                                    MCP_AXIS_LINEAR,
+                                    "sample density, times the image's mean (brightest: "
+                                    "the 99th percentile and above)"))
                 goto done;
         }
     }

@@ -77,9 +77,10 @@ int mcp__variance_from(const char *text, mcp_series_variance *out);
 const char *mcp__variance_ratio_warning(double ratio, int using_increments);
 /* A series' ratio into its JSON object / report section ("variance_ratio", and when
  * off "variance_choice" if the increments are used, else "variance_warning"), and that
- * line once on stderr (also when quiet: it says what the figures rest on). j may be
- * NULL. */
-void mcp__report_variance_ratio(double ratio, int using_increments, cJSON *j);
+ * line once on stderr (also when quiet: it says what the figures rest on) unless the
+ * increments are used because the series asked for them (asked: variance_from
+ * increments). j may be NULL. */
+void mcp__report_variance_ratio(double ratio, int using_increments, int asked, cJSON *j);
 
 /* ---- stage_denoiser.c ---- */
 
@@ -168,6 +169,9 @@ typedef struct mcp__adaptive_loop {
     const mcp_image *reference;
     const mcp_denoiser *den;
     cJSON *section; /* the job report's section, or NULL */
+    /* the top of the colour scale of the maps written last (their colour bars):
+     * counts and sampling map of the last pass, sampling map of the one before */
+    double counts_hi, map_hi, prev_map_hi;
 } mcp__adaptive_loop;
 
 /* Runs the loop and writes every output; *json (may be NULL) receives the figures. */
