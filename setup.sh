@@ -61,6 +61,8 @@ link_python() { # lets `python3 -c "import mcpost"` find build/python: a .pth fi
     compgen -G "build/python/mcpost*.so" >/dev/null || return 0
     local site
     site=$("$PYTHON" -c 'import site; print(site.getusersitepackages())') || return 0
+    # said once, when the link is made (a second demo prints mcpost's lines only)
+    [ "$(cat "$site/mcpost-build.pth" 2>/dev/null)" != "$PWD/build/python" ] || return 0
     mkdir -p "$site" && echo "$PWD/build/python" >"$site/mcpost-build.pth"
     echo "setup: python3 finds the mcpost module in build/python ($site/mcpost-build.pth)" >&2
 }
