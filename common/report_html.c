@@ -728,6 +728,7 @@ render_figure(sbuf *b, const page_image *im)
     }
     sb_str(b, "<figcaption>");
     sb_text(b, im->caption && *im->caption ? im->caption : im->rel);
+    if (im->rgbe) sb_str(b, " <span title=\"the display controls apply\">&#9788;</span>");
     if (im->data && im->width > 0) {
         sb_printf(b, " <span class=\"dim\">%d&times;%d px", im->width, im->height);
         if (k > 1) sb_printf(b, ", shown %d&times;", k);
@@ -976,7 +977,8 @@ render_display_bar(sbuf *b, const cJSON *root)
     for (size_t i = 0; i < sizeof modes / sizeof *modes; i++)
         sb_printf(b, "<option value=\"%s\"%s>%s</option>", modes[i][0],
                   strcmp(mode, modes[i][0]) ? "" : " selected", modes[i][1]);
-    sb_str(b, "</select></label><div class=\"dsp-legend\" hidden>");
+    sb_str(b, "</select></label><span class=\"dim\">for the renders marked &#9788;</span>"
+              "<div class=\"dsp-legend\" hidden>");
     cJSON *scale = cJSON_CreateObject();
     if (!scale || !cJSON_AddStringToObject(scale, "colormap", "viridis") ||
         !cJSON_AddNumberToObject(scale, "min", pow(10.0, FALSE_LO)) ||
