@@ -299,7 +299,7 @@ cmd_blend(int argc, char **argv)
     cJSON *section = mcp_report_section(report, "blend", title);
     if (!section || mcp__blend_run(series, den, ref, &o, den->name, &sink, section))
         goto fail;
-    mcp__outdir_fix_paths(&whole, mcp_report_json(report));
+    if (mcp__outdir_fix_paths(&whole, mcp_report_json(report))) goto fail;
     char *text = cJSON_Print(section), path[4400];
     snprintf(path, sizeof path, "%s/blend.json", whole.tmp);
     int wrc = !text || mcp_write_file_atomic(path, text, strlen(text));

@@ -435,9 +435,9 @@ cmd_estimate(int argc, char **argv)
         if (!json) print_single(e, path, den->name, eo);
         status = exit_status && !e->stop ? EXIT_CONTINUE : 0;
     }
-    if (report) mcp__outdir_fix_paths(&whole, mcp_report_json(report));
-    mcp__outdir_fix_paths(&whole, summary);
-    if (report && (mcp_report_write(report, od.dir) || mcp__outdir_commit(&whole))) {
+    if ((report && mcp__outdir_fix_paths(&whole, mcp_report_json(report))) ||
+        mcp__outdir_fix_paths(&whole, summary) ||
+        (report && (mcp_report_write(report, od.dir) || mcp__outdir_commit(&whole)))) {
         status = 1;
         goto done;
     }

@@ -268,7 +268,7 @@ cmd_perceptual(int argc, char **argv)
                                          mcp_perc_method_name(a.opt.method))))
         goto fail;
     if (mcp__perceptual_run(&a, &r, &summary, NULL)) goto fail;
-    mcp__outdir_fix_paths(&od, summary); /* name the files where they will be */
+    if (mcp__outdir_fix_paths(&od, summary)) goto fail; /* the files where they will be */
     mcp__perc_fill_section(r.section, summary);
     if (mcp_report_write(report, od.tmp) || mcp__outdir_commit(&od)) goto fail;
     if (json)

@@ -78,7 +78,7 @@ typedef struct mcp__outdir {
 int mcp__outdir_begin(mcp__outdir *o, const char *dir);
 int mcp__outdir_commit(mcp__outdir *o);
 void mcp__outdir_abort(mcp__outdir *o);
-void mcp__outdir_fix_paths(const mcp__outdir *o, cJSON *json);
+int mcp__outdir_fix_paths(const mcp__outdir *o, cJSON *json);
 /* A function the handler of SIGINT, SIGTERM and SIGHUP calls after removing the
  * temporary files in flight (imageio.c); it must be async-signal-safe. */
 void mcp__signal_cleanup_hook(void (*hook)(void));

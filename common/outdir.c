@@ -222,7 +222,7 @@ mcp__outdir_abort(mcp__outdir *o)
     o->active = 0;
 }
 
-static void
+static int
 fix_one(const mcp__outdir *o, cJSON *it)
 {
     size_t n = strlen(o->tmp);
@@ -230,20 +230,21 @@ fix_one(const mcp__outdir *o, cJSON *it)
         (it->valuestring[n] == '/' || !it->valuestring[n])) {
         size_t len = strlen(o->final) + strlen(it->valuestring + n) + 1;
         char *s = mcp_malloc(len);
-        if (s) {
-            snprintf(s, len, "%s%s", o->final, it->valuestring + n);
-            cJSON_SetValuestring(it, s);
-            free(s);
-        }
+        if (!s) return -1;
+        snprintf(s, len, "%s%s", o->final, it->valuestring + n);
+        char *set = cJSON_SetValuestring(it, s);
+        free(s);
+        if (!set) return mcp_error("out of memory");
     }
     for (cJSON *c = it->child; c; c = c->next)
-        fix_one(o, c);
+        if (fix_one(o, c)) return -1;
+    return 0;
 }
 
 /* Replaces the leading temporary folder name in every string of json by the final
  * one, so that figures and messages name the folder the user asked for. */
-void
+int
 mcp__outdir_fix_paths(const mcp__outdir *o, cJSON *json)
 {
-    if (json) fix_one(o, json);
+    return json && o->active ? fix_one(o, json) : 0;
 }

@@ -556,6 +556,8 @@ read_rgbe(page_image *im, const char *path)
         (im->width > 0 && (img->width != im->width || img->height != im->height)) ||
         (long)img->width * img->height > HDR_MAX_PIXELS) {
         mcp_image_free(img);
+        /* out of memory must fail the page, not drop the values */
+        if (strstr(mcp_error_message(), "out of memory")) return -1;
         mcp_error_clear();
         return 0;
     }

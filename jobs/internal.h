@@ -33,7 +33,7 @@ typedef struct mcp__outdir {
 int mcp__outdir_begin(mcp__outdir *o, const char *dir);
 int mcp__outdir_commit(mcp__outdir *o);
 void mcp__outdir_abort(mcp__outdir *o);
-void mcp__outdir_fix_paths(const mcp__outdir *o, cJSON *json);
+int mcp__outdir_fix_paths(const mcp__outdir *o, cJSON *json);
 
 /* ---- commands (common/shell.c, declared in common/internal.h) ---- */
 
