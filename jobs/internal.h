@@ -172,6 +172,7 @@ typedef struct mcp__adaptive_loop {
     /* the top of the colour scale of the maps written last (their colour bars):
      * counts and sampling map of the last pass, sampling map of the one before */
     double counts_hi, map_hi, prev_map_hi;
+    int counts_flat; /* the last pass's counts are one value (counts_hi): no picture */
 } mcp__adaptive_loop;
 
 /* Runs the loop and writes every output; *json (may be NULL) receives the figures. */
