@@ -179,16 +179,23 @@ done:
     return rc;
 }
 
-/* With several tests, the first section: one row a test, and the worst gate. */
+/* With several tests, the first section: one row a test (the FLIP columns that were
+ * computed, the gate's verdict when there is a gate), and the worst gate. */
 static int
-summary_section(mcp_report *report, cJSON *sections, int n_tests, const mcp__gate *gate,
-                mcp__gate_verdict worst, const char *worst_test, cJSON **out)
+summary_section(cJSON *sections, int n_tests, const mcp_metrics_options *o,
+                const mcp__gate *gate, mcp__gate_verdict worst, const char *worst_test,
+                cJSON **out)
 {
-    static const char *const cols[] = {"test", "relMSE", "PSNR (dB)", "LDR-FLIP",
-                                       "HDR-FLIP", "gate"};
+    const char *cols[6] = {"test", "relMSE", "PSNR (dB)"};
+    int n_cols = 3;
+    if (o->flip_ldr) cols[n_cols++] = "LDR-FLIP";
+    if (o->flip_hdr) cols[n_cols++] = "HDR-FLIP";
+    if (gate->n) cols[n_cols++] = "gate";
     cJSON *s = cJSON_CreateObject();
-    cJSON *t = s ? mcp_report_add_table(s, "every test against the reference", cols, 6) : NULL;
-    if (!t) {
+    cJSON *t = s ? mcp_report_add_table(s, "every test against the reference", cols, n_cols)
+                 : NULL;
+    cJSON *rows = cJSON_GetObjectItem(t, "rows");
+    if (!rows) {
         cJSON_Delete(s);
         return mcp_error("out of memory for the report");
     }
@@ -201,12 +208,28 @@ summary_section(mcp_report *report, cJSON *sections, int n_tests, const mcp__gat
         const cJSON *g = cJSON_GetObjectItem(cJSON_GetObjectItem(sec, "gate"), "verdict");
         double relmse = figure(sec, "relmse", NULL);
         if (relmse < best_relmse) best_relmse = relmse, best = i;
-        if (mcp_report_table_add_row(
-                t, "sdddds", cJSON_GetStringValue(cJSON_GetObjectItem(sec, "test")), relmse,
-                figure(sec, "psnr", NULL), figure(sec, "flip_ldr", "mean"),
-                figure(sec, "flip_hdr", "mean"), cJSON_IsString(g) ? g->valuestring : NULL)) {
+        /* a row as report.h has it: numbers (NaN as null) and strings */
+        cJSON *row = cJSON_CreateArray();
+        double v[4] = {relmse, figure(sec, "psnr", NULL), figure(sec, "flip_ldr", "mean"),
+                       figure(sec, "flip_hdr", "mean")};
+        int on[4] = {1, 1, o->flip_ldr, o->flip_hdr};
+        if (!row || !cJSON_AddItemToArray(row, cJSON_CreateString(cJSON_GetStringValue(
+                                                   cJSON_GetObjectItem(sec, "test"))))) {
+            cJSON_Delete(row);
             cJSON_Delete(s);
-            return -1;
+            return mcp_error("out of memory for the report");
+        }
+        for (int k = 0; k < 4; k++)
+            if (on[k])
+                cJSON_AddItemToArray(row, isfinite(v[k]) ? cJSON_CreateNumber(v[k])
+                                                         : cJSON_CreateNull());
+        if (gate->n)
+            cJSON_AddItemToArray(row, cJSON_IsString(g) ? cJSON_CreateString(g->valuestring)
+                                                        : cJSON_CreateNull());
+        cJSON_AddItemToArray(rows, row);
+        if (cJSON_GetArraySize(row) != n_cols) { /* an item ran out of memory */
+            cJSON_Delete(s);
+            return mcp_error("out of memory for the report");
         }
     }
     const char *best_name =
@@ -230,7 +253,6 @@ summary_section(mcp_report *report, cJSON *sections, int n_tests, const mcp__gat
                                     "gate %s, first in %s; %s",
                                     worst == MCP__GATE_FAILURE ? "FAILURE" : "WARNING",
                                     worst_test, best_text);
-    (void)report;
     if (rc) {
         cJSON_Delete(s);
         return -1;
@@ -353,7 +375,7 @@ cmd_compare(int argc, char **argv)
     cJSON *sections = cJSON_GetObjectItem(mcp_report_json(report), "sections");
     if (n_tests > 1) { /* the summary goes first */
         cJSON *sum = NULL;
-        if (summary_section(report, sections, n_tests, &gate, worst, worst_test, &sum))
+        if (summary_section(sections, n_tests, &o, &gate, worst, worst_test, &sum))
             goto done;
         cJSON_InsertItemInArray(sections, 0, sum);
     }

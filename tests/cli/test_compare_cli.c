@@ -56,6 +56,7 @@ test_figures_and_gates(void **state)
     (void)state;
     const char *ref = scratch("ref.exr"), *a = scratch("a.exr"),
                *b = scratch("b.exr"), *dir = scratch("page");
+    char path[4400];
     write_pair(ref, a, 0.1f);
     write_pair(ref, b, 0.3f);
     /* no gate: exit 0, the figures in JSON */
@@ -76,7 +77,6 @@ test_figures_and_gates(void **state)
     }
     cJSON_Delete(doc);
     /* one folder per test, and the page */
-    char path[4400];
     const char *files[] = {"report.html", "report.json", "test1/test.png", "test1/test.exr",
                            "test1/reference.png", "test2/relse.png", "test2/test.exr"};
     for (size_t i = 0; i < sizeof files / sizeof *files; i++) {
@@ -92,6 +92,28 @@ test_figures_and_gates(void **state)
     while (last > out && last[-1] != '\n')
         last--;
     assert_non_null(strstr(last, "WARNING: relmse > 0.1"));
+    /* the summary first: a row a test, no FLIP columns (none computed), the gate's
+       verdicts, and the worst one in words */
+    snprintf(path, sizeof path, "%s/report.json", dir);
+    char *summary_text = mcp_test_read_text(path);
+    cJSON *rep = cJSON_Parse(summary_text);
+    free(summary_text);
+    const cJSON *sum = cJSON_GetArrayItem(cJSON_GetObjectItem(rep, "sections"), 0);
+    assert_string_equal(cJSON_GetObjectItem(sum, "title")->valuestring, "summary");
+    const cJSON *table = cJSON_GetArrayItem(cJSON_GetObjectItem(sum, "tables"), 0);
+    char *cols = cJSON_PrintUnformatted(cJSON_GetObjectItem(table, "columns"));
+    assert_string_equal(cols, "[\"test\",\"relMSE\",\"PSNR (dB)\",\"gate\"]");
+    free(cols);
+    const cJSON *rows = cJSON_GetObjectItem(table, "rows");
+    assert_string_equal(cJSON_GetArrayItem(cJSON_GetArrayItem(rows, 0), 3)->valuestring, "pass");
+    assert_string_equal(cJSON_GetArrayItem(cJSON_GetArrayItem(rows, 1), 3)->valuestring,
+                        "warning");
+    assert_close(cJSON_GetArrayItem(cJSON_GetArrayItem(rows, 1), 1)->valuedouble,
+                 0.09 / 0.26, 1e-5, 0);
+    const char *sv = cJSON_GetObjectItem(cJSON_GetObjectItem(sum, "verdict"), "text")->valuestring;
+    assert_non_null(strstr(sv, "gate WARNING, first in "));
+    assert_non_null(strstr(sv, "b.exr"));
+    cJSON_Delete(rep);
     assert_int_equal(run("compare '%s' '%s' '%s' -o '%s' --flip none --quiet --warn "
                          "'relmse > 0.1' --fail 'mse > 0.05'",
                          ref, a, b, dir),
