@@ -68,6 +68,7 @@ cmd_blend(int argc, char **argv)
     mcp_denoiser *den = NULL;
     mcp_image *ref = NULL;
     mcp_report *report = NULL;
+    mcp__outdir whole = {0}; /* -o DIR appears whole, or not at all */
     int parsed = mcp_cli_parse(mcp_operation_blend(), head, examples, argc, argv, &st, &sh,
                                &df, &first);
     if (parsed >= 0) {
@@ -94,13 +95,13 @@ cmd_blend(int argc, char **argv)
               : mcp_series_from_paths((const char *const *)argv + optind, NULL, n_files,
                                       &series)) ||
         mcp_cli_denoiser_create(&df, &den) ||
-        (ref_path && mcp_image_read(ref_path, NULL, &ref)) || mcp_make_dirs(out_dir) ||
-        mcp_report_new("mcpost blend", &report))
+        (ref_path && mcp_image_read(ref_path, NULL, &ref)) ||
+        mcp__outdir_begin(&whole, out_dir) || mcp_report_new("mcpost blend", &report))
         goto fail;
     series->variance_from = variance_from;
     mcp__blend_sink sink;
     memset(&sink, 0, sizeof sink);
-    snprintf(sink.dir, sizeof sink.dir, "%s", out_dir);
+    snprintf(sink.dir, sizeof sink.dir, "%s", whole.tmp);
     sink.rel = "";
     sink.all_images = all_images;
     char title[600];
@@ -108,18 +109,20 @@ cmd_blend(int argc, char **argv)
     cJSON *section = mcp_report_section(report, "blend", title);
     if (!section || mcp__blend_run(series, den, ref, &o, den->name, &sink, section))
         goto fail;
-    char *text = cJSON_Print(section), path[4200];
-    snprintf(path, sizeof path, "%s/blend.json", out_dir);
+    if (mcp__outdir_fix_paths(&whole, mcp_report_json(report))) goto fail;
+    char *text = cJSON_Print(section), path[4400];
+    snprintf(path, sizeof path, "%s/blend.json", whole.tmp);
     int wrc = !text || mcp_write_file_atomic(path, text, strlen(text));
     if (!wrc && json) puts(text);
     free(text);
-    if (wrc || mcp_report_write(report, out_dir)) goto fail;
+    if (wrc || mcp_report_write(report, whole.tmp) || mcp__outdir_commit(&whole)) goto fail;
     mcp_note("blend: %d members into %s", series->count, out_dir);
     status = 0;
     goto done;
 fail:
     status = mcp_cli_fail();
 done:
+    mcp__outdir_abort(&whole);
     mcp_report_free(report);
     mcp_image_free(ref);
     mcp_denoiser_free(den);

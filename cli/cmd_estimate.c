@@ -154,11 +154,16 @@ cmd_estimate(int argc, char **argv)
     mcp_report *report = NULL;
     cJSON *summary = NULL, *section = NULL;
     mcp__estimate_dir od;
+    mcp__outdir whole = {0}; /* -o DIR appears whole, or not at all */
     memset(&od, 0, sizeof od);
-    if (outdir) snprintf(od.dir, sizeof od.dir, "%s", outdir);
-    if (mcp_cli_denoiser_create(&df, &den) ||
+    if (mcp_estimate_check(eo) ||
+        mcp_cli_denoiser_create(&df, &den) ||
         (ref_path && mcp_image_read(ref_path, NULL, &ref)))
         goto done;
+    if (outdir) { /* after the cheap checks, before any work */
+        if (mcp__outdir_begin(&whole, outdir)) goto done;
+        snprintf(od.dir, sizeof od.dir, "%s", whole.tmp);
+    }
     if (outdir && (mcp_report_new("mcpost estimate", &report) ||
                    !(section = mcp_report_section(
                          report, "estimate",
@@ -214,7 +219,9 @@ cmd_estimate(int argc, char **argv)
         if (!json) print_single(e, path, den->name, eo);
         status = exit_status && !e->stop ? EXIT_CONTINUE : 0;
     }
-    if (report && mcp_report_write(report, od.dir)) {
+    if ((report && mcp__outdir_fix_paths(&whole, mcp_report_json(report))) ||
+        mcp__outdir_fix_paths(&whole, summary) ||
+        (report && (mcp_report_write(report, od.dir) || mcp__outdir_commit(&whole)))) {
         status = 1;
         goto done;
     }
@@ -223,6 +230,7 @@ cmd_estimate(int argc, char **argv)
         summary = NULL;
     }
 done:
+    mcp__outdir_abort(&whole);
     if (status == 1) mcp_cli_fail();
     cJSON_Delete(summary);
     mcp_report_free(report);

@@ -179,6 +179,7 @@ cmd_perceptual(int argc, char **argv)
     mcp_image *ref = NULL, *surr = NULL, *conf = NULL, *kern = NULL;
     mcp_report *report = NULL;
     cJSON *summary = NULL;
+    mcp__outdir od = {0}; /* the folder appears whole, or not at all */
     optind = 1;
     while ((opt = getopt_long(argc, argv, "m:s:r:o:h", longs, &idx)) != -1) {
         int rc = mcp_cli_denoiser_flag(&df, opt, optarg);
@@ -260,14 +261,16 @@ cmd_perceptual(int argc, char **argv)
     if (!strcmp(a.surrogate, "denoise") &&
         mcp_cli_denoiser_create(&df, &r.den))
         goto fail;
-    if (mcp_make_dirs(out_dir) || mcp_report_new("mcpost perceptual", &report)) goto fail;
-    snprintf(r.out_dir, sizeof r.out_dir, "%s", out_dir);
+    if (mcp__outdir_begin(&od, out_dir) || mcp_report_new("mcpost perceptual", &report))
+        goto fail;
+    snprintf(r.out_dir, sizeof r.out_dir, "%s", od.tmp);
     if (!(r.section = mcp_report_section(report, "perceptual",
                                          mcp_perc_method_name(a.opt.method))))
         goto fail;
     if (mcp__perceptual_run(&a, &r, &summary, NULL)) goto fail;
+    if (mcp__outdir_fix_paths(&od, summary)) goto fail; /* the files where they will be */
     mcp__perc_fill_section(r.section, summary);
-    if (mcp_report_write(report, out_dir)) goto fail;
+    if (mcp_report_write(report, od.tmp) || mcp__outdir_commit(&od)) goto fail;
     if (json)
         mcp_cli_print_json(summary);
     else {
@@ -280,6 +283,7 @@ cmd_perceptual(int argc, char **argv)
 fail:
     status = mcp_cli_fail();
 done:
+    mcp__outdir_abort(&od);
     cJSON_Delete(summary);
     mcp_report_free(report);
     mcp_image_free(ref), mcp_image_free(surr), mcp_image_free(conf), mcp_image_free(kern);

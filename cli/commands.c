@@ -2,7 +2,7 @@
 #include "cli.h"
 
 extern const mcp_command mcp_command_info, mcp_command_convert, mcp_command_run;
-extern const mcp_command mcp_command_metrics;
+extern const mcp_command mcp_command_metrics, mcp_command_compare;
 extern const mcp_command mcp_command_denoise;
 
 extern const mcp_command mcp_command_perceptual;
@@ -20,6 +20,7 @@ const mcp_command *const mcp_commands[] = {
     &mcp_command_submit,
     &mcp_command_collect,
     &mcp_command_metrics,
+    &mcp_command_compare,
     &mcp_command_denoise,
     &mcp_command_perceptual,
     &mcp_command_estimate,

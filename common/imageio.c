@@ -203,6 +203,8 @@ oiio_write(const mcp_image *img, const char *path, mcp_format format,
 #define MAX_IN_FLIGHT 32
 static char *volatile in_flight[MAX_IN_FLIGHT];
 static pthread_mutex_t in_flight_lock = PTHREAD_MUTEX_INITIALIZER;
+/* then the output folder in flight (outdir.c) */
+static void (*volatile cleanup_hook)(void);
 
 static void
 on_fatal_signal(int sig)
@@ -210,6 +212,7 @@ on_fatal_signal(int sig)
     for (int i = 0; i < MAX_IN_FLIGHT; i++)
         if (in_flight[i])
             unlink(in_flight[i]);
+    if (cleanup_hook) cleanup_hook();
     signal(sig, SIG_DFL);
     raise(sig);
 }
@@ -233,6 +236,13 @@ install_signal_cleanup(void)
 {
     static pthread_once_t once = PTHREAD_ONCE_INIT;
     pthread_once(&once, install_handlers);
+}
+
+void
+mcp__signal_cleanup_hook(void (*hook)(void))
+{
+    cleanup_hook = hook;
+    install_signal_cleanup();
 }
 
 static void

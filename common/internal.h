@@ -61,6 +61,28 @@ int mcp__shell_check(int status, const char *what, const char *command);
 int mcp__shell_fill(const char *tmpl, int n, const char *const *names,
                     const char *const *values, unsigned quoted, char **out);
 
+/* Output folders that appear whole (outdir.c; docs/conventions.md, "Output folders"):
+ * begin makes the hidden temporary folder o->tmp beside dir (first removing what killed
+ * runs left there) and refuses a dir that exists and is neither empty nor an mcpost
+ * output; the command writes into o->tmp; commit renames it onto dir (swapping with an
+ * old one, then removing that); abort removes it (safe after commit, and twice).
+ * fix_paths rewrites strings that start with o->tmp to start with dir. */
+#include <cjson/cJSON.h>
+#ifndef MCP__OUTDIR_DEFINED /* both internal.h files declare it */
+#define MCP__OUTDIR_DEFINED
+typedef struct mcp__outdir {
+    char final[4096], tmp[4200];
+    int active;
+} mcp__outdir;
+#endif
+int mcp__outdir_begin(mcp__outdir *o, const char *dir);
+int mcp__outdir_commit(mcp__outdir *o);
+void mcp__outdir_abort(mcp__outdir *o);
+int mcp__outdir_fix_paths(const mcp__outdir *o, cJSON *json);
+/* A function the handler of SIGINT, SIGTERM and SIGHUP calls after removing the
+ * temporary files in flight (imageio.c); it must be async-signal-safe. */
+void mcp__signal_cleanup_hook(void (*hook)(void));
+
 /* Until called again with NULL, every section made takes this title (borrowed) in
  * place of the one its stage gives: a job stage's `title:` (job.c, report.c). */
 #include <mcpost/report.h>

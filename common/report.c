@@ -96,6 +96,47 @@ mcp_report_add_image(cJSON *section, const char *rel_path, const char *caption)
 }
 
 cJSON *
+mcp_report_add_hdr_image(cJSON *section, const char *rel_png, const char *rel_hdr,
+                         const char *caption)
+{
+    if (mcp_report_add_image(section, rel_png, caption)) return NULL;
+    cJSON *images = cJSON_GetObjectItem(section, "images");
+    cJSON *img = cJSON_GetArrayItem(images, cJSON_GetArraySize(images) - 1);
+    if (!cJSON_AddStringToObject(img, "hdr", rel_hdr)) {
+        oom();
+        return NULL;
+    }
+    return img;
+}
+
+static const char *const display_modes[] = {"clamp", "aces", "hable", "reinhard",
+                                            "false-colour"};
+
+int
+mcp_report_display_mode_check(const char *mode)
+{
+    for (size_t i = 0; i < sizeof display_modes / sizeof *display_modes; i++)
+        if (!strcmp(mode, display_modes[i])) return 0;
+    return mcp_error("unknown display '%s' (known: clamp, aces, hable, reinhard, "
+                     "false-colour)",
+                     mode);
+}
+
+int
+mcp_report_set_display(mcp_report *r, double exposure, const char *mode)
+{
+    if (!isfinite(exposure) || exposure < -20 || exposure > 20)
+        return mcp_error("exposure %g: want stops in [-20, 20]", exposure);
+    if (mcp_report_display_mode_check(mode)) return -1;
+    cJSON_DeleteItemFromObject(r->root, "display");
+    cJSON *d = cJSON_AddObjectToObject(r->root, "display");
+    if (!d || !cJSON_AddNumberToObject(d, "exposure", exposure) ||
+        !cJSON_AddStringToObject(d, "mode", mode))
+        return oom();
+    return 0;
+}
+
+cJSON *
 mcp_report_add_map(cJSON *section, const char *rel_path, const char *caption,
                    mcp_colormap map, double lo, double hi, mcp_axis_scale axis,
                    const char *unit)

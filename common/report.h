@@ -13,7 +13,9 @@
  *   "tables": [{"title", "columns": [names], "rows": [[number|string|null, ...]]}]
  *   "images": [{"path" (relative to the report's folder), "caption",
  *               "scale": {"colormap", "min", "max", "axis": "linear"|"log", "unit",
- *                         "marks": [{"value", "label"}]} (false-colour maps only)}]
+ *                         "marks": [{"value", "label"}]} (false-colour maps only),
+ *               "hdr": a file with the linear values behind the picture (EXR, PFM):
+ *                      the page can re-expose it (renders only)}]
  *   "plots":  [{"title", "x": {"label", "scale"}, "y": {...},
  *               "series": [{"name", "style", "dashed", "x": [...], "y": [...]}]}]
  * report.html renders every section generically from that, so a stage only fills
@@ -21,7 +23,11 @@
  * are inline, images are embedded as base64 data URIs (PNG, JPEG, GIF, SVG, WebP;
  * other files are listed by name), shown at their pixel size or an integer multiple
  * of it (nearest neighbour), maps with their colour bar, and plots are inline SVG
- * drawn by plot.h. docs/report.md describes the page for its readers. */
+ * drawn by plot.h. An image with "hdr" gets the page's display controls (an exposure
+ * slider; clamp, ACES, Hable, Reinhard or false colour), which start as the document's
+ *   "display": {"exposure" (stops), "mode"}
+ * says (exposure 0, clamp when absent). docs/report.md describes the page for its
+ * readers. */
 #ifndef MCP_REPORT_H
 #define MCP_REPORT_H
 
@@ -62,6 +68,20 @@ MCP_API int mcp_report_add_image(cJSON *section, const char *rel_path,
 MCP_API cJSON *mcp_report_add_map(cJSON *section, const char *rel_path,
                                   const char *caption, mcp_colormap map, double lo,
                                   double hi, mcp_axis_scale axis, const char *unit);
+
+/* Adds a render to a section's "images" list: rel_png is its picture as a screen shows
+ * it (clamped, sRGB), rel_hdr a file of its linear values (EXR, PFM; relative to the
+ * report's folder) that the page re-exposes and tone-maps with its display controls.
+ * Returns the image's object (owned by the section), or NULL on failure. */
+MCP_API cJSON *mcp_report_add_hdr_image(cJSON *section, const char *rel_png,
+                                        const char *rel_hdr, const char *caption);
+
+/* How the page first shows its HDR images: exposure in stops (2^exposure scales the
+ * values) and the mode, one of clamp, aces, hable, reinhard (tonemap.h's curves, then
+ * sRGB) or false-colour (log10 luminance). A reader changes both on the page. */
+MCP_API int mcp_report_set_display(mcp_report *r, double exposure, const char *mode);
+/* 0 when mode is one of those names; else -1 with "unknown display 'X' (known: ...)". */
+MCP_API int mcp_report_display_mode_check(const char *mode);
 
 /* Marks a value on a map's colour bar (e.g. the threshold tau). */
 MCP_API int mcp_report_map_add_mark(cJSON *map, double value, const char *label);

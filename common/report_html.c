@@ -10,6 +10,8 @@
 #define _POSIX_C_SOURCE 200809L /* strcasecmp */
 #include <mcpost/report.h>
 #include <mcpost/image.h>
+#include <mcpost/imageio.h>
+#include <mcpost/tonemap.h>
 
 #include <math.h>
 #include <stdarg.h>
@@ -33,6 +35,11 @@
 #define MAX_DEPTH 8
 /* Colour stops of a colour bar's gradient. */
 #define RAMP_STOPS 33
+/* HDR data larger than this many pixels is left out (the page keeps the PNG). */
+#define HDR_MAX_PIXELS (4L << 20)
+/* The false-colour display: log10 of luminance x 2^exposure from LO to HI. */
+#define FALSE_LO (-3.0)
+#define FALSE_HI 2.0
 
 /* ---- a growing string ---- */
 
@@ -504,6 +511,7 @@ typedef struct {
     size_t size;
     int width, height; /* pixels, from a PNG's header; 0 when unknown */
     char id[32];
+    unsigned char *rgbe; /* the linear values ("hdr"), 4 bytes a pixel, or NULL */
 } page_image;
 
 static uint32_t
@@ -532,6 +540,54 @@ upscale(const page_image *im, int px)
 {
     int side = im->width > im->height ? im->width : im->height;
     return side > 0 && side < px ? px / side : 1;
+}
+
+/* The image's "hdr" file as RGBE (Ward's shared exponent: R, G, B mantissas and the
+ * exponent + 128 of the largest, 4 bytes a pixel), which the page's script decodes
+ * and re-exposes; values <= 0 or NaN are black. Left out (NULL, no error) when the file
+ * cannot be read, has no RGB or differs in size from the picture. -1 only when memory
+ * runs out. */
+static int
+read_rgbe(page_image *im, const char *path)
+{
+    mcp_image *img = NULL;
+    int rgb[3];
+    if (mcp_image_read(path, NULL, &img) || mcp_rgb_channels(img, rgb) ||
+        (im->width > 0 && (img->width != im->width || img->height != im->height)) ||
+        (long)img->width * img->height > HDR_MAX_PIXELS) {
+        mcp_image_free(img);
+        /* out of memory must fail the page, not drop the values */
+        if (strstr(mcp_error_message(), "out of memory")) return -1;
+        mcp_error_clear();
+        return 0;
+    }
+    size_t n = (size_t)img->width * img->height;
+    if (!(im->rgbe = mcp_malloc(4 * n))) {
+        mcp_image_free(img);
+        return -1;
+    }
+    im->width = img->width;
+    im->height = img->height;
+    for (size_t i = 0; i < n; i++) {
+        const float *p = mcp_image_px(img, (int)(i % img->width), (int)(i / img->width));
+        float v[3], m = 0;
+        for (int k = 0; k < 3; k++) {
+            v[k] = p[rgb[k]] > 0 ? p[rgb[k]] : 0; /* NaN too */
+            if (v[k] > m) m = v[k];
+        }
+        unsigned char *o = im->rgbe + 4 * i;
+        int e;
+        if (!(m > 1e-32f) || !isfinite(m)) {
+            memset(o, 0, 4);
+            continue;
+        }
+        double scale = frexp(m, &e) * 256.0 / m;
+        for (int k = 0; k < 3; k++)
+            o[k] = (unsigned char)(v[k] * scale > 255 ? 255 : v[k] * scale);
+        o[3] = (unsigned char)(e + 128);
+    }
+    mcp_image_free(img);
+    return 0;
 }
 
 /* The value at fraction t of a colour bar. */
@@ -658,6 +714,10 @@ render_figure(sbuf *b, const page_image *im)
         sb_text(b, im->rel);
         if (im->width > 0)
             sb_printf(b, "\" width=\"%d\" height=\"%d", k * im->width, k * im->height);
+        if (im->rgbe) { /* the linear values, for the display controls */
+            sb_printf(b, "\" data-hdr=\"%d,%d,", im->width, im->height);
+            sb_base64(b, im->rgbe, 4 * (size_t)im->width * im->height);
+        }
         sb_printf(b, "\" src=\"data:%s;base64,", im->mime);
         sb_base64(b, im->data, im->size);
         sb_str(b, "\">");
@@ -670,6 +730,7 @@ render_figure(sbuf *b, const page_image *im)
     }
     sb_str(b, "<figcaption>");
     sb_text(b, im->caption && *im->caption ? im->caption : im->rel);
+    if (im->rgbe) sb_str(b, " <span title=\"the display controls apply\">&#9788;</span>");
     if (im->data && im->width > 0) {
         sb_printf(b, " <span class=\"dim\">%d&times;%d px", im->width, im->height);
         if (k > 1) sb_printf(b, ", shown %d&times;", k);
@@ -756,6 +817,11 @@ render_images(sbuf *b, const cJSON *section, const char *dir, int section_index)
         im->data = NULL;
         if (im->mime && read_file(full, &im->data, &im->size)) b->failed = 1;
         if (im->data) png_size(im);
+        const char *hdr = json_string(ij, "hdr");
+        if (im->data && hdr) {
+            snprintf(full, sizeof full, "%s/%s", dir, hdr);
+            if (read_rgbe(im, full)) b->failed = 1;
+        }
         k++;
     }
     /* the comparison: the first pixel size that two or more images share */
@@ -773,8 +839,10 @@ render_images(sbuf *b, const cJSON *section, const char *dir, int section_index)
     for (int i = 0; i < k; i++)
         render_figure(b, &ims[i]);
     sb_str(b, "</div>\n");
-    for (int i = 0; i < k; i++)
+    for (int i = 0; i < k; i++) {
         free(ims[i].data);
+        free(ims[i].rgbe);
+    }
     free(ims);
     free(members);
 }
@@ -857,6 +925,77 @@ render_plots(sbuf *b, const cJSON *section)
     }
 }
 
+/* ---- the display of HDR images ---- */
+
+/* 1 when a section has an image with linear values ("hdr"). */
+static int
+page_has_hdr(const cJSON *sections)
+{
+    const cJSON *s, *im;
+    cJSON_ArrayForEach(s, sections) cJSON_ArrayForEach(im, cJSON_GetObjectItem(s, "images"))
+    if (json_string(im, "hdr")) return 1;
+    return 0;
+}
+
+/* The display controls of the HDR images: exposure in stops, and clamp, the tone maps
+ * of tonemap.h or false colour (log10 luminance on viridis, with its colour bar). The
+ * script (display_script) redraws every image that has data-hdr, and the comparison
+ * with them. */
+static void
+render_display_bar(sbuf *b, const cJSON *root)
+{
+    static const char *const modes[][2] = {
+        {"clamp", "clamp (as the PNG files)"}, {"aces", "ACES"}, {"hable", "Hable"},
+        {"reinhard", "Reinhard"}, {"false-colour", "false colour: log luminance"}};
+    const cJSON *d = cJSON_GetObjectItem(root, "display");
+    const cJSON *ej = cJSON_GetObjectItem(d, "exposure");
+    const char *mode = json_string(d, "mode");
+    double ev = cJSON_IsNumber(ej) ? ej->valuedouble : 0;
+    if (!mode) mode = "clamp";
+    /* the false-colour ramp, 256 colours, for the script */
+    mcp_image *ramp = NULL;
+    unsigned char rgb[256 * 3];
+    if (mcp_image_new(256, 1, 1, (const char *const[]){"t"}, &ramp)) {
+        b->failed = 1;
+        return;
+    }
+    for (int i = 0; i < 256; i++)
+        ramp->data[i] = (float)i / 255;
+    int rc = mcp_colormap_apply(ramp, 0, 0.0, 1.0, MCP_COLORMAP_VIRIDIS, rgb);
+    mcp_image_free(ramp);
+    if (rc) {
+        b->failed = 1;
+        return;
+    }
+    sb_printf(b, "<div class=\"display\" data-lo=\"%g\" data-hi=\"%g\" data-ramp=\"",
+              FALSE_LO, FALSE_HI);
+    for (int i = 0; i < 256 * 3; i++)
+        sb_printf(b, "%s%d", i ? "," : "", rgb[i]);
+    sb_printf(b, "\"><b>renders</b><label>exposure <input class=\"dsp-exp\" type=\"range\" "
+                 "min=\"-10\" max=\"10\" step=\"0.25\" value=\"%g\" aria-label=\"exposure\">"
+                 "</label><output class=\"dsp-ev\">%+.2f EV</output><label>display "
+                 "<select class=\"dsp-mode\">",
+              ev, ev);
+    for (size_t i = 0; i < sizeof modes / sizeof *modes; i++)
+        sb_printf(b, "<option value=\"%s\"%s>%s</option>", modes[i][0],
+                  strcmp(mode, modes[i][0]) ? "" : " selected", modes[i][1]);
+    sb_str(b, "</select></label><span class=\"dim\">for the renders marked &#9788;</span>"
+              "<div class=\"dsp-legend\" hidden>");
+    cJSON *scale = cJSON_CreateObject();
+    if (!scale || !cJSON_AddStringToObject(scale, "colormap", "viridis") ||
+        !cJSON_AddNumberToObject(scale, "min", pow(10.0, FALSE_LO)) ||
+        !cJSON_AddNumberToObject(scale, "max", pow(10.0, FALSE_HI)) ||
+        !cJSON_AddStringToObject(scale, "axis", "log") ||
+        !cJSON_AddStringToObject(scale, "unit", "luminance x 2^exposure")) {
+        cJSON_Delete(scale);
+        b->failed = 1;
+        return;
+    }
+    render_colour_bar(b, scale);
+    cJSON_Delete(scale);
+    sb_str(b, "</div></div>\n");
+}
+
 /* ---- the page ---- */
 
 static const char css[] =
@@ -913,7 +1052,13 @@ static const char css[] =
     ".hint{font-size:12px;color:#666;margin:4px 0}\n"
     ".plot{display:inline-block;margin:8px 12px 8px 0;max-width:100%}"
     ".plot svg{max-width:100%;height:auto}\n"
-    ".noimg{padding:20px;border:1px dashed #bbb;color:#777;font-size:13px}\n";
+    ".noimg{padding:20px;border:1px dashed #bbb;color:#777;font-size:13px}\n"
+    ".display{position:sticky;top:0;z-index:5;display:flex;flex-wrap:wrap;gap:6px 16px;"
+    "align-items:center;padding:8px 28px;font-size:13px;background:#eceff1;"
+    "border-bottom:1px solid #ccc}\n"
+    ".display input{vertical-align:middle;width:180px;max-width:40vw}"
+    ".display output{font-variant-numeric:tabular-nums;min-width:64px}\n"
+    ".dsp-legend{width:260px;max-width:100%}.dsp-legend[hidden]{display:none}\n";
 
 /* The wipe comparisons: pick the two images, move the split, magnify both at the
  * pointer. Plain DOM, no libraries. */
@@ -936,7 +1081,42 @@ static const char script[] =
     "r.oninput=function(){split(+r.value)};\n"
     "v.onpointerdown=function(e){down=true;v.setPointerCapture(e.pointerId);move(e)};"
     "v.onpointerup=function(){down=false};v.onpointermove=move;\n"
-    "pick();split(50);c.hidden=false});\n";
+    "pick();split(50);c.hidden=false});\n"
+    /* The display controls: the linear values of every img[data-hdr] (RGBE, decoded
+     * once) times 2^exposure, through the tone map -- the curves of tonemap.h, clamped
+     * and sRGB-encoded as the PNG writer does -- or false colour (log10 luminance,
+     * data-lo to data-hi, on the bar's ramp); the comparison picks the new pictures. */
+    "(function(){var bar=document.querySelector('.display');if(!bar)return;\n"
+    "var q=function(s){return bar.querySelector(s)},ex=q('.dsp-exp'),md=q('.dsp-mode'),"
+    "ev=q('.dsp-ev'),lg=q('.dsp-legend'),lo=+bar.dataset.lo,hi=+bar.dataset.hi,"
+    "ramp=bar.dataset.ramp.split(',').map(Number),items=[];\n"
+    "function R(k,x){return(k[0]*x*x+k[1]*x+k[2])/(k[3]*x*x+k[4]*x+k[5])}\n"
+    "var TM={clamp:function(x){return x},"
+    "aces:function(x){return R([2.51,0.03,0,2.43,0.59,0.14],x)},"
+    "hable:function(x){return R([0.231683,0.013791,0,0.18,0.3,0.018],x)},"
+    "reinhard:function(x){return x/(1+x)}};\n"
+    "function enc(v){v=v>0?(v<1?v:1):0;return Math.round(255*(v<=0.0031308?12.92*v:"
+    "1.055*Math.pow(v,1/2.4)-0.055))}\n"
+    "document.querySelectorAll('img[data-hdr]').forEach(function(img){"
+    "var a=img.dataset.hdr.split(','),w=+a[0],h=+a[1],s=atob(a[2]),n=w*h,"
+    "f=new Float32Array(3*n);\n"
+    "for(var p=0;p<n;p++){var e=s.charCodeAt(4*p+3);if(!e)continue;var k=Math.pow(2,e-136);"
+    "for(var c=0;c<3;c++)f[3*p+c]=(s.charCodeAt(4*p+c)+0.5)*k}\n"
+    "items.push({img:img,f:f,w:w,h:h})});\n"
+    "function draw(){var k=Math.pow(2,+ex.value),m=md.value,t=TM[m]||TM.clamp,"
+    "fc=m==='false-colour';ev.textContent=(ex.value<0?'':'+')+(+ex.value).toFixed(2)+' EV';"
+    "lg.hidden=!fc;\n"
+    "items.forEach(function(it){var cv=document.createElement('canvas');cv.width=it.w;"
+    "cv.height=it.h;var x=cv.getContext('2d'),d=x.createImageData(it.w,it.h),o=d.data,"
+    "f=it.f;\n"
+    "for(var p=0,i=0;i<o.length;p+=3,i+=4){if(fc){var L=k*(0.2126*f[p]+0.7152*f[p+1]+"
+    "0.0722*f[p+2]),u=L>0?(Math.log10(L)-lo)/(hi-lo):0,j=3*Math.round(255*(u>0?(u<1?u:1):0));"
+    "o[i]=ramp[j];o[i+1]=ramp[j+1];o[i+2]=ramp[j+2]}\n"
+    "else{o[i]=enc(t(k*f[p]));o[i+1]=enc(t(k*f[p+1]));o[i+2]=enc(t(k*f[p+2]))}o[i+3]=255}\n"
+    "x.putImageData(d,0,0);it.img.src=cv.toDataURL()});\n"
+    "document.querySelectorAll('.compare select.cmp-a').forEach(function(s){"
+    "if(s.onchange)s.onchange()})}\n"
+    "ex.oninput=md.onchange=draw;if(+ex.value!==0||md.value!=='clamp')draw()})();\n";
 
 int
 mcp_report_html(mcp_report *r, const char *dir, char **html)
@@ -970,6 +1150,7 @@ mcp_report_html(mcp_report *r, const char *dir, char **html)
         }
         sb_str(&b, "</nav>\n");
     }
+    if (page_has_hdr(sections)) render_display_bar(&b, root);
     int i = 0;
     cJSON_ArrayForEach(s, sections)
     {

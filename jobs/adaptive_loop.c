@@ -75,9 +75,12 @@ cmp_float(const void *a, const void *b)
 }
 
 /* A one-channel image as a false-colour PNG, scaled to its 99th percentile: a few
- * pixels far above the rest (a firefly's) would otherwise leave the picture black. */
+ * pixels far above the rest (a firefly's) would otherwise leave the picture black.
+ * *top receives the value at the scale's top (the colour bar's end), *flat (may be
+ * NULL) whether every pixel has one value (then *top is it). */
 static int
-write_png(const mcp__adaptive_loop *c, const mcp_image *img, const char *fmt, int pass)
+write_png(const mcp__adaptive_loop *c, const mcp_image *img, const char *fmt, int pass,
+          double *top, int *flat)
 {
     char path[4352];
     size_t n = (size_t)img->width * img->height;
@@ -89,6 +92,8 @@ write_png(const mcp__adaptive_loop *c, const mcp_image *img, const char *fmt, in
     qsort(v, n, sizeof *v, cmp_float);
     double hi = v[(size_t)(0.99 * (double)(n - 1))];
     if (!(hi > 0)) hi = v[n - 1];
+    if (flat) *flat = v[0] == v[n - 1];
+    *top = flat && *flat ? v[0] : hi > 0 ? hi : 1.0;
     free(v);
     unsigned char *rgb = mcp_malloc(n * 3);
     int rc =
@@ -102,11 +107,14 @@ write_png(const mcp__adaptive_loop *c, const mcp_image *img, const char *fmt, in
 static int
 on_iteration(const mcp_adaptive_state *st, void *ctx)
 {
-    const mcp__adaptive_loop *c = ctx;
+    mcp__adaptive_loop *c = ctx;
     const mcp_adaptive_iteration *it = st->it;
-    if (write_png(c, st->counts, "maps/counts_%04d.png", it->pass) ||
+    c->prev_map_hi = c->map_hi;
+    if (write_png(c, st->counts, "maps/counts_%04d.png", it->pass, &c->counts_hi,
+                  &c->counts_flat) ||
         (c->ao.map != MCP_ADAPTIVE_UNIFORM &&
-         write_png(c, st->est->sampling_map, "maps/sampling_map_%04d.png", it->pass)))
+         write_png(c, st->est->sampling_map, "maps/sampling_map_%04d.png", it->pass,
+                   &c->map_hi, NULL)))
         return -1;
     char rel[64] = "";
     if (c->reference) snprintf(rel, sizeof rel, ", relMSE %.4g", it->relmse);
@@ -226,11 +234,28 @@ write_curves(const mcp__adaptive_loop *c, const mcp_adaptive_result *r)
             goto done;
         char relp[512];
         snprintf(relp, sizeof relp, "%smaps/counts_%04d.png", c->rel, n - 1);
-        if (mcp_report_add_image(c->section, relp, "the last pass's sample counts"))
+        /* the colours run from 0 to the 99th percentile (write_png); one value for
+           every pixel would be a flat square, so the section says the value instead */
+        if (c->counts_flat) {
+            char text[128];
+            snprintf(text, sizeof text, "%g in every pixel (one value: no map to show)",
+                     c->counts_hi);
+            if (!cJSON_AddStringToObject(c->section, "last_pass_samples", text)) goto done;
+        } else if (!mcp_report_add_map(c->section, relp, "the last pass's sample counts",
+                                       MCP_COLORMAP_INFERNO, 0.0, c->counts_hi,
+                                       MCP_AXIS_LINEAR,
+                                       "samples per pixel in the pass (brightest: its 99th "
+                                       "percentile and above)"))
             goto done;
         if (n > 1 && c->ao.map != MCP_ADAPTIVE_UNIFORM) {
+            /* the map's weights sum to 1: shown as multiples of the mean weight */
+            double mean = 1.0 / ((double)c->width * c->height);
             snprintf(relp, sizeof relp, "%smaps/sampling_map_%04d.png", c->rel, n - 2);
-            if (mcp_report_add_image(c->section, relp, "the sampling map it came from"))
+            if (!mcp_report_add_map(c->section, relp, "the sampling map it came from",
+                                    MCP_COLORMAP_INFERNO, 0.0, c->prev_map_hi / mean,
+                                    MCP_AXIS_LINEAR,
+                                    "sample density, times the image's mean (brightest: "
+                                    "the 99th percentile and above)"))
                 goto done;
         }
     }

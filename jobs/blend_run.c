@@ -147,12 +147,29 @@ blend_verdict(cJSON *section, const mcp_blend_series_result *r)
             best = i;
     double best_ratio = r->rows[best].err[m].mse / r->rows[best].err[MCP_BLEND_NOISY].mse;
     int converges = fin <= 1.0;
+    /* another blend with a lower MSE at the last member: say which and why it is not
+     * the one used (the ideal weights need the reference: a bound, not a method) */
+    char other[300] = "";
+    int win = -1;
+    for (int k = 0; k < MCP_BLEND_N_METHODS; k++)
+        if (k != (int)m && k != MCP_BLEND_NOISY && k != MCP_BLEND_DENOISED &&
+            last->err[k].mse < last->err[win < 0 ? (int)m : win].mse)
+            win = k;
+    if (win == MCP_BLEND_IDEAL)
+        snprintf(other, sizeof other,
+                 "; the %s weights reach %.3g\u00d7 of it, but they need the reference "
+                 "(a bound, not a method)",
+                 mcp_blend_method_name(win), last->err[win].mse / last->err[m].mse);
+    else if (win >= 0)
+        snprintf(other, sizeof other, "; %s does better here (%.3g\u00d7 of it; weights: %s)",
+                 mcp_blend_method_name(win), last->err[win].mse / last->err[m].mse,
+                 mcp_blend_method_name(win));
     return mcp_report_set_verdict(
         section, converges ? MCP_VERDICT_GOOD : MCP_VERDICT_BAD,
-        "blend %s: at %g spp %.3g\u00d7 the noisy MSE (denoised alone %.3g\u00d7); at "
-        "best %.3g\u00d7 at %g spp",
-        converges ? "converges" : "does not beat the noisy image", last->spp, fin, den,
-        best_ratio, r->rows[best].spp);
+        "blend (%s) %s: at %g spp %.3g\u00d7 the noisy MSE (denoised alone %.3g\u00d7); at "
+        "best %.3g\u00d7 at %g spp%s",
+        mcp_blend_method_name(m), converges ? "converges" : "does not beat the noisy image",
+        last->spp, fin, den, best_ratio, r->rows[best].spp, other);
 }
 
 /* Fills a report section with the run's settings, per-member figures and, with a
@@ -240,7 +257,8 @@ mcp__blend_run(const mcp_series *series, const mcp_denoiser *den, const mcp_imag
     if (!rc) rc = mcp_series_variance_ratio(series, &ratio);
     if (!rc)
         mcp__report_variance_ratio(ratio, r->variance_source == MCP_VARSRC_INCREMENTS,
-                                      section);
+                                   series->variance_from == MCP_SERIES_VARIANCE_INCREMENTS,
+                                   section);
     cJSON_Delete(s->members);
     s->members = NULL;
     mcp_blend_series_result_free(r);

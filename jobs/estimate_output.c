@@ -121,6 +121,33 @@ blocks_error_picture(const mcp_blocks *blocks, const mcp_image *dist,
     return rc;
 }
 
+static int
+cmp_float(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
+/* The sampling map as inferno from 0 to its 99th percentile (a few pixels far above
+ * the rest would leave the picture black), in multiples of the mean weight (the map
+ * sums to 1); *top the value at the scale's top, in the same unit. */
+static int
+sampling_map_picture(const mcp_image *map, unsigned char *rgb8, double *top)
+{
+    size_t n = (size_t)map->width * map->height;
+    float *v = mcp_malloc(n * sizeof *v);
+    if (!v) return -1;
+    for (int y = 0; y < map->height; y++)
+        for (int x = 0; x < map->width; x++)
+            v[(size_t)y * map->width + x] = mcp_image_px(map, x, y)[0];
+    qsort(v, n, sizeof *v, cmp_float);
+    double hi = v[(size_t)(0.99 * (double)(n - 1))];
+    if (!(hi > 0)) hi = v[n - 1] > 0 ? v[n - 1] : 1.0 / (double)n;
+    free(v);
+    *top = hi * (double)n;
+    return mcp_colormap_apply(map, 0, 0.0, hi, MCP_COLORMAP_INFERNO, rgb8);
+}
+
 /* Every image of one estimate, the block pictures, and their place in the report.
  * The pictures are made first and every file is then written at once, a file per
  * thread (mcp_write_files), the costliest first: distribution.exr (its six channels
@@ -129,20 +156,35 @@ int
 mcp__estimate_write_single(const mcp_estimate *e, const mcp__estimate_dir *o,
                            cJSON *section, const cJSON *summary)
 {
-    enum { MAX_FILES = 12 };
-    mcp_image *block_mean = NULL, *dist = NULL;
-    unsigned char *blocks_rgb = NULL, *error_rgb = NULL;
+    enum { MAX_FILES = 14 };
+    mcp_image *block_mean = NULL, *dist = NULL, *shown = NULL, *rgb_view = NULL;
+    unsigned char *blocks_rgb = NULL, *error_rgb = NULL, *map_rgb = NULL;
     char (*paths)[4352] = NULL;
-    int rc = -1, n = 0, w = e->blocks->width, h = e->blocks->height;
+    double map_top = 0;
+    int rc = -1, n = 0, w = e->blocks->width, h = e->blocks->height, rgb[3];
     if (mcp_make_dirs(o->dir) ||
         mcp_blocks_mean_image(e->blocks, e->maps.sure_rel, &block_mean) ||
         mcp_error_dist_image(e->dist, &dist) ||
-        !(paths = mcp_malloc(MAX_FILES * sizeof *paths)) ||
-        !(blocks_rgb = mcp_malloc((size_t)w * h * 3)) ||
-        mcp_blocks_picture(e->blocks, blocks_rgb))
+        !(paths = mcp_malloc(MAX_FILES * sizeof *paths)))
+        goto done;
+    /* one block is one colour: a flat square that shows nothing, so no blocks.png
+     * (the error picture's caption says why there is one block) */
+    if (e->blocks->count > 1 && (!(blocks_rgb = mcp_malloc((size_t)w * h * 3)) ||
+                                 mcp_blocks_picture(e->blocks, blocks_rgb)))
         goto done;
     if (section && (!(error_rgb = mcp_malloc((size_t)w * h * 3)) ||
                     blocks_error_picture(e->blocks, dist, error_rgb)))
+        goto done;
+    /* what the report shows beside the error: the denoised image (its PNG as a screen
+     * shows it, the page re-exposes denoised.exr) and where the next samples go */
+    if (section &&
+        (mcp_rgb_channels(e->maps.denoised, rgb) ||
+         mcp_image_copy_channels(e->maps.denoised, rgb, 3, &rgb_view) ||
+         mcp_tonemap_apply(rgb_view, MCP_TONEMAP_CLAMP, &shown)))
+        goto done;
+    if (section && e->sampling_map &&
+        (!(map_rgb = mcp_malloc((size_t)w * h * 3)) ||
+         sampling_map_picture(e->sampling_map, map_rgb, &map_top)))
         goto done;
     const struct {
         const char *name;
@@ -151,6 +193,8 @@ mcp__estimate_write_single(const mcp_estimate *e, const mcp__estimate_dir *o,
     } outputs[MAX_FILES] = {
         {"distribution.exr", dist, NULL},
         {"blocks_error.png", NULL, error_rgb},
+        {"denoised.png", shown, NULL},
+        {"sampling_map.png", NULL, map_rgb},
         {"denoised.exr", e->maps.denoised, NULL},
         {"sure.exr", e->maps.sure, NULL},
         {"sure_rel.exr", e->maps.sure_rel, NULL},
@@ -187,13 +231,31 @@ mcp__estimate_write_single(const mcp_estimate *e, const mcp__estimate_dir *o,
         snprintf(unit, sizeof unit,
                  "the model's expected error s\u00b2(\u03bb + 1), mean of R, G, B, log "
                  "scale; F(tau) averages each pixel's chance to be below tau");
+        char rel_exr[512];
+        snprintf(rel, sizeof rel, "%sdenoised.png", o->rel);
+        snprintf(rel_exr, sizeof rel_exr, "%sdenoised.exr", o->rel);
+        if (!mcp_report_add_hdr_image(section, rel, rel_exr, "the denoised image"))
+            goto done;
         snprintf(rel, sizeof rel, "%sblocks_error.png", o->rel);
         cJSON *map = mcp_report_add_map(section, rel, caption, MCP_COLORMAP_INFERNO, 1e-5,
                                         1.0, MCP_AXIS_LOG, unit);
         if (!map || mcp_report_map_add_mark(map, e->tau, "tau")) goto done;
+        if (map_rgb) {
+            snprintf(rel, sizeof rel, "%ssampling_map.png", o->rel);
+            if (!mcp_report_add_map(section, rel,
+                                    "the sampling map: where the next pass puts its "
+                                    "samples",
+                                    MCP_COLORMAP_INFERNO, 0.0, map_top, MCP_AXIS_LINEAR,
+                                    "sample density, times the image's mean (brightest: "
+                                    "the 99th percentile and above)"))
+                goto done;
+        }
     }
     rc = 0;
 done:
+    free(map_rgb);
+    mcp_image_free(shown);
+    mcp_image_free(rgb_view);
     free(error_rgb);
     free(blocks_rgb);
     free(paths);
@@ -443,7 +505,8 @@ mcp__estimate_run_series(const mcp_series *series, const mcp_denoiser *den,
     if (mcp_estimate_series(series, den, so, ref, progress_cb, &p, &s)) return -1;
     cJSON *j = series_json(s, den->name, so->est.sure.metric);
     int using_increments = s->variance_source == MCP_VARSRC_INCREMENTS;
-    mcp__report_variance_ratio(s->variance_ratio, using_increments, j);
+    mcp__report_variance_ratio(s->variance_ratio, using_increments,
+                               series->variance_from == MCP_SERIES_VARIANCE_INCREMENTS, j);
     if (section) {
         cJSON_AddStringToObject(section, "variance_source",
                                 mcp_variance_source_name(s->variance_source));

@@ -24,6 +24,21 @@
 #include <stddef.h>
 #include <stdint.h>
 
+/* ---- output folders that appear whole (common/outdir.c, declared in
+ * common/internal.h) ---- */
+
+#ifndef MCP__OUTDIR_DEFINED /* both internal.h files declare it */
+#define MCP__OUTDIR_DEFINED
+typedef struct mcp__outdir {
+    char final[4096], tmp[4200];
+    int active;
+} mcp__outdir;
+#endif
+int mcp__outdir_begin(mcp__outdir *o, const char *dir);
+int mcp__outdir_commit(mcp__outdir *o);
+void mcp__outdir_abort(mcp__outdir *o);
+int mcp__outdir_fix_paths(const mcp__outdir *o, cJSON *json);
+
 /* ---- commands (common/shell.c, declared in common/internal.h) ---- */
 
 /* A command under /bin/sh with mcpost's programs on the end of its PATH, and its
@@ -69,9 +84,10 @@ const char *mcp__variance_source_words(mcp_variance_source src);
 const char *mcp__variance_ratio_warning(double ratio, int using_increments);
 /* A series' ratio into its JSON object / report section ("variance_ratio", and when
  * off "variance_choice" if the increments are used, else "variance_warning"), and that
- * line once on stderr (also when quiet: it says what the figures rest on). j may be
- * NULL. */
-void mcp__report_variance_ratio(double ratio, int using_increments, cJSON *j);
+ * line once on stderr (also when quiet: it says what the figures rest on) unless the
+ * increments are used because the series asked for them (asked: variance_from
+ * increments). j may be NULL. */
+void mcp__report_variance_ratio(double ratio, int using_increments, int asked, cJSON *j);
 
 /* ---- stage_denoiser.c ---- */
 
@@ -158,6 +174,10 @@ typedef struct mcp__adaptive_loop {
     const mcp_image *reference;
     const mcp_denoiser *den;
     cJSON *section; /* the job report's section, or NULL */
+    /* the top of the colour scale of the maps written last (their colour bars):
+     * counts and sampling map of the last pass, sampling map of the one before */
+    double counts_hi, map_hi, prev_map_hi;
+    int counts_flat; /* the last pass's counts are one value (counts_hi): no picture */
 } mcp__adaptive_loop;
 
 /* Runs the loop and writes every output; *json (may be NULL) receives the figures. */
@@ -273,5 +293,12 @@ int mcp__gate_exit_code(mcp__gate_verdict v);
 void mcp__gate_record(mcp__gate_verdict v);
 mcp__gate_verdict mcp__gate_worst(void);
 void mcp__gate_reset(void);
+
+/* The metrics section's verdict from its figures (stage_metrics.c): the gate's line
+ * first when there is a gate (its colour: pass good, warning info, failure bad), then
+ * relMSE as a relative error, FLIP in words and a series' MSE slope; `mcpost compare`
+ * gives its sections the same line. */
+int mcp__metrics_verdict(cJSON *section, const mcp__gate *gate, mcp__gate_verdict gv,
+                         const char *gate_line);
 
 #endif

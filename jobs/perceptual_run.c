@@ -280,6 +280,26 @@ write_spectrum(const mcp__perc_run *r, const mcp_image *pic, const char *name,
     return rc ? -1 : 0;
 }
 
+/* A render's picture for the report: NAME.png as a screen shows it (clamped, sRGB),
+ * with NAME<exr_suffix>.exr (written already) as the linear values the page
+ * re-exposes; exr_suffix NULL: NAME.exr. The caption starts with NAME. */
+static int
+write_render(const mcp__perc_run *r, const mcp_image *img, const char *exr_suffix,
+             const char *name, const char *what, cJSON *outputs)
+{
+    char file[200], rel_png[800], rel_exr[800], caption[400];
+    mcp_image *shown = NULL;
+    snprintf(file, sizeof file, "%s.png", name);
+    snprintf(rel_png, sizeof rel_png, "%s%s.png", r->rel, name);
+    snprintf(rel_exr, sizeof rel_exr, "%s%s%s.exr", r->rel, name, exr_suffix ? exr_suffix : "");
+    snprintf(caption, sizeof caption, "%s: %s", name, what);
+    int rc = mcp_tonemap_apply(img, MCP_TONEMAP_CLAMP, &shown) ||
+             write_image(r, shown, file, outputs) ||
+             !mcp_report_add_hdr_image(r->section, rel_png, rel_exr, caption);
+    mcp_image_free(shown);
+    return rc ? -1 : 0;
+}
+
 /* Runs the re-render command for a permutation; *out the re-rendered colour. */
 typedef struct {
     const mcp__perc_args *a;
@@ -545,6 +565,14 @@ mcp__perceptual_run(mcp__perc_args *a, mcp__perc_run *r, cJSON **summary,
         mcp_report_add_number(s, "pmse_ratio", sc.pmse / sm.pmse);
         mcp_report_add_number(s, "white_fraction", sc.white_fraction);
     }
+    /* the pictures: the result beside the candidates' mean, for the wipe */
+    if (r->section && (write_render(r, measured, again ? "_rerendered" : "", name,
+                                    "the optimised image", outputs) ||
+                       write_image(r, mean, "mean.exr", outputs) ||
+                       write_render(r, mean, NULL, "mean",
+                                    "the candidates' mean (what averaging gives)",
+                                    outputs)))
+        goto done;
     if (spec) {
         char caption[160];
         snprintf(file, sizeof file, "%s_spectrum.png", name);
@@ -599,6 +627,37 @@ summary_number(const cJSON *s, const char *key)
     return cJSON_IsNumber(v) ? v->valuedouble : NAN;
 }
 
+/* With the comparison table: "; X does better here (...)" when a method other than
+ * the one run has a lower pMSE on this input, and why it is not the result: a
+ * horizontal method's figure without a re-render is its prediction (it moves samples
+ * between pixels, so only a re-render of the scene realises it). */
+static void
+best_other(const cJSON *summary, const char *method, double ratio, char *buf, size_t cap)
+{
+    const cJSON *row, *best = NULL;
+    double mean = summary_number(summary, "mean_pmse"), best_ratio = ratio;
+    cJSON_ArrayForEach(row, cJSON_GetObjectItem(summary, "comparison"))
+    {
+        const cJSON *mj = cJSON_GetObjectItem(row, "method");
+        if (!cJSON_IsString(mj) || !strcmp(mj->valuestring, method) ||
+            !strcmp(mj->valuestring, "mean") || !strcmp(mj->valuestring, "surrogate"))
+            continue; /* the mean and the surrogate are no methods */
+        double r = summary_number(row, "pmse") / mean;
+        if (r < best_ratio) best_ratio = r, best = row;
+    }
+    if (!best) return;
+    const char *name = cJSON_GetObjectItem(best, "method")->valuestring;
+    const cJSON *again = cJSON_GetObjectItem(best, "rerendered");
+    if (again && !cJSON_IsTrue(again))
+        snprintf(buf, cap,
+                 "; %s predicts %.3g\u00d7, but it moves samples between pixels: only a "
+                 "re-render (rerender:) realises that",
+                 name, best_ratio);
+    else
+        snprintf(buf, cap, "; %s does better on this input (%.3g\u00d7; method: %s to use it)",
+                 name, best_ratio, name);
+}
+
 /* The section's verdict from the summary: with a reference, pMSE against the
  * candidates' mean (below 1: the method lowered the perceived error) and how much of
  * the error's power is at low frequencies (blue noise: less than the mean's white
@@ -612,14 +671,16 @@ perceptual_verdict(cJSON *section, const cJSON *summary)
            low = summary_number(summary, "low_freq_fraction"),
            mean_low = summary_number(summary, "mean_low_freq_fraction");
     int rc;
+    char other[400] = "";
+    if (!isnan(ratio)) best_other(summary, method, ratio, other, sizeof other);
     if (!isnan(ratio))
         rc = mcp_report_set_verdict(
             section, ratio < 1 ? MCP_VERDICT_GOOD : MCP_VERDICT_BAD,
             "%s: pMSE %.3g\u00d7 the candidates' mean (%.2g%% %s perceived error); "
-            "low-frequency share of the error %.3g against the mean's %.3g: %s",
+            "low-frequency share of the error %.3g against the mean's %.3g: %s%s",
             method, ratio, 100 * fabs(1 - ratio), ratio < 1 ? "less" : "more: no gain",
             low, mean_low,
-            low < mean_low ? "bluer noise" : "no bluer than the mean's white noise");
+            low < mean_low ? "bluer noise" : "no bluer than the mean's white noise", other);
     else
         rc = mcp_report_set_verdict(
             section, MCP_VERDICT_INFO,

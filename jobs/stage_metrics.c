@@ -254,8 +254,8 @@ member_number(const cJSON *obj, const char *key)
 
 /* The metrics section's verdict, from its figures: the relative error in percent,
  * FLIP in words, and over a series how fast the MSE falls (1/spp when unbiased). */
-static int
-metrics_verdict(cJSON *section, const mcp__gate *gate, mcp__gate_verdict gv,
+int
+mcp__metrics_verdict(cJSON *section, const mcp__gate *gate, mcp__gate_verdict gv,
                 const char *gate_line)
 {
     char text[3000] = "";
@@ -588,7 +588,7 @@ stage_metrics(mcp_job *job, const mcp_node *settings)
         /* `mcpost run` exits with the job's worst gate (cli/cmd_run.c) */
         mcp__gate_record(gv);
     }
-    if (metrics_verdict(section, &pl.gate, gv, gate_line)) goto done;
+    if (mcp__metrics_verdict(section, &pl.gate, gv, gate_line)) goto done;
     rc = 0;
 done:
     mcp_metrics_maps_free(&maps);

@@ -48,7 +48,7 @@ mcp__variance_source_words(mcp_variance_source src)
 }
 
 void
-mcp__report_variance_ratio(double ratio, int using_increments, cJSON *j)
+mcp__report_variance_ratio(double ratio, int using_increments, int asked, cJSON *j)
 {
     if (!(ratio > 0))
         return;
@@ -57,8 +57,10 @@ mcp__report_variance_ratio(double ratio, int using_increments, cJSON *j)
     if (!mcp_variance_ratio_off(ratio))
         return;
     const char *w = mcp__variance_ratio_warning(ratio, using_increments);
-    /* taken care of (the increments are used) is news, not a warning */
-    fprintf(stderr, "mcpost: %s%s\n", using_increments ? "" : "warning: ", w);
+    /* taken care of (the increments are used) is news, not a warning; and no news when
+     * the job or command asked for the increments itself */
+    if (!using_increments || !asked)
+        fprintf(stderr, "mcpost: %s%s\n", using_increments ? "" : "warning: ", w);
     if (j)
         cJSON_AddStringToObject(j, using_increments ? "variance_choice" : "variance_warning",
                                 w);

@@ -44,9 +44,14 @@ mcp__split_words(const char *text, char ***words, int *count)
         n += *p == ',';
     char **w = mcp_calloc((size_t)n, sizeof *w);
     int k = 0;
+    int lost = 0; /* a word whose copy ran out of memory */
     for (char *tok = strtok_r(copy, ",", &save); w && tok; tok = strtok_r(NULL, ",", &save))
-        w[k++] = mcp_strdup(tok);
+        lost |= !(w[k++] = mcp_strdup(tok));
     free(copy);
+    if (w && lost) {
+        mcp__free_words(w, k);
+        w = NULL;
+    }
     if (!w)
         return -1;
     *words = w;

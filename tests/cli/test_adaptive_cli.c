@@ -163,13 +163,62 @@ test_job_stage(void **state)
     snprintf(path, sizeof path, "%s/report.json", mcp_test_path("jobout"));
     text = mcp_test_read_text(path);
     assert_non_null(strstr(text, "\"stage\":\t\"adaptive\""));
+    /* both heat maps have their colour bar: inferno from 0 to a positive top */
+    j = cJSON_Parse(text);
     free(text);
+    const cJSON *im;
+    int maps = 0;
+    cJSON_ArrayForEach(im, cJSON_GetObjectItem(
+                               cJSON_GetArrayItem(cJSON_GetObjectItem(j, "sections"), 0),
+                               "images"))
+    {
+        const cJSON *sc = cJSON_GetObjectItem(im, "scale");
+        assert_non_null(sc);
+        assert_string_equal(cJSON_GetObjectItem(sc, "colormap")->valuestring, "inferno");
+        assert_true(cJSON_GetObjectItem(sc, "min")->valuedouble == 0);
+        assert_true(cJSON_GetObjectItem(sc, "max")->valuedouble > 0);
+        maps++;
+    }
+    assert_int_equal(maps, 2);
+    cJSON_Delete(j);
     /* an unknown key names its line */
     mcp_test_write_text(mcp_test_path("bad.yaml"), "stages:\n"
                                                    "  - adaptive:\n"
                                                    "      render: x {counts} {output}\n"
                                                    "      budjet: 4\n");
     assert_one_line_error(run("run '%s'", mcp_test_path("bad.yaml")), "bad.yaml:4");
+}
+
+/* Uniform sampling gives every pixel one count: the page says the value instead of
+ * showing a flat square. */
+static void
+test_uniform_counts_say_so(void **state)
+{
+    (void)state;
+    char job[8192], path[4400];
+    snprintf(job, sizeof job,
+             "output: uniform\n"
+             "stages:\n"
+             "  - adaptive:\n"
+             "      render: \"'%s' --sample-counts {counts} --pass {pass} --seed {seed} "
+             "-o {output}\"\n"
+             "      size: 16x16\n"
+             "      map: uniform\n"
+             "      budget: 16\n"
+             "      spp_per_iteration: 8\n"
+             "      denoiser: gauss\n",
+             MCP_TEST_PROCEDURAL);
+    mcp_test_write_text(mcp_test_path("uniform.yaml"), job);
+    assert_int_equal(run("run '%s' --quiet", mcp_test_path("uniform.yaml")), 0);
+    snprintf(path, sizeof path, "%s/report.json", mcp_test_path("uniform"));
+    char *text = mcp_test_read_text(path);
+    cJSON *j = cJSON_Parse(text);
+    free(text);
+    const cJSON *s = cJSON_GetArrayItem(cJSON_GetObjectItem(j, "sections"), 0);
+    assert_string_equal(cJSON_GetObjectItem(s, "last_pass_samples")->valuestring,
+                        "8 in every pixel (one value: no map to show)");
+    assert_int_equal(cJSON_GetArraySize(cJSON_GetObjectItem(s, "images")), 0);
+    cJSON_Delete(j);
 }
 
 static void
@@ -221,6 +270,7 @@ main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_cli_matches_library),
         cmocka_unit_test(test_job_stage),
+        cmocka_unit_test(test_uniform_counts_say_so),
         cmocka_unit_test(test_errors),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -3,8 +3,10 @@
  * one of its allocations in turn, must end with an error (non-zero status, one line
  * set) and no crash; the ASan build adds: no leak, whichever allocation failed. Then
  * the same runs with a file-size limit, as on a full disk. Either way no partial
- * output file may be left: every file in the output folder reads back whole, and
- * no temporary file (*.tmp-*) is left behind.
+ * output may be left: a failed run leaves no output folder at all, nor its hidden
+ * temporary one (docs/conventions.md, "Output folders"), and every file of a folder
+ * that was written reads back whole, with no temporary file (*.tmp-*) left behind.
+ * `compare` runs the same way.
  *
  * The commands run in this process (the CLI's own table, cli/commands.c), so that
  * the hook and the leak checker see them; their stdout and stderr go to a file. */
@@ -140,6 +142,25 @@ assert_no_partial_files(const char *path)
     closedir(d);
 }
 
+/* A failed run left nothing: no output folder, and no hidden ".NAME.tmp-PID" beside
+ * it. */
+static void
+assert_nothing_left(const char *outdir, const char *args)
+{
+    if (access(outdir, F_OK) == 0)
+        fail_msg("`mcpost %s` failed and left its output folder %s", args, outdir);
+    const char *slash = strrchr(outdir, '/');
+    char parent[4096], prefix[600];
+    snprintf(parent, sizeof parent, "%.*s", (int)(slash - outdir), outdir);
+    snprintf(prefix, sizeof prefix, ".%s.tmp-", slash + 1);
+    DIR *d = opendir(parent);
+    assert_non_null(d);
+    for (struct dirent *e; (e = readdir(d));)
+        if (!strncmp(e->d_name, prefix, strlen(prefix)))
+            fail_msg("`mcpost %s` failed and left %s/%s", args, parent, e->d_name);
+    closedir(d);
+}
+
 /* Makes allocation 0, 1, 2, ... of the command fail in turn, until a run meets no
  * failure (it then ran to the end). Returns how many runs failed. */
 static long
@@ -161,7 +182,7 @@ fail_each_allocation(const char *args, const char *outdir)
         if (status == 0 || !mcp_error_message()[0] || strchr(mcp_error_message(), '\n'))
             fail_msg("`mcpost %s` with allocation %ld failing: status %d, message '%s'",
                      args, n, status, mcp_error_message());
-        assert_no_partial_files(outdir);
+        assert_nothing_left(outdir, args);
         failed++;
     }
     assert_no_partial_files(outdir);
@@ -202,6 +223,17 @@ test_perceptual_fails_cleanly_at_every_allocation(void **state)
     assert_true(fail_each_allocation(args, out) > 10);
 }
 
+static void
+test_compare_fails_cleanly_at_every_allocation(void **state)
+{
+    (void)state;
+    char args[4096], out[4096];
+    snprintf(out, sizeof out, "%s/compare-out", dir);
+    snprintf(args, sizeof args, "compare %s/p_0000.exr %s/q_0000.exr --flip ldr -o %s", dir,
+             dir, out);
+    assert_true(fail_each_allocation(args, out) > 10);
+}
+
 /* A full disk, as a file-size limit: writes past it fail with EFBIG (SIGXFSZ is
  * ignored, as a shell would not). At each limit the run either fits or fails with
  * one line, and leaves only whole files. */
@@ -209,7 +241,7 @@ static void
 test_full_disk_leaves_no_partial_output(void **state)
 {
     (void)state;
-    char args[3][4096], out[4096];
+    char args[4][4096], out[4096];
     snprintf(out, sizeof out, "%s/disk-out", dir);
     snprintf(args[0], sizeof args[0], "estimate %s/p_0000.exr --denoiser gauss -o %s", dir,
              out);
@@ -219,12 +251,14 @@ test_full_disk_leaves_no_partial_output(void **state)
              "perceptual --denoiser gauss -o %s %s/p_single_0000.exr %s/p_single_0001.exr "
              "%s/p_single_0002.exr %s/p_single_0003.exr",
              out, dir, dir, dir, dir);
+    snprintf(args[3], sizeof args[3], "compare %s/p_0000.exr %s/q_0000.exr -o %s", dir, dir,
+             out);
     mcp_progress_set_quiet(1);
     void (*old)(int) = signal(SIGXFSZ, SIG_IGN);
     struct rlimit saved;
     assert_int_equal(getrlimit(RLIMIT_FSIZE, &saved), 0);
     static const rlim_t limits[] = {1, 200, 1000, 3000, 10000, 30000};
-    for (int a = 0; a < 3; a++) {
+    for (int a = 0; a < 4; a++) {
         int failures = 0;
         for (size_t i = 0; i < sizeof limits / sizeof *limits; i++) {
             remove_tree(out);
@@ -238,6 +272,7 @@ test_full_disk_leaves_no_partial_output(void **state)
                 if (!mcp_error_message()[0] || strchr(mcp_error_message(), '\n'))
                     fail_msg("`mcpost %s` at %ld bytes: status %d, message '%s'", args[a],
                              (long)limits[i], status, mcp_error_message());
+                assert_nothing_left(out, args[a]);
             }
             assert_no_partial_files(out);
         }
@@ -254,6 +289,7 @@ main(void)
         cmocka_unit_test(test_estimate_fails_cleanly_at_every_allocation),
         cmocka_unit_test(test_blend_fails_cleanly_at_every_allocation),
         cmocka_unit_test(test_perceptual_fails_cleanly_at_every_allocation),
+        cmocka_unit_test(test_compare_fails_cleanly_at_every_allocation),
         cmocka_unit_test(test_full_disk_leaves_no_partial_output),
     };
     return cmocka_run_group_tests(tests, setup, NULL);

@@ -185,6 +185,9 @@ test_stale_temporaries_are_cleared(void **state)
     char dir[4096], sub[4200], path[4400];
     snprintf(dir, sizeof dir, "%s", mcp_test_path("stale-frame"));
     snprintf(sub, sizeof sub, "%s/estimate", dir);
+    /* a fresh folder: an earlier run's "live" temporary is a dead process's now */
+    snprintf(path, sizeof path, "rm -rf '%s'", dir);
+    assert_int_equal(system(path), 0);
     mkdir(dir, 0777);
     mkdir(sub, 0777);
     pid_t gone = fork(); /* a pid that has certainly ended */

@@ -381,16 +381,19 @@ test_cli_single_and_series(void **state)
     int stop = cJSON_IsTrue(cJSON_GetObjectItem(j, "stop"));
     assert_int_equal(st, stop ? 0 : 10);
     assert_true(cJSON_GetObjectItem(j, "cdf_at_tau")->valuedouble >= 0.0);
+    int blocks = cJSON_GetObjectItem(j, "blocks")->valueint;
     cJSON_Delete(j);
-    const char *files[] = {"denoised.exr", "sure.exr",         "sure_rel.exr",
-                           "variance.exr", "sampling_map.exr", "sample_counts.exr",
-                           "blocks.png",   "distribution.exr", "estimate.json",
-                           "report.html"};
+    const char *files[] = {"denoised.exr",      "sure.exr",          "sure_rel.exr",
+                           "variance.exr",      "sampling_map.exr",  "sample_counts.exr",
+                           "distribution.exr",  "estimate.json",     "report.html",
+                           "denoised.png",      "sampling_map.png",  "blocks_error.png"};
     for (size_t i = 0; i < sizeof files / sizeof *files; i++) {
         char p[256];
         snprintf(p, sizeof p, "cli_out/%s", files[i]);
         assert_int_equal(access(mcp_test_path(p), R_OK), 0);
     }
+    /* blocks.png only when there are blocks to tell apart (one is a flat square) */
+    assert_int_equal(access(mcp_test_path("cli_out/blocks.png"), R_OK) == 0, blocks > 1);
     mcp_image *counts = NULL;
     assert_int_equal(
         mcp_image_read(mcp_test_path("cli_out/sample_counts.exr"), NULL, &counts), 0);

@@ -60,12 +60,44 @@ window.addEventListener('load', function () {
     r.value = 50;
     r.dispatchEvent(new Event('input'));
   });
+  /* the display controls: a new exposure, then false colour, redraw every HDR render
+   * (a new picture) and the comparison shows the redrawn ones */
+  var hdr = document.querySelectorAll('img[data-hdr]'), display = 'none';
+  var bar = document.querySelector('.display');
+  if (hdr.length && !bar) bad.push('HDR renders but no display controls');
+  if (bar) {
+    var ex = bar.querySelector('.dsp-exp'), md = bar.querySelector('.dsp-mode');
+    var before = Array.prototype.map.call(hdr, function (i) { return i.src; });
+    var changed = function () {
+      var n = 0;
+      hdr.forEach(function (img, k) { n += img.src !== before[k]; before[k] = img.src; });
+      return n;
+    };
+    ex.value = +ex.value + 2;
+    ex.dispatchEvent(new Event('input'));
+    var byExposure = changed();
+    md.value = 'false-colour';
+    md.dispatchEvent(new Event('change'));
+    var byMode = changed(), legend = !bar.querySelector('.dsp-legend').hidden;
+    if (byExposure !== hdr.length)
+      bad.push('exposure +2 redrew ' + byExposure + ' of ' + hdr.length + ' HDR renders');
+    if (byMode !== hdr.length)
+      bad.push('false colour redrew ' + byMode + ' of ' + hdr.length + ' HDR renders');
+    if (!legend) bad.push('false colour shows no colour bar');
+    document.querySelectorAll('.compare').forEach(function (c) {
+      var a = c.querySelector('select.cmp-a').value, src = document.getElementById(a).src;
+      if (document.getElementById(a).dataset.hdr && c.querySelector('img.cmp-a').src !== src)
+        bad.push('the comparison does not follow the display controls' + where(c));
+    });
+    display = byExposure + '/' + byMode;
+  }
   var compares = document.querySelectorAll('.compare:not([hidden])').length;
   var out = document.createElement('pre');
   out.id = 'mcp-check';
   out.textContent = (bad.length ? 'FAIL' : 'PASS') + ' width=' + vw + ' height=' +
     doc.scrollHeight + ' images=' + images + ' figures=' + figures + ' bars=' + bars +
-    ' sections=' + sections.length + ' compares=' + compares + '\n' +
+    ' sections=' + sections.length + ' compares=' + compares + ' hdr=' + hdr.length +
+    ' display=' + display + '\n' +
     bad.slice(0, 30).join('\n') + (bad.length > 30 ? '\n... ' + (bad.length - 30) + ' more' : '');
   document.body.appendChild(out);
 });

@@ -3,7 +3,9 @@
  * hold up -- the metrics stage's MSE equals the MSE recomputed here from the two files,
  * the converging blend at 1024 spp is at least as good as the noisy image, and the
  * perceptual optimisation lowers pMSE below the candidates' mean, with its energy
- * falling, and the adaptive loop around the procedural renderer (found beside mcpost)
+ * falling, the headline blend and perceptual methods are the best of their own tables
+ * (or the verdict says why not), the pages show the images each stage made, and the
+ * adaptive loop around the procedural renderer (found beside mcpost)
  * spends its budget with the true error falling pass by pass. */
 #include "testing.h"
 
@@ -16,6 +18,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 static const cJSON *
 item(const cJSON *o, const char *key)
@@ -133,11 +136,75 @@ test_demo_job(void **state)
                   noisy);
     assert_true(curves <= noisy);
 
+    /* the blend's headline weights (james_stein, the default) have the lowest MSE at
+       1024 spp of the blends that need no reference; the verdict names them and says
+       why the ideal weights, lower still, are not used */
+    const cJSON *blend = cJSON_GetArrayItem(sections, 8);
+    const char *headline = item(blend, "weights")->valuestring;
+    double head_mse = number(item(final, headline), "mse");
+    static const char *const practical[] = {"easy", "curves", "james_stein"};
+    for (int i = 0; i < 3; i++)
+        assert_true(head_mse <= number(item(final, practical[i]), "mse"));
+    const char *bv = item(item(blend, "verdict"), "text")->valuestring;
+    assert_non_null(strstr(bv, "blend (james_stein) converges"));
+    if (number(item(final, "ideal"), "mse") < head_mse)
+        assert_non_null(strstr(bv, "the ideal weights reach"));
+
     /* perceptual: lower pMSE than the candidates' mean, energy falling */
     const cJSON *perc = cJSON_GetArrayItem(sections, 9);
     print_message("demo: perceptual pMSE / mean %.4f\n", number(perc, "pmse_ratio"));
     assert_true(number(perc, "pmse") < number(perc, "mean_pmse"));
     assert_true(number(perc, "energy_final") < number(perc, "energy_initial"));
+    /* its headline method has the lowest pMSE in its own table of the methods measured
+       as they are (a horizontal method's row without a re-render is a prediction; the
+       verdict says so) */
+    const cJSON *prow;
+    cJSON_ArrayForEach(prow, item(cJSON_GetArrayItem(item(perc, "tables"), 0), "rows"))
+    {
+        const char *m = cJSON_GetArrayItem(prow, 0)->valuestring;
+        double pm = cJSON_GetArrayItem(prow, 1)->valuedouble;
+        if (!strcmp(m, "mean") || !strcmp(m, "surrogate")) continue;
+        if (strstr(m, "(prediction)")) {
+            if (pm < number(perc, "pmse"))
+                assert_non_null(strstr(item(item(perc, "verdict"), "text")->valuestring,
+                                       "only a re-render (rerender:) realises that"));
+            continue;
+        }
+        if (pm < number(perc, "pmse"))
+            fail_msg("perceptual: %s has pMSE %g below the headline %s's %g", m, pm,
+                     item(perc, "method")->valuestring, number(perc, "pmse"));
+    }
+
+    /* the pages show what was made: the estimate its denoised image (re-exposable),
+       the expected error and the sampling map; perceptual the result beside the mean
+       (both re-exposable, for the wipe); every map of the adaptive loop has its scale */
+    static const struct {
+        int section;
+        const char *suffix, *has; /* an image whose path ends so, with this member */
+    } shown[] = {{4, "estimate/denoised.png", "hdr"},
+                 {4, "estimate/blocks_error.png", "scale"},
+                 {4, "estimate/sampling_map.png", "scale"},
+                 {9, "perceptual/power-set.png", "hdr"},
+                 {9, "perceptual/mean.png", "hdr"},
+                 {10, "maps/counts_0003.png", "scale"},
+                 {10, "maps/sampling_map_0002.png", "scale"}};
+    for (size_t i = 0; i < sizeof shown / sizeof *shown; i++) {
+        const cJSON *im, *found = NULL;
+        cJSON_ArrayForEach(im, item(cJSON_GetArrayItem(sections, shown[i].section), "images"))
+        {
+            const char *p = item(im, "path")->valuestring;
+            size_t lp = strlen(p), ls = strlen(shown[i].suffix);
+            if (lp >= ls && !strcmp(p + lp - ls, shown[i].suffix)) found = im;
+        }
+        if (!found || !cJSON_GetObjectItem(found, shown[i].has))
+            fail_msg("section %d: no image %s with %s", shown[i].section, shown[i].suffix,
+                     shown[i].has);
+    }
+    /* one block: no flat blocks.png */
+    char flat[4400];
+    snprintf(flat, sizeof flat, "%s/estimate/blocks.png", dir);
+    assert_int_equal(number(cJSON_GetArrayItem(sections, 4), "blocks") == 1,
+                     access(flat, F_OK) != 0);
 
     /* adaptive: four passes of 16 spp to the budget of 64, each with its true relMSE
        against the committed truth; the error falls pass by pass (the procedural
