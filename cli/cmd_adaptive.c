@@ -42,6 +42,8 @@ static const char usage[] =
     "  --max-iterations N       passes at most [1000]\n"
     "  --quantum Q              counts in multiples of Q: K*K for a renderer that draws\n"
     "                           stratified passes of K*K samples [1]\n"
+    "  --uniform-mix F          share of every pass spread evenly, the rest by the map:\n"
+    "                           a floor for rare paths no pixel has drawn yet [0]\n"
     "  --probes N               probes of the estimate [4]\n"
     "  --seed S                 the {seed} of the command, and the probes' [1]\n"
     "  --reference REF          the converged image: relMSE per pass\n"
@@ -70,6 +72,7 @@ enum {
     OPT_P,
     OPT_MAXIT,
     OPT_QUANTUM,
+    OPT_UNIFORM_MIX,
     OPT_PROBES,
     OPT_SEED,
     OPT_REF,
@@ -94,6 +97,7 @@ cmd_adaptive(int argc, char **argv)
         {"percentile", required_argument, 0, OPT_P},
         {"max-iterations", required_argument, 0, OPT_MAXIT},
         {"quantum", required_argument, 0, OPT_QUANTUM},
+        {"uniform-mix", required_argument, 0, OPT_UNIFORM_MIX},
         {"probes", required_argument, 0, OPT_PROBES},
         {"seed", required_argument, 0, OPT_SEED},
         {"reference", required_argument, 0, OPT_REF},
@@ -153,6 +157,9 @@ cmd_adaptive(int argc, char **argv)
             break;
         case OPT_QUANTUM:
             rc = mcp__parse_int("--quantum", optarg, &c.ao.quantum);
+            break;
+        case OPT_UNIFORM_MIX:
+            rc = mcp__parse_double("--uniform-mix", optarg, &c.ao.uniform_mix);
             break;
         case OPT_PROBES:
             rc = mcp__parse_int("--probes", optarg, &c.ao.est.sure.n_probes);

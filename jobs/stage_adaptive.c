@@ -10,7 +10,7 @@ static const char *const adaptive_keys[] = {
     "render",         "output",   "size",   "map",  "spp_per_iteration",
     "initial_spp",    "budget",   "stop",   "tau",  "p",
     "max_iterations", "quantum",  "probes", "seed", "reference",
-    "keep_passes",    "denoiser", "title",  NULL};
+    "keep_passes",    "denoiser", "title",  "uniform_mix", NULL};
 
 /* The stage's settings, read before anything is loaded (by the run, and by the job's
  * check before any stage runs): the loop's options, the size, the reference by name
@@ -45,6 +45,7 @@ parse_adaptive(mcp_job *job, const mcp_node *s, adaptive_plan *pl)
         mcp_node_opt_double(s, "p", &c->ao.est.p) ||
         mcp_node_opt_int(s, "max_iterations", &c->ao.max_iterations) ||
         mcp_node_opt_int(s, "quantum", &c->ao.quantum) ||
+        mcp_node_opt_double(s, "uniform_mix", &c->ao.uniform_mix) ||
         mcp_node_opt_int(s, "probes", &c->ao.est.sure.n_probes) ||
         mcp_node_opt_double(s, "seed", &seed) ||
         mcp_node_opt_bool(s, "keep_passes", &c->keep_passes))
