@@ -113,9 +113,9 @@ counts_for(int w, int h, const mcp_image *weights, double mix, int64_t samples,
             sum += mcp_image_px(weights, (int)(i % w), (int)(i / w))[0];
         if (mcp__image_new(w, h, 1, name, "mixed map", &flat)) return -1;
         for (size_t i = 0; i < npix; i++) {
-            double share = sum > 0.0
-                               ? mcp_image_px(weights, (int)(i % w), (int)(i / w))[0] / sum
-                               : 1.0 / npix;
+            double share =
+                sum > 0.0 ? mcp_image_px(weights, (int)(i % w), (int)(i / w))[0] / sum
+                          : 1.0 / npix;
             flat->data[i] = (float)((1.0 - mix) * share + mix / npix);
         }
         weights = flat;

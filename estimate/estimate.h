@@ -548,16 +548,16 @@ MCP_API double mcp_equal_error_spp(const double *spp, const double *error, int n
  * pixels (a (2 dilate + 1)^2 square) of one that has not stopped samples on. */
 
 typedef struct mcp_renderer_rule_options {
-    double threshold;  /* Cycles' noise threshold (its UI's number; the error is
-                          compared with 5 x it, as Cycles does) [0.01] */
-    int min_samples;   /* checks start once a pixel has more than min_samples + 1;
-                          0: Cycles' automatic max(4, ceil(16 / threshold^0.3)) [0] */
-    int step;          /* samples between two checks (Cycles: 16) [16] */
-    int max_spp;       /* samples per pixel at most (Cycles' sample count) [1024] */
-    int dilate;        /* radius of the square that an unstopped pixel keeps
-                          sampling (Cycles: 1, 3x3); 0: none [1] */
-    int record_every;  /* denoise and record a point when the samples of an unstopped
-                          pixel are a multiple of this, and at the end [step] */
+    double threshold; /* Cycles' noise threshold (its UI's number; the error is
+                         compared with 5 x it, as Cycles does) [0.01] */
+    int min_samples;  /* checks start once a pixel has more than min_samples + 1;
+                         0: Cycles' automatic max(4, ceil(16 / threshold^0.3)) [0] */
+    int step;         /* samples between two checks (Cycles: 16) [16] */
+    int max_spp;      /* samples per pixel at most (Cycles' sample count) [1024] */
+    int dilate;       /* radius of the square that an unstopped pixel keeps
+                         sampling (Cycles: 1, 3x3); 0: none [1] */
+    int record_every; /* denoise and record a point when the samples of an unstopped
+                         pixel are a multiple of this, and at the end [step] */
 } mcp_renderer_rule_options;
 
 MCP_API mcp_renderer_rule_options mcp_renderer_rule_defaults(void);

@@ -181,9 +181,8 @@ record(const mcp_denoiser *den, const mcp_dump *acc, const mcp_image *reference,
     mcp_denoise_input in = mcp_denoise_input_of(acc);
     if (den->apply(den, &in, denoised)) return mcp_error_prefix("%s: ", den->name);
     pt->relmse = pt->relmse_noisy = NAN;
-    if (reference &&
-        (mcp_relmse(*denoised, reference, MCP_EPS_REL, &pt->relmse) ||
-         mcp_relmse(acc->color, reference, MCP_EPS_REL, &pt->relmse_noisy)))
+    if (reference && (mcp_relmse(*denoised, reference, MCP_EPS_REL, &pt->relmse) ||
+                      mcp_relmse(acc->color, reference, MCP_EPS_REL, &pt->relmse_noisy)))
         return -1;
     return 0;
 }

@@ -7,9 +7,9 @@
 #include <string.h>
 
 static const char *const adaptive_keys[] = {
-    "render",         "output",   "size",   "map",  "spp_per_iteration",
-    "initial_spp",    "budget",   "stop",   "tau",  "p",
-    "max_iterations", "quantum",  "probes", "seed", "reference",
+    "render",         "output",   "size",   "map",         "spp_per_iteration",
+    "initial_spp",    "budget",   "stop",   "tau",         "p",
+    "max_iterations", "quantum",  "probes", "seed",        "reference",
     "keep_passes",    "denoiser", "title",  "uniform_mix", NULL};
 
 /* The stage's settings, read before anything is loaded (by the run, and by the job's
@@ -34,8 +34,8 @@ parse_adaptive(mcp_job *job, const mcp_node *s, adaptive_plan *pl)
     const mcp_node *render = NULL;
     if (mcp_node_require(s, "render", "adaptive", &render) ||
         mcp_node_string(render, "render", &c->render) ||
-        mcp_node_opt_string(s, "output", &pl->sub) || mcp_node_opt_string(s, "map", &map) ||
-        mcp_node_opt_string(s, "size", &size) ||
+        mcp_node_opt_string(s, "output", &pl->sub) ||
+        mcp_node_opt_string(s, "map", &map) || mcp_node_opt_string(s, "size", &size) ||
         mcp_node_opt_string(s, "reference", &pl->ref_name) ||
         mcp_node_opt_double(s, "spp_per_iteration", &c->ao.spp_per_iteration) ||
         mcp_node_opt_double(s, "initial_spp", &c->ao.initial_spp) ||

@@ -221,8 +221,9 @@ check_mix(const mcp_adaptive_state *st, void *ctx)
         samples += mcp_image_px(c, i % c->width, i / c->width)[0];
     }
     for (int i = 0; i < npix; i++) {
-        double share = (1 - m->mix) * mcp_image_px(w, i % c->width, i / c->width)[0] / sum +
-                       m->mix / npix;
+        double share =
+            (1 - m->mix) * mcp_image_px(w, i % c->width, i / c->width)[0] / sum +
+            m->mix / npix;
         double got = mcp_image_px(c, i % c->width, i / c->width)[0];
         if (!(fabs(got - samples * share) < 1.0 + 1e-6))
             fail_msg("mix %g, pixel %d: count %g, share %g of %g samples", m->mix, i, got,

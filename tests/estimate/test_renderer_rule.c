@@ -129,7 +129,7 @@ test_dilation_wakes_the_neighbours(void **state)
  * 8 class-A samples of mean MU - d_J, d_J = (c / 4)(sqrt(J) - sqrt(J - 1)), so that
  * the class-A mean after J passes is MU - (c / 4) sqrt(J) / J = MU - c / sqrt(16 J).
  * With dilate 0 a pixel that stops never samples again, so its J is the pass + 1. */
-static const double noise_c[RW * RH] = {0.0, 0.3, 0.4, 0.5, 0.55, 0.7,
+static const double noise_c[RW * RH] = {0.0, 0.3,  0.4, 0.5,  0.55, 0.7,
                                         1.0, 0.45, 0.0, 0.35, 0.52, 2.0};
 
 static int
@@ -198,8 +198,8 @@ test_known_noise_stops_where_the_closed_form_says(void **state)
             }
         double got = mcp_dump_spp_at(r->accumulated, p % RW, p / RW);
         if (got != expect)
-            fail_msg("pixel %d (c = %g) stopped at %g samples, the closed form says %d", p,
-                     noise_c[p], got, expect);
+            fail_msg("pixel %d (c = %g) stopped at %g samples, the closed form says %d",
+                     p, noise_c[p], got, expect);
         total += expect;
     }
     /* 0 and 0.3 stop at the first check; 0.4 at 112, 0.5 at 176, 0.55 at 208, and

@@ -68,8 +68,8 @@ check_half_over_seeds(mcp_proc_sampler sampler, int n)
     for (int r = 0; r < R; r++) {
         mcp_dump *d = NULL;
         mcp_image *half = NULL;
-        if (mcp_proc_render_counts_half(&s, counts, 0, mcp_proc_realization_seed(5, r), &d,
-                                        &half))
+        if (mcp_proc_render_counts_half(&s, counts, 0, mcp_proc_realization_seed(5, r),
+                                        &d, &half))
             fail_msg("mcp_proc_render_counts_half: %s", mcp_error_message());
         for (int p = 0; p < W * H; p++) {
             const float *hp = mcp_image_px(half, p % W, p / W);
@@ -106,8 +106,8 @@ check_half_over_seeds(mcp_proc_sampler sampler, int n)
      * sum over independent pixels of means of R independent q's, so by the central
      * limit theorem it lies within 5 of its standard errors (estimated from the q's
      * themselves, whatever their tails) of the closed form; here that is 3-4%
-     * (over 600 seeds the sums came within 1.1% and 0.3%), where a wrong closed form (sigma^2 / n/2, or the overlap of A with I
-     * left out) would be off by a factor 2. */
+     * (over 600 seeds the sums came within 1.1% and 0.3%), where a wrong closed form
+     * (sigma^2 / n/2, or the overlap of A with I left out) would be off by a factor 2. */
     double all_s2 = 0, var_sum = 0;
     for (int p = 0; p < W * H; p++) {
         double mq = sum_q[p] / R;
@@ -159,7 +159,8 @@ test_half_pass_is_the_plain_pass(void **state)
         assert_int_equal(memcmp(plain->color->data, d->color->data, NV * sizeof(float)),
                          0);
         assert_int_equal(
-            memcmp(plain->var_of_mean->data, d->var_of_mean->data, NV * sizeof(float)), 0);
+            memcmp(plain->var_of_mean->data, d->var_of_mean->data, NV * sizeof(float)),
+            0);
         assert_int_equal(mcp_image_channel(half, "SampleCount"), 3);
         assert_true(mcp_image_px(half, 3, 2)[3] == 0.0f);
         assert_true(mcp_image_px(half, 3, 2)[0] == 0.0f);
