@@ -16,9 +16,10 @@
  * samples, up to 4 B samples per pixel); after every 32 samples of its unstopped
  * pixels the state is what a render with that threshold and that sample count
  * gives (the passes run in lockstep), so each run gives a point (mean spp, denoised
- * relMSE) per sample count. The lower envelope of all of them, with uniform's points
- * (adaptive sampling off), is the rule at its best threshold and sample count for every
- * error: the curve that the map's relMSE is read on.
+ * relMSE) per sample count, a curve. The rule at its best for an error is the fewest
+ * spp at which any run's curve, or uniform's (adaptive sampling off), reaches it,
+ * each interpolated as uniform's is: the best threshold and min samples for that
+ * error, chosen knowing the truth (which favours the rule).
  *
  *   bench_adaptive [--size N] [--budget SPP] [--spp-per-iteration N]
  *                  [--denoisers nlm,unet] [--seeds K] [--plot FILE.svg]
@@ -42,6 +43,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+
+#define MAX_LIST 16 /* numbers in a --thresholds, --min-samples or --mixes list */
 
 typedef struct scene_ctx {
     mcp_proc_scene scene;
@@ -179,18 +182,26 @@ speedup_text(double eq, double spp, const double *cs, const double *ce, int n, d
     }
 }
 
-/* The rule's runs for every threshold on one scene, and the envelope of their points
- * with the uniform run's: *n points, spp ascending, in rs[] / re[] (cap of them). */
-static int
-rule_front(scene_ctx *s, const mcp_denoiser *den, const double *thresholds, int nt,
-           const double *mins, int nmin, double budget, double spp_it,
-           const mcp_image *ref, const double *us, const double *ue, int nu, double *rs,
-           double *re, int cap)
+/* Curves (mean spp ascending, relMSE): uniform's and one per run of the rule. */
+#define MAX_RUNS (MAX_LIST * MAX_LIST + 1)
+#define MAX_POINTS 256
+typedef struct curves {
+    int n, len[MAX_RUNS];
+    double spp[MAX_RUNS][MAX_POINTS], err[MAX_RUNS][MAX_POINTS];
+} curves;
+
+/* The rule's runs on one scene for every threshold and min samples, after the
+ * uniform run's curve (adaptive sampling off, the limit of a zero threshold). */
+static void
+rule_curves(scene_ctx *s, const mcp_denoiser *den, const double *thresholds, int nt,
+            const double *mins, int nmin, double budget, double spp_it,
+            const mcp_image *ref, const double *us, const double *ue, int nu, curves *c)
 {
-    int n = 0;
-    for (int i = 0; i < nu && n < cap; i++, n++)
-        rs[n] = us[i], re[n] = ue[i];
-    for (int k = 0; k < nt * nmin; k++) {
+    c->n = 1;
+    c->len[0] = nu < MAX_POINTS ? nu : MAX_POINTS;
+    memcpy(c->spp[0], us, sizeof(double) * c->len[0]);
+    memcpy(c->err[0], ue, sizeof(double) * c->len[0]);
+    for (int k = 0; k < nt * nmin && c->n < MAX_RUNS; k++) {
         const int t = k / nmin;
         mcp_renderer_rule_options o = mcp_renderer_rule_defaults();
         o.threshold = thresholds[t];
@@ -201,8 +212,10 @@ rule_front(scene_ctx *s, const mcp_denoiser *den, const double *thresholds, int 
         if (mcp_renderer_rule_run(s->scene.width, s->scene.height, den, &o, render_half,
                                   s, ref, &r))
             die("renderer rule");
-        for (int i = 0; i < r->count && n < cap; i++, n++) {
-            rs[n] = r->points[i].mean_spp, re[n] = r->points[i].relmse;
+        int m = 0;
+        for (int i = 0; i < r->count && m < MAX_POINTS; i++, m++) {
+            c->spp[c->n][m] = r->points[i].mean_spp;
+            c->err[c->n][m] = r->points[i].relmse;
             if (g_verbose)
                 fprintf(stderr,
                         "    rule t=%g (min %d) at %d spp: mean %.1f spp, "
@@ -210,15 +223,43 @@ rule_front(scene_ctx *s, const mcp_denoiser *den, const double *thresholds, int 
                         thresholds[t], r->min_samples, r->points[i].max_spp,
                         r->points[i].mean_spp, r->points[i].active, r->points[i].relmse);
         }
+        c->len[c->n++] = m;
         mcp_renderer_rule_result_free(r);
     }
-    return mcp_pareto_front(rs, re, n);
+}
+
+/* The rule at its best for an error: the fewest spp at which any of the curves
+ * reaches it (each interpolated log-log between its own points, as for uniform);
+ * NAN when none does. *below: some curve is already below it at its first point
+ * (then that first point's spp counts, an upper bound). */
+static double
+best_equal_error(const curves *c, double target, int *below)
+{
+    double best = NAN;
+    *below = 0;
+    for (int k = 0; k < c->n; k++) {
+        if (c->len[k] < 1) continue;
+        double eq = mcp_equal_error_spp(c->spp[k], c->err[k], c->len[k], target);
+        if (isnan(eq) && c->err[k][0] <= target) eq = c->spp[k][0], *below = 1;
+        if (!isnan(eq) && !(eq >= best)) best = eq;
+    }
+    return best;
+}
+
+/* The rule's error at x spp: the lowest of the curves that reach x. */
+static double
+best_error_at(const curves *c, double x)
+{
+    double best = NAN;
+    for (int k = 0; k < c->n; k++) {
+        double e = curve_at(c->spp[k], c->err[k], c->len[k], x);
+        if (!isnan(e) && !(e >= best)) best = e;
+    }
+    return best;
 }
 
 #define MAX_CURVES 64
-#define MAX_LIST 16
 #define MAX_VARIANTS (3 * MAX_LIST)
-#define MAX_FRONT 4096
 
 int
 main(int argc, char **argv)
@@ -228,10 +269,10 @@ main(int argc, char **argv)
     double budget = 128, spp_it = 32;
     const char *denoisers = "nlm", *plot_path = NULL;
     /* Cycles' noise thresholds (its default is 0.01) and min samples (0: automatic),
-       the ones whose runs make the rule's envelope from about 60 to 300 spp on these
-       scenes: a sweep of 0.0025 to 0.08 with min samples 16, 32 and automatic put
-       0.04 and 0.08 on it only below 60 spp, 0.0025 only above 300, and min samples
-       32 within 3% of 16 (docs/adaptive.md) */
+       the ones whose runs are the rule's best from about 60 to 300 spp on these
+       scenes: in a sweep of 0.0025 to 0.08 with min samples 16, 32 and automatic,
+       0.04 and 0.08 were best only below 60 spp, 0.0025 only above 300, and min
+       samples 32 within 3% of 16 (docs/adaptive.md) */
     const char *threshold_list = "0.005,0.01,0.02";
     const char *min_list = "0,16";
     const char *mix_list = "0"; /* shares of uniform samples, each beside the maps */
@@ -292,7 +333,7 @@ main(int argc, char **argv)
     }
     /* the curves of the first seed, for the plot */
     static double px[MAX_CURVES][256], py[MAX_CURVES][256];
-    static double rs[MAX_FRONT], re[MAX_FRONT];
+    static curves rule;
     static char names[MAX_CURVES][96];
     mcp_plot_series series[MAX_CURVES];
     int n_series = 0, bounded = 0;
@@ -300,8 +341,8 @@ main(int argc, char **argv)
            "%dx%d procedural scene, %d seed(s)\n",
            budget, spp_it, size, size, seeds);
     printf("renderer rule: Cycles' noise threshold in {%s}, min samples in {%s} (0: "
-           "automatic), checks every 16 spp, up to %g spp; its best envelope with "
-           "uniform\n",
+           "automatic), checks every 16 spp, up to %g spp; at every error the best of "
+           "its runs and uniform\n",
            threshold_list, min_list, 4 * budget);
     printf("(N%%u: N%% of every adaptive pass spread uniformly)\n");
     printf("%-20s %-9s %-16s %11s %11s %9s %9s\n", "scene", "denoiser", "map", "relMSE",
@@ -353,13 +394,19 @@ main(int argc, char **argv)
                                                          1};
                     n_series++;
                 }
-                /* the renderer rule at its best: its envelope, its error at B and its
-                   own speed-up over uniform there */
+                /* the renderer rule at its best: its runs' curves, its error at B and
+                   its own speed-up over uniform there */
                 t0 = now_ms();
-                int nr = rule_front(&s, den, thresholds, nt, mins, nmin, budget, spp_it,
-                                    ref, us, ue, nu, rs, re, MAX_FRONT);
+                rule_curves(&s, den, thresholds, nt, mins, nmin, budget, spp_it, ref, us,
+                            ue, nu, &rule);
                 double t_rule = now_ms() - t0;
-                double rule_at_b = curve_at(rs, re, nr, budget);
+                double rule_at_b = best_error_at(&rule, budget);
+                if (g_verbose) {
+                    fprintf(stderr, "    uniform:");
+                    for (int i = 0; i < nu; i++)
+                        fprintf(stderr, " (%g, %.5g)", us[i], ue[i]);
+                    fprintf(stderr, "\n");
+                }
                 double rule_speedup;
                 char text[32], text2[32];
                 speedup_text(mcp_equal_error_spp(us, ue, nu, rule_at_b), budget, us, ue,
@@ -376,9 +423,12 @@ main(int argc, char **argv)
                     speedup_text(mcp_equal_error_spp(us, ue, nu, last->relmse),
                                  last->mean_spp, us, ue, nu, last->relmse, text,
                                  sizeof text, &speedup, &bounded);
-                    speedup_text(mcp_equal_error_spp(rs, re, nr, last->relmse),
-                                 last->mean_spp, rs, re, nr, last->relmse, text2,
-                                 sizeof text2, &over_rule, &bounded);
+                    int below = 0;
+                    double eq_rule = best_equal_error(&rule, last->relmse, &below);
+                    over_rule = eq_rule / last->mean_spp;
+                    snprintf(text2, sizeof text2, "%s%.2fx", below ? "<" : "", over_rule);
+                    if (below) bounded = 1;
+                    if (isnan(eq_rule)) snprintf(text2, sizeof text2, "> 4B");
                     printf("%-20s %-9s %-16s %11.5g %11.5g %9s %9s\n", sname, dn,
                            vnames[v], last->relmse, at_b, text, text2);
                     if (isfinite(speedup)) sum_speedup[v] += speedup, n_speedup[v]++;
@@ -402,8 +452,8 @@ main(int argc, char **argv)
                 }
                 fprintf(stderr,
                         "  (%s, %s, seed %d: uniform run %.1f s, the rule's %d runs "
-                        "%.1f s, %d points on its envelope)\n",
-                        dn, sname, sd + 1, t_uniform / 1e3, nt * nmin, t_rule / 1e3, nr);
+                        "%.1f s)\n",
+                        dn, sname, sd + 1, t_uniform / 1e3, nt * nmin, t_rule / 1e3);
                 free(us);
                 free(ue);
                 mcp_adaptive_result_free(u);

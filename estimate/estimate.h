@@ -615,12 +615,6 @@ MCP_API int mcp_renderer_rule_run(int width, int height, const mcp_denoiser *den
                                   const mcp_image *reference,
                                   mcp_renderer_rule_result **out);
 
-/* The lower envelope of several runs' (or any) points (spp, error): the points that
- * no other point beats in both (fewer or equal spp and lower error), spp ascending,
- * written over spp[] and error[]; returns how many. Its mcp_equal_error_spp is the
- * spp that the best of the runs needs for an error. */
-MCP_API int mcp_pareto_front(double *spp, double *error, int n);
-
 #ifdef __cplusplus
 }
 #endif

@@ -285,37 +285,3 @@ done:
         *out = r;
     return rc;
 }
-
-/* sorts points by spp, lower error first among equal spp */
-typedef struct {
-    double spp, error;
-} point;
-
-static int
-by_spp(const void *a, const void *b)
-{
-    const point *p = a, *q = b;
-    if (p->spp != q->spp) return p->spp < q->spp ? -1 : 1;
-    return (p->error > q->error) - (p->error < q->error);
-}
-
-int
-mcp_pareto_front(double *spp, double *error, int n)
-{
-    if (n <= 0) return 0;
-    point *p = malloc((size_t)n * sizeof *p);
-    if (!p) return mcp_error("pareto front: out of memory");
-    int m = 0;
-    for (int i = 0; i < n; i++)
-        if (isfinite(spp[i]) && isfinite(error[i])) p[m++] = (point){spp[i], error[i]};
-    qsort(p, (size_t)m, sizeof *p, by_spp);
-    int k = 0;
-    for (int i = 0; i < m; i++)
-        if (k == 0 || p[i].error < error[k - 1]) {
-            spp[k] = p[i].spp;
-            error[k] = p[i].error;
-            k++;
-        }
-    free(p);
-    return k;
-}

@@ -4,7 +4,7 @@
  * source states, the dilation of the unstopped pixels (which pixels it wakes, that a
  * stopped pixel is not tested again), a whole run in which every pixel's noise has a
  * known size c / sqrt(n) so that it must stop at a sample count the closed form
- * gives, the lower envelope of points, and the options' errors. */
+ * gives, and the options' errors. */
 #include "testing.h"
 
 #include <mcpost/estimate.h>
@@ -214,23 +214,7 @@ test_known_noise_stops_where_the_closed_form_says(void **state)
     mcp_denoiser_free(den);
 }
 
-/* ---- the envelope, the options ---- */
-
-static void
-test_pareto_front(void **state)
-{
-    (void)state;
-    double spp[7] = {64, 32, 64, 48, 128, 100, NAN};
-    double err[7] = {0.5, 1.0, 0.6, 0.4, 0.45, 0.3, 0.1};
-    int n = mcp_pareto_front(spp, err, 7);
-    assert_int_equal(n, 3);
-    const double es[3] = {32, 48, 100}, ee[3] = {1.0, 0.4, 0.3};
-    for (int i = 0; i < 3; i++) {
-        assert_true(spp[i] == es[i]);
-        assert_true(err[i] == ee[i]);
-    }
-    assert_int_equal(mcp_pareto_front(spp, err, 0), 0);
-}
+/* ---- the options ---- */
 
 static void
 test_option_errors(void **state)
@@ -264,7 +248,6 @@ main(void)
         cmocka_unit_test(test_automatic_min_samples),
         cmocka_unit_test(test_dilation_wakes_the_neighbours),
         cmocka_unit_test(test_known_noise_stops_where_the_closed_form_says),
-        cmocka_unit_test(test_pareto_front),
         cmocka_unit_test(test_option_errors),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
