@@ -344,7 +344,11 @@ main(int argc, char **argv)
            "automatic), checks every 16 spp, up to %g spp; at every error the best of "
            "its runs and uniform\n",
            threshold_list, min_list, 4 * budget);
-    printf("(N%%u: N%% of every adaptive pass spread uniformly)\n");
+    for (int m = 0; m < nm; m++)
+        if (mixes[m] > 0) {
+            printf("(map+N%%u: N%% of every adaptive pass spread uniformly)\n");
+            break;
+        }
     printf("%-20s %-9s %-16s %11s %11s %9s %9s\n", "scene", "denoiser", "map", "relMSE",
            "uniform@B", "speed-up", "vs rule");
     char list[256];
