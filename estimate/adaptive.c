@@ -68,6 +68,9 @@ mcp_adaptive_check(const mcp_adaptive_options *o)
     if (o->max_iterations < 1)
         return mcp_error("adaptive: max_iterations must be >= 1 (got %d)",
                          o->max_iterations);
+    if (!(o->uniform_mix >= 0.0 && o->uniform_mix <= 1.0))
+        return mcp_error("adaptive: uniform_mix must be in [0, 1] (got %g)",
+                         o->uniform_mix);
     if (o->quantum < 1 || o->quantum > 1 << 20)
         return mcp_error("adaptive: quantum must be in [1, 2^20] (got %d)", o->quantum);
     return mcp_estimate_check(&o->est);
@@ -84,18 +87,33 @@ mcp_adaptive_result_free(mcp_adaptive_result *r)
 }
 
 /* Counts for `samples` samples (a multiple of quantum) proportional to weights, or
- * uniform when weights is NULL: largest remainders in units of quantum. */
+ * uniform when weights is NULL, with the share `mix` of them spread evenly: largest
+ * remainders in units of quantum. */
 static int
-counts_for(int w, int h, const mcp_image *weights, int64_t samples, int quantum,
-           mcp_image **out)
+counts_for(int w, int h, const mcp_image *weights, double mix, int64_t samples,
+           int quantum, mcp_image **out)
 {
+    static const char *const name[1] = {"weight"};
     mcp_image *flat = NULL;
+    const size_t npix = (size_t)w * h;
     *out = NULL;
     if (!weights) {
-        static const char *const name[1] = {"weight"};
         if (mcp__image_new(w, h, 1, name, "uniform map", &flat)) return -1;
-        for (size_t i = 0; i < (size_t)w * h; i++)
+        for (size_t i = 0; i < npix; i++)
             flat->data[i] = 1.0f;
+        weights = flat;
+    } else if (mix > 0.0) {
+        /* (1 - mix) of the map's share plus mix of an even one, per pixel */
+        double sum = 0.0;
+        for (size_t i = 0; i < npix; i++)
+            sum += mcp_image_px(weights, (int)(i % w), (int)(i / w))[0];
+        if (mcp__image_new(w, h, 1, name, "mixed map", &flat)) return -1;
+        for (size_t i = 0; i < npix; i++) {
+            double share =
+                sum > 0.0 ? mcp_image_px(weights, (int)(i % w), (int)(i / w))[0] / sum
+                          : 1.0 / npix;
+            flat->data[i] = (float)((1.0 - mix) * share + mix / npix);
+        }
         weights = flat;
     }
     int rc = mcp_sample_counts(weights, samples / quantum, out);
@@ -109,8 +127,8 @@ counts_for(int w, int h, const mcp_image *weights, int64_t samples, int quantum,
 
 /* The pass's own count must be what it was asked to render: a renderer that ignores
  * the counts would make every figure after it wrong without a sign. */
-static int
-check_pass(const mcp_dump *part, const mcp_image *counts, int pass)
+int
+mcp__adaptive_check_pass(const mcp_dump *part, const mcp_image *counts, int pass)
 {
     const mcp_image *c = part->color;
     const char *src = part->source ? part->source : "the pass";
@@ -131,8 +149,8 @@ check_pass(const mcp_dump *part, const mcp_image *counts, int pass)
 }
 
 /* Merges part into *acc (taking it when *acc is empty). Takes ownership of part. */
-static int
-accumulate(mcp_dump **acc, mcp_dump *part)
+int
+mcp__adaptive_accumulate(mcp_dump **acc, mcp_dump *part)
 {
     if (!*acc) {
         *acc = part;
@@ -192,7 +210,7 @@ mcp_adaptive_run(int width, int height, const mcp_denoiser *den,
     mcp_image *counts = NULL, *next = NULL;
     mcp_estimate *est = NULL;
     int rc = -1;
-    if (!r->iterations || counts_for(width, height, NULL, first, o.quantum, &counts))
+    if (!r->iterations || counts_for(width, height, NULL, 0.0, first, o.quantum, &counts))
         goto done;
     int64_t total = 0, samples = first;
     for (int pass = 0;; pass++) {
@@ -211,11 +229,11 @@ mcp_adaptive_run(int width, int height, const mcp_denoiser *den,
             goto done;
         }
         double t1 = mcp__now_ms();
-        if (check_pass(part, counts, pass)) {
+        if (mcp__adaptive_check_pass(part, counts, pass)) {
             mcp_dump_free(part);
             goto done;
         }
-        if (accumulate(&r->accumulated, part)) {
+        if (mcp__adaptive_accumulate(&r->accumulated, part)) {
             mcp_error_prefix("adaptive: pass %d: ", pass);
             goto done;
         }
@@ -255,7 +273,7 @@ mcp_adaptive_run(int width, int height, const mcp_denoiser *den,
             samples = left < per_pass ? left : per_pass;
             if (counts_for(width, height,
                            o.map == MCP_ADAPTIVE_UNIFORM ? NULL : est->sampling_map,
-                           samples, o.quantum, &next))
+                           o.uniform_mix, samples, o.quantum, &next))
                 goto done;
         }
         it->ms_render = t1 - t0;

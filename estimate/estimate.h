@@ -465,6 +465,10 @@ typedef struct mcp_adaptive_options {
     int max_iterations;       /* passes at most [1000] */
     int quantum;              /* every count is a multiple of this: k^2 for a renderer
                                  whose samples come in stratified passes of k^2 [1] */
+    double uniform_mix;       /* share of every adaptive pass spread evenly over the
+                                 pixels, the rest placed by the map: a floor under the
+                                 counts for the rare paths (fireflies) that a pixel has
+                                 not drawn yet, so the map cannot see [0] */
 } mcp_adaptive_options;
 
 MCP_API mcp_adaptive_options mcp_adaptive_defaults(void);
@@ -540,6 +544,85 @@ MCP_API int mcp_adaptive_run(int width, int height, const mcp_denoiser *den,
  * it: then below its first point). Equal-error speed-up = this / the method's spp. */
 MCP_API double mcp_equal_error_spp(const double *spp, const double *error, int n,
                                    double target);
+
+/* ---- the renderers' own adaptive stopping rule (estimate/renderer_rule.c) ----
+ *
+ * What Cycles (and Mitsuba 3's adaptive_sampling integrator) do, as a baseline for the
+ * maps above (docs/adaptive.md, "The renderers' own rule"): every `step` samples,
+ * once past min_samples, a pixel still sampling compares its mean I with the mean A of
+ * its half buffer (the samples of class A, about every other one):
+ *     error = (|I_r - A_r| + |I_g - A_g| + |I_b - A_b|) / (1e-4 + s(I)),
+ *     s(I) = sqrt(I_r + I_g + I_b) below 1, I_r + I_g + I_b above,
+ * and stops for good when error < 5 x threshold; then every pixel within `dilate`
+ * pixels (a (2 dilate + 1)^2 square) of one that has not stopped samples on. */
+
+typedef struct mcp_renderer_rule_options {
+    double threshold; /* Cycles' noise threshold (its UI's number; the error is
+                         compared with 5 x it, as Cycles does) [0.01] */
+    int min_samples;  /* checks start once a pixel has more than min_samples + 1;
+                         0: Cycles' automatic max(4, ceil(16 / threshold^0.3)) [0] */
+    int step;         /* samples between two checks (Cycles: 16) [16] */
+    int max_spp;      /* samples per pixel at most (Cycles' sample count) [1024] */
+    int dilate;       /* radius of the square that an unstopped pixel keeps
+                         sampling (Cycles: 1, 3x3); 0: none [1] */
+    int record_every; /* denoise and record a point when the samples of an unstopped
+                         pixel are a multiple of this, and at the end [step] */
+} mcp_renderer_rule_options;
+
+MCP_API mcp_renderer_rule_options mcp_renderer_rule_defaults(void);
+/* Checks every field, naming it. */
+MCP_API int mcp_renderer_rule_check(const mcp_renderer_rule_options *opt);
+/* min_samples, or Cycles' automatic value for the threshold when it is 0. */
+MCP_API int mcp_renderer_rule_min_samples(const mcp_renderer_rule_options *opt);
+
+/* The error of one pixel (the formula above) from its mean and its half buffer's. */
+MCP_API double mcp_renderer_rule_pixel_error(const float mean[3], const float half[3]);
+
+/* One check: every pixel with converged[i] == 0 (row-major) gets 1 when its error is
+ * below 5 x threshold; then every pixel within `dilate` of one still at 0 is set to
+ * 0 (a stopped pixel next to an unstopped one samples again, as in Cycles). mean and
+ * half: 3 channels R, G, B (more are ignored), the same size. Returns how many pixels
+ * are still sampling (converged[i] == 0), or -1 with an error. */
+MCP_API long mcp_renderer_rule_update(const mcp_image *mean, const mcp_image *half,
+                                      double threshold, int dilate,
+                                      unsigned char *converged);
+
+/* Renders pass `pass` with counts(p) new samples in pixel p, as mcp_adaptive_render_fn,
+ * and its half buffer *half: channels R, G, B the mean of the pass's class-A samples
+ * and SampleCount their number (mcp_proc_render_counts_half). */
+typedef int (*mcp_renderer_rule_render_fn)(int pass, const mcp_image *counts,
+                                           mcp_dump **out, mcp_image **half, void *ctx);
+
+/* The state at one recorded check: what a render with the same threshold and a
+ * sample count (Cycles' max samples) of max_spp gives, the passes being in lockstep. */
+typedef struct mcp_renderer_rule_point {
+    int max_spp;         /* samples of a pixel that never stopped */
+    double mean_spp;     /* samples rendered / pixels */
+    long active;         /* pixels still sampling after this check */
+    double relmse;       /* of the denoised image (NAN without a reference) */
+    double relmse_noisy; /* of the accumulated mean */
+} mcp_renderer_rule_point;
+
+typedef struct mcp_renderer_rule_result {
+    int count;
+    mcp_renderer_rule_point *points;
+    int min_samples;       /* the one used */
+    mcp_dump *accumulated; /* every pass merged (pooled) */
+    mcp_image *denoised;   /* F of the last point */
+} mcp_renderer_rule_result;
+
+MCP_API void mcp_renderer_rule_result_free(mcp_renderer_rule_result *r);
+
+/* Runs the rule: pass k renders `step` samples (fewer at the end, to land on max_spp)
+ * in every pixel still sampling and none in the others; the passes are merged as in
+ * mcp_adaptive_run, the half buffers summed; the check runs after every pass once
+ * past min_samples; it ends at max_spp or when every pixel has stopped. reference may
+ * be NULL. */
+MCP_API int mcp_renderer_rule_run(int width, int height, const mcp_denoiser *den,
+                                  const mcp_renderer_rule_options *opt,
+                                  mcp_renderer_rule_render_fn render, void *render_ctx,
+                                  const mcp_image *reference,
+                                  mcp_renderer_rule_result **out);
 
 #ifdef __cplusplus
 }

@@ -116,6 +116,16 @@ extern const mcp_denoiser_kind mcp__denoiser_bilateral;
 extern const mcp_denoiser_kind mcp__denoiser_external;
 extern const mcp_denoiser_kind mcp__denoiser_unet;
 
+/* ---- the adaptive loops (adaptive.c, renderer_rule.c) ---- */
+
+/* 0 when the pass's dump has exactly the counts it was asked to render; otherwise an
+ * error naming the pixel (a renderer that ignores the counts would make every figure
+ * after it wrong without a sign). */
+int mcp__adaptive_check_pass(const mcp_dump *part, const mcp_image *counts, int pass);
+/* Merges part into *acc, pooled (taking it when *acc is empty); takes ownership of
+ * part. */
+int mcp__adaptive_accumulate(mcp_dump **acc, mcp_dump *part);
+
 /* Room for a path built from settings (a folder and a file name). */
 #define PATH_CAP 4096
 

@@ -90,6 +90,15 @@ static const mcp_option adaptive_options[] = {
      .doc =
          "counts in multiples of Q: K*K for a renderer that draws stratified passes of "
          "K*K samples"},
+    {.name = "uniform_mix",
+     .type = MCP_OPT_NUMBER,
+     .where = CJ,
+     .offset = AO(uniform_mix),
+     .meta = "F",
+     .def = "0",
+     .doc = "share of every pass spread evenly, the rest by the map: a floor for rare "
+            "paths no pixel has drawn yet",
+     .lo = 0, .hi = 1, .bounds = MCP_OPT_LO | MCP_OPT_HI},
     {.name = "probes",
      .type = MCP_OPT_INT,
      .where = CJ,

@@ -87,6 +87,19 @@ MCP_API int mcp_proc_render(const mcp_proc_scene *scene, int spp, uint64_t seed,
 MCP_API int mcp_proc_render_counts(const mcp_proc_scene *scene, const mcp_image *counts,
                                    int pass, uint64_t seed, mcp_dump **out);
 
+/* The same pass, and its half buffer: what a renderer's own adaptive stopping rule
+ * keeps beside the full mean (Cycles' adaptive auxiliary buffer, Mitsuba 3's odd
+ * image; docs/adaptive.md). *half has channels R, G, B, the mean of the pass's samples
+ * of class A, and SampleCount, how many those are (0 and mean 0 in a pixel without
+ * one). Class A is every other sample of the independent sampler (even stream
+ * indices); with the jittered one, in each pass of k^2 the cells (i, j) with
+ * i + j + pass even, so that two passes hold exactly one class-A sample per cell.
+ * Over a whole number of pairs of passes (any even count with the independent
+ * sampler) class A is half the samples and its mean is unbiased. */
+MCP_API int mcp_proc_render_counts_half(const mcp_proc_scene *scene,
+                                        const mcp_image *counts, int pass, uint64_t seed,
+                                        mcp_dump **out, mcp_image **half);
+
 /* count images (R, G, B) of spp samples each, image k using sample indices
  * [k*spp, (k+1)*spp) of the streams of mcp_proc_render with the same seed and
  * permutation: independent estimates for the perceptual methods. The mean of count

@@ -44,7 +44,23 @@ typedef struct {
     double mean[3], m2[3]; /* Welford: running mean and sum of squared deviations */
     double albedo[3];
     long n;
+    double half_sum[3]; /* the samples of class A (sample_in_half) */
+    long half_n;
 } accum;
+
+/* Whether sample s is in the half buffer ("class A") that a renderer's stopping rule
+ * compares with the full mean (docs/adaptive.md, "The renderers' own rule"). The
+ * class should itself be as well spread over the pixel as the sampler allows: with
+ * the independent sampler every other sample; with the jittered one, within a pass of
+ * k^2, the cells of one colour of a checkerboard, the colour alternating from pass to
+ * pass, so that two passes put exactly one class-A sample in every cell. One formula
+ * does both: k = 1 has a single cell and a pass per sample. */
+static inline int
+sample_in_half(uint64_t s, int k)
+{
+    uint64_t pass = (uint64_t)k * (uint64_t)k, cell = s % pass;
+    return ((cell % (uint64_t)k) + (cell / (uint64_t)k) + s / pass) % 2 == 0;
+}
 
 /* Samples [first, first + n) of stream key, for pixel (x, y). */
 static void
@@ -78,6 +94,11 @@ render_into(const mcp__proc_geom *g, int x, int y, uint64_t key, uint64_t first,
             a->mean[c] += delta / a->n;
             a->m2[c] += delta * (rgb[c] - a->mean[c]);
             a->albedo[c] += (alb[c] - a->albedo[c]) / a->n;
+        }
+        if (sample_in_half(s, k)) {
+            a->half_n++;
+            for (int c = 0; c < 3; c++)
+                a->half_sum[c] += rgb[c];
         }
     }
 }
@@ -316,16 +337,19 @@ pixel_counts(const mcp__proc_geom *g, const mcp_image *counts, long **out)
     return 0;
 }
 
-int
-mcp_proc_render_counts(const mcp_proc_scene *scene, const mcp_image *counts, int pass,
-                       uint64_t seed, mcp_dump **out)
+/* mcp_proc_render_counts, and the half buffer when half is not NULL. */
+static int
+render_counts(const mcp_proc_scene *scene, const mcp_image *counts, int pass,
+              uint64_t seed, mcp_dump **out, mcp_image **half)
 {
+    static const char *const half_names[4] = {"R", "G", "B", "SampleCount"};
     static const char *const xyz[3] = {"X", "Y", "Z"};
     mcp__proc_geom g;
     long *n = NULL;
     mcp_dump *d = NULL;
     char label[96], text[32];
     *out = NULL;
+    if (half) *half = NULL;
     if (mcp__proc_geom_init(scene, &g)) return -1;
     if (!counts) return mcp_error("procedural: missing sample counts");
     if (pass < 0) return mcp_error("procedural: pass must be >= 0 (got %d)", pass);
@@ -338,6 +362,9 @@ mcp_proc_render_counts(const mcp_proc_scene *scene, const mcp_image *counts, int
         new_rgb(&g, NULL, label, &d->albedo) || new_rgb(&g, xyz, label, &d->normal) ||
         mcp_image_new(g.width, g.height, 1, count_name, &d->spp_map) ||
         !(d->source = mcp_strdup(label)))
+        goto fail;
+    if (half && (mcp_image_new(g.width, g.height, 4, half_names, half) ||
+                 mcp_image_set_source(*half, label)))
         goto fail;
     snprintf(text, sizeof text, "%llu", (unsigned long long)seed);
     if (mcp_attrs_set_string(&d->attrs, "mcpost.procedural.seed", text)) goto fail;
@@ -370,6 +397,12 @@ mcp_proc_render_counts(const mcp_proc_scene *scene, const mcp_image *counts, int
             }
             nrm[0] = 0.0f, nrm[1] = 1.0f, nrm[2] = 0.0f;
             mcp_image_px(d->spp_map, x, y)[0] = (float)n[i];
+            if (half) {
+                float *h = mcp_image_px(*half, x, y);
+                for (int c = 0; c < 3; c++)
+                    h[c] = a.half_n > 0 ? (float)(a.half_sum[c] / a.half_n) : 0.0f;
+                h[3] = (float)a.half_n;
+            }
         }
     free(n);
     *out = d;
@@ -377,5 +410,24 @@ mcp_proc_render_counts(const mcp_proc_scene *scene, const mcp_image *counts, int
 fail:
     free(n);
     mcp_dump_free(d);
+    if (half) {
+        mcp_image_free(*half);
+        *half = NULL;
+    }
     return -1;
+}
+
+int
+mcp_proc_render_counts(const mcp_proc_scene *scene, const mcp_image *counts, int pass,
+                       uint64_t seed, mcp_dump **out)
+{
+    return render_counts(scene, counts, pass, seed, out, NULL);
+}
+
+int
+mcp_proc_render_counts_half(const mcp_proc_scene *scene, const mcp_image *counts,
+                            int pass, uint64_t seed, mcp_dump **out, mcp_image **half)
+{
+    if (!half) return mcp_error("procedural: missing the half buffer's output");
+    return render_counts(scene, counts, pass, seed, out, half);
 }

@@ -200,6 +200,67 @@ test_variance_map_beats_uniform(void **state)
     mcp_image_free(truth);
 }
 
+/* uniform_mix: the next pass's counts are largest remainders of
+ * samples x ((1 - mix) w_p / sum w + mix / pixels) over the map w that the pass's
+ * estimate made, so each is within one of that share; mix 1 is uniform sampling. */
+typedef struct mix_check {
+    double mix;
+    int checked;
+} mix_check;
+
+static int
+check_mix(const mcp_adaptive_state *st, void *ctx)
+{
+    mix_check *m = ctx;
+    if (!st->next_counts) return 0;
+    const mcp_image *w = st->est->sampling_map, *c = st->next_counts;
+    const int npix = c->width * c->height;
+    double sum = 0, samples = 0;
+    for (int i = 0; i < npix; i++) {
+        sum += mcp_image_px(w, i % c->width, i / c->width)[0];
+        samples += mcp_image_px(c, i % c->width, i / c->width)[0];
+    }
+    for (int i = 0; i < npix; i++) {
+        double share =
+            (1 - m->mix) * mcp_image_px(w, i % c->width, i / c->width)[0] / sum +
+            m->mix / npix;
+        double got = mcp_image_px(c, i % c->width, i / c->width)[0];
+        if (!(fabs(got - samples * share) < 1.0 + 1e-6))
+            fail_msg("mix %g, pixel %d: count %g, share %g of %g samples", m->mix, i, got,
+                     share, samples);
+        if (m->mix == 1.0) assert_true(got == 8.0f);
+    }
+    m->checked++;
+    return 0;
+}
+
+static void
+test_uniform_mix(void **state)
+{
+    (void)state;
+    recorded r = {mcp_proc_scene_defaults(), 3, 0, {0}, {0}, 0};
+    r.scene.width = r.scene.height = 16;
+    mcp_denoiser *den = denoiser("gauss");
+    const double mixes[3] = {0.0, 0.3, 1.0};
+    for (int k = 0; k < 3; k++) {
+        mcp_adaptive_options o = mcp_adaptive_defaults();
+        o.spp_per_iteration = 8;
+        o.budget_spp = 24;
+        o.uniform_mix = mixes[k];
+        mix_check m = {mixes[k], 0};
+        mcp_adaptive_result *res = NULL;
+        assert_int_equal(
+            mcp_adaptive_run(16, 16, den, &o, render, &r, NULL, check_mix, &m, &res), 0);
+        assert_int_equal(m.checked, 2);
+        mcp_adaptive_result_free(res);
+    }
+    mcp_adaptive_options o = mcp_adaptive_defaults();
+    o.budget_spp = 8;
+    o.uniform_mix = 1.5;
+    assert_error_contains(mcp_adaptive_check(&o), "uniform_mix");
+    mcp_denoiser_free(den);
+}
+
 /* The other stop rules: the estimate's criterion F(tau) >= p, and max_iterations. */
 static void
 test_stop_rules(void **state)
@@ -331,6 +392,7 @@ main(void)
         cmocka_unit_test(test_accumulation_is_exact),
         cmocka_unit_test(test_quantum_keeps_whole_passes),
         cmocka_unit_test(test_variance_map_beats_uniform),
+        cmocka_unit_test(test_uniform_mix),
         cmocka_unit_test(test_stop_rules),
         cmocka_unit_test(test_zero_count_pass_round_trip),
         cmocka_unit_test(test_equal_error_spp),
