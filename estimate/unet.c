@@ -10,6 +10,8 @@
 #include "unet_internal.h"
 #include "internal.h"
 
+#include <mcpost/progress.h>
+
 #include <float.h>
 #include <math.h>
 #include <stdint.h>
@@ -17,6 +19,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
+#include <unistd.h>
 #ifdef _OPENMP
 #include <omp.h>
 #endif
@@ -812,6 +815,19 @@ trace_relu(const pass *ps, const mcp__unet_conv *L, int relu, batch *out)
  * products by default (unet_winograd.c), else the direct loops below. With a trace,
  * the primal pass records its mask, and a replay (tangents alone: no bias) applies
  * it. */
+/* Progress of a run on a terminal, a step per convolution of every pass and tile: a
+ * 1080p apply takes seconds, an estimate's tangents tens of seconds. Shown only on a
+ * terminal and for images of a megapixel or more (a log stays quiet, as with
+ * --quiet); the calling thread's, as the block cache. */
+static _Thread_local mcp_progress *run_progress;
+static _Thread_local long run_steps;
+
+static void
+progress_step(void)
+{
+    if (run_progress) mcp_progress_update(run_progress, ++run_steps);
+}
+
 static int
 conv_into(const pass *ps, const mcp__unet_conv *L, const batch *a, const batch *b,
           int relu, batch *out)
@@ -820,6 +836,7 @@ conv_into(const pass *ps, const mcp__unet_conv *L, const batch *a, const batch *
     if (conv_plain(ps, L, a, b, relu && !replay, !replay, out) ||
         trace_relu(ps, L, relu, out))
         return -1;
+    progress_step();
     return 0;
 }
 
@@ -967,6 +984,7 @@ conv_up_replace(const pass *ps, const mcp__unet_conv *L, batch *t, batch *skip, 
     }
     if (trace_relu(ps, L, relu, &out))
         return -1;
+    progress_step();
     batch_free(t);
     batch_free(skip);
     *t = out;
@@ -1371,8 +1389,22 @@ mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_imag
         input_scale > 0 ? input_scale : mcp__unet_autoexposure(color, net->v2);
     if (!(scale_in > 0 && scale_in < 1e30))
         return mcp_error("unet: bad input scale %g", scale_in);
+    mcp_progress bar;
+    const int show = (double)W * H >= 1048576.0 && !mcp_progress_quiet() &&
+                     isatty(STDERR_FILENO) && !run_progress;
+    if (show) {
+        const int tiles = tile ? ((W + tile - 1) / tile) * ((H + tile - 1) / tile) : 1;
+        mcp_progress_begin(&bar, n ? "U-Net and its tangents" : "U-Net",
+                           (long)MCP__UNET_NCONV * (1 + n) * tiles);
+        run_progress = &bar;
+        run_steps = 0;
+    }
     int rc = tile ? run_tiled(net, color, albedo, normal, scale_in, t, n, tile, out, jt)
                   : run_whole(net, color, albedo, normal, scale_in, t, n, out, jt);
+    if (show) {
+        mcp_progress_end(&bar);
+        run_progress = NULL;
+    }
     if (rc) {
         if (out) {
             mcp_image_free(*out);
