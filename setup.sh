@@ -20,10 +20,12 @@
 set -euo pipefail
 cd "$(dirname "$0")"
 
-# Debian 12 packages that mcpost needs (README.md lists what each is for).
+# Debian 12 packages that mcpost needs (README.md lists what each is for; the library
+# links none of the bench-only ones: libopenblas-dev and libdnnl-dev are bench_unet's
+# baselines).
 PACKAGES=(gcc g++ make cmake pkg-config
           libopenexr-dev libopenimageio-dev libopencv-core-dev libopencv-imgproc-dev
-          libyaml-dev libcjson-dev libcmocka-dev libopenblas-dev libpng-dev
+          libyaml-dev libcjson-dev libcmocka-dev libopenblas-dev libdnnl-dev libpng-dev
           libdeflate-dev python3-dev python3-numpy python3-pytest python3-matplotlib
           python3-pip python3-setuptools python3-wheel python3-venv)
 JOBS=${MCPOST_JOBS:-$(nproc)}

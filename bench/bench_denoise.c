@@ -29,7 +29,7 @@ main(int argc, char **argv)
         return 2;
     }
     bench_scene sc;
-    bench_scene_make(side, side, &sc);
+    bench_scene_make(side, side, 4, &sc); /* the most bench_call_tangents asks for */
     int threads = 1;
 #ifdef _OPENMP
     threads = omp_get_max_threads();

@@ -1,22 +1,33 @@
-/* bench_unet.c: timings of the `unet` denoiser (OIDN's RT U-Net, estimate/unet.c; no
- * pass/fail) beside a baseline measured in the same run: OpenBLAS's cblas_sgemm at
- * the network's layer shapes (M = cout, K = 9 cin, N = 65536, as an im2col
- * convolution would call it), on as many threads as the U-Net.
+/* bench_unet.c: timings and peak memory of the `unet` denoiser (OIDN's RT U-Net,
+ * estimate/unet.c; no pass/fail) beside two baselines measured in the same run, on as
+ * many threads: OpenBLAS's cblas_sgemm at the network's layer shapes (M = cout,
+ * K = 9 cin, N = 65536, as an im2col convolution would call it), and, where the build
+ * made it (libdnnl-dev and the anchor program dnnl_unet.cpp, kept outside the tree:
+ * MCPOST_ONEDNN_ANCHOR, bench/CMakeLists.txt), oneDNN running the same network the way
+ * OIDN 1.4 does on the CPU (direct convolutions in its layout), and with oneDNN's
+ * Winograd; without it, one line says how to get it.
  *
  * The U-Net runs on a render-like input (noisy colour, albedo with edges, normals of
  * two planes, as bench_denoise) with the official colour + albedo + normal weights
  * from $MCPOST_OIDN_WEIGHTS, else the shipped weights/rt_hdr_alb_nrm.tza of the source
- * tree (without them it prints a skip line and exits 0): apply, and apply + JVP with 1
- * and with 4 tangents in one pass, in the default (Winograd) mode and in the
- * fixed-bit mode (MCPOST_UNET_FIXED=1: the direct loops, the same bits on every
- * x86-64). Each figure is the median of `repeats` runs after one warm-up: wall-clock
- * ms and ms per megapixel with the default OpenMP team (OMP_NUM_THREADS changes it),
- * and the direct-convolution-equivalent rate: 125406 multiply-adds per pixel of the
- * input padded to a multiple of 16, per image of the batch (the primal and each
- * tangent), per wall-clock second, and that rate over sgemm's.
+ * tree (without them it prints a skip line and exits 0): apply, and apply + JVP with 1,
+ * 4 and 8 tangents in one pass, in the default (Winograd) mode and in the fixed-bit
+ * mode (MCPOST_UNET_FIXED=1: the direct loops, the same bits on every x86-64). Each
+ * row is a fresh process (this program run again with --one, or the anchor), so that
+ * its peak resident memory is that of a process doing only that call on that input;
+ * oneDNN's process holds its 9-channel input and 3-channel output, ours the colour,
+ * albedo, normal and variance images, the tangents and the outputs. Each time is the
+ * median of `repeats` runs after one warm-up: wall-clock ms and ms per megapixel with
+ * the default OpenMP team (OMP_NUM_THREADS changes it), CPU ms (all threads) per
+ * megapixel, and the direct-convolution-equivalent rate: 125406 multiply-adds per
+ * pixel of the input padded to a multiple of 16, per image of the batch (the primal
+ * and each tangent), per wall-clock second, and that rate over sgemm's.
  * Usage: bench_unet [repeats (default 3)] [width (default 512)] [height (default width)]
  *                   [both | default | fixed (the modes timed; default both)]
  *        (1080p: bench_unet 3 1920 1080) */
+/* wait4: the peak memory of each child process */
+#define _DEFAULT_SOURCE
+
 #include <mcpost/denoiser.h>
 
 #include "denoiser_bench.h"
@@ -26,6 +37,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
 #include <unistd.h>
 #ifdef _OPENMP
 #include <omp.h>
@@ -97,6 +110,12 @@ sgemm_baseline(int threads)
 }
 #endif
 
+/* The calls timed: apply (-1 tangents), and apply + JVP with 1, 4 and 8 tangents. */
+#define N_CALLS 4
+static const char *const call_labels[N_CALLS] = {
+    "apply", "apply + JVP, 1 tangent", "apply + JVP, 4 tangents", "apply + JVP, 8 tangents"};
+static const int call_tangents[N_CALLS] = {-1, 1, 4, 8};
+
 /* The weights: $MCPOST_OIDN_WEIGHTS, else the shipped weights/ of the source tree this
  * file was compiled from (CMake passes absolute source paths). */
 static const char *
@@ -111,9 +130,150 @@ weights_path(void)
     return buf;
 }
 
+/* The child's side of one row (bench_unet --one TANGENTS REPEATS WIDTH HEIGHT, the mode
+ * from MCPOST_UNET_FIXED): the scene with only the tangents the call needs, the call
+ * timed, and "ms cpu_ms" on stdout. */
+static int
+time_one_call(const char *weights, int tangents, int repeats, int width, int height)
+{
+    char opt[4200];
+    snprintf(opt, sizeof opt, "weights=%s", weights);
+    mcp_denoiser *d = NULL;
+    if (mcp_denoiser_create_from_args("unet", (const char *[]){opt}, 1, &d)) {
+        fprintf(stderr, "bench_unet: %s\n", mcp_error_message());
+        return 1;
+    }
+    bench_scene sc;
+    bench_scene_make(width, height, tangents < 0 ? 0 : tangents, &sc);
+    double cpu = 0, ms = bench_denoiser_median_ms(d, &sc.in, sc.t, tangents, repeats, &cpu);
+    bench_scene_free(&sc);
+    mcp_denoiser_free(d);
+    if (ms < 0) return 1;
+    printf("%.17g %.17g\n", ms, cpu);
+    return 0;
+}
+
+/* Runs path with argv (environment inherited) and its stdout into out (cap bytes,
+ * NUL-terminated); returns its exit status (-1 when it could not run or was killed),
+ * and in *peak_mb its peak resident memory in MB (1e6 bytes). */
+static int
+run_child(const char *path, char *const argv[], char *out, size_t cap, double *peak_mb)
+{
+    int fd[2];
+    *peak_mb = -1, out[0] = 0;
+    fflush(stdout);
+    if (pipe(fd)) return -1;
+    pid_t pid = fork();
+    if (pid < 0) {
+        close(fd[0]), close(fd[1]);
+        return -1;
+    }
+    if (pid == 0) {
+        dup2(fd[1], STDOUT_FILENO);
+        close(fd[0]), close(fd[1]);
+        execv(path, argv);
+        _exit(127);
+    }
+    close(fd[1]);
+    /* what does not fit is read and dropped, so that the child never blocks on a full
+     * pipe */
+    char drop[256];
+    size_t len = 0;
+    ssize_t got;
+    while ((got = read(fd[0], len < cap - 1 ? out + len : drop,
+                       len < cap - 1 ? cap - 1 - len : sizeof drop)) > 0)
+        if (len < cap - 1) len += (size_t)got;
+    out[len] = 0;
+    close(fd[0]);
+    int status = 0;
+    struct rusage ru;
+    if (wait4(pid, &status, 0, &ru) != pid) return -1;
+    *peak_mb = (double)ru.ru_maxrss * 1024 / 1e6; /* ru_maxrss is in KiB on Linux */
+    return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+/* One row of the tables: times, rates and peak memory. */
+static void
+print_row(const char *label, double ms, double cpu, double gmac, double sgemm, double mp,
+          double peak_mb)
+{
+    const double rate = gmac / (ms * 1e-3);
+    printf("%-32s %10.1f %10.1f %12.1f %10.2f", label, ms, ms / mp, cpu / mp, rate);
+    if (sgemm > 0)
+        printf(" %10.2f", rate / sgemm);
+    else
+        printf(" %10s", "-");
+    printf(" %10.0f\n", peak_mb);
+}
+
+static void
+print_header(void)
+{
+    printf("%-32s %10s %10s %12s %10s %10s %10s\n", "call", "ms", "ms/MP", "CPU ms/MP",
+           "GMAC/s", "x sgemm", "peak MB");
+}
+
+#ifndef MCP_BENCH_ONEDNN_WHY /* CMake says why it did not build the anchor */
+#define MCP_BENCH_ONEDNN_WHY "this build does not look for it"
+#endif
+
+#ifdef MCP_BENCH_ONEDNN
+/* The anchor's two runs (OIDN 1.4's direct convolutions in its layout, and oneDNN's
+ * Winograd), their rows, and their times in ms[0], ms[1] (-1 when a run failed). */
+static int
+onednn_rows(const char *weights, int repeats, int width, int height, int threads,
+            double sgemm, double mp, double gmac, double ms[2])
+{
+    static const char *const algos[2] = {"direct", "winograd"};
+    static const char *const labels[2] = {"apply, direct (as OIDN 1.4)", "apply, Winograd"};
+    char w[16], h[16], reps[16], out[1024], title[256] = "", impl[2][256] = {"", ""};
+    double row[2][3], peak[2];
+    snprintf(w, sizeof w, "%d", width), snprintf(h, sizeof h, "%d", height);
+    snprintf(reps, sizeof reps, "%d", repeats);
+    int status = 0;
+    for (int a = 0; a < 2; a++) {
+        char *argv[] = {(char *)MCP_BENCH_ONEDNN, (char *)weights, w, h, "--reps", reps,
+                        "--layout", "oidn", "--algo", (char *)algos[a], NULL};
+        ms[a] = -1;
+        const int rc = run_child(MCP_BENCH_ONEDNN, argv, out, sizeof out, &peak[a]);
+        /* "oneDNN 2.6.3 apply [direct, oidn; jit:avx512_corex16]  1920x1088 2 thr
+         *  3500.0 ms  75.00 GMAC/s  7000.0 CPU ms  (runs ...)" */
+        const char *apply = strstr(out, " apply ["), *open = strchr(out, '['),
+                   *close = open ? strchr(open, ']') : NULL, *thr = strstr(out, " thr ");
+        if (rc != 0 || !apply || !close || !thr ||
+            sscanf(thr + 5, "%lf ms %lf GMAC/s %lf CPU ms", &row[a][0], &row[a][1],
+                   &row[a][2]) != 3) {
+            fprintf(stderr, "bench_unet: the oneDNN anchor (%s, --algo %s) failed%s%s\n",
+                    MCP_BENCH_ONEDNN, algos[a], out[0] ? ": " : "", out);
+            status = 1;
+            continue;
+        }
+        ms[a] = row[a][0];
+        snprintf(title, sizeof title, "%.*s", (int)(apply - out), out);
+        snprintf(impl[a], sizeof impl[a], "%.*s", (int)(close - open - 1), open + 1);
+    }
+    printf("%s (the anchor dnnl_unet.cpp: OIDN 1.4's RT U-Net, primal only) at %dx%d, "
+           "%d thread(s), median of %d\n",
+           title[0] ? title : "oneDNN", width, height, threads, repeats);
+    print_header();
+    for (int a = 0; a < 2; a++)
+        if (ms[a] > 0) print_row(labels[a], row[a][0], row[a][2], gmac, sgemm, mp, peak[a]);
+    for (int a = 0; a < 2; a++) /* oneDNN's kernels, as the anchor names them */
+        if (ms[a] > 0) printf("  --algo %s --layout oidn: %s\n", algos[a], impl[a]);
+    printf("\n");
+    return status;
+}
+#endif
+
 int
 main(int argc, char **argv)
 {
+    if (argc == 6 && !strcmp(argv[1], "--one")) {
+        const char *path = weights_path();
+        return path ? time_one_call(path, atoi(argv[2]), atoi(argv[3]), atoi(argv[4]),
+                                    atoi(argv[5]))
+                    : 1;
+    }
     int repeats = argc > 1 ? atoi(argv[1]) : 3, width = argc > 2 ? atoi(argv[2]) : 512;
     int height = argc > 3 ? atoi(argv[3]) : width;
     const char *modes = argc > 4 ? argv[4] : "both";
@@ -130,19 +290,14 @@ main(int argc, char **argv)
                path ? path : "(unknown)");
         return 0;
     }
-    char opt[4200];
-    snprintf(opt, sizeof opt, "weights=%s", path);
-    mcp_denoiser *d = NULL;
-    if (mcp_denoiser_create_from_args("unet", (const char *[]){opt}, 1, &d)) {
-        fprintf(stderr, "bench_unet: %s\n", mcp_error_message());
-        return 1;
-    }
-    bench_scene sc;
-    bench_scene_make(width, height, &sc);
     int threads = 1;
 #ifdef _OPENMP
     threads = omp_get_max_threads();
 #endif
+    /* every child (our rows and the anchor's) runs on the same team */
+    char threads_s[16];
+    snprintf(threads_s, sizeof threads_s, "%d", threads);
+    setenv("OMP_NUM_THREADS", threads_s, 1);
     double sgemm = -1;
 #ifdef MCP_BENCH_OPENBLAS
     sgemm = sgemm_baseline(threads);
@@ -151,34 +306,51 @@ main(int argc, char **argv)
 #endif
     const double mp = (double)width * height / 1e6;
     const double padded = (double)((width + 15) / 16 * 16) * ((height + 15) / 16 * 16);
+    const double gmac_apply = MAC_PER_PIXEL * padded * 1e-9;
+    char w[16], h[16], reps[16], nt[16], out[256];
+    snprintf(w, sizeof w, "%d", width), snprintf(h, sizeof h, "%d", height);
+    snprintf(reps, sizeof reps, "%d", repeats);
     int status = 0;
+    double apply_ms[2] = {-1, -1}; /* the default and fixed-bit modes' apply */
     for (int fixed = first; fixed <= last; fixed++) {
         setenv("MCPOST_UNET_FIXED", fixed ? "1" : "0", 1);
         printf("unet at %dx%d, %d thread(s), median of %d, %s\n", width, height, threads,
                repeats, fixed ? "fixed-bit mode (MCPOST_UNET_FIXED=1: direct loops)"
                               : "default mode (Winograd F(2x2,3x3))");
-        printf("%-24s %10s %10s %12s %10s %10s\n", "call", "ms", "ms/MP", "CPU ms/MP",
-               "GMAC/s", "x sgemm");
-        for (int c = 0; c < BENCH_N_CALLS; c++) {
-            const int nt = bench_call_tangents[c];
-            double cpu = 0, ms = bench_denoiser_median_ms(d, &sc.in, sc.t, nt, repeats, &cpu);
-            if (ms < 0) {
+        print_header();
+        for (int c = 0; c < N_CALLS; c++) {
+            const int n = call_tangents[c];
+            snprintf(nt, sizeof nt, "%d", n);
+            char *args[] = {argv[0], "--one", nt, reps, w, h, NULL};
+            double ms, cpu, peak;
+            if (run_child("/proc/self/exe", args, out, sizeof out, &peak) != 0 ||
+                sscanf(out, "%lf %lf", &ms, &cpu) != 2) {
+                fprintf(stderr, "bench_unet: %s failed\n", call_labels[c]);
                 status = 1;
                 continue;
             }
-            const double gmac = MAC_PER_PIXEL * padded * (nt < 0 ? 1 : 1 + nt) * 1e-9;
-            const double rate = gmac / (ms * 1e-3);
-            printf("%-24s %10.1f %10.1f %12.1f %10.2f", bench_call_labels[c], ms, ms / mp,
-                   cpu / mp, rate);
-            if (sgemm > 0)
-                printf(" %10.2f\n", rate / sgemm);
-            else
-                printf(" %10s\n", "-");
+            if (n < 0) apply_ms[fixed] = ms;
+            print_row(call_labels[c], ms, cpu, gmac_apply * (n < 0 ? 1 : 1 + n), sgemm, mp,
+                      peak);
         }
         printf("\n");
     }
     unsetenv("MCPOST_UNET_FIXED");
-    bench_scene_free(&sc);
-    mcp_denoiser_free(d);
+#ifdef MCP_BENCH_ONEDNN
+    double onednn_ms[2];
+    status |= onednn_rows(path, repeats, width, height, threads, sgemm, mp, gmac_apply,
+                          onednn_ms);
+    for (int fixed = 0; fixed <= 1; fixed++)
+        if (apply_ms[fixed] > 0 && onednn_ms[0] > 0 && onednn_ms[1] > 0)
+            printf("unet's apply (%s mode) takes %.2fx oneDNN direct's time, %.2fx "
+                   "Winograd's\n",
+                   fixed ? "fixed-bit" : "default", apply_ms[fixed] / onednn_ms[0],
+                   apply_ms[fixed] / onednn_ms[1]);
+#else
+    printf("bench_unet: no oneDNN baseline: the anchor was not built: %s "
+           "(docs/benchmarks.md, U-Net)\n",
+           MCP_BENCH_ONEDNN_WHY);
+    (void)apply_ms;
+#endif
     return status;
 }

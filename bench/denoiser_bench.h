@@ -63,15 +63,15 @@ bench_render_like(int w, int h, mcp_image **color, mcp_image **albedo, mcp_image
 }
 
 /* Tangents per call at most. */
-#define MAX_TANGENTS 4
+#define MAX_TANGENTS 8
 
-/* MAX_TANGENTS colour tangents of the noise's scale (uniform, times the standard
+/* n <= MAX_TANGENTS colour tangents of the noise's scale (uniform, times the standard
  * deviation), as images tan[k] and tangents t[k]. */
 static inline void
-bench_tangents(int w, int h, const mcp_image *variance, mcp_image **tan,
+bench_tangents(int w, int h, const mcp_image *variance, int n, mcp_image **tan,
                mcp_denoise_tangent *t)
 {
-    for (int k = 0; k < MAX_TANGENTS; k++) {
+    for (int k = 0; k < n; k++) {
         tan[k] = bench_rgb(w, h);
         uint64_t st = 100 + k;
         for (size_t i = 0; i < (size_t)w * h * 3; i++)
@@ -81,18 +81,22 @@ bench_tangents(int w, int h, const mcp_image *variance, mcp_image **tan,
     }
 }
 
-/* The render-like input and its tangents, as both benchmarks time them. */
+/* The render-like input and its tangents, as both benchmarks time them (tan[k] is NULL
+ * from the number made on). */
 typedef struct {
     mcp_image *color, *albedo, *normal, *variance, *tan[MAX_TANGENTS];
     mcp_denoise_tangent t[MAX_TANGENTS];
     mcp_denoise_input in;
 } bench_scene;
 
+/* The scene with n_tangents <= MAX_TANGENTS tangents (only those a call needs: the
+ * benchmarks that measure peak memory hold no more). */
 static inline void
-bench_scene_make(int w, int h, bench_scene *s)
+bench_scene_make(int w, int h, int n_tangents, bench_scene *s)
 {
+    *s = (bench_scene){0};
     bench_render_like(w, h, &s->color, &s->albedo, &s->normal, &s->variance);
-    bench_tangents(w, h, s->variance, s->tan, s->t);
+    bench_tangents(w, h, s->variance, n_tangents, s->tan, s->t);
     s->in = (mcp_denoise_input){s->color, s->albedo, s->normal, s->variance};
 }
 
