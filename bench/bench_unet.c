@@ -46,6 +46,7 @@
 
 #define MAC_PER_PIXEL 125406.0 /* the RT U-Net's 3x3 convolutions, 9 input channels */
 
+#ifdef MCP_BENCH_OPENBLAS
 /* The RT U-Net's convolutions: input and output channels, and the resolution as a
  * fraction of the input's pixels (MACs per input pixel: 9 cin cout / frac). */
 static const struct {
@@ -56,7 +57,6 @@ static const struct {
               {64, 64, 4},    {73, 64, 1},    {64, 32, 1},    {32, 3, 1}};
 #define N_LAYERS ((int)(sizeof layers / sizeof layers[0]))
 
-#ifdef MCP_BENCH_OPENBLAS
 #include <cblas.h>
 void openblas_set_num_threads(int n);
 
