@@ -316,7 +316,7 @@ main(int argc, char **argv)
         setenv("MCPOST_UNET_FIXED", fixed ? "1" : "0", 1);
         printf("unet at %dx%d, %d thread(s), median of %d, %s\n", width, height, threads,
                repeats, fixed ? "fixed-bit mode (MCPOST_UNET_FIXED=1: direct loops)"
-                              : "default mode (Winograd F(2x2,3x3))");
+                              : "default mode (Winograd: F(2x2,3x3), tangents F(4x4,3x3))");
         print_header();
         for (int c = 0; c < N_CALLS; c++) {
             const int n = call_tangents[c];
