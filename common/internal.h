@@ -68,13 +68,10 @@ int mcp__shell_fill(const char *tmpl, int n, const char *const *names,
  * old one, then removing that); abort removes it (safe after commit, and twice).
  * fix_paths rewrites strings that start with o->tmp to start with dir. */
 #include <cjson/cJSON.h>
-#ifndef MCP__OUTDIR_DEFINED /* both internal.h files declare it */
-#define MCP__OUTDIR_DEFINED
 typedef struct mcp__outdir {
     char final[4096], tmp[4200];
     int active;
 } mcp__outdir;
-#endif
 int mcp__outdir_begin(mcp__outdir *o, const char *dir);
 int mcp__outdir_commit(mcp__outdir *o);
 void mcp__outdir_abort(mcp__outdir *o);

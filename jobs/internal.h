@@ -18,26 +18,12 @@
 #include <mcpost/progress.h>
 #include <mcpost/stages.h>
 
+#include "../common/internal.h" /* output folders that appear whole (common/outdir.c) */
 #include "../ops/internal.h"
 
 #include <cjson/cJSON.h>
 #include <stddef.h>
 #include <stdint.h>
-
-/* ---- output folders that appear whole (common/outdir.c, declared in
- * common/internal.h) ---- */
-
-#ifndef MCP__OUTDIR_DEFINED /* both internal.h files declare it */
-#define MCP__OUTDIR_DEFINED
-typedef struct mcp__outdir {
-    char final[4096], tmp[4200];
-    int active;
-} mcp__outdir;
-#endif
-int mcp__outdir_begin(mcp__outdir *o, const char *dir);
-int mcp__outdir_commit(mcp__outdir *o);
-void mcp__outdir_abort(mcp__outdir *o);
-int mcp__outdir_fix_paths(const mcp__outdir *o, cJSON *json);
 
 /* ---- commands (common/shell.c, declared in common/internal.h) ---- */
 
