@@ -108,6 +108,27 @@ int mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color,
 int mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cout,
                             const float *a, int ca, int a_up, const float *b, int n, int h,
                             int w, int relu, float *out);
+/* A Winograd convolution F(m x m, 3x3): its tile, its transforms (unet_winograd.c
+ * and unet_winograd4.c), and the driver that runs them over an image in tasks of
+ * about chunk tiles with the matrix products of unet_gemm.c (unet_winograd.c). */
+typedef struct mcp__unet_winograd {
+    int m;          /* outputs per tile side: 2 or 4 */
+    int elems;      /* transformed elements per tile: (m + 2)^2 */
+    int chunk;      /* tiles per task, about */
+    int row_floats; /* the transforms' row scratch: row_floats x (tiles + 1) floats */
+    void (*transform_weights)(const float *weight, int cin, int cout, float *u);
+    void (*transform_input)(const float *src, int up, int h, int w, int ty, int tx0,
+                            int nt, float *rows, float *v, size_t ld);
+    void (*transform_output)(const float *m, size_t ld, int ty, int tx0, int nt, int h,
+                             int w, float bias, int relu, int primal, const float *p0,
+                             float *dst, float *row);
+} mcp__unet_winograd;
+
+int mcp__unet_winograd_conv(const mcp__unet_winograd *k, const float *weight,
+                            const float *bias, int cin, int cout, const float *a, int ca,
+                            int a_up, const float *b, int n, int h, int w, int relu,
+                            float *out);
+
 /* The same as F(4x4, 3x3) (unet_winograd4.c): 1.78 times fewer multiply-adds, a
  * relative error ~1e-4 instead of ~1e-6; for the tangents' passes. */
 int mcp__unet_conv_winograd4(const float *weight, const float *bias, int cin, int cout,

@@ -247,18 +247,35 @@ transform_output(const float *m, size_t ld, int ty, int tx0, int nt, int h, int 
     }
 }
 
+/* The F(2x2, 3x3) convolution: 2x2 outputs per tile, 16 elements, rows of 8 (nt + 1)
+ * floats for the transforms. */
+static const mcp__unet_winograd f2x2 = {2, 16, CHUNK, 8, transform_weights, transform_input,
+                                        transform_output};
+
 int
 mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cout,
                         const float *a, int ca, int a_up, const float *b, int n, int h,
                         int w, int relu, float *out)
 {
+    return mcp__unet_winograd_conv(&f2x2, weight, bias, cin, cout, a, ca, a_up, b, n, h, w,
+                                   relu, out);
+}
+
+/* A Winograd convolution of either size (unet_internal.h). */
+int
+mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
+                        const float *bias, int cin, int cout, const float *a, int ca,
+                        int a_up, const float *b, int n, int h, int w, int relu, float *out)
+{
+    const int tile_m = k_->m, elems = k_->elems;
     mcp__unet_gemm g;
     mcp__unet_gemm_choose(&g);
-    const int cb = cin - ca, th = (h + 1) / 2, tw = (w + 1) / 2;
+    const int cb = cin - ca, th = (h + tile_m - 1) / tile_m,
+              tw = (w + tile_m - 1) / tile_m;
     /* tasks: the image's tiles in row-major order, chunk at a time (the last fewer),
-     * chunk about CHUNK in whole column blocks of the kernel */
+     * chunk about k_->chunk in whole column blocks of the kernel (at least one) */
     const size_t n_tiles = (size_t)th * tw;
-    const int chunk = (CHUNK + g.nr / 2) / g.nr * g.nr;
+    const int rounded = (k_->chunk + g.nr / 2) / g.nr * g.nr, chunk = rounded > 0 ? rounded : g.nr;
     const int chunks = (int)((n_tiles + chunk - 1) / chunk);
     const int mp = (cout + g.mr - 1) / g.mr * g.mr; /* rows of the products */
     const size_t ld_max = (size_t)chunk;            /* whole blocks */
@@ -268,18 +285,19 @@ mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cou
 #ifdef _OPENMP
     n_threads = omp_get_max_threads();
 #endif
-    /* per thread: V (16 x cin x ld), M (16 x mp x ld), rows for the transforms */
-    const size_t per_thread = 16 * ld_max * ((size_t)cin + mp) + 8 * ((size_t)chunk + 1);
-    float *u = mcp_malloc(16 * plane * sizeof(float));
-    float *packed = u ? mcp_malloc((size_t)16 * mp * cin * sizeof(float)) : NULL;
+    /* per thread: V (elems x cin x ld), M (elems x mp x ld), rows for the transforms */
+    const size_t per_thread =
+        elems * ld_max * ((size_t)cin + mp) + (size_t)k_->row_floats * ((size_t)chunk + 1);
+    float *u = mcp_malloc(elems * plane * sizeof(float));
+    float *packed = u ? mcp_malloc((size_t)elems * mp * cin * sizeof(float)) : NULL;
     float *scratch =
         packed ? mcp__unet_alloc((size_t)n_threads * per_thread * sizeof(float)) : NULL;
     if (!scratch) {
         free(u), free(packed);
         return -1;
     }
-    transform_weights(weight, cin, cout, u);
-    for (int e = 0; e < 16; e++)
+    k_->transform_weights(weight, cin, cout, u);
+    for (int e = 0; e < elems; e++)
         mcp__unet_gemm_pack(&g, u + e * plane, cout, cin, packed + (size_t)e * mp * cin);
 #pragma omp parallel num_threads(n_threads)
     {
@@ -288,8 +306,8 @@ mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cou
         thread = omp_get_thread_num();
 #endif
         float *v = scratch + (size_t)thread * per_thread;
-        float *m = v + 16 * ld_max * (size_t)cin;
-        float *rows = m + 16 * ld_max * (size_t)mp;
+        float *m = v + elems * ld_max * (size_t)cin;
+        float *rows = m + elems * ld_max * (size_t)mp;
         /* a task is one chunk of every image, the primal first: the tangents take its
          * ReLU mask while it is still in the cache */
 #pragma omp for schedule(dynamic, 1)
@@ -308,32 +326,32 @@ mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cou
                         mcp__unet_prefetch_rows(i + 1 < ca
                                           ? a + ((size_t)k * ca + i + 1) * a_hw
                                           : b + ((size_t)k * cb + (i + 1 - ca)) * hw,
-                                      i + 1 < ca && a_up, h, w, t0, nt, tw, 2);
+                                      i + 1 < ca && a_up, h, w, t0, nt, tw, tile_m);
                     /* the chunk's pieces of tile rows */
                     for (int j = 0; j < nt;) {
                         const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
                         const int len = tw - tx < nt - j ? tw - tx : nt - j;
-                        transform_input(src, up, h, w, ty, tx, len, rows,
-                                        v + (size_t)i * ld + j, ldv);
+                        k_->transform_input(src, up, h, w, ty, tx, len, rows,
+                                            v + (size_t)i * ld + j, ldv);
                         j += len;
                     }
                     /* the padding columns: zeros, so that the padded outputs are
                      * finite (they are not stored) */
-                    for (int e = 0; e < 16; e++)
+                    for (int e = 0; e < elems; e++)
                         memset(v + e * ldv + (size_t)i * ld + nt, 0,
                                (size_t)(ld - nt) * sizeof(float));
                 }
-                for (int e = 0; e < 16; e++)
+                for (int e = 0; e < elems; e++)
                     mcp__unet_gemm_run(&g, packed + (size_t)e * mp * cin, cout, cin,
                                        v + e * ldv, ld, ld, m + e * ldm, ld);
                 for (int o = 0; o < cout; o++)
                     for (int j = 0; j < nt;) {
                         const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
                         const int len = tw - tx < nt - j ? tw - tx : nt - j;
-                        transform_output(m + (size_t)o * ld + j, ldm, ty, tx, len, h, w,
-                                         k == 0 && bias ? bias[o] : 0.0f, relu, k == 0,
-                                         out + (size_t)o * hw,
-                                         out + ((size_t)k * cout + o) * hw, rows);
+                        k_->transform_output(m + (size_t)o * ld + j, ldm, ty, tx, len, h, w,
+                                             k == 0 && bias ? bias[o] : 0.0f, relu, k == 0,
+                                             out + (size_t)o * hw,
+                                             out + ((size_t)k * cout + o) * hw, rows);
                         j += len;
                     }
             }

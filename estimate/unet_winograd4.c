@@ -255,94 +255,16 @@ transform_output4(const float *m, size_t ld, int ty, int tx0, int nt, int h, int
     }
 }
 
+/* 4x4 outputs per tile, 36 elements; the transforms' rows: 24 (nt + 1) floats for the
+ * input's phases, more than the output's 20 nt. */
+static const mcp__unet_winograd f4x4 = {4, ELEMS, CHUNK4, 24, transform_weights,
+                                        transform_input4, transform_output4};
+
 int
 mcp__unet_conv_winograd4(const float *weight, const float *bias, int cin, int cout,
                          const float *a, int ca, int a_up, const float *b, int n, int h,
                          int w, int relu, float *out)
 {
-    mcp__unet_gemm g;
-    mcp__unet_gemm_choose(&g);
-    const int cb = cin - ca, th = (h + 3) / 4, tw = (w + 3) / 4;
-    const size_t n_tiles = (size_t)th * tw;
-    const int chunk = (CHUNK4 + g.nr / 2) / g.nr * g.nr > 0 ? (CHUNK4 + g.nr / 2) / g.nr * g.nr
-                                                            : g.nr;
-    const int chunks = (int)((n_tiles + chunk - 1) / chunk);
-    const int mp = (cout + g.mr - 1) / g.mr * g.mr;
-    const size_t ld_max = (size_t)chunk;
-    const size_t hw = (size_t)h * w, plane = (size_t)cout * cin;
-    const size_t a_hw = a_up ? hw / 4 : hw;
-    int n_threads = 1;
-#ifdef _OPENMP
-    n_threads = omp_get_max_threads();
-#endif
-    /* per thread: V (36 x cin x ld), M (36 x mp x ld), rows for the transforms */
-    const size_t row_floats = 24 * ((size_t)chunk + 1) > 20 * (size_t)chunk
-                                  ? 24 * ((size_t)chunk + 1)
-                                  : 20 * (size_t)chunk;
-    const size_t per_thread = ELEMS * ld_max * ((size_t)cin + mp) + row_floats;
-    float *u = mcp_malloc(ELEMS * plane * sizeof(float));
-    float *packed = u ? mcp_malloc((size_t)ELEMS * mp * cin * sizeof(float)) : NULL;
-    float *scratch =
-        packed ? mcp__unet_alloc((size_t)n_threads * per_thread * sizeof(float)) : NULL;
-    if (!scratch) {
-        free(u), free(packed);
-        return -1;
-    }
-    transform_weights(weight, cin, cout, u);
-    for (int e = 0; e < ELEMS; e++)
-        mcp__unet_gemm_pack(&g, u + e * plane, cout, cin, packed + (size_t)e * mp * cin);
-#pragma omp parallel num_threads(n_threads)
-    {
-        int thread = 0;
-#ifdef _OPENMP
-        thread = omp_get_thread_num();
-#endif
-        float *v = scratch + (size_t)thread * per_thread;
-        float *m = v + ELEMS * ld_max * (size_t)cin;
-        float *rows = m + ELEMS * ld_max * (size_t)mp;
-#pragma omp for schedule(dynamic, 1)
-        for (int c = 0; c < chunks; c++)
-            for (int k = 0; k < n; k++) {
-                const size_t t0 = (size_t)c * chunk;
-                const int nt =
-                    (int)(n_tiles - t0 < (size_t)chunk ? n_tiles - t0 : (size_t)chunk);
-                const int ld = (nt + g.nr - 1) / g.nr * g.nr;
-                const size_t ldv = (size_t)cin * ld, ldm = (size_t)mp * ld;
-                for (int i = 0; i < cin; i++) {
-                    const int up = i < ca && a_up;
-                    const float *src = i < ca ? a + ((size_t)k * ca + i) * a_hw
-                                              : b + ((size_t)k * cb + (i - ca)) * hw;
-                    if (i + 1 < cin) /* the next channel's rows, while this one runs */
-                        mcp__unet_prefetch_rows(i + 1 < ca
-                                                    ? a + ((size_t)k * ca + i + 1) * a_hw
-                                                    : b + ((size_t)k * cb + (i + 1 - ca)) * hw,
-                                                i + 1 < ca && a_up, h, w, t0, nt, tw, 4);
-                    for (int j = 0; j < nt;) {
-                        const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
-                        const int len = tw - tx < nt - j ? tw - tx : nt - j;
-                        transform_input4(src, up, h, w, ty, tx, len, rows,
-                                         v + (size_t)i * ld + j, ldv);
-                        j += len;
-                    }
-                    for (int e = 0; e < ELEMS; e++) /* padding columns: zeros */
-                        memset(v + e * ldv + (size_t)i * ld + nt, 0,
-                               (size_t)(ld - nt) * sizeof(float));
-                }
-                for (int e = 0; e < ELEMS; e++)
-                    mcp__unet_gemm_run(&g, packed + (size_t)e * mp * cin, cout, cin,
-                                       v + e * ldv, ld, ld, m + e * ldm, ld);
-                for (int o = 0; o < cout; o++)
-                    for (int j = 0; j < nt;) {
-                        const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
-                        const int len = tw - tx < nt - j ? tw - tx : nt - j;
-                        transform_output4(m + (size_t)o * ld + j, ldm, ty, tx, len, h, w,
-                                          k == 0 && bias ? bias[o] : 0.0f, relu, k == 0,
-                                          out + (size_t)o * hw,
-                                          out + ((size_t)k * cout + o) * hw, rows);
-                        j += len;
-                    }
-            }
-    }
-    free(u), free(packed), free(scratch);
-    return 0;
+    return mcp__unet_winograd_conv(&f4x4, weight, bias, cin, cout, a, ca, a_up, b, n, h, w,
+                                   relu, out);
 }
