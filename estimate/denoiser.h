@@ -50,6 +50,10 @@ struct mcp_denoiser {
      * patch_radius 0): the estimate's automatic s² pooling stays off for it where the
      * variance has many degrees of freedom (docs/fidelity.md) */
     int sharp_variance;
+    /* the estimate's automatic probe count (0: MCP_ESTIMATE_PROBES): each probe is one
+     * more tangent, and a denoiser whose tangents cost nearly an apply picks fewer where
+     * they agree as often (the U-Net: docs/fidelity.md "The defaults") */
+    int estimate_probes;
     /* F(in): a new 3-channel image "R,G,B". */
     int (*apply)(const mcp_denoiser *self, const mcp_denoise_input *in, mcp_image **out);
     /* J·t_k for k < n at the point `at`, in one primal pass: out[k] receives a new

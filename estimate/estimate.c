@@ -27,9 +27,8 @@ mcp_estimate_defaults(void)
     mcp_estimate_options o;
     memset(&o, 0, sizeof o);
     o.sure = mcp_sure_defaults();
-    /* four probes with s² pooled agree with the truth as often as eight on the
-       stratified fixtures (docs/fidelity.md "The defaults"), at half the JVPs */
-    o.sure.n_probes = 4;
+    /* chosen by the denoiser (mcp_estimate_auto_probes) */
+    o.sure.n_probes = -1;
     o.variance_rademacher = 0;
     o.blocks = mcp_block_defaults();
     o.tau = 0.01;
@@ -40,6 +39,14 @@ mcp_estimate_defaults(void)
     o.budget = 0;
     o.s2_pool = -1;
     return o;
+}
+
+int
+mcp_estimate_auto_probes(const mcp_denoiser *den)
+{
+    /* four probes with s² pooled agree with the truth as often as eight on the
+       stratified fixtures (docs/fidelity.md "The defaults"), at half the JVPs */
+    return den && den->estimate_probes > 0 ? den->estimate_probes : MCP_ESTIMATE_PROBES;
 }
 
 int
@@ -62,8 +69,9 @@ mcp_estimate_check(const mcp_estimate_options *o)
         return mcp_error(
             "estimate: metric must be relse, relse-perceptual or se (got %d)",
             (int)s->metric);
-    if (s->n_probes < 1 || s->n_probes > 1024)
-        return mcp_error("estimate: probes must be in [1, 1024] (got %d)", s->n_probes);
+    if ((s->n_probes < 1 && s->n_probes != -1) || s->n_probes > 1024)
+        return mcp_error("estimate: probes must be auto or in [1, 1024] (got %d)",
+                         s->n_probes);
     if (!(s->fd_delta > 0.0) || !isfinite(s->fd_delta))
         return mcp_error("estimate: delta must be > 0 (got %g)", s->fd_delta);
     if (!(s->ppd >= 0.0) || !isfinite(s->ppd))
@@ -216,6 +224,7 @@ mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,
     mcp_estimate_options o = opt ? *opt : mcp_estimate_defaults();
     if (mcp_estimate_check(&o) || mcp__check_dump("estimate", dump)) return -1;
     if (!den) return mcp_error("estimate: missing denoiser");
+    if (o.sure.n_probes < 1) o.sure.n_probes = mcp_estimate_auto_probes(den);
     mcp_estimate *e = mcp_calloc(1, sizeof *e);
     if (!e) return -1;
     evaluation ev;
@@ -248,6 +257,7 @@ mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,
         e->maps.var_rel = vr;
     }
     /* s² from few probes: pooled so that its χ² spread does not fatten the tail */
+    e->probes = o.sure.n_probes;
     e->s2_pool = o.s2_pool >= 0 ? o.s2_pool : mcp_estimate_auto_s2_pool(dump, den);
     if (mcp_pool_window(e->maps.var_rel, NULL, e->s2_pool) ||
         mcp_pool_window(e->maps.var, NULL, e->s2_pool))

@@ -98,8 +98,9 @@ MCP_API int mcp_probe_rademacher(const mcp_dump *dump, uint64_t seed, int k,
 
 typedef struct mcp_sure_options {
     mcp_error_metric metric; /* [relse] */
-    int n_probes;            /* K >= 1: probes averaged in the Jε terms [1; 4 in
-                                mcp_estimate_defaults] */
+    int n_probes;            /* K >= 1: probes averaged in the Jε terms [1; in
+                                mcp_estimate_defaults -1, the denoiser's choice,
+                                mcp_estimate_auto_probes] */
     uint64_t seed;           /* [0] */
     double ppd;      /* relse-perceptual: pixels per degree, 0 = FLIP's 67.02 [0] */
     int mc_sure;     /* 1: Jε by finite differences (Ramani 2008), even when the
@@ -326,6 +327,11 @@ typedef struct mcp_estimate_options {
     int s2_pool;
 } mcp_estimate_options;
 
+/* The automatic probe count: the denoiser's own (den->estimate_probes: the U-Net 3),
+ * else MCP_ESTIMATE_PROBES; docs/fidelity.md "The defaults" has the figures. */
+#define MCP_ESTIMATE_PROBES 4
+MCP_API int mcp_estimate_auto_probes(const mcp_denoiser *den);
+
 /* The automatic pooling radius: 1, except 0 for a denoiser with a sharp Var[F]
  * (den->sharp_variance) on a variance with many degrees of freedom (per-sample, of the
  * mean); docs/fidelity.md "The defaults" has the figures. */
@@ -360,6 +366,7 @@ typedef struct mcp_estimate {
     mcp_variance_source variance_source; /* what the dump's variance rests on */
     double variance_dof;                 /* its degrees of freedom (0: many/unknown) */
     int s2_pool;                         /* the radius s² was pooled over */
+    int probes;                          /* the probes it took */
 } mcp_estimate;
 
 MCP_API int mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,

@@ -77,7 +77,7 @@ transform_weights(const float *weight, int cin, int cout, float *u)
  * ph[q][j] = column 4 (tx0 + j) - 1 + q for j <= nt, so that tile tx0 + j's six
  * columns are ph[0..3][j], ph[0][j + 1], ph[1][j + 1]; zeros outside the image. With
  * up, the source is at half resolution and read upsampled (nearest, 2x). */
-static inline void
+static inline __attribute__((always_inline)) void
 load_row4(const float *src, int up, int h, int w, int y, int tx0, int nt, float *ph[4])
 {
     const int n = nt + 1;
@@ -122,15 +122,14 @@ load_row4(const float *src, int up, int h, int w, int y, int tx0, int nt, float 
         }
         j = hi > lo ? hi : lo;
     }
-    /* the edges: at most one value on the left, a few on the right */
-    for (int e = 0; e < n; e++) {
-        if (e >= lo && e < hi)
-            continue;
-        for (int q = 0; q < 4; q++) {
-            const int x = x0 + 4 * e + q;
-            ph[q][e] = x >= 0 && x < w ? r[up ? x / 2 : x] : 0.0f;
-        }
-    }
+    /* the edges: at most one value on the left (e < lo), a few on the right */
+    const int edges[2][2] = {{0, lo}, {hi > lo ? hi : lo, n}};
+    for (int side = 0; side < 2; side++)
+        for (int e = edges[side][0]; e < edges[side][1]; e++)
+            for (int q = 0; q < 4; q++) {
+                const int x = x0 + 4 * e + q;
+                ph[q][e] = x >= 0 && x < w ? r[up ? x / 2 : x] : 0.0f;
+            }
 }
 
 /* V for tiles [tx0, tx0 + nt) of tile row ty, one channel: v[e * ld + j], e = 6 a + b,

@@ -67,13 +67,6 @@ render_pass(int pass, const mcp_image *counts, mcp_dump **out, void *ctx)
     return rc;
 }
 
-static int
-cmp_float(const void *a, const void *b)
-{
-    float x = *(const float *)a, y = *(const float *)b;
-    return (x > y) - (x < y);
-}
-
 /* A one-channel image as a false-colour PNG, scaled to its 99th percentile: a few
  * pixels far above the rest (a firefly's) would otherwise leave the picture black.
  * *top receives the value at the scale's top (the colour bar's end), *flat (may be
@@ -89,12 +82,16 @@ write_png(const mcp__adaptive_loop *c, const mcp_image *img, const char *fmt, in
     for (int y = 0; y < img->height; y++)
         for (int x = 0; x < img->width; x++)
             v[(size_t)y * img->width + x] = mcp_image_px(img, x, y)[0];
-    qsort(v, n, sizeof *v, cmp_float);
-    double hi = v[(size_t)(0.99 * (double)(n - 1))];
-    if (!(hi > 0)) hi = v[n - 1];
-    if (flat) *flat = v[0] == v[n - 1];
-    *top = flat && *flat ? v[0] : hi > 0 ? hi : 1.0;
+    /* the smallest, the 99th percentile and the largest, by selection */
+    const size_t ranks[3] = {0, (size_t)(0.99 * (double)(n - 1)), n - 1};
+    float sel[3];
+    int bad = mcp__select_ranks(v, n, ranks, 3, sel);
     free(v);
+    if (bad) return -1;
+    double hi = sel[1];
+    if (!(hi > 0)) hi = sel[2];
+    if (flat) *flat = sel[0] == sel[2];
+    *top = flat && *flat ? sel[0] : hi > 0 ? hi : 1.0;
     unsigned char *rgb = mcp_malloc(n * 3);
     int rc =
         !rgb || path_in(c, path, sizeof path, fmt, pass) ||

@@ -435,7 +435,31 @@ test_cli_single_and_series(void **state)
     st = run("estimate '%s' --denoiser gauss --probes 0",
              mcp_test_path("cli_spp0064.exr"));
     assert_int_equal(st, 1);
-    assert_non_null(strstr(err, "probes must be in [1, 1024] (got 0)"));
+    assert_non_null(strstr(err, "--probes must be auto or a number in [1, 1024] (got 0)"));
+    /* the probe count is the denoiser's (docs/fidelity.md "The defaults"): 3 for the
+       U-Net, whose tangents cost over half an apply, 4 for the others; the automatic
+       estimate is the explicit one, to the bit */
+    static const struct {
+        const char *denoiser;
+        int probes;
+    } auto_probes[] = {{"gauss", 4}, {"unet", 3}};
+    for (int i = 0; i < 2; i++) {
+        double cdf[2];
+        for (int explicit_k = 0; explicit_k < 2; explicit_k++) {
+            char probes[32] = "";
+            if (explicit_k) snprintf(probes, sizeof probes, "--probes %d", auto_probes[i].probes);
+            st = run("estimate '%s/samples/fixtures/strat/texture/series/texture_spp0032.exr' "
+                     "--denoiser %s %s --json",
+                     MCP_TEST_SOURCE_DIR, auto_probes[i].denoiser, probes);
+            assert_int_equal(st, 0);
+            cJSON *j = cJSON_Parse(out);
+            assert_non_null(j);
+            assert_int_equal(cJSON_GetObjectItem(j, "probes")->valueint, auto_probes[i].probes);
+            cdf[explicit_k] = cJSON_GetObjectItem(j, "cdf_at_tau")->valuedouble;
+            cJSON_Delete(j);
+        }
+        assert_true(cdf[0] == cdf[1]);
+    }
 }
 
 static void
