@@ -477,6 +477,174 @@ test_blend_weights_and_the_shorthand(void **state)
     mcp_cli_denoiser_flags_free(&df);
 }
 
+/* The reader of one front end on argv or a YAML map: 0 or -1 (msg). */
+static int
+cli_settings(const mcp_operation *op, int argc, char **argv, void *settings, char *msg,
+             size_t cap)
+{
+    mcp_shared_settings sh;
+    mcp_cli_denoiser_flags df = {0};
+    int first = 0;
+    mcp_error_clear();
+    int rc = mcp_cli_parse(op, "", "", argc, argv, settings, &sh, &df, &first);
+    mcp_cli_denoiser_flags_free(&df);
+    snprintf(msg, cap, "%s", mcp_error_message());
+    return rc == -1 ? 0 : -1;
+}
+
+static mcp_node *
+yaml(const char *text)
+{
+    mcp_node *root = NULL;
+    assert_int_equal(mcp_yaml_parse_string(text, "job.yaml", &root), 0);
+    return root;
+}
+
+/* The gates' conditions (repeatable texts the table takes as they are) read by the
+ * command line and by a job alike: the same conditions taken, in the same order, asking
+ * the metrics for the same shares of pixels; the same ones refused with the same
+ * message ("--fail 'x': ..." against "fail: 'x': ..."). */
+static void
+test_gates_read_alike(void **state)
+{
+    (void)state;
+    static const struct {
+        const char *key, *text;
+        int good;
+    } cases[] = {{"fail", "flip_ldr.mean > 0.2", 1},
+                 {"warn", "relmse >= 0.5", 1},
+                 {"fail", "psnr<10", 1},
+                 {"warn", "relse_percentiles.value.0 > 0.001", 1},
+                 {"fail_percent", "flip_ldr 0.1 1%", 1},
+                 {"warn_percent", "relse 0.3 5", 1},
+                 {"fail", "flip.mean > 0.1", 0},
+                 {"warn", "relmse = 0.1", 0},
+                 {"fail", "psnr > lots", 0},
+                 {"fail_percent", "flip 0.1 1%", 0},
+                 {"warn_percent", "flip_ldr 0.1", 0},
+                 {"fail_percent", "relse 0.1 120", 0}};
+    const mcp_operation *op = mcp_operation_metrics();
+    int n = (int)(sizeof cases / sizeof *cases);
+    for (int i = 0; i < n; i++) {
+        mcp_metrics_settings a, b;
+        mcp_metrics_options oa, ob;
+        mcp__gate ga, gb;
+        const char *bad_key = NULL;
+        int bad_index = -1;
+        char flag[64], cli_msg[512] = "", job_msg[512] = "", text[512];
+        mcp_option_flag(cases[i].key, flag, sizeof flag);
+        /* fail: a good condition first, so that the one under test is the second */
+        int two = !strcmp(cases[i].key, "fail");
+        char *argv[] = {"metrics", flag, "mse > 1", flag, (char *)cases[i].text, NULL};
+        char *one[] = {"metrics", flag, (char *)cases[i].text, NULL};
+        int cli = cli_settings(op, two ? 5 : 3, two ? argv : one, &a, cli_msg,
+                               sizeof cli_msg);
+        assert_int_equal(cli, 0);
+        oa = a.o;
+        cli = mcp__gate_from_settings(&a, &oa, &ga, &bad_key, &bad_index);
+        if (cli) snprintf(cli_msg, sizeof cli_msg, "%s", mcp_error_message());
+        /* the job: a list, the condition at its own line */
+        if (two)
+            snprintf(text, sizeof text, "%s:\n  - mse > 1\n  - '%s'\n", cases[i].key,
+                     cases[i].text);
+        else
+            snprintf(text, sizeof text, "%s:\n  - '%s'\n", cases[i].key, cases[i].text);
+        mcp_node *root = yaml(text);
+        mcp_shared_settings sh;
+        assert_int_equal(mcp__job_settings(op, root, &sh, &b), 0);
+        ob = b.o;
+        int job = mcp__gate_from_settings(&b, &ob, &gb, &bad_key, &bad_index);
+        if (job) {
+            /* as the stage puts it: at the condition's line, the key for the flag */
+            const mcp_node *list = mcp_node_get(root, bad_key);
+            const char *m = mcp_error_message();
+            snprintf(job_msg, sizeof job_msg, "job.yaml:%d: %s: %s",
+                     list->items[bad_index]->line, bad_key, strchr(m, ' ') + 1);
+        }
+        if (cases[i].good != !cli || cases[i].good != !job)
+            fail_msg("%s '%s': the command line %s (%s), the job %s (%s)", cases[i].key,
+                     cases[i].text, cli ? "refuses it" : "takes it", cli_msg,
+                     job ? "refuses it" : "takes it", job_msg);
+        if (cli) {
+            char want[600];
+            snprintf(want, sizeof want, "job.yaml:%d: %s: %s",
+                     mcp_node_get(root, bad_key)->items[bad_index]->line, cases[i].key,
+                     strchr(cli_msg, ' ') + 1);
+            assert_string_equal(job_msg, want);
+            assert_non_null(strstr(cli_msg, flag));
+        } else {
+            assert_int_equal(ga.n, gb.n);
+            for (int k = 0; k < ga.n; k++)
+                assert_string_equal(ga.c[k].text, gb.c[k].text);
+            assert_int_equal(oa.n_above, ob.n_above);
+            assert_memory_equal(oa.above, ob.above, sizeof oa.above);
+        }
+        mcp_node_free(root);
+    }
+}
+
+/* A convert's channels and a perceptual kernel's taps: "A,B,C" on the command line is a
+ * job's list [A, B, C]. */
+static void
+test_lists_as_texts_read_alike(void **state)
+{
+    (void)state;
+    mcp_convert_settings ca, cb;
+    char msg[512];
+    char **na = NULL, **nb = NULL;
+    int ka = 0, kb = 0;
+    assert_int_equal(cli_settings(mcp_operation_convert(), 3,
+                                  (char *[]){"convert", "--channels", "B,G,R", NULL}, &ca,
+                                  msg, sizeof msg),
+                     0);
+    mcp_node *root = yaml("channels: [B, G, R]\n");
+    assert_int_equal(mcp__job_settings(mcp_operation_convert(), root, NULL, &cb), 0);
+    assert_int_equal(mcp__convert_channel_names(&ca, &na, &ka), 0);
+    assert_int_equal(mcp__convert_channel_names(&cb, &nb, &kb), 0);
+    assert_int_equal(ka, 3);
+    assert_int_equal(kb, 3);
+    for (int i = 0; i < 3; i++)
+        assert_string_equal(na[i], nb[i]);
+    assert_string_equal(na[0], "B");
+    mcp__free_words(na, ka);
+    mcp__free_words(nb, kb);
+    mcp_node_free(root);
+
+    mcp_perceptual_settings pa, pb;
+    mcp__perc_args aa, ab;
+    assert_int_equal(cli_settings(mcp_operation_perceptual(), 3,
+                                  (char *[]){"perceptual", "--kernel", "0.25,0.5,0.25", NULL},
+                                  &pa, msg, sizeof msg),
+                     0);
+    root = yaml("kernel: [0.25, 0.5, 0.25]\n");
+    assert_int_equal(mcp__job_settings(mcp_operation_perceptual(), root, NULL, &pb), 0);
+    assert_int_equal(mcp__perc_args_from_settings(&pa, &aa), 0);
+    assert_int_equal(mcp__perc_args_from_settings(&pb, &ab), 0);
+    assert_int_equal(aa.opt.model.user_kernel_width, 3);
+    assert_int_equal(ab.opt.model.user_kernel_width, 3);
+    /* the outer product of the taps: the centre 0.25, a corner 1/16 */
+    assert_true(aa.kernel[4] == 0.25 && aa.kernel[0] == 0.0625);
+    assert_memory_equal(aa.kernel, ab.kernel, 9 * sizeof(double));
+    mcp__perc_args_free(&aa);
+    mcp__perc_args_free(&ab);
+    mcp_node_free(root);
+    /* an even count fails alike */
+    root = yaml("kernel: [0.5, 0.5]\n");
+    assert_int_equal(mcp__job_settings(mcp_operation_perceptual(), root, NULL, &pb), 0);
+    assert_int_equal(mcp__perc_args_from_settings(&pb, &ab), -1);
+    snprintf(msg, sizeof msg, "%s", mcp_error_message());
+    mcp__perc_args_free(&ab);
+    mcp_node_free(root);
+    assert_int_equal(cli_settings(mcp_operation_perceptual(), 3,
+                                  (char *[]){"perceptual", "--kernel", "0.5,0.5", NULL}, &pa,
+                                  msg + 256, 256),
+                     0);
+    assert_int_equal(mcp__perc_args_from_settings(&pa, &aa), -1);
+    assert_string_equal(msg, mcp_error_message());
+    assert_string_equal(msg, "kernel: give an odd number of taps (got 2)");
+    mcp__perc_args_free(&aa);
+}
+
 int
 main(void)
 {
@@ -486,6 +654,8 @@ main(void)
         cmocka_unit_test(test_stage_keys_are_the_tables),
         cmocka_unit_test(test_flags_are_spelt_once),
         cmocka_unit_test(test_blend_weights_and_the_shorthand),
+        cmocka_unit_test(test_gates_read_alike),
+        cmocka_unit_test(test_lists_as_texts_read_alike),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
