@@ -222,7 +222,8 @@ cmd_compare(int argc, char **argv)
     /* a bad value is a usage error here, as it always was for compare */
     if (parsed >= 0) return parsed == 1 ? 2 : parsed;
     mcp_metrics_options o = st.m.o;
-    const char *out_dir = sh.output ? sh.output : "compare", *display = st.display;
+    const char *out_dir = sh.output ? sh.output : "compare", *display =
+        mcp_wordlist_name(&mcp_report_display_words, st.display);
     double exposure = st.exposure;
     int json = sh.json;
     optind = first;

@@ -45,10 +45,6 @@ void mcp__free_words(char **words, int count);
 
 /* ---- settings.c: a stage's settings ---- */
 
-/* An enum key read with its from_name function (parse's out is the enum); a bad name
- * fails at the key's line. Absent: *out unchanged. */
-int mcp__opt_enum(const mcp_node *settings, const char *key,
-                  int (*parse)(const char *, void *), void *out);
 /* A stage's settings through its operation's table: ops/internal.h's
  * mcp__options_from_node and mcp__options_node_keys. */
 #define mcp__job_settings mcp__options_from_node

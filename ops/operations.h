@@ -116,7 +116,7 @@ typedef struct mcp_metrics_settings {
 typedef struct mcp_compare_settings {
     mcp_metrics_settings m; /* first: metrics' rows read it at their own offsets */
     double exposure;        /* the page's starting exposure, stops */
-    const char *display;    /* the page's starting display */
+    int display;            /* the page's starting display (mcp_report_display_words) */
 } mcp_compare_settings;
 
 /* At most this many kernel items (taps) a job lists. */
