@@ -65,9 +65,13 @@ parse_perceptual(mcp_job *job, const mcp_node *settings, mcp__perc_args *a,
     mcp__perc_args_free(a);
     if (mcp__perc_args_from_settings(&st, a)) {
         /* the kernel's or the confidence's error at its line, else the stage's */
-        const char *key = mcp_node_get(settings, "kernel") ? "kernel" : NULL;
-        return key ? mcp__at_line(settings, key) : mcp_node_error(settings, "%s",
-                                                                  mcp_error_message());
+        const char *m = mcp_error_message();
+        const char *key = !strncmp(m, "kernel", 6)                ? "kernel"
+                          : !strncmp(m, "perceptual: confidence", 22) ? "confidence"
+                                                                      : NULL;
+        return key && mcp_node_get(settings, key)
+                   ? mcp__at_line(settings, key)
+                   : mcp_node_error(settings, "%s", mcp_error_message());
     }
     *name = st.name;
     *folder = sh.output ? sh.output : st.name;

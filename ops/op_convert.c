@@ -70,8 +70,7 @@ static const mcp_option convert_options[] = {
      .where = MCP_OPT_CLI,
      .offset = offsetof(S, dump),
      .meta = "CONVENTION",
-     .doc = "read IN as a render dump and write it in CONVENTION (pbrt, mitsuba, "
-            "blender, mcpost)",
+     .doc = "read IN as a render dump and write it in this convention",
      .words = &mcp_convention_words},
     {.name = "spp",
      .type = MCP_OPT_TEXT,

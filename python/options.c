@@ -205,9 +205,13 @@ static void
 python_default(const mcp_option *o, char *buf, size_t cap)
 {
     const char *def = o->def;
-    if (o->type == MCP_OPT_INPUT || o->type == MCP_OPT_TEXT || o->type == MCP_OPT_TEXTS ||
-        !def) {
+    char *end = NULL;
+    if (o->type == MCP_OPT_INPUT || !def) {
         snprintf(buf, cap, "None");
+    } else if (o->type == MCP_OPT_TEXT || o->type == MCP_OPT_TEXTS) {
+        /* a number as a number (confidence=1), a word as a str (surrogate='denoise') */
+        (void)strtod(def, &end);
+        snprintf(buf, cap, end != def && !*end ? "%s" : "'%s'", def);
     } else if (o->type == MCP_OPT_ENUM || o->type == MCP_OPT_DENOISER ||
                o->type == MCP_OPT_WORDSET ||
                ((o->type == MCP_OPT_INT || o->type == MCP_OPT_NUMBER) && o->auto_word &&
