@@ -1,6 +1,7 @@
 /* cmd_convert.c: `mcpost convert IN OUT` -- change format, pick channels (the library's
  * pick, shared with the `convert` job stage: jobs/stage_convert.c), change pixel type
- * and compression, or rewrite a render dump in another renderer's convention. */
+ * and compression, or rewrite a render dump in another renderer's convention. The flags
+ * are the convert table's (ops/op_convert.c), as the job stage's keys. */
 #include "cli.h"
 
 #include <stdio.h>

@@ -1,7 +1,8 @@
 /* cmd_metrics.c: `mcpost metrics TEST REF` -- MSE, RMSE, relMSE, PSNR, pMSE, RelSE
  * percentiles, LDR-FLIP, HDR-FLIP and the blue-noise fraction of a test image against
  * a reference (common/metrics.h), as a table, JSON, and maps. The job stage is in
- * stage_metrics.c; flags and job keys are the same words. */
+ * stage_metrics.c; the flags are the metrics table's (ops/op_metrics.c), as the job's
+ * keys and Python's keywords. */
 #include "cli.h"
 
 #include <mcpost/metrics.h>

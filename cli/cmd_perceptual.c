@@ -4,8 +4,8 @@
  * when a re-render command is given), the surrogate, the scores against a reference
  * (pMSE, MSE, the blue-noise spectrum), and with --compare the table of every method on
  * the same input (Chizhov et al. 2022 Table 1). The settings and the run are the
- * library's, shared with the `perceptual` job stage (jobs/perceptual_run.c). Flags and
- * job keys are the same words ('-' in flags, '_' in keys). */
+ * library's, shared with the `perceptual` job stage (jobs/perceptual_run.c); the flags
+ * are the perceptual table's (ops/op_perceptual.c), as the job's keys. */
 #include "cli.h"
 
 #include <mcpost/perceptual.h>

@@ -1,7 +1,7 @@
 /* perceptual_run.c: perceptual error optimisation of M candidate renders, for `mcpost
  * perceptual` and the `perceptual` job stage alike (docs/mathematics.md §4;
- * perceptual.h): the settings (flags and job keys are the same words, '-' in flags, '_'
- * in keys), the candidates and their features, the run with its files (the optimised
+ * perceptual.h): the run's settings from the perceptual table's (ops/op_perceptual.c),
+ * the candidates and their features, the run with its files (the optimised
  * image, for horizontal methods the prediction and the permutation map, the re-rendered
  * image when a re-render command is given, the surrogate, the scores against a reference
  * and the error spectra), the comparison of every method (Chizhov et al. 2022 Table 1)

@@ -1,6 +1,6 @@
 /* stage_convert.c: the `convert` job stage -- an input written in another format, with
  * chosen channels, pixel type and compression -- and the channel pick it shares with
- * `mcpost convert`. */
+ * `mcpost convert`. The keys are the convert table's (ops/op_convert.c). */
 #include "internal.h"
 
 #include <mcpost/tonemap.h>

@@ -1,6 +1,6 @@
 /* stage_perceptual.c: the `perceptual` job stage -- blue-noise error optimisation of a
  * few renders (perceptual_run.c; docs/perceptual.md), its result published for later
- * stages under its name. */
+ * stages under its name. The keys are the perceptual table's (ops/op_perceptual.c). */
 #include "internal.h"
 
 #include <stdio.h>
