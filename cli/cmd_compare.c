@@ -11,42 +11,24 @@
 #include <mcpost/report.h>
 #include <mcpost/tonemap.h>
 
-#include <getopt.h>
+#include <getopt.h> /* optind */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-static const char usage[] =
+static const char head[] =
     "usage: mcpost compare REF TEST... [-o DIR] [options]\n"
     "  A page to look at renders against a reference: for each TEST, a wipe comparison\n"
     "  of TEST and REF (drag the split, zoom), the error maps (LDR/HDR-FLIP, relative\n"
     "  squared error, error spectra) with colour bars, the figures of `mcpost metrics`\n"
-    "  and, with --fail/--warn, the gate's verdict. The page re-exposes the renders:\n"
-    "  an exposure slider and clamp, ACES, Hable, Reinhard or false colour. Note the\n"
-    "  order: the reference first (metrics takes TEST REF).\n"
-    "\n"
-    "  -o, --output DIR          the page's folder [compare]: report.html, report.json,\n"
-    "                            the previews and maps (one TEST: in DIR; several: in\n"
-    "                            DIR/test1, DIR/test2, ...). Written whole, then renamed\n"
-    "                            into place; a rerun replaces it (docs/conventions.md)\n"
-    "  --exposure X              the page's starting exposure, stops [0]\n"
-    "  --display NAME            the page's starting display: clamp, aces, hable,\n"
-    "                            reinhard or false-colour [clamp]\n"
-    "  --json                    print the figures as JSON instead of lines\n"
-    "  Figures (as `mcpost metrics`):\n"
-    "  --flip LIST               which FLIPs: ldr,hdr or none [ldr,hdr]\n"
-    "  --tone-mapper NAME        HDR-FLIP: aces, hable or reinhard [aces]\n"
-    "  --ppd X                   FLIP's pixels per degree [67.02]\n"
-    "  --eps-rel X               epsilon of relMSE and RelSE [0.01]\n"
-    "  --no-spectra              skip the tiled error spectra\n"
-    "  Gates (CI; docs/metrics.md, \"Gates\"), judged on every TEST:\n"
-    "  --fail 'EXPR'             FAILURE when EXPR holds (repeatable)\n"
-    "  --warn 'EXPR'             WARNING when EXPR holds (repeatable)\n"
-    "                            EXPR: FIGURE OP NUMBER, as `mcpost metrics`. The last\n"
-    "                            line is the worst verdict; exit 0 pass, 3 warning,\n"
-    "                            4 failure (1 error, 2 usage error)\n"
-    "\n"
+    "  (its options, below) and, with a gate (--fail, --warn, ...), the verdict, judged\n"
+    "  on every TEST: the last line is the worst; exit 0 pass, 3 warning, 4 failure (1\n"
+    "  error, 2 usage error). The page re-exposes the renders: an exposure slider and\n"
+    "  clamp, ACES, Hable, Reinhard or false colour. Note the order: the reference\n"
+    "  first (metrics takes TEST REF).\n";
+
+static const char examples[] =
     "examples (from the source folder, on the sample renders):\n"
     "  mcpost compare samples/fixtures/cornell/cornell_reference.exr \\\n"
     "                 samples/fixtures/cornell/series/cornell_spp0064.exr -o out/compare\n"
@@ -55,40 +37,6 @@ static const char usage[] =
     "                 samples/fixtures/cornell/series/cornell_spp0256.exr \\\n"
     "                 -o out/compare_spp --flip ldr --exposure 1 \\\n"
     "                 --fail 'flip_ldr.mean > 0.5' --warn 'relmse > 1'\n";
-
-enum {
-    OPT_JSON = 256,
-    OPT_EXPOSURE,
-    OPT_DISPLAY,
-    OPT_FLIP,
-    OPT_TONE_MAPPER,
-    OPT_PPD,
-    OPT_EPS,
-    OPT_NO_SPECTRA,
-    OPT_FAIL,
-    OPT_WARN
-};
-
-/* "ldr,hdr" / "none" into the two switches. */
-static int
-parse_flip_list(const char *text, mcp_metrics_options *o)
-{
-    char **words = NULL;
-    int n = 0;
-    if (mcp__split_words(text, &words, &n)) return -1;
-    o->flip_ldr = o->flip_hdr = 0;
-    int rc = 0;
-    for (int i = 0; i < n && !rc; i++) {
-        if (!strcmp(words[i], "ldr"))
-            o->flip_ldr = 1;
-        else if (!strcmp(words[i], "hdr"))
-            o->flip_hdr = 1;
-        else if (strcmp(words[i], "none"))
-            rc = mcp_error("--flip: unknown '%s' (use ldr, hdr or none)", words[i]);
-    }
-    mcp__free_words(words, n);
-    return rc;
-}
 
 /* The render's RGB as a screen shows it (PNG: clamped, sRGB) and its linear values
  * (EXR), for the page's display controls; both into the section. */
@@ -264,82 +212,30 @@ summary_section(cJSON *sections, int n_tests, const mcp_metrics_options *o,
 static int
 cmd_compare(int argc, char **argv)
 {
-    static const struct option longs[] = {
-        {"output", required_argument, 0, 'o'},
-        {"json", no_argument, 0, OPT_JSON},
-        {"exposure", required_argument, 0, OPT_EXPOSURE},
-        {"display", required_argument, 0, OPT_DISPLAY},
-        {"flip", required_argument, 0, OPT_FLIP},
-        {"tone-mapper", required_argument, 0, OPT_TONE_MAPPER},
-        {"ppd", required_argument, 0, OPT_PPD},
-        {"eps-rel", required_argument, 0, OPT_EPS},
-        {"no-spectra", no_argument, 0, OPT_NO_SPECTRA},
-        {"fail", required_argument, 0, OPT_FAIL},
-        {"warn", required_argument, 0, OPT_WARN},
-        {"help", no_argument, 0, 'h'},
-        {0, 0, 0, 0}};
+    mcp_compare_settings st;
+    mcp_shared_settings sh;
+    mcp_cli_denoiser_flags df = {0};
     mcp__gate gate = {0};
-    mcp_metrics_options o = mcp_metrics_defaults();
-    const char *out_dir = "compare", *display = "clamp";
-    double exposure = 0;
-    int json = 0, opt;
-    optind = 1;
-    while ((opt = getopt_long(argc, argv, "ho:", longs, NULL)) != -1) {
-        int rc = 0;
-        switch (opt) {
-        case 'o':
-            out_dir = optarg;
-            break;
-        case OPT_JSON:
-            json = 1;
-            break;
-        case OPT_EXPOSURE:
-            rc = mcp__parse_double("--exposure", optarg, &exposure);
-            break;
-        case OPT_DISPLAY:
-            display = optarg;
-            rc = mcp_report_display_mode_check(display);
-            break;
-        case OPT_FLIP:
-            rc = parse_flip_list(optarg, &o);
-            break;
-        case OPT_TONE_MAPPER:
-            rc = mcp_tonemap_from_name(optarg, &o.flip.tone_mapper);
-            break;
-        case OPT_PPD:
-            rc = mcp__parse_double("--ppd", optarg, &o.flip.ppd);
-            break;
-        case OPT_EPS:
-            rc = mcp__parse_double("--eps-rel", optarg, &o.eps_rel);
-            break;
-        case OPT_NO_SPECTRA:
-            o.spectra = 0;
-            break;
-        case OPT_FAIL:
-        case OPT_WARN:
-            if (mcp__gate_add(&gate, optarg, opt == OPT_FAIL))
-                return mcp_cli_usage("compare", "%s", mcp_error_message());
-            break;
-        case 'h':
-            fputs(usage, stdout);
-            return 0;
-        default:
-            return mcp_cli_usage("compare", "bad option");
-        }
-        if (rc) return mcp_cli_usage("compare", "%s", mcp_error_message());
-    }
+    int first = 0;
+    int parsed = mcp_cli_parse(mcp_operation_compare(), head, examples, argc, argv, &st,
+                               &sh, &df, &first);
+    /* a bad value is a usage error here, as it always was for compare */
+    if (parsed >= 0) return parsed == 1 ? 2 : parsed;
+    mcp_metrics_options o = st.m.o;
+    const char *out_dir = sh.output ? sh.output : "compare", *display =
+        mcp_wordlist_name(&mcp_report_display_words, st.display);
+    double exposure = st.exposure;
+    int json = sh.json;
+    optind = first;
     int n_tests = argc - optind - 1;
     if (n_tests < 1)
         return mcp_cli_usage("compare", "give REF and at least one TEST (got %d files)",
                              argc - optind);
-    if (o.flip_hdr && mcp_tonemap_flip_coefficients(o.flip.tone_mapper, (float[6]){0}))
+    /* gates checked before any image is read: a usage error */
+    const char *bad_key;
+    int bad_index;
+    if (mcp__gate_from_settings(&st.m, &o, &gate, &bad_key, &bad_index))
         return mcp_cli_usage("compare", "%s", mcp_error_message());
-    if (gate.n) { /* names checked before any image is read: a usage error */
-        cJSON *names = mcp__gate_metrics_names(&o);
-        int bad = !names || mcp__gate_check(&gate, names, NULL);
-        cJSON_Delete(names);
-        if (bad) return mcp_cli_usage("compare", "%s", mcp_error_message());
-    }
     const char *ref_path = argv[optind];
     char *const *tests = argv + optind + 1;
     mcp_image *ref = NULL;
@@ -427,4 +323,4 @@ done:
 const mcp_command mcp_command_compare = {"compare",
                                          "a page to look at renders against a reference "
                                          "(wipe, error maps, figures, gates)",
-                                         cmd_compare, 0};
+                                         cmd_compare, 1};

@@ -1,7 +1,8 @@
 /* cmd_metrics.c: `mcpost metrics TEST REF` -- MSE, RMSE, relMSE, PSNR, pMSE, RelSE
  * percentiles, LDR-FLIP, HDR-FLIP and the blue-noise fraction of a test image against
  * a reference (common/metrics.h), as a table, JSON, and maps. The job stage is in
- * stage_metrics.c; flags and job keys are the same words. */
+ * stage_metrics.c; the flags are the metrics table's (ops/op_metrics.c), as the job's
+ * keys and Python's keywords. */
 #include "cli.h"
 
 #include <mcpost/metrics.h>
@@ -12,61 +13,20 @@
 #include <stdlib.h>
 #include <string.h>
 
-static const char usage[] =
+static const char head[] =
     "usage: mcpost metrics TEST [TEST...] REF [options]\n"
     "  Compares each TEST (e.g. a denoised render) with REF (the reference, the last\n"
     "  file). All are EXR, PFM, PNG, ... with R, G, B channels; 8-bit files are\n"
     "  sRGB-decoded to linear. Prints MSE, RMSE, relMSE (eps 1e-2), PSNR (displayed:\n"
     "  clamped, sRGB), pMSE, RelSE percentiles, LDR-FLIP and HDR-FLIP with FLIP's\n"
     "  statistics (weighted median and quartiles, min, max) and the blue-noise\n"
-    "  low-frequency fraction; several TESTs give one row per test.\n"
-    "\n"
-    "  -o, --output DIR          write maps: flip_ldr/flip_hdr (.exr and magma .png),\n"
-    "                            flip_hdr_exposure, relse, sq_error, spectra (each\n"
-    "                            TEST's prefixed with its name when several),\n"
-    "                            flip_ldr/flip_hdr_histogram.svg (FLIP's weighted\n"
-    "                            histogram, the tests overlapped), metrics.json\n"
-    "  --json                    print JSON instead of the table\n"
-    "  --csv FILE                also write the figures as CSV, a row per test\n"
-    "  FLIP (NVIDIA FLIP v1.6):\n"
-    "  --ppd X                   pixels per degree (default: from the viewing "
-    "condition)\n"
-    "  --distance-m X            viewing distance [0.7]\n"
-    "  --display-width-m X       display width [0.7]\n"
-    "  --display-width-px N      display width in pixels [3840] (defaults: ppd 67.02)\n"
-    "  --tone-mapper NAME        HDR-FLIP: aces, hable or reinhard [aces]\n"
-    "  --start-exposure X        HDR-FLIP, stops [automatic]\n"
-    "  --stop-exposure X         HDR-FLIP, stops [automatic]\n"
-    "  --num-exposures N         HDR-FLIP, >= 2 [max(2, ceil(stop - start))]\n"
-    "  --flip LIST               which FLIPs: ldr,hdr or none [ldr,hdr]\n"
-    "  Relative errors:\n"
-    "  --percentiles LIST        RelSE percentiles in [0, 1] [0.5,0.9,0.99]\n"
-    "  --eps-rel X               epsilon of relMSE and RelSE [0.01]\n"
-    "  pMSE (Chizhov et al. 2022):\n"
-    "  --pmse-kernel NAME        tap3 ([1/pi, 1-2/pi, 1/pi]) or gaussian [tap3]\n"
-    "  --pmse-dpi X              gaussian: screen resolution [300]\n"
-    "  --pmse-distance-in X      gaussian: viewing distance in inches [16]\n"
-    "  --pmse-filter-reference   filter the reference with g too (h = g, not delta)\n"
-    "  --pmse-tone-map NAME      clamp, aces, hable, reinhard or none [clamp]\n"
-    "  Blue noise:\n"
-    "  --no-spectra              skip the tiled error spectra\n"
-    "  --spectra-tile-size N     tile size [32]\n"
-    "  --spectra-cutoff X        fraction of Nyquist [0.25]\n"
-    "  Gates (CI; docs/metrics.md, \"Gates\"):\n"
-    "  --fail 'EXPR'             FAILURE when EXPR holds (repeatable)\n"
-    "  --warn 'EXPR'             WARNING when EXPR holds (repeatable)\n"
-    "                            EXPR: FIGURE OP NUMBER, OP one of > >= < <=, FIGURE a\n"
-    "                            number of the --json output, dots for nesting\n"
-    "                            (mse, relmse, psnr, flip_ldr.mean, ...). Prints PASS,\n"
-    "                            WARNING: ... or FAILURE: ... last (--json: a \"gate\"\n"
-    "                            object) and exits 0 pass, 3 warning, 4 failure\n"
-    "                            (1 error, 2 usage error, as always)\n"
-    "  --fail-percent 'MAP T P'  FAILURE when more than P% of the pixels have MAP\n"
-    "  --warn-percent 'MAP T P'  above T (idiff's -fail T -failpercent P); MAP one of\n"
-    "                            flip_ldr, flip_hdr, relse (any channel), e.g.\n"
-    "                            'flip_ldr 0.1 1%' (repeatable). Several TESTs: the\n"
-    "                            worst verdict of all, each test's in its row\n"
-    "\n"
+    "  low-frequency fraction; several TESTs give one row per test. A gate (--fail,\n"
+    "  --warn, --fail-percent, --warn-percent) prints PASS, WARNING: ... or FAILURE: ...\n"
+    "  last (--json: a \"gate\" object) and exits 0 pass, 3 warning, 4 failure (1 error,\n"
+    "  2 usage error, as always); several TESTs: the worst verdict of all, each test's\n"
+    "  in its row.\n";
+
+static const char examples[] =
     "examples (from the source folder, on the sample renders):\n"
     "  mcpost metrics samples/fixtures/cornell/series/cornell_spp0016.exr samples/fixtures/cornell/cornell_reference.exr\n"
     "  mcpost metrics --json --flip ldr samples/fixtures/cornell/series/cornell_spp0064.exr \\\n"
@@ -76,72 +36,6 @@ static const char usage[] =
     "                 samples/fixtures/cornell/series/cornell_spp0064.exr \\\n"
     "                 samples/fixtures/cornell/cornell_reference.exr -o out/metrics_maps \\\n"
     "                 --csv out/metrics.csv --fail-percent 'flip_ldr 0.5 1%'\n";
-
-enum {
-    OPT_JSON = 256,
-    OPT_PPD,
-    OPT_DISTANCE,
-    OPT_WIDTH_M,
-    OPT_WIDTH_PX,
-    OPT_TONE_MAPPER,
-    OPT_START,
-    OPT_STOP,
-    OPT_NUM,
-    OPT_FLIP,
-    OPT_PERCENTILES,
-    OPT_EPS,
-    OPT_PKERNEL,
-    OPT_PDPI,
-    OPT_PDIST,
-    OPT_PFILTER,
-    OPT_PTONE,
-    OPT_NO_SPECTRA,
-    OPT_TILE,
-    OPT_CUTOFF,
-    OPT_FAIL,
-    OPT_WARN,
-    OPT_FAIL_PERCENT,
-    OPT_WARN_PERCENT,
-    OPT_CSV
-};
-
-/* "ldr,hdr" / "none" into the two switches. */
-static int
-parse_flip_list(const char *text, mcp_metrics_options *o)
-{
-    char **words = NULL;
-    int n = 0;
-    if (mcp__split_words(text, &words, &n)) return -1;
-    o->flip_ldr = o->flip_hdr = 0;
-    int rc = 0;
-    for (int i = 0; i < n && !rc; i++) {
-        if (!strcmp(words[i], "ldr"))
-            o->flip_ldr = 1;
-        else if (!strcmp(words[i], "hdr"))
-            o->flip_hdr = 1;
-        else if (strcmp(words[i], "none"))
-            rc = mcp_error("--flip: unknown '%s' (use ldr, hdr or none)", words[i]);
-    }
-    mcp__free_words(words, n);
-    return rc;
-}
-
-static int
-parse_percentiles(const char *text, mcp_metrics_options *o)
-{
-    char **words = NULL;
-    int n = 0, rc = 0;
-    if (mcp__split_words(text, &words, &n)) return -1;
-    double p[MCP_METRICS_MAX_PERCENTILES];
-    if (n > MCP_METRICS_MAX_PERCENTILES)
-        rc = mcp_error("--percentiles: at most %d values (got %d)",
-                       MCP_METRICS_MAX_PERCENTILES, n);
-    for (int i = 0; i < n && !rc; i++)
-        rc = mcp__parse_double("--percentiles", words[i], &p[i]);
-    if (!rc) rc = mcp_metrics_set_percentiles(o, p, n);
-    mcp__free_words(words, n);
-    return rc;
-}
 
 static void
 print_flip_stats(const mcp_flip_stats *st)
@@ -489,145 +383,27 @@ overall_verdict(const test_result *r, int n, char *line, size_t cap, cJSON **gat
 static int
 cmd_metrics(int argc, char **argv)
 {
-    static const struct option longs[] = {
-        {"output", required_argument, 0, 'o'},
-        {"json", no_argument, 0, OPT_JSON},
-        {"csv", required_argument, 0, OPT_CSV},
-        {"ppd", required_argument, 0, OPT_PPD},
-        {"distance-m", required_argument, 0, OPT_DISTANCE},
-        {"display-width-m", required_argument, 0, OPT_WIDTH_M},
-        {"display-width-px", required_argument, 0, OPT_WIDTH_PX},
-        {"tone-mapper", required_argument, 0, OPT_TONE_MAPPER},
-        {"start-exposure", required_argument, 0, OPT_START},
-        {"stop-exposure", required_argument, 0, OPT_STOP},
-        {"num-exposures", required_argument, 0, OPT_NUM},
-        {"flip", required_argument, 0, OPT_FLIP},
-        {"percentiles", required_argument, 0, OPT_PERCENTILES},
-        {"eps-rel", required_argument, 0, OPT_EPS},
-        {"pmse-kernel", required_argument, 0, OPT_PKERNEL},
-        {"pmse-dpi", required_argument, 0, OPT_PDPI},
-        {"pmse-distance-in", required_argument, 0, OPT_PDIST},
-        {"pmse-filter-reference", no_argument, 0, OPT_PFILTER},
-        {"pmse-tone-map", required_argument, 0, OPT_PTONE},
-        {"no-spectra", no_argument, 0, OPT_NO_SPECTRA},
-        {"spectra-tile-size", required_argument, 0, OPT_TILE},
-        {"spectra-cutoff", required_argument, 0, OPT_CUTOFF},
-        {"fail", required_argument, 0, OPT_FAIL},
-        {"warn", required_argument, 0, OPT_WARN},
-        {"fail-percent", required_argument, 0, OPT_FAIL_PERCENT},
-        {"warn-percent", required_argument, 0, OPT_WARN_PERCENT},
-        {"help", no_argument, 0, 'h'},
-        {0, 0, 0, 0}};
+    mcp_metrics_settings st;
+    mcp_shared_settings sh;
+    mcp_cli_denoiser_flags df = {0};
     mcp__gate gate = {0};
-    mcp_metrics_options o = mcp_metrics_defaults();
-    const char *out_dir = NULL, *csv_path = NULL;
-    int json = 0, opt;
-    optind = 1;
-    while ((opt = getopt_long(argc, argv, "ho:", longs, NULL)) != -1) {
-        int rc = 0;
-        switch (opt) {
-        case 'o':
-            out_dir = optarg;
-            break;
-        case OPT_JSON:
-            json = 1;
-            break;
-        case OPT_CSV:
-            csv_path = optarg;
-            break;
-        case OPT_PPD:
-            rc = mcp__parse_double("--ppd", optarg, &o.flip.ppd);
-            break;
-        case OPT_DISTANCE:
-            rc = mcp__parse_double("--distance-m", optarg, &o.flip.distance_m);
-            break;
-        case OPT_WIDTH_M:
-            rc = mcp__parse_double("--display-width-m", optarg, &o.flip.display_width_m);
-            break;
-        case OPT_WIDTH_PX:
-            rc =
-                mcp__parse_double("--display-width-px", optarg, &o.flip.display_width_px);
-            break;
-        case OPT_TONE_MAPPER:
-            rc = mcp_tonemap_from_name(optarg, &o.flip.tone_mapper);
-            break;
-        case OPT_START:
-            rc = mcp__parse_double("--start-exposure", optarg, &o.flip.start_exposure);
-            break;
-        case OPT_STOP:
-            rc = mcp__parse_double("--stop-exposure", optarg, &o.flip.stop_exposure);
-            break;
-        case OPT_NUM:
-            rc = mcp__parse_int("--num-exposures", optarg, &o.flip.num_exposures);
-            break;
-        case OPT_FLIP:
-            rc = parse_flip_list(optarg, &o);
-            break;
-        case OPT_PERCENTILES:
-            rc = parse_percentiles(optarg, &o);
-            break;
-        case OPT_EPS:
-            rc = mcp__parse_double("--eps-rel", optarg, &o.eps_rel);
-            break;
-        case OPT_PKERNEL:
-            rc = mcp_pkernel_kind_from_name(optarg, &o.pmse.kernel.kind);
-            break;
-        case OPT_PDPI:
-            rc = mcp__parse_double("--pmse-dpi", optarg, &o.pmse.kernel.dpi);
-            break;
-        case OPT_PDIST:
-            rc = mcp__parse_double("--pmse-distance-in", optarg,
-                                   &o.pmse.kernel.distance_in);
-            break;
-        case OPT_PFILTER:
-            o.pmse.filter_reference = 1;
-            break;
-        case OPT_PTONE:
-            rc = mcp_tonemap_from_name(optarg, &o.pmse.tone_map);
-            break;
-        case OPT_NO_SPECTRA:
-            o.spectra = 0;
-            break;
-        case OPT_TILE:
-            rc = mcp__parse_int("--spectra-tile-size", optarg, &o.spectra_opt.tile_size);
-            break;
-        case OPT_CUTOFF:
-            rc = mcp__parse_double("--spectra-cutoff", optarg, &o.spectra_opt.cutoff);
-            break;
-        case OPT_FAIL:
-        case OPT_WARN:
-            /* a malformed condition is the caller's mistake: a usage error, not a gate */
-            if (mcp__gate_add(&gate, optarg, opt == OPT_FAIL))
-                return mcp_cli_usage("metrics", "%s", mcp_error_message());
-            break;
-        case OPT_FAIL_PERCENT:
-        case OPT_WARN_PERCENT:
-            if (mcp__gate_add_percent(&gate, optarg, opt == OPT_FAIL_PERCENT))
-                return mcp_cli_usage("metrics", "%s", mcp_error_message());
-            break;
-        case 'h':
-            fputs(usage, stdout);
-            return 0;
-        default:
-            return mcp_cli_usage("metrics", "bad option");
-        }
-        if (rc) return mcp_cli_fail();
-    }
+    int first = 0;
+    int parsed = mcp_cli_parse(mcp_operation_metrics(), head, examples, argc, argv, &st,
+                               &sh, &df, &first);
+    if (parsed >= 0) return parsed;
+    mcp_metrics_options o = st.o;
+    const char *out_dir = sh.output, *csv_path = st.csv;
+    int json = sh.json;
+    optind = first;
     if (argc - optind < 2)
         return mcp_cli_usage("metrics", "give TEST... and REF (got %d files)",
                              argc - optind);
-    if (o.flip_hdr && mcp_tonemap_flip_coefficients(o.flip.tone_mapper, (float[6]){0}))
-        return mcp_cli_fail();
-    if (gate.n) {
-        /* Names checked before the images are read: a typo costs no FLIP run, and it
-         * is a usage error (2), never mistaken for a gate's verdict. */
-        if (mcp__gate_request(&gate, &o))
-            return mcp_cli_usage("metrics", "%s", mcp_error_message());
-        cJSON *names = mcp__gate_metrics_names(&o);
-        int bad = !names || mcp__gate_check(&gate, names, NULL);
-        cJSON_Delete(names);
-        if (bad) return mcp_cli_usage("metrics", "%s", mcp_error_message());
-    }
+    /* Gates checked before the images are read: a typo costs no FLIP run, and it is a
+     * usage error (2), never mistaken for a gate's verdict. */
+    const char *bad_key;
+    int bad_index;
+    if (mcp__gate_from_settings(&st, &o, &gate, &bad_key, &bad_index))
+        return mcp_cli_usage("metrics", "%s", mcp_error_message());
     int n_tests = argc - optind - 1;
     const char *ref_path = argv[argc - 1];
     mcp_image *ref = NULL;
@@ -731,4 +507,4 @@ out:
 const mcp_command mcp_command_metrics = {"metrics",
                                          "compare test images with a reference "
                                          "(MSE, relMSE, PSNR, pMSE, FLIP, ...)",
-                                         cmd_metrics, 0};
+                                         cmd_metrics, 1};

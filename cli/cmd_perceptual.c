@@ -4,13 +4,13 @@
  * when a re-render command is given), the surrogate, the scores against a reference
  * (pMSE, MSE, the blue-noise spectrum), and with --compare the table of every method on
  * the same input (Chizhov et al. 2022 Table 1). The settings and the run are the
- * library's, shared with the `perceptual` job stage (jobs/perceptual_run.c). Flags and
- * job keys are the same words ('-' in flags, '_' in keys). */
+ * library's, shared with the `perceptual` job stage (jobs/perceptual_run.c); the flags
+ * are the perceptual table's (ops/op_perceptual.c), as the job's keys. */
 #include "cli.h"
 
 #include <mcpost/perceptual.h>
 
-#include <getopt.h>
+#include <getopt.h> /* optind */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -73,42 +73,14 @@ print_summary(const cJSON *s)
 
 /* ---- the subcommand ---- */
 
-static const char usage[] =
+static const char head[] =
     "usage: mcpost perceptual [options] CANDIDATES...\n"
-    "  Perceptual error optimisation (Chizhov et al. 2022): picks, per pixel, one of "
-    "the\n"
+    "  Perceptual error optimisation (Chizhov et al. 2022): picks, per pixel, one of the\n"
     "  candidate renders (vertical methods) or permutes pixels' seeds (horizontal) so\n"
     "  that the error is least visible. Candidates are images or render dumps of few\n"
-    "  samples each, e.g. 4 single-sample renders.\n"
-    "  --method M          vertical-iterative [default], power-set, error-diffusion,\n"
-    "                      dither, horizontal, histogram, permutation\n"
-    "  --surrogate S       denoise [default: the denoiser on the candidates' mean],\n"
-    "                      reference (the ground truth: best case), or an image FILE\n"
-    "  --denoiser NAME     the surrogate's denoiser [default: unet with the shipped\n"
-    "                      weights; nlm when the candidates have no albedo and normal];\n"
-    "                      its settings:\n"
-    MCP_CLI_DENOISER_USAGE("")
-    "  --ref FILE          ground truth: pMSE, MSE and the error spectrum\n"
-    "  --confidence C      trust in the surrogate, in [0, 1] [1], or a per-pixel FILE\n"
-    "  --group N           average N consecutive files into one candidate [1]\n"
-    "  --compare           also run every method on the input: the comparison table\n"
-    "  --rerender CMD      for horizontal methods: a shell command that re-renders with\n"
-    "                      the permutation map {permutation} into the image {output}\n"
-    "                      ({method} names the method); the result is then measured\n"
-    "  -o, --output DIR    output folder [perceptual]\n"
-    "  --json              print the figures as JSON\n"
-    "  model: --tone-map clamp|aces|none [clamp]; --kernel tap3|gaussian|a,b,c "
-    "(separable\n"
-    "         taps)|FILE (a 2D kernel image) [tap3]; --dpi R [300], --distance INCHES "
-    "[16]\n"
-    "         (gaussian); --filter-surrogate (h = g instead of delta)\n"
-    "  search: --passes T [100 vertical, 10 horizontal]; --init random|mean [random];\n"
-    "         --seed S [1]; --max-subsets N [64]; --radius R [1]; --travel r [1];\n"
-    "         --tile N [8] (permutation baseline)\n"
-    "  mask:  --mask-size N [128]; --mask-sigma S [1.5]; --mask-seed S [1]; --no-cache\n"
-    "         (the mask is cached in $XDG_CACHE_HOME/mcpost or ~/.cache/mcpost)\n"
-    "  --spectra-tile N    tiles of the error spectrum [32]\n"
-    "\n"
+    "  samples each, e.g. 4 single-sample renders.\n";
+
+static const char examples[] =
     "examples (from the source folder, on the sample renders):\n"
     "  mcpost perceptual samples/fixtures/cornell/singles/cornell_single0[0-3].exr \\\n"
     "                    --ref samples/fixtures/cornell/cornell_reference.exr -o out/perceptual\n"
@@ -137,100 +109,29 @@ read_rgb(const char *path, mcp_image **out)
 static int
 cmd_perceptual(int argc, char **argv)
 {
-    enum { O_JSON = 1000, O_FILTER, O_NOCACHE, O_COMPARE };
-    static const struct option longs[] = {
-        {"method", required_argument, 0, 'm'},
-        {"surrogate", required_argument, 0, 's'},
-        {"ref", required_argument, 0, 'r'},
-        {"reference", required_argument, 0, 'r'},
-        {"output", required_argument, 0, 'o'},
-        {"json", no_argument, 0, O_JSON},
-        MCP_CLI_DENOISER_LONGOPTS,
-        {"filter-surrogate", no_argument, 0, O_FILTER},
-        {"no-cache", no_argument, 0, O_NOCACHE},
-        {"compare", no_argument, 0, O_COMPARE},
-        {"confidence", required_argument, 0, 'W'},
-        {"group", required_argument, 0, 'W'},
-        {"tone-map", required_argument, 0, 'W'},
-        {"kernel", required_argument, 0, 'W'},
-        {"dpi", required_argument, 0, 'W'},
-        {"distance", required_argument, 0, 'W'},
-        {"passes", required_argument, 0, 'W'},
-        {"init", required_argument, 0, 'W'},
-        {"seed", required_argument, 0, 'W'},
-        {"max-subsets", required_argument, 0, 'W'},
-        {"radius", required_argument, 0, 'W'},
-        {"travel", required_argument, 0, 'W'},
-        {"tile", required_argument, 0, 'W'},
-        {"mask-size", required_argument, 0, 'W'},
-        {"mask-sigma", required_argument, 0, 'W'},
-        {"mask-seed", required_argument, 0, 'W'},
-        {"rerender", required_argument, 0, 'W'},
-        {"spectra-tile", required_argument, 0, 'W'},
-        {"help", no_argument, 0, 'h'},
-        {0, 0, 0, 0}};
+    mcp_perceptual_settings st;
+    mcp_shared_settings sh;
     mcp__perc_args a;
     mcp__perc_run r;
     mcp__perc_args_init(&a);
     memset(&r, 0, sizeof r);
-    const char *out_dir = "perceptual", *ref_path = NULL;
     mcp_cli_denoiser_flags df = {0}; /* no --denoiser: the default */
-    int json = 0, opt, idx = 0, status = 1;
+    int first = 0, status = 1;
     mcp_image *ref = NULL, *surr = NULL, *conf = NULL, *kern = NULL;
     mcp_report *report = NULL;
     cJSON *summary = NULL;
     mcp__outdir od = {0}; /* the folder appears whole, or not at all */
-    optind = 1;
-    while ((opt = getopt_long(argc, argv, "m:s:r:o:h", longs, &idx)) != -1) {
-        int rc = mcp_cli_denoiser_flag(&df, opt, optarg);
-        if (rc < 0) goto fail;
-        if (rc) continue;
-        switch (opt) {
-        case 'm':
-            rc = mcp__perc_set_word(&a, "method", optarg);
-            break;
-        case 's':
-            rc = mcp__perc_set_word(&a, "surrogate", optarg);
-            break;
-        case 'r':
-            ref_path = optarg;
-            break;
-        case 'o':
-            out_dir = optarg;
-            break;
-        case O_JSON:
-            json = 1;
-            break;
-        case O_FILTER:
-            a.opt.model.filter_surrogate = 1;
-            break;
-        case O_NOCACHE:
-            a.opt.mask.use_cache = 0;
-            break;
-        case O_COMPARE:
-            a.compare = 1;
-            break;
-        case 'W': {
-            char key[64];
-            snprintf(key, sizeof key, "%s", longs[idx].name);
-            for (char *p = key; *p; p++)
-                *p = *p == '-' ? '_' : *p;
-            rc = mcp__perc_set_word(&a, key, optarg);
-            break;
-        }
-        case 'h':
-            fputs(usage, stdout);
-            status = 0;
-            goto done;
-        default:
-            status = mcp_cli_usage("perceptual", "bad option");
-            goto done;
-        }
-        if (rc) {
-            status = mcp_cli_fail();
-            goto done;
-        }
+    int parsed = mcp_cli_parse(mcp_operation_perceptual(), head, examples, argc, argv, &st,
+                               &sh, &df, &first);
+    if (parsed >= 0) {
+        status = parsed;
+        goto done;
     }
+    mcp__perc_args_free(&a);
+    if (mcp__perc_args_from_settings(&st, &a)) goto fail;
+    const char *out_dir = sh.output ? sh.output : "perceptual", *ref_path = st.reference;
+    int json = sh.json;
+    optind = first;
     if (optind >= argc) {
         status = mcp_cli_usage("perceptual", "no candidate files given");
         goto done;
@@ -295,4 +196,4 @@ done:
 
 const mcp_command mcp_command_perceptual = {
     "perceptual", "perceptual error optimisation of few-sample renders (Chizhov 2022)",
-    cmd_perceptual, 0};
+    cmd_perceptual, 1};

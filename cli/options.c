@@ -103,13 +103,16 @@ build_longs(const mcp_operation *op, long_table *t, char *shorts, size_t cap)
         }
     }
     add_long(t, "help", no_argument, 'h');
-    const mcp_operation *sh = mcp_shared_operation();
-    for (const mcp_option *o = sh->options; o->name; o++)
-        if (o->letter && shared_takes(op, o)) {
-            size_t n = strlen(shorts);
-            if (n + 3 < cap)
-                shorts[n] = o->letter, shorts[n + 1] = ':', shorts[n + 2] = '\0';
-        }
+    const mcp_operation *tables[2] = {op, mcp_shared_operation()};
+    for (int k = 0; k < 2; k++)
+        for (const mcp_option *o = tables[k]->options; o->name; o++)
+            if (o->letter &&
+                (k ? shared_takes(op, o) : mcp_option_takes(o, MCP_OPT_CLI))) {
+                size_t n = strlen(shorts);
+                if (n + 3 < cap)
+                    snprintf(shorts + n, cap - n, "%c%s", o->letter,
+                             o->type == MCP_OPT_FLAG ? "" : ":");
+            }
     t->longs[t->n] = (struct option){0, 0, 0, 0};
 }
 
@@ -225,7 +228,7 @@ mcp_cli_parse(const mcp_operation *op, const char *head, const char *examples, i
               mcp_cli_denoiser_flags *df, int *first)
 {
     static long_table t; /* one command runs per process */
-    char shorts[16];
+    char shorts[32];
     build_longs(op, &t, shorts, sizeof shorts);
     mcp_operation_defaults(op, settings);
     mcp_operation_defaults(mcp_shared_operation(), sh);
@@ -253,6 +256,8 @@ mcp_cli_parse(const mcp_operation *op, const char *head, const char *examples, i
             rc = set_row(shared, &shared->options[(opt - SHARED_BASE) / 2],
                          (opt - SHARED_BASE) % 2, optarg, sh);
         } else if (opt < 256 && opt != '?') {
+            for (const mcp_option *o = op->options; o->name; o++)
+                if (o->letter == opt) rc = set_row(op, o, 0, optarg, settings);
             for (const mcp_option *o = shared->options; o->name; o++)
                 if (o->letter == opt) rc = set_row(shared, o, 0, optarg, sh);
         } else {

@@ -65,6 +65,9 @@ static const char *const exr_compression_names[] = {"none",  "rle", "zips", "zip
                                                     "pxr24", "b44", "b44a", "dwaa", "dwab"};
 const mcp_wordlist mcp_exr_compression_words = {"EXR compression", exr_compression_names, 10};
 
+static const char *const exr_pixel_names[] = {"float", "half"};
+const mcp_wordlist mcp_exr_pixel_words = {"pixel type", exr_pixel_names, 2};
+
 int
 mcp_exr_compression_from_name(const char *name, mcp_exr_compression *out)
 {

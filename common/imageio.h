@@ -99,6 +99,8 @@ typedef struct mcp_write_options {
 
 MCP_API mcp_write_options mcp_write_defaults(void);
 MCP_API extern const mcp_wordlist mcp_exr_compression_words;
+/* "float", "half": mcp_exr_pixel's words */
+MCP_API extern const mcp_wordlist mcp_exr_pixel_words;
 MCP_API int mcp_exr_compression_from_name(const char *name, mcp_exr_compression *out);
 
 /* Writes img (any strides) in the format the extension names. EXR keeps every

@@ -111,15 +111,15 @@ mcp_report_add_hdr_image(cJSON *section, const char *rel_png, const char *rel_hd
 
 static const char *const display_modes[] = {"clamp", "aces", "hable", "reinhard",
                                             "false-colour"};
+const mcp_wordlist mcp_report_display_words = {"display", display_modes, 5};
 
 int
 mcp_report_display_mode_check(const char *mode)
 {
     for (size_t i = 0; i < sizeof display_modes / sizeof *display_modes; i++)
         if (!strcmp(mode, display_modes[i])) return 0;
-    return mcp_error("unknown display '%s' (known: clamp, aces, hable, reinhard, "
-                     "false-colour)",
-                     mode);
+    int v;
+    return mcp_wordlist_find(&mcp_report_display_words, mode, &v);
 }
 
 int

@@ -35,6 +35,7 @@
 #include <mcpost/error.h>
 #include <mcpost/filter.h>
 #include <mcpost/plot.h>
+#include <mcpost/wordlist.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -82,6 +83,9 @@ MCP_API cJSON *mcp_report_add_hdr_image(cJSON *section, const char *rel_png,
 MCP_API int mcp_report_set_display(mcp_report *r, double exposure, const char *mode);
 /* 0 when mode is one of those names; else -1 with "unknown display 'X' (known: ...)". */
 MCP_API int mcp_report_display_mode_check(const char *mode);
+/* The display modes' words, value i the i-th: clamp, aces, hable, reinhard,
+ * false-colour. */
+MCP_API extern const mcp_wordlist mcp_report_display_words;
 
 /* Marks a value on a map's colour bar (e.g. the threshold tau). */
 MCP_API int mcp_report_map_add_mark(cJSON *map, double value, const char *label);

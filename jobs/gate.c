@@ -326,3 +326,39 @@ mcp__gate_reset(void)
 {
     worst = MCP__GATE_PASS;
 }
+
+int
+mcp__gate_from_settings(const mcp_metrics_settings *s, mcp_metrics_options *o,
+                        mcp__gate *g, const char **bad_key, int *bad_index)
+{
+    /* the four kinds in the table's order, each condition added, its percent share
+       requested and its figure checked before the next, so the first bad one is named */
+    const struct {
+        const char *key;
+        const char *const *texts;
+        int n, is_fail, percent;
+    } kinds[] = {{"fail", s->fail, s->n_fail, 1, 0},
+                 {"warn", s->warn, s->n_warn, 0, 0},
+                 {"fail_percent", s->fail_percent, s->n_fail_percent, 1, 1},
+                 {"warn_percent", s->warn_percent, s->n_warn_percent, 0, 1}};
+    memset(g, 0, sizeof *g);
+    for (int k = 0; k < 4; k++)
+        for (int i = 0; i < kinds[k].n; i++) {
+            *bad_key = kinds[k].key;
+            *bad_index = i;
+            const char *t = kinds[k].texts[i];
+            if (kinds[k].percent ? mcp__gate_add_percent(g, t, kinds[k].is_fail)
+                                 : mcp__gate_add(g, t, kinds[k].is_fail))
+                return -1;
+            mcp__gate one = {.n = 1};
+            one.c[0] = g->c[g->n - 1];
+            if (mcp__gate_request(&one, o)) return -1;
+            cJSON *names = mcp__gate_metrics_names(o);
+            int bad = !names || mcp__gate_check(&one, names, NULL);
+            cJSON_Delete(names);
+            if (bad) return -1;
+        }
+    *bad_key = NULL;
+    *bad_index = -1;
+    return 0;
+}

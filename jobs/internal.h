@@ -45,10 +45,6 @@ void mcp__free_words(char **words, int count);
 
 /* ---- settings.c: a stage's settings ---- */
 
-/* An enum key read with its from_name function (parse's out is the enum); a bad name
- * fails at the key's line. Absent: *out unchanged. */
-int mcp__opt_enum(const mcp_node *settings, const char *key,
-                  int (*parse)(const char *, void *), void *out);
 /* A stage's settings through its operation's table: ops/internal.h's
  * mcp__options_from_node and mcp__options_node_keys. */
 #define mcp__job_settings mcp__options_from_node
@@ -94,6 +90,9 @@ void mcp__info_add_dump(cJSON *o, const mcp_dump *d);
  * except that a PNG, JPEG, HDR or PFM output (out_path's format) of an image with
  * R, G, B by name gets those (and A, for PNG and JPEG), which is what a person
  * converting to PNG means (docs/conventions.md, "Channel order"). */
+/* The channels' names of convert's settings, each value split at commas ("R,G,B" on
+ * the command line, a list in a job), malloc'd: free with mcp__free_words. */
+int mcp__convert_channel_names(const mcp_convert_settings *s, char ***names, int *count);
 int mcp__convert_pick_channels(const mcp_image *img, char **names, int count,
                                const char *out_path, mcp_image **out);
 
@@ -201,8 +200,10 @@ typedef struct {
 
 void mcp__perc_args_init(mcp__perc_args *a);
 void mcp__perc_args_free(mcp__perc_args *a);
-/* One setting, by its job key (the flag's words with '_'), from its text. */
-int mcp__perc_set_word(mcp__perc_args *a, const char *key, const char *v);
+/* The run's settings from perceptual's (<mcpost/operations.h>): the options, the
+ * confidence as a number or a map's name, the kernel as a word, taps or a file; then
+ * the library's check. Free with mcp__perc_args_free, also after a failure. */
+int mcp__perc_args_from_settings(const mcp_perceptual_settings *s, mcp__perc_args *a);
 /* A separable kernel's taps (an odd count). */
 int mcp__perc_set_taps(mcp__perc_args *a, const double *t, int n);
 void mcp__perc_run_free(mcp__perc_run *r);
@@ -274,6 +275,13 @@ int mcp__gate_check(const mcp__gate *g, const cJSON *figures, int *bad);
 int mcp__gate_eval(const mcp__gate *g, const cJSON *figures, mcp__gate_verdict *verdict,
                    cJSON **gate_json, char *line, size_t cap);
 int mcp__gate_exit_code(mcp__gate_verdict v);
+/* The gate of metrics' settings (<mcpost/operations.h>): every condition of fail, warn,
+ * fail_percent and warn_percent, in that order, parsed, its share of pixels requested
+ * in o and its figure checked against what o computes, one at a time. On failure the
+ * current error is the command line's ("--fail 'x > 1': no figure 'x' ..."), and
+ * *bad_key and *bad_index name the condition ("fail", 0) for a job's line. */
+int mcp__gate_from_settings(const mcp_metrics_settings *s, mcp_metrics_options *o,
+                            mcp__gate *g, const char **bad_key, int *bad_index);
 /* The worst verdict of the gates judged in this process since the last reset: what
  * `mcpost run` exits with. */
 void mcp__gate_record(mcp__gate_verdict v);

@@ -1,12 +1,12 @@
 /* perceptual_run.c: perceptual error optimisation of M candidate renders, for `mcpost
  * perceptual` and the `perceptual` job stage alike (docs/mathematics.md §4;
- * perceptual.h): the settings (flags and job keys are the same words, '-' in flags, '_'
- * in keys), the candidates and their features, the run with its files (the optimised
+ * perceptual.h): the run's settings from the perceptual table's (ops/op_perceptual.c),
+ * the candidates and their features, the run with its files (the optimised
  * image, for horizontal methods the prediction and the permutation map, the re-rendered
  * image when a re-render command is given, the surrogate, the scores against a reference
  * and the error spectra), the comparison of every method (Chizhov et al. 2022 Table 1)
  * and the report section. */
-#define _POSIX_C_SOURCE 200809L /* strcasecmp, WEXITSTATUS */
+#define _POSIX_C_SOURCE 200809L /* WEXITSTATUS */
 
 #include "internal.h"
 
@@ -36,30 +36,6 @@ mcp__perc_args_free(mcp__perc_args *a)
 {
     free(a->kernel);
     a->kernel = NULL;
-}
-
-static int
-parse_bool(const char *key, const char *v, int *out)
-{
-    if (!strcasecmp(v, "true") || !strcasecmp(v, "yes") || !strcmp(v, "1"))
-        *out = 1;
-    else if (!strcasecmp(v, "false") || !strcasecmp(v, "no") || !strcmp(v, "0"))
-        *out = 0;
-    else
-        return mcp_error("%s must be true or false (got '%s')", key, v);
-    return 0;
-}
-
-static int
-parse_u64(const char *key, const char *v, uint64_t *out)
-{
-    char *end;
-    errno = 0;
-    unsigned long long u = strtoull(v, &end, 10);
-    if (!*v || *v == '-' || *end || errno)
-        return mcp_error("%s must be an unsigned integer (got '%s')", key, v);
-    *out = u;
-    return 0;
 }
 
 /* Separable taps "a,b,c" (odd count): the kernel is their outer product. */
@@ -105,71 +81,40 @@ set_kernel(mcp__perc_args *a, const char *v)
     return 0;
 }
 
-/* One setting by its key (flag name with '_' for '-') and text value. */
-int
-mcp__perc_set_word(mcp__perc_args *a, const char *key, const char *v)
+/* A kernel's taps, one number an item (a job's list) */
+static int
+set_kernel_items(mcp__perc_args *a, const char *const *items, int n)
 {
-    mcp_perc_options *o = &a->opt;
-    int rc = 0;
-    double d = 0.0;
-    if (!strcmp(key, "method"))
-        rc = mcp_perc_method_from_name(v, &o->method);
-    else if (!strcmp(key, "surrogate"))
-        a->surrogate = v;
-    else if (!strcmp(key, "confidence")) {
-        if (mcp__parse_double("confidence", v, &d) == 0) {
-            o->model.confidence = d;
-            a->confidence = NULL;
-        } else {
-            mcp_error_clear();
-            a->confidence = v; /* a per-pixel map */
-        }
-    } else if (!strcmp(key, "group")) {
-        rc = mcp__parse_int("group", v, &a->group);
-        if (!rc && a->group < 1) rc = mcp_error("group must be >= 1 (got %d)", a->group);
-    } else if (!strcmp(key, "tone_map"))
-        rc = mcp_tonemap_from_name(v, &o->model.tone_map);
-    else if (!strcmp(key, "kernel"))
-        rc = set_kernel(a, v);
-    else if (!strcmp(key, "dpi"))
-        rc = mcp__parse_double("dpi", v, &o->model.kernel.dpi);
-    else if (!strcmp(key, "distance"))
-        rc = mcp__parse_double("distance", v, &o->model.kernel.distance_in);
-    else if (!strcmp(key, "filter_surrogate"))
-        rc = parse_bool(key, v, &o->model.filter_surrogate);
-    else if (!strcmp(key, "passes"))
-        rc = mcp__parse_int("passes", v, &o->passes);
-    else if (!strcmp(key, "init"))
-        rc = mcp_perc_init_from_name(v, &o->init);
-    else if (!strcmp(key, "seed"))
-        rc = parse_u64("seed", v, &o->seed);
-    else if (!strcmp(key, "max_subsets"))
-        rc = mcp__parse_int("max_subsets", v, &o->max_subsets);
-    else if (!strcmp(key, "radius"))
-        rc = mcp__parse_int("radius", v, &o->radius);
-    else if (!strcmp(key, "travel"))
-        rc = mcp__parse_int("travel", v, &o->travel);
-    else if (!strcmp(key, "tile"))
-        rc = mcp__parse_int("tile", v, &o->tile);
-    else if (!strcmp(key, "mask_size"))
-        rc = mcp__parse_int("mask_size", v, &o->mask.size);
-    else if (!strcmp(key, "mask_sigma"))
-        rc = mcp__parse_double("mask_sigma", v, &o->mask.sigma);
-    else if (!strcmp(key, "mask_seed"))
-        rc = parse_u64("mask_seed", v, &o->mask.seed);
-    else if (!strcmp(key, "cache"))
-        rc = parse_bool(key, v, &o->mask.use_cache);
-    else if (!strcmp(key, "compare"))
-        rc = parse_bool(key, v, &a->compare);
-    else if (!strcmp(key, "rerender"))
-        a->rerender = v;
-    else if (!strcmp(key, "spectra_tile")) {
-        rc = mcp__parse_int("spectra_tile", v, &a->spectra_tile);
-        if (!rc && a->spectra_tile < 4)
-            rc = mcp_error("spectra_tile must be >= 4 (got %d)", a->spectra_tile);
-    } else
-        rc = mcp_error("unknown setting '%s'", key);
-    return rc;
+    double *t = mcp_malloc((size_t)n * sizeof *t);
+    int rc = !t;
+    for (int i = 0; !rc && i < n; i++)
+        rc = mcp__parse_double("kernel", items[i], &t[i]);
+    rc = rc || mcp__perc_set_taps(a, t, n);
+    free(t);
+    return rc ? -1 : 0;
+}
+
+int
+mcp__perc_args_from_settings(const mcp_perceptual_settings *s, mcp__perc_args *a)
+{
+    mcp__perc_args_init(a);
+    a->opt = s->opt;
+    a->surrogate = s->surrogate;
+    a->group = s->group;
+    a->compare = s->compare;
+    a->rerender = s->rerender;
+    a->spectra_tile = s->spectra_tile;
+    double c = 0.0;
+    if (mcp__parse_double("confidence", s->confidence, &c) == 0) {
+        a->opt.model.confidence = c;
+    } else {
+        mcp_error_clear();
+        a->confidence = s->confidence; /* a per-pixel map */
+    }
+    if ((s->n_kernel == 1 && set_kernel(a, s->kernel[0])) ||
+        (s->n_kernel > 1 && set_kernel_items(a, s->kernel, s->n_kernel)))
+        return -1;
+    return mcp_perc_check(&a->opt);
 }
 
 /* ---- the run, shared by the subcommand and the stage ---- */

@@ -1,5 +1,6 @@
-/* settings.c: reading a stage's settings -- an enum key by its from_name function, and
- * an error the library found put at the line of the key it came from. */
+/* settings.c: reading a stage's settings -- an error the library found put at the line
+ * of the key it came from (the values themselves are read through the operation table,
+ * ops/node.c). */
 #include "internal.h"
 
 #include <ctype.h>
@@ -18,16 +19,4 @@ mcp__at_line(const mcp_node *settings, const char *key)
     if (strncmp(msg, n->file, len) == 0 && msg[len] == ':' && isdigit((unsigned char)msg[len + 1]))
         return -1;
     return mcp_node_error(n, "%s", msg);
-}
-
-int
-mcp__opt_enum(const mcp_node *settings, const char *key, int (*parse)(const char *, void *),
-              void *out)
-{
-    const char *s = NULL;
-    if (mcp_node_opt_string(settings, key, &s))
-        return -1;
-    if (s && parse(s, out))
-        return mcp__at_line(settings, key);
-    return 0;
 }

@@ -1,6 +1,6 @@
 /* stage_convert.c: the `convert` job stage -- an input written in another format, with
  * chosen channels, pixel type and compression -- and the channel pick it shares with
- * `mcpost convert`. */
+ * `mcpost convert`. The keys are the convert table's (ops/op_convert.c). */
 #include "internal.h"
 
 #include <mcpost/tonemap.h>
@@ -8,55 +8,33 @@
 #include <stdlib.h>
 #include <string.h>
 
-static const char *const convert_keys[] = {"input",       "output", "channels", "pixel",
-                                           "compression", "title",  NULL};
+/* The keys: the options of the convert table that a job takes (ops/op_convert.c),
+ * filled in by stages.c before the table is first handed out. */
+const char *mcp__convert_keys[MCP__OPTION_KEYS_MAX];
 
 /* The stage's settings, read before anything is loaded (by the run, and by the job's
- * check before any stage runs): the output file's name and how to write it, and the
- * channels to keep (names borrowed from the settings; free `names`). */
+ * check before any stage runs): through the convert table, the input checked against
+ * the job's, the output's format known, and the channels to keep (free `names` with
+ * mcp__free_words). */
 typedef struct convert_plan {
-    const char *out;
-    mcp_write_options wo;
-    const char **names;
+    mcp_convert_settings s;
+    char **names;
     int count;
 } convert_plan;
 
 static int
 parse_convert(mcp_job *job, const mcp_node *settings, convert_plan *pl)
 {
-    const mcp_node *out_node = NULL, *chan = mcp_node_get(settings, "channels");
-    const char *pixel = NULL, *comp = NULL;
+    const mcp_node *out_node = NULL;
     memset(pl, 0, sizeof *pl);
-    pl->wo = mcp_write_defaults();
-    if (mcp_job_check_input(job, settings, "input", MCP_JOB_IMAGE) ||
-        mcp_node_require(settings, "output", "stage 'convert'", &out_node) ||
-        mcp_node_string(out_node, "output", &pl->out) ||
-        mcp_node_opt_string(settings, "pixel", &pixel) ||
-        mcp_node_opt_string(settings, "compression", &comp))
+    if (mcp__job_settings(mcp_operation_convert(), settings, NULL, &pl->s) ||
+        mcp_job_check_input(job, settings, "input", MCP_JOB_IMAGE) ||
+        mcp_node_require(settings, "output", "stage 'convert'", &out_node))
         return -1;
-    if (mcp_format_from_path(pl->out) == MCP_FORMAT_UNKNOWN)
-        return mcp_node_error(out_node, "output: unknown image format '%s'", pl->out);
-    if (pixel && strcmp(pixel, "half") && strcmp(pixel, "float"))
-        return mcp_node_error(mcp_node_get(settings, "pixel"),
-                              "pixel must be half or float (got '%s')", pixel);
-    if (pixel && !strcmp(pixel, "half"))
-        pl->wo.exr_pixel = MCP_EXR_HALF;
-    if (comp && mcp_exr_compression_from_name(comp, &pl->wo.compression))
-        return mcp_node_error(mcp_node_get(settings, "compression"), "%s",
-                              mcp_error_message());
-    if (chan) {
-        if (chan->kind != MCP_NODE_SEQ || chan->count == 0)
-            return mcp_node_error(chan, "channels must be a list of channel names");
-        if (!(pl->names = mcp_calloc((size_t)chan->count, sizeof *pl->names)))
-            return -1;
-        pl->count = chan->count;
-        for (int i = 0; i < pl->count; i++)
-            if (mcp_node_string(chan->items[i], "channels", &pl->names[i])) {
-                free(pl->names);
-                pl->names = NULL;
-                return -1;
-            }
-    }
+    if (mcp_format_from_path(pl->s.output) == MCP_FORMAT_UNKNOWN)
+        return mcp_node_error(out_node, "output: unknown image format '%s'", pl->s.output);
+    if (mcp__convert_channel_names(&pl->s, &pl->names, &pl->count))
+        return mcp__at_line(settings, "channels");
     return 0;
 }
 
@@ -65,7 +43,7 @@ check_convert(mcp_job *job, const mcp_node *settings)
 {
     convert_plan pl;
     int rc = parse_convert(job, settings, &pl);
-    free(pl.names);
+    mcp__free_words(pl.names, pl.count);
     return rc;
 }
 
@@ -78,30 +56,27 @@ stage_convert(mcp_job *job, const mcp_node *settings)
     if (parse_convert(job, settings, &pl))
         return -1;
     if (mcp_job_image(job, settings, "input", &img)) {
-        free(pl.names);
+        mcp__free_words(pl.names, pl.count);
         return -1;
     }
-    const char *out = pl.out;
-    const char **names = pl.names;
-    int count = pl.count;
-    mcp_write_options wo = pl.wo;
+    const char *out = pl.s.output;
     char path[4096];
     mcp_image *picked = NULL;
     int rc = mcp_job_output_path(job, out, path, sizeof path) ||
-             mcp__convert_pick_channels(img, (char **)names, count, path, &picked) ||
-             mcp_image_write(picked, path, &wo);
-    free(names);
+             mcp__convert_pick_channels(img, pl.names, pl.count, path, &picked) ||
+             mcp_image_write(picked, path, &pl.s.wo);
+    mcp__free_words(pl.names, pl.count);
     mcp_image_free(picked);
     if (rc)
         return chan ? mcp_node_error(chan, "%s", mcp_error_message()) : -1;
     cJSON *section = mcp_report_section(mcp_job_report(job), "convert", out);
-    const char *input = NULL, *dot = strrchr(out, '.');
-    mcp_node_opt_string(settings, "input", &input);
+    const char *input = pl.s.input, *dot = strrchr(out, '.');
     int png = dot && !strcmp(dot, ".png");
     if (!section || mcp_report_add_image(section, out, out) ||
         mcp_report_set_verdict(section, MCP_VERDICT_INFO, "wrote %s from %s, %dx%d%s", out,
                                input ? input : "the input", img->width, img->height,
-                               png ? ": linear values clamped to [0, 1] and sRGB-encoded, "
+                               png && pl.s.wo.srgb_encode
+                                   ? ": linear values clamped to [0, 1] and sRGB-encoded, "
                                      "as a screen shows them"
                                    : ""))
         return -1;
@@ -111,7 +86,37 @@ stage_convert(mcp_job *job, const mcp_node *settings)
 
 const mcp_stage mcp_stage_convert = {"convert", "write an input in another format, with "
                                                 "chosen channels",
-                                     convert_keys, stage_convert, check_convert};
+                                     mcp__convert_keys, stage_convert, check_convert};
+
+int
+mcp__convert_channel_names(const mcp_convert_settings *s, char ***names, int *count)
+{
+    char **all = NULL;
+    int n = 0;
+    *names = NULL;
+    *count = 0;
+    for (int i = 0; i < s->n_channels; i++) {
+        char **words = NULL;
+        int k = 0;
+        if (mcp__split_words(s->channels[i], &words, &k)) {
+            mcp__free_words(all, n);
+            return -1;
+        }
+        char **grown = realloc(all, (size_t)(n + k ? n + k : 1) * sizeof *grown);
+        if (!grown) {
+            mcp__free_words(words, k);
+            mcp__free_words(all, n);
+            return mcp_error("convert: out of memory");
+        }
+        all = grown;
+        for (int j = 0; j < k; j++)
+            all[n++] = words[j];
+        free(words); /* the words themselves moved into all */
+    }
+    *names = all;
+    *count = n;
+    return 0;
+}
 
 /* The channels of img named in `names`, as a new image. With no names, a format that
  * stores colour by place gets the colour, found by name (docs/conventions.md, "Channel

@@ -13,119 +13,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-static const char *const metrics_keys[] = {"input",
-                                           "reference",
-                                           "series",
-                                           "estimate",
-                                           "title",
-                                           "output",
-                                           "maps",
-                                           "ppd",
-                                           "distance_m",
-                                           "display_width_m",
-                                           "display_width_px",
-                                           "tone_mapper",
-                                           "start_exposure",
-                                           "stop_exposure",
-                                           "num_exposures",
-                                           "flip",
-                                           "percentiles",
-                                           "eps_rel",
-                                           "pmse_kernel",
-                                           "pmse_dpi",
-                                           "pmse_distance_in",
-                                           "pmse_filter_reference",
-                                           "pmse_tone_map",
-                                           "spectra",
-                                           "spectra_tile_size",
-                                           "spectra_cutoff",
-                                           "fail",
-                                           "warn",
-                                           "fail_percent",
-                                           "warn_percent",
-                                           "compare",
-                                           NULL};
-
-/* ---- settings ---- */
-
-static int
-parse_tonemap(const char *s, void *out)
-{
-    return mcp_tonemap_from_name(s, out);
-}
-
-static int
-parse_pkernel(const char *s, void *out)
-{
-    return mcp_pkernel_kind_from_name(s, out);
-}
-
-/* flip: [ldr, hdr] | ldr | none */
-static int
-read_flip(const mcp_node *settings, mcp_metrics_options *o)
-{
-    const mcp_node *n = mcp_node_get(settings, "flip");
-    if (!n) return 0;
-    if (n->kind == MCP_NODE_MAP)
-        return mcp_node_error(n, "flip must be ldr, hdr, none or a list of them");
-    o->flip_ldr = o->flip_hdr = 0;
-    int m = n->kind == MCP_NODE_SEQ ? n->count : 1;
-    for (int i = 0; i < m; i++) {
-        const mcp_node *item = n->kind == MCP_NODE_SEQ ? n->items[i] : n;
-        const char *s = NULL;
-        if (mcp_node_string(item, "flip", &s)) return -1;
-        if (!strcmp(s, "ldr"))
-            o->flip_ldr = 1;
-        else if (!strcmp(s, "hdr"))
-            o->flip_hdr = 1;
-        else if (strcmp(s, "none"))
-            return mcp_node_error(item, "flip: unknown '%s' (use ldr, hdr or none)", s);
-    }
-    return 0;
-}
-
-/* The metrics' options from the stage's keys (the flags' words with '_' for '-'). */
-static int
-read_options(const mcp_node *s, mcp_metrics_options *o)
-{
-    double *p = NULL;
-    int np = 0, rc = -1;
-    int spectra = o->spectra, filt = o->pmse.filter_reference;
-    if (mcp_node_opt_double(s, "ppd", &o->flip.ppd) ||
-        mcp_node_opt_double(s, "distance_m", &o->flip.distance_m) ||
-        mcp_node_opt_double(s, "display_width_m", &o->flip.display_width_m) ||
-        mcp_node_opt_double(s, "display_width_px", &o->flip.display_width_px) ||
-        mcp__opt_enum(s, "tone_mapper", parse_tonemap, &o->flip.tone_mapper) ||
-        mcp_node_opt_double(s, "start_exposure", &o->flip.start_exposure) ||
-        mcp_node_opt_double(s, "stop_exposure", &o->flip.stop_exposure) ||
-        mcp_node_opt_int(s, "num_exposures", &o->flip.num_exposures) || read_flip(s, o) ||
-        mcp_node_opt_doubles(s, "percentiles", &p, &np) ||
-        mcp_node_opt_double(s, "eps_rel", &o->eps_rel) ||
-        mcp__opt_enum(s, "pmse_kernel", parse_pkernel, &o->pmse.kernel.kind) ||
-        mcp_node_opt_double(s, "pmse_dpi", &o->pmse.kernel.dpi) ||
-        mcp_node_opt_double(s, "pmse_distance_in", &o->pmse.kernel.distance_in) ||
-        mcp_node_opt_bool(s, "pmse_filter_reference", &filt) ||
-        mcp__opt_enum(s, "pmse_tone_map", parse_tonemap, &o->pmse.tone_map) ||
-        mcp_node_opt_bool(s, "spectra", &spectra) ||
-        mcp_node_opt_int(s, "spectra_tile_size", &o->spectra_opt.tile_size) ||
-        mcp_node_opt_double(s, "spectra_cutoff", &o->spectra_opt.cutoff))
-        goto done;
-    o->spectra = spectra;
-    o->pmse.filter_reference = filt;
-    if (p && mcp_metrics_set_percentiles(o, p, np)) {
-        mcp__at_line(s, "percentiles");
-        goto done;
-    }
-    if (o->flip_hdr &&
-        mcp_tonemap_flip_coefficients(o->flip.tone_mapper, (float[6]){0})) {
-        mcp__at_line(s, "tone_mapper");
-        goto done;
-    }
-    rc = 0;
-done:
-    free(p);
-    return rc;
-}
+/* The keys: the options of the metrics table that a job takes (ops/op_metrics.c),
+ * filled in by stages.c before the table is first handed out. */
+const char *mcp__metrics_keys[MCP__OPTION_KEYS_MAX];
 
 /* ---- report pieces ---- */
 
@@ -385,79 +275,43 @@ done:
 /* ---- the stage ---- */
 
 /* The stage's settings, read before anything is loaded (by the run, and by the job's
- * check before any stage runs): the options and the names of what it compares, each
- * checked against the job's inputs and earlier results. Strings are borrowed from the
- * settings. */
+ * check before any stage runs): the options through the metrics table and the names of
+ * what it compares, each checked against the job's inputs and earlier results. Strings
+ * are borrowed from the settings. */
 typedef struct metrics_plan {
-    mcp_metrics_options o;
-    const char *input, *reference, *output, *series_name, *estimate_name;
-    const char *compare_name; /* a second test whose FLIP histograms overlap input's */
-    int want_maps;
+    mcp_metrics_settings s;
+    mcp_shared_settings sh;
+    mcp_metrics_options o; /* s.o with the shares of pixels the gates judge */
     mcp__gate gate;
 } metrics_plan;
 
-/* fail: / warn: -- one condition or a list of them, each parsed and its figure named
- * checked against what these options compute, at the item's line, before any stage
- * runs. */
-/* The gate's error at the item's line, without the flag's "--fail " (the key says it);
- * copied first, as mcp_node_error rewrites the error line that it would read. */
+/* The gate's error at the condition's line, without the flag's "--fail " (the key says
+ * it); copied first, as mcp_node_error rewrites the error line that it would read. */
 static int
-gate_error(const mcp_node *item, const char *key)
+gate_error(const mcp_node *settings, const char *key, int index)
 {
     char msg[1024];
     const char *m = mcp_error_message();
     /* "--fail-percent 'x': ..." -> "'x': ..." */
     const char *after_flag = strncmp(m, "--", 2) || !strchr(m, ' ') ? m : strchr(m, ' ') + 1;
     snprintf(msg, sizeof msg, "%s", after_flag);
-    return mcp_node_error(item, "%s: %s", key, msg);
-}
-
-static int
-read_gate(const mcp_node *settings, const char *key, metrics_plan *pl)
-{
     const mcp_node *n = mcp_node_get(settings, key);
-    if (!n) return 0;
-    if (n->kind == MCP_NODE_MAP)
-        return mcp_node_error(n, "%s must be a condition or a list of them", key);
-    int m = n->kind == MCP_NODE_SEQ ? n->count : 1;
-    for (int i = 0; i < m; i++) {
-        const mcp_node *item = n->kind == MCP_NODE_SEQ ? n->items[i] : n;
-        const char *s = NULL;
-        int percent = !strncmp(key + 4, "_percent", 8), is_fail = key[0] == 'f';
-        if (mcp_node_string(item, key, &s)) return -1;
-        if (percent ? mcp__gate_add_percent(&pl->gate, s, is_fail)
-                    : mcp__gate_add(&pl->gate, s, is_fail))
-            return gate_error(item, key);
-        mcp__gate one = {.n = 1};
-        one.c[0] = pl->gate.c[pl->gate.n - 1];
-        /* a percent condition asks the metrics for its share of pixels */
-        if (mcp__gate_request(&one, &pl->o)) return gate_error(item, key);
-        cJSON *names = mcp__gate_metrics_names(&pl->o);
-        int bad = !names || mcp__gate_check(&one, names, NULL);
-        cJSON_Delete(names);
-        if (bad) return gate_error(item, key);
-    }
-    return 0;
+    const mcp_node *item = n && n->kind == MCP_NODE_SEQ && index < n->count ? n->items[index]
+                                                                            : n;
+    return mcp_node_error(item, "%s: %s", key, msg);
 }
 
 static int
 parse_metrics(mcp_job *job, const mcp_node *settings, metrics_plan *pl)
 {
     memset(pl, 0, sizeof *pl);
-    pl->o = mcp_metrics_defaults();
-    pl->want_maps = 1;
-    if (mcp_node_opt_string(settings, "input", &pl->input) ||
-        mcp_node_opt_string(settings, "reference", &pl->reference) ||
-        mcp_node_opt_string(settings, "series", &pl->series_name) ||
-        mcp_node_opt_string(settings, "estimate", &pl->estimate_name) ||
-        mcp_node_opt_string(settings, "output", &pl->output) ||
-        mcp_node_opt_bool(settings, "maps", &pl->want_maps) ||
-        mcp_node_opt_string(settings, "compare", &pl->compare_name) ||
-        read_options(settings, &pl->o) || read_gate(settings, "fail", pl) ||
-        read_gate(settings, "warn", pl) || read_gate(settings, "fail_percent", pl) ||
-        read_gate(settings, "warn_percent", pl))
-        return -1;
-    if (pl->gate.n && !pl->input) {
+    const char *bad_key = NULL;
+    int bad_index = -1;
+    if (mcp__job_settings(mcp_operation_metrics(), settings, &pl->sh, &pl->s)) return -1;
+    pl->o = pl->s.o;
+    if (mcp__gate_from_settings(&pl->s, &pl->o, &pl->gate, &bad_key, &bad_index))
+        return gate_error(settings, bad_key, bad_index);
+    if (pl->gate.n && !pl->s.input) {
         static const char *const keys[] = {"fail", "warn", "fail_percent", "warn_percent"};
         const mcp_node *at = NULL;
         for (int k = 0; k < 4 && !at; k++)
@@ -466,29 +320,29 @@ parse_metrics(mcp_job *job, const mcp_node *settings, metrics_plan *pl)
                               "a gate (fail:, warn:, fail_percent:, warn_percent:) judges "
                               "'input' against the reference; give 'input'");
     }
-    if (pl->compare_name && !pl->input)
+    if (pl->s.compare && !pl->s.input)
         return mcp_node_error(mcp_node_get(settings, "compare"),
                               "'compare' needs 'input' (the image it is drawn beside)");
-    if (pl->compare_name && !pl->o.flip_ldr && !pl->o.flip_hdr)
+    if (pl->s.compare && !pl->o.flip_ldr && !pl->o.flip_hdr)
         return mcp_node_error(mcp_node_get(settings, "compare"),
                               "'compare' overlaps FLIP histograms, but flip is none");
-    if (!pl->reference) {
+    if (!pl->s.reference) {
         const mcp_node *n = NULL;
         return mcp_node_require(settings, "reference", "stage 'metrics'", &n);
     }
-    if (!pl->input && !pl->series_name)
+    if (!pl->s.input && !pl->s.series)
         return mcp_node_error(settings,
                               "stage 'metrics' needs 'input' or 'series' (or both)");
-    if (pl->estimate_name && !pl->input)
+    if (pl->s.estimate && !pl->s.input)
         return mcp_node_error(mcp_node_get(settings, "estimate"),
                               "'estimate' needs 'input' (the image it estimates)");
     return mcp_job_check_input(job, settings, "reference", MCP_JOB_IMAGE) ||
-           (pl->input && mcp_job_check_input(job, settings, "input", MCP_JOB_IMAGE)) ||
-           (pl->estimate_name &&
+           (pl->s.input && mcp_job_check_input(job, settings, "input", MCP_JOB_IMAGE)) ||
+           (pl->s.estimate &&
             mcp_job_check_input(job, settings, "estimate", MCP_JOB_IMAGE)) ||
-           (pl->compare_name &&
+           (pl->s.compare &&
             mcp_job_check_input(job, settings, "compare", MCP_JOB_IMAGE)) ||
-           (pl->series_name && mcp_job_check_input(job, settings, "series", MCP_JOB_SERIES))
+           (pl->s.series && mcp_job_check_input(job, settings, "series", MCP_JOB_SERIES))
                ? -1
                : 0;
 }
@@ -507,15 +361,15 @@ stage_metrics(mcp_job *job, const mcp_node *settings)
     if (parse_metrics(job, settings, &pl))
         return -1;
     mcp_metrics_options o = pl.o;
-    const char *input = pl.input, *reference = pl.reference, *output = pl.output,
-               *series_name = pl.series_name, *estimate_name = pl.estimate_name;
-    int want_maps = pl.want_maps;
+    const char *input = pl.s.input, *reference = pl.s.reference, *output = pl.sh.output,
+               *series_name = pl.s.series, *estimate_name = pl.s.estimate;
+    int want_maps = pl.s.maps;
 
     const mcp_image *ref = NULL, *test = NULL, *estimate = NULL, *compare = NULL;
     const mcp_series *series = NULL;
     if (mcp_job_image(job, settings, "reference", &ref) ||
         (input && mcp_job_image(job, settings, "input", &test)) ||
-        (pl.compare_name && mcp_job_image(job, settings, "compare", &compare)) ||
+        (pl.s.compare && mcp_job_image(job, settings, "compare", &compare)) ||
         (estimate_name && mcp_job_image(job, settings, "estimate", &estimate)) ||
         (series_name && mcp_job_series(job, settings, "series", &series)))
         return -1;
@@ -549,8 +403,8 @@ stage_metrics(mcp_job *job, const mcp_node *settings)
             /* the second test's FLIPs only: its histogram and statistics */
             cJSON *c = cJSON_AddObjectToObject(section, "compare");
             if (!c) goto done;
-            cJSON_AddStringToObject(c, "input", pl.compare_name);
-            mcp_note("metrics: FLIP of %s against %s", pl.compare_name, reference);
+            cJSON_AddStringToObject(c, "input", pl.s.compare);
+            mcp_note("metrics: FLIP of %s against %s", pl.s.compare, reference);
             if ((o.flip_ldr && mcp_flip_ldr(compare, ref, &o.flip, &cmp[0], NULL)) ||
                 (o.flip_hdr && mcp_flip_hdr(compare, ref, &o.flip, &cmp[1], NULL, NULL))) {
                 mcp__at_line(settings, "compare");
@@ -560,7 +414,7 @@ stage_metrics(mcp_job *job, const mcp_node *settings)
             if (o.flip_hdr) add_flip_figures(c, "flip_hdr", &cmp[1]);
         }
         if (percentile_plot(section, maps.relse, estimate, estimate_name) ||
-            flip_histograms(section, &m, input, cmp, compare ? pl.compare_name : NULL))
+            flip_histograms(section, &m, input, cmp, compare ? pl.s.compare : NULL))
             goto done;
         if (want_maps) {
             char rel_t[1200], rel_r[1200], path[4096];
@@ -600,4 +454,4 @@ const mcp_stage mcp_stage_metrics = {"metrics",
                                      "reference (MSE, relMSE, PSNR, pMSE, FLIP, "
                                      "RelSE percentiles, blue noise) with maps and "
                                      "plots",
-                                     metrics_keys, stage_metrics, check_metrics};
+                                     mcp__metrics_keys, stage_metrics, check_metrics};

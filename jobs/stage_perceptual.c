@@ -1,41 +1,15 @@
 /* stage_perceptual.c: the `perceptual` job stage -- blue-noise error optimisation of a
  * few renders (perceptual_run.c; docs/perceptual.md), its result published for later
- * stages under its name. */
+ * stages under its name. The keys are the perceptual table's (ops/op_perceptual.c). */
 #include "internal.h"
 
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-static const char *const perceptual_keys[] = {"name",
-                                              "candidates",
-                                              "method",
-                                              "surrogate",
-                                              "denoiser",
-                                              "reference",
-                                              "confidence",
-                                              "group",
-                                              "tone_map",
-                                              "kernel",
-                                              "dpi",
-                                              "distance",
-                                              "filter_surrogate",
-                                              "passes",
-                                              "init",
-                                              "seed",
-                                              "max_subsets",
-                                              "radius",
-                                              "travel",
-                                              "tile",
-                                              "mask_size",
-                                              "mask_sigma",
-                                              "mask_seed",
-                                              "cache",
-                                              "compare",
-                                              "rerender",
-                                              "spectra_tile",
-                                              "title",
-                                              NULL};
+/* The keys: the options of the perceptual table that a job takes
+ * (ops/op_perceptual.c), filled in by stages.c before the table is first handed out. */
+const char *mcp__perceptual_keys[MCP__OPTION_KEYS_MAX];
 
 /* Loads the candidates: a series input (every member a dump or image) or a list of
  * input names (images or dumps; their colour only). */
@@ -75,39 +49,34 @@ stage_candidates(mcp_job *job, const mcp_node *settings, mcp__perc_run *r)
 }
 
 /* The stage's settings, read before anything is loaded (by the run, and by the job's
- * check before any stage runs): every word into `a` (as the flags), the result's
- * name, the inputs it names (candidates, reference, surrogate, confidence: checked
- * against the job's inputs and earlier results), the kernel file, and the surrogate's
- * denoiser (*den, the caller's to free). Declares the result for later stages. */
+ * check before any stage runs): through the perceptual table into `a` (as the flags),
+ * the result's name and folder, the inputs it names (candidates, reference, surrogate,
+ * confidence: checked against the job's inputs and earlier results), the kernel file,
+ * and the surrogate's denoiser (*den, the caller's to free). Declares the result for
+ * later stages. */
 static int
 parse_perceptual(mcp_job *job, const mcp_node *settings, mcp__perc_args *a,
-                 const char **name, mcp_denoiser **den)
+                 const char **name, const char **folder, mcp_denoiser **den)
 {
-    *name = "perceptual";
+    mcp_perceptual_settings st;
+    mcp_shared_settings sh;
     *den = NULL;
-    for (int i = 0; i < settings->count; i++) {
-        const char *key = settings->keys[i]->value;
-        const mcp_node *v = settings->items[i];
-        if (!strcmp(key, "candidates") || !strcmp(key, "denoiser") ||
-            !strcmp(key, "reference") || !strcmp(key, "name") || !strcmp(key, "title"))
-            continue;
-        if (!strcmp(key, "kernel") && v->kind == MCP_NODE_SEQ) {
-            double *t = NULL;
-            int n = 0;
-            if (mcp_node_opt_doubles(settings, "kernel", &t, &n)) return -1;
-            int bad = mcp__perc_set_taps(a, t, n);
-            free(t);
-            if (bad) return mcp_node_error(v, "%s", mcp_error_message());
-            continue;
-        }
-        if (v->kind != MCP_NODE_SCALAR)
-            return mcp_node_error(v, "%s must be a single value", key);
-        if (mcp__perc_set_word(a, key, v->value))
-            return mcp_node_error(v, "%s", mcp_error_message());
+    if (mcp__job_settings(mcp_operation_perceptual(), settings, &sh, &st)) return -1;
+    mcp__perc_args_free(a);
+    if (mcp__perc_args_from_settings(&st, a)) {
+        /* the kernel's or the confidence's error at its line, else the stage's */
+        const char *m = mcp_error_message();
+        const char *key = !strncmp(m, "kernel", 6)                ? "kernel"
+                          : !strncmp(m, "perceptual: confidence", 22) ? "confidence"
+                                                                      : NULL;
+        return key && mcp_node_get(settings, key)
+                   ? mcp__at_line(settings, key)
+                   : mcp_node_error(settings, "%s", mcp_error_message());
     }
+    *name = st.name;
+    *folder = sh.output ? sh.output : st.name;
     const mcp_node *n = NULL;
-    if (mcp_node_opt_string(settings, "name", name) ||
-        mcp_node_require(settings, "candidates", "stage 'perceptual'", &n))
+    if (mcp_node_require(settings, "candidates", "stage 'perceptual'", &n))
         return -1;
     if (n->kind == MCP_NODE_SCALAR) {
         if (mcp_job_check_name(job, n, MCP_JOB_SERIES)) return -1;
@@ -118,8 +87,7 @@ parse_perceptual(mcp_job *job, const mcp_node *settings, mcp__perc_args *a,
         return mcp_node_error(n,
                               "candidates must name a series input or list image inputs");
     }
-    if ((mcp_node_get(settings, "reference") &&
-         mcp_job_check_input(job, settings, "reference", MCP_JOB_IMAGE)) ||
+    if ((st.reference && mcp_job_check_input(job, settings, "reference", MCP_JOB_IMAGE)) ||
         (strcmp(a->surrogate, "denoise") && strcmp(a->surrogate, "reference") &&
          mcp_job_check_input(job, settings, "surrogate", MCP_JOB_IMAGE)) ||
         (a->confidence && mcp_job_check_input(job, settings, "confidence", MCP_JOB_IMAGE)) ||
@@ -135,9 +103,9 @@ check_perceptual(mcp_job *job, const mcp_node *settings)
 {
     mcp__perc_args a;
     mcp__perc_args_init(&a);
-    const char *name;
+    const char *name, *folder;
     mcp_denoiser *den = NULL;
-    int rc = parse_perceptual(job, settings, &a, &name, &den);
+    int rc = parse_perceptual(job, settings, &a, &name, &folder, &den);
     mcp_denoiser_free(den);
     mcp__perc_args_free(&a);
     return rc;
@@ -151,10 +119,10 @@ stage_perceptual(mcp_job *job, const mcp_node *settings)
     mcp__perc_args_init(&a);
     memset(&r, 0, sizeof r);
     int rc = -1;
-    const char *name = "perceptual";
+    const char *name = "perceptual", *folder = name;
     cJSON *summary = NULL;
     mcp_image *kern = NULL, *img = NULL;
-    if (parse_perceptual(job, settings, &a, &name, &r.den) ||
+    if (parse_perceptual(job, settings, &a, &name, &folder, &r.den) ||
         stage_candidates(job, settings, &r))
         goto done;
     if (mcp_node_get(settings, "reference") &&
@@ -174,9 +142,9 @@ stage_perceptual(mcp_job *job, const mcp_node *settings)
         }
         r.kernel_img = kern;
     }
-    /* outputs in <output>/<name>/, images relative to the report */
-    snprintf(r.rel, sizeof r.rel, "%s/", name);
-    if (mcp_job_output_subdir(job, name, r.out_dir, sizeof r.out_dir)) goto done;
+    /* outputs in <job output>/<output, else name>/, images relative to the report */
+    snprintf(r.rel, sizeof r.rel, "%s/", folder);
+    if (mcp_job_output_subdir(job, folder, r.out_dir, sizeof r.out_dir)) goto done;
     char title[300];
     snprintf(title, sizeof title, "%s: %s", name, mcp_perc_method_name(a.opt.method));
     if (!(r.section = mcp_report_section(mcp_job_report(job), "perceptual", title)) ||
@@ -212,4 +180,4 @@ const mcp_stage mcp_stage_perceptual = {
     "perceptual",
     "perceptual error optimisation of few-sample renders, with scores and the comparison "
     "of every method",
-    perceptual_keys, stage_perceptual, check_perceptual};
+    mcp__perceptual_keys, stage_perceptual, check_perceptual};

@@ -23,12 +23,15 @@ static const mcp_stage *const stages[] = {
 };
 
 /* The keys of the stages that read their settings through an operation's table
- * (stage_estimate.c, stage_blend.c, stage_adaptive.c, stage_info.c): derived from the table, once, before the stage
- * table is handed out. */
+ * (every stage_*.c): derived from the table, once, before the stage table is handed
+ * out. */
 extern const char *mcp__estimate_keys[MCP__OPTION_KEYS_MAX];
 extern const char *mcp__blend_keys[MCP__OPTION_KEYS_MAX];
 extern const char *mcp__adaptive_keys[MCP__OPTION_KEYS_MAX];
 extern const char *mcp__info_keys[MCP__OPTION_KEYS_MAX];
+extern const char *mcp__convert_keys[MCP__OPTION_KEYS_MAX];
+extern const char *mcp__metrics_keys[MCP__OPTION_KEYS_MAX];
+extern const char *mcp__perceptual_keys[MCP__OPTION_KEYS_MAX];
 static const char *const stage_extras[] = {"title", NULL};
 
 static void
@@ -40,6 +43,12 @@ fill_keys(void)
     mcp__op_job_keys(mcp_operation_adaptive(), stage_extras, mcp__adaptive_keys,
                      MCP__OPTION_KEYS_MAX);
     mcp__op_job_keys(mcp_operation_info(), stage_extras, mcp__info_keys, MCP__OPTION_KEYS_MAX);
+    mcp__op_job_keys(mcp_operation_convert(), stage_extras, mcp__convert_keys,
+                     MCP__OPTION_KEYS_MAX);
+    mcp__op_job_keys(mcp_operation_metrics(), stage_extras, mcp__metrics_keys,
+                     MCP__OPTION_KEYS_MAX);
+    mcp__op_job_keys(mcp_operation_perceptual(), stage_extras, mcp__perceptual_keys,
+                     MCP__OPTION_KEYS_MAX);
 }
 
 const mcp_stage *const *

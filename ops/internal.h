@@ -12,6 +12,13 @@ extern const mcp_operation mcp__op_adaptive;
 extern const mcp_operation mcp__op_info;
 extern const mcp_operation mcp__op_merge;
 extern const mcp_operation mcp__op_denoise;
+extern const mcp_operation mcp__op_convert;
+extern const mcp_operation mcp__op_metrics;
+extern const mcp_operation mcp__op_compare;
+extern const mcp_operation mcp__op_perceptual;
+
+/* metrics' and compare's FLIPs, "ldr,hdr" (op_metrics.c) */
+extern const mcp_wordlist mcp__flip_kind_words;
 
 /* ---- node.c ---- */
 

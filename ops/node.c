@@ -36,18 +36,20 @@ node_text(const mcp_node *n, const mcp_option *o, const char *key, char **joined
         *text = n->value;
         return 0;
     }
-    if (n->kind == MCP_NODE_MAP || o->type != MCP_OPT_LIST) {
+    if (n->kind == MCP_NODE_MAP || (o->type != MCP_OPT_LIST && o->type != MCP_OPT_WORDSET)) {
         /* as mcp_node_int and its kin say it */
         static const char *const what[] = {
             "a number", "an integer",        "an integer", "a number", "true or false",
-            "a word",   "a list of numbers", "a string",   "a string", "a denoiser"};
+            "a word",   "a list of numbers", "a string",   "a string", "a denoiser",
+            "a string or a list of them",    "a word or a list of words"};
         return mcp_node_error(n, "%s must be %s, not a %s", key, what[o->type],
                               n->kind == MCP_NODE_MAP ? "map" : "list");
     }
     size_t len = 1;
     for (int i = 0; i < n->count; i++) {
         if (n->items[i]->kind != MCP_NODE_SCALAR)
-            return mcp_node_error(n->items[i], "%s must be a list of numbers", key);
+            return mcp_node_error(n->items[i], "%s must be a list of %s", key,
+                                  o->type == MCP_OPT_LIST ? "numbers" : "words");
         len += strlen(n->items[i]->value) + 1;
     }
     char *s = mcp_malloc(len);
@@ -80,6 +82,20 @@ mcp__options_from_node(const mcp_operation *op, const mcp_node *map,
         /* extras (title) are the stage's; the denoiser is read by mcp__stage_denoiser */
         if (!o || !mcp_option_takes(o, MCP_OPT_JOB) || o->type == MCP_OPT_DENOISER)
             continue;
+        const mcp_node *v = map->items[i];
+        /* a list of inputs (perceptual's candidates) is the stage's to read */
+        if (o->type == MCP_OPT_INPUT && v->kind == MCP_NODE_SEQ) continue;
+        if (o->type == MCP_OPT_TEXTS && v->kind == MCP_NODE_SEQ) {
+            /* each item one value, refused at its own line */
+            for (int k = 0; k < v->count; k++) {
+                if (v->items[k]->kind != MCP_NODE_SCALAR)
+                    return mcp_node_error(v->items[k], "%s must be a string or a list of "
+                                          "them", key);
+                if (mcp_operation_set(target, o, key, v->items[k]->value, dst))
+                    return mcp_node_error(v->items[k], "%s", mcp_error_message());
+            }
+            continue;
+        }
         char *joined = NULL;
         const char *text = NULL;
         if (node_text(map->items[i], o, key, &joined, &text)) return -1;

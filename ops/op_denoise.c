@@ -1,6 +1,7 @@
 /* op_denoise.c: the options of `denoise` (one denoiser alone, and its Jacobian-vector
- * product), for the command line (options.h); Python's denoise and jvp take the same
- * inputs as arrays (python/denoise.c). */
+ * product), for the command line and Python's denoise and jvp (options.h): the inputs
+ * are files on the command line and arrays in Python (python/denoise.c), and the
+ * denoiser's settings are its own table's (--denoiser-opt KEY=VALUE, KEY=VALUE). */
 #include "internal.h"
 
 #include <stddef.h>
@@ -9,6 +10,11 @@
 #define TEXT_ROW(NAME, META, GROUP, DOC)                                                 \
     {                                                                                    \
         .name = #NAME, .type = MCP_OPT_TEXT, .where = MCP_OPT_CLI,                       \
+        .offset = offsetof(S, NAME), .meta = META, .group = GROUP, .doc = DOC            \
+    }
+#define INPUT_ROW(NAME, META, GROUP, DOC)                                                \
+    {                                                                                    \
+        .name = #NAME, .type = MCP_OPT_INPUT, .where = MCP_OPT_CLI | MCP_OPT_PY,         \
         .offset = offsetof(S, NAME), .meta = META, .group = GROUP, .doc = DOC            \
     }
 #define FLAG_ROW(NAME, GROUP, DOC)                                                       \
@@ -20,7 +26,7 @@
 static const mcp_option denoise_options[] = {
     {.name = "denoiser",
      .type = MCP_OPT_DENOISER,
-     .where = MCP_OPT_CLI,
+     .where = MCP_OPT_CLI | MCP_OPT_PY,
      .meta = "NAME",
      .def = "default",
      .doc = "the denoiser (see --list): `default` is unet with the shipped weights, nlm "
@@ -31,14 +37,14 @@ static const mcp_option denoise_options[] = {
         "direction T (channels R,G,B, or 3 channels), computed in the same pass"),
     TEXT_ROW(tangent_out, "FILE", NULL, "where J.T goes [<output stem>_jvp.exr]"),
     FLAG_ROW(list, NULL, "print the denoisers and their settings"),
-    TEXT_ROW(color, "FILE", "Separate inputs instead of DUMP",
-             "the colour (R,G,B channels, or exactly 3)"),
-    TEXT_ROW(albedo, "FILE", "Separate inputs instead of DUMP",
-             "the albedo (R,G,B, or exactly 3 channels)"),
-    TEXT_ROW(normal, "FILE", "Separate inputs instead of DUMP",
-             "the normal (X,Y,Z, or exactly 3 channels)"),
-    TEXT_ROW(variance_of_mean, "FILE", "Separate inputs instead of DUMP",
-             "the variance of the colour mean, R,G,B"),
+    INPUT_ROW(color, "FILE", "Separate inputs instead of DUMP",
+              "the colour (R,G,B channels, or exactly 3; Python: the first argument)"),
+    INPUT_ROW(albedo, "FILE", "Separate inputs instead of DUMP",
+              "the albedo (R,G,B, or exactly 3 channels)"),
+    INPUT_ROW(normal, "FILE", "Separate inputs instead of DUMP",
+              "the normal (X,Y,Z, or exactly 3 channels)"),
+    INPUT_ROW(variance_of_mean, "FILE", "Separate inputs instead of DUMP",
+              "the variance of the colour mean, R,G,B (Python: also variance=)"),
     FLAG_ROW(no_albedo, "Parts of the input", "ignore the input's albedo"),
     FLAG_ROW(no_normal, "Parts of the input", "ignore the input's normal"),
     FLAG_ROW(no_variance, "Parts of the input", "ignore the input's variance"),

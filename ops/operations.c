@@ -5,7 +5,9 @@
 
 static const mcp_operation *const list[] = {&mcp__op_estimate, &mcp__op_blend,
                                             &mcp__op_adaptive, &mcp__op_info, &mcp__op_merge,
-                                            &mcp__op_denoise, NULL};
+                                            &mcp__op_denoise, &mcp__op_convert,
+                                            &mcp__op_metrics, &mcp__op_compare,
+                                            &mcp__op_perceptual, NULL};
 
 const mcp_operation *const *
 mcp_operations(void)

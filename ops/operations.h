@@ -9,7 +9,10 @@
 #include <mcpost/blend.h>
 #include <mcpost/dump.h>
 #include <mcpost/estimate.h>
+#include <mcpost/imageio.h>
+#include <mcpost/metrics.h>
 #include <mcpost/options.h>
+#include <mcpost/perceptual.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -75,6 +78,69 @@ typedef struct mcp_denoise_settings {
     int list;
 } mcp_denoise_settings;
 
+/* `convert`: an image written in another format, or a render dump in another
+ * convention. */
+typedef struct mcp_convert_settings {
+    mcp_write_options wo;     /* pixel, compression; tiled and linear by finish */
+    const char *channels[64]; /* names, or "A,B,C" (each split at commas) */
+    int n_channels;
+    int half;                 /* command line: --half, pixel half */
+    int tiled;                /* EXR tiles of tiled x tiled (0: scanlines) */
+    int linear;               /* LDR outputs: no sRGB encoding */
+    mcp_convention dump;      /* command line: rewrite a dump in this convention */
+    const char *spp;          /* command line: the dump's sample count */
+    const char *input;        /* a job's input */
+    const char *output;       /* a job's output file */
+    uint64_t given;
+} mcp_convert_settings;
+
+/* At most this many conditions of each gate kind (--fail, --warn, ...). */
+#define MCP_METRICS_MAX_GATES 16
+
+/* `metrics`: test images against a reference, with gates; also `compare`'s figures
+ * and gates (mcp_compare_settings). */
+typedef struct mcp_metrics_settings {
+    mcp_metrics_options o; /* o.flip_ldr and o.flip_hdr follow flip */
+    int flip;              /* bit 0 LDR-FLIP, bit 1 HDR-FLIP */
+    /* the gates' conditions as given, parsed by the front ends (jobs/gate.c) */
+    const char *fail[MCP_METRICS_MAX_GATES], *warn[MCP_METRICS_MAX_GATES];
+    const char *fail_percent[MCP_METRICS_MAX_GATES], *warn_percent[MCP_METRICS_MAX_GATES];
+    int n_fail, n_warn, n_fail_percent, n_warn_percent;
+    const char *csv;       /* command line: the figures as CSV too */
+    const char *input, *reference, *series, *estimate, *compare; /* a job's inputs */
+    int maps;              /* a job: write maps and previews */
+    uint64_t given;
+} mcp_metrics_settings;
+
+/* `compare`: metrics' figures and gates on a page. */
+typedef struct mcp_compare_settings {
+    mcp_metrics_settings m; /* first: metrics' rows read it at their own offsets */
+    double exposure;        /* the page's starting exposure, stops */
+    int display;            /* the page's starting display (mcp_report_display_words) */
+} mcp_compare_settings;
+
+/* At most this many kernel items (taps) a job lists. */
+#define MCP_PERCEPTUAL_MAX_TAPS 65
+
+/* `perceptual`: perceptual error optimisation of few-sample renders. */
+typedef struct mcp_perceptual_settings {
+    mcp_perc_options opt;
+    const char *surrogate;  /* "denoise", "reference", or an image (file, input) */
+    const char *confidence; /* a number in [0, 1], or a per-pixel image */
+    /* tap3, gaussian, a 2D kernel image, or separable taps: "a,b,c" (a job: a list,
+     * an item each; the items are joined) */
+    const char *kernel[MCP_PERCEPTUAL_MAX_TAPS];
+    int n_kernel;
+    const char *rerender;   /* a command with {permutation} {output} {method} */
+    const char *reference;  /* a file (command line), an input (job), an array */
+    const char *candidates; /* a job's series input or list of inputs */
+    const char *name;       /* a job: the result's name */
+    int group;              /* files averaged into one candidate */
+    int compare;            /* every method on the input too */
+    int spectra_tile;
+    uint64_t given;
+} mcp_perceptual_settings;
+
 /* The operations' tables (ops/op_*.c). */
 MCP_API const mcp_operation *mcp_operation_estimate(void);
 MCP_API const mcp_operation *mcp_operation_blend(void);
@@ -82,6 +148,10 @@ MCP_API const mcp_operation *mcp_operation_adaptive(void);
 MCP_API const mcp_operation *mcp_operation_info(void);
 MCP_API const mcp_operation *mcp_operation_merge(void);
 MCP_API const mcp_operation *mcp_operation_denoise(void);
+MCP_API const mcp_operation *mcp_operation_convert(void);
+MCP_API const mcp_operation *mcp_operation_metrics(void);
+MCP_API const mcp_operation *mcp_operation_compare(void);
+MCP_API const mcp_operation *mcp_operation_perceptual(void);
 
 #ifdef __cplusplus
 }

@@ -213,6 +213,54 @@ parse_list(const mcp_operation *op, const mcp_option *o, const char *label,
     return 0;
 }
 
+/* "ldr,hdr" into bits of o->words (1 << i for words[i]); "none" alone is 0 */
+static int
+parse_wordset(const mcp_option *o, const char *label, const char *text, int *out)
+{
+    int bits = 0, n = 0, none = 0;
+    const char *p = text;
+    for (;;) {
+        const char *comma = strchr(p, ',');
+        size_t len = comma ? (size_t)(comma - p) : strlen(p);
+        char word[64];
+        while (len && *p == ' ')
+            p++, len--;
+        while (len && p[len - 1] == ' ')
+            len--;
+        if (len >= sizeof word) len = sizeof word - 1;
+        memcpy(word, p, len);
+        word[len] = '\0';
+        int v = 0;
+        if (!strcasecmp(word, "none")) {
+            none = 1;
+        } else if (mcp_wordlist_find(o->words, word, &v)) {
+            char known[256];
+            mcp_wordlist_join(o->words, ", ", known, sizeof known);
+            return mcp_error("%s: unknown '%s' (use %s or none)", label, word, known);
+        } else {
+            bits |= 1 << v;
+        }
+        n++;
+        if (!comma) break;
+        p = comma + 1;
+    }
+    if (none && n > 1)
+        return mcp_error("%s: none goes alone (got '%s')", label, text);
+    *out = bits;
+    return 0;
+}
+
+/* one more text of a repeatable option */
+static int
+add_text(const mcp_option *o, const char *label, const char *text, const char **out,
+         int *count)
+{
+    if (*count >= o->max_count)
+        return mcp_error("%s: at most %d values (got more)", label, o->max_count);
+    out[(*count)++] = text;
+    return 0;
+}
+
 int
 mcp_operation_set(const mcp_operation *op, const mcp_option *o, const char *label,
                   const char *text, void *settings)
@@ -251,6 +299,12 @@ mcp_operation_set(const mcp_operation *op, const mcp_option *o, const char *labe
         break;
     case MCP_OPT_DENOISER:
         return mcp_error("%s: a denoiser is read by the front end, not as text", label);
+    case MCP_OPT_TEXTS:
+        rc = add_text(o, label, text, f, field(settings, o->count_offset));
+        break;
+    case MCP_OPT_WORDSET:
+        rc = parse_wordset(o, label, text, f);
+        break;
     }
     if (rc) return -1;
     if (op && op->given_offset) {
@@ -302,7 +356,8 @@ mcp_option_format(const mcp_option *o, const void *settings, char *buf, size_t c
     buf[0] = '\0';
     switch (o->type) {
     case MCP_OPT_NUMBER:
-        if (o->auto_word && *(const double *)f == o->auto_value)
+        if (o->auto_word && (*(const double *)f == o->auto_value ||
+                             (isnan(*(const double *)f) && isnan(o->auto_value))))
             snprintf(buf, cap, "%s", o->auto_word);
         else
             format_double(*(const double *)f, buf, cap);
@@ -345,6 +400,25 @@ mcp_option_format(const mcp_option *o, const void *settings, char *buf, size_t c
     case MCP_OPT_DENOISER:
         snprintf(buf, cap, "~");
         break;
+    case MCP_OPT_TEXTS: {
+        const char *const *t = f;
+        int n = *(const int *)cfield(settings, o->count_offset);
+        size_t len = 0;
+        for (int i = 0; i < n && len + 1 < cap; i++)
+            len += (size_t)snprintf(buf + len, cap - len, "%s%s", i ? "; " : "", t[i]);
+        if (!n) snprintf(buf, cap, "~");
+        break;
+    }
+    case MCP_OPT_WORDSET: {
+        int bits = *(const int *)f;
+        size_t len = 0;
+        for (int i = 0; i < o->words->count && len + 1 < cap; i++)
+            if (bits & (1 << i))
+                len += (size_t)snprintf(buf + len, cap - len, "%s%s", len ? "," : "",
+                                        o->words->words[i]);
+        if (!len) snprintf(buf, cap, "none");
+        break;
+    }
     }
 }
 
@@ -461,11 +535,14 @@ markdown_row(strbuf *b, const mcp_operation *op, const mcp_option *o, const char
     int rc = add(b, "| `%s` | ", o->name) || add_cell(b, flag) || add(b, " | ") ||
              add_cell(b, def ? def : "—") || add(b, " | ") || add_cell(b, doc) ||
              add(b, "%s", range);
-    if (!rc && o->type == MCP_OPT_ENUM) {
+    if (!rc && (o->type == MCP_OPT_ENUM || o->type == MCP_OPT_WORDSET)) {
         char words[512];
         mcp_wordlist_join(o->words, "`, `", words, sizeof words);
-        rc = add(b, "; one of `%s`", words);
+        rc = o->type == MCP_OPT_ENUM ? add(b, "; one of `%s`", words)
+                                     : add(b, "; any of `%s`, or `none`", words);
     }
+    if (!rc && o->type == MCP_OPT_TEXTS)
+        rc = add(b, " (repeatable: a job gives a list)");
     /* which front ends it misses, of those the operation has at all */
     unsigned all = 0;
     for (const mcp_option *p = op->options; p->name; p++)

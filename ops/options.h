@@ -41,9 +41,16 @@ typedef enum {
     MCP_OPT_TEXT,    /* const char *, borrowed from the front end's text */
     MCP_OPT_INPUT,   /* const char *: a file on the command line, an input's name in a
                       * job, an array or a path in Python (each front end reads it) */
-    MCP_OPT_DENOISER /* the denoiser and its settings: each front end reads it
-                      * (--denoiser and --denoiser-opt, a job's denoiser map, a
-                      * Python name or dict); declared here for the docs and keys */
+    MCP_OPT_DENOISER, /* the denoiser and its settings: each front end reads it
+                       * (--denoiser and --denoiser-opt, a job's denoiser map, a
+                       * Python name or dict); declared here for the docs and keys */
+    MCP_OPT_TEXTS,   /* const char *[max_count] at offset, the count (int) at
+                      * count_offset: each value given adds one (the command line
+                      * repeats the flag, a job gives one or a YAML list, Python a str
+                      * or a sequence of str); borrowed like MCP_OPT_TEXT */
+    MCP_OPT_WORDSET  /* int: a set of words' words, bit i for words[i], given
+                      * comma-separated ("ldr,hdr"; a YAML list in a job, a str or a
+                      * sequence of str in Python); the word "none" is the empty set */
 } mcp_opt_type;
 
 /* Where an option is taken (the `where` bits; 0 means all three). */
@@ -60,11 +67,11 @@ typedef struct mcp_option {
     const char *meta;          /* the value's name in --help: "T", "LIST", "NAME" */
     const char *def;           /* the default as the docs say it (NULL: none) */
     const char *doc;           /* one line */
-    const mcp_wordlist *words; /* MCP_OPT_ENUM */
+    const mcp_wordlist *words; /* MCP_OPT_ENUM, MCP_OPT_WORDSET */
     double lo, hi;             /* MCP_OPT_NUMBER, MCP_OPT_INT: the range, per bounds */
     unsigned bounds;
-    size_t count_offset; /* MCP_OPT_LIST: offsetof the count */
-    int max_count;       /* MCP_OPT_LIST: at most this many values (at least 1) */
+    size_t count_offset; /* MCP_OPT_LIST, MCP_OPT_TEXTS: offsetof the count */
+    int max_count;       /* MCP_OPT_LIST, MCP_OPT_TEXTS: at most this many values */
     /* MCP_OPT_INT, MCP_OPT_NUMBER: a word that stands for auto_value ("auto") */
     const char *auto_word;
     double auto_value;

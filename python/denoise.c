@@ -136,46 +136,60 @@ release_inputs(inputs *in)
     mcp_py_image_release(&in->variance);
 }
 
-/* Positional images, denoiser= and **settings: the keys other than these are the
- * denoiser's settings. */
+/* Positional images, the keywords of denoise's table that Python takes
+ * (ops/op_denoise.c: albedo, normal, variance_of_mean, denoiser), variance (the old
+ * name of variance_of_mean) and **settings: any other keyword is a setting of the
+ * denoiser, checked by its own table when it is made. */
 static int
-parse_call(PyObject *args, PyObject *kw, int with_tangent, PyObject **color,
+parse_call(const char *fn, PyObject *args, PyObject *kw, int with_tangent, PyObject **color,
            PyObject **tangent, PyObject **albedo, PyObject **normal, PyObject **variance,
            const char **name, PyObject **settings)
 {
-    static const char *const own[] = {"color", "tangent", "albedo", "normal", "variance",
-                                      "denoiser"};
+    static const char *const own[] = {"color",    "tangent",          "albedo", "normal",
+                                      "variance", "variance_of_mean", "denoiser", NULL};
+    PyObject *mine = PyDict_New(), *keep = PyList_New(0), *vals[7], *pos[2];
+    mcp_denoise_settings st;
     *settings = PyDict_New();
-    PyObject *mine = PyDict_New();
-    if (!*settings || !mine)
-        goto fail;
+    if (!*settings || !mine || !keep) goto fail;
     PyObject *k, *v;
-    Py_ssize_t pos = 0;
-    while (kw && PyDict_Next(kw, &pos, &k, &v)) {
+    Py_ssize_t at = 0;
+    while (kw && PyDict_Next(kw, &at, &k, &v)) {
         int is_own = 0;
-        for (size_t i = 0; i < sizeof own / sizeof *own; i++)
+        for (int i = 0; own[i]; i++)
             if ((with_tangent || i != 1) && PyUnicode_Check(k) &&
                 !strcmp(PyUnicode_AsUTF8(k), own[i]))
                 is_own = 1;
-        if (PyDict_SetItem(is_own ? mine : *settings, k, v))
-            goto fail;
+        if (PyDict_SetItem(is_own ? mine : *settings, k, v)) goto fail;
     }
-    static char *keys_d[] = {"color", "albedo", "normal", "variance", "denoiser", NULL};
-    static char *keys_j[] = {"color", "tangent", "albedo", "normal", "variance", "denoiser",
-                             NULL};
-    *albedo = *normal = *variance = Py_None;
+    static const char *const positional[] = {"color", "tangent"};
+    if (mcp_py_settings(mcp_operation_denoise(), fn, mine, own, vals, &st, keep) ||
+        mcp_py_positionals(fn, positional, with_tangent ? 2 : 1, args,
+                           (PyObject *const[]){vals[0], vals[1]}, pos))
+        goto fail;
+    if (vals[4] && vals[5]) {
+        PyErr_Format(PyExc_TypeError, "%s(): give variance or variance_of_mean, not both", fn);
+        goto fail;
+    }
+    *color = pos[0];
+    if (tangent) *tangent = with_tangent ? pos[1] : NULL;
+    *albedo = vals[2] ? vals[2] : Py_None;
+    *normal = vals[3] ? vals[3] : Py_None;
+    *variance = vals[4] ? vals[4] : vals[5] ? vals[5] : Py_None;
     *name = "default";
-    int ok = with_tangent
-                 ? PyArg_ParseTupleAndKeywords(args, mine, "OO|$OOOs:jvp", keys_j, color,
-                                               tangent, albedo, normal, variance, name)
-                 : PyArg_ParseTupleAndKeywords(args, mine, "O|$OOOs:denoise", keys_d, color,
-                                               albedo, normal, variance, name);
+    if (vals[6] && vals[6] != Py_None) {
+        if (!PyUnicode_Check(vals[6])) {
+            PyErr_Format(PyExc_TypeError, "%s(): denoiser must be a str, its settings "
+                         "keywords", fn);
+            goto fail;
+        }
+        *name = PyUnicode_AsUTF8(vals[6]);
+    }
     Py_DECREF(mine);
-    if (!ok)
-        Py_CLEAR(*settings);
-    return ok ? 0 : -1;
+    Py_DECREF(keep);
+    return 0;
 fail:
     Py_XDECREF(mine);
+    Py_XDECREF(keep);
     Py_CLEAR(*settings);
     return -1;
 }
@@ -186,7 +200,7 @@ py_denoise(PyObject *self, PyObject *args, PyObject *kw)
     (void)self;
     PyObject *c, *a, *n, *v, *settings;
     const char *name;
-    if (parse_call(args, kw, 0, &c, NULL, &a, &n, &v, &name, &settings))
+    if (parse_call("denoise", args, kw, 0, &c, NULL, &a, &n, &v, &name, &settings))
         return NULL;
     mcp_denoiser *den = NULL;
     inputs in;
@@ -217,7 +231,7 @@ py_jvp(PyObject *self, PyObject *args, PyObject *kw)
     (void)self;
     PyObject *c, *t, *a, *n, *v, *settings;
     const char *name;
-    if (parse_call(args, kw, 1, &c, &t, &a, &n, &v, &name, &settings))
+    if (parse_call("jvp", args, kw, 1, &c, &t, &a, &n, &v, &name, &settings))
         return NULL;
     mcp_denoiser *den = NULL;
     inputs in;
@@ -330,14 +344,11 @@ py_denoisers(PyObject *self, PyObject *unused)
 #define FN(f) (PyCFunction)(void (*)(void))(f)
 PyMethodDef mcp_py_denoise_methods[] = {
     {"denoise", FN(py_denoise), KW,
-     "denoise(color, *, albedo=None, normal=None, variance=None, denoiser='default',\n"
-     "        **settings) -> ndarray H x W x 3\n\n"
      "Runs one denoiser (see denoisers()) with its settings, the job file's keys (e.g.\n"
      "denoiser='gauss', sigma=2; denoiser='unet', weights=PATH). 'default' is the U-Net\n"
-     "with the shipped weights, or nlm without albedo and normal."},
+     "with the shipped weights, or nlm without albedo and normal. variance is\n"
+     "variance_of_mean's other name."},
     {"jvp", FN(py_jvp), KW,
-     "jvp(color, tangent, *, albedo=None, normal=None, variance=None, denoiser='default',\n"
-     "    **settings) -> (denoised, J·tangent)\n\n"
      "The denoiser's Jacobian-vector product at the input in the direction of tangent\n"
      "(exact forward mode for the built-in denoisers), in the same pass as F. tangent\n"
      "may be a list of images: then a list of products comes back."},

@@ -98,10 +98,16 @@ int mcp_py_denoiser_arg(PyObject *arg, mcp_denoiser **out);
  * exception. fn names the function in messages. */
 int mcp_py_settings(const mcp_operation *op, const char *fn, PyObject *kw, const char *const *own,
                     PyObject **own_values, void *settings, PyObject *keep);
-/* The docstring of op's function: "NAME(POSITIONAL, *, keyword=default, ...) -> RETURNS",
- * prose, and a line per keyword from the table. malloc'd. */
-char *mcp_py_doc(const mcp_operation *op, const char *positional, const char *returns,
-                 const char *prose);
+/* The docstring of op's function fn: "FN(POSITIONAL, *, keyword=default, ..., EXTRAS)
+ * -> RETURNS", prose, and a line per keyword from the table; EXTRAS (may be NULL) are
+ * the keywords the function reads itself that the table lacks ("maps=False").
+ * malloc'd. */
+char *mcp_py_doc(const mcp_operation *op, const char *fn, const char *positional,
+                 const char *extras, const char *returns, const char *prose);
+/* A function's n positional arguments, given by position or by keyword (own_values[i],
+ * NULL when not given) into out; a missing or doubled one is a TypeError. */
+int mcp_py_positionals(const char *fn, const char *const *names, int n, PyObject *args,
+                       PyObject *const *own_values, PyObject **out);
 
 /* ---- numbers ---- */
 

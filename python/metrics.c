@@ -417,62 +417,21 @@ static PyObject *
 py_metrics(PyObject *self, PyObject *args, PyObject *kw)
 {
     (void)self;
-    static char *keys[] = {"test",          "ref",           "percentiles",
-                           "eps_rel",       "flip",          "ppd",
-                           "distance_m",    "display_width_m", "display_width_px",
-                           "tone_mapper",   "start_exposure", "stop_exposure",
-                           "num_exposures", "pmse_kernel",   "pmse_dpi",
-                           "pmse_distance_in", "pmse_filter_reference", "pmse_tone_map",
-                           "spectra",       "spectra_tile_size", "spectra_cutoff",
-                           "maps",          "pixels_above", NULL};
-    PyObject *a, *b, *plist = NULL, *flip = NULL, *above = NULL;
-    mcp_metrics_options o = mcp_metrics_defaults();
-    double ppd = 0, dist = 0, wm = 0, wpx = 0, start = NAN, stop = NAN, pdpi = 0, pdist = 0;
-    int num = 0, pfilter = 0, want_maps = 0;
-    const char *tm = NULL, *pkernel = NULL, *ptone = NULL;
-    if (!PyArg_ParseTupleAndKeywords(
-            args, kw, "OO|$OdOddddzddizddpzpidpO:metrics", keys, &a, &b, &plist, &o.eps_rel,
-            &flip, &ppd, &dist, &wm, &wpx, &tm, &start, &stop, &num, &pkernel, &pdpi,
-            &pdist, &pfilter, &ptone, &o.spectra, &o.spectra_opt.tile_size,
-            &o.spectra_opt.cutoff, &want_maps, &above))
-        return NULL;
+    /* the keywords are the metrics' table (ops/op_metrics.c); these are read here: the
+       two images, maps (return them) and pixels_above */
+    static const char *const own[] = {"test", "ref", "maps", "pixels_above", NULL};
+    PyObject *vals[4], *pair_args[2], *keep = PyList_New(0);
+    mcp_metrics_settings st;
+    if (!keep) return NULL;
+    int bad = mcp_py_settings(mcp_operation_metrics(), "metrics", kw, own, vals, &st, keep) ||
+              mcp_py_positionals("metrics", own, 2, args, vals, pair_args);
+    Py_DECREF(keep); /* no text of the settings is used below */
+    if (bad) return NULL;
+    PyObject *a = pair_args[0], *b = pair_args[1], *above = vals[3];
+    mcp_metrics_options o = st.o;
+    int want_maps = vals[2] ? PyObject_IsTrue(vals[2]) : 0;
+    if (want_maps < 0) return NULL;
     if (above && above != Py_None && above_options(above, &o)) return NULL;
-    if (flip_options(ppd, dist, wm, wpx, tm, start, stop, num, &o.flip) ||
-        pmse_options(pkernel, pdpi, pdist, pfilter, ptone, &o.pmse))
-        return NULL;
-    if (flip) { /* "ldr,hdr", "none", or a list of those words */
-        PyObject *comma = PyUnicode_FromString(",");
-        PyObject *words = !comma                ? NULL
-                          : PyUnicode_Check(flip) ? PyUnicode_Split(flip, comma, -1)
-                                                  : PySequence_List(flip);
-        Py_XDECREF(comma);
-        if (!words)
-            return NULL;
-        o.flip_ldr = o.flip_hdr = 0;
-        for (Py_ssize_t i = 0; i < PyList_GET_SIZE(words); i++) {
-            const char *w = PyUnicode_Check(PyList_GET_ITEM(words, i))
-                                ? PyUnicode_AsUTF8(PyList_GET_ITEM(words, i))
-                                : "?";
-            if (!strcmp(w, "ldr"))
-                o.flip_ldr = 1;
-            else if (!strcmp(w, "hdr"))
-                o.flip_hdr = 1;
-            else if (strcmp(w, "none")) {
-                PyErr_Format(mcp_py_error, "flip: unknown '%s' (use ldr, hdr or none)", w);
-                Py_DECREF(words);
-                return NULL;
-            }
-        }
-        Py_DECREF(words);
-    }
-    if (plist) {
-        double p[MCP_METRICS_MAX_PERCENTILES];
-        int n;
-        if (mcp_py_doubles(plist, "percentiles", p, MCP_METRICS_MAX_PERCENTILES, &n))
-            return NULL;
-        if (mcp_metrics_set_percentiles(&o, p, n))
-            return mcp_py_fail();
-    }
     mcp_py_image t, r;
     if (get_pair(a, b, &t, &r))
         return NULL;
@@ -547,14 +506,11 @@ PyMethodDef mcp_py_metrics_methods[] = {
      "The low-frequency energy fraction of the error (low_fraction; white_fraction is\n"
      "what white noise gives), its energy, and the tiled spectrum picture."},
     {"metrics", FN(py_metrics), KW,
-     "metrics(test, ref, *, percentiles=None, eps_rel=0.01, flip='ldr,hdr', ppd=0, ...,\n"
-     "        pmse_kernel='tap3', ..., spectra=True, spectra_tile_size=32,\n"
-     "        spectra_cutoff=0.25, maps=False, pixels_above=None)\n"
-     "    -> dict (or (dict, maps) with maps=True)\n\n"
      "Every figure of `mcpost metrics --json`, with its keys and keywords: FLIP's\n"
      "statistics beside each mean, the histogram counts in flip_histogram, and with\n"
      "pixels_above=[('flip_ldr', 0.1), ('relse', 0.5)] the percentage of pixels above\n"
-     "each threshold (pixels_above)."},
+     "each threshold (pixels_above). maps=True returns the maps too: sq_error, relse,\n"
+     "flip_ldr, flip_hdr, flip_hdr_exposure, spectra."},
     {"flip_stats", FN(py_flip_stats), KW,
      "flip_stats(map) -> dict: FLIP's statistics of an H x W map as NVIDIA's tool\n"
      "defines them: weighted_median, weighted_q1, weighted_q3 (each pixel weighted by\n"

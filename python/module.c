@@ -142,14 +142,23 @@ join_tables(void)
     /* the functions of operations with a table: their signature and keywords come from
        it (python/options.c), before the prose their file gives */
     static const struct {
-        const char *name, *positional, *returns;
-    } ops[] = {{"estimate", "dump", "dict"}, {"blend", "dumps", "dict"}};
+        const char *name, *op, *positional, *extras, *returns;
+    } ops[] = {{"estimate", "estimate", "dump", NULL, "dict"},
+               {"blend", "blend", "dumps", NULL, "dict"},
+               {"metrics", "metrics", "test, ref", "maps=False, pixels_above=None",
+                "dict (or (dict, maps) with maps=True)"},
+               {"perceptual", "perceptual", "candidates", "albedo=None, normal=None, mask=None",
+                "dict"},
+               {"denoise", "denoise", "color", "variance=None, **settings",
+                "ndarray H x W x 3"},
+               {"jvp", "denoise", "color, tangent", "variance=None, **settings",
+                "(denoised, J·tangent)"}};
     for (size_t i = 0; i < n; i++)
         for (size_t k = 0; k < sizeof ops / sizeof *ops; k++)
             if (!strcmp(all_methods[i].ml_name, ops[k].name)) {
-                const mcp_operation *op = mcp_operation_find(ops[k].name);
-                char *doc = op ? mcp_py_doc(op, ops[k].positional, ops[k].returns,
-                                            all_methods[i].ml_doc)
+                const mcp_operation *op = mcp_operation_find(ops[k].op);
+                char *doc = op ? mcp_py_doc(op, ops[k].name, ops[k].positional, ops[k].extras,
+                                            ops[k].returns, all_methods[i].ml_doc)
                                : NULL;
                 if (!doc) return -1;
                 all_methods[i].ml_doc = doc; /* the module's, for the process */

@@ -47,7 +47,9 @@ value_text(const char *fn, const mcp_option *o, PyObject *v, char *buf, size_t c
     *text = buf;
     switch (o->type) {
     case MCP_OPT_NUMBER:
-        if (!is_number(v)) return type_error(fn, o->name, "a number");
+        if (o->auto_word && PyUnicode_Check(v)) return text_of(v, 0, buf, cap);
+        if (!is_number(v))
+            return type_error(fn, o->name, o->auto_word ? "a number or 'auto'" : "a number");
         return text_of(v, 1, buf, cap);
     case MCP_OPT_INT:
         if (o->auto_word && PyUnicode_Check(v)) return text_of(v, 0, buf, cap);
@@ -105,6 +107,31 @@ value_text(const char *fn, const mcp_option *o, PyObject *v, char *buf, size_t c
         *text = PyBytes_AS_STRING(b);
         return 0;
     }
+    case MCP_OPT_WORDSET: {
+        if (PyUnicode_Check(v)) return text_of(v, 0, buf, cap);
+        PyObject *fast = PySequence_Fast(v, "");
+        if (!fast) {
+            PyErr_Clear();
+            return type_error(fn, o->name, "a str or a sequence of str");
+        }
+        size_t n = 0;
+        buf[0] = '\0';
+        for (Py_ssize_t i = 0; i < PySequence_Fast_GET_SIZE(fast); i++) {
+            PyObject *x = PySequence_Fast_GET_ITEM(fast, i);
+            const char *w = PyUnicode_Check(x) ? PyUnicode_AsUTF8(x) : NULL;
+            if (!w) {
+                Py_DECREF(fast);
+                return PyErr_Occurred() ? -1 : type_error(fn, o->name, "a sequence of str");
+            }
+            n += (size_t)snprintf(buf + n, n < cap ? cap - n : 0, "%s%s", i ? "," : "", w);
+        }
+        Py_DECREF(fast);
+        return 0;
+    }
+    case MCP_OPT_TEXTS: /* one str here; a sequence is taken item by item */
+        if (!PyUnicode_Check(v)) return type_error(fn, o->name, "a str or a sequence of str");
+        *text = PyUnicode_AsUTF8(v);
+        return *text ? 0 : -1;
     case MCP_OPT_DENOISER:
         break;
     }
@@ -139,6 +166,24 @@ mcp_py_settings(const mcp_operation *op, const char *fn, PyObject *kw,
             return -1;
         }
         if (value == Py_None) continue; /* None: the default */
+        if (o->type == MCP_OPT_TEXTS && !PyUnicode_Check(value)) {
+            PyObject *fast = PySequence_Fast(value, "");
+            if (!fast) {
+                PyErr_Clear();
+                return type_error(fn, name, "a str or a sequence of str");
+            }
+            /* the items are borrowed by the settings: kept alive with them */
+            int rc = PyList_Append(keep, fast);
+            Py_DECREF(fast);
+            for (Py_ssize_t i = 0; !rc && i < PySequence_Fast_GET_SIZE(fast); i++) {
+                PyObject *x = PySequence_Fast_GET_ITEM(fast, i);
+                const char *t = PyUnicode_Check(x) ? PyUnicode_AsUTF8(x) : NULL;
+                if (!t) return PyErr_Occurred() ? -1 : type_error(fn, name, "a sequence of str");
+                if (mcp_operation_set(op, o, name, t, settings)) return mcp_py_fail_int();
+            }
+            if (rc) return -1;
+            continue;
+        }
         char buf[2048];
         PyObject *held = NULL;
         const char *text = NULL;
@@ -160,10 +205,17 @@ static void
 python_default(const mcp_option *o, char *buf, size_t cap)
 {
     const char *def = o->def;
-    if (o->type == MCP_OPT_INPUT || o->type == MCP_OPT_TEXT || !def) {
+    char *end = NULL;
+    if (o->type == MCP_OPT_INPUT || !def) {
         snprintf(buf, cap, "None");
+    } else if (o->type == MCP_OPT_TEXT || o->type == MCP_OPT_TEXTS) {
+        /* a number as a number (confidence=1), a word as a str (surrogate='denoise') */
+        (void)strtod(def, &end);
+        snprintf(buf, cap, end != def && !*end ? "%s" : "'%s'", def);
     } else if (o->type == MCP_OPT_ENUM || o->type == MCP_OPT_DENOISER ||
-               (o->type == MCP_OPT_INT && o->auto_word && !strcmp(def, o->auto_word))) {
+               o->type == MCP_OPT_WORDSET ||
+               ((o->type == MCP_OPT_INT || o->type == MCP_OPT_NUMBER) && o->auto_word &&
+                !strcmp(def, o->auto_word))) {
         snprintf(buf, cap, "'%s'", def);
     } else if (o->type == MCP_OPT_FLAG) {
         snprintf(buf, cap, "%s", strcmp(def, "true") ? "False" : "True");
@@ -179,24 +231,59 @@ python_default(const mcp_option *o, char *buf, size_t cap)
     }
 }
 
+int
+mcp_py_positionals(const char *fn, const char *const *names, int n, PyObject *args,
+                   PyObject *const *own_values, PyObject **out)
+{
+    Py_ssize_t given = PyTuple_GET_SIZE(args);
+    if (given > n) {
+        PyErr_Format(PyExc_TypeError, "%s() takes %d positional arguments but %zd were given",
+                     fn, n, given);
+        return -1;
+    }
+    for (int i = 0; i < n; i++) {
+        out[i] = i < given ? PyTuple_GET_ITEM(args, i) : own_values[i];
+        if (i < given && own_values[i]) {
+            PyErr_Format(PyExc_TypeError, "%s() got multiple values for argument '%s'", fn,
+                         names[i]);
+            return -1;
+        }
+        if (!out[i]) {
+            PyErr_Format(PyExc_TypeError, "%s() missing required argument '%s'", fn,
+                         names[i]);
+            return -1;
+        }
+    }
+    return 0;
+}
+
+/* 1 when name is one of the words of "a, b, c" */
+static int
+in_list(const char *list, const char *name)
+{
+    size_t len = strlen(name);
+    for (const char *p = list; (p = strstr(p, name)); p += len)
+        if ((p == list || p[-1] == ' ') && (p[len] == ',' || p[len] == '\0')) return 1;
+    return 0;
+}
+
 char *
-mcp_py_doc(const mcp_operation *op, const char *positional, const char *returns,
-           const char *prose)
+mcp_py_doc(const mcp_operation *op, const char *fn, const char *positional,
+           const char *extras, const char *returns, const char *prose)
 {
     size_t cap = 16384, n = 0, line = 0;
     char *doc = malloc(cap);
     if (!doc) return NULL;
-    n += (size_t)snprintf(doc, cap, "%s(%s, *", op->name, positional);
+    n += (size_t)snprintf(doc, cap, "%s(%s, *", fn, positional);
     line = n;
     for (const mcp_option *o = op->options; o->name && n < cap; o++) {
-        if (!mcp_option_takes(o, MCP_OPT_PY)) continue;
+        if (!mcp_option_takes(o, MCP_OPT_PY) || in_list(positional, o->name)) continue;
         char def[128], item[256];
         python_default(o, def, sizeof def);
         int len = snprintf(item, sizeof item, ", %s=%s", o->name, def);
         if (line + (size_t)len > 84) { /* wrap under the opening parenthesis */
-            n += (size_t)snprintf(doc + n, cap - n, ",\n%*s", (int)strlen(op->name) + 1,
-                                  "");
-            line = strlen(op->name) + 1;
+            n += (size_t)snprintf(doc + n, cap - n, ",\n%*s", (int)strlen(fn) + 1, "");
+            line = strlen(fn) + 1;
             n += (size_t)snprintf(doc + n, cap - n, "%s", item + 2);
             line += (size_t)len - 2;
         } else {
@@ -204,13 +291,20 @@ mcp_py_doc(const mcp_operation *op, const char *positional, const char *returns,
             line += (size_t)len;
         }
     }
+    if (extras && n < cap) {
+        if (line + strlen(extras) + 2 > 84)
+            n += (size_t)snprintf(doc + n, cap - n, ",\n%*s%s", (int)strlen(fn) + 1, "",
+                                  extras);
+        else
+            n += (size_t)snprintf(doc + n, cap - n, ", %s", extras);
+    }
     if (n < cap)
         n += (size_t)snprintf(doc + n, cap - n, ") -> %s\n\n%s\n\nKeywords:\n", returns,
                               prose);
     for (const mcp_option *o = op->options; o->name && n < cap; o++) {
-        if (!mcp_option_takes(o, MCP_OPT_PY)) continue;
+        if (!mcp_option_takes(o, MCP_OPT_PY) || in_list(positional, o->name)) continue;
         n += (size_t)snprintf(doc + n, cap - n, "  %s: %s", o->name, o->doc);
-        if (o->type == MCP_OPT_ENUM && n < cap) {
+        if ((o->type == MCP_OPT_ENUM || o->type == MCP_OPT_WORDSET) && n < cap) {
             char words[256];
             mcp_wordlist_join(o->words, ", ", words, sizeof words);
             n += (size_t)snprintf(doc + n, cap - n, " (%s)", words);
@@ -260,7 +354,8 @@ py_options(PyObject *self, PyObject *args)
 {
     (void)self;
     static const char *const types[] = {"number", "int",  "seed", "whole", "flag",
-                                        "enum",   "list", "text", "input", "denoiser"};
+                                        "enum",   "list", "text", "input", "denoiser",
+                                        "texts",  "wordset"};
     const char *name;
     if (!PyArg_ParseTuple(args, "s:options", &name)) return NULL;
     const mcp_operation *op = mcp_operation_find(name);
@@ -271,7 +366,7 @@ py_options(PyObject *self, PyObject *args)
     PyObject *list = PyList_New(0);
     for (const mcp_option *o = op->options; list && o->name; o++) {
         PyObject *words = Py_NewRef(Py_None), *where = PyList_New(0);
-        if (o->type == MCP_OPT_ENUM) {
+        if (o->type == MCP_OPT_ENUM || o->type == MCP_OPT_WORDSET) {
             Py_DECREF(words);
             words = PyList_New(0);
             for (int i = 0; words && i < o->words->count; i++) {

@@ -157,36 +157,29 @@ static PyObject *
 py_perceptual(PyObject *self, PyObject *args, PyObject *kw)
 {
     (void)self;
-    static char *keys[] = {"candidates", "method",    "surrogate",   "reference",
-                           "denoiser",   "albedo",    "normal",      "confidence",
-                           "passes",     "init",      "seed",        "max_subsets",
-                           "radius",     "travel",    "tile",        "tone_map",
-                           "kernel",     "dpi",       "distance",    "filter_surrogate",
-                           "mask_size",  "mask_sigma", "mask_seed",  "cache",
-                           "spectra_tile", "mask",    NULL};
-    mcp_perc_options o = mcp_perc_defaults();
-    PyObject *list, *surr_obj = NULL, *ref_obj = Py_None, *den_obj = Py_None,
-                    *alb_obj = Py_None, *nrm_obj = Py_None, *conf_obj = NULL, *kernel = NULL,
-                    *seed = NULL, *mask_seed = NULL, *mask_obj = Py_None;
-    const char *method = NULL, *init = NULL, *tone = NULL;
-    int spectra_tile = 32;
-    if (!PyArg_ParseTupleAndKeywords(
-            args, kw, "O|$zOOOOOOizOiiiizOddpidOpiO:perceptual", keys, &list, &method,
-            &surr_obj, &ref_obj, &den_obj, &alb_obj, &nrm_obj, &conf_obj, &o.passes, &init,
-            &seed, &o.max_subsets, &o.radius, &o.travel, &o.tile, &tone, &kernel,
-            &o.model.kernel.dpi, &o.model.kernel.distance_in, &o.model.filter_surrogate,
-            &o.mask.size, &o.mask.sigma, &mask_seed, &o.mask.use_cache, &spectra_tile,
-            &mask_obj))
-        return NULL;
-    if ((method && mcp_perc_method_from_name(method, &o.method)) ||
-        (init && mcp_perc_init_from_name(init, &o.init)) ||
-        (tone && mcp_tonemap_from_name(tone, &o.model.tone_map)))
-        return mcp_py_fail();
-    if (seed && (o.seed = PyLong_AsUnsignedLongLong(seed)) == (uint64_t)-1 && PyErr_Occurred())
-        return NULL;
-    if (mask_seed && (o.mask.seed = PyLong_AsUnsignedLongLong(mask_seed)) == (uint64_t)-1 &&
-        PyErr_Occurred())
-        return NULL;
+    /* the keywords are perceptual's table (ops/op_perceptual.c); these are read here:
+       the candidates, the images and the denoiser, and what takes an array as well as
+       a word or a number (surrogate, confidence, kernel) */
+    static const char *const own[] = {"candidates", "surrogate", "reference", "denoiser",
+                                      "albedo",     "normal",    "confidence", "kernel",
+                                      "mask",       NULL};
+    PyObject *vals[9], *list = NULL, *keep = PyList_New(0);
+    mcp_perceptual_settings st;
+    if (!keep) return NULL;
+    int bad = mcp_py_settings(mcp_operation_perceptual(), "perceptual", kw, own, vals, &st,
+                              keep) ||
+              mcp_py_positionals("perceptual", own, 1, args, vals, &list);
+    Py_DECREF(keep); /* no text of the settings is used below */
+    if (bad) return NULL;
+    mcp_perc_options o = st.opt;
+    int spectra_tile = st.spectra_tile;
+    PyObject *surr_obj = vals[1], *ref_obj = vals[2] ? vals[2] : Py_None,
+             *den_obj = vals[3] ? vals[3] : Py_None, *alb_obj = vals[4] ? vals[4] : Py_None,
+             *nrm_obj = vals[5] ? vals[5] : Py_None, *conf_obj = vals[6], *kernel = vals[7],
+             *mask_obj = vals[8] ? vals[8] : Py_None;
+    if (surr_obj == Py_None) surr_obj = NULL; /* None: the default */
+    if (conf_obj == Py_None) conf_obj = NULL;
+    if (kernel == Py_None) kernel = NULL;
     double *taps = NULL;
     cands c = {0};
     mcp_py_image ref = {0}, surr_in = {0}, conf = {0}, alb = {0}, nrm = {0}, mask = {0};
@@ -337,12 +330,6 @@ done:
 
 PyMethodDef mcp_py_perceptual_methods[] = {
     {"perceptual", (PyCFunction)(void (*)(void))py_perceptual, METH_VARARGS | METH_KEYWORDS,
-     "perceptual(candidates, *, method='vertical-iterative', surrogate='denoise',\n"
-     "           reference=None, denoiser='default', albedo=None, normal=None,\n"
-     "           confidence=1.0, passes=0, init='random', seed=1, max_subsets=64,\n"
-     "           radius=1, travel=1, tile=8, tone_map='clamp', kernel='tap3', dpi=300,\n"
-     "           distance=16, filter_surrogate=False, mask_size=128, mask_sigma=1.5,\n"
-     "           mask_seed=1, cache=True, spectra_tile=32, mask=None) -> dict\n\n"
      "Perceptual error optimisation (Chizhov et al. 2022) of M candidate renders\n"
      "(arrays, dump dicts or paths): 'image', 'index' (vertical methods) or\n"
      "'permutation' (horizontal), 'surrogate', 'energy' and with a reference 'pmse',\n"

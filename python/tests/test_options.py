@@ -13,8 +13,8 @@ import mcpost
 
 from conftest import CLI as MCPOST
 
-OPERATIONS = ["estimate", "blend"]
-COMPARED = ("number", "int", "seed", "whole", "flag", "enum", "list")
+OPERATIONS = ["estimate", "blend", "metrics", "perceptual"]
+COMPARED = ("number", "int", "seed", "whole", "flag", "enum", "list", "wordset")
 
 
 def both_take(o):
@@ -48,6 +48,10 @@ def values_for(o):
         vs = o["words"] + [w.upper().replace("_", "-") for w in o["words"]] + ["nope"]
     elif t == "list":
         vs = [[0.25], [0.75, 0.25], [0.25] * (o["max_count"] + 1), [0.25, 2.0], [-1.0]]
+    elif t == "wordset":
+        w = o["words"]
+        vs = [w[0], [w[-1]], list(reversed(w)), ",".join(w).upper(), "none", ["none", w[0]],
+              "nope", [w[0], "nope"]]
     return vs
 
 
@@ -57,6 +61,8 @@ def cli_words(o, v):
         return [flag if v else "--no-" + flag[2:]]
     if o["type"] == "list":
         return [flag, ",".join(repr(x) for x in v)]
+    if o["type"] == "wordset" and not isinstance(v, str):
+        return [flag, ",".join(v)]
     return [flag, v if isinstance(v, str) else repr(v)]
 
 
@@ -133,10 +139,36 @@ def test_wrong_types_and_unknown_keywords():
         mcpost.settings("nope")
 
 
-@pytest.mark.parametrize("op", OPERATIONS)
-def test_docstrings_list_every_keyword(op):
-    doc = getattr(mcpost, op).__doc__
+POSITIONAL = {"denoise": ("color",), "jvp": ("color", "tangent")}
+
+
+@pytest.mark.parametrize("op,fn", [(op, op) for op in OPERATIONS] +
+                         [("denoise", "denoise"), ("denoise", "jvp")])
+def test_docstrings_list_every_keyword(op, fn):
+    doc = getattr(mcpost, fn).__doc__
+    head = doc.split("\n\n")[0]
+    for name in POSITIONAL.get(fn, ()):
+        assert head.startswith(fn + "(" + ", ".join(POSITIONAL[fn]) + ", *"), head
     for o in mcpost.options(op):
-        if "python" in o["where"]:
-            assert o["name"] + "=" in doc.split("\n\n")[0], o["name"]
+        if "python" in o["where"] and o["name"] not in POSITIONAL.get(fn, ()):
+            assert o["name"] + "=" in head, o["name"]
             assert "  " + o["name"] + ": " in doc, o["name"]
+
+
+def test_denoise_takes_the_tables_keywords():
+    """denoise's keywords are its table's rows that Python takes (and variance, the old
+    name of variance_of_mean): the same image by either name, and both is an error."""
+    import numpy as np
+    rng = np.random.default_rng(3)
+    color = rng.random((16, 16, 3), dtype=np.float32)
+    var = np.full((16, 16, 3), 0.01, np.float32)
+    a = mcpost.denoise(color, variance=var, denoiser="nlm")
+    b = mcpost.denoise(color, variance_of_mean=var, denoiser="nlm")
+    assert np.array_equal(a, b)
+    with pytest.raises(TypeError, match="variance or variance_of_mean, not both"):
+        mcpost.denoise(color, variance=var, variance_of_mean=var, denoiser="nlm")
+    with pytest.raises(TypeError, match="missing required argument 'color'"):
+        mcpost.denoise(denoiser="nlm")
+    # any other keyword is the denoiser's setting, refused by its own table
+    with pytest.raises(mcpost.Error, match="sigmaa"):
+        mcpost.denoise(color, denoiser="gauss", sigmaa=2)

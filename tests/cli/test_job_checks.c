@@ -116,7 +116,7 @@ test_convert_bad_pixel_type(void **state)
                           "      input: noisy\n"           /* 14 */
                           "      output: noisy.exr\n"      /* 15 */
                           "      pixel: double\n",         /* 16 */
-                          16, "pixel must be half or float");
+                          16, "unknown pixel type 'double' (known: float, half)");
     assert_fails_up_front("  - convert: {input: noisy, output: noisy.xyz}\n", /* 13 */
                           13, "unknown image format");
 }

@@ -93,10 +93,36 @@ values_for(const mcp_option *o, values *vs)
             snprintf(w, sizeof w, "%s", o->words->words[i]);
             add_text(vs, w);
             for (char *c = w; *c; c++)
-                *c = *c == '_' ? '-' : *c == '-' ? '_' : (char)(*c & ~0x20);
+                *c = *c == '_'                ? '-'
+                     : *c == '-'              ? '_'
+                     : *c >= 'a' && *c <= 'z' ? (char)(*c & ~0x20)
+                                              : *c;
             add_text(vs, w);
         }
         add_text(vs, "nope");
+        break;
+    case MCP_OPT_WORDSET:
+        for (int i = 0; i < o->words->count; i++) {
+            char w[64];
+            add_text(vs, o->words->words[i]);
+            snprintf(w, sizeof w, "%s", o->words->words[i]);
+            for (char *c = w; *c; c++)
+                *c = (char)(*c & ~0x20);
+            add_text(vs, w);
+        }
+        if (o->words->count > 1) {
+            char w[160];
+            snprintf(w, sizeof w, "%s,%s", o->words->words[1], o->words->words[0]);
+            add_text(vs, w);
+            snprintf(w, sizeof w, "none,%s", o->words->words[0]);
+            add_text(vs, w);
+        }
+        add_text(vs, "none");
+        add_text(vs, "nope");
+        break;
+    case MCP_OPT_TEXTS:
+        add_text(vs, "flip_ldr.mean > 0.5");
+        add_text(vs, "R");
         break;
     case MCP_OPT_LIST: {
         char many[160] = "";
@@ -122,13 +148,15 @@ assert_field_equal(const mcp_option *o, const void *a, const void *b)
     const char *pa = (const char *)a + o->offset, *pb = (const char *)b + o->offset;
     switch (o->type) {
     case MCP_OPT_NUMBER:
-        if (*(const double *)pa != *(const double *)pb)
+        if (*(const double *)pa != *(const double *)pb &&
+            !(isnan(*(const double *)pa) && isnan(*(const double *)pb)))
             fail_msg("%s: %.17g against %.17g", o->name, *(const double *)pa,
                      *(const double *)pb);
         break;
     case MCP_OPT_INT:
     case MCP_OPT_FLAG:
     case MCP_OPT_ENUM:
+    case MCP_OPT_WORDSET:
         if (*(const int *)pa != *(const int *)pb)
             fail_msg("%s: %d against %d", o->name, *(const int *)pa, *(const int *)pb);
         break;
@@ -141,6 +169,14 @@ assert_field_equal(const mcp_option *o, const void *a, const void *b)
         int nb = *(const int *)((const char *)b + o->count_offset);
         assert_int_equal(na, nb);
         if (memcmp(pa, pb, (size_t)na * sizeof(double))) fail_msg("%s differs", o->name);
+        break;
+    }
+    case MCP_OPT_TEXTS: {
+        int na = *(const int *)((const char *)a + o->count_offset);
+        int nb = *(const int *)((const char *)b + o->count_offset);
+        assert_int_equal(na, nb);
+        for (int i = 0; i < na; i++)
+            assert_string_equal(((const char *const *)pa)[i], ((const char *const *)pb)[i]);
         break;
     }
     default:
@@ -200,7 +236,7 @@ job_read(const mcp_operation *op, const mcp_option *o, const char *value, void *
          char *msg, size_t cap)
 {
     char yaml[512];
-    if (o->type == MCP_OPT_LIST && strchr(value, ',')) {
+    if ((o->type == MCP_OPT_LIST || o->type == MCP_OPT_WORDSET) && strchr(value, ',')) {
         char items[400] = "";
         for (const char *p = value; *p; p++) {
             size_t n = strlen(items);
@@ -220,12 +256,14 @@ job_read(const mcp_operation *op, const mcp_option *o, const char *value, void *
         snprintf(yaml + n, sizeof yaml - n, ", %s}",
                  strcmp(base, "budget") ? "stop: true" : "budget: 8");
     }
-    mcp_node *root = NULL;
+    /* the settings borrow the texts of the file: kept until the next read */
+    static mcp_node *root = NULL;
+    mcp_node_free(root);
+    root = NULL;
     assert_int_equal(mcp_yaml_parse_string(yaml, "job.yaml", &root), 0);
     mcp_shared_settings sh;
     int rc = mcp__job_settings(op, root, &sh, settings);
     snprintf(msg, cap, "%s", mcp_error_message());
-    mcp_node_free(root);
     return rc;
 }
 
@@ -285,7 +323,10 @@ test_cli_and_job_read_alike(void **state)
                 compared++;
             }
             if (!accepted) fail_msg("%s %s: no value was taken", (*op)->name, o->name);
-            if (!refused && o->type != MCP_OPT_FLAG && strcmp(o->name, "weights"))
+            /* a repeatable text takes any text here (the gates' conditions are read by
+               the front ends: test_gates_read_alike) */
+            if (!refused && o->type != MCP_OPT_FLAG && o->type != MCP_OPT_TEXTS &&
+                strcmp(o->name, "weights"))
                 fail_msg("%s %s: no value was refused", (*op)->name, o->name);
         }
         free(a);
@@ -305,7 +346,7 @@ defaults_read_back(const mcp_operation *const *op)
         mcp_operation_defaults(*op, d);
         for (const mcp_option *o = (*op)->options; o->name; o++) {
             if (!o->def || o->type == MCP_OPT_TEXT || o->type == MCP_OPT_INPUT ||
-                o->type == MCP_OPT_DENOISER)
+                o->type == MCP_OPT_DENOISER || o->type == MCP_OPT_TEXTS)
                 continue;
             mcp_operation_defaults(*op, s);
             if (mcp_operation_set(*op, o, o->name, o->def, s))
@@ -316,7 +357,7 @@ defaults_read_back(const mcp_operation *const *op)
             char text[256];
             mcp_option_format(o, d, text, sizeof text);
             double x = 0, y = 0;
-            if (o->type == MCP_OPT_NUMBER && sscanf(text, "%lf", &x) == 1 &&
+            if (o->type == MCP_OPT_NUMBER && !o->auto_word && sscanf(text, "%lf", &x) == 1 &&
                 sscanf(o->def, "%lf", &y) == 1)
                 assert_true(x == y);
             else
@@ -346,8 +387,9 @@ test_defaults_read_back(void **state)
             assert_null((*k)->keys[i]);
             n++;
         }
-    assert_int_equal(n, 11); /* estimate, blend, adaptive, info, merge, denoise; gauss,
-                                nlm, bilateral, external, unet */
+    assert_int_equal(n, 15); /* estimate, blend, adaptive, info, merge, denoise, convert,
+                                metrics, compare, perceptual; gauss, nlm, bilateral,
+                                external, unet */
 }
 
 /* Every operation's stage takes exactly its table's job options, the shared output
@@ -359,7 +401,7 @@ test_stage_keys_are_the_tables(void **state)
     int stages = 0;
     for (const mcp_operation *const *op = mcp_operations(); *op; op++) {
         const mcp_stage *st = mcp_job_stage_find((*op)->name);
-        if (!st) { /* merge, denoise: the command line's alone */
+        if (!st) { /* merge, denoise, compare: the command line's alone */
             for (const mcp_option *o = (*op)->options; o->name; o++)
                 assert_false(mcp_option_takes(o, MCP_OPT_JOB));
             continue;
@@ -377,7 +419,8 @@ test_stage_keys_are_the_tables(void **state)
         assert_string_equal(st->keys[n], "title");
         assert_null(st->keys[n + 1]);
     }
-    assert_int_equal(stages, 4); /* estimate, blend, adaptive, info */
+    assert_int_equal(stages, 7); /* estimate, blend, adaptive, info, convert, metrics,
+                                    perceptual */
 }
 
 /* No two flags of one command are spelt alike (the table's, their --no- forms and
@@ -434,6 +477,174 @@ test_blend_weights_and_the_shorthand(void **state)
     mcp_cli_denoiser_flags_free(&df);
 }
 
+/* The reader of one front end on argv or a YAML map: 0 or -1 (msg). */
+static int
+cli_settings(const mcp_operation *op, int argc, char **argv, void *settings, char *msg,
+             size_t cap)
+{
+    mcp_shared_settings sh;
+    mcp_cli_denoiser_flags df = {0};
+    int first = 0;
+    mcp_error_clear();
+    int rc = mcp_cli_parse(op, "", "", argc, argv, settings, &sh, &df, &first);
+    mcp_cli_denoiser_flags_free(&df);
+    snprintf(msg, cap, "%s", mcp_error_message());
+    return rc == -1 ? 0 : -1;
+}
+
+static mcp_node *
+yaml(const char *text)
+{
+    mcp_node *root = NULL;
+    assert_int_equal(mcp_yaml_parse_string(text, "job.yaml", &root), 0);
+    return root;
+}
+
+/* The gates' conditions (repeatable texts the table takes as they are) read by the
+ * command line and by a job alike: the same conditions taken, in the same order, asking
+ * the metrics for the same shares of pixels; the same ones refused with the same
+ * message ("--fail 'x': ..." against "fail: 'x': ..."). */
+static void
+test_gates_read_alike(void **state)
+{
+    (void)state;
+    static const struct {
+        const char *key, *text;
+        int good;
+    } cases[] = {{"fail", "flip_ldr.mean > 0.2", 1},
+                 {"warn", "relmse >= 0.5", 1},
+                 {"fail", "psnr<10", 1},
+                 {"warn", "relse_percentiles.value.0 > 0.001", 1},
+                 {"fail_percent", "flip_ldr 0.1 1%", 1},
+                 {"warn_percent", "relse 0.3 5", 1},
+                 {"fail", "flip.mean > 0.1", 0},
+                 {"warn", "relmse = 0.1", 0},
+                 {"fail", "psnr > lots", 0},
+                 {"fail_percent", "flip 0.1 1%", 0},
+                 {"warn_percent", "flip_ldr 0.1", 0},
+                 {"fail_percent", "relse 0.1 120", 0}};
+    const mcp_operation *op = mcp_operation_metrics();
+    int n = (int)(sizeof cases / sizeof *cases);
+    for (int i = 0; i < n; i++) {
+        mcp_metrics_settings a, b;
+        mcp_metrics_options oa, ob;
+        mcp__gate ga, gb;
+        const char *bad_key = NULL;
+        int bad_index = -1;
+        char flag[64], cli_msg[512] = "", job_msg[512] = "", text[512];
+        mcp_option_flag(cases[i].key, flag, sizeof flag);
+        /* fail: a good condition first, so that the one under test is the second */
+        int two = !strcmp(cases[i].key, "fail");
+        char *argv[] = {"metrics", flag, "mse > 1", flag, (char *)cases[i].text, NULL};
+        char *one[] = {"metrics", flag, (char *)cases[i].text, NULL};
+        int cli = cli_settings(op, two ? 5 : 3, two ? argv : one, &a, cli_msg,
+                               sizeof cli_msg);
+        assert_int_equal(cli, 0);
+        oa = a.o;
+        cli = mcp__gate_from_settings(&a, &oa, &ga, &bad_key, &bad_index);
+        if (cli) snprintf(cli_msg, sizeof cli_msg, "%s", mcp_error_message());
+        /* the job: a list, the condition at its own line */
+        if (two)
+            snprintf(text, sizeof text, "%s:\n  - mse > 1\n  - '%s'\n", cases[i].key,
+                     cases[i].text);
+        else
+            snprintf(text, sizeof text, "%s:\n  - '%s'\n", cases[i].key, cases[i].text);
+        mcp_node *root = yaml(text);
+        mcp_shared_settings sh;
+        assert_int_equal(mcp__job_settings(op, root, &sh, &b), 0);
+        ob = b.o;
+        int job = mcp__gate_from_settings(&b, &ob, &gb, &bad_key, &bad_index);
+        if (job) {
+            /* as the stage puts it: at the condition's line, the key for the flag */
+            const mcp_node *list = mcp_node_get(root, bad_key);
+            const char *m = mcp_error_message();
+            snprintf(job_msg, sizeof job_msg, "job.yaml:%d: %s: %s",
+                     list->items[bad_index]->line, bad_key, strchr(m, ' ') + 1);
+        }
+        if (cases[i].good != !cli || cases[i].good != !job)
+            fail_msg("%s '%s': the command line %s (%s), the job %s (%s)", cases[i].key,
+                     cases[i].text, cli ? "refuses it" : "takes it", cli_msg,
+                     job ? "refuses it" : "takes it", job_msg);
+        if (cli) {
+            char want[600];
+            snprintf(want, sizeof want, "job.yaml:%d: %s: %s",
+                     mcp_node_get(root, bad_key)->items[bad_index]->line, cases[i].key,
+                     strchr(cli_msg, ' ') + 1);
+            assert_string_equal(job_msg, want);
+            assert_non_null(strstr(cli_msg, flag));
+        } else {
+            assert_int_equal(ga.n, gb.n);
+            for (int k = 0; k < ga.n; k++)
+                assert_string_equal(ga.c[k].text, gb.c[k].text);
+            assert_int_equal(oa.n_above, ob.n_above);
+            assert_memory_equal(oa.above, ob.above, sizeof oa.above);
+        }
+        mcp_node_free(root);
+    }
+}
+
+/* A convert's channels and a perceptual kernel's taps: "A,B,C" on the command line is a
+ * job's list [A, B, C]. */
+static void
+test_lists_as_texts_read_alike(void **state)
+{
+    (void)state;
+    mcp_convert_settings ca, cb;
+    char msg[512];
+    char **na = NULL, **nb = NULL;
+    int ka = 0, kb = 0;
+    assert_int_equal(cli_settings(mcp_operation_convert(), 3,
+                                  (char *[]){"convert", "--channels", "B,G,R", NULL}, &ca,
+                                  msg, sizeof msg),
+                     0);
+    mcp_node *root = yaml("channels: [B, G, R]\n");
+    assert_int_equal(mcp__job_settings(mcp_operation_convert(), root, NULL, &cb), 0);
+    assert_int_equal(mcp__convert_channel_names(&ca, &na, &ka), 0);
+    assert_int_equal(mcp__convert_channel_names(&cb, &nb, &kb), 0);
+    assert_int_equal(ka, 3);
+    assert_int_equal(kb, 3);
+    for (int i = 0; i < 3; i++)
+        assert_string_equal(na[i], nb[i]);
+    assert_string_equal(na[0], "B");
+    mcp__free_words(na, ka);
+    mcp__free_words(nb, kb);
+    mcp_node_free(root);
+
+    mcp_perceptual_settings pa, pb;
+    mcp__perc_args aa, ab;
+    assert_int_equal(cli_settings(mcp_operation_perceptual(), 3,
+                                  (char *[]){"perceptual", "--kernel", "0.25,0.5,0.25", NULL},
+                                  &pa, msg, sizeof msg),
+                     0);
+    root = yaml("kernel: [0.25, 0.5, 0.25]\n");
+    assert_int_equal(mcp__job_settings(mcp_operation_perceptual(), root, NULL, &pb), 0);
+    assert_int_equal(mcp__perc_args_from_settings(&pa, &aa), 0);
+    assert_int_equal(mcp__perc_args_from_settings(&pb, &ab), 0);
+    assert_int_equal(aa.opt.model.user_kernel_width, 3);
+    assert_int_equal(ab.opt.model.user_kernel_width, 3);
+    /* the outer product of the taps: the centre 0.25, a corner 1/16 */
+    assert_true(aa.kernel[4] == 0.25 && aa.kernel[0] == 0.0625);
+    assert_memory_equal(aa.kernel, ab.kernel, 9 * sizeof(double));
+    mcp__perc_args_free(&aa);
+    mcp__perc_args_free(&ab);
+    mcp_node_free(root);
+    /* an even count fails alike */
+    root = yaml("kernel: [0.5, 0.5]\n");
+    assert_int_equal(mcp__job_settings(mcp_operation_perceptual(), root, NULL, &pb), 0);
+    assert_int_equal(mcp__perc_args_from_settings(&pb, &ab), -1);
+    snprintf(msg, sizeof msg, "%s", mcp_error_message());
+    mcp__perc_args_free(&ab);
+    mcp_node_free(root);
+    assert_int_equal(cli_settings(mcp_operation_perceptual(), 3,
+                                  (char *[]){"perceptual", "--kernel", "0.5,0.5", NULL}, &pa,
+                                  msg + 256, 256),
+                     0);
+    assert_int_equal(mcp__perc_args_from_settings(&pa, &aa), -1);
+    assert_string_equal(msg, mcp_error_message());
+    assert_string_equal(msg, "kernel: give an odd number of taps (got 2)");
+    mcp__perc_args_free(&aa);
+}
+
 int
 main(void)
 {
@@ -443,6 +654,8 @@ main(void)
         cmocka_unit_test(test_stage_keys_are_the_tables),
         cmocka_unit_test(test_flags_are_spelt_once),
         cmocka_unit_test(test_blend_weights_and_the_shorthand),
+        cmocka_unit_test(test_gates_read_alike),
+        cmocka_unit_test(test_lists_as_texts_read_alike),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 #define CAP 65536
 static char out[CAP], err[CAP];
@@ -217,7 +218,8 @@ test_job(void **state)
         "                 reference: truth, method: power-set, kernel: [0.25, 0.5, "
         "0.25]}\n"
         "  - perceptual: {name: two, candidates: [c0, c1], surrogate: reference,\n"
-        "                 reference: truth, method: error-diffusion, tone_map: none}\n"
+        "                 reference: truth, method: error-diffusion, tone_map: none,\n"
+        "                 output: two_files}\n"
         "  - perceptual:\n"
         "      name: swaps\n"
         "      candidates: singles\n"
@@ -250,6 +252,13 @@ test_job(void **state)
         cJSON_GetArraySize(cJSON_GetObjectItem(cJSON_GetArrayItem(secs, 0), "tables")),
         1);
     assert_int_equal((int)num(cJSON_GetArrayItem(secs, 2), "candidates"), 2);
+    /* output: names the stage's folder in the job's output (else its name) */
+    struct stat st;
+    snprintf(path, sizeof path, "%s/two_files", mcp_test_path("job"));
+    assert_int_equal(stat(path, &st), 0);
+    assert_true(S_ISDIR(st.st_mode));
+    snprintf(path, sizeof path, "%s/vertical", mcp_test_path("job"));
+    assert_int_equal(stat(path, &st), 0);
     assert_true(
         cJSON_IsTrue(cJSON_GetObjectItem(cJSON_GetArrayItem(secs, 3), "rerendered")));
     cJSON_Delete(report);
