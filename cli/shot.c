@@ -162,6 +162,13 @@ int
 mcp_cli_shot_run(const mcp_cli_shot *s, const mcp_job_options *jo, int jobs, int force)
 {
     int *todo, n_todo, n_failed = 0, first_failed[8];
+    /* what runs of these frames killed outright left: their hidden folders
+       (.0017.tmp-PID, common/outdir.c), a complete frame's too (killed in --force) */
+    for (int i = 0; i < s->n_chosen; i++) {
+        char base[32];
+        snprintf(base, sizeof base, "%04d", s->chosen[i]);
+        mcp__outdir_clear_stale(s->output_dir, base);
+    }
     if (frames_to_run(s, force, &todo, &n_todo))
         return -1;
     int skipped = s->n_chosen - n_todo;

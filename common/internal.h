@@ -73,6 +73,13 @@ typedef struct mcp__outdir {
     int active;
 } mcp__outdir;
 int mcp__outdir_begin(mcp__outdir *o, const char *dir);
+/* The same for a dir that is mcpost's by its place, whatever it holds (a frame's folder
+ * in a shot's output, beside frames.json: an unfinished one of an older version, or one
+ * whose report.json was removed to run it again): it is replaced, never refused. */
+int mcp__outdir_begin_owned(mcp__outdir *o, const char *dir);
+/* Removes parent/.BASE.tmp-PID and .BASE.old-PID whose process is gone (what a SIGKILL
+ * left; begin does it for its own dir), saying so for each. */
+void mcp__outdir_clear_stale(const char *parent, const char *base);
 int mcp__outdir_commit(mcp__outdir *o);
 void mcp__outdir_abort(mcp__outdir *o);
 int mcp__outdir_fix_paths(const mcp__outdir *o, cJSON *json);
