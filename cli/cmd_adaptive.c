@@ -78,7 +78,9 @@ cmd_adaptive(int argc, char **argv)
     if (mcp_cli_denoiser_create(&df, &den)) goto done;
     c.den = den;
     /* after the cheap checks, before the first pass */
-    if (mcp__outdir_begin(&whole, sh.output)) goto done;
+    if (mcp__outdir_begin(&whole, sh.output) ||
+        (ref_path && mcp__outdir_check_input(&whole, ref_path)))
+        goto done;
     snprintf(c.dir, sizeof c.dir, "%s", whole.tmp);
     if (mcp__adaptive_run_loop(&c, sh.json ? &j : NULL) || mcp__outdir_commit(&whole))
         goto done;

@@ -644,7 +644,11 @@ cmd_metrics(int argc, char **argv)
     for (int i = 0; i < n_tests; i++)
         res[i].path = argv[optind + i];
     if (out_dir) { /* after the cheap checks, before any work */
-        if (mcp__outdir_begin(&whole, out_dir)) goto done;
+        if (mcp__outdir_begin(&whole, out_dir) ||
+            mcp__outdir_check_input(&whole, ref_path))
+            goto done;
+        for (int i = 0; i < n_tests; i++)
+            if (mcp__outdir_check_input(&whole, res[i].path)) goto done;
         maps_dir = whole.tmp;
     }
     if (mcp_image_read(ref_path, NULL, &ref)) goto done;

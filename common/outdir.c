@@ -241,6 +241,21 @@ mcp__outdir_abort(mcp__outdir *o)
     o->active = 0;
 }
 
+int
+mcp__outdir_check_input(const mcp__outdir *o, const char *input)
+{
+    char *dir = realpath(o->final, NULL), *file = dir ? realpath(input, NULL) : NULL;
+    size_t n = dir ? strlen(dir) : 0;
+    int inside = file && !strncmp(file, dir, n) && (file[n] == '/' || !file[n]);
+    free(file);
+    free(dir);
+    if (inside)
+        return mcp_error("%s: is inside the output folder %s, which this run replaces "
+                         "whole; give another output folder",
+                         input, o->final);
+    return 0;
+}
+
 static int
 fix_one(const mcp__outdir *o, cJSON *it)
 {

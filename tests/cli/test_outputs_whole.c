@@ -251,6 +251,18 @@ test_metrics_output_appears_whole(void **state)
     assert_false(exists(path)); /* the old run's CSV went with the old folder */
     free(first), free(second);
     assert_int_equal(count_named(dir, ".m."), 0);
+    /* an input inside the folder that the run would replace is refused, and kept */
+    char inside[4400];
+    snprintf(inside, sizeof inside, "%s/ref.exr", m);
+    char cmd[9000];
+    snprintf(cmd, sizeof cmd, "cp " CORNELL "/cornell_reference.exr '%s'", inside);
+    assert_int_equal(system(cmd), 0);
+    assert_int_equal(run("metrics " CORNELL "/series/cornell_spp0064.exr '%s' -o '%s'",
+                         inside, m),
+                     1);
+    assert_non_null(strstr(err, "is inside the output folder"));
+    assert_true(exists(inside));
+    assert_int_equal(count_named(dir, ".m."), 0);
 }
 
 static void
