@@ -335,7 +335,6 @@ judge_frame(shot *s, frame_row *r, cJSON *rep, const char *frame_dir)
     }
 }
 
-/* One frame's state and figures. */
 /* 1 when the shot's folder holds the frame's hidden folder in the making
  * (.0017.tmp-PID). */
 static int
@@ -352,6 +351,7 @@ running_frame(const char *shot_dir, int frame)
     return found;
 }
 
+/* One frame's state and figures. */
 static void
 read_frame(shot *s, frame_row *r)
 {

@@ -139,7 +139,9 @@ run_frame(const mcp_cli_shot *s, const mcp_job_options *jo, int frame)
     mcp_error_prefix("frame %d: ", frame);
     char message[1100];
     snprintf(message, sizeof message, "%s\n", mcp_error_message());
-    if (!mcp_make_dirs(dir))
+    /* a frame run again (--force) that failed keeps its earlier complete folder
+       (common/outdir.c): it is complete, not failed, and gets no error.txt */
+    if (!mcp_frame_complete(s->output_dir, frame) && !mcp_make_dirs(dir))
         mcp_write_file_atomic(err_path, message, strlen(message));
     fprintf(stderr, "mcpost: %s", message);
     return -1;

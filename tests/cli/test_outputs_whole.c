@@ -295,7 +295,8 @@ test_adaptive_output_appears_whole(void **state)
 }
 
 /* A frame job whose estimate runs an external denoiser that, until DIR/go exists,
- * records its shell's pid and sleeps: a run of it can be killed mid-frame. */
+ * records its shell's pid and sleeps: a run of it can be killed mid-frame. While
+ * DIR/fail exists it fails. */
 static void
 write_slow_frame_job(const char *dir)
 {
@@ -311,9 +312,9 @@ write_slow_frame_job(const char *dir)
              "      input: noisy\n"
              "      denoiser:\n"
              "        name: external\n"
-             "        command: 'if [ -e %s/go ]; then cp {color} {output}; else echo $$ > "
-             "%s/denoiser.pid; exec sleep 60; fi'\n",
-             dir, dir);
+             "        command: 'if [ -e %s/fail ]; then exit 3; elif [ -e %s/go ]; then cp "
+             "{color} {output}; else echo $$ > %s/denoiser.pid; exec sleep 60; fi'\n",
+             dir, dir, dir);
     mcp_test_write_text(job, text);
     for (int f = 1; f <= 2; f++) {
         char cmd[8400];
@@ -372,6 +373,17 @@ test_killed_frame_leaves_no_folder(void **state)
     assert_non_null(strstr(err, "left by an earlier run that was killed"));
     assert_int_equal(count_named(out_dir, ".0001."), 0);
     assert_int_equal(run("collect '%s' --quiet", out_dir), 0);
+    /* a rerun that fails leaves the complete frame as it was, without an error.txt */
+    char fail_flag[4200];
+    snprintf(fail_flag, sizeof fail_flag, "%s/fail", dir);
+    mcp_test_write_text(fail_flag, "");
+    assert_int_equal(run("run '%s/shot.yaml' --force --frames 1", dir), 1);
+    assert_non_null(strstr(err, "1 of 1 frames failed (1)"));
+    still = read_in(out_dir, "0001/report.json");
+    assert_string_equal(still, before);
+    free(still);
+    assert_false(exists((snprintf(out, sizeof out, "%s/0001/error.txt", out_dir), out)));
+    assert_int_equal(count_named(out_dir, ".0001."), 0);
     free(before);
 }
 
