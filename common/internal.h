@@ -78,7 +78,8 @@ int mcp__outdir_begin(mcp__outdir *o, const char *dir);
  * whose report.json was removed to run it again): it is replaced, never refused. */
 int mcp__outdir_begin_owned(mcp__outdir *o, const char *dir);
 /* -1 with "INPUT: is inside the output folder DIR, which this run replaces whole" when
- * the file input lies in o->final (an earlier output): the commit would remove it. */
+ * the file input (or the folder of a pattern that names no file) lies in o->final (an
+ * earlier output): the commit would remove it. */
 int mcp__outdir_check_input(const mcp__outdir *o, const char *input);
 /* Removes parent/.BASE.tmp-PID and .BASE.old-PID whose process is gone (what a SIGKILL
  * left; begin does it for its own dir), saying so for each. */

@@ -43,6 +43,7 @@ struct mcp_job {
     int frame_paths; /* an input path has changed with the frame (resolve_input) */
     int skip_input_files; /* mcp_job_check_settings: inputs' files not looked for */
     int *frames, n_frames; /* the job's frames: (none: n_frames 0) */
+    const mcp__outdir *whole; /* the output folder being written: no input inside it */
 };
 
 static const char *const root_keys[] = {"title", "inputs", "output", "frames", "stages",
@@ -88,7 +89,11 @@ resolve_input(mcp_job *job, const mcp_node *at, const char *rel, int series, cha
         job->frame_paths |= strcmp(expanded, rel) != 0;
         rel = expanded;
     }
-    return mcp_job_resolve(job, rel, buf, cap);
+    if (mcp_job_resolve(job, rel, buf, cap)) return -1;
+    /* a rerun replaces the old output folder whole: an input inside it would go too */
+    if (job->whole && mcp__outdir_check_input(job->whole, buf))
+        return mcp_node_error(at, "%s", mcp_error_message());
+    return 0;
 }
 
 const char *
@@ -1154,6 +1159,10 @@ mcp_job_run_file(const char *path, const mcp_stage *const *stages,
         mcp_error_prefix("%s: output: ", job->path);
         goto done;
     }
+    /* the inputs once more, now that the folder the run replaces is known */
+    job->whole = &whole;
+    if (check_inputs(job))
+        goto done;
     for (int i = 0; i < list->count; i++) {
         const mcp_stage *stage;
         const mcp_node *settings;

@@ -245,6 +245,13 @@ int
 mcp__outdir_check_input(const mcp__outdir *o, const char *input)
 {
     char *dir = realpath(o->final, NULL), *file = dir ? realpath(input, NULL) : NULL;
+    if (dir && !file) { /* a pattern (a series' "%04d"): the folder it names */
+        char parent[4096];
+        const char *slash = strrchr(input, '/');
+        snprintf(parent, sizeof parent, "%.*s", slash ? (int)(slash - input) + (slash == input) : 1,
+                 slash ? input : ".");
+        file = realpath(parent, NULL);
+    }
     size_t n = dir ? strlen(dir) : 0;
     int inside = file && !strncmp(file, dir, n) && (file[n] == '/' || !file[n]);
     free(file);

@@ -431,6 +431,23 @@ test_failed_job_leaves_no_folder(void **state)
     snprintf(path, sizeof path, "%s/noisy.png", result);
     assert_true(exists(path));
     assert_int_equal(count_named(dir, ".out."), 0);
+    /* an input inside the output folder, which the run would replace with the old
+       folder, is refused at its line, and kept */
+    char cmd[9000];
+    snprintf(cmd, sizeof cmd, "cp " CORNELL "/series/cornell_spp0064.exr '%s/in.exr'",
+             result);
+    assert_int_equal(system(cmd), 0);
+    mcp_test_write_text(job, "inputs:\n"
+                             "  noisy: {dump: out/in.exr}\n"
+                             "output: out\n"
+                             "stages:\n"
+                             "  - info: {input: noisy}\n");
+    assert_int_equal(run("run '%s' --quiet", job), 1);
+    assert_non_null(strstr(err, "job.yaml:2: "));
+    assert_non_null(strstr(err, "is inside the output folder"));
+    snprintf(path, sizeof path, "%s/in.exr", result);
+    assert_true(exists(path));
+    assert_int_equal(count_named(dir, ".out."), 0);
 }
 
 int
