@@ -248,8 +248,8 @@ mcp__outdir_check_input(const mcp__outdir *o, const char *input)
     if (dir && !file) { /* a pattern (a series' "%04d"): the folder it names */
         char parent[4096];
         const char *slash = strrchr(input, '/');
-        snprintf(parent, sizeof parent, "%.*s", slash ? (int)(slash - input) + (slash == input) : 1,
-                 slash ? input : ".");
+        int len = slash ? (int)(slash - input) + (slash == input) : 1;
+        snprintf(parent, sizeof parent, "%.*s", len, slash ? input : ".");
         file = realpath(parent, NULL);
     }
     size_t n = dir ? strlen(dir) : 0;
