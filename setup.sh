@@ -51,11 +51,25 @@ install_packages() { # install_packages [PACKAGE...]: PACKAGES when none are nam
 PYTHON=/usr/bin/python3
 
 build() { # build DIR [cmake args...]: warnings are errors here (MCPOST_WERROR)
-    local dir=$1
+    # cmake's and the compiler's lines go to DIR/setup-build.log, so that the demo
+    # prints mcpost's lines only: one line says when something was built, and a
+    # failed build shows the end of the log (and where the rest is)
+    local dir=$1 log
     shift
-    cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DMCPOST_WERROR=ON \
-        -DPython3_EXECUTABLE="$PYTHON" "$@" >/dev/null
-    cmake --build "$dir" -j "$JOBS"
+    log=$dir/setup-build.log
+    [ -f "$dir/CMakeCache.txt" ] ||
+        echo "setup: building $dir (the first time takes minutes; cmake's output: $log)" >&2
+    mkdir -p "$dir"
+    if ! { cmake -S . -B "$dir" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DMCPOST_WERROR=ON \
+               -DPython3_EXECUTABLE="$PYTHON" "$@" &&
+               cmake --build "$dir" -j "$JOBS"; } >"$log" 2>&1; then
+        tail -n 60 "$log" >&2
+        echo "setup: building $dir failed; the whole log is $log" >&2
+        exit 1
+    fi
+    if grep -q -E '^\[ *[0-9]+(%|/[0-9]+)\] (Building|Linking)' "$log"; then
+        echo "setup: built $dir (cmake's output: $log)" >&2
+    fi
 }
 
 link_python() { # lets `python3 -c "import mcpost"` find build/python: a .pth file in

@@ -6,7 +6,8 @@
  * adaptive.csv (relMSE with a reference, and the estimated error, against the total
  * samples) and adaptive.svg. The loop is the library's, shared with the `adaptive` job
  * stage (jobs/adaptive_loop.c). The flags are the adaptive table's (ops/op_adaptive.c),
- * read by cli/options.c; the job keys are the same words. */
+ * read by cli/options.c; the job keys are the same words. -o DIR appears whole
+ * (common/outdir.c): the passes run in a hidden folder beside it. */
 #include "cli.h"
 
 #include <mcpost/estimate.h>
@@ -60,11 +61,11 @@ cmd_adaptive(int argc, char **argv)
     c.render = st.render;
     c.seed = st.seed;
     c.keep_passes = st.keep_passes;
-    snprintf(c.dir, sizeof c.dir, "%s", sh.output);
     const char *size = st.size, *ref_path = st.reference;
     mcp_image *ref = NULL;
     mcp_denoiser *den = NULL;
     cJSON *j = NULL;
+    mcp__outdir whole = {0}; /* -o DIR appears whole, or not at all */
     int status = 1;
     if (ref_path && mcp_image_read(ref_path, NULL, &ref)) goto done;
     c.reference = ref;
@@ -76,11 +77,19 @@ cmd_adaptive(int argc, char **argv)
     if (!size) c.width = ref->width, c.height = ref->height;
     if (mcp_cli_denoiser_create(&df, &den)) goto done;
     c.den = den;
-    if (mcp__adaptive_run_loop(&c, sh.json ? &j : NULL)) goto done;
+    /* after the cheap checks, before the first pass */
+    if (mcp__outdir_begin(&whole, sh.output) ||
+        (ref_path && mcp__outdir_check_input(&whole, ref_path)))
+        goto done;
+    snprintf(c.dir, sizeof c.dir, "%s", whole.tmp);
+    if (mcp__adaptive_run_loop(&c, sh.json ? &j : NULL) || mcp__outdir_commit(&whole))
+        goto done;
     if (j) mcp_cli_print_json(j);
     j = NULL;
     status = 0;
 done:
+    mcp__outdir_abort(&whole);
+    cJSON_Delete(j);
     if (status) status = mcp_cli_fail();
     mcp_image_free(ref);
     mcp_denoiser_free(den);

@@ -335,6 +335,22 @@ judge_frame(shot *s, frame_row *r, cJSON *rep, const char *frame_dir)
     }
 }
 
+/* 1 when the shot's folder holds the frame's hidden folder in the making
+ * (.0017.tmp-PID). */
+static int
+running_frame(const char *shot_dir, int frame)
+{
+    char prefix[32];
+    int n = snprintf(prefix, sizeof prefix, ".%04d.tmp-", frame), found = 0;
+    DIR *d = opendir(shot_dir);
+    if (!d) return 0;
+    struct dirent *e;
+    while (!found && (e = readdir(d)))
+        found = !strncmp(e->d_name, prefix, (size_t)n);
+    closedir(d);
+    return found;
+}
+
 /* One frame's state and figures. */
 static void
 read_frame(shot *s, frame_row *r)
@@ -343,8 +359,17 @@ read_frame(shot *s, frame_row *r)
     struct stat st;
     mcp_frame_dir(s->dir, r->frame, dir, sizeof dir);
     if (stat(dir, &st) != 0) {
-        r->status = FRAME_MISSING;
-        snprintf(r->message, sizeof r->message, "never ran (no folder %04d/)", r->frame);
+        /* a frame's folder appears whole (common/outdir.c): until then it is hidden */
+        int hidden = running_frame(s->dir, r->frame);
+        r->status = hidden ? FRAME_UNFINISHED : FRAME_MISSING;
+        if (hidden)
+            snprintf(r->message, sizeof r->message,
+                     "no folder %04d/ yet, only its hidden .%04d.tmp-PID: still running, "
+                     "or killed",
+                     r->frame, r->frame);
+        else
+            snprintf(r->message, sizeof r->message, "never ran (no folder %04d/)",
+                     r->frame);
         return;
     }
     snprintf(path, sizeof path, "%s/report.json", dir);

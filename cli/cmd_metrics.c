@@ -2,7 +2,8 @@
  * percentiles, LDR-FLIP, HDR-FLIP and the blue-noise fraction of a test image against
  * a reference (common/metrics.h), as a table, JSON, and maps. The job stage is in
  * stage_metrics.c; the flags are the metrics table's (ops/op_metrics.c), as the job's
- * keys and Python's keywords. */
+ * keys and Python's keywords. -o DIR appears whole (common/outdir.c): the maps go into
+ * a hidden folder, renamed to DIR at the end. */
 #include "cli.h"
 
 #include <mcpost/metrics.h>
@@ -409,6 +410,8 @@ cmd_metrics(int argc, char **argv)
     mcp_image *ref = NULL;
     test_result *res = calloc((size_t)n_tests, sizeof *res);
     cJSON *doc = NULL, *all_gate = NULL;
+    mcp__outdir whole = {0}; /* -o DIR appears whole, or not at all */
+    const char *maps_dir = NULL; /* where the maps go: whole.tmp */
     int status = 1;
     if (!res) {
         mcp_error("metrics: out of memory");
@@ -416,6 +419,14 @@ cmd_metrics(int argc, char **argv)
     }
     for (int i = 0; i < n_tests; i++)
         res[i].path = argv[optind + i];
+    if (out_dir) { /* after the cheap checks, before any work */
+        if (mcp__outdir_begin(&whole, out_dir) ||
+            mcp__outdir_check_input(&whole, ref_path))
+            goto done;
+        for (int i = 0; i < n_tests; i++)
+            if (mcp__outdir_check_input(&whole, res[i].path)) goto done;
+        maps_dir = whole.tmp;
+    }
     if (mcp_image_read(ref_path, NULL, &ref)) goto done;
     for (int i = 0; i < n_tests; i++) {
         test_result *r = &res[i];
@@ -427,7 +438,7 @@ cmd_metrics(int argc, char **argv)
         if (!failed && out_dir) {
             char prefix[600];
             maps_prefix(res, n_tests, i, prefix, sizeof prefix);
-            failed = mcp_metrics_write_maps(&maps, out_dir, prefix, NULL);
+            failed = mcp_metrics_write_maps(&maps, maps_dir, prefix, NULL);
         }
         mcp_metrics_maps_free(&maps);
         if (failed || !(r->doc = cJSON_CreateObject())) goto done;
@@ -468,16 +479,26 @@ cmd_metrics(int argc, char **argv)
     if (out_dir) {
         char path[4096];
         char *text = NULL;
-        if ((o.flip_ldr && write_histogram_svg(out_dir, res, n_tests, 0)) ||
-            (o.flip_hdr && write_histogram_svg(out_dir, res, n_tests, 1)))
+        if ((o.flip_ldr && write_histogram_svg(maps_dir, res, n_tests, 0)) ||
+            (o.flip_hdr && write_histogram_svg(maps_dir, res, n_tests, 1)))
             goto done;
-        snprintf(path, sizeof path, "%s/metrics.json", out_dir);
+        snprintf(path, sizeof path, "%s/metrics.json", maps_dir);
         if (!(text = cJSON_Print(doc))) goto done;
         int rc = mcp_write_file_atomic(path, text, strlen(text));
         free(text);
         if (rc) goto done;
     }
+    /* the CSV before the folder is renamed into place: a CSV that cannot be written
+       leaves no folder either, and one asked for inside DIR goes into it */
+    char csv_in_dir[8400];
+    size_t dir_len = out_dir ? strlen(whole.final) : 0;
+    if (csv_path && out_dir && !strncmp(csv_path, whole.final, dir_len) &&
+        csv_path[dir_len] == '/') {
+        snprintf(csv_in_dir, sizeof csv_in_dir, "%s%s", whole.tmp, csv_path + dir_len);
+        csv_path = csv_in_dir;
+    }
     if (csv_path && write_csv(csv_path, res, n_tests, ref_path, gate.n > 0)) goto done;
+    if (out_dir && mcp__outdir_commit(&whole)) goto done;
     if (json) {
         mcp_cli_print_json(doc);
         doc = NULL;
@@ -495,6 +516,7 @@ cmd_metrics(int argc, char **argv)
 done:
     if (status) status = mcp_cli_fail();
 out:
+    mcp__outdir_abort(&whole);
     for (int i = 0; res && i < n_tests; i++)
         cJSON_Delete(res[i].doc);
     free(res);

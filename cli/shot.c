@@ -139,7 +139,9 @@ run_frame(const mcp_cli_shot *s, const mcp_job_options *jo, int frame)
     mcp_error_prefix("frame %d: ", frame);
     char message[1100];
     snprintf(message, sizeof message, "%s\n", mcp_error_message());
-    if (!mcp_make_dirs(dir))
+    /* a frame run again (--force) that failed keeps its earlier complete folder
+       (common/outdir.c): it is complete, not failed, and gets no error.txt */
+    if (!mcp_frame_complete(s->output_dir, frame) && !mcp_make_dirs(dir))
         mcp_write_file_atomic(err_path, message, strlen(message));
     fprintf(stderr, "mcpost: %s", message);
     return -1;
@@ -162,6 +164,13 @@ int
 mcp_cli_shot_run(const mcp_cli_shot *s, const mcp_job_options *jo, int jobs, int force)
 {
     int *todo, n_todo, n_failed = 0, first_failed[8];
+    /* what runs of these frames killed outright left: their hidden folders
+       (.0017.tmp-PID, common/outdir.c), a complete frame's too (killed in --force) */
+    for (int i = 0; i < s->n_chosen; i++) {
+        char base[32];
+        snprintf(base, sizeof base, "%04d", s->chosen[i]);
+        mcp__outdir_clear_stale(s->output_dir, base);
+    }
     if (frames_to_run(s, force, &todo, &n_todo))
         return -1;
     int skipped = s->n_chosen - n_todo;

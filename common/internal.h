@@ -73,6 +73,17 @@ typedef struct mcp__outdir {
     int active;
 } mcp__outdir;
 int mcp__outdir_begin(mcp__outdir *o, const char *dir);
+/* The same for a dir that is mcpost's by its place, whatever it holds (a frame's folder
+ * in a shot's output, beside frames.json: an unfinished one of an older version, or one
+ * whose report.json was removed to run it again): it is replaced, never refused. */
+int mcp__outdir_begin_owned(mcp__outdir *o, const char *dir);
+/* -1 with "INPUT: is inside the output folder DIR, which this run replaces whole" when
+ * the file input (or the folder of a pattern that names no file) lies in o->final (an
+ * earlier output): the commit would remove it. */
+int mcp__outdir_check_input(const mcp__outdir *o, const char *input);
+/* Removes parent/.BASE.tmp-PID and .BASE.old-PID whose process is gone (what a SIGKILL
+ * left; begin does it for its own dir), saying so for each. */
+void mcp__outdir_clear_stale(const char *parent, const char *base);
 int mcp__outdir_commit(mcp__outdir *o);
 void mcp__outdir_abort(mcp__outdir *o);
 int mcp__outdir_fix_paths(const mcp__outdir *o, cJSON *json);

@@ -43,6 +43,7 @@ struct mcp_job {
     int frame_paths; /* an input path has changed with the frame (resolve_input) */
     int skip_input_files; /* mcp_job_check_settings: inputs' files not looked for */
     int *frames, n_frames; /* the job's frames: (none: n_frames 0) */
+    const mcp__outdir *whole; /* the output folder being written: no input inside it */
 };
 
 static const char *const root_keys[] = {"title", "inputs", "output", "frames", "stages",
@@ -88,7 +89,11 @@ resolve_input(mcp_job *job, const mcp_node *at, const char *rel, int series, cha
         job->frame_paths |= strcmp(expanded, rel) != 0;
         rel = expanded;
     }
-    return mcp_job_resolve(job, rel, buf, cap);
+    if (mcp_job_resolve(job, rel, buf, cap)) return -1;
+    /* a rerun replaces the old output folder whole: an input inside it would go too */
+    if (job->whole && mcp__outdir_check_input(job->whole, buf))
+        return mcp_node_error(at, "%s", mcp_error_message());
+    return 0;
 }
 
 const char *
@@ -1056,9 +1061,8 @@ mcp_job_frames(const char *path, const mcp_job_options *opt, int **frames, int *
     return rc;
 }
 
-/* report.html first and report.json last, each atomically: a frame whose report.json
- * exists is complete (mcp_frame_complete), and a run killed at any moment leaves
- * none, or the one of the previous complete run removed before it started. */
+/* report.html first and report.json last, each atomically, into the hidden folder that
+ * becomes the output folder once they are written (begin_whole_output). */
 static int
 write_report(mcp_job *job)
 {
@@ -1077,6 +1081,49 @@ write_report(mcp_job *job)
     return rc;
 }
 
+/* The output folder appears whole (common/outdir.c; docs/conventions.md, "Output
+ * folders"): the stages write into a hidden folder beside it, named by its real path
+ * (no "jobs/../../out" in messages and reports), which becomes job->output_dir. A
+ * frame's folder in a shot's output (beside frames.json) is mcpost's by its place:
+ * replaced whatever it holds (a frame run again after its report.json was removed). */
+static int
+begin_whole_output(mcp_job *job, mcp__outdir *o)
+{
+    char dir[4096], parent[4096], real_dir[8200];
+    snprintf(dir, sizeof dir, "%s", job->output_dir);
+    size_t n = strlen(dir);
+    while (n > 1 && dir[n - 1] == '/')
+        dir[--n] = '\0';
+    char *slash = strrchr(dir, '/');
+    const char *base = slash ? slash + 1 : dir, *path = dir;
+    snprintf(parent, sizeof parent, "%.*s", slash ? (int)(slash - dir) + (slash == dir) : 1,
+             slash ? dir : ".");
+    char *real = NULL;
+    /* ".", ".." and "/" are refused by mcp__outdir_begin, by the name given */
+    if (*base && strcmp(base, ".") && strcmp(base, "..")) {
+        if (mcp_make_dirs(parent)) return -1;
+        if ((real = realpath(parent, NULL))) {
+            snprintf(real_dir, sizeof real_dir, "%s/%s", strcmp(real, "/") ? real : "", base);
+            path = real_dir;
+        }
+    }
+    char manifest[8300];
+    struct stat st;
+    snprintf(manifest, sizeof manifest, "%s/frames.json", real ? real : parent);
+    free(real);
+    int owned = job->opt.frame >= 0 && stat(manifest, &st) == 0;
+    if (owned ? mcp__outdir_begin_owned(o, path) : mcp__outdir_begin(o, path)) return -1;
+    char *tmp = mcp_strdup(o->tmp);
+    if (!tmp) {
+        mcp__outdir_abort(o);
+        return -1;
+    }
+    free(job->output_dir);
+    job->output_dir = tmp;
+    job->output_made = 1;
+    return 0;
+}
+
 int
 mcp_job_run_file(const char *path, const mcp_stage *const *stages,
                  const mcp_job_options *opt)
@@ -1088,6 +1135,7 @@ mcp_job_run_file(const char *path, const mcp_stage *const *stages,
         return -1;
     int rc = -1;
     const mcp_node *list = NULL;
+    mcp__outdir whole = {0};
     /* quiet covers the job's own notes and all that its stages print through mcp_note
      * and mcp_progress, which read the process-wide switch: it is set for the run and
      * put back as the caller had it */
@@ -1105,19 +1153,16 @@ mcp_job_run_file(const char *path, const mcp_stage *const *stages,
     /* check everything before running anything */
     if (job_validate(job, stages, &list))
         goto done;
-    if (job->opt.frame >= 0) {
-        /* a rerun (--force) is incomplete until its own report.json is written */
-        char stale[4200];
-        snprintf(stale, sizeof stale, "%s/report.json", job->output_dir);
-        if (unlink(stale) != 0 && errno != ENOENT) {
-            mcp_error("%s: cannot remove: %s", stale, strerror(errno));
-            goto done;
-        }
-    }
-    if (!mcp_job_output_dir(job) || !job->output_made) {
+    /* a frame run again (--force) stays complete, the old run's, until the new one
+       is renamed into place */
+    if (begin_whole_output(job, &whole)) {
         mcp_error_prefix("%s: output: ", job->path);
         goto done;
     }
+    /* the inputs once more, now that the folder the run replaces is known */
+    job->whole = &whole;
+    if (check_inputs(job))
+        goto done;
     for (int i = 0; i < list->count; i++) {
         const mcp_stage *stage;
         const mcp_node *settings;
@@ -1138,7 +1183,9 @@ mcp_job_run_file(const char *path, const mcp_stage *const *stages,
             goto done;
         }
     }
-    if (write_report(job))
+    /* the report names the folder where it will be */
+    if (mcp__outdir_fix_paths(&whole, mcp_report_json(job->report)) || write_report(job) ||
+        mcp__outdir_commit(&whole))
         goto done;
     if (job->opt.json_stdout) {
         char *json = cJSON_Print(mcp_report_json(job->report));
@@ -1146,9 +1193,10 @@ mcp_job_run_file(const char *path, const mcp_stage *const *stages,
             puts(json);
         free(json);
     }
-    mcp_note("results in %s (report.html, report.json)", job->output_dir);
+    mcp_note("results in %s (report.html, report.json)", whole.final);
     rc = 0;
 done:
+    mcp__outdir_abort(&whole);
     mcp_progress_set_quiet(was_quiet);
     job_free(job);
     return rc;

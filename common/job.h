@@ -113,7 +113,10 @@ MCP_API mcp_job_options mcp_job_defaults(void);
 /* Parses, validates (every stage known, its keys allowed, every input's file
  * present) and runs a job. stages is NULL-terminated; NULL means the library's own
  * (mcp_job_stages, <mcpost/stages.h>: the stages `mcpost run` knows). Writes
- * report.json (and what the stages add) to the output folder; opt NULL: defaults. */
+ * report.json (and what the stages add) to the output folder, which appears whole:
+ * the stages write into a hidden folder beside it, renamed into place after
+ * report.json, so a failed run leaves none (docs/conventions.md, "Output folders");
+ * opt NULL: defaults. */
 MCP_API int mcp_job_run_file(const char *path, const mcp_stage *const *stages,
                              const mcp_job_options *opt);
 
@@ -138,7 +141,10 @@ MCP_API int mcp_job_check(const char *path, const mcp_stage *const *stages);
 MCP_API int mcp_job_check_settings(const char *path, const mcp_stage *const *stages);
 
 /* For stages: the job file (for messages), the folder relative paths resolve to, and
- * the output folder (created on first use). */
+ * the output folder (created on first use). While the job runs, that is the hidden
+ * folder that becomes the output folder (".NAME.tmp-PID" beside it): paths a stage
+ * puts into its report section are given the final folder's name when the report is
+ * written; other files that hold the folder's path would name the hidden one. */
 MCP_API const char *mcp_job_path(const mcp_job *job);
 MCP_API const char *mcp_job_output_dir(mcp_job *job);
 

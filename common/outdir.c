@@ -1,7 +1,8 @@
 /* outdir.c: output folders that appear whole (docs/conventions.md, "Output folders").
  *
- * A command that writes a folder (estimate -o, blend -o, perceptual -o, compare -o)
- * writes it under a hidden temporary name beside it, ".NAME.tmp-PID", and renames it
+ * A command that writes a folder (estimate -o, blend -o, perceptual -o, compare -o,
+ * metrics -o, adaptive -o, and the job runner's output: folder, a frame's folder of a
+ * shot) writes it under a hidden temporary name beside it, ".NAME.tmp-PID", and renames it
  * into place once every file is written. A failed command removes its temporary
  * folder; one stopped by SIGINT, SIGTERM or SIGHUP removes it in the signal handler;
  * one killed outright (SIGKILL, a crash) leaves it, hidden, and the next command that
@@ -11,8 +12,9 @@
  * A rerun onto an existing DIR replaces it: the new folder and the old one swap names
  * in one step (renameat2 RENAME_EXCHANGE; where the file system lacks it, the old one
  * is renamed away first), then the old one is removed. Only a folder that mcpost made
- * (it holds report.json) or an empty one is replaced; any other is refused, so that
- * `-o ~/renders` cannot delete someone's files. */
+ * (it holds report.json, metrics.json or adaptive.json), an empty one, or one that is
+ * mcpost's by its place (a frame's folder in a shot's output) is replaced; any other is
+ * refused, so that `-o ~/renders` cannot delete someone's files. */
 #define _GNU_SOURCE /* renameat2, nftw's FTW_DEPTH */
 #include "internal.h"
 
@@ -86,8 +88,8 @@ on_signal(void)
 /* ---- leftovers of killed runs ---- */
 
 /* Removes ".BASE.tmp-PID" and ".BASE.old-PID" in parent whose process is gone. */
-static void
-clear_stale(const char *parent, const char *base)
+void
+mcp__outdir_clear_stale(const char *parent, const char *base)
 {
     DIR *d = opendir(parent);
     if (!d) return;
@@ -110,14 +112,19 @@ clear_stale(const char *parent, const char *base)
     closedir(d);
 }
 
-/* 1 when the folder is empty or holds a report.json (made by mcpost); 0 otherwise. */
+/* 1 when the folder is empty or holds a file that only mcpost writes there: report.json
+ * (a page: estimate, blend, perceptual, compare, a job), metrics.json (metrics -o),
+ * adaptive.json (adaptive -o); 0 otherwise. */
 static int
 replaceable(const char *dir)
 {
+    static const char *const marks[] = {"report.json", "metrics.json", "adaptive.json"};
     char path[4200];
     struct stat st;
-    snprintf(path, sizeof path, "%s/report.json", dir);
-    if (stat(path, &st) == 0) return 1;
+    for (size_t i = 0; i < sizeof marks / sizeof marks[0]; i++) {
+        snprintf(path, sizeof path, "%s/%s", dir, marks[i]);
+        if (stat(path, &st) == 0 && S_ISREG(st.st_mode)) return 1;
+    }
     DIR *d = opendir(dir);
     if (!d) return 0;
     struct dirent *e;
@@ -128,8 +135,8 @@ replaceable(const char *dir)
     return empty;
 }
 
-int
-mcp__outdir_begin(mcp__outdir *o, const char *dir)
+static int
+begin(mcp__outdir *o, const char *dir, int owned)
 {
     memset(o, 0, sizeof *o);
     size_t n = strlen(dir);
@@ -155,13 +162,13 @@ mcp__outdir_begin(mcp__outdir *o, const char *dir)
     if (stat(o->final, &st) == 0) {
         if (!S_ISDIR(st.st_mode))
             return mcp_error("%s: exists and is not a folder; give another output", o->final);
-        if (!replaceable(o->final))
+        if (!owned && !replaceable(o->final))
             return mcp_error("%s: exists and is not an mcpost output (no report.json); give "
                              "a new folder, or remove this one",
                              o->final);
     }
     if (mcp_make_dirs(parent)) return -1;
-    clear_stale(parent, base);
+    mcp__outdir_clear_stale(parent, base);
     snprintf(o->tmp, sizeof o->tmp, "%s/.%s.tmp-%d", parent, base, (int)getpid());
     remove_tree(o->tmp); /* ours from an earlier call in this process, if any */
     if (mkdir(o->tmp, 0777) != 0)
@@ -173,6 +180,18 @@ mcp__outdir_begin(mcp__outdir *o, const char *dir)
     mcp__signal_cleanup_hook(on_signal);
     o->active = 1;
     return 0;
+}
+
+int
+mcp__outdir_begin(mcp__outdir *o, const char *dir)
+{
+    return begin(o, dir, 0);
+}
+
+int
+mcp__outdir_begin_owned(mcp__outdir *o, const char *dir)
+{
+    return begin(o, dir, 1);
 }
 
 int
@@ -220,6 +239,28 @@ mcp__outdir_abort(mcp__outdir *o)
     have_in_flight = 0;
     remove_tree(o->tmp);
     o->active = 0;
+}
+
+int
+mcp__outdir_check_input(const mcp__outdir *o, const char *input)
+{
+    char *dir = realpath(o->final, NULL), *file = dir ? realpath(input, NULL) : NULL;
+    if (dir && !file) { /* a pattern (a series' "%04d"): the folder it names */
+        char parent[4096];
+        const char *slash = strrchr(input, '/');
+        int len = slash ? (int)(slash - input) + (slash == input) : 1;
+        snprintf(parent, sizeof parent, "%.*s", len, slash ? input : ".");
+        file = realpath(parent, NULL);
+    }
+    size_t n = dir ? strlen(dir) : 0;
+    int inside = file && !strncmp(file, dir, n) && (file[n] == '/' || !file[n]);
+    free(file);
+    free(dir);
+    if (inside)
+        return mcp_error("%s: is inside the output folder %s, which this run replaces "
+                         "whole; give another output folder",
+                         input, o->final);
+    return 0;
 }
 
 static int

@@ -38,11 +38,17 @@
 #include "internal.h"
 
 #include <mcpost/filter.h>
+#include <mcpost/progress.h>
 
 #include <math.h>
 #include <stdint.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 
 /* Rows per work unit. 32 keeps the patch margin (2f rows) a small overhead and the
  * strip's buffers within a core's L2 cache at 1024 columns. */
@@ -644,12 +650,45 @@ run_strip(const nlm_params *p, const nlm_work *wk, nlm_scratch *s, int y0, int r
     }
 }
 
+/* Progress of a run on a terminal, a step per strip: a megapixel takes seconds, an
+ * estimate's tangents several times that. Shown as the U-Net's is (estimate/unet.c):
+ * only on a terminal, for images of a megapixel or more, not with --quiet, and not
+ * when called from inside a parallel region (several images at once would share one
+ * line). The master thread draws it, as strips finish in any order. */
+static int
+show_progress(const nlm_work *wk)
+{
+    int nested = 0;
+#ifdef _OPENMP
+    nested = omp_in_parallel();
+#endif
+    return (double)wk->w * wk->h >= 1048576.0 && !mcp_progress_quiet() &&
+           isatty(STDERR_FILENO) && !nested;
+}
+
+static int
+thread_num(void)
+{
+#ifdef _OPENMP
+    return omp_get_thread_num();
+#else
+    return 0;
+#endif
+}
+
 /* Runs every strip; outputs must be allocated packed w x h x 3. */
 static int
 run_all(const char *who, const nlm_params *p, const nlm_work *wk, const nlm_out *out)
 {
-    int n_strips = (wk->h + STRIP_ROWS - 1) / STRIP_ROWS, failed = 0;
+    int n_strips = (wk->h + STRIP_ROWS - 1) / STRIP_ROWS, failed = 0, finished = 0;
     size_t floats = scratch_floats(wk, p->patch_radius);
+    mcp_progress bar;
+    const int show = show_progress(wk);
+    if (show) {
+        char label[96];
+        snprintf(label, sizeof label, "%s%s", who, wk->nt ? " and its tangents" : "");
+        mcp_progress_begin(&bar, label, n_strips);
+    }
 #pragma omp parallel if ((size_t)wk->w * wk->h >= PARALLEL_MIN_PIXELS && n_strips > 1)
     {
         float *buf = mcp_malloc(floats * sizeof *buf);
@@ -666,8 +705,20 @@ run_all(const char *who, const nlm_params *p, const nlm_work *wk, const nlm_out 
                 rows = wk->h - y0 < STRIP_ROWS ? wk->h - y0 : STRIP_ROWS;
             if (buf)
                 run_strip(p, wk, &s, y0, rows, out);
+            if (show) {
+                int n;
+#pragma omp atomic capture
+                n = ++finished;
+                if (thread_num() == 0) mcp_progress_update(&bar, n);
+            }
         }
         free(buf);
+    }
+    if (show) {
+        if (failed && !mcp_progress_quiet())
+            fputc('\n', stderr); /* no "100%" for a run that failed */
+        else
+            mcp_progress_end(&bar);
     }
     if (failed)
         return mcp_error("%s: out of memory (%zu bytes of scratch per thread)", who,

@@ -58,7 +58,9 @@ on_point(const mcp_blend_point *p, void *ctx)
                                    mcp_blend_method_name(more[i]), files))
                 return -1;
     }
-    /* the last member's pictures go into the report */
+    /* the last member's pictures go into the report, each with its linear values for
+       the page's display controls: the blend's own file, the others written here
+       unless all_images wrote them */
     if (p->index == p->count - 1) {
         const mcp_blend_method shown[] = {MCP_BLEND_NOISY, MCP_BLEND_DENOISED, p->method};
         for (int i = 0; i < 3; i++) {
@@ -67,9 +69,13 @@ on_point(const mcp_blend_point *p, void *ctx)
             snprintf(name, sizeof name, "%s.%s.png", base,
                      mcp_blend_method_name(shown[i]));
             snprintf(path, sizeof path, "%s/%s", s->dir, name);
+            int written = shown[i] == p->method ||
+                          (s->all_images && shown[i] == MCP_BLEND_DENOISED);
             /* clamped and sRGB-encoded, as the PNG writer shows linear values */
             int rc = mcp_tonemap_apply(p->images[shown[i]], MCP_TONEMAP_CLAMP, &ldr) ||
-                     mcp_image_write(ldr, path, NULL);
+                     mcp_image_write(ldr, path, NULL) ||
+                     (!written && write_member_image(s, p->images[shown[i]], base,
+                                                     mcp_blend_method_name(shown[i]), files));
             mcp_image_free(ldr);
             if (rc) return -1;
         }
@@ -225,13 +231,18 @@ fill_section(cJSON *section, const mcp_blend_series_result *r,
             return -1;
     }
     if (blend_verdict(section, r)) return -1;
-    const char *shown[] = {"noisy", "denoised", mcp_blend_method_name(r->method)};
+    /* the pictures on_point wrote, and their linear values: the blend's in its own
+       file, NAME.blend.exr */
+    const mcp_blend_method shown[] = {MCP_BLEND_NOISY, MCP_BLEND_DENOISED, r->method};
     for (int i = 0; i < 3; i++) {
-        char rel[1400], caption[700];
-        snprintf(rel, sizeof rel, "%s%s.%s.png", s->rel, s->last_base, shown[i]);
+        const char *name = mcp_blend_method_name(shown[i]);
+        char rel[1400], rel_exr[1400], caption[700];
+        snprintf(rel, sizeof rel, "%s%s.%s.png", s->rel, s->last_base, name);
+        snprintf(rel_exr, sizeof rel_exr, "%s%s.%s.exr", s->rel, s->last_base,
+                 shown[i] == r->method ? "blend" : name);
         snprintf(caption, sizeof caption, "%s at %g spp: %s", s->last_base,
-                 r->rows[r->count - 1].spp, shown[i]);
-        if (mcp_report_add_image(section, rel, caption)) return -1;
+                 r->rows[r->count - 1].spp, name);
+        if (!mcp_report_add_hdr_image(section, rel, rel_exr, caption)) return -1;
     }
     return 0;
 }

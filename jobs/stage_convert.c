@@ -80,7 +80,9 @@ stage_convert(mcp_job *job, const mcp_node *settings)
                                      "as a screen shows them"
                                    : ""))
         return -1;
-    mcp_note("wrote %s", path);
+    /* by its name in the output folder: the path is the hidden folder's until the job
+       ends (common/outdir.c) */
+    mcp_note("wrote %s into the output folder", out);
     return 0;
 }
 

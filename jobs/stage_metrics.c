@@ -98,21 +98,26 @@ flip_histograms(cJSON *section, const mcp_metrics *m, const char *input,
     return mcp_report_json_only(section, "flip_histogram");
 }
 
+/* A render's picture for the page: rel (a .png) as a screen shows it, and beside it the
+ * same name in .exr with its linear RGB, which the page re-exposes and tone-maps with
+ * its display controls (report.h; as the compare page's renders). */
 static int
 write_preview(mcp_job *job, const mcp_image *img, const char *rel, cJSON *section,
               const char *caption)
 {
-    char path[4096];
+    char path[4096], rel_exr[1300], exr_path[4096];
     int rgb[3];
     mcp_image *view = NULL;
+    snprintf(rel_exr, sizeof rel_exr, "%.*s.exr", (int)(strlen(rel) - strlen(".png")), rel);
     if (mcp_rgb_channels(img, rgb) || mcp_job_output_path(job, rel, path, sizeof path) ||
+        mcp_job_output_path(job, rel_exr, exr_path, sizeof exr_path) ||
         mcp_image_copy_channels(img, rgb, 3, &view))
         return -1;
     /* Displayed as the PNG writer shows linear values: clamped and sRGB-encoded. */
     mcp_image *shown = NULL;
     int rc = mcp_tonemap_apply(view, MCP_TONEMAP_CLAMP, &shown) ||
-             mcp_image_write(shown, path, NULL) ||
-             mcp_report_add_image(section, rel, caption);
+             mcp_image_write(shown, path, NULL) || mcp_image_write(view, exr_path, NULL) ||
+             !mcp_report_add_hdr_image(section, rel, rel_exr, caption);
     mcp_image_free(shown);
     mcp_image_free(view);
     return rc ? -1 : 0;

@@ -216,10 +216,12 @@ test_runner_runs_stages_in_order(void **state)
     assert_int_equal(mcp_image_read(mcp_test_path("out/ok/sub/out.exr"), NULL, &back), 0);
     assert_true(back->data[5] == 0.25f);
     mcp_image_free(back);
-    /* mcp_job_output_subdir: the folder's path, made */
-    const char *tail = "/out/ok/made/here";
+    /* mcp_job_output_subdir: the folder's path, made, in the output folder in the
+       making (the hidden one beside it, renamed when the job is done) */
+    const char *tail = "/made/here";
     size_t n = strlen(subdir_seen);
     assert_true(n > strlen(tail) && !strcmp(subdir_seen + n - strlen(tail), tail));
+    assert_non_null(strstr(subdir_seen, "/out/.ok.tmp-"));
     struct stat st;
     assert_int_equal(stat(mcp_test_path("out/ok/made/here"), &st), 0);
     assert_true(S_ISDIR(st.st_mode));

@@ -61,6 +61,37 @@ mse_of_files(const char *dump_path, const char *ref_path)
     return s / n;
 }
 
+/* The largest difference between the linear R, G, B of a render (a dump's colour, or an
+ * image's R, G, B by name) and those of an EXR the page re-exposes. */
+static double
+rgb_difference(const char *render, int is_dump, const char *exr)
+{
+    mcp_dump *dump = NULL;
+    mcp_image *img = NULL, *shown = NULL;
+    int ri[3] = {0, 1, 2}, si[3];
+    const char *const rgb[] = {"R", "G", "B"};
+    if ((is_dump ? mcp_dump_read(render, &dump)
+                 : mcp_image_read(render, NULL, &img) ||
+                       mcp_image_channels(img, rgb, 3, ri)) ||
+        mcp_image_read(exr, NULL, &shown) || mcp_image_channels(shown, rgb, 3, si))
+        fail_msg("%s", mcp_error_message());
+    const mcp_image *c = is_dump ? dump->color : img;
+    assert_int_equal(c->width, shown->width);
+    assert_int_equal(c->height, shown->height);
+    double worst = 0;
+    for (int y = 0; y < c->height; y++)
+        for (int x = 0; x < c->width; x++)
+            for (int k = 0; k < 3; k++) {
+                double d = fabs((double)mcp_image_px(c, x, y)[ri[k]] -
+                                mcp_image_px(shown, x, y)[si[k]]);
+                worst = d > worst || isnan(d) ? d : worst;
+            }
+    mcp_dump_free(dump);
+    mcp_image_free(img);
+    mcp_image_free(shown);
+    return worst;
+}
+
 static void
 test_demo_job(void **state)
 {
@@ -181,9 +212,14 @@ test_demo_job(void **state)
     static const struct {
         int section;
         const char *suffix, *has; /* an image whose path ends so, with this member */
-    } shown[] = {{4, "estimate/denoised.png", "hdr"},
+    } shown[] = {{3, "noisy/test.png", "hdr"},
+                 {3, "noisy/reference.png", "hdr"},
+                 {4, "estimate/denoised.png", "hdr"},
                  {4, "estimate/blocks_error.png", "scale"},
                  {4, "estimate/sampling_map.png", "scale"},
+                 {8, "blend/cornell_spp1024.noisy.png", "hdr"},
+                 {8, "blend/cornell_spp1024.denoised.png", "hdr"},
+                 {8, "blend/cornell_spp1024.james_stein.png", "hdr"},
                  {9, "perceptual/power-set.png", "hdr"},
                  {9, "perceptual/mean.png", "hdr"},
                  {10, "maps/counts_0003.png", "scale"},
@@ -199,6 +235,22 @@ test_demo_job(void **state)
         if (!found || !cJSON_GetObjectItem(found, shown[i].has))
             fail_msg("section %d: no image %s with %s", shown[i].section, shown[i].suffix,
                      shown[i].has);
+    }
+    /* the metrics and blend renders re-expose the very values they show: the files
+       behind them hold the inputs' linear RGB, bit for bit, not a clamped copy */
+    static const struct {
+        const char *render, *exr;
+        int is_dump;
+    } linear[] = {{"series/cornell_spp0064.exr", "noisy/test.exr", 1},
+                  {"cornell_reference.exr", "noisy/reference.exr", 0},
+                  {"series/cornell_spp1024.exr", "blend/cornell_spp1024.noisy.exr", 1}};
+    for (size_t i = 0; i < sizeof linear / sizeof *linear; i++) {
+        char render[4400], exr[4400];
+        snprintf(render, sizeof render, "%s/samples/fixtures/cornell/%s",
+                 MCP_TEST_SOURCE_DIR, linear[i].render);
+        snprintf(exr, sizeof exr, "%s/%s", dir, linear[i].exr);
+        double d = rgb_difference(render, linear[i].is_dump, exr);
+        if (d != 0) fail_msg("%s: differs from %s by %g", exr, render, d);
     }
     /* one block: no flat blocks.png */
     char flat[4400];
