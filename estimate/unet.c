@@ -622,6 +622,7 @@ typedef struct pass {
     const mcp__unet *net;
     int fast;   /* Winograd products */
     int coarse; /* F(4x4, 3x3): a tangents' pass, unless exact_tangents */
+    int bf16;   /* with coarse: products in bfloat16 where the CPU has them */
     primal_trace *trace;
 } pass;
 
@@ -630,8 +631,11 @@ static int
 winograd(const pass *ps, const mcp__unet_conv *L, const float *bias, const float *a,
          int ca, int a_up, const float *b, int n, int h, int w, int relu, float *out)
 {
-    return (ps->coarse ? mcp__unet_conv_winograd4 : mcp__unet_conv_winograd)(
-        L->weight, bias, L->cin, L->cout, a, ca, a_up, b, n, h, w, relu, out);
+    if (ps->coarse)
+        return mcp__unet_conv_winograd4(L->weight, bias, L->cin, L->cout, a, ca, a_up, b, n,
+                                        h, w, relu, ps->bf16, out);
+    return mcp__unet_conv_winograd(L->weight, bias, L->cin, L->cout, a, ca, a_up, b, n, h, w,
+                                   relu, out);
 }
 
 static int
@@ -1009,8 +1013,8 @@ network(const mcp__unet *net, batch *x, batch *t, primal_trace *tr)
     if (tr)
         tr->pools = 0;
     const int fast = mcp__unet_fast(net);
-    const pass ps_ = {net, fast, fast && tr && tr->replay && !exact_tangents(net), tr},
-               *ps = &ps_;
+    const int coarse = fast && tr && tr->replay && !exact_tangents(net);
+    const pass ps_ = {net, fast, coarse, coarse && mcp__unet_gemm_bf16_has(), tr}, *ps = &ps_;
     int rc = conv_into(ps, &c[E0], x, NULL, 1, t) || conv_replace(ps, &c[E1], t, NULL, 1) ||
              pool_to(ps, t, &p1) || conv_into(ps, &c[E2], &p1, NULL, 1, t) ||
              pool_to(ps, t, &p2) || conv_into(ps, &c[E3], &p2, NULL, 1, t) ||

@@ -9,6 +9,7 @@
 #include <mcpost/image.h>
 
 #include <stddef.h>
+#include <stdint.h>
 
 /* ---- .tza archive (tza.c; docs/oidn-network.md §2) ---- */
 
@@ -127,13 +128,13 @@ typedef struct mcp__unet_winograd {
 int mcp__unet_winograd_conv(const mcp__unet_winograd *k, const float *weight,
                             const float *bias, int cin, int cout, const float *a, int ca,
                             int a_up, const float *b, int n, int h, int w, int relu,
-                            float *out);
+                            int bf16, float *out);
 
 /* The same as F(4x4, 3x3) (unet_winograd4.c): 1.78 times fewer multiply-adds, a
  * relative error ~1e-4 instead of ~1e-6; for the tangents' passes. */
 int mcp__unet_conv_winograd4(const float *weight, const float *bias, int cin, int cout,
                              const float *a, int ca, int a_up, const float *b, int n,
-                             int h, int w, int relu, float *out);
+                             int h, int w, int relu, int bf16, float *out);
 /* Prefetches the input rows that tiles [t0, t0 + nt) of m x m outputs read from one
  * channel (unet_winograd.c). */
 void mcp__unet_prefetch_rows(const float *src, int up, int h, int w, size_t t0, int nt,
@@ -168,6 +169,19 @@ void mcp__unet_gemm_run(const mcp__unet_gemm *g, const float *packed, int m, int
                         const float *b, size_t ldb, int n, float *c, size_t ldc);
 
 /* OIDN's PU transfer function (normalised: x = PU(y)/PU(65504)) and its inverse. */
+/* The tangents' products in bfloat16 (unet_gemm.c): whether they were asked for
+ * (MCPOST_UNET_BF16=1) and the CPU has AVX512-BF16; B as pairs of rows rounded to bf16
+ * (out[p][j] = row 2p | row 2p + 1 << 16, a zero row past kn); A packed in blocks of
+ * MCP__UNET_BF16_MR rows; C = A B for n a multiple of MCP__UNET_BF16_NR columns. */
+#define MCP__UNET_BF16_MR 8
+#define MCP__UNET_BF16_NR 48
+int mcp__unet_gemm_bf16_has(void);
+void mcp__unet_bf16_pairs(const float *v, size_t ldv, int kn, int ncols, uint32_t *out,
+                          size_t ldo);
+void mcp__unet_gemm_bf16_pack(const float *a, int m, int kn, uint32_t *packed);
+void mcp__unet_gemm_bf16_run(const uint32_t *packed, int m, int kn, const uint32_t *b,
+                             size_t ldb, int n, float *c, size_t ldc);
+
 float mcp__pu_forward(float y);
 float mcp__pu_inverse(float x);
 

@@ -258,14 +258,15 @@ mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cou
                         int w, int relu, float *out)
 {
     return mcp__unet_winograd_conv(&f2x2, weight, bias, cin, cout, a, ca, a_up, b, n, h, w,
-                                   relu, out);
+                                   relu, 0, out);
 }
 
 /* A Winograd convolution of either size (unet_internal.h). */
 int
 mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
                         const float *bias, int cin, int cout, const float *a, int ca,
-                        int a_up, const float *b, int n, int h, int w, int relu, float *out)
+                        int a_up, const float *b, int n, int h, int w, int relu, int bf16,
+                        float *out)
 {
     const int tile_m = k_->m, elems = k_->elems;
     mcp__unet_gemm g;
@@ -285,11 +286,19 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
 #ifdef _OPENMP
     n_threads = omp_get_max_threads();
 #endif
-    /* per thread: V (elems x cin x ld), M (elems x mp x ld), rows for the transforms */
-    const size_t per_thread =
-        elems * ld_max * ((size_t)cin + mp) + (size_t)k_->row_floats * ((size_t)chunk + 1);
+    /* bf16 products: the packed weights and one element's V as pairs of rows */
+    const int kp = (cin + 1) / 2;
+    /* in the float kernel's blocks (the AVX-512 one's, which every AVX512-BF16 CPU has) */
+    bf16 = bf16 && g.mr == MCP__UNET_BF16_MR && g.nr == MCP__UNET_BF16_NR;
+    /* per thread: V (elems x cin x ld), M (elems x mp x ld), rows for the transforms,
+       and with bf16 one element's V in pairs (kp x ld) */
+    const size_t per_thread = elems * ld_max * ((size_t)cin + mp) +
+                              (size_t)k_->row_floats * ((size_t)chunk + 1) +
+                              (bf16 ? (size_t)kp * ld_max : 0);
     float *u = mcp_malloc(elems * plane * sizeof(float));
-    float *packed = u ? mcp_malloc((size_t)elems * mp * cin * sizeof(float)) : NULL;
+    float *packed = u ? mcp_malloc(bf16 ? (size_t)elems * mp * kp * sizeof(uint32_t)
+                                        : (size_t)elems * mp * cin * sizeof(float))
+                      : NULL;
     float *scratch =
         packed ? mcp__unet_alloc((size_t)n_threads * per_thread * sizeof(float)) : NULL;
     if (!scratch) {
@@ -298,7 +307,11 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
     }
     k_->transform_weights(weight, cin, cout, u);
     for (int e = 0; e < elems; e++)
-        mcp__unet_gemm_pack(&g, u + e * plane, cout, cin, packed + (size_t)e * mp * cin);
+        if (bf16)
+            mcp__unet_gemm_bf16_pack(u + e * plane, cout, cin,
+                                     (uint32_t *)packed + (size_t)e * mp * kp);
+        else
+            mcp__unet_gemm_pack(&g, u + e * plane, cout, cin, packed + (size_t)e * mp * cin);
 #pragma omp parallel num_threads(n_threads)
     {
         int thread = 0;
@@ -308,6 +321,7 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
         float *v = scratch + (size_t)thread * per_thread;
         float *m = v + elems * ld_max * (size_t)cin;
         float *rows = m + elems * ld_max * (size_t)mp;
+        uint32_t *pairs = (uint32_t *)(rows + (size_t)k_->row_floats * ((size_t)chunk + 1));
         /* a task is one chunk of every image, the primal first: the tangents take its
          * ReLU mask while it is still in the cache */
 #pragma omp for schedule(dynamic, 1)
@@ -342,8 +356,13 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
                                (size_t)(ld - nt) * sizeof(float));
                 }
                 for (int e = 0; e < elems; e++)
-                    mcp__unet_gemm_run(&g, packed + (size_t)e * mp * cin, cout, cin,
-                                       v + e * ldv, ld, ld, m + e * ldm, ld);
+                    if (bf16) {
+                        mcp__unet_bf16_pairs(v + e * ldv, ld, cin, ld, pairs, ld);
+                        mcp__unet_gemm_bf16_run((const uint32_t *)packed + (size_t)e * mp * kp,
+                                                cout, cin, pairs, ld, ld, m + e * ldm, ld);
+                    } else
+                        mcp__unet_gemm_run(&g, packed + (size_t)e * mp * cin, cout, cin,
+                                           v + e * ldv, ld, ld, m + e * ldm, ld);
                 for (int o = 0; o < cout; o++)
                     for (int j = 0; j < nt;) {
                         const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);

@@ -262,8 +262,8 @@ static const mcp__unet_winograd f4x4 = {4, ELEMS, CHUNK4, 24, transform_weights,
 int
 mcp__unet_conv_winograd4(const float *weight, const float *bias, int cin, int cout,
                          const float *a, int ca, int a_up, const float *b, int n, int h,
-                         int w, int relu, float *out)
+                         int w, int relu, int bf16, float *out)
 {
     return mcp__unet_winograd_conv(&f4x4, weight, bias, cin, cout, a, ca, a_up, b, n, h, w,
-                                   relu, out);
+                                   relu, bf16, out);
 }

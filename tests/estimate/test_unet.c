@@ -1281,6 +1281,26 @@ check_kernels(const mcp__unet *net, const rnet *n, const mcp_image *col,
         }
         unsetenv("MCPOST_UNET_EXACT_TANGENTS");
         assert_true(rel_l2(jt_mode[0], jt_mode[1]) > 0.0);
+        /* the opt-in bfloat16 tangents (MCPOST_UNET_BF16=1, on AVX512-BF16 CPUs, with
+           the AVX-512 kernel): the primal's bits unchanged, the JVP within the stated
+           10% (docs/denoisers.md), and not the float path's bits (it did run) */
+        setenv("MCPOST_UNET_BF16", "1", 1);
+        if (!strcmp(names[i], "avx512") && mcp__unet_gemm_bf16_has()) {
+            mcp_image *out = NULL, *jt = NULL, *out_float = NULL, *jt_float = NULL;
+            assert_int_equal(mcp__unet_run(net, col, alb, nrm, scale, t, 1, &out, &jt), 0);
+            setenv("MCPOST_UNET_BF16", "0", 1);
+            assert_int_equal(
+                mcp__unet_run(net, col, alb, nrm, scale, t, 1, &out_float, &jt_float), 0);
+            const double e_jvp = rel_err(jt, fp);
+            print_message("%s: kernel avx512, tangents F(4x4,3x3) in bf16: JVP against "
+                          "double %.2e\n",
+                          what, e_jvp);
+            assert_true(rel_l2(out, out_float) == 0.0);
+            assert_true(e_jvp < 0.1 && rel_l2(jt, jt_float) > 0.0);
+            mcp_image_free(out), mcp_image_free(jt);
+            mcp_image_free(out_float), mcp_image_free(jt_float);
+        }
+        unsetenv("MCPOST_UNET_BF16");
         mcp_image_free(jt_mode[0]), mcp_image_free(jt_mode[1]);
         tried++;
     }
