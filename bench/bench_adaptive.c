@@ -405,6 +405,25 @@ main(int argc, char **argv)
                             ue, nu, &rule);
                 double t_rule = now_ms() - t0;
                 double rule_at_b = best_error_at(&rule, budget);
+                /* the plot: the rule's best run at each of uniform's sample counts (the
+                   lower envelope of its thresholds and min samples) */
+                if (sd == 0 && smp == 0 && n_series < MAX_CURVES) {
+                    int k = 0;
+                    for (int i = 0; i < nu && k < 256; i++) {
+                        const double e = best_error_at(&rule, us[i]);
+                        if (isnan(e)) continue;
+                        px[n_series][k] = us[i], py[n_series][k] = e, k++;
+                    }
+                    if (k > 1) {
+                        snprintf(names[n_series], 96, "renderer rule, best run (%s, %s)", dn,
+                                 sname);
+                        series[n_series] =
+                            (mcp_plot_series){names[n_series], MCP_SERIES_LINE_POINTS,
+                                              px[n_series],    py[n_series],
+                                              k,               0};
+                        n_series++;
+                    }
+                }
                 if (g_verbose) {
                     fprintf(stderr, "    uniform:");
                     for (int i = 0; i < nu; i++)
