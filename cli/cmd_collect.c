@@ -81,21 +81,10 @@ read_text(const char *path)
     FILE *f = fopen(path, "rb");
     if (!f)
         return NULL;
-    size_t cap = 1 << 16, len = 0;
-    char *buf = malloc(cap);
-    for (size_t n; buf && (n = fread(buf + len, 1, cap - len - 1, f)) > 0;) {
-        len += n;
-        if (len + 1 == cap) {
-            char *grown = realloc(buf, cap *= 2);
-            if (!grown)
-                free(buf);
-            buf = grown;
-        }
-    }
+    mcp__strbuf text = {0};
+    mcp__strbuf_read_file(&text, f);
     fclose(f);
-    if (buf)
-        buf[len] = '\0';
-    return buf;
+    return mcp__strbuf_take(&text);
 }
 
 static frame_row *

@@ -50,10 +50,6 @@ int mcp__denoise_check_tangents(const char *who, const mcp_denoise_input *at,
 /* A new zero-filled packed image with channels R, G, B labelled `source`. */
 int mcp__rgb_new(int width, int height, const char *source, mcp_image **out);
 
-/* Grows the text buffer *buf (capacity *cap) to hold at least need bytes (doubling, so
- * that appending stays linear); -1 with an error when out of memory. */
-int mcp__buf_reserve(char **buf, size_t *cap, size_t need);
-
 /* A new denoiser with the common fields set, a zeroed state block of state_size bytes
  * (freed with it) and a destroy that frees both; NULL with an error on failure. */
 mcp_denoiser *mcp__denoiser_new(const char *name, size_t state_size);

@@ -424,10 +424,8 @@ mcp_option_format(const mcp_option *o, const void *settings, char *buf, size_t c
 
 /* ---- text for people: the dump and the docs' table ---- */
 
-typedef struct {
-    char *text;
-    size_t len, cap;
-} strbuf;
+/* a growing string (common/strbuf.c) */
+typedef mcp__strbuf strbuf;
 
 static int add(strbuf *b, const char *fmt, ...) MCP_PRINTF(2, 3);
 
@@ -435,22 +433,10 @@ static int
 add(strbuf *b, const char *fmt, ...)
 {
     va_list ap;
-    for (;;) {
-        size_t room = b->cap - b->len;
-        va_start(ap, fmt);
-        int n = vsnprintf(b->text ? b->text + b->len : NULL, b->text ? room : 0, fmt, ap);
-        va_end(ap);
-        if (n < 0) return -1;
-        if (b->text && (size_t)n < room) {
-            b->len += (size_t)n;
-            return 0;
-        }
-        size_t cap = (b->cap + (size_t)n + 1) * 2;
-        char *t = mcp_realloc(b->text, cap);
-        if (!t) return -1;
-        b->text = t;
-        b->cap = cap;
-    }
+    va_start(ap, fmt);
+    int rc = mcp__strbuf_vprintf(b, fmt, ap);
+    va_end(ap);
+    return rc;
 }
 
 char *
@@ -467,10 +453,10 @@ mcp_operation_dump(const mcp_operation *op, const void *settings, unsigned where
         rc = add(&b, "%s: %s\n", o->name, v);
     }
     if (rc) {
-        free(b.text);
+        mcp__strbuf_free(&b);
         return NULL;
     }
-    return b.text;
+    return mcp__strbuf_take(&b);
 }
 
 /* "(command line only)", "(not in Python)" for where */
@@ -572,8 +558,8 @@ mcp_operation_markdown(const mcp_operation *op)
                          is_output ? op->output_def : o->def);
     }
     if (rc) {
-        free(b.text);
+        mcp__strbuf_free(&b);
         return NULL;
     }
-    return b.text;
+    return mcp__strbuf_take(&b);
 }
