@@ -81,6 +81,8 @@ int mcp__outdir_begin_owned(mcp__outdir *o, const char *dir);
  * the file input (or the folder of a pattern that names no file) lies in o->final (an
  * earlier output): the commit would remove it. */
 int mcp__outdir_check_input(const mcp__outdir *o, const char *input);
+/* The same for each of inputs[0..n) that is not NULL; the first inside fails. */
+int mcp__outdir_check_inputs(const mcp__outdir *o, const char *const *inputs, int n);
 /* Removes parent/.BASE.tmp-PID and .BASE.old-PID whose process is gone (what a SIGKILL
  * left; begin does it for its own dir), saying so for each. */
 void mcp__outdir_clear_stale(const char *parent, const char *base);
