@@ -402,10 +402,9 @@ cmd_metrics(int argc, char **argv)
         res[i].path = argv[optind + i];
     if (out_dir) { /* after the cheap checks, before any work */
         if (mcp__outdir_begin(&whole, out_dir) ||
-            mcp__outdir_check_input(&whole, ref_path))
+            mcp__outdir_check_inputs(&whole, (const char *const *)argv + optind,
+                                     n_tests + 1)) /* the tests, then REF */
             goto done;
-        for (int i = 0; i < n_tests; i++)
-            if (mcp__outdir_check_input(&whole, res[i].path)) goto done;
         maps_dir = whole.tmp;
     }
     if (mcp_image_read(ref_path, NULL, &ref)) goto done;
