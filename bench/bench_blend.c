@@ -26,6 +26,8 @@
 #include <malloc.h>
 
 #include "bench.h"
+
+#include "../common/rng_internal.h"
 #endif
 
 #define W 1920
@@ -59,15 +61,11 @@ median_ms(bench_fn fn, void *ctx, int repeats, double *wall, double *cpu)
     return 0;
 }
 
-/* splitmix64 */
+/* splitmix64 (common/rng_internal.h), 53 bits into [0, 1) */
 static double
 uniform(uint64_t *s)
 {
-    uint64_t z = (*s += 0x9e3779b97f4a7c15ULL);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-    z ^= z >> 31;
-    return (double)(z >> 11) * 0x1.0p-53;
+    return (double)(mcp__splitmix64_next(s) >> 11) * 0x1.0p-53;
 }
 
 static mcp_image *

@@ -12,6 +12,8 @@
 #include <omp.h>
 
 #include "bench.h"
+
+#include "../common/rng_internal.h"
 #endif
 
 /* CPU time of the whole process (all threads): on a machine shared with other work,
@@ -19,10 +21,7 @@
 static uint64_t
 next(uint64_t *s)
 {
-    uint64_t z = (*s += 0x9e3779b97f4a7c15ull);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return z ^ (z >> 31);
+    return mcp__splitmix64_next(s);
 }
 
 /* An HDR "render": smooth gradients over four decades, a bright square, and a noisy

@@ -21,6 +21,8 @@
 #include <omp.h>
 
 #include "bench.h"
+
+#include "../common/rng_internal.h"
 #endif
 
 #define M 4
@@ -28,10 +30,7 @@
 static double
 uniform(uint64_t *s)
 {
-    uint64_t z = (*s += 0x9e3779b97f4a7c15ull);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return ((z ^ (z >> 31)) >> 11) * 0x1.0p-53;
+    return (double)(mcp__splitmix64_next(s) >> 11) * 0x1.0p-53;
 }
 
 static void

@@ -8,6 +8,8 @@
 
 #include "bench.h"
 
+#include "../common/rng_internal.h"
+
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -17,10 +19,7 @@
 static inline double
 bench_uniform(uint64_t *s)
 {
-    uint64_t z = (*s += 0x9e3779b97f4a7c15ULL);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-    return (double)((z ^ (z >> 31)) >> 11) / 9007199254740992.0;
+    return (double)(mcp__splitmix64_next(s) >> 11) * 0x1.0p-53;
 }
 
 /* A w x h R,G,B image; exits with a message on failure. */

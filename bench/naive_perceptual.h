@@ -16,6 +16,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../common/rng_internal.h"
+
 typedef struct {
     int w, h, m;
     const float *cand; /* candidate j at pixel p, channel c: cand[(j * n + p) * 3 + c] */
@@ -65,10 +67,7 @@ naive_box_energy(const float *o, const float *t, int w, int h, int x0, int y0, i
 static uint64_t
 naive_hash(uint64_t seed, uint64_t i) /* the library's per-pixel random start */
 {
-    uint64_t z = seed ^ (0x9E3779B97F4A7C15ull * (i + 1));
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
+    return mcp__mix64(seed ^ (MCP__SPLITMIX64_GAMMA * (i + 1)));
 }
 
 /* Vertical iterative minimisation over m candidate images (cand as in naive_input,

@@ -79,7 +79,7 @@ cmd_adaptive(int argc, char **argv)
     c.den = den;
     /* after the cheap checks, before the first pass */
     if (mcp__outdir_begin(&whole, sh.output) ||
-        (ref_path && mcp__outdir_check_input(&whole, ref_path)))
+        mcp__outdir_check_inputs(&whole, &ref_path, 1))
         goto done;
     snprintf(c.dir, sizeof c.dir, "%s", whole.tmp);
     if (mcp__adaptive_run_loop(&c, sh.json ? &j : NULL) || mcp__outdir_commit(&whole))

@@ -96,7 +96,10 @@ cmd_blend(int argc, char **argv)
                                       &series)) ||
         mcp_cli_denoiser_create(&df, &den) ||
         (ref_path && mcp_image_read(ref_path, NULL, &ref)) ||
-        mcp__outdir_begin(&whole, out_dir) || mcp_report_new("mcpost blend", &report))
+        mcp__outdir_begin(&whole, out_dir) ||
+        mcp__outdir_check_inputs(&whole, (const char *const *)argv + optind, n_files) ||
+        mcp__outdir_check_inputs(&whole, &ref_path, 1) ||
+        mcp_report_new("mcpost blend", &report))
         goto fail;
     series->variance_from = variance_from;
     mcp__blend_sink sink;

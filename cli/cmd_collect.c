@@ -18,14 +18,13 @@
 #include <ctype.h>
 #include <dirent.h>
 #include <errno.h>
-#include <getopt.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
 
-static const char usage[] =
+static const char head[] =
     "usage: mcpost collect OUT_DIR [--json] [--quiet] [gates]\n"
     "  Gathers the frames of a frame job (OUT_DIR/0001/report.json, ...) into one\n"
     "  report, OUT_DIR/report.json and report.html: every figure (MSE, relMSE, FLIP,\n"
@@ -40,8 +39,8 @@ static const char usage[] =
     "  --warn 'EXPR', --fail-percent 'MAP T P', --warn-percent 'MAP T P' (repeatable;\n"
     "  a share of pixels comes from the section's pixels_above or its map's EXR).\n"
     "  PASS, WARNING: ... or FAILURE: ... is the last line; exit 3 warning, 4 failure\n"
-    "  (1 when a frame is not complete).\n"
-    "\n"
+    "  (1 when a frame is not complete).\n";
+static const char examples[] =
     "examples (from the source folder, on the sample renders):\n"
     "  mcpost run samples/jobs/shot.yaml -j 2 && mcpost collect out/shot\n"
     "  mcpost collect out/shot --json > out/shot_figures.json\n"
@@ -81,21 +80,10 @@ read_text(const char *path)
     FILE *f = fopen(path, "rb");
     if (!f)
         return NULL;
-    size_t cap = 1 << 16, len = 0;
-    char *buf = malloc(cap);
-    for (size_t n; buf && (n = fread(buf + len, 1, cap - len - 1, f)) > 0;) {
-        len += n;
-        if (len + 1 == cap) {
-            char *grown = realloc(buf, cap *= 2);
-            if (!grown)
-                free(buf);
-            buf = grown;
-        }
-    }
+    mcp__strbuf text = {0};
+    mcp__strbuf_read_file(&text, f);
     fclose(f);
-    if (buf)
-        buf[len] = '\0';
-    return buf;
+    return mcp__strbuf_take(&text);
 }
 
 static frame_row *
@@ -696,39 +684,24 @@ done:
 static int
 cmd_collect(int argc, char **argv)
 {
-    enum { OPT_FAIL = 256, OPT_WARN, OPT_FAIL_PERCENT, OPT_WARN_PERCENT };
-    static const struct option longs[] = {{"json", no_argument, 0, 'j'},
-                                          {"quiet", no_argument, 0, 'q'},
-                                          {"fail", required_argument, 0, OPT_FAIL},
-                                          {"warn", required_argument, 0, OPT_WARN},
-                                          {"fail-percent", required_argument, 0, OPT_FAIL_PERCENT},
-                                          {"warn-percent", required_argument, 0, OPT_WARN_PERCENT},
-                                          {"help", no_argument, 0, 'h'},
-                                          {0, 0, 0, 0}};
-    int opt, json = 0;
-    mcp__gate gate = {0};
-    optind = 1;
-    while ((opt = getopt_long(argc, argv, "qh", longs, NULL)) != -1) {
-        switch (opt) {
-        case 'j': json = 1; break;
-        case 'q': mcp_progress_set_quiet(1); break;
-        case OPT_FAIL:
-        case OPT_WARN:
-            if (mcp__gate_add(&gate, optarg, opt == OPT_FAIL))
-                return mcp_cli_usage("collect", "%s", mcp_error_message());
-            break;
-        case OPT_FAIL_PERCENT:
-        case OPT_WARN_PERCENT:
-            if (mcp__gate_add_percent(&gate, optarg, opt == OPT_FAIL_PERCENT))
-                return mcp_cli_usage("collect", "%s", mcp_error_message());
-            break;
-        case 'h': fputs(usage, stdout); return 0;
-        default: return mcp_cli_usage("collect", "bad option");
-        }
-    }
-    if (argc - optind != 1)
+    /* the gates through collect's table (ops/op_metrics.c), read as metrics reads them
+       (jobs/gate.c) but without a figure check: the frames' sections were computed
+       with their job's options, and each is judged by what it holds */
+    mcp_metrics_settings st;
+    mcp_shared_settings sh;
+    mcp_cli_denoiser_flags df = {0};
+    int first = 0;
+    int parsed =
+        mcp_cli_parse(&mcp__op_collect, head, examples, argc, argv, &st, &sh, &df, &first);
+    if (parsed >= 0) return parsed;
+    mcp__gate gate;
+    const char *bad_key;
+    int bad_index;
+    if (mcp__gate_from_settings(&st, NULL, &gate, &bad_key, &bad_index))
+        return mcp_cli_usage("collect", "%s", mcp_error_message());
+    if (argc - first != 1)
         return mcp_cli_usage("collect", "give one output folder (of a job with frames:)");
-    int rc = collect(argv[optind], json, &gate);
+    int rc = collect(argv[first], sh.json, &gate);
     return rc < 0 ? mcp_cli_fail() : rc;
 }
 

@@ -254,7 +254,8 @@ cmd_compare(int argc, char **argv)
                  base_name(ref_path));
     if (mcp_image_read(ref_path, NULL, &ref) || mcp_report_new(title, &report) ||
         mcp_report_set_display(report, exposure, display) ||
-        mcp__outdir_begin(&od, out_dir))
+        mcp__outdir_begin(&od, out_dir) ||
+        mcp__outdir_check_inputs(&od, (const char *const *)argv + optind, n_tests + 1))
         goto done;
     for (int i = 0; i < n_tests; i++) {
         mcp__gate_verdict v;

@@ -161,7 +161,10 @@ cmd_estimate(int argc, char **argv)
         (ref_path && mcp_image_read(ref_path, NULL, &ref)))
         goto done;
     if (outdir) { /* after the cheap checks, before any work */
-        if (mcp__outdir_begin(&whole, outdir)) goto done;
+        const char *named[] = {ref_path, pattern};
+        if (mcp__outdir_begin(&whole, outdir) || mcp__outdir_check_inputs(&whole, named, 2) ||
+            mcp__outdir_check_inputs(&whole, (const char *const *)argv + optind, n_files))
+            goto done;
         snprintf(od.dir, sizeof od.dir, "%s", whole.tmp);
     }
     if (outdir && (mcp_report_new("mcpost estimate", &report) ||

@@ -198,33 +198,14 @@ print_rows(const test_result *r, int n, const char *ref, const mcp_image *img, i
     }
 }
 
-/* A growing CSV text. */
-typedef struct csv_buf {
-    char *s;
-    size_t len, cap;
-    int failed;
-} csv_buf;
-
-/* Appends t; as a field (field 1) it is quoted when it holds a comma, a quote or a
- * line break, quotes doubled. */
+/* Appends t to the CSV text; as a field (field 1) it is quoted when it holds a comma,
+ * a quote or a line break, quotes doubled. */
 static void
-csv_put(csv_buf *b, const char *t, int field)
+csv_put(mcp__strbuf *b, const char *t, int field)
 {
     int quote = field && strpbrk(t, ",\"\n\r") != NULL;
-    size_t need = b->len + 2 * strlen(t) + 4;
-    if (b->failed) return;
-    if (need > b->cap) {
-        size_t c = b->cap ? b->cap : 4096;
-        while (c < need)
-            c *= 2;
-        char *g = realloc(b->s, c);
-        if (!g) {
-            b->failed = 1;
-            return;
-        }
-        b->s = g, b->cap = c;
-    }
-    char *o = b->s + b->len;
+    char *o = mcp__strbuf_reserve(b, 2 * strlen(t) + 2);
+    if (!o) return;
     if (quote) *o++ = '"';
     for (; *t; t++) {
         if (quote && *t == '"') *o++ = '"';
@@ -243,7 +224,7 @@ write_csv(const char *path, const test_result *r, int n, const char *ref, int ga
     column cols[MAX_COLUMNS];
     double vals[MAX_COLUMNS];
     char num[64];
-    csv_buf b = {0};
+    mcp__strbuf b = {0};
     int nc = columns_of(&r[0].m, cols, vals);
     csv_put(&b, "test,reference", 0);
     for (int c = 0; c < nc; c++) {
@@ -273,7 +254,7 @@ write_csv(const char *path, const test_result *r, int n, const char *ref, int ga
     }
     int rc = b.failed ? mcp_error("--csv %s: out of memory", path)
                       : mcp_write_file_atomic(path, b.s, b.len);
-    free(b.s);
+    mcp__strbuf_free(&b);
     return rc;
 }
 
@@ -421,10 +402,9 @@ cmd_metrics(int argc, char **argv)
         res[i].path = argv[optind + i];
     if (out_dir) { /* after the cheap checks, before any work */
         if (mcp__outdir_begin(&whole, out_dir) ||
-            mcp__outdir_check_input(&whole, ref_path))
+            mcp__outdir_check_inputs(&whole, (const char *const *)argv + optind,
+                                     n_tests + 1)) /* the tests, then REF */
             goto done;
-        for (int i = 0; i < n_tests; i++)
-            if (mcp__outdir_check_input(&whole, res[i].path)) goto done;
         maps_dir = whole.tmp;
     }
     if (mcp_image_read(ref_path, NULL, &ref)) goto done;

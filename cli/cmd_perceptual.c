@@ -162,7 +162,11 @@ cmd_perceptual(int argc, char **argv)
     if (!strcmp(a.surrogate, "denoise") &&
         mcp_cli_denoiser_create(&df, &r.den))
         goto fail;
-    if (mcp__outdir_begin(&od, out_dir) || mcp_report_new("mcpost perceptual", &report))
+    const char *named[] = {ref_path, surr ? a.surrogate : NULL, a.confidence, a.kernel_file};
+    if (mcp__outdir_begin(&od, out_dir) ||
+        mcp__outdir_check_inputs(&od, (const char *const *)argv + optind, argc - optind) ||
+        mcp__outdir_check_inputs(&od, named, 4) ||
+        mcp_report_new("mcpost perceptual", &report))
         goto fail;
     snprintf(r.out_dir, sizeof r.out_dir, "%s", od.tmp);
     if (!(r.section = mcp_report_section(report, "perceptual",

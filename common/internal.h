@@ -81,6 +81,8 @@ int mcp__outdir_begin_owned(mcp__outdir *o, const char *dir);
  * the file input (or the folder of a pattern that names no file) lies in o->final (an
  * earlier output): the commit would remove it. */
 int mcp__outdir_check_input(const mcp__outdir *o, const char *input);
+/* The same for each of inputs[0..n) that is not NULL; the first inside fails. */
+int mcp__outdir_check_inputs(const mcp__outdir *o, const char *const *inputs, int n);
 /* Removes parent/.BASE.tmp-PID and .BASE.old-PID whose process is gone (what a SIGKILL
  * left; begin does it for its own dir), saying so for each. */
 void mcp__outdir_clear_stale(const char *parent, const char *base);
@@ -152,4 +154,28 @@ int mcp__png_read(const char *path, const mcp_read_options *opt, mcp_image **out
 int mcp__png_write(const mcp_image *img, const char *path, const mcp_write_options *opt);
 /* 8-bit samples, c = 1, 3 or 4 channels interleaved, written as they are */
 int mcp__png_write_bytes(const unsigned char *bytes, int w, int h, int c, const char *path);
+
+/* Growing strings (strbuf.c): a NUL-terminated text s[0..len) in cap bytes, zeroed to
+ * start ({0}). A failed allocation sets failed, and every later call then does nothing
+ * and returns -1 (NULL), so a builder checks once at the end. reserve makes room for
+ * extra more bytes and the NUL and returns where they go (the caller writes them,
+ * adds to len and terminates); take hands over s (an empty string when nothing was
+ * added; NULL after a failure, the buffer freed) and leaves the buffer zeroed;
+ * read_file appends the rest of f (-1 on a read error, what was read kept). */
+#include <stdarg.h>
+#include <stdio.h>
+#include <mcpost/error.h>
+typedef struct mcp__strbuf {
+    char *s;
+    size_t len, cap;
+    int failed;
+} mcp__strbuf;
+char *mcp__strbuf_reserve(mcp__strbuf *b, size_t extra);
+int mcp__strbuf_put(mcp__strbuf *b, const char *s, size_t n);
+int mcp__strbuf_str(mcp__strbuf *b, const char *s);
+int mcp__strbuf_printf(mcp__strbuf *b, const char *fmt, ...) MCP_PRINTF(2, 3);
+int mcp__strbuf_vprintf(mcp__strbuf *b, const char *fmt, va_list ap);
+char *mcp__strbuf_take(mcp__strbuf *b);
+void mcp__strbuf_free(mcp__strbuf *b);
+int mcp__strbuf_read_file(mcp__strbuf *b, FILE *f);
 #endif

@@ -263,6 +263,14 @@ mcp__outdir_check_input(const mcp__outdir *o, const char *input)
     return 0;
 }
 
+int
+mcp__outdir_check_inputs(const mcp__outdir *o, const char *const *inputs, int n)
+{
+    for (int i = 0; i < n; i++)
+        if (inputs[i] && mcp__outdir_check_input(o, inputs[i])) return -1;
+    return 0;
+}
+
 static int
 fix_one(const mcp__outdir *o, cJSON *it)
 {

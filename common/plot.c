@@ -4,6 +4,8 @@
 #define _POSIX_C_SOURCE 200809L /* strcasecmp */
 #include <mcpost/plot.h>
 
+#include "internal.h"
+
 #include <math.h>
 #include <stdarg.h>
 #include <stdint.h>
@@ -69,42 +71,16 @@ mcp_logistic(double z)
     return 1.0 / (1.0 + exp(-z));
 }
 
-/* ---- a growing text buffer ---- */
+/* ---- a growing text buffer (common/strbuf.c; a failure sticks in b->failed) ---- */
 
-typedef struct {
-    char *s;
-    size_t len, cap;
-    int failed;
-} sbuf;
+typedef mcp__strbuf sbuf;
 
 static void MCP_PRINTF(2, 3) sb_printf(sbuf *b, const char *fmt, ...)
 {
-    if (b->failed) return;
-    for (;;) {
-        va_list ap;
-        va_start(ap, fmt);
-        int n =
-            vsnprintf(b->s ? b->s + b->len : NULL, b->s ? b->cap - b->len : 0, fmt, ap);
-        va_end(ap);
-        if (n < 0) {
-            b->failed = 1;
-            return;
-        }
-        if (b->s && b->len + (size_t)n < b->cap) {
-            b->len += (size_t)n;
-            return;
-        }
-        size_t cap = b->cap ? b->cap * 2 : 4096;
-        while (cap < b->len + (size_t)n + 1)
-            cap *= 2;
-        char *s = mcp_realloc(b->s, cap);
-        if (!s) {
-            b->failed = 1;
-            return;
-        }
-        b->s = s;
-        b->cap = cap;
-    }
+    va_list ap;
+    va_start(ap, fmt);
+    mcp__strbuf_vprintf(b, fmt, ap);
+    va_end(ap);
 }
 
 /* XML-escaped text. */

@@ -13,6 +13,8 @@
 #include <mcpost/imageio.h>
 #include <mcpost/tonemap.h>
 
+#include "internal.h"
+
 #include <math.h>
 #include <stdarg.h>
 #include <stdint.h>
@@ -41,66 +43,28 @@
 #define FALSE_LO (-3.0)
 #define FALSE_HI 2.0
 
-/* ---- a growing string ---- */
+/* ---- a growing string (common/strbuf.c; a failure sticks in b->failed) ---- */
 
-typedef struct {
-    char *s;
-    size_t len, cap;
-    int failed;
-} sbuf;
+typedef mcp__strbuf sbuf;
 
 static void
 sb_put(sbuf *b, const char *s, size_t n)
 {
-    if (b->failed) return;
-    if (b->len + n + 1 > b->cap) {
-        size_t cap = b->cap ? b->cap : 65536;
-        while (cap < b->len + n + 1)
-            cap *= 2;
-        char *p = mcp_realloc(b->s, cap);
-        if (!p) {
-            b->failed = 1;
-            return;
-        }
-        b->s = p;
-        b->cap = cap;
-    }
-    memcpy(b->s + b->len, s, n);
-    b->len += n;
-    b->s[b->len] = '\0';
+    mcp__strbuf_put(b, s, n);
 }
 
 static void
 sb_str(sbuf *b, const char *s)
 {
-    sb_put(b, s, strlen(s));
+    mcp__strbuf_str(b, s);
 }
 
 static void MCP_PRINTF(2, 3) sb_printf(sbuf *b, const char *fmt, ...)
 {
-    char small[512];
     va_list ap;
     va_start(ap, fmt);
-    int n = vsnprintf(small, sizeof small, fmt, ap);
+    mcp__strbuf_vprintf(b, fmt, ap);
     va_end(ap);
-    if (n < 0) {
-        b->failed = 1;
-        return;
-    }
-    if ((size_t)n < sizeof small) {
-        sb_put(b, small, (size_t)n);
-        return;
-    }
-    char *big = mcp_malloc((size_t)n + 1);
-    if (!big) {
-        b->failed = 1;
-        return;
-    }
-    va_start(ap, fmt);
-    vsnprintf(big, (size_t)n + 1, fmt, ap);
-    va_end(ap);
-    sb_put(b, big, (size_t)n);
-    free(big);
 }
 
 /* HTML-escaped text. */

@@ -40,29 +40,24 @@ programs_dir(char *buf, size_t cap)
     return -1;
 }
 
-/* Appends text[0..n) to the growing string *s (length *len, capacity *cap),
- * single-quoted for /bin/sh when quote is set ('\'' for each quote inside). */
+/* Appends text[0..n) to b, single-quoted for /bin/sh when quote is set ('\'' for
+ * each quote inside). */
 static int
-append(char **s, size_t *len, size_t *cap, const char *text, size_t n, int quote)
+append(mcp__strbuf *b, const char *text, size_t n, int quote)
 {
-    size_t need = *len + (quote ? 4 * n + 2 : n) + 1;
-    if (need > *cap) {
-        size_t c = need * 2;
-        char *p = mcp_realloc(*s, c);
-        if (!p) return -1;
-        *s = p;
-        *cap = c;
-    }
-    if (quote) (*s)[(*len)++] = '\'';
+    char *o = mcp__strbuf_reserve(b, quote ? 4 * n + 2 : n);
+    if (!o) return -1;
+    if (quote) *o++ = '\'';
     for (size_t i = 0; i < n; i++) {
         if (quote && text[i] == '\'') {
-            memcpy(*s + *len, "'\\''", 4);
-            *len += 4;
+            memcpy(o, "'\\''", 4);
+            o += 4;
         } else
-            (*s)[(*len)++] = text[i];
+            *o++ = text[i];
     }
-    if (quote) (*s)[(*len)++] = '\'';
-    (*s)[*len] = '\0';
+    if (quote) *o++ = '\'';
+    *o = '\0';
+    b->len = (size_t)(o - b->s);
     return 0;
 }
 
@@ -70,24 +65,18 @@ int
 mcp__shell_fill(const char *tmpl, int n, const char *const *names,
                 const char *const *values, unsigned quoted, char **out)
 {
-    char *s = NULL;
-    size_t len = 0, cap = 0;
-    int rc = append(&s, &len, &cap, "", 0, 0);
+    mcp__strbuf s = {0};
+    int rc = 0;
     for (const char *p = tmpl; *p && !rc;) {
         int k = -1;
         for (int i = 0; i < n && k < 0; i++)
             if (!strncmp(p, names[i], strlen(names[i]))) k = i;
-        rc = k < 0 ? append(&s, &len, &cap, p, 1, 0)
-                   : append(&s, &len, &cap, values[k], strlen(values[k]),
-                            (quoted >> k) & 1);
+        rc = k < 0 ? append(&s, p, 1, 0)
+                   : append(&s, values[k], strlen(values[k]), (quoted >> k) & 1);
         p += k < 0 ? 1 : strlen(names[k]);
     }
-    if (rc) {
-        free(s);
-        return -1;
-    }
-    *out = s;
-    return 0;
+    *out = mcp__strbuf_take(&s);
+    return *out ? 0 : -1;
 }
 
 int
@@ -98,17 +87,13 @@ mcp__shell(const char *command)
     if (programs_dir(dir, sizeof dir) != 0) return system(command);
     /* PATH="${PATH:+$PATH:}"'DIR'; export PATH; COMMAND */
     static const char head[] = "PATH=\"${PATH:+$PATH:}\"", tail[] = "; export PATH; ";
-    char *line = NULL;
-    size_t len = 0, cap = 0;
-    if (append(&line, &len, &cap, head, strlen(head), 0) ||
-        append(&line, &len, &cap, dir, strlen(dir), 1) ||
-        append(&line, &len, &cap, tail, strlen(tail), 0) ||
-        append(&line, &len, &cap, command, strlen(command), 0)) {
-        free(line);
-        return -1;
-    }
-    int status = system(line);
-    free(line);
+    mcp__strbuf line = {0};
+    append(&line, head, strlen(head), 0);
+    append(&line, dir, strlen(dir), 1);
+    append(&line, tail, strlen(tail), 0);
+    append(&line, command, strlen(command), 0);
+    int status = line.failed ? -1 : system(line.s);
+    mcp__strbuf_free(&line);
     return status;
 }
 

@@ -8,6 +8,7 @@
 #include <mcpost/denoiser.h>
 
 #include "internal.h"
+#include "../common/internal.h" /* growing strings (common/strbuf.c) */
 
 #include <pthread.h>
 #include <stdio.h>
@@ -106,12 +107,12 @@ is_key(const char *s, size_t len)
     return 1;
 }
 
-/* Appends s to buf (growing it) as a YAML double-quoted scalar. */
+/* Appends s to b as a YAML double-quoted scalar. */
 static int
-append_quoted(char **buf, size_t *len, size_t *cap, const char *s)
+append_quoted(mcp__strbuf *b, const char *s)
 {
-    if (mcp__buf_reserve(buf, cap, *len + 2 * strlen(s) + 3)) return -1;
-    char *p = *buf + *len;
+    char *p = mcp__strbuf_reserve(b, 2 * strlen(s) + 2);
+    if (!p) return -1;
     *p++ = '"';
     for (; *s; s++) {
         if (*s == '"' || *s == '\\')
@@ -120,17 +121,7 @@ append_quoted(char **buf, size_t *len, size_t *cap, const char *s)
     }
     *p++ = '"';
     *p = '\0';
-    *len = (size_t)(p - *buf);
-    return 0;
-}
-
-static int
-append_text(char **buf, size_t *len, size_t *cap, const char *s, size_t n)
-{
-    if (mcp__buf_reserve(buf, cap, *len + n + 1)) return -1;
-    memcpy(*buf + *len, s, n);
-    *len += n;
-    (*buf)[*len] = '\0';
+    b->len = (size_t)(p - b->s);
     return 0;
 }
 
@@ -139,10 +130,8 @@ append_text(char **buf, size_t *len, size_t *cap, const char *s, size_t n)
 static int
 args_to_yaml(const char *name, const char *const *opts, int n_opts, char **out)
 {
-    char *buf = NULL;
-    size_t len = 0, cap = 0;
-    int rc = append_text(&buf, &len, &cap, "{name: ", 7) ||
-             append_quoted(&buf, &len, &cap, name);
+    mcp__strbuf buf = {0};
+    int rc = mcp__strbuf_str(&buf, "{name: ") || append_quoted(&buf, name);
     for (int i = 0; i < n_opts && !rc; i++) {
         const char *eq = strchr(opts[i], '=');
         if (!eq || !is_key(opts[i], (size_t)(eq - opts[i]))) {
@@ -164,19 +153,17 @@ args_to_yaml(const char *name, const char *const *opts, int n_opts, char **out)
         if (rc)
             break;
         const char *value = eq + 1;
-        rc = append_text(&buf, &len, &cap, i ? ",\n" : ", ", 2) ||
-             append_text(&buf, &len, &cap, opts[i], klen) ||
-             append_text(&buf, &len, &cap, ": ", 2) ||
-             (is_plain_word(value) ? append_text(&buf, &len, &cap, value, strlen(value))
-                                   : append_quoted(&buf, &len, &cap, value));
+        rc = mcp__strbuf_str(&buf, i ? ",\n" : ", ") ||
+             mcp__strbuf_put(&buf, opts[i], klen) || mcp__strbuf_str(&buf, ": ") ||
+             (is_plain_word(value) ? mcp__strbuf_str(&buf, value)
+                                   : append_quoted(&buf, value));
     }
-    if (!rc)
-        rc = append_text(&buf, &len, &cap, "}", 1);
+    if (!rc) rc = mcp__strbuf_str(&buf, "}");
     if (rc) {
-        free(buf);
+        mcp__strbuf_free(&buf);
         return -1;
     }
-    *out = buf;
+    *out = mcp__strbuf_take(&buf);
     return 0;
 }
 
@@ -187,18 +174,6 @@ destroy_plain(mcp_denoiser *self)
 }
 
 /* ---- helpers for the kinds (internal.h) ---- */
-
-int
-mcp__buf_reserve(char **buf, size_t *cap, size_t need)
-{
-    if (need <= *cap) return 0;
-    size_t c = need * 2;
-    char *b = mcp_realloc(*buf, c);
-    if (!b) return -1;
-    *buf = b;
-    *cap = c;
-    return 0;
-}
 
 int
 mcp__denoise_check_input(const char *who, const mcp_denoise_input *in)

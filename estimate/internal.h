@@ -50,10 +50,6 @@ int mcp__denoise_check_tangents(const char *who, const mcp_denoise_input *at,
 /* A new zero-filled packed image with channels R, G, B labelled `source`. */
 int mcp__rgb_new(int width, int height, const char *source, mcp_image **out);
 
-/* Grows the text buffer *buf (capacity *cap) to hold at least need bytes (doubling, so
- * that appending stays linear); -1 with an error when out of memory. */
-int mcp__buf_reserve(char **buf, size_t *cap, size_t need);
-
 /* A new denoiser with the common fields set, a zeroed state block of state_size bytes
  * (freed with it) and a destroy that frees both; NULL with an error on failure. */
 mcp_denoiser *mcp__denoiser_new(const char *name, size_t state_size);
@@ -64,15 +60,17 @@ mcp_denoiser *mcp__denoiser_new(const char *name, size_t state_size);
 #include <stdint.h>
 #include <mcpost/estimate.h>
 
-/* A counter-based random stream (splitmix64) keyed by (seed, stream kind, probe,
- * pixel index): the same numbers whatever the thread count (probes.c). */
+#include "../common/rng_internal.h"
+
+/* A counter-based random stream (splitmix64, common/rng_internal.h) keyed by (seed,
+ * stream kind, probe, pixel index): the same numbers whatever the thread count
+ * (probes.c). */
 typedef struct mcp__rng {
     uint64_t state;
     double spare; /* the second Box-Muller normal */
     int has_spare;
 } mcp__rng;
 
-uint64_t mcp__mix64(uint64_t z);
 void mcp__rng_init(mcp__rng *r, uint64_t seed, uint64_t stream, uint64_t k, uint64_t index);
 uint64_t mcp__rng_u64(mcp__rng *r);
 double mcp__rng_normal(mcp__rng *r);

@@ -27,18 +27,10 @@ enum { STREAM_GAUSS = 1, STREAM_RADEMACHER = 2 };
 
 /* ---- random numbers ---- */
 
-uint64_t
-mcp__mix64(uint64_t z)
-{
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-    return z ^ (z >> 31);
-}
-
 void
 mcp__rng_init(mcp__rng *r, uint64_t seed, uint64_t stream, uint64_t k, uint64_t index)
 {
-    uint64_t s = mcp__mix64(seed + 0x9e3779b97f4a7c15ULL);
+    uint64_t s = mcp__mix64(seed + MCP__SPLITMIX64_GAMMA);
     s = mcp__mix64(s ^ (stream * 0xd1b54a32d192ed03ULL + k));
     r->state = mcp__mix64(s ^ index);
     r->spare = 0.0;
@@ -48,8 +40,7 @@ mcp__rng_init(mcp__rng *r, uint64_t seed, uint64_t stream, uint64_t k, uint64_t 
 uint64_t
 mcp__rng_u64(mcp__rng *r)
 {
-    r->state += 0x9e3779b97f4a7c15ULL;
-    return mcp__mix64(r->state);
+    return mcp__splitmix64_next(&r->state);
 }
 
 double

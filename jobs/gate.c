@@ -350,6 +350,7 @@ mcp__gate_from_settings(const mcp_metrics_settings *s, mcp_metrics_options *o,
             if (kinds[k].percent ? mcp__gate_add_percent(g, t, kinds[k].is_fail)
                                  : mcp__gate_add(g, t, kinds[k].is_fail))
                 return -1;
+            if (!o) continue; /* collect: each section's own figures judge it */
             mcp__gate one = {.n = 1};
             one.c[0] = g->c[g->n - 1];
             if (mcp__gate_request(&one, o)) return -1;

@@ -279,7 +279,9 @@ int mcp__gate_exit_code(mcp__gate_verdict v);
  * fail_percent and warn_percent, in that order, parsed, its share of pixels requested
  * in o and its figure checked against what o computes, one at a time. On failure the
  * current error is the command line's ("--fail 'x > 1': no figure 'x' ..."), and
- * *bad_key and *bad_index name the condition ("fail", 0) for a job's line. */
+ * *bad_key and *bad_index name the condition ("fail", 0) for a job's line. With o NULL
+ * (collect, whose frames' sections were computed with their job's options) the
+ * conditions are only parsed; each section's figures judge them later. */
 int mcp__gate_from_settings(const mcp_metrics_settings *s, mcp_metrics_options *o,
                             mcp__gate *g, const char **bad_key, int *bad_index);
 /* The worst verdict of the gates judged in this process since the last reset: what

@@ -16,6 +16,9 @@ extern const mcp_operation mcp__op_convert;
 extern const mcp_operation mcp__op_metrics;
 extern const mcp_operation mcp__op_compare;
 extern const mcp_operation mcp__op_perceptual;
+/* collect's gates (cli/cmd_collect.c; settings: mcp_metrics_settings): the command
+ * line's only, so not in operations.c's list */
+extern const mcp_operation mcp__op_collect;
 
 /* metrics' and compare's FLIPs, "ldr,hdr" (op_metrics.c) */
 extern const mcp_wordlist mcp__flip_kind_words;

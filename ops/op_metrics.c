@@ -31,6 +31,18 @@ const mcp_wordlist mcp__flip_kind_words = {"FLIP", flip_kind_names, 2};
         .doc = DOC                                                                       \
     }
 
+/* The four gate rows, taken where GW says: metrics', compare's and collect's. */
+#define GATE_ROWS(GW)                                                                    \
+    GATE_ROW(fail, GW, "'EXPR'",                                                         \
+             "FAILURE when EXPR holds: FIGURE OP NUMBER, OP one of > >= < <=, "          \
+             "FIGURE a number of the JSON, dots for nesting (flip_ldr.mean)"),           \
+    GATE_ROW(warn, GW, "'EXPR'", "WARNING when EXPR holds"),                             \
+    GATE_ROW(fail_percent, GW, "'MAP T P'",                                              \
+             "FAILURE when more than P% of the pixels have MAP (flip_ldr, "              \
+             "flip_hdr, relse) above T (idiff's -failpercent)"),                         \
+    GATE_ROW(warn_percent, GW, "'MAP T P'",                                              \
+             "WARNING when more than P% of the pixels have MAP above T")
+
 /* The figures' options and the gates, the rows metrics and compare share: W is where
  * the figures' options are taken, GW the gates' (metrics: everywhere and not in Python;
  * compare: the command line). */
@@ -216,15 +228,7 @@ const mcp_wordlist mcp__flip_kind_words = {"FLIP", flip_kind_names, 2};
          .doc = "the low frequencies' share of Nyquist",                                 \
          .hi = 1,                                                                        \
          .bounds = MCP_OPT_LO_OPEN | MCP_OPT_HI},                                        \
-        GATE_ROW(fail, GW, "'EXPR'",                                                         \
-                 "FAILURE when EXPR holds: FIGURE OP NUMBER, OP one of > >= < <=, "      \
-                 "FIGURE a number of the JSON, dots for nesting (flip_ldr.mean)"),       \
-        GATE_ROW(warn, GW, "'EXPR'", "WARNING when EXPR holds"),                             \
-        GATE_ROW(fail_percent, GW, "'MAP T P'",                                              \
-                 "FAILURE when more than P% of the pixels have MAP (flip_ldr, "          \
-                 "flip_hdr, relse) above T (idiff's -failpercent)"),                     \
-        GATE_ROW(warn_percent, GW, "'MAP T P'", "WARNING when more than P% of the pixels "   \
-                                            "have MAP above T")
+        GATE_ROWS(GW)
 
 static const mcp_option metrics_options[] = {
     {.name = "input",
@@ -375,3 +379,18 @@ mcp_operation_compare(void)
 {
     return &mcp__op_compare;
 }
+
+/* ---- collect: the gates alone, judged on every frame of a shot (cli/cmd_collect.c) ---- */
+
+static const mcp_option collect_options[] = {GATE_ROWS(MCP_OPT_CLI), {0}};
+
+const mcp_operation mcp__op_collect = {
+    .name = "collect",
+    .summary = "gather a frame job's reports into one (the gates of metrics over every "
+               "frame)",
+    .options = collect_options,
+    .size = sizeof(S),
+    .defaults = metrics_defaults,
+    .given_offset = offsetof(S, given),
+    .shared = MCP_SHARED_JSON | MCP_SHARED_QUIET,
+};

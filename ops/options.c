@@ -424,53 +424,24 @@ mcp_option_format(const mcp_option *o, const void *settings, char *buf, size_t c
 
 /* ---- text for people: the dump and the docs' table ---- */
 
-typedef struct {
-    char *text;
-    size_t len, cap;
-} strbuf;
-
-static int add(strbuf *b, const char *fmt, ...) MCP_PRINTF(2, 3);
-
-static int
-add(strbuf *b, const char *fmt, ...)
-{
-    va_list ap;
-    for (;;) {
-        size_t room = b->cap - b->len;
-        va_start(ap, fmt);
-        int n = vsnprintf(b->text ? b->text + b->len : NULL, b->text ? room : 0, fmt, ap);
-        va_end(ap);
-        if (n < 0) return -1;
-        if (b->text && (size_t)n < room) {
-            b->len += (size_t)n;
-            return 0;
-        }
-        size_t cap = (b->cap + (size_t)n + 1) * 2;
-        char *t = mcp_realloc(b->text, cap);
-        if (!t) return -1;
-        b->text = t;
-        b->cap = cap;
-    }
-}
-
 char *
 mcp_operation_dump(const mcp_operation *op, const void *settings, unsigned where)
 {
-    strbuf b = {0};
-    int rc = add(&b, "%s", "");
+    mcp__strbuf b = {0}; /* common/strbuf.c */
+    int rc = 0;
     for (const mcp_option *o = op->options; o->name && !rc; o++) {
         if (!mcp_option_takes(o, where) || o->type == MCP_OPT_INPUT ||
             o->type == MCP_OPT_DENOISER)
             continue;
         char v[1024];
         mcp_option_format(o, settings, v, sizeof v);
-        rc = add(&b, "%s: %s\n", o->name, v);
+        rc = mcp__strbuf_printf(&b, "%s: %s\n", o->name, v);
     }
     if (rc) {
-        free(b.text);
+        mcp__strbuf_free(&b);
         return NULL;
     }
-    return b.text;
+    return mcp__strbuf_take(&b);
 }
 
 /* "(command line only)", "(not in Python)" for where */
@@ -490,17 +461,17 @@ where_text(unsigned where)
 
 /* text with '|' as "\|", which a markdown table cell needs */
 static int
-add_cell(strbuf *b, const char *text)
+add_cell(mcp__strbuf *b, const char *text)
 {
     for (const char *p = text; *p; p++)
-        if (*p == '|' ? add(b, "%s", "\\|") : add(b, "%c", *p)) return -1;
+        if (*p == '|' ? mcp__strbuf_str(b, "\\|") : mcp__strbuf_put(b, p, 1)) return -1;
     return 0;
 }
 
 /* One row of the docs' table. */
 static int
-markdown_row(strbuf *b, const mcp_operation *op, const mcp_option *o, const char *doc,
-             const char *def)
+markdown_row(mcp__strbuf *b, const mcp_operation *op, const mcp_option *o,
+             const char *doc, const char *def)
 {
     char flag[96] = "—", meta[96] = "", range[96] = "";
     const char *value = o->meta                   ? o->meta
@@ -532,32 +503,34 @@ markdown_row(strbuf *b, const mcp_operation *op, const mcp_option *o, const char
         range_text(o, r, sizeof r);
         snprintf(range, sizeof range, " (%s)", r);
     }
-    int rc = add(b, "| `%s` | ", o->name) || add_cell(b, flag) || add(b, " | ") ||
-             add_cell(b, def ? def : "—") || add(b, " | ") || add_cell(b, doc) ||
-             add(b, "%s", range);
+    int rc = mcp__strbuf_printf(b, "| `%s` | ", o->name) || add_cell(b, flag) ||
+             mcp__strbuf_str(b, " | ") || add_cell(b, def ? def : "—") ||
+             mcp__strbuf_str(b, " | ") || add_cell(b, doc) || mcp__strbuf_str(b, range);
     if (!rc && (o->type == MCP_OPT_ENUM || o->type == MCP_OPT_WORDSET)) {
         char words[512];
         mcp_wordlist_join(o->words, "`, `", words, sizeof words);
-        rc = o->type == MCP_OPT_ENUM ? add(b, "; one of `%s`", words)
-                                     : add(b, "; any of `%s`, or `none`", words);
+        rc = mcp__strbuf_printf(b,
+                                o->type == MCP_OPT_ENUM ? "; one of `%s`"
+                                                        : "; any of `%s`, or `none`",
+                                words);
     }
     if (!rc && o->type == MCP_OPT_TEXTS)
-        rc = add(b, " (repeatable: a job gives a list)");
+        rc = mcp__strbuf_str(b, " (repeatable: a job gives a list)");
     /* which front ends it misses, of those the operation has at all */
     unsigned all = 0;
     for (const mcp_option *p = op->options; p->name; p++)
         all |= p->where ? p->where : MCP_OPT_ALL;
     if (!rc && o->where && (o->where & all) != all)
-        rc = add(b, " (%s)", where_text(o->where | (MCP_OPT_ALL & ~all)));
-    return rc || add(b, " |\n");
+        rc = mcp__strbuf_printf(b, " (%s)", where_text(o->where | (MCP_OPT_ALL & ~all)));
+    return rc || mcp__strbuf_str(b, " |\n");
 }
 
 char *
 mcp_operation_markdown(const mcp_operation *op)
 {
-    strbuf b = {0};
-    int rc =
-        add(&b, "| option | command line | default | meaning |\n|---|---|---|---|\n");
+    mcp__strbuf b = {0};
+    int rc = mcp__strbuf_str(
+        &b, "| option | command line | default | meaning |\n|---|---|---|---|\n");
     for (const mcp_option *o = op->options; o->name && !rc; o++)
         rc = markdown_row(&b, op, o, o->doc, o->def);
     const mcp_operation *sh = mcp_shared_operation();
@@ -572,8 +545,8 @@ mcp_operation_markdown(const mcp_operation *op)
                          is_output ? op->output_def : o->def);
     }
     if (rc) {
-        free(b.text);
+        mcp__strbuf_free(&b);
         return NULL;
     }
-    return b.text;
+    return mcp__strbuf_take(&b);
 }

@@ -11,6 +11,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "../common/rng_internal.h"
+
 /* ---- the kernel g ---- */
 
 /* g as a full (2r+1)^2 array: g(dx, dy) at taps[(dy + r) * side + dx + r]. The
@@ -91,15 +93,12 @@ int mcp__image_from_rgb(int w, int h, const float *rgb, mcp_image **out);
  * in [0, 1]. */
 int mcp__confidence_map(const mcp_perc_model *model, int w, int h, float **out);
 
-/* A 64-bit hash of (seed, i): splitmix64's finaliser (random streams per pixel, so
- * results never depend on the thread count). */
+/* A 64-bit hash of (seed, i): splitmix64's finaliser (common/rng_internal.h; random
+ * streams per pixel, so results never depend on the thread count). */
 static inline uint64_t
 mcp__hash64(uint64_t seed, uint64_t i)
 {
-    uint64_t z = seed ^ (0x9E3779B97F4A7C15ull * (i + 1));
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
+    return mcp__mix64(seed ^ (MCP__SPLITMIX64_GAMMA * (i + 1)));
 }
 
 static inline double

@@ -9,6 +9,8 @@
  * the cell that the sample index names, so it needs no state either. */
 #include "internal.h"
 
+#include "../../common/rng_internal.h"
+
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -16,27 +18,20 @@
 /* Dimensions per sample: footprint (2), then the shading dimensions. */
 #define DIMS (2 + MCP__PROC_SHADE_DIMS)
 
-/* splitmix64's finaliser: a bijection of 64-bit words with full avalanche. */
-static inline uint64_t
-mix64(uint64_t z)
-{
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9u;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebu;
-    return z ^ (z >> 31);
-}
-
 /* The key of one pixel's stream. */
 static uint64_t
 stream_key(uint64_t seed, uint64_t src_index)
 {
-    return mix64(mix64(seed + 0x9e3779b97f4a7c15u) ^ (src_index * 0xd1b54a32d192ed03u));
+    return mcp__mix64(mcp__mix64(seed + MCP__SPLITMIX64_GAMMA) ^
+                      (src_index * 0xd1b54a32d192ed03u));
 }
 
 /* Uniform in [0, 1) with 53 random bits. */
 static inline double
 stream_uniform(uint64_t key, uint64_t sample, int dim)
 {
-    uint64_t h = mix64(key ^ mix64(sample * DIMS + (uint64_t)dim + 0x632be59bd9b4e019u));
+    uint64_t h =
+        mcp__mix64(key ^ mcp__mix64(sample * DIMS + (uint64_t)dim + 0x632be59bd9b4e019u));
     return (double)(h >> 11) * 0x1.0p-53;
 }
 
@@ -167,7 +162,7 @@ uint64_t
 mcp_proc_realization_seed(uint64_t seed, int realization)
 {
     if (realization == 0) return seed;
-    return mix64(seed ^ mix64((uint64_t)realization * 0xa0761d6478bd642fu));
+    return mcp__mix64(seed ^ mcp__mix64((uint64_t)realization * 0xa0761d6478bd642fu));
 }
 
 int

@@ -3,7 +3,8 @@
  * folder) makes it appear whole or not at all (docs/conventions.md, "Output folders"):
  * a failure found late leaves no folder, a run killed mid-way (SIGKILL, SIGTERM)
  * leaves no DIR, the next run clears what a SIGKILL left, a rerun replaces an earlier
- * output, and a folder that mcpost did not make is refused. */
+ * output, and a folder that mcpost did not make is refused, as is an input inside the
+ * folder that the run would replace (metrics, estimate, blend, perceptual, compare). */
 #include "testing.h"
 
 #include <dirent.h>
@@ -294,6 +295,85 @@ test_adaptive_output_appears_whole(void **state)
     assert_int_equal(count_named(dir, ".a."), 0);
 }
 
+/* An input inside the folder that a rerun would replace (common/outdir.c's check, as
+ * metrics has it above): `CMD -o DIR/o` writes the folder; SOURCE is copied into it as
+ * NAME; `BEFORE 'DIR/o/NAME' AFTER -o DIR/o` must then fail with the one line naming
+ * that input, keep it, leave the old output's report.json byte for byte, and leave no
+ * hidden temporary folder. */
+static void
+assert_input_inside_refused(const char *folder, const char *cmd, const char *source,
+                            const char *name, const char *before, const char *after)
+{
+    const char *dir = fresh_dir(folder);
+    char o[4200], inside[4400], copy[9000];
+    snprintf(o, sizeof o, "%s/o", dir);
+    assert_int_equal(run("%s --quiet -o '%s'", cmd, o), 0);
+    char *first = read_in(o, "report.json");
+    snprintf(inside, sizeof inside, "%s/%s", o, name);
+    snprintf(copy, sizeof copy, "cp '%s' '%s'", source, inside);
+    assert_int_equal(system(copy), 0);
+    assert_int_equal(run("%s '%s' %s --quiet -o '%s'", before, inside, after, o), 1);
+    char want[4600];
+    snprintf(want, sizeof want, "%s: is inside the output folder %s,", inside, o);
+    assert_non_null(strstr(err, want));
+    assert_null(strchr(strchr(err, '\n') + 1, '\n')); /* one line */
+    assert_true(exists(inside));
+    char *kept = read_in(o, "report.json");
+    assert_string_equal(kept, first);
+    free(first), free(kept);
+    assert_int_equal(count_named(dir, ".o."), 0);
+}
+
+#define ESTIMATE_EXTERNAL "--denoiser external --denoiser-command 'cp {color} {output}'"
+
+static void
+test_estimate_refuses_an_input_inside_its_output(void **state)
+{
+    (void)state;
+    assert_input_inside_refused("estimate_inside",
+                                "estimate " CORNELL "/series/cornell_spp0064.exr "
+                                ESTIMATE_EXTERNAL,
+                                CORNELL "/series/cornell_spp0064.exr", "dump.exr",
+                                "estimate", ESTIMATE_EXTERNAL);
+}
+
+static void
+test_blend_refuses_an_input_inside_its_output(void **state)
+{
+    (void)state;
+    assert_input_inside_refused("blend_inside",
+                                "blend " CORNELL "/series/cornell_spp0004.exr " CORNELL
+                                "/series/cornell_spp0016.exr --denoiser gauss",
+                                CORNELL "/series/cornell_spp0016.exr", "spp16.exr",
+                                "blend " CORNELL "/series/cornell_spp0004.exr",
+                                "--denoiser gauss");
+}
+
+static void
+test_perceptual_refuses_an_input_inside_its_output(void **state)
+{
+    (void)state;
+    assert_input_inside_refused("perceptual_inside",
+                                "perceptual " CORNELL "/singles/cornell_single0[0-3].exr "
+                                "-m permutation -s denoise --denoiser gauss",
+                                CORNELL "/singles/cornell_single00.exr", "single00.exr",
+                                "perceptual",
+                                CORNELL "/singles/cornell_single0[1-3].exr "
+                                "-m permutation -s denoise --denoiser gauss");
+}
+
+static void
+test_compare_refuses_an_input_inside_its_output(void **state)
+{
+    (void)state;
+    /* the reference inside: compare reads it first */
+    assert_input_inside_refused("compare_inside",
+                                "compare " CORNELL "/cornell_reference.exr " CORNELL
+                                "/series/cornell_spp0016.exr --flip none",
+                                CORNELL "/cornell_reference.exr", "ref.exr", "compare",
+                                CORNELL "/series/cornell_spp0016.exr --flip none");
+}
+
 /* A frame job whose estimate runs an external denoiser that, until DIR/go exists,
  * records its shell's pid and sleeps: a run of it can be killed mid-frame. While
  * DIR/fail exists it fails. */
@@ -460,6 +540,10 @@ main(void)
         cmocka_unit_test(test_rerun_replaces_and_foreign_folder_is_refused),
         cmocka_unit_test(test_metrics_output_appears_whole),
         cmocka_unit_test(test_adaptive_output_appears_whole),
+        cmocka_unit_test(test_estimate_refuses_an_input_inside_its_output),
+        cmocka_unit_test(test_blend_refuses_an_input_inside_its_output),
+        cmocka_unit_test(test_perceptual_refuses_an_input_inside_its_output),
+        cmocka_unit_test(test_compare_refuses_an_input_inside_its_output),
         cmocka_unit_test(test_killed_frame_leaves_no_folder),
         cmocka_unit_test(test_failed_job_leaves_no_folder),
     };

@@ -1,6 +1,8 @@
 /* testing.c: shared test helpers (see testing.h). */
 #include "testing.h"
 
+#include "../../common/rng_internal.h"
+
 #include <stdarg.h>
 
 #include <errno.h>
@@ -130,10 +132,7 @@ mcp_test_max_abs_diff(const mcp_image *a, const mcp_image *b)
 uint64_t
 mcp_test_rand_u64(uint64_t *state)
 {
-    uint64_t z = (*state += 0x9e3779b97f4a7c15ull);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return z ^ (z >> 31);
+    return mcp__splitmix64_next(state);
 }
 
 double
