@@ -58,11 +58,6 @@ typedef struct mcp_image {
 #define MCP_MAX_PIXELS_DEFAULT (1ull << 28)
 #define MCP_MAX_BYTES_DEFAULT (1ull << 34)
 
-/* 0 when a width x height x channels image is within MCP_MAX_DIM per side, 4096
- * channels and the ceiling above; else -1 with a message naming the size and the
- * variable that raises the limit. Readers call it before they look at the data. */
-MCP_API int mcp_image_check_size(int width, int height, int channels);
-
 /* A new zero-filled packed image (within mcp_image_check_size). names may be NULL
  * (channels are then called "C0", "C1", ...). */
 MCP_API int mcp_image_new(int width, int height, int channels,
