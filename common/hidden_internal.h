@@ -21,11 +21,6 @@
  * variable that raises the limit. Readers call it before they look at the data. */
 int mcp_image_check_size(int width, int height, int channels);
 
-/* ---- imageio.c ---- */
-
-/* 1 once the OpenImageIO plug-in has been loaded in this process. */
-int mcp_oiio_loaded(void);
-
 /* ---- dump.c: the words of two dump enums, and the series' variance source ---- */
 
 extern const mcp_wordlist mcp_variance_source_words, mcp_badval_policy_words;

@@ -131,6 +131,9 @@ typedef struct mcp_file_write {
  * still written. */
 MCP_API int mcp_write_files(const mcp_file_write *files, int n);
 
+/* 1 once the OpenImageIO plug-in has been loaded in this process. */
+MCP_API int mcp_oiio_loaded(void);
+
 /* ---- atomic output files (used by every writer, usable by anyone) ---- */
 
 typedef struct mcp_atomic_file {
