@@ -40,6 +40,15 @@ ROOT = Path(__file__).resolve().parent
 LIBS = "mcpost.libs"  # the folder beside the module (auditwheel's naming)
 
 
+def abi_version():
+    """The shared library's ABI version, its soname's number (MCP_ABI_VERSION)."""
+    text = (ROOT / "CMakeLists.txt").read_text()
+    m = re.search(r"set\(MCP_ABI_VERSION\s+([0-9]+)\)", text)
+    if not m:
+        sys.exit("setup.py: no set(MCP_ABI_VERSION N) in " + str(ROOT / "CMakeLists.txt"))
+    return m.group(1)
+
+
 def project_version():
     """The version in CMakeLists.txt's project(), the library's one version."""
     text = (ROOT / "CMakeLists.txt").read_text()
@@ -78,7 +87,6 @@ class CMakeBuildExt(build_ext):
                      "`./setup.sh build` builds build/python, which python3 then imports "
                      "as it changes (docs/python.md)")
         check_prerequisites()
-        version = project_version()
         module = Path(self.get_ext_fullpath(ext.name))
         with tempfile.TemporaryDirectory(prefix="mcpost-pip-") as tmp:
             build, stage = Path(tmp, "build"), Path(tmp, "stage")
@@ -111,10 +119,10 @@ class CMakeBuildExt(build_ext):
             shutil.copyfile(built[0], module)
             # only what runs: no headers, static library, CMake or pkg-config files;
             # the library under its soname, the one name the module asks for (a wheel
-            # holds no symlinks, and copies of libmcpost.so.X.Y.Z would double it)
+            # holds no symlinks, and copies under other names would double it)
             libs = module.parent / LIBS
             shutil.rmtree(libs, ignore_errors=True)  # nothing stale from an earlier build
-            soname = "libmcpost.so." + version.split(".")[0]
+            soname = "libmcpost.so." + abi_version()
             # the U-Net (the default denoiser) needs its weights: a wheel without them
             # would fail only at the first denoise
             weights = stage / LIBS / "share" / "mcpost" / "rt_hdr_alb_nrm.tza"

@@ -124,11 +124,6 @@ MCP_API extern const mcp_wordlist mcp_blend_filter_words;
 MCP_API extern const mcp_wordlist mcp_neg_sure_words;
 MCP_API extern const mcp_wordlist mcp_blend_weighting_words;
 MCP_API int mcp_curve_fit_from_name(const char *name, mcp_curve_fit *out);
-MCP_API int mcp_curve_model_from_name(const char *name, mcp_curve_model *out);
-MCP_API int mcp_blend_filter_from_name(const char *name, mcp_blend_filter *out);
-MCP_API int mcp_neg_sure_from_name(const char *name, mcp_neg_sure *out);
-/* "james_stein" (also "james-stein"), "curves" */
-MCP_API int mcp_blend_weighting_from_name(const char *name, mcp_blend_weighting *out);
 MCP_API const char *mcp_blend_weighting_name(mcp_blend_weighting w);
 MCP_API const char *mcp_curve_fit_name(mcp_curve_fit f);
 MCP_API const char *mcp_curve_model_name(mcp_curve_model m);
@@ -190,9 +185,6 @@ typedef struct mcp_blend_state {
 MCP_API int mcp_blend_filter_image(const mcp_image *img, double mean_var,
                                    const mcp_blend_options *opt, const mcp_denoiser *den,
                                    mcp_image **out);
-
-/* Negative values of sure: zeroed (magnitude 0) or replaced by |value|. In place. */
-MCP_API int mcp_blend_fix_sure_inplace(mcp_image *sure, int magnitude);
 
 /* Prepared estimates of one iteration: v and SURE filtered (or not, per the stopping
  * rule) and SURE made non-negative (per the negative rule). state may be NULL (the

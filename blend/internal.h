@@ -114,4 +114,15 @@ double mcp__max_weight(const mcp_blend_options *o);
  * `otherwise` (common/dump.c, common/internal.h). */
 const char *mcp__no_variance_hint(const mcp_dump *d, const char *otherwise);
 
+/* ---- not exported by libmcpost.so (docs/library.md, "Exported symbols") ---- */
+
+int mcp_curve_model_from_name(const char *name, mcp_curve_model *out);
+int mcp_blend_filter_from_name(const char *name, mcp_blend_filter *out);
+int mcp_neg_sure_from_name(const char *name, mcp_neg_sure *out);
+/* "james_stein" (also "james-stein"), "curves" */
+int mcp_blend_weighting_from_name(const char *name, mcp_blend_weighting *out);
+
+/* Negative values of sure: zeroed (magnitude 0) or replaced by |value|. In place. */
+int mcp_blend_fix_sure_inplace(mcp_image *sure, int magnitude);
+
 #endif

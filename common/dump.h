@@ -46,7 +46,7 @@ typedef enum {
 MCP_API const char *mcp_convention_name(mcp_convention c);
 /* The words of the dump enums (their from_name functions read them). */
 MCP_API extern const mcp_wordlist mcp_convention_words, mcp_variance_kind_words,
-    mcp_variance_source_words, mcp_badval_policy_words, mcp_merge_variance_words;
+    mcp_merge_variance_words;
 MCP_API int mcp_convention_from_name(const char *name, mcp_convention *out);
 
 typedef enum {
@@ -205,8 +205,6 @@ typedef enum {
 
 /* "auto", "file", "increments". */
 MCP_API extern const mcp_wordlist mcp_series_variance_words;
-MCP_API const char *mcp_series_variance_name(mcp_series_variance v);
-MCP_API int mcp_series_variance_from_name(const char *name, mcp_series_variance *out);
 
 /* Whether a ratio of Variance/n to the increments' spread (mcp_series_variance_ratio)
  * says Variance/n is off: outside [0.8, 1.25]. That band holds the independent

@@ -55,10 +55,6 @@ typedef struct mcp_flip_options {
 
 MCP_API mcp_flip_options mcp_flip_defaults(void);
 
-/* The pixels per degree that opt selects, in float as FLIP computes it. Fails naming
- * the field when it is not positive and finite. */
-MCP_API int mcp_flip_ppd(const mcp_flip_options *opt, float *ppd);
-
 /* FLIP's statistics of a per-pixel error map, as NVIDIA's tool (v1.6, tool/pooling.h)
  * defines and prints them (docs/metrics.md, "FLIP's statistics"):
  *  - the weighted percentile at p (median p = 0.5, quartiles 0.25 and 0.75) weighs
@@ -83,10 +79,6 @@ typedef struct mcp_flip_stats {
 /* The statistics of n per-pixel FLIP values (row-major). Values must be finite;
  * those outside [0, 1] count in no bucket, as in the tool. n >= 1. */
 MCP_API int mcp_flip_statistics(const float *values, size_t n, mcp_flip_stats *out);
-
-/* FLIP's weighted percentile (as above) of n values at p in [0, 1]. */
-MCP_API int mcp_flip_weighted_percentile(const float *values, size_t n, double p,
-                                         double *out);
 
 /* Bucket i of the weighted histogram: count_i (i + 0.5) / 100 / (n / 2^20), the
  * weighted FLIP sum per megapixel that the tool plots. */
@@ -114,39 +106,6 @@ MCP_API int mcp_flip_ldr(const mcp_image *test, const mcp_image *ref,
 MCP_API int mcp_flip_hdr(const mcp_image *test, const mcp_image *ref,
                          const mcp_flip_options *opt, mcp_flip_result *res,
                          mcp_image **map, mcp_image **exposure_map);
-
-/* ---- FLIP's parts, for tests and for other modules ---- */
-
-/* The 1D filters at a given ppd (FLIP.h setSpatialFilters, setFeatureFilter).
- * spatial: 2 * spatial_radius + 1 taps of y, cx (each sums to 1) and cz1, cz2 (the
- * GaussianSqrt split of the blue-yellow sum of Gaussians: cz1 x cz1 + cz2 x cz2 sums
- * to 1). feature: 2 * feature_radius + 1 taps of the Gaussian g and its first and
- * second derivatives dg, ddg (positive taps sum to 1, negative to -1). */
-typedef struct mcp_flip_filters {
-    float ppd;
-    int spatial_radius;
-    float *y, *cx, *cz1, *cz2;
-    int feature_radius;
-    float *g, *dg, *ddg;
-} mcp_flip_filters;
-
-MCP_API int mcp_flip_filters_new(float ppd, mcp_flip_filters **out);
-MCP_API void mcp_flip_filters_free(mcp_flip_filters *f);
-
-/* cmax = HyAB(Hunt(Lab(green)), Hunt(Lab(blue)))^qc = 41.2760963 (FLIP.h
- * computeMaxDistance, in float). */
-MCP_API float mcp_flip_cmax(void);
-
-/* The larger root x of tm(x) = 0.85 for FLIP's tone curve (FLIP.h computeExposures):
- * 2.1188723 (aces), 3.1277493 (hable), 5.6666667 (reinhard). */
-MCP_API int mcp_flip_exposure_xmax(mcp_tonemap tm, float *xmax);
-
-/* The automatic exposure range of a reference: start = log2(xmax / Ymax),
- * stop = log2(xmax / Ymedian) with Y the Rec. 709 luminance of max(ref, 0), Ymedian
- * element n/2 of the sorted luminances (zeros included) and both clamped to
- * FLT_EPSILON (our departure). */
-MCP_API int mcp_flip_auto_exposures(const mcp_image *ref, mcp_tonemap tm, float *start,
-                                    float *stop);
 
 /* ---- the CSF operator M of SURE_M (docs/mathematics.md §2.3, docs/flip.md §4) ----
  *

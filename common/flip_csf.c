@@ -15,6 +15,7 @@
 
 #include <stdlib.h>
 #include <string.h>
+#include "hidden_internal.h"
 
 #define PARALLEL_MIN_FLOATS 65536
 

@@ -45,16 +45,6 @@ MCP_API int mcp_frames_format(const int *frames, int count, char *buf, size_t ca
 /* Whether frame is in the sorted set. */
 MCP_API int mcp_frames_contains(const int *frames, int count, int frame);
 
-/* Whether path holds a frame token (1) or not (0), by the rules above; -1 (error
- * set) when the path breaks them. series: the path is a series pattern. */
-MCP_API int mcp_frame_token_check(const char *path, int series);
-
-/* Replaces the frame token of path by the frame number into buf. In a series pattern
- * the spp conversion (and any "%%") is kept for mcp_series_from_pattern; elsewhere
- * "%%" becomes '%'. A path without a token is copied. */
-MCP_API int mcp_frame_expand(const char *path, int series, int frame, char *buf,
-                             size_t cap);
-
 /* The folder of a frame's results inside a job's output folder: "<dir>/0017". */
 MCP_API int mcp_frame_dir(const char *output_dir, int frame, char *buf, size_t cap);
 

@@ -58,12 +58,7 @@ typedef struct mcp_image {
 #define MCP_MAX_PIXELS_DEFAULT (1ull << 28)
 #define MCP_MAX_BYTES_DEFAULT (1ull << 34)
 
-/* 0 when a width x height x channels image is within MCP_MAX_DIM per side, 4096
- * channels and the ceiling above; else -1 with a message naming the size and the
- * variable that raises the limit. Readers call it before they look at the data. */
-MCP_API int mcp_image_check_size(int width, int height, int channels);
-
-/* A new zero-filled packed image (within mcp_image_check_size). names may be NULL
+/* A new zero-filled packed image (within the ceiling above). names may be NULL
  * (channels are then called "C0", "C1", ...). */
 MCP_API int mcp_image_new(int width, int height, int channels,
                           const char *const *names, mcp_image **out);
@@ -72,7 +67,7 @@ MCP_API void mcp_image_free(mcp_image *img);
 
 /* A view of pixels the caller owns (a numpy array, a renderer's buffer): channel c of
  * pixel (x, y) at data[y * row_stride + x * pixel_stride + c]. names may be NULL
- * ("C0", ...); source labels messages (NULL: "(image)"). Within mcp_image_check_size;
+ * ("C0", ...); source labels messages (NULL: "(image)"). Within the ceiling above;
  * the pixels must outlive the view, and mcp_image_free frees only the header. */
 MCP_API int mcp_image_wrap(float *data, int width, int height, int channels,
                            ptrdiff_t pixel_stride, ptrdiff_t row_stride,

@@ -4,6 +4,7 @@
 
 #include <stddef.h>
 
+#include "hidden_internal.h"
 #include "oiio_internal.h"
 
 #include <mcpost/image.h>

@@ -129,11 +129,6 @@ MCP_API int mcp_relse_map(const mcp_image *test, const mcp_image *ref, double ep
 MCP_API int mcp_image_percentiles(const mcp_image *img, const double *p, int n_p,
                                   double *out);
 
-/* Checks a test/reference pair: same size, R, G, B present, every RGB value finite.
- * Fills the channel indices. */
-MCP_API int mcp_metrics_check_pair(const mcp_image *test, const mcp_image *ref,
-                                   int rgb_test[3], int rgb_ref[3]);
-
 /* The figures as members of obj (a JSON object): mse, rmse, relmse, psnr (the
  * string "inf" for identical displays), pmse (with its settings), relse_percentiles
  * {p: [...], value: [...]}, flip_ldr {mean, weighted_median, weighted_q1,

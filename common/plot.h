@@ -19,11 +19,6 @@ extern "C" {
 
 typedef enum { MCP_AXIS_LINEAR, MCP_AXIS_LOG, MCP_AXIS_LOGIT } mcp_axis_scale;
 
-/* "linear", "log", "logit". */
-MCP_API extern const mcp_wordlist mcp_axis_scale_words, mcp_series_style_words;
-MCP_API int mcp_axis_scale_from_name(const char *name, mcp_axis_scale *out);
-MCP_API const char *mcp_axis_scale_name(mcp_axis_scale s);
-
 /* BARS: a histogram, one bar per point centred on x, as wide as the smallest gap
  * between neighbouring x, up from 0 on a linear y axis (the axis bottom otherwise);
  * translucent, so that bars of several series overlap visibly (FLIP's overlapped
@@ -34,10 +29,6 @@ typedef enum {
     MCP_SERIES_LINE_POINTS,
     MCP_SERIES_BARS
 } mcp_series_style;
-
-/* "line", "scatter", "line+points", "bars". */
-MCP_API int mcp_series_style_from_name(const char *name, mcp_series_style *out);
-MCP_API const char *mcp_series_style_name(mcp_series_style s);
 
 typedef struct mcp_plot_series {
     const char *name; /* legend text */

@@ -9,6 +9,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include "hidden_internal.h"
 
 struct mcp_report {
     cJSON *root;

@@ -81,8 +81,6 @@ MCP_API cJSON *mcp_report_add_hdr_image(cJSON *section, const char *rel_png,
  * values) and the mode, one of clamp, aces, hable, reinhard (tonemap.h's curves, then
  * sRGB) or false-colour (log10 luminance). A reader changes both on the page. */
 MCP_API int mcp_report_set_display(mcp_report *r, double exposure, const char *mode);
-/* 0 when mode is one of those names; else -1 with "unknown display 'X' (known: ...)". */
-MCP_API int mcp_report_display_mode_check(const char *mode);
 /* The display modes' words, value i the i-th: clamp, aces, hable, reinhard,
  * false-colour. */
 MCP_API extern const mcp_wordlist mcp_report_display_words;

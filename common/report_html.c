@@ -22,6 +22,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
+#include "hidden_internal.h"
 
 #ifndef MCP_VERSION
 #define MCP_VERSION "?"

@@ -179,7 +179,6 @@ typedef enum {
 } mcp_sampling_kind;
 
 MCP_API extern const mcp_wordlist mcp_sampling_kind_words;
-MCP_API int mcp_sampling_kind_from_name(const char *name, mcp_sampling_kind *out);
 MCP_API const char *mcp_sampling_kind_name(mcp_sampling_kind kind);
 
 typedef struct mcp_sampling_options {
@@ -455,7 +454,6 @@ typedef enum {
 } mcp_adaptive_map;
 
 MCP_API extern const mcp_wordlist mcp_adaptive_map_words;
-MCP_API int mcp_adaptive_map_from_name(const char *name, mcp_adaptive_map *out);
 MCP_API const char *mcp_adaptive_map_name(mcp_adaptive_map map);
 
 typedef struct mcp_adaptive_options {

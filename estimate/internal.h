@@ -127,4 +127,9 @@ int mcp__adaptive_accumulate(mcp_dump **acc, mcp_dump *part);
 /* Room for a path built from settings (a folder and a file name). */
 #define PATH_CAP 4096
 
+/* ---- not exported by libmcpost.so (docs/library.md, "Exported symbols") ---- */
+
+int mcp_sampling_kind_from_name(const char *name, mcp_sampling_kind *out);
+int mcp_adaptive_map_from_name(const char *name, mcp_adaptive_map *out);
+
 #endif

@@ -41,4 +41,10 @@ int mcp__options_from_node(const mcp_operation *op, const mcp_node *map,
 /* Room for a map's keys (mcp__options_node_keys). */
 #define MCP__OPTION_KEYS_MAX 64
 
+/* ---- not exported by libmcpost.so (docs/library.md, "Exported symbols") ---- */
+
+/* The value of o in settings as text, as mcp_operation_set reads it back ("0.01",
+ * "true", "relse", "0.5,0.9"; NULL text "~"): into buf, truncated to cap. */
+void mcp_option_format(const mcp_option *o, const void *settings, char *buf, size_t cap);
+
 #endif

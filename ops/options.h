@@ -148,11 +148,6 @@ MCP_API int mcp_operation_given(const mcp_operation *op, const mcp_option *o,
 /* After the options: op->finish (may fail, e.g. the library's check). */
 MCP_API int mcp_operation_finish(const mcp_operation *op, void *settings);
 
-/* The value of o in settings as text, as mcp_operation_set reads it back ("0.01",
- * "true", "relse", "0.5,0.9"; NULL text "~"): into buf, truncated to cap. */
-MCP_API void mcp_option_format(const mcp_option *o, const void *settings, char *buf,
-                               size_t cap);
-
 /* The settings as "name: value" lines, one per option that front end `where` takes
  * (MCP_OPT_INPUT and MCP_OPT_DENOISER left out): what `--print-settings` prints and
  * Python's mcpost.settings returns, for comparing front ends. malloc'd. */

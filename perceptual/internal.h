@@ -242,4 +242,34 @@ mcp__mask_at(const mcp_image *mask, int x, int y)
     return mcp_image_px(mask, x % mask->width, y % mask->height)[0];
 }
 
+/* ---- not exported by libmcpost.so (docs/library.md, "Exported symbols") ---- */
+
+int mcp_perc_method_from_name(const char *name, mcp_perc_method *out);
+/* 1 for the horizontal methods (their result is a permutation to re-render). */
+int mcp_perc_method_is_horizontal(mcp_perc_method method);
+int mcp_perc_init_from_name(const char *name, mcp_perc_init *out);
+const char *mcp_perc_init_name(mcp_perc_init init);
+
+/* The methods one by one (opt->method is ignored); mcp_perc_optimize picks one. */
+int mcp_perc_vertical_iterative(const mcp_image *const *cands, int m,
+                                const mcp_image *surrogate, const mcp_perc_options *opt,
+                                mcp_perc_result *out);
+int mcp_perc_power_set(const mcp_image *const *cands, int m, const mcp_image *surrogate,
+                       const mcp_perc_options *opt, mcp_perc_result *out);
+int mcp_perc_error_diffusion(const mcp_image *const *cands, int m,
+                             const mcp_image *surrogate, const mcp_perc_options *opt,
+                             mcp_perc_result *out);
+int mcp_perc_dither(const mcp_image *const *cands, int m, const mcp_image *surrogate,
+                    const mcp_perc_options *opt, mcp_perc_result *out);
+int mcp_perc_histogram(const mcp_image *const *cands, int m, const mcp_perc_options *opt,
+                       mcp_perc_result *out);
+/* Horizontal: one estimate q per pixel. */
+int mcp_perc_horizontal(const mcp_image *q, const mcp_image *surrogate,
+                        const mcp_perc_options *opt, mcp_perc_result *out);
+int mcp_perc_permutation(const mcp_image *q, const mcp_perc_options *opt,
+                         mcp_perc_result *out);
+
+/* Applies a permutation map (channels X, Y) to an image: out(p) = img(map(p)). */
+int mcp_perc_permute(const mcp_image *img, const mcp_image *map, mcp_image **out);
+
 #endif

@@ -92,10 +92,7 @@ typedef enum {
 } mcp_perc_method;
 
 MCP_API extern const mcp_wordlist mcp_perc_method_words;
-MCP_API int mcp_perc_method_from_name(const char *name, mcp_perc_method *out);
 MCP_API const char *mcp_perc_method_name(mcp_perc_method method);
-/* 1 for the horizontal methods (their result is a permutation to re-render). */
-MCP_API int mcp_perc_method_is_horizontal(mcp_perc_method method);
 
 typedef enum {
     MCP_PERC_INIT_RANDOM, /* a random candidate per pixel, from (seed, pixel) */
@@ -103,8 +100,6 @@ typedef enum {
 } mcp_perc_init;
 
 MCP_API extern const mcp_wordlist mcp_perc_init_words;
-MCP_API int mcp_perc_init_from_name(const char *name, mcp_perc_init *out);
-MCP_API const char *mcp_perc_init_name(mcp_perc_init init);
 
 typedef struct mcp_perc_options {
     mcp_perc_method method; /* [vertical-iterative] */
@@ -153,37 +148,12 @@ MCP_API int mcp_perc_optimize(const mcp_image *const *cands, int m,
                               const mcp_image *surrogate, const mcp_perc_options *opt,
                               mcp_perc_result *out);
 
-/* The methods one by one (opt->method is ignored). */
-MCP_API int mcp_perc_vertical_iterative(const mcp_image *const *cands, int m,
-                                        const mcp_image *surrogate,
-                                        const mcp_perc_options *opt,
-                                        mcp_perc_result *out);
-MCP_API int mcp_perc_power_set(const mcp_image *const *cands, int m,
-                               const mcp_image *surrogate, const mcp_perc_options *opt,
-                               mcp_perc_result *out);
-MCP_API int mcp_perc_error_diffusion(const mcp_image *const *cands, int m,
-                                     const mcp_image *surrogate,
-                                     const mcp_perc_options *opt, mcp_perc_result *out);
-MCP_API int mcp_perc_dither(const mcp_image *const *cands, int m,
-                            const mcp_image *surrogate, const mcp_perc_options *opt,
-                            mcp_perc_result *out);
-MCP_API int mcp_perc_histogram(const mcp_image *const *cands, int m,
-                               const mcp_perc_options *opt, mcp_perc_result *out);
-/* Horizontal: one estimate q per pixel. */
-MCP_API int mcp_perc_horizontal(const mcp_image *q, const mcp_image *surrogate,
-                                const mcp_perc_options *opt, mcp_perc_result *out);
-MCP_API int mcp_perc_permutation(const mcp_image *q, const mcp_perc_options *opt,
-                                 mcp_perc_result *out);
-
 /* The power set's search space: the means of the non-empty subsets of the m
  * candidates, at most max_subsets of them, in this order: the m single candidates,
  * the mean of all m, then pairs, triples, ... (each size in lexicographic order).
  * masks[k] (bit i: candidate i) may be NULL; otherwise it receives *count masks
  * (the caller gives room for min(max_subsets, 2^m - 1)). */
 MCP_API int mcp_perc_subset_masks(int m, int max_subsets, uint64_t *masks, int *count);
-
-/* Applies a permutation map (channels X, Y) to an image: out(p) = img(map(p)). */
-MCP_API int mcp_perc_permute(const mcp_image *img, const mcp_image *map, mcp_image **out);
 
 /* ---- surrogates ---- */
 

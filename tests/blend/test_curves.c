@@ -1,6 +1,7 @@
 /* test_curves.c: blend/curves.c against closed forms (docs/mathematics.md §3.1, §3.4:
  * convergence curve, Eq. 11, weight; Denisova & Bocchi 2024 Eqs. 7, 11, 14). */
 #include "blend_testing.h"
+#include "../../blend/internal.h"
 
 #include <math.h>
 

@@ -4,6 +4,7 @@
 #include "blend_testing.h"
 
 #include <math.h>
+#include "../../blend/internal.h"
 
 static void
 test_fix_sure(void **state)

@@ -5,6 +5,7 @@
  * (self-influence 1/9 <= 1/2) must leave the blend within 10% of the noisy image's
  * error at every noise level, while a perfect denoiser keeps nearly all its weight. */
 #include "blend_testing.h"
+#include "../../blend/internal.h"
 
 #include <math.h>
 

@@ -8,6 +8,7 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#include "../../common/hidden_internal.h"
 
 /* Filter results vs. the naive reference: both sum at most ~150 products whose
  * magnitudes add up to about 1 (kernels are scaled to sum(|k|) <= 1, pixels in [0, 1)),

@@ -16,6 +16,7 @@
 
 #include <mcpost/flip.h>
 #include <mcpost/imageio.h>
+#include "../../common/hidden_internal.h"
 
 #define PI_D 3.14159265358979323846
 

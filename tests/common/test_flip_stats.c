@@ -14,6 +14,7 @@
 
 #include <mcpost/flip.h>
 #include <mcpost/imageio.h>
+#include "../../common/hidden_internal.h"
 
 /* ---- closed forms ---- */
 

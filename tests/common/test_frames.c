@@ -11,6 +11,7 @@
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
+#include "../../common/hidden_internal.h"
 
 static void
 assert_set(const char *text, const int *want, int n_want)

@@ -5,6 +5,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include "../../common/hidden_internal.h"
 
 static void
 test_new_is_zeroed_and_packed(void **state)

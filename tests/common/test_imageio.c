@@ -9,6 +9,7 @@
 #include <string.h>
 #include <sys/stat.h>
 #include <unistd.h>
+#include "../../common/hidden_internal.h"
 
 static const char *names6[] = {"R", "G", "B", "Variance.R", "albedo.G", "N.X"};
 

@@ -10,6 +10,7 @@
 #include <mcpost/imageio.h>
 #include <mcpost/plot.h>
 #include <mcpost/report.h>
+#include "../../common/hidden_internal.h"
 
 static int
 count(const char *hay, const char *needle)

@@ -11,6 +11,7 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#include "../../estimate/internal.h"
 
 #define MAX_PASSES 16
 

@@ -16,6 +16,7 @@
 
 #include <mcpost/estimate.h>
 #include <mcpost/filter.h>
+#include "../../estimate/internal.h"
 
 #define W 24
 #define H 20

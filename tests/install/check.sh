@@ -9,6 +9,9 @@ work=$build/test-install/work
 rm -rf "$build/test-install"
 mkdir -p "$work"
 cmake --install "$build" --prefix "$prefix" >/dev/null
+# the public headers and only they (CMakeLists.txt's MCP_PUBLIC_HEADERS, mirrored into
+# the build tree): no internal one (exr_zip.h, fastpow.h, *internal.h) is installed
+diff <(ls "$prefix/include/mcpost") <(ls "$build/include/mcpost")
 cmake -S "$src/consumer" -B "$work/cmake" -DCMAKE_PREFIX_PATH="$prefix" >/dev/null
 cmake --build "$work/cmake" >/dev/null
 "$work/cmake/consumer" "$work"

@@ -7,6 +7,7 @@
 
 #include <math.h>
 #include <stdlib.h>
+#include "../../perceptual/internal.h"
 
 static float
 lum_at(const mcp_image *img, int x, int y)

@@ -11,6 +11,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include "../../perceptual/internal.h"
 
 #define CAP 65536
 static char out[CAP], err[CAP];

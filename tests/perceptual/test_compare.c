@@ -6,6 +6,7 @@
 
 #include <math.h>
 #include <string.h>
+#include "../../perceptual/internal.h"
 
 typedef struct {
     int calls, rerenders;

@@ -6,6 +6,7 @@
 
 #include <math.h>
 #include <omp.h>
+#include "../../perceptual/internal.h"
 
 static mcp_image *
 grey(int w, int h, const float *v)

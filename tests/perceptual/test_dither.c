@@ -7,6 +7,7 @@
 
 #include <math.h>
 #include <omp.h>
+#include "../../perceptual/internal.h"
 
 static mcp_image *
 grey_row(int w, const float *v)

@@ -5,6 +5,7 @@
 #include "perc_testing.h"
 
 #include <math.h>
+#include "../../perceptual/internal.h"
 
 static void
 test_subset_masks(void **state)

@@ -8,6 +8,7 @@
 #include <mcpost/denoiser.h>
 
 #include <math.h>
+#include "../../perceptual/internal.h"
 
 typedef struct {
     mcp_image *color, *variance;

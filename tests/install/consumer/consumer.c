@@ -1,7 +1,6 @@
 /* consumer.c: uses the installed library -- an EXR round trip and a PNG written
  * through the plug-in, found beside the installed library. */
-#include <mcpost/dump.h>
-#include <mcpost/imageio.h>
+#include <mcpost/mcpost.h> /* the umbrella header: every public one */
 #include <stdio.h>
 
 int
