@@ -118,6 +118,8 @@ test)
     install_packages slurm-wlm munge
     # headless Chromium opens report.html in the test report/page_in_chromium
     install_packages chromium
+    # the test format/clang_format checks every source file against .clang-format
+    install_packages clang-format
     # Blender's Cycles renders a tiny .blend through tools/mcpost-cycles-render.py in
     # the test cli/cycles_render
     install_packages blender

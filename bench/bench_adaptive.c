@@ -51,7 +51,7 @@ typedef struct scene_ctx {
     uint64_t seed;
 } scene_ctx;
 
-static int g_probes = 0; /* --probes: the estimate's (0: its default, as users get it) */
+static int g_probes = 0;  /* --probes: the estimate's (0: its default, as users get it) */
 static int g_verbose = 0; /* --verbose 1: every point of the rule's runs on stderr */
 /* what every run's passes spent, per denoiser: mcpost's part and the denoiser's */
 static double g_ms_added, g_ms_denoise;
@@ -415,12 +415,14 @@ main(int argc, char **argv)
                         px[n_series][k] = us[i], py[n_series][k] = e, k++;
                     }
                     if (k > 1) {
-                        snprintf(names[n_series], 96, "renderer rule, best run (%s, %s)", dn,
-                                 sname);
-                        series[n_series] =
-                            (mcp_plot_series){names[n_series], MCP_SERIES_LINE_POINTS,
-                                              px[n_series],    py[n_series],
-                                              k,               0};
+                        snprintf(names[n_series], 96, "renderer rule, best run (%s, %s)",
+                                 dn, sname);
+                        series[n_series] = (mcp_plot_series){names[n_series],
+                                                             MCP_SERIES_LINE_POINTS,
+                                                             px[n_series],
+                                                             py[n_series],
+                                                             k,
+                                                             0};
                         n_series++;
                     }
                 }

@@ -1,16 +1,16 @@
 /* bench_blend.c: timings of the blend step at 1920x1080 (no pass/fail): filtering of v
  * and SURE (Gaussian, window 11), on-the-fly curves, weights, the blend and the
- * safeguard, one iteration as mcp_blend_step runs it with --weights curves, with denoising and SURE excluded. The paper
- * reports ~35 ms for everything including OIDN and SURE on a GPU (Denisova & Bocchi
- * 2024 Section 3); the target here is <= 50 ms on 2 cores. mcp_blend_step fuses curves,
- * weights and the blend into one pass (the on-the-fly curve in closed form); the
- * separate curve-image and weight functions (used for retrospective curves and for
- * writing curves out) are timed too, with easy blending and the James-Stein combiner.
- * The step is timed first with glibc's default allocator (fresh pages every call),
- * then everything with freed memory kept, as mcpost runs (the target's figure). Each
- * figure is the median of `repeats` runs after two warm-ups, wall-clock and process CPU
- * time. Usage: bench_blend [repeats (default 11)] (OMP_NUM_THREADS=2 for the 2-core
- * figure). */
+ * safeguard, one iteration as mcp_blend_step runs it with --weights curves, with
+ * denoising and SURE excluded. The paper reports ~35 ms for everything including OIDN and
+ * SURE on a GPU (Denisova & Bocchi 2024 Section 3); the target here is <= 50 ms on 2
+ * cores. mcp_blend_step fuses curves, weights and the blend into one pass (the on-the-fly
+ * curve in closed form); the separate curve-image and weight functions (used for
+ * retrospective curves and for writing curves out) are timed too, with easy blending and
+ * the James-Stein combiner. The step is timed first with glibc's default allocator (fresh
+ * pages every call), then everything with freed memory kept, as mcpost runs (the target's
+ * figure). Each figure is the median of `repeats` runs after two warm-ups, wall-clock and
+ * process CPU time. Usage: bench_blend [repeats (default 11)] (OMP_NUM_THREADS=2 for the
+ * 2-core figure). */
 #include <mcpost/blend.h>
 
 #include <math.h>

@@ -74,8 +74,8 @@ typedef enum {
     SRC_AUTO,
     N_SRC
 } source;
-static const char *const source_names[N_SRC] = {"per-sample",  "increments", "replicates4",
-                                                "replicates8", "oracle",     "auto"};
+static const char *const source_names[N_SRC] = {
+    "per-sample", "increments", "replicates4", "replicates8", "oracle", "auto"};
 
 /* One scene's fixture: blocks[r][b] (r = 0 carries Variance), features, reference. */
 typedef struct scene {
@@ -99,16 +99,14 @@ load_scene(const char *dir, const char *name, scene *s)
     s->name = name;
     for (int r = 0; r < RENDERS; r++)
         for (int b = 0; b < BLOCKS; b++) {
-            snprintf(path, sizeof path, "%s/%s/blocks/%s_r%d_b%02d.exr", dir, name, name, r,
-                     b);
-            if (mcp_dump_read(path, &s->blocks[r][b]))
-                return -1;
+            snprintf(path, sizeof path, "%s/%s/blocks/%s_r%d_b%02d.exr", dir, name, name,
+                     r, b);
+            if (mcp_dump_read(path, &s->blocks[r][b])) return -1;
         }
     snprintf(path, sizeof path, "%s/%s/%s_features.exr", dir, name, name);
     /* the features file has no colour: read it as an image and pick the channels */
     mcp_image *img = NULL;
-    if (mcp_image_read(path, NULL, &img))
-        return -1;
+    if (mcp_image_read(path, NULL, &img)) return -1;
     int ia[3], in[3];
     if (mcp_image_channels(img, (const char *const[]){"Albedo.R", "Albedo.G", "Albedo.B"},
                            3, ia) ||
@@ -163,11 +161,9 @@ static mcp_dump *
 running(const scene *s, int r, int j)
 {
     mcp_dump *d = NULL;
-    if (j == 1)
-        return copy_block(s->blocks[r][0]);
+    if (j == 1) return copy_block(s->blocks[r][0]);
     mcp_merge_options mo = {r == 0 ? MCP_MERGE_POOLED : MCP_MERGE_REPLICATES, 0};
-    if (mcp_dump_merge((const mcp_dump *const *)s->blocks[r], j, &mo, &d))
-        die("merge");
+    if (mcp_dump_merge((const mcp_dump *const *)s->blocks[r], j, &mo, &d)) die("merge");
     if (r > 0) {
         /* only the mean is wanted: the blocks' spread is not this render's variance */
         mcp_image_free(d->var_of_mean);
@@ -196,7 +192,9 @@ iteration_dump(const scene *s, source src, int j, double *ratio)
     *ratio = 0;
     switch (src) {
     case SRC_PER_SAMPLE:
-    case SRC_AUTO: d = running(s, 0, j); break;
+    case SRC_AUTO:
+        d = running(s, 0, j);
+        break;
     case SRC_INCREMENTS: {
         mcp_dump *m[MAX_ITER];
         for (int k = 0; k < j; k++)
@@ -204,7 +202,8 @@ iteration_dump(const scene *s, source src, int j, double *ratio)
         if (j == 1) {
             d = m[0]; /* one block: nothing to compare; the per-sample variance stays */
         } else {
-            if (mcp_dump_increment_variance((const mcp_dump *const *)m, j, NULL, &d, ratio))
+            if (mcp_dump_increment_variance((const mcp_dump *const *)m, j, NULL, &d,
+                                            ratio))
                 die("increments");
             for (int k = 0; k < j; k++)
                 mcp_dump_free(m[k]);
@@ -239,15 +238,15 @@ iteration_dump(const scene *s, source src, int j, double *ratio)
         d->variance_source = MCP_VARSRC_REPLICATES;
         d->variance_dof = RENDERS - 1;
         d->replicates = RENDERS;
-        if (mcp_dump_pool_variance(d, shape, 2))
-            die("pool");
+        if (mcp_dump_pool_variance(d, shape, 2)) die("pool");
         mcp_image_free(shape);
         mcp_dump_free(all);
         for (int r = 1; r < RENDERS; r++)
             mcp_dump_free(parts[r]);
         break;
     }
-    default: break;
+    default:
+        break;
     }
     set_features(s, d);
     return d;
@@ -262,15 +261,15 @@ write_series(const scene *s, source src, int iters, const char *dir, double *rat
     for (int j = 1; j <= iters; j++) {
         double ratio;
         mcp_dump *d = iteration_dump(s, src, j, &ratio);
-        if (ratio > 0)
-            *ratio_last = ratio;
+        if (ratio > 0) *ratio_last = ratio;
         char path[4096];
-        snprintf(path, sizeof path, "%s/%s_%s_%04d.exr", dir, s->name, source_names[src], j);
+        snprintf(path, sizeof path, "%s/%s_%s_%04d.exr", dir, s->name, source_names[src],
+                 j);
         paths[j - 1] = strdup(path);
         spp[j - 1] = d->spp;
         if (mcp_dump_write(d, path,
                            d->variance_source == MCP_VARSRC_PER_SAMPLE ? MCP_CONV_PBRT
-                                                                        : MCP_CONV_MCPOST,
+                                                                       : MCP_CONV_MCPOST,
                            NULL))
             die("write");
         mcp_dump_free(d);
@@ -280,7 +279,8 @@ write_series(const scene *s, source src, int iters, const char *dir, double *rat
         die("series");
     /* each source as it is, except auto: what a user gets from the render's own
        checkpoints (mcp_series_load's default choice) */
-    series->variance_from = src == SRC_AUTO ? MCP_SERIES_VARIANCE_AUTO : MCP_SERIES_VARIANCE_FILE;
+    series->variance_from =
+        src == SRC_AUTO ? MCP_SERIES_VARIANCE_AUTO : MCP_SERIES_VARIANCE_FILE;
     for (int j = 0; j < iters; j++)
         free(paths[j]);
     free(paths);
@@ -294,12 +294,12 @@ write_series(const scene *s, source src, int iters, const char *dir, double *rat
 static mcp_image *
 reference_for(const scene *s, source src, double *ref_spp)
 {
-    int first_unused = src == SRC_PER_SAMPLE || src == SRC_INCREMENTS || src == SRC_AUTO ? 1
-                       : src == SRC_REP4                             ? 4
-                                                                     : RENDERS;
+    int first_unused = src == SRC_PER_SAMPLE || src == SRC_INCREMENTS || src == SRC_AUTO
+                           ? 1
+                       : src == SRC_REP4 ? 4
+                                         : RENDERS;
     mcp_image *ref = NULL;
-    if (mcp_image_copy(s->reference, &ref))
-        die("copy");
+    if (mcp_image_copy(s->reference, &ref)) die("copy");
     *ref_spp = 16384;
     size_t n = (size_t)ref->width * ref->height * 3;
     for (int i = 0; i < (int)n; i++)
@@ -323,11 +323,11 @@ true_percentile(const mcp_series *series, int i, const mcp_denoiser *den,
 {
     mcp_dump *d = NULL;
     mcp_image *f = NULL, *err = NULL;
-    if (mcp_series_load(series, i, &d))
-        die("load");
+    if (mcp_series_load(series, i, &d)) die("load");
     mcp_denoise_input in = mcp_denoise_input_of(d);
     double tau = NAN;
-    if (den->apply(den, &in, &f) || mcp_true_error(f, reference, MCP_METRIC_RELSE, 0, &err) ||
+    if (den->apply(den, &in, &f) ||
+        mcp_true_error(f, reference, MCP_METRIC_RELSE, 0, &err) ||
         mcp_true_percentiles(err, &p, 1, &tau))
         die("truth");
     mcp_image_free(f);
@@ -380,8 +380,7 @@ run_estimate(const run_settings *rs, const mcp_series *series, const mcp_denoise
     const int *tau_it = rs->tau_it;
     mcp_series_estimate_options eo = mcp_series_estimate_defaults();
     eo.est.p = p;
-    if (rs->probes > 0)
-        eo.est.sure.n_probes = rs->probes;
+    if (rs->probes > 0) eo.est.sure.n_probes = rs->probes;
     eo.n_taus = 3;
     for (int t = 0; t < 3; t++) {
         double tau = true_percentile(series, tau_it[t] - 1, den, reference, p);
@@ -390,8 +389,7 @@ run_estimate(const run_settings *rs, const mcp_series *series, const mcp_denoise
     eo.est.n_percentiles = 1;
     eo.est.percentiles[0] = p;
     mcp_series_estimate *se = NULL;
-    if (rs->s2_pool != -2)
-        eo.est.s2_pool = rs->s2_pool;
+    if (rs->s2_pool != -2) eo.est.s2_pool = rs->s2_pool;
     if (mcp_estimate_series(series, den, &eo, reference, NULL, NULL, &se))
         die("estimate series");
     for (int t = 0; t < 3; t++) {
@@ -410,10 +408,9 @@ run_estimate(const run_settings *rs, const mcp_series *series, const mcp_denoise
     }
     if (rs->curves) {
         printf("|  | spp: est. / true 99.9th pct, est. / true mean error: ");
-        for (int i = 0; i < se->count; i += se->count / 8 > 0 ? se->count / 8 : 1)
+        for (int i = 0; i<se->count; i += se->count / 8> 0 ? se->count / 8 : 1)
             printf("%.0f: %.3g/%.3g, %.3g/%.3g; ", se->points[i].spp,
-                   se->points[i].est_percentile[0],
-                   se->points[i].true_percentile[0],
+                   se->points[i].est_percentile[0], se->points[i].true_percentile[0],
                    se->points[i].est_mean_error, se->points[i].true_mean_error);
         printf("| | | |\n");
     }
@@ -486,8 +483,7 @@ run_blend(const run_settings *rs, const mcp_series *series, const mcp_denoiser *
     bo.blend.fit = rs->fit;
     bo.blend.safeguard = rs->safeguard;
     oracle_ctx oc = {reference, &bo.blend, calloc((size_t)series->count, sizeof(double))};
-    if (!oc.oracle_mse)
-        die("out of memory");
+    if (!oc.oracle_mse) die("out of memory");
     mcp_blend_series_result *br = NULL;
     if (mcp_blend_series(series, den, reference, &bo, oracle_point, &oc, &br))
         die("blend series");
@@ -511,16 +507,15 @@ run_blend(const run_settings *rs, const mcp_series *series, const mcp_denoiser *
     tl->blend_near += near;
     tl->js_near += js_near;
     tl->js_worst_member = fmax(tl->js_worst_member, js_worst);
-    tl->js_worst_final = fmax(tl->js_worst_final,
-                              last[MCP_BLEND_JAMES_STEIN].mse / last[MCP_BLEND_NOISY].mse);
+    tl->js_worst_final = fmax(tl->js_worst_final, last[MCP_BLEND_JAMES_STEIN].mse /
+                                                      last[MCP_BLEND_NOISY].mse);
     tl->blend_cases++;
-    if (worst > tl->worst_member)
-        tl->worst_member = worst;
+    if (worst > tl->worst_member) tl->worst_member = worst;
     tl->curves_over_min += curves_sum;
     tl->oracle_over_min += oracle_sum;
-    if (final > tl->worst_final)
-        tl->worst_final = final;
-    printf("| %s blend | | <= min(noisy, denoised) at %d of %d, <= 1.10x min at %d; over min: "
+    if (final > tl->worst_final) tl->worst_final = final;
+    printf("| %s blend | | <= min(noisy, denoised) at %d of %d, <= 1.10x min at %d; over "
+           "min: "
            "%.3fx on average, %.3fx at worst (window-optimal oracle %.3fx); last: %.3fx "
            "noisy MSE (denoised %.3fx); James-Stein <= 1.10x min at %d, %.3fx at worst, "
            "last %.3fx noisy | | |\n",
@@ -544,8 +539,10 @@ split(char *text, char **words, int max)
 int
 main(int argc, char **argv)
 {
-    const char *fixtures = "samples/fixtures/strat", *weights = getenv("MCPOST_OIDN_WEIGHTS");
-    char scenes_arg[256] = "cornell,texture,interior", dens_arg[256] = "nlm,bilateral,unet";
+    const char *fixtures = "samples/fixtures/strat",
+               *weights = getenv("MCPOST_OIDN_WEIGHTS");
+    char scenes_arg[256] = "cornell,texture,interior",
+         dens_arg[256] = "nlm,bilateral,unet";
     char srcs_arg[256] = "auto,per-sample,increments,replicates4,replicates8,oracle";
     int iters = MAX_ITER, blend = 1, estimate = 1, curves = 0, probes = 0, s2_pool = -2,
         safeguard = 1;
@@ -565,8 +562,7 @@ main(int argc, char **argv)
         else if (!strcmp(a, "--iterations") && v)
             iters = atoi(v), i++;
         else if (!strcmp(a, "--fit") && v) {
-            if (mcp_curve_fit_from_name(v, &fit))
-                die("--fit");
+            if (mcp_curve_fit_from_name(v, &fit)) die("--fit");
             i++;
         } else if (!strcmp(a, "--s2-pool") && v)
             s2_pool = atoi(v), i++;
@@ -581,15 +577,16 @@ main(int argc, char **argv)
         else if (!strcmp(a, "--no-safeguard"))
             safeguard = 0;
         else {
-            fprintf(stderr, "usage: bench_fidelity [--scenes LIST] [--denoisers LIST] "
-                            "[--sources LIST] [--fixtures DIR] [--weights TZA] "
-                            "[--iterations N] [--probes K] [--s2-pool R] [--fit NAME] [--no-blend | "
-                            "--blend-only] [--curves] [--no-safeguard]\n");
+            fprintf(
+                stderr,
+                "usage: bench_fidelity [--scenes LIST] [--denoisers LIST] "
+                "[--sources LIST] [--fixtures DIR] [--weights TZA] "
+                "[--iterations N] [--probes K] [--s2-pool R] [--fit NAME] [--no-blend | "
+                "--blend-only] [--curves] [--no-safeguard]\n");
             return 2;
         }
     }
-    if (iters < 4 || iters > MAX_ITER)
-        iters = MAX_ITER;
+    if (iters < 4 || iters > MAX_ITER) iters = MAX_ITER;
     char *scenes[8], *dens[8], *srcs[8];
     int n_scenes = split(scenes_arg, scenes, 8), n_dens = split(dens_arg, dens, 8),
         n_srcs = split(srcs_arg, srcs, 8);
@@ -597,8 +594,7 @@ main(int argc, char **argv)
     for (int k = 0; k < n_srcs; k++) {
         src_ids[k] = N_SRC;
         for (int q = 0; q < N_SRC; q++)
-            if (!strcmp(srcs[k], source_names[q]))
-                src_ids[k] = (source)q;
+            if (!strcmp(srcs[k], source_names[q])) src_ids[k] = (source)q;
         if (src_ids[k] == N_SRC) {
             fprintf(stderr, "bench_fidelity: unknown source '%s'\n", srcs[k]);
             return 2;
@@ -635,18 +631,20 @@ main(int argc, char **argv)
             int tau_it[3];
             for (int t = 0; t < 3; t++) {
                 tau_it[t] = (int)lround(tau_iters[t] * n_it / 32.0);
-                if (tau_it[t] < 1)
-                    tau_it[t] = 1;
+                if (tau_it[t] < 1) tau_it[t] = 1;
             }
             mcp_series *series = write_series(&s, src, n_it, tmp, &ratio);
-            run_settings run = {p, probes, s2_pool, curves, safeguard, fit, floor, tau_it};
+            run_settings run = {p,         probes, s2_pool, curves,
+                                safeguard, fit,    floor,   tau_it};
             printf("\n### %s, %s%s; reference %.0f spp, its noise floor at p %.3g",
                    s.name, source_names[src],
-                   src == SRC_REP4 || src == SRC_REP8 ? " (spp: all renders together)" : "",
+                   src == SRC_REP4 || src == SRC_REP8 ? " (spp: all renders together)"
+                                                      : "",
                    ref_spp, floor);
             if (ratio > 0)
-                printf("; Variance/n over the increments' spread at the last member: %.2f",
-                       ratio);
+                printf(
+                    "; Variance/n over the increments' spread at the last member: %.2f",
+                    ratio);
             printf("\n\n| denoiser | τ | estimated spp (true) | agree | early |\n"
                    "|---|---|---|---|---|\n");
             for (int di = 0; di < n_dens; di++) {
@@ -668,10 +666,8 @@ main(int argc, char **argv)
                 if (mcp_denoiser_create_from_args(kind, opts, n_opts, &den))
                     die(dens[di]);
                 tally *tl = &total[src][di];
-                if (estimate)
-                    run_estimate(&run, series, den, reference, dens[di], tl);
-                if (blend)
-                    run_blend(&run, series, den, reference, dens[di], tl);
+                if (estimate) run_estimate(&run, series, den, reference, dens[di], tl);
+                if (blend) run_blend(&run, series, den, reference, dens[di], tl);
                 mcp_denoiser_free(den);
             }
             printf("\n(%.1f s)\n", (now_ms() - t0) / 1e3);
@@ -691,25 +687,25 @@ main(int argc, char **argv)
     for (int k = 0; k < n_srcs; k++)
         for (int di = 0; di < n_dens; di++) {
             const tally *t = &total[src_ids[k]][di];
-            if (!t->cases && !t->blend_cases)
-                continue;
+            if (!t->cases && !t->blend_cases) continue;
             if (t->cases)
-                printf("| %s | %s | %d of %d (%.0f%%) | %d | %d |", source_names[src_ids[k]],
-                       dens[di], t->agree, t->cases, 100.0 * t->agree / t->cases, t->early,
-                       t->never_est);
+                printf("| %s | %s | %d of %d (%.0f%%) | %d | %d |",
+                       source_names[src_ids[k]], dens[di], t->agree, t->cases,
+                       100.0 * t->agree / t->cases, t->early, t->never_est);
             else /* --blend-only */
                 printf("| %s | %s | | | |", source_names[src_ids[k]], dens[di]);
             if (t->blend_cases)
                 printf(" %d of %d (%.0f%%) | %d of %d (%.0f%%) | %.3fx | %.3fx | %.3fx | "
                        "%.3fx |",
-                       t->blend_good, t->blend_points, 100.0 * t->blend_good / t->blend_points,
-                       t->blend_near, t->blend_points, 100.0 * t->blend_near / t->blend_points,
+                       t->blend_good, t->blend_points,
+                       100.0 * t->blend_good / t->blend_points, t->blend_near,
+                       t->blend_points, 100.0 * t->blend_near / t->blend_points,
                        t->curves_over_min / t->blend_points, t->worst_member,
                        t->oracle_over_min / t->blend_points, t->worst_final);
             if (t->blend_cases)
-                printf(" %d of %d (%.0f%%) | %.3fx | %.3fx |\n", t->js_near, t->blend_points,
-                       100.0 * t->js_near / t->blend_points, t->js_worst_member,
-                       t->js_worst_final);
+                printf(" %d of %d (%.0f%%) | %.3fx | %.3fx |\n", t->js_near,
+                       t->blend_points, 100.0 * t->js_near / t->blend_points,
+                       t->js_worst_member, t->js_worst_final);
             else
                 printf(" | | | | | | | | |\n");
         }

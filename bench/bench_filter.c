@@ -36,8 +36,7 @@ static double
 median_ms(bench_fn fn, void *ctx, int repeats)
 {
     double *t = malloc((size_t)repeats * sizeof *t), med;
-    if (!t)
-        return -1;
+    if (!t) return -1;
     for (int i = 0; i < 2; i++)
         if (fn(ctx)) {
             free(t);
@@ -118,8 +117,7 @@ int
 main(int argc, char **argv)
 {
     int repeats = argc > 1 ? atoi(argv[1]) : 11, max_threads = 1;
-    if (repeats < 1)
-        repeats = 1;
+    if (repeats < 1) repeats = 1;
 #ifdef _OPENMP
     max_threads = omp_get_max_threads();
 #endif
@@ -134,8 +132,8 @@ main(int argc, char **argv)
         s = s * 6364136223846793005u + 1442695040888963407u;
         img->data[i] = (float)((s >> 40) * (1.0 / (1 << 24)));
     }
-    printf("bench_filter: %dx%dx%d float32, median of %d runs, OpenMP threads %d\n",
-           SIDE, SIDE, CHANNELS, repeats, max_threads);
+    printf("bench_filter: %dx%dx%d float32, median of %d runs, OpenMP threads %d\n", SIDE,
+           SIDE, CHANNELS, repeats, max_threads);
 
     const int windows[] = {5, 11};
     for (int wi = 0; wi < 2; wi++) {
@@ -143,8 +141,7 @@ main(int argc, char **argv)
         float *k1 = malloc((size_t)win * sizeof *k1);
         float *k2 = malloc((size_t)win * win * sizeof *k2);
         blur_ctx b = {img, win, (win - 1) / 6.0, k2, NULL};
-        if (!k1 || !k2 || mcp_gaussian_kernel(b.sigma, r, k1))
-            return 1;
+        if (!k1 || !k2 || mcp_gaussian_kernel(b.sigma, r, k1)) return 1;
         for (int j = 0; j < win; j++)
             for (int i = 0; i < win; i++)
                 k2[j * win + i] = k1[i] * k1[j];
@@ -178,7 +175,8 @@ main(int argc, char **argv)
     bench_set_threads(max_threads);
     double spn = median_ms(spectra, img, repeats);
     printf("tile power spectra 1024^2 in 32^2 tiles: %7.2f ms (1 thread) %7.2f ms "
-           "(%d threads)\n", sp1, spn, max_threads);
+           "(%d threads)\n",
+           sp1, spn, max_threads);
     bench_set_threads(1);
     double cm1 = median_ms(colormap, img, repeats);
     bench_set_threads(max_threads);

@@ -75,8 +75,7 @@ time_write(const mcp_image *img, const char *path, const mcp_write_options *o,
     bench_set_threads(threads);
     for (int i = -1; i < repeats; i++) {
         double t0 = now_ms(), c0 = cpu_ms();
-        if (mcp_image_write(img, path, o))
-            die(path);
+        if (mcp_image_write(img, path, o)) die(path);
         if (i >= 0) {
             t[i] = now_ms() - t0;
             c[i] = cpu_ms() - c0;
@@ -97,13 +96,11 @@ time_read(const char *path, int threads, int as_dump, double *cpu)
         double t0 = now_ms(), c0 = cpu_ms();
         if (as_dump) {
             mcp_dump *d;
-            if (mcp_dump_read(path, &d))
-                die(path);
+            if (mcp_dump_read(path, &d)) die(path);
             mcp_dump_free(d);
         } else {
             mcp_image *img;
-            if (mcp_image_read(path, NULL, &img))
-                die(path);
+            if (mcp_image_read(path, NULL, &img)) die(path);
             mcp_image_free(img);
         }
         if (i >= 0) {
@@ -132,8 +129,8 @@ typedef struct setting {
 /* One row per setting: size, write and read on 1 and on all threads. The dump's rows
  * also read it as a dump (mcp_dump_read: the EXR read plus the dump's checks). */
 static void
-table(const char *title, const mcp_image *img, const char *path, const setting *s,
-      int n, int is_dump, double write_target, double read_target)
+table(const char *title, const mcp_image *img, const char *path, const setting *s, int n,
+      int is_dump, double write_target, double read_target)
 {
     int all = max_threads();
     printf("\n%s: %dx%d, %d channels, float; wall ms on 1 and on %d threads, and CPU ms "
@@ -147,7 +144,8 @@ table(const char *title, const mcp_image *img, const char *path, const setting *
         o.exr_zip_level = s[i].zip_level;
         o.exr_min_saving = s[i].min_saving;
         double wc, rc, unused;
-        double w1 = time_write(img, path, &o, 1, &wc), wn = time_write(img, path, &o, all, &unused);
+        double w1 = time_write(img, path, &o, 1, &wc),
+               wn = time_write(img, path, &o, all, &unused);
         double r1 = time_read(path, 1, 0, &rc), rn = time_read(path, all, 0, &unused);
         printf("  %-27s %6.2f %6.0f %6.0f %6.0f    %6.1f %6.1f %6.1f", s[i].label,
                file_mb(path), w1, wn, wc, r1, rn, rc);
@@ -182,7 +180,8 @@ libpng_write_rgb8(const unsigned char *rgb, int w, int h, const char *path)
     png_init_io(png, f);
     png_set_compression_level(png, 3);
     png_set_IHDR(png, info, (png_uint_32)w, (png_uint_32)h, 8, PNG_COLOR_TYPE_RGB,
-                 PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+                 PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT,
+                 PNG_FILTER_TYPE_DEFAULT);
     png_set_sRGB(png, info, PNG_sRGB_INTENT_PERCEPTUAL);
     png_write_info(png, info);
     for (int y = 0; y < h; y++)
@@ -227,8 +226,7 @@ png_table(const mcp_image *img, const char *path)
     if (!rgb || mcp_image_new(w, h, 1, (const char *const[]){"Y"}, &lg))
         die("png picture");
     double *sorted = malloc((size_t)w * h * sizeof *sorted);
-    if (!sorted)
-        die("png picture");
+    if (!sorted) die("png picture");
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++) {
             float v = mcp_image_px(img, x, y)[0];
@@ -239,8 +237,10 @@ png_table(const mcp_image *img, const char *path)
     qsort(sorted, (size_t)w * h, sizeof *sorted, cmp_double);
     double lo = sorted[(size_t)w * h / 50], hi = sorted[(size_t)w * h * 49 / 50];
     free(sorted);
-    printf("\nPNG, %dx%d RGB 8-bit: wall ms on 1 and on %d threads, CPU ms of the 1-thread "
-           "runs, file MB\n", w, h, all);
+    printf(
+        "\nPNG, %dx%d RGB 8-bit: wall ms on 1 and on %d threads, CPU ms of the 1-thread "
+        "runs, file MB\n",
+        w, h, all);
     printf("  %-44s %6s %6s %6s %7s\n", "picture, writer", "1", "N", "cpu", "MB");
     for (int picture = 0; picture < 2; picture++) {
         if (picture == 0) {
@@ -273,10 +273,8 @@ png_table(const mcp_image *img, const char *path)
 int
 main(int argc, char **argv)
 {
-    if (argc > 1)
-        repeats = atoi(argv[1]);
-    if (argc > 2)
-        dir = argv[2];
+    if (argc > 1) repeats = atoi(argv[1]);
+    if (argc > 2) dir = argv[2];
     int png_only = argc > 3 && strcmp(argv[3], "png") == 0;
     if (repeats < 1 || repeats > 64 || (argc > 3 && !png_only)) {
         fprintf(stderr, "usage: bench_io [repeats 1..64] [folder] [png]\n");
@@ -301,24 +299,23 @@ main(int argc, char **argv)
     mcp_proc_scene scene = mcp_proc_scene_defaults();
     scene.width = scene.height = 512;
     mcp_dump *small = NULL, *big = NULL;
-    if (mcp_proc_render(&scene, 16, 1, NULL, &small))
-        die("procedural render");
+    if (mcp_proc_render(&scene, 16, 1, NULL, &small)) die("procedural render");
     snprintf(path, sizeof path, "%s/bench_io_rgb.exr", dir);
     if (!png_only)
         table("512x512 RGB render (16 spp)", small->color, path, settings, n, 0, 30, 20);
 
     scene.width = 1920;
     scene.height = 1080;
-    if (mcp_proc_render(&scene, 4, 1, NULL, &big))
-        die("procedural render");
+    if (mcp_proc_render(&scene, 4, 1, NULL, &big)) die("procedural render");
     /* the dump as mcpost writes it, read back as the 12-channel image it is */
     snprintf(path, sizeof path, "%s/bench_io_dump.exr", dir);
     mcp_image *dump_img = NULL;
     if (!png_only && (mcp_dump_write(big, path, MCP_CONV_PBRT, NULL) ||
-        mcp_image_read(path, NULL, &dump_img)))
+                      mcp_image_read(path, NULL, &dump_img)))
         die(path);
     if (!png_only)
-        table("1080p dump (pbrt channels, 4 spp)", dump_img, path, settings, n, 1, 0, 100);
+        table("1080p dump (pbrt channels, 4 spp)", dump_img, path, settings, n, 1, 0,
+              100);
     mcp_image_free(dump_img);
     snprintf(path, sizeof path, "%s/bench_io_picture.png", dir);
     png_table(big->var_of_mean ? big->var_of_mean : big->color, path);

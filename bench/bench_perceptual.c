@@ -262,8 +262,8 @@ main(int argc, char **argv)
 
     printf("\ntargets (512x512 on 2 cores): vertical-iterative %.1f ms <= 250 ms: %s; "
            "error-diffusion %.2f ms <= 5 ms: %s; dither %.2f ms <= 5 ms: %s\n",
-           vertical_ms, verdict(vertical_ms, 250.0), ed_ms, verdict(ed_ms, 5.0), dither_ms,
-           verdict(dither_ms, 5.0));
+           vertical_ms, verdict(vertical_ms, 250.0), ed_ms, verdict(ed_ms, 5.0),
+           dither_ms, verdict(dither_ms, 5.0));
     free(cand), free(subsets), free(surr), free(out);
     for (int j = 0; j < M; j++)
         mcp_image_free(c[j]);

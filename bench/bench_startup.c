@@ -61,8 +61,7 @@ main(int argc, char **argv)
     snprintf(png, sizeof png, "%s/bench_startup.png", dir);
     mcp_image *img;
     const char *names[] = {"R", "G", "B", "Variance.R", "Variance.G", "Variance.B"};
-    if (mcp_image_new(1024, 1024, 6, names, &img))
-        return 1;
+    if (mcp_image_new(1024, 1024, 6, names, &img)) return 1;
     uint64_t s = 1;
     for (size_t i = 0; i < (size_t)1024 * 1024 * 6; i++) {
         s = s * 6364136223846793005ull + 1442695040888963407ull;

@@ -51,10 +51,10 @@
  * fraction of the input's pixels (MACs per input pixel: 9 cin cout / frac). */
 static const struct {
     int cin, cout, frac;
-} layers[] = {{9, 32, 1},     {32, 32, 1},    {32, 48, 4},    {48, 64, 16},
-              {64, 80, 64},   {80, 96, 256},  {96, 96, 256},  {160, 112, 64},
-              {112, 112, 64}, {160, 96, 16},  {96, 96, 16},   {128, 64, 4},
-              {64, 64, 4},    {73, 64, 1},    {64, 32, 1},    {32, 3, 1}};
+} layers[] = {{9, 32, 1},     {32, 32, 1},   {32, 48, 4},   {48, 64, 16},
+              {64, 80, 64},   {80, 96, 256}, {96, 96, 256}, {160, 112, 64},
+              {112, 112, 64}, {160, 96, 16}, {96, 96, 16},  {128, 64, 4},
+              {64, 64, 4},    {73, 64, 1},   {64, 32, 1},   {32, 3, 1}};
 #define N_LAYERS ((int)(sizeof layers / sizeof layers[0]))
 
 #include <cblas.h>
@@ -64,20 +64,23 @@ void openblas_set_num_threads(int n);
 static double
 sgemm_rate(int m, int k, int n)
 {
-    float *a = malloc((size_t)m * k * sizeof(float)), *b = malloc((size_t)k * n * sizeof(float));
+    float *a = malloc((size_t)m * k * sizeof(float)),
+          *b = malloc((size_t)k * n * sizeof(float));
     float *c = malloc((size_t)m * n * sizeof(float));
     if (!a || !b || !c) {
         free(a), free(b), free(c);
         return -1;
     }
     uint64_t st = 7;
-    for (size_t i = 0; i < (size_t)m * k; i++) a[i] = (float)bench_uniform(&st) - 0.5f;
-    for (size_t i = 0; i < (size_t)k * n; i++) b[i] = (float)bench_uniform(&st) - 0.5f;
+    for (size_t i = 0; i < (size_t)m * k; i++)
+        a[i] = (float)bench_uniform(&st) - 0.5f;
+    for (size_t i = 0; i < (size_t)k * n; i++)
+        b[i] = (float)bench_uniform(&st) - 0.5f;
     double t[4];
     for (int r = 0; r < 4; r++) {
         double t0 = now_ms();
-        cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, m, n, k, 1.0f, a, k, b, n, 0.0f,
-                    c, n);
+        cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, m, n, k, 1.0f, a, k, b, n,
+                    0.0f, c, n);
         t[r] = now_ms() - t0;
     }
     free(a), free(b), free(c);
@@ -93,8 +96,9 @@ static double
 sgemm_baseline(int threads)
 {
     openblas_set_num_threads(threads);
-    printf("OpenBLAS cblas_sgemm, %d thread(s), N = 65536 (an im2col convolution's call)\n",
-           threads);
+    printf(
+        "OpenBLAS cblas_sgemm, %d thread(s), N = 65536 (an im2col convolution's call)\n",
+        threads);
     printf("%-10s %6s %6s %10s\n", "layer", "M", "K", "GMAC/s");
     double macs = 0, secs = 0;
     for (int l = 0; l < N_LAYERS; l++) {
@@ -112,8 +116,9 @@ sgemm_baseline(int threads)
 
 /* The calls timed: apply (-1 tangents), and apply + JVP with 1, 4 and 8 tangents. */
 #define N_CALLS 4
-static const char *const call_labels[N_CALLS] = {
-    "apply", "apply + JVP, 1 tangent", "apply + JVP, 4 tangents", "apply + JVP, 8 tangents"};
+static const char *const call_labels[N_CALLS] = {"apply", "apply + JVP, 1 tangent",
+                                                 "apply + JVP, 4 tangents",
+                                                 "apply + JVP, 8 tangents"};
 static const int call_tangents[N_CALLS] = {-1, 1, 4, 8};
 
 /* The weights: $MCPOST_OIDN_WEIGHTS, else the shipped weights/ of the source tree this
@@ -145,7 +150,8 @@ time_one_call(const char *weights, int tangents, int repeats, int width, int hei
     }
     bench_scene sc;
     bench_scene_make(width, height, tangents < 0 ? 0 : tangents, &sc);
-    double cpu = 0, ms = bench_denoiser_median_ms(d, &sc.in, sc.t, tangents, repeats, &cpu);
+    double cpu = 0,
+           ms = bench_denoiser_median_ms(d, &sc.in, sc.t, tangents, repeats, &cpu);
     bench_scene_free(&sc);
     mcp_denoiser_free(d);
     if (ms < 0) return 1;
@@ -225,15 +231,25 @@ onednn_rows(const char *weights, int repeats, int width, int height, int threads
             double sgemm, double mp, double gmac, double ms[2])
 {
     static const char *const algos[2] = {"direct", "winograd"};
-    static const char *const labels[2] = {"apply, direct (as OIDN 1.4)", "apply, Winograd"};
+    static const char *const labels[2] = {"apply, direct (as OIDN 1.4)",
+                                          "apply, Winograd"};
     char w[16], h[16], reps[16], out[1024], title[256] = "", impl[2][256] = {"", ""};
     double row[2][3], peak[2];
     snprintf(w, sizeof w, "%d", width), snprintf(h, sizeof h, "%d", height);
     snprintf(reps, sizeof reps, "%d", repeats);
     int status = 0;
     for (int a = 0; a < 2; a++) {
-        char *argv[] = {(char *)MCP_BENCH_ONEDNN, (char *)weights, w, h, "--reps", reps,
-                        "--layout", "oidn", "--algo", (char *)algos[a], NULL};
+        char *argv[] = {(char *)MCP_BENCH_ONEDNN,
+                        (char *)weights,
+                        w,
+                        h,
+                        "--reps",
+                        reps,
+                        "--layout",
+                        "oidn",
+                        "--algo",
+                        (char *)algos[a],
+                        NULL};
         ms[a] = -1;
         const int rc = run_child(MCP_BENCH_ONEDNN, argv, out, sizeof out, &peak[a]);
         /* "oneDNN 2.6.3 apply [direct, oidn; jit:avx512_corex16]  1920x1088 2 thr
@@ -257,7 +273,8 @@ onednn_rows(const char *weights, int repeats, int width, int height, int threads
            title[0] ? title : "oneDNN", width, height, threads, repeats);
     print_header();
     for (int a = 0; a < 2; a++)
-        if (ms[a] > 0) print_row(labels[a], row[a][0], row[a][2], gmac, sgemm, mp, peak[a]);
+        if (ms[a] > 0)
+            print_row(labels[a], row[a][0], row[a][2], gmac, sgemm, mp, peak[a]);
     for (int a = 0; a < 2; a++) /* oneDNN's kernels, as the anchor names them */
         if (ms[a] > 0) printf("  --algo %s --layout oidn: %s\n", algos[a], impl[a]);
     printf("\n");
@@ -277,7 +294,8 @@ main(int argc, char **argv)
     int repeats = argc > 1 ? atoi(argv[1]) : 3, width = argc > 2 ? atoi(argv[2]) : 512;
     int height = argc > 3 ? atoi(argv[3]) : width;
     const char *modes = argc > 4 ? argv[4] : "both";
-    const int first = !strcmp(modes, "fixed") ? 1 : 0, last = !strcmp(modes, "default") ? 0 : 1;
+    const int first = !strcmp(modes, "fixed") ? 1 : 0,
+              last = !strcmp(modes, "default") ? 0 : 1;
     if (repeats < 1 || width < 8 || width > 8192 || height < 8 || height > 8192 ||
         (strcmp(modes, "both") && strcmp(modes, "default") && strcmp(modes, "fixed"))) {
         fprintf(stderr, "usage: bench_unet [repeats >= 1] [width in 8..8192] "
@@ -315,8 +333,9 @@ main(int argc, char **argv)
     for (int fixed = first; fixed <= last; fixed++) {
         setenv("MCPOST_UNET_FIXED", fixed ? "1" : "0", 1);
         printf("unet at %dx%d, %d thread(s), median of %d, %s\n", width, height, threads,
-               repeats, fixed ? "fixed-bit mode (MCPOST_UNET_FIXED=1: direct loops)"
-                              : "default mode (Winograd: F(2x2,3x3), tangents F(4x4,3x3))");
+               repeats,
+               fixed ? "fixed-bit mode (MCPOST_UNET_FIXED=1: direct loops)"
+                     : "default mode (Winograd: F(2x2,3x3), tangents F(4x4,3x3))");
         print_header();
         for (int c = 0; c < N_CALLS; c++) {
             const int n = call_tangents[c];
@@ -330,8 +349,8 @@ main(int argc, char **argv)
                 continue;
             }
             if (n < 0) apply_ms[fixed] = ms;
-            print_row(call_labels[c], ms, cpu, gmac_apply * (n < 0 ? 1 : 1 + n), sgemm, mp,
-                      peak);
+            print_row(call_labels[c], ms, cpu, gmac_apply * (n < 0 ? 1 : 1 + n), sgemm,
+                      mp, peak);
         }
         printf("\n");
     }

@@ -323,8 +323,8 @@ typedef struct mcp_blend_row {
     double mean_var, mean_sure; /* raw image means (the rules compare them) */
     int filtered;               /* estimates filtered at this member */
     int magnitude;              /* negative SURE by magnitude (else zeroed) */
-    double mean_rho;         /* mean of W / (I + W): the share of d in the blend */
-    double safeguard_pulled; /* share of values the safeguard pulled back (0: off) */
+    double mean_rho;            /* mean of W / (I + W): the share of d in the blend */
+    double safeguard_pulled;    /* share of values the safeguard pulled back (0: off) */
     mcp_blend_errors err[MCP_BLEND_N_METHODS]; /* with a reference; ideal too */
 } mcp_blend_row;
 

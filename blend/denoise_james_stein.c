@@ -34,8 +34,9 @@ weights_at(const js_denoiser *js, const mcp_denoise_input *in, const mcp_image *
 {
     *rho = NULL;
     if (!in->variance)
-        return mcp_error("james-stein: the input has no variance (the combiner weighs the "
-                         "denoised image by it)");
+        return mcp_error(
+            "james-stein: the input has no variance (the combiner weighs the "
+            "denoised image by it)");
     mcp_image *blend = NULL;
     int rc = mcp_blend_james_stein(in->color, d, in->variance, js->window, &blend, rho);
     mcp_image_free(blend);
@@ -47,8 +48,7 @@ static int
 combine(const mcp_image *rho, const mcp_image *a, const mcp_image *b, mcp_image **out)
 {
     static const char *const rgb[] = {"R", "G", "B"};
-    if (mcp_image_new(a->width, a->height, 3, rgb, out))
-        return -1;
+    if (mcp_image_new(a->width, a->height, 3, rgb, out)) return -1;
     int rc_ = rho->channels >= 3;
     for (int y = 0; y < a->height; y++)
         for (int x = 0; x < a->width; x++) {
@@ -77,12 +77,11 @@ js_apply(const mcp_denoiser *self, const mcp_denoise_input *in, mcp_image **out)
 }
 
 static int
-js_jvp(const mcp_denoiser *self, const mcp_denoise_input *at, const mcp_denoise_tangent *t,
-       int n, mcp_image **primal, mcp_image **out)
+js_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
+       const mcp_denoise_tangent *t, int n, mcp_image **primal, mcp_image **out)
 {
     const js_denoiser *js = (const js_denoiser *)self;
-    if (primal)
-        *primal = NULL;
+    if (primal) *primal = NULL;
     for (int k = 0; k < n && out; k++)
         out[k] = NULL;
     mcp_image *d = NULL, *rho = NULL;
@@ -92,10 +91,8 @@ js_jvp(const mcp_denoiser *self, const mcp_denoise_input *at, const mcp_denoise_
         weights_at(js, at, d, &rho))
         goto done;
     for (int k = 0; k < n; k++)
-        if (combine(rho, jd[k], t[k].color, &out[k]))
-            goto done;
-    if (primal && combine(rho, d, at->color, primal))
-        goto done;
+        if (combine(rho, jd[k], t[k].color, &out[k])) goto done;
+    if (primal && combine(rho, d, at->color, primal)) goto done;
     rc = 0;
 done:
     for (int k = 0; k < n; k++) {
@@ -136,8 +133,7 @@ create_inner(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
     mcp_node **keys = mcp_calloc((size_t)cap, sizeof *keys),
              **items = mcp_calloc((size_t)cap, sizeof *items);
     int rc = -1;
-    if (!keys || !items)
-        goto done;
+    if (!keys || !items) goto done;
     name.line = name_key.line = settings->line;
     name.file = name_key.file = settings->file;
     keys[n] = &name_key, items[n++] = &name;
@@ -169,10 +165,10 @@ js_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
         return -1;
     if (window < 1 || window % 2 == 0 || window > 255)
         return mcp_node_error(mcp_node_get(settings, "window"),
-                              "james-stein: window must be odd, 1 to 255 (got %d)", window);
+                              "james-stein: window must be odd, 1 to 255 (got %d)",
+                              window);
     js_denoiser *js = mcp_calloc(1, sizeof *js);
-    if (!js)
-        return -1;
+    if (!js) return -1;
     if (create_inner(settings, base_dir, &js->inner)) {
         free(js);
         return -1;
@@ -194,11 +190,11 @@ js_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
  * kind lacks fails there, naming it. tests/blend/test_james_stein.c checks that this
  * list covers every kind's keys. */
 static const char *const js_keys[] = {
-    "inner",        "window",       "sigma",         "radius",        "patch_radius",
-    "k_color",      "alpha",        "epsilon",       "sigma_color",   "use_variance",
-    "variance_blur", "sigma_albedo", "sigma_normal", "sigma_spatial", "weights",
-    "input_scale",  "tile",         "fixed_bits",    "exact_tangents", "max_memory_mb", "command",
-    "format",       "delta",        "workdir",       NULL};
+    "inner",         "window",       "sigma",        "radius",         "patch_radius",
+    "k_color",       "alpha",        "epsilon",      "sigma_color",    "use_variance",
+    "variance_blur", "sigma_albedo", "sigma_normal", "sigma_spatial",  "weights",
+    "input_scale",   "tile",         "fixed_bits",   "exact_tangents", "max_memory_mb",
+    "command",       "format",       "delta",        "workdir",        NULL};
 
 const mcp_denoiser_kind mcp__denoiser_james_stein = {
     "james-stein",

@@ -65,7 +65,8 @@ mcp_blend_options_check(const mcp_blend_options *o)
                          o->js_window);
     if (o->safeguard != 0 && o->safeguard != 1)
         return mcp_error("blend: safeguard must be 0 or 1 (got %d)", o->safeguard);
-    if (o->weights != MCP_BLEND_WEIGHTS_JAMES_STEIN && o->weights != MCP_BLEND_WEIGHTS_CURVES)
+    if (o->weights != MCP_BLEND_WEIGHTS_JAMES_STEIN &&
+        o->weights != MCP_BLEND_WEIGHTS_CURVES)
         return mcp_error("blend: weights must be james_stein or curves (got %d)",
                          (int)o->weights);
     return 0;

@@ -86,12 +86,13 @@ load_member(const run *r, int i, mcp_dump **out)
 {
     mcp_dump *d = NULL;
     if (mcp_series_load(r->series, i, &d)) return -1;
-    const char *why = !d->var_of_mean ? "has no variance"
+    const char *why = !d->var_of_mean               ? "has no variance"
                       : d->spp_map || !(d->spp > 0) ? "has no scalar sample count"
                                                     : NULL;
-    const char *hint = !d->var_of_mean
-                           ? mcp__no_variance_hint(d, " (blend needs the variance of the mean)")
-                           : "";
+    const char *hint =
+        !d->var_of_mean
+            ? mcp__no_variance_hint(d, " (blend needs the variance of the mean)")
+            : "";
     if (!why && r->reference && !mcp_image_same_size(d->color, r->reference))
         why = "does not match the reference's size";
     if (why) {
@@ -337,8 +338,9 @@ mcp_blend_series(const mcp_series *series, const mcp_denoiser *den,
     r.res->count = n;
     r.res->has_reference = reference != NULL;
     r.res->has_flip = reference != NULL && o->flip;
-    r.res->method = o->blend.weights == MCP_BLEND_WEIGHTS_JAMES_STEIN ? MCP_BLEND_JAMES_STEIN
-                                                                      : MCP_BLEND_CURVES;
+    r.res->method = o->blend.weights == MCP_BLEND_WEIGHTS_JAMES_STEIN
+                        ? MCP_BLEND_JAMES_STEIN
+                        : MCP_BLEND_CURVES;
     if (run_series(&r, on_point, ctx)) goto done;
     *out = r.res;
     r.res = NULL;

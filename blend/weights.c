@@ -230,12 +230,13 @@ sqrt_form_row(const mcp__otf *otf, double black, const float *vr, float *sr,
             __m128 mixed = _mm_add_ps(nv, _mm_mul_ps(rho, _mm_sub_ps(dv, nv)));
             __m128 all_d = _mm_cmpeq_ps(rho, one);
             _mm_storeu_ps(wd + i, wt);
-            _mm_storeu_ps(rd + i, _mm_or_ps(_mm_and_ps(all_d, dv), _mm_andnot_ps(all_d, mixed)));
+            _mm_storeu_ps(rd + i,
+                          _mm_or_ps(_mm_and_ps(all_d, dv), _mm_andnot_ps(all_d, mixed)));
         }
 #endif
         for (; i < n3; i++)
-            sqrt_form_value(spp, cap, zero_w, magnitude, vr[i], sr + i, np[i], dp[i], wd + i,
-                            rd + i);
+            sqrt_form_value(spp, cap, zero_w, magnitude, vr[i], sr + i, np[i], dp[i],
+                            wd + i, rd + i);
         return;
     }
     for (int x = 0; x < w; x++) {

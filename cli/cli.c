@@ -32,8 +32,7 @@ void
 mcp_cli_print_json(cJSON *json)
 {
     char *text = cJSON_Print(json);
-    if (text)
-        puts(text);
+    if (text) puts(text);
     free(text);
     cJSON_Delete(json);
 }
@@ -48,8 +47,7 @@ mcp_cli_read_dump(const char *path, const char *spp, const char *convention,
         (convention && mcp_convention_from_name(convention, &spec.convention)) ||
         (variance && mcp_variance_kind_from_name(variance, &spec.variance)))
         return -1;
-    if (spp && spec.spp <= 0)
-        return mcp_error("--spp must be > 0 (got %s)", spp);
+    if (spp && spec.spp <= 0) return mcp_error("--spp must be > 0 (got %s)", spp);
     return mcp_dump_load(&spec, out);
 }
 
@@ -62,7 +60,7 @@ mcp_cli_output_is_not_input(const char *cmd, const char *out, const char *const 
     for (int i = 0; i < n; i++)
         if (inputs[i] && stat(inputs[i], &si) == 0 && si.st_dev == so.st_dev &&
             si.st_ino == so.st_ino)
-            return mcp_error("%s: the output %s is the input %s; give another output", cmd,
-                             out, inputs[i]);
+            return mcp_error("%s: the output %s is the input %s; give another output",
+                             cmd, out, inputs[i]);
     return 0;
 }

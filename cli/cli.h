@@ -34,8 +34,8 @@ int mcp_cli_usage(const char *cmd, const char *fmt, ...) MCP_PRINTF(2, 3);
  * whatever the spelling): "CMD: the output OUT is the input IN; give another
  * output" as the current error and -1; 0 when out is new or another file. inputs may
  * hold NULLs. */
-int mcp_cli_output_is_not_input(const char *cmd, const char *out, const char *const *inputs,
-                                int n);
+int mcp_cli_output_is_not_input(const char *cmd, const char *out,
+                                const char *const *inputs, int n);
 
 /* Prints JSON on stdout (pretty) and frees it. */
 void mcp_cli_print_json(cJSON *json);
@@ -75,7 +75,9 @@ enum {
         {"denoiser-opt", required_argument, 0, MCP_CLI_OPT_DENOISER_OPT},                \
         {"weights", required_argument, 0, MCP_CLI_OPT_WEIGHTS},                          \
         {"input-scale", required_argument, 0, MCP_CLI_OPT_INPUT_SCALE},                  \
-        {"denoiser-command", required_argument, 0, MCP_CLI_OPT_DENOISER_COMMAND}
+    {                                                                                    \
+        "denoiser-command", required_argument, 0, MCP_CLI_OPT_DENOISER_COMMAND           \
+    }
 
 /* Help lines for the flags besides --denoiser NAME (whose default each command tells
  * itself). The descriptions start in column 26 + strlen(PAD): PAD is a string literal
@@ -119,8 +121,8 @@ void mcp_cli_denoiser_flags_free(mcp_cli_denoiser_flags *f);
  * the status to exit with: 0 after --help (head, the options, examples) or
  * --print-settings (the settings as read, mcp_operation_dump), 1 or 2 after an error
  * (printed). Quiet and threads take effect here. */
-int mcp_cli_parse(const mcp_operation *op, const char *head, const char *examples, int argc,
-                  char **argv, void *settings, mcp_shared_settings *sh,
+int mcp_cli_parse(const mcp_operation *op, const char *head, const char *examples,
+                  int argc, char **argv, void *settings, mcp_shared_settings *sh,
                   mcp_cli_denoiser_flags *df, int *first);
 /* The --help text: head, the option list from op's table, examples. */
 void mcp_cli_print_help(const mcp_operation *op, const char *head, const char *examples);

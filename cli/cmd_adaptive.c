@@ -23,16 +23,20 @@ static const char head[] =
     "usage: mcpost adaptive --render CMD -o DIR (--size WxH | --reference REF)\n"
     "                       (--budget SPP | --stop) [options]\n"
     "  The adaptive-sampling loop of Firmino 2023: render -> merge -> denoise ->\n"
-    "  variance of the denoised image -> sampling map -> integer counts -> render more.\n";
+    "  variance of the denoised image -> sampling map -> integer counts -> render "
+    "more.\n";
 
 static const char examples[] =
     "examples (mcpost-procedural is built and installed beside mcpost, and mcpost\n"
     "finds the programs beside it after those on the PATH):\n"
     "  mcpost adaptive --size 64x64 --budget 64 --denoiser nlm -o out/adaptive \\\n"
-    "    --render 'mcpost-procedural --sample-counts {counts} --pass {pass} --seed {seed} -o {output}'\n"
-    "  mcpost adaptive --size 64x64 --budget 96 --map tonemapped --spp-per-iteration 16 \\\n"
+    "    --render 'mcpost-procedural --sample-counts {counts} --pass {pass} --seed "
+    "{seed} -o {output}'\n"
+    "  mcpost adaptive --size 64x64 --budget 96 --map tonemapped --spp-per-iteration 16 "
+    "\\\n"
     "    --denoiser gauss -o out/adaptive_tonemapped \\\n"
-    "    --render 'mcpost-procedural --sample-counts {counts} --pass {pass} --seed {seed} -o {output}'\n";
+    "    --render 'mcpost-procedural --sample-counts {counts} --pass {pass} --seed "
+    "{seed} -o {output}'\n";
 
 static int
 cmd_adaptive(int argc, char **argv)

@@ -30,11 +30,14 @@ static const char head[] =
 
 static const char examples[] =
     "examples (from the source folder, on the sample renders):\n"
-    "  mcpost blend 'samples/fixtures/cornell/series/cornell_spp%04d.exr' --spp 16,32,64,128 --denoiser gauss \\\n"
+    "  mcpost blend 'samples/fixtures/cornell/series/cornell_spp%04d.exr' --spp "
+    "16,32,64,128 --denoiser gauss \\\n"
     "               --fit last_two -o out/blend\n"
     "  mcpost blend samples/fixtures/texture/series/texture_spp0016.exr \\\n"
-    "               samples/fixtures/texture/series/texture_spp0064.exr --denoiser nlm --no-flip \\\n"
-    "               --ref samples/fixtures/texture/texture_reference.exr -o out/blend_texture\n";
+    "               samples/fixtures/texture/series/texture_spp0064.exr --denoiser nlm "
+    "--no-flip \\\n"
+    "               --ref samples/fixtures/texture/texture_reference.exr -o "
+    "out/blend_texture\n";
 
 static int
 parse_spp_list(const char *text, int **out, int *count)
@@ -69,8 +72,8 @@ cmd_blend(int argc, char **argv)
     mcp_image *ref = NULL;
     mcp_report *report = NULL;
     mcp__outdir whole = {0}; /* -o DIR appears whole, or not at all */
-    int parsed = mcp_cli_parse(mcp_operation_blend(), head, examples, argc, argv, &st, &sh,
-                               &df, &first);
+    int parsed = mcp_cli_parse(mcp_operation_blend(), head, examples, argc, argv, &st,
+                               &sh, &df, &first);
     if (parsed >= 0) {
         status = parsed;
         goto done;
@@ -118,7 +121,8 @@ cmd_blend(int argc, char **argv)
     int wrc = !text || mcp_write_file_atomic(path, text, strlen(text));
     if (!wrc && json) puts(text);
     free(text);
-    if (wrc || mcp_report_write(report, whole.tmp) || mcp__outdir_commit(&whole)) goto fail;
+    if (wrc || mcp_report_write(report, whole.tmp) || mcp__outdir_commit(&whole))
+        goto fail;
     mcp_note("blend: %d members into %s", series->count, out_dir);
     status = 0;
     goto done;

@@ -44,11 +44,17 @@ static const char examples[] =
     "examples (from the source folder, on the sample renders):\n"
     "  mcpost run samples/jobs/shot.yaml -j 2 && mcpost collect out/shot\n"
     "  mcpost collect out/shot --json > out/shot_figures.json\n"
-    "  mcpost collect out/shot --quiet --warn 'relmse > 1' --fail-percent 'flip_ldr 0.9 1%'\n";
+    "  mcpost collect out/shot --quiet --warn 'relmse > 1' --fail-percent 'flip_ldr 0.9 "
+    "1%'\n";
 
 #define MAX_FIGURES 64
 
-typedef enum { FRAME_COMPLETE, FRAME_FAILED, FRAME_UNFINISHED, FRAME_MISSING } frame_status;
+typedef enum {
+    FRAME_COMPLETE,
+    FRAME_FAILED,
+    FRAME_UNFINISHED,
+    FRAME_MISSING
+} frame_status;
 static const char *const status_names[] = {"complete", "failed", "unfinished", "missing"};
 
 typedef struct frame_row {
@@ -78,8 +84,7 @@ static char *
 read_text(const char *path)
 {
     FILE *f = fopen(path, "rb");
-    if (!f)
-        return NULL;
+    if (!f) return NULL;
     mcp__strbuf text = {0};
     mcp__strbuf_read_file(&text, f);
     fclose(f);
@@ -90,8 +95,7 @@ static frame_row *
 add_row(shot *s, int frame)
 {
     for (int i = 0; i < s->n_rows; i++)
-        if (s->rows[i].frame == frame)
-            return &s->rows[i];
+        if (s->rows[i].frame == frame) return &s->rows[i];
     if (s->n_rows == s->cap) {
         int cap = s->cap ? 2 * s->cap : 64;
         frame_row *grown = realloc(s->rows, (size_t)cap * sizeof *grown);
@@ -137,13 +141,11 @@ find_frames(shot *s)
         cJSON_Delete(m);
     }
     DIR *d = opendir(s->dir);
-    if (!d)
-        return mcp_error("%s: cannot read the folder: %s", s->dir, strerror(errno));
+    if (!d) return mcp_error("%s: cannot read the folder: %s", s->dir, strerror(errno));
     for (struct dirent *e; (e = readdir(d));) {
         const char *n = e->d_name;
         size_t len = strlen(n);
-        if (len < 4 || len > 7 || strspn(n, "0123456789") != len)
-            continue;
+        if (len < 4 || len > 7 || strspn(n, "0123456789") != len) continue;
         struct stat st;
         snprintf(path, sizeof path, "%s/%s", s->dir, n);
         if (stat(path, &st) == 0 && S_ISDIR(st.st_mode) && !add_row(s, atoi(n))) {
@@ -153,9 +155,10 @@ find_frames(shot *s)
     }
     closedir(d);
     if (!s->n_rows)
-        return mcp_error("%s: no frames here (no frames.json and no frame folders such as "
-                         "0001/)",
-                         s->dir);
+        return mcp_error(
+            "%s: no frames here (no frames.json and no frame folders such as "
+            "0001/)",
+            s->dir);
     return 0;
 }
 
@@ -163,8 +166,7 @@ static int
 figure_index(shot *s, const char *name)
 {
     for (int k = 0; k < s->n_figures; k++)
-        if (!strcmp(s->figures[k], name))
-            return k;
+        if (!strcmp(s->figures[k], name)) return k;
     if (s->n_figures == MAX_FIGURES || !(s->figures[s->n_figures] = mcp_strdup(name)))
         return -1;
     return s->n_figures++;
@@ -176,8 +178,7 @@ put_figure(shot *s, frame_row *r, const char *section, const char *what, double 
     char name[512];
     snprintf(name, sizeof name, "%s: %s", section, what);
     int k = figure_index(s, name);
-    if (k >= 0)
-        r->values[k] = v;
+    if (k >= 0) r->values[k] = v;
 }
 
 /* The figures of one section of a frame's report. */
@@ -201,8 +202,7 @@ section_figures(shot *s, frame_row *r, const cJSON *sec)
         const cJSON *v = cJSON_GetObjectItem(sec, keys[i][0]);
         if (cJSON_IsObject(v)) /* flip_*: {"mean": ...} */
             v = cJSON_GetObjectItem(v, "mean");
-        if (cJSON_IsNumber(v))
-            put_figure(s, r, name, keys[i][1], v->valuedouble);
+        if (cJSON_IsNumber(v)) put_figure(s, r, name, keys[i][1], v->valuedouble);
     }
     /* estimate over a series: the first spp at which it would stop, per tau */
     const cJSON *table;
@@ -217,14 +217,13 @@ section_figures(shot *s, frame_row *r, const cJSON *sec)
                 col = i;
             i++;
         }
-        if (col < 1)
-            continue;
+        if (col < 1) continue;
         cJSON_ArrayForEach(row, cJSON_GetObjectItem(table, "rows"))
         {
-            const cJSON *tau = cJSON_GetArrayItem(row, 0), *spp = cJSON_GetArrayItem(row, col);
+            const cJSON *tau = cJSON_GetArrayItem(row, 0),
+                        *spp = cJSON_GetArrayItem(row, col);
             char what[64];
-            if (!cJSON_IsNumber(tau) || !cJSON_IsNumber(spp))
-                continue;
+            if (!cJSON_IsNumber(tau) || !cJSON_IsNumber(spp)) continue;
             snprintf(what, sizeof what, "stop spp (tau %g)", tau->valuedouble);
             put_figure(s, r, name, what, spp->valuedouble);
         }
@@ -240,7 +239,8 @@ add_share_from_map(cJSON *sec, const char *frame_dir, const mcp__gate_cond *c)
     const cJSON *a;
     cJSON_ArrayForEach(a, cJSON_GetObjectItem(sec, "pixels_above"))
     {
-        const cJSON *map = cJSON_GetObjectItem(a, "map"), *t = cJSON_GetObjectItem(a, "threshold");
+        const cJSON *map = cJSON_GetObjectItem(a, "map"),
+                    *t = cJSON_GetObjectItem(a, "threshold");
         if (cJSON_IsString(map) && !strcmp(map->valuestring, c->figure) &&
             cJSON_IsNumber(t) && t->valuedouble == c->threshold)
             return 0; /* measured by the stage */
@@ -256,10 +256,12 @@ add_share_from_map(cJSON *sec, const char *frame_dir, const mcp__gate_cond *c)
             (n > strlen(png) && p->valuestring[n - strlen(png) - 1] != '/' &&
              p->valuestring[n - strlen(png) - 1] != '.'))
             continue;
-        snprintf(path, sizeof path, "%s/%.*s.exr", frame_dir, (int)(n - 4), p->valuestring);
+        snprintf(path, sizeof path, "%s/%.*s.exr", frame_dir, (int)(n - 4),
+                 p->valuestring);
         mcp_image *map = NULL;
         double percent;
-        if (mcp_image_read(path, NULL, &map) || mcp_image_percent_above(map, c->threshold, &percent)) {
+        if (mcp_image_read(path, NULL, &map) ||
+            mcp_image_percent_above(map, c->threshold, &percent)) {
             mcp_image_free(map);
             return -1;
         }
@@ -312,8 +314,9 @@ judge_frame(shot *s, frame_row *r, cJSON *rep, const char *frame_dir)
         }
         if (v == r->verdict && v != MCP__GATE_PASS && len < sizeof r->gate_text) {
             const char *why = strchr(line, ':');
-            len += (size_t)snprintf(r->gate_text + len, sizeof r->gate_text - len, "%s%s:%s",
-                                    len ? "; " : "", input->valuestring, why ? why + 1 : "");
+            len +=
+                (size_t)snprintf(r->gate_text + len, sizeof r->gate_text - len, "%s%s:%s",
+                                 len ? "; " : "", input->valuestring, why ? why + 1 : "");
         }
     }
     if (!judged) {
@@ -370,10 +373,10 @@ read_frame(shot *s, frame_row *r)
         cJSON_ArrayForEach(sec, cJSON_GetObjectItem(rep, "sections"))
             section_figures(s, r, sec);
         if (s->gate && !s->gate_failed) judge_frame(s, r, rep, dir);
-        if (!s->title && cJSON_IsString(title) && (s->title = mcp_strdup(title->valuestring))) {
+        if (!s->title && cJSON_IsString(title) &&
+            (s->title = mcp_strdup(title->valuestring))) {
             char *cut = strstr(s->title, ", frame ");
-            if (cut)
-                *cut = '\0';
+            if (cut) *cut = '\0';
         }
         cJSON_Delete(rep);
         return;
@@ -402,8 +405,7 @@ rank_figure(const shot *s)
     for (size_t o = 0; o < sizeof order / sizeof order[0]; o++)
         for (int k = 0; k < s->n_figures; k++) {
             size_t n = strlen(s->figures[k]), m = strlen(order[o]);
-            if (n >= m && !strcmp(s->figures[k] + n - m, order[o]))
-                return k;
+            if (n >= m && !strcmp(s->figures[k] + n - m, order[o])) return k;
         }
     return -1;
 }
@@ -417,10 +419,8 @@ worst_first(const void *a, const void *b)
         return (x->status > y->status) - (x->status < y->status);
     double u = rank_by >= 0 ? x->values[rank_by] : NAN,
            v = rank_by >= 0 ? y->values[rank_by] : NAN;
-    if (isnan(u) != isnan(v))
-        return isnan(u) ? 1 : -1;
-    if (!isnan(u) && u != v)
-        return u < v ? 1 : -1;
+    if (isnan(u) != isnan(v)) return isnan(u) ? 1 : -1;
+    if (!isnan(u) && u != v) return u < v ? 1 : -1;
     return (x->frame > y->frame) - (x->frame < y->frame);
 }
 
@@ -434,7 +434,9 @@ by_frame(const void *a, const void *b)
 static const char *
 verdict_name(mcp__gate_verdict v)
 {
-    return v == MCP__GATE_FAILURE ? "failure" : v == MCP__GATE_WARNING ? "warning" : "pass";
+    return v == MCP__GATE_FAILURE   ? "failure"
+           : v == MCP__GATE_WARNING ? "warning"
+                                    : "pass";
 }
 
 /* The gates' verdict over the complete frames, the worst, and its line: "PASS", or
@@ -484,8 +486,8 @@ shot_verdict(const shot *s, cJSON *sec, const int counts[4], int rank)
                                       v == MCP__GATE_FAILURE   ? MCP_VERDICT_BAD
                                       : v == MCP__GATE_WARNING ? MCP_VERDICT_INFO
                                                                : MCP_VERDICT_GOOD,
-                                      "gate %s; all %d frames complete%s", line, s->n_rows,
-                                      worst_text);
+                                      "gate %s; all %d frames complete%s", line,
+                                      s->n_rows, worst_text);
     }
     if (complete == s->n_rows)
         return mcp_report_set_verdict(sec, MCP_VERDICT_GOOD, "all %d frames complete%s",
@@ -502,22 +504,18 @@ static int
 build_report(shot *s, mcp_report *rep, int counts[4])
 {
     cJSON *sec = mcp_report_section(rep, "collect", "the shot");
-    if (!sec)
-        return -1;
+    if (!sec) return -1;
     cJSON_AddNumberToObject(sec, "frames", s->n_rows);
     for (int st = 0; st < 4; st++)
         cJSON_AddNumberToObject(sec, status_names[st], counts[st]);
-    if (s->job)
-        cJSON_AddStringToObject(sec, "job", s->job);
+    if (s->job) cJSON_AddStringToObject(sec, "job", s->job);
     int rank = rank_figure(s);
-    if (rank >= 0)
-        cJSON_AddStringToObject(sec, "worst_first_by", s->figures[rank]);
+    if (rank >= 0) cJSON_AddStringToObject(sec, "worst_first_by", s->figures[rank]);
 
     /* every frame, machine-readable: its state, figures and page (report.json only:
        the page's tables show the same) */
     cJSON *list = cJSON_AddArrayToObject(sec, "frame_list");
-    if (!list || mcp_report_json_only(sec, "frame_list"))
-        return -1;
+    if (!list || mcp_report_json_only(sec, "frame_list")) return -1;
     for (int i = 0; list && i < s->n_rows; i++) {
         const frame_row *r = &s->rows[i];
         cJSON *o = cJSON_CreateObject(), *fig = cJSON_CreateObject();
@@ -548,7 +546,8 @@ build_report(shot *s, mcp_report *rep, int counts[4])
         for (int i = 0; t && i < s->n_rows; i++)
             if (s->rows[i].status != FRAME_COMPLETE &&
                 mcp_report_table_add_row(t, "iss", s->rows[i].frame,
-                                         status_names[s->rows[i].status], s->rows[i].message))
+                                         status_names[s->rows[i].status],
+                                         s->rows[i].message))
                 return -1;
     }
 
@@ -565,12 +564,11 @@ build_report(shot *s, mcp_report *rep, int counts[4])
             x[i] = s->rows[i].frame, y[i] = s->rows[i].values[k];
             shown += !isnan(y[i]);
         }
-        if (!shown)
-            continue;
+        if (!shown) continue;
         cJSON *plot = mcp_report_add_plot(sec, s->figures[k], "frame", MCP_AXIS_LINEAR,
                                           s->figures[k], MCP_AXIS_LINEAR);
-        if (!plot || !mcp_report_plot_add_series(plot, s->figures[k],
-                                                 MCP_SERIES_LINE_POINTS, x, y, s->n_rows)) {
+        if (!plot || !mcp_report_plot_add_series(
+                         plot, s->figures[k], MCP_SERIES_LINE_POINTS, x, y, s->n_rows)) {
             free(x), free(y);
             return -1;
         }
@@ -588,7 +586,8 @@ build_report(shot *s, mcp_report *rep, int counts[4])
         cols[n++] = "page";
         rank_by = rank;
         frame_row *sorted = mcp_calloc((size_t)s->n_rows, sizeof *sorted);
-        cJSON *t = sorted ? mcp_report_add_table(sec, "frames, worst first", cols, n) : NULL;
+        cJSON *t =
+            sorted ? mcp_report_add_table(sec, "frames, worst first", cols, n) : NULL;
         if (!t) {
             free(sorted);
             return -1;
@@ -609,7 +608,8 @@ build_report(shot *s, mcp_report *rep, int counts[4])
                                               ? cJSON_CreateNull()
                                               : cJSON_CreateNumber(sorted[i].values[k]));
             if (s->gate)
-                cJSON_AddItemToArray(row, cJSON_CreateString(verdict_name(sorted[i].verdict)));
+                cJSON_AddItemToArray(row,
+                                     cJSON_CreateString(verdict_name(sorted[i].verdict)));
             cJSON_AddItemToArray(row, cJSON_CreateString(page));
         }
         free(sorted);
@@ -625,8 +625,7 @@ collect(const char *dir, int json_stdout, const mcp__gate *gate)
     mcp_report *rep = NULL;
     int rc = -1, counts[4] = {0};
     char *json = NULL;
-    if (find_frames(&s))
-        goto done;
+    if (find_frames(&s)) goto done;
     qsort(s.rows, (size_t)s.n_rows, sizeof *s.rows, by_frame);
     for (int i = 0; i < s.n_rows; i++) {
         read_frame(&s, &s.rows[i]);
@@ -691,8 +690,8 @@ cmd_collect(int argc, char **argv)
     mcp_shared_settings sh;
     mcp_cli_denoiser_flags df = {0};
     int first = 0;
-    int parsed =
-        mcp_cli_parse(&mcp__op_collect, head, examples, argc, argv, &st, &sh, &df, &first);
+    int parsed = mcp_cli_parse(&mcp__op_collect, head, examples, argc, argv, &st, &sh,
+                               &df, &first);
     if (parsed >= 0) return parsed;
     mcp__gate gate;
     const char *bad_key;
@@ -705,5 +704,5 @@ cmd_collect(int argc, char **argv)
     return rc < 0 ? mcp_cli_fail() : rc;
 }
 
-const mcp_command mcp_command_collect = {"collect", "gather a frame job's reports into one",
-                                         cmd_collect, 1};
+const mcp_command mcp_command_collect = {
+    "collect", "gather a frame job's reports into one", cmd_collect, 1};

@@ -31,7 +31,8 @@ static const char head[] =
 static const char examples[] =
     "examples (from the source folder, on the sample renders):\n"
     "  mcpost compare samples/fixtures/cornell/cornell_reference.exr \\\n"
-    "                 samples/fixtures/cornell/series/cornell_spp0064.exr -o out/compare\n"
+    "                 samples/fixtures/cornell/series/cornell_spp0064.exr -o "
+    "out/compare\n"
     "  mcpost compare samples/fixtures/cornell/cornell_reference.exr \\\n"
     "                 samples/fixtures/cornell/series/cornell_spp0016.exr \\\n"
     "                 samples/fixtures/cornell/series/cornell_spp0256.exr \\\n"
@@ -85,7 +86,8 @@ compare_one(const char *test_path, const char *ref_path, const mcp_image *ref, i
 {
     char prefix[64] = "", title[4400], cap_test[4400], cap_ref[4400];
     if (n_tests > 1) snprintf(prefix, sizeof prefix, "test%d/", index + 1);
-    snprintf(title, sizeof title, "%s against %s", base_name(test_path), base_name(ref_path));
+    snprintf(title, sizeof title, "%s against %s", base_name(test_path),
+             base_name(ref_path));
     snprintf(cap_test, sizeof cap_test, "test: %s", base_name(test_path));
     snprintf(cap_ref, sizeof cap_ref, "reference: %s", base_name(ref_path));
     cJSON *section = mcp_report_section(report, "compare", title);
@@ -140,8 +142,9 @@ summary_section(cJSON *sections, int n_tests, const mcp_metrics_options *o,
     if (o->flip_hdr) cols[n_cols++] = "HDR-FLIP";
     if (gate->n) cols[n_cols++] = "gate";
     cJSON *s = cJSON_CreateObject();
-    cJSON *t = s ? mcp_report_add_table(s, "every test against the reference", cols, n_cols)
-                 : NULL;
+    cJSON *t =
+        s ? mcp_report_add_table(s, "every test against the reference", cols, n_cols)
+          : NULL;
     cJSON *rows = cJSON_GetObjectItem(t, "rows");
     if (!rows) {
         cJSON_Delete(s);
@@ -172,18 +175,18 @@ summary_section(cJSON *sections, int n_tests, const mcp_metrics_options *o,
                 cJSON_AddItemToArray(row, isfinite(v[k]) ? cJSON_CreateNumber(v[k])
                                                          : cJSON_CreateNull());
         if (gate->n)
-            cJSON_AddItemToArray(row, cJSON_IsString(g) ? cJSON_CreateString(g->valuestring)
-                                                        : cJSON_CreateNull());
+            cJSON_AddItemToArray(row, cJSON_IsString(g)
+                                          ? cJSON_CreateString(g->valuestring)
+                                          : cJSON_CreateNull());
         cJSON_AddItemToArray(rows, row);
         if (cJSON_GetArraySize(row) != n_cols) { /* an item ran out of memory */
             cJSON_Delete(s);
             return mcp_error("out of memory for the report");
         }
     }
-    const char *best_name =
-        best >= 0 ? cJSON_GetStringValue(cJSON_GetObjectItem(cJSON_GetArrayItem(sections, best),
-                                                             "test"))
-                  : NULL;
+    const char *best_name = best >= 0 ? cJSON_GetStringValue(cJSON_GetObjectItem(
+                                            cJSON_GetArrayItem(sections, best), "test"))
+                                      : NULL;
     char best_text[4400] = "";
     if (best_name)
         snprintf(best_text, sizeof best_text, "lowest relMSE: %s (%.3g)", best_name,
@@ -196,11 +199,10 @@ summary_section(cJSON *sections, int n_tests, const mcp_metrics_options *o,
         rc = mcp_report_set_verdict(s, MCP_VERDICT_GOOD, "gate PASS on all %d tests; %s",
                                     n_tests, best_text);
     else
-        rc = mcp_report_set_verdict(s, worst == MCP__GATE_FAILURE ? MCP_VERDICT_BAD
-                                                                  : MCP_VERDICT_INFO,
-                                    "gate %s, first in %s; %s",
-                                    worst == MCP__GATE_FAILURE ? "FAILURE" : "WARNING",
-                                    worst_test, best_text);
+        rc = mcp_report_set_verdict(
+            s, worst == MCP__GATE_FAILURE ? MCP_VERDICT_BAD : MCP_VERDICT_INFO,
+            "gate %s, first in %s; %s",
+            worst == MCP__GATE_FAILURE ? "FAILURE" : "WARNING", worst_test, best_text);
     if (rc) {
         cJSON_Delete(s);
         return -1;
@@ -222,8 +224,8 @@ cmd_compare(int argc, char **argv)
     /* a bad value is a usage error here, as it always was for compare */
     if (parsed >= 0) return parsed == 1 ? 2 : parsed;
     mcp_metrics_options o = st.m.o;
-    const char *out_dir = sh.output ? sh.output : "compare", *display =
-        mcp_wordlist_name(&mcp_report_display_words, st.display);
+    const char *out_dir = sh.output ? sh.output : "compare",
+               *display = mcp_wordlist_name(&mcp_report_display_words, st.display);
     double exposure = st.exposure;
     int json = sh.json;
     optind = first;
@@ -247,8 +249,8 @@ cmd_compare(int argc, char **argv)
     char worst_line[2200] = "", title[4400];
     int status = 1;
     if (n_tests == 1)
-        snprintf(title, sizeof title, "mcpost compare: %s against %s", base_name(tests[0]),
-                 base_name(ref_path));
+        snprintf(title, sizeof title, "mcpost compare: %s against %s",
+                 base_name(tests[0]), base_name(ref_path));
     else
         snprintf(title, sizeof title, "mcpost compare: %d renders against %s", n_tests,
                  base_name(ref_path));
@@ -260,8 +262,8 @@ cmd_compare(int argc, char **argv)
     for (int i = 0; i < n_tests; i++) {
         mcp__gate_verdict v;
         char line[2200];
-        if (compare_one(tests[i], ref_path, ref, i, n_tests, &o, &gate, od.tmp, report, &v,
-                        line, sizeof line))
+        if (compare_one(tests[i], ref_path, ref, i, n_tests, &o, &gate, od.tmp, report,
+                        &v, line, sizeof line))
             goto done;
         if (v > worst) {
             worst = v;
@@ -295,9 +297,10 @@ cmd_compare(int argc, char **argv)
             cJSON_AddItemToArray(list, copy);
         }
         if (gate.n)
-            cJSON_AddStringToObject(out, "gate", worst == MCP__GATE_PASS      ? "pass"
-                                                 : worst == MCP__GATE_WARNING ? "warning"
-                                                                              : "failure");
+            cJSON_AddStringToObject(out, "gate",
+                                    worst == MCP__GATE_PASS      ? "pass"
+                                    : worst == MCP__GATE_WARNING ? "warning"
+                                                                 : "failure");
         mcp_cli_print_json(out);
         out = NULL;
     } else {

@@ -14,9 +14,12 @@ static const char head[] =
 
 static const char examples[] =
     "examples (from the source folder, on the sample renders):\n"
-    "  mcpost convert samples/fixtures/cornell/cornell_reference.exr /tmp/cornell.png --channels R,G,B\n"
-    "  mcpost convert samples/fixtures/cornell/series/cornell_spp0016.exr /tmp/cornell_mitsuba.exr --dump mitsuba\n"
-    "  mcpost convert samples/fixtures/cornell/cornell_reference.exr /tmp/cornell_half.exr --half --compression piz\n";
+    "  mcpost convert samples/fixtures/cornell/cornell_reference.exr /tmp/cornell.png "
+    "--channels R,G,B\n"
+    "  mcpost convert samples/fixtures/cornell/series/cornell_spp0016.exr "
+    "/tmp/cornell_mitsuba.exr --dump mitsuba\n"
+    "  mcpost convert samples/fixtures/cornell/cornell_reference.exr "
+    "/tmp/cornell_half.exr --half --compression piz\n";
 
 static int
 cmd_convert(int argc, char **argv)
@@ -29,7 +32,8 @@ cmd_convert(int argc, char **argv)
     int n_channels = 0, first = 0, status = 1;
     int parsed = mcp_cli_parse(op, head, examples, argc, argv, &st, &sh, &df, &first);
     if (parsed >= 0) return parsed;
-    if (argc - first != 2) return mcp_cli_usage("convert", "give one input and one output file");
+    if (argc - first != 2)
+        return mcp_cli_usage("convert", "give one input and one output file");
     const char *in = argv[first], *out = argv[first + 1];
     if (mcp_cli_output_is_not_input("convert", out, &in, 1) ||
         mcp__convert_channel_names(&st, &channels, &n_channels))
@@ -45,8 +49,7 @@ cmd_convert(int argc, char **argv)
                !mcp_image_write(picked, out, &st.wo)) {
         status = 0;
     }
-    if (status)
-        mcp_cli_fail();
+    if (status) mcp_cli_fail();
     mcp_dump_free(dump);
     mcp_image_free(picked);
     mcp_image_free(img);
@@ -54,6 +57,7 @@ cmd_convert(int argc, char **argv)
     return status;
 }
 
-const mcp_command mcp_command_convert = {"convert", "convert images and render dumps "
-                                                    "between formats and conventions",
+const mcp_command mcp_command_convert = {"convert",
+                                         "convert images and render dumps "
+                                         "between formats and conventions",
                                          cmd_convert, 1};

@@ -23,8 +23,10 @@ static const char head[] =
 
 static const char examples[] =
     "examples (from the source folder, on the sample renders):\n"
-    "  mcpost denoise samples/fixtures/cornell/series/cornell_spp0064.exr --denoiser nlm -o /tmp/cornell_nlm.exr\n"
-    "  mcpost denoise samples/fixtures/cornell/series/cornell_spp0016.exr -o /tmp/cornell_unet.exr   # the U-Net\n"
+    "  mcpost denoise samples/fixtures/cornell/series/cornell_spp0064.exr --denoiser nlm "
+    "-o /tmp/cornell_nlm.exr\n"
+    "  mcpost denoise samples/fixtures/cornell/series/cornell_spp0016.exr -o "
+    "/tmp/cornell_unet.exr   # the U-Net\n"
     "  mcpost denoise --list\n";
 
 static void
@@ -47,8 +49,7 @@ read_rgb(const char *path, const char *what, mcp_image **out)
     static const char *const triples[][3] = {{"R", "G", "B"}, {"X", "Y", "Z"}};
     mcp_image *img = NULL;
     *out = NULL;
-    if (mcp_image_read(path, NULL, &img))
-        return -1;
+    if (mcp_image_read(path, NULL, &img)) return -1;
     int idx[3], rc = -1;
     if (mcp_image_find_triple(img, triples, 2, idx))
         mcp_error("%s: the %s needs channels R,G,B or X,Y,Z, or exactly 3 channels "
@@ -65,12 +66,10 @@ static void
 stem_of(const char *path, int strip_dir, char *buf, size_t cap)
 {
     const char *base = path, *slash = strrchr(path, '/');
-    if (strip_dir && slash)
-        base = slash + 1;
+    if (strip_dir && slash) base = slash + 1;
     snprintf(buf, cap, "%s", base);
     char *dot = strrchr(buf, '.'), *sep = strrchr(buf, '/');
-    if (dot && dot != buf && (!sep || dot > sep + 1))
-        *dot = '\0';
+    if (dot && dot != buf && (!sep || dot > sep + 1)) *dot = '\0';
 }
 
 typedef struct {
@@ -88,18 +87,15 @@ load_input(const inputs *in, mcp_dump **out)
         return mcp_cli_read_dump(in->dump, in->spp, in->convention, in->variance_kind,
                                  out);
     mcp_dump *d = mcp_calloc(1, sizeof *d);
-    if (!d)
-        return -1;
+    if (!d) return -1;
     int rc = read_rgb(in->color, "colour", &d->color) ||
              (in->albedo && read_rgb(in->albedo, "albedo", &d->albedo)) ||
              (in->normal && read_rgb(in->normal, "normal", &d->normal)) ||
              (in->variance && read_rgb(in->variance, "variance", &d->var_of_mean));
     const mcp_image *parts[] = {d->albedo, d->normal, d->var_of_mean};
     for (int i = 0; i < 3 && !rc; i++)
-        if (parts[i] && !mcp_image_same_size(parts[i], d->color))
-            rc = -1;
-    if (!rc && !(d->source = mcp_strdup(in->color)))
-        rc = -1;
+        if (parts[i] && !mcp_image_same_size(parts[i], d->color)) rc = -1;
+    if (!rc && !(d->source = mcp_strdup(in->color))) rc = -1;
     if (rc) {
         mcp_dump_free(d);
         return -1;
@@ -114,22 +110,16 @@ run(const mcp_denoiser *den, const mcp_dump *dump, const inputs *ins, const char
     const char *tangent_path, const char *tangent_out)
 {
     mcp_denoise_input in = mcp_denoise_input_of(dump);
-    if (ins->no_albedo)
-        in.albedo = NULL;
-    if (ins->no_normal)
-        in.normal = NULL;
-    if (ins->no_variance)
-        in.variance = NULL;
+    if (ins->no_albedo) in.albedo = NULL;
+    if (ins->no_normal) in.normal = NULL;
+    if (ins->no_variance) in.variance = NULL;
     mcp_image *t = NULL, *den_img = NULL, *jt = NULL;
     int rc = -1;
     if (tangent_path) {
-        if (read_rgb(tangent_path, "tangent", &t))
-            goto done;
-        if (!mcp_image_same_size(t, in.color))
-            goto done;
+        if (read_rgb(tangent_path, "tangent", &t)) goto done;
+        if (!mcp_image_same_size(t, in.color)) goto done;
         mcp_denoise_tangent tan = {t, NULL, NULL};
-        if (den->jvp(den, &in, &tan, 1, &den_img, &jt))
-            goto done;
+        if (den->jvp(den, &in, &tan, 1, &den_img, &jt)) goto done;
     } else if (den->apply(den, &in, &den_img)) {
         goto done;
     }
@@ -157,8 +147,8 @@ cmd_denoise(int argc, char **argv)
     mcp_shared_settings sh;
     mcp_cli_denoiser_flags df = {0};
     int first = 0;
-    int parsed = mcp_cli_parse(mcp_operation_denoise(), head, examples, argc, argv, &st, &sh,
-                               &df, &first);
+    int parsed = mcp_cli_parse(mcp_operation_denoise(), head, examples, argc, argv, &st,
+                               &sh, &df, &first);
     if (parsed >= 0) {
         mcp_cli_denoiser_flags_free(&df);
         return parsed;
@@ -200,13 +190,14 @@ cmd_denoise(int argc, char **argv)
         mcp_cli_denoiser_flags_free(&df);
         return 2;
     }
-    if (argc - first == 1)
-        in.dump = argv[first];
+    if (argc - first == 1) in.dump = argv[first];
     char out_buf[PATH_CAP], jvp_buf[PATH_CAP], stem[PATH_CAP];
     if (!out) {
         stem_of(in.dump ? in.dump : in.color, 1, stem, sizeof stem);
         snprintf(out_buf, sizeof out_buf, "%s_%s.exr", stem,
-                 df.name ? df.name : df.n_opts ? "unet" : "default");
+                 df.name     ? df.name
+                 : df.n_opts ? "unet"
+                             : "default");
         out = out_buf;
     }
     if (tangent && !tangent_out) {
@@ -216,14 +207,15 @@ cmd_denoise(int argc, char **argv)
     }
     mcp_denoiser *den = NULL;
     mcp_dump *dump = NULL;
-    const char *inputs[6] = {in.dump, in.color, in.albedo, in.normal, in.variance, tangent};
+    const char *inputs[6] = {in.dump,   in.color,    in.albedo,
+                             in.normal, in.variance, tangent};
     if (mcp_cli_output_is_not_input("denoise", out, inputs, 6) ||
         mcp_cli_output_is_not_input("denoise", tangent_out, inputs, 6)) {
         mcp_cli_denoiser_flags_free(&df);
         return mcp_cli_fail();
     }
-    if (!mcp_cli_denoiser_create(&df, &den) &&
-        !load_input(&in, &dump) && !run(den, dump, &in, out, tangent, tangent_out))
+    if (!mcp_cli_denoiser_create(&df, &den) && !load_input(&in, &dump) &&
+        !run(den, dump, &in, out, tangent, tangent_out))
         status = 0;
     else
         mcp_cli_fail();

@@ -111,9 +111,12 @@ static const char head[] =
 
 static const char examples[] =
     "examples (from the source folder, on the sample renders):\n"
-    "  mcpost estimate samples/fixtures/cornell/series/cornell_spp0064.exr --denoiser nlm -o out/estimate\n"
-    "  mcpost estimate --series 'samples/fixtures/cornell/series/cornell_spp%04d.exr' --spp 16,32,64,128 \\\n"
-    "                  --denoiser bilateral --ref samples/fixtures/cornell/cornell_reference.exr\n";
+    "  mcpost estimate samples/fixtures/cornell/series/cornell_spp0064.exr --denoiser "
+    "nlm -o out/estimate\n"
+    "  mcpost estimate --series 'samples/fixtures/cornell/series/cornell_spp%04d.exr' "
+    "--spp 16,32,64,128 \\\n"
+    "                  --denoiser bilateral --ref "
+    "samples/fixtures/cornell/cornell_reference.exr\n";
 
 static int
 cmd_estimate(int argc, char **argv)
@@ -156,13 +159,13 @@ cmd_estimate(int argc, char **argv)
     mcp__estimate_dir od;
     mcp__outdir whole = {0}; /* -o DIR appears whole, or not at all */
     memset(&od, 0, sizeof od);
-    if (mcp_estimate_check(eo) ||
-        mcp_cli_denoiser_create(&df, &den) ||
+    if (mcp_estimate_check(eo) || mcp_cli_denoiser_create(&df, &den) ||
         (ref_path && mcp_image_read(ref_path, NULL, &ref)))
         goto done;
     if (outdir) { /* after the cheap checks, before any work */
         const char *named[] = {ref_path, pattern};
-        if (mcp__outdir_begin(&whole, outdir) || mcp__outdir_check_inputs(&whole, named, 2) ||
+        if (mcp__outdir_begin(&whole, outdir) ||
+            mcp__outdir_check_inputs(&whole, named, 2) ||
             mcp__outdir_check_inputs(&whole, (const char *const *)argv + optind, n_files))
             goto done;
         snprintf(od.dir, sizeof od.dir, "%s", whole.tmp);
@@ -202,8 +205,7 @@ cmd_estimate(int argc, char **argv)
         spec.path = path;
         spec.convention = st.convention;
         spec.variance = st.variance;
-        if (mcp_dump_load(&spec, &dump) ||
-            mcp_estimate_compute(dump, den, eo, &e))
+        if (mcp_dump_load(&spec, &dump) || mcp_estimate_compute(dump, den, eo, &e))
             goto done;
         summary = mcp__estimate_json(e, path, den->name, eo);
         if (ref && mcp__estimate_add_truth(e, ref, eo, summary)) /* the truth beside it */

@@ -23,8 +23,7 @@ print_title(const char *text)
 {
     const char *end = strchr(text, '\n');
     int n = end ? (int)(end - text) : (int)strlen(text);
-    if (n >= 2 && text[0] == '#' && text[1] == ' ')
-        text += 2, n -= 2;
+    if (n >= 2 && text[0] == '#' && text[1] == ' ') text += 2, n -= 2;
     printf("%.*s", n, text);
 }
 
@@ -48,8 +47,7 @@ cmd_help(int argc, char **argv)
         list_topics();
         return 0;
     }
-    if (argc > 2)
-        return mcp_cli_usage("help", "give one topic");
+    if (argc > 2) return mcp_cli_usage("help", "give one topic");
     const char *topic = argv[1];
     if (!strcmp(topic, "--help") || !strcmp(topic, "-h")) {
         fputs(usage, stdout);
@@ -77,6 +75,7 @@ cmd_help(int argc, char **argv)
     return 2;
 }
 
-const mcp_command mcp_command_help = {"help", "print a docs page: render dumps, job files, "
-                                              "denoisers (mcpost help lists them)",
+const mcp_command mcp_command_help = {"help",
+                                      "print a docs page: render dumps, job files, "
+                                      "denoisers (mcpost help lists them)",
                                       cmd_help, 0};

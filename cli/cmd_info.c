@@ -16,7 +16,8 @@ add_attrs(cJSON *o, const mcp_attrs *attrs)
         if (t->type == MCP_ATTR_STRING)
             cJSON_AddStringToObject(a, t->name, t->s);
         else
-            cJSON_AddNumberToObject(a, t->name, t->type == MCP_ATTR_INT ? (double)t->i : t->f);
+            cJSON_AddNumberToObject(a, t->name,
+                                    t->type == MCP_ATTR_INT ? (double)t->i : t->f);
     }
 }
 
@@ -35,7 +36,8 @@ describe_file(const char *path, const mcp_image *img, const mcp_dump_spec *spec)
         mcp__info_add_dump(o, d);
         mcp_dump_free(d);
     } else {
-        cJSON_AddStringToObject(o, "convention", mcp_convention_name(mcp_dump_detect(img)));
+        cJSON_AddStringToObject(o, "convention",
+                                mcp_convention_name(mcp_dump_detect(img)));
         cJSON_AddStringToObject(o, "dump_error", mcp_error_message());
     }
     if (mcp__info_add_channels(cJSON_AddArrayToObject(o, "channels"), img, "")) {
@@ -51,24 +53,24 @@ static void
 print_variance_source(const cJSON *o)
 {
     const cJSON *src = cJSON_GetObjectItem(o, "variance_source");
-    if (!cJSON_IsString(src) || strcmp(src->valuestring, "none") == 0)
-        return;
+    if (!cJSON_IsString(src) || strcmp(src->valuestring, "none") == 0) return;
     const cJSON *dof = cJSON_GetObjectItem(o, "variance_dof"),
                 *k = cJSON_GetObjectItem(o, "replicates"),
                 *pool = cJSON_GetObjectItem(o, "variance_pool");
     mcp_variance_source s;
-    if (strcmp(src->valuestring, "per-sample") == 0 || strcmp(src->valuestring, "of-mean") == 0 ||
+    if (strcmp(src->valuestring, "per-sample") == 0 ||
+        strcmp(src->valuestring, "of-mean") == 0 ||
         strcmp(src->valuestring, "xyz-moments") == 0)
-        printf("  source:    %s\n", mcp_variance_source_from_name(src->valuestring, &s) == 0
-                                        ? mcp__variance_source_words(s)
-                                        : src->valuestring);
+        printf("  source:    %s\n",
+               mcp_variance_source_from_name(src->valuestring, &s) == 0
+                   ? mcp__variance_source_words(s)
+                   : src->valuestring);
     else
         printf("  source:    %s: the spread of %d %s (%g degrees of freedom)\n",
                src->valuestring, k ? k->valueint : 0,
                strcmp(src->valuestring, "replicates") == 0 ? "renders" : "blocks",
                dof ? dof->valuedouble : 0);
-    if (pool)
-        printf("  pooled:    over %g pixels\n", pool->valuedouble);
+    if (pool) printf("  pooled:    over %g pixels\n", pool->valuedouble);
 }
 
 static void
@@ -76,7 +78,8 @@ print_text(const cJSON *o)
 {
     const cJSON *spp = cJSON_GetObjectItem(o, "spp");
     printf("file:        %s\n", cJSON_GetObjectItem(o, "file")->valuestring);
-    printf("size:        %dx%d, %d channels (%s)\n", cJSON_GetObjectItem(o, "width")->valueint,
+    printf("size:        %dx%d, %d channels (%s)\n",
+           cJSON_GetObjectItem(o, "width")->valueint,
            cJSON_GetObjectItem(o, "height")->valueint,
            cJSON_GetArraySize(cJSON_GetObjectItem(o, "channels")),
            cJSON_GetObjectItem(o, "format")->valuestring);
@@ -88,27 +91,24 @@ print_text(const cJSON *o)
     else
         printf("samples:     unknown (give --spp)\n");
     const cJSON *var = cJSON_GetObjectItem(o, "variance");
-    if (var)
-        printf("variance:    %s\n", var->valuestring);
+    if (var) printf("variance:    %s\n", var->valuestring);
     print_variance_source(o);
     const cJSON *err = cJSON_GetObjectItem(o, "dump_error");
-    if (err)
-        printf("as a dump:   %s\n", err->valuestring);
+    if (err) printf("as a dump:   %s\n", err->valuestring);
     printf("\n%-28s %12s %12s %12s %8s %8s %8s\n", "channel", "min", "mean", "max", "NaN",
            "Inf", "negative");
     const cJSON *ch;
     cJSON_ArrayForEach(ch, cJSON_GetObjectItem(o, "channels"))
-    printf("%-28s %12.6g %12.6g %12.6g %8.0f %8.0f %8.0f\n",
-           cJSON_GetObjectItem(ch, "name")->valuestring,
-           cJSON_GetObjectItem(ch, "min")->valuedouble,
-           cJSON_GetObjectItem(ch, "mean")->valuedouble,
-           cJSON_GetObjectItem(ch, "max")->valuedouble,
-           cJSON_GetObjectItem(ch, "nan")->valuedouble,
-           cJSON_GetObjectItem(ch, "inf")->valuedouble,
-           cJSON_GetObjectItem(ch, "negative")->valuedouble);
+        printf("%-28s %12.6g %12.6g %12.6g %8.0f %8.0f %8.0f\n",
+               cJSON_GetObjectItem(ch, "name")->valuestring,
+               cJSON_GetObjectItem(ch, "min")->valuedouble,
+               cJSON_GetObjectItem(ch, "mean")->valuedouble,
+               cJSON_GetObjectItem(ch, "max")->valuedouble,
+               cJSON_GetObjectItem(ch, "nan")->valuedouble,
+               cJSON_GetObjectItem(ch, "inf")->valuedouble,
+               cJSON_GetObjectItem(ch, "negative")->valuedouble);
     const cJSON *a = cJSON_GetObjectItem(o, "attributes");
-    if (cJSON_GetArraySize(a))
-        printf("\nattributes:\n");
+    if (cJSON_GetArraySize(a)) printf("\nattributes:\n");
     cJSON_ArrayForEach(ch, a)
     {
         if (cJSON_IsString(ch))
@@ -119,7 +119,8 @@ print_text(const cJSON *o)
 }
 
 static const char head[] =
-    "usage: mcpost info FILE... [--json] [--spp N] [--convention NAME] [--variance KIND]\n"
+    "usage: mcpost info FILE... [--json] [--spp N] [--convention NAME] [--variance "
+    "KIND]\n"
     "  Prints size, channels with min/mean/max and NaN/Inf/negative counts, the\n"
     "  render-dump convention (pbrt, mitsuba, blender, mcpost, plain) and the sample\n"
     "  count.\n";
@@ -136,14 +137,13 @@ cmd_info(int argc, char **argv)
     mcp_shared_settings sh;
     mcp_cli_denoiser_flags df = {0}; /* info takes no denoiser */
     int first = 0;
-    int parsed =
-        mcp_cli_parse(mcp_operation_info(), head, examples, argc, argv, &st, &sh, &df, &first);
+    int parsed = mcp_cli_parse(mcp_operation_info(), head, examples, argc, argv, &st, &sh,
+                               &df, &first);
     mcp_cli_denoiser_flags_free(&df);
     if (parsed >= 0) return parsed;
     mcp_dump_spec spec = st.spec;
     int json = sh.json;
-    if (first >= argc)
-        return mcp_cli_usage("info", "no file given");
+    if (first >= argc) return mcp_cli_usage("info", "no file given");
     int status = 0;
     cJSON *all = cJSON_CreateArray();
     for (int i = first; i < argc; i++) {
@@ -161,8 +161,7 @@ cmd_info(int argc, char **argv)
         if (json) {
             cJSON_AddItemToArray(all, o);
         } else {
-            if (i > first)
-                printf("\n");
+            if (i > first) printf("\n");
             print_text(o);
             cJSON_Delete(o);
         }
@@ -179,4 +178,5 @@ cmd_info(int argc, char **argv)
     return status;
 }
 
-const mcp_command mcp_command_info = {"info", "describe images and render dumps", cmd_info, 1};
+const mcp_command mcp_command_info = {"info", "describe images and render dumps",
+                                      cmd_info, 1};

@@ -15,8 +15,10 @@ static const char head[] =
 
 static const char examples[] =
     "examples (from the source folder, on the sample renders):\n"
-    "  mcpost merge samples/fixtures/strat/texture/blocks/texture_r[0-3]_b00.exr -o /tmp/texture_merged.exr\n"
-    "  mcpost merge --variance pooled samples/fixtures/strat/texture/blocks/texture_r0_b0[0-3].exr \\\n"
+    "  mcpost merge samples/fixtures/strat/texture/blocks/texture_r[0-3]_b00.exr -o "
+    "/tmp/texture_merged.exr\n"
+    "  mcpost merge --variance pooled "
+    "samples/fixtures/strat/texture/blocks/texture_r0_b0[0-3].exr \\\n"
     "                 -o /tmp/texture_pooled.exr\n";
 
 /* One input read with the --spp and --convention given. */
@@ -35,8 +37,8 @@ cmd_merge(int argc, char **argv)
     mcp_shared_settings sh;
     mcp_cli_denoiser_flags df = {0}; /* merge takes no denoiser */
     int first = 0;
-    int parsed = mcp_cli_parse(mcp_operation_merge(), head, examples, argc, argv, &st, &sh,
-                               &df, &first);
+    int parsed = mcp_cli_parse(mcp_operation_merge(), head, examples, argc, argv, &st,
+                               &sh, &df, &first);
     mcp_cli_denoiser_flags_free(&df);
     if (parsed >= 0) return parsed;
     mcp_merge_options mo = st.mo;
@@ -44,21 +46,17 @@ cmd_merge(int argc, char **argv)
     if (st.half) wo.exr_pixel = MCP_EXR_HALF;
     const char *out_path = sh.output;
     int count = argc - first;
-    if (count < 1)
-        return mcp_cli_usage("merge", "no dumps given");
-    if (!out_path)
-        return mcp_cli_usage("merge", "no output given (-o OUT)");
+    if (count < 1) return mcp_cli_usage("merge", "no dumps given");
+    if (!out_path) return mcp_cli_usage("merge", "no output given (-o OUT)");
     if (mcp_cli_output_is_not_input("merge", out_path, (const char *const *)argv + first,
                                     count))
         return mcp_cli_fail();
     mcp_dump **parts = mcp_calloc((size_t)count, sizeof *parts);
     mcp_dump *merged = NULL;
     int status = 1;
-    if (!parts)
-        return mcp_cli_fail();
+    if (!parts) return mcp_cli_fail();
     for (int i = 0; i < count; i++)
-        if (read_part(argv[first + i], &st.spec, &parts[i]))
-            goto done;
+        if (read_part(argv[first + i], &st.spec, &parts[i])) goto done;
     if (mcp_dump_merge((const mcp_dump *const *)parts, count, &mo, &merged) ||
         mcp_dump_write(merged, out_path, MCP_CONV_MCPOST, &wo))
         goto done;
@@ -76,8 +74,7 @@ cmd_merge(int argc, char **argv)
     printf("\n");
     status = 0;
 done:
-    if (status)
-        status = mcp_cli_fail();
+    if (status) status = mcp_cli_fail();
     for (int i = 0; i < count; i++)
         mcp_dump_free(parts[i]);
     free(parts);
@@ -85,6 +82,7 @@ done:
     return status;
 }
 
-const mcp_command mcp_command_merge = {"merge", "combine renders of one frame into a dump "
-                                                "(variance from replicates)",
+const mcp_command mcp_command_merge = {"merge",
+                                       "combine renders of one frame into a dump "
+                                       "(variance from replicates)",
                                        cmd_merge, 1};

@@ -22,20 +22,25 @@ static const char head[] =
     "  clamped, sRGB), pMSE, RelSE percentiles, LDR-FLIP and HDR-FLIP with FLIP's\n"
     "  statistics (weighted median and quartiles, min, max) and the blue-noise\n"
     "  low-frequency fraction; several TESTs give one row per test. A gate (--fail,\n"
-    "  --warn, --fail-percent, --warn-percent) prints PASS, WARNING: ... or FAILURE: ...\n"
-    "  last (--json: a \"gate\" object) and exits 0 pass, 3 warning, 4 failure (1 error,\n"
+    "  --warn, --fail-percent, --warn-percent) prints PASS, WARNING: ... or FAILURE: "
+    "...\n"
+    "  last (--json: a \"gate\" object) and exits 0 pass, 3 warning, 4 failure (1 "
+    "error,\n"
     "  2 usage error, as always); several TESTs: the worst verdict of all, each test's\n"
     "  in its row.\n";
 
 static const char examples[] =
     "examples (from the source folder, on the sample renders):\n"
-    "  mcpost metrics samples/fixtures/cornell/series/cornell_spp0016.exr samples/fixtures/cornell/cornell_reference.exr\n"
-    "  mcpost metrics --json --flip ldr samples/fixtures/cornell/series/cornell_spp0064.exr \\\n"
+    "  mcpost metrics samples/fixtures/cornell/series/cornell_spp0016.exr "
+    "samples/fixtures/cornell/cornell_reference.exr\n"
+    "  mcpost metrics --json --flip ldr "
+    "samples/fixtures/cornell/series/cornell_spp0064.exr \\\n"
     "                 samples/fixtures/cornell/cornell_reference.exr \\\n"
     "                 --fail 'flip_ldr.mean > 0.2' --warn 'relmse > 0.5'\n"
     "  mcpost metrics samples/fixtures/cornell/series/cornell_spp0016.exr \\\n"
     "                 samples/fixtures/cornell/series/cornell_spp0064.exr \\\n"
-    "                 samples/fixtures/cornell/cornell_reference.exr -o out/metrics_maps \\\n"
+    "                 samples/fixtures/cornell/cornell_reference.exr -o out/metrics_maps "
+    "\\\n"
     "                 --csv out/metrics.csv --fail-percent 'flip_ldr 0.5 1%'\n";
 
 static void
@@ -110,14 +115,15 @@ static void
 put_flip_columns(column *cols, double *vals, int *n, const char *text, const char *csv,
                  const mcp_flip_result *f)
 {
-    const char *what[6][2] = {{"", "mean"},
-                              {" median", "weighted_median"},
-                              {" q1", "weighted_q1"},
-                              {" q3", "weighted_q3"},
-                              {" min", "min"},
-                              {" max", "max"}};
-    const double v[6] = {f->mean,           f->stats.weighted_median, f->stats.weighted_q1,
-                         f->stats.weighted_q3, f->stats.min,          f->stats.max};
+    const char *what[6][2] = {{"", "mean"},           {" median", "weighted_median"},
+                              {" q1", "weighted_q1"}, {" q3", "weighted_q3"},
+                              {" min", "min"},        {" max", "max"}};
+    const double v[6] = {f->mean,
+                         f->stats.weighted_median,
+                         f->stats.weighted_q1,
+                         f->stats.weighted_q3,
+                         f->stats.min,
+                         f->stats.max};
     for (int k = 0; k < 6; k++) {
         char t[48], c[64];
         snprintf(t, sizeof t, "%s%s", text, what[k][0]);
@@ -143,8 +149,10 @@ columns_of(const mcp_metrics *m, column *cols, double *vals)
         snprintf(c, sizeof c, "relse_p%g", 100.0 * m->percentiles[k]);
         put_column(cols, vals, &n, t, c, m->relse[k]);
     }
-    if (m->has_flip_ldr) put_flip_columns(cols, vals, &n, "LDR-FLIP", "flip_ldr", &m->flip_ldr);
-    if (m->has_flip_hdr) put_flip_columns(cols, vals, &n, "HDR-FLIP", "flip_hdr", &m->flip_hdr);
+    if (m->has_flip_ldr)
+        put_flip_columns(cols, vals, &n, "LDR-FLIP", "flip_ldr", &m->flip_ldr);
+    if (m->has_flip_hdr)
+        put_flip_columns(cols, vals, &n, "HDR-FLIP", "flip_hdr", &m->flip_hdr);
     if (m->has_spectra)
         put_column(cols, vals, &n, "blue noise", "blue_noise_low_fraction",
                    m->spectra.low_fraction);
@@ -169,7 +177,9 @@ typedef struct test_result {
 static const char *
 verdict_word(mcp__gate_verdict v)
 {
-    return v == MCP__GATE_FAILURE ? "FAILURE" : v == MCP__GATE_WARNING ? "WARNING" : "PASS";
+    return v == MCP__GATE_FAILURE   ? "FAILURE"
+           : v == MCP__GATE_WARNING ? "WARNING"
+                                    : "PASS";
 }
 
 /* A row per test: the test's name, its figures and, with a gate, its verdict. */
@@ -278,8 +288,8 @@ write_histogram_svg(const char *dir, const test_result *r, int n, int hdr)
         const mcp_flip_stats *st = hdr ? &r[t].m.flip_hdr.stats : &r[t].m.flip_ldr.stats;
         for (int i = 0; i < B; i++)
             y[t * B + i] = mcp_flip_weighted_bucket(st, i);
-        ps[t] = (mcp_plot_series){.name = r[t].path, .style = MCP_SERIES_BARS, .x = x,
-                                  .y = y + t * B, .n = B};
+        ps[t] = (mcp_plot_series){
+            .name = r[t].path, .style = MCP_SERIES_BARS, .x = x, .y = y + t * B, .n = B};
     }
     mcp_plot plot = {.title = hdr ? "weighted HDR-FLIP histogram"
                                   : "weighted LDR-FLIP histogram",
@@ -289,7 +299,8 @@ write_histogram_svg(const char *dir, const test_result *r, int n, int hdr)
                      .y_scale = MCP_AXIS_LINEAR,
                      .series = ps,
                      .n_series = n};
-    snprintf(path, sizeof path, "%s/%s_histogram.svg", dir, hdr ? "flip_hdr" : "flip_ldr");
+    snprintf(path, sizeof path, "%s/%s_histogram.svg", dir,
+             hdr ? "flip_hdr" : "flip_ldr");
     if (mcp_plot_svg(&plot, &svg)) goto done;
     rc = mcp_write_file_atomic(path, svg, strlen(svg));
 done:
@@ -340,9 +351,10 @@ overall_verdict(const test_result *r, int n, char *line, size_t cap, cJSON **gat
         return worst;
     }
     cJSON *g = cJSON_CreateObject();
-    cJSON_AddStringToObject(g, "verdict", worst == MCP__GATE_FAILURE   ? "failure"
-                                          : worst == MCP__GATE_WARNING ? "warning"
-                                                                       : "pass");
+    cJSON_AddStringToObject(g, "verdict",
+                            worst == MCP__GATE_FAILURE   ? "failure"
+                            : worst == MCP__GATE_WARNING ? "warning"
+                                                         : "pass");
     cJSON *failed = cJSON_AddArrayToObject(g, "failed_tests"),
           *warned = cJSON_AddArrayToObject(g, "warned_tests");
     size_t len = (size_t)snprintf(line, cap, "%s", verdict_word(worst));
@@ -391,7 +403,7 @@ cmd_metrics(int argc, char **argv)
     mcp_image *ref = NULL;
     test_result *res = calloc((size_t)n_tests, sizeof *res);
     cJSON *doc = NULL, *all_gate = NULL;
-    mcp__outdir whole = {0}; /* -o DIR appears whole, or not at all */
+    mcp__outdir whole = {0};     /* -o DIR appears whole, or not at all */
     const char *maps_dir = NULL; /* where the maps go: whole.tmp */
     int status = 1;
     if (!res) {

@@ -75,7 +75,8 @@ print_summary(const cJSON *s)
 
 static const char head[] =
     "usage: mcpost perceptual [options] CANDIDATES...\n"
-    "  Perceptual error optimisation (Chizhov et al. 2022): picks, per pixel, one of the\n"
+    "  Perceptual error optimisation (Chizhov et al. 2022): picks, per pixel, one of "
+    "the\n"
     "  candidate renders (vertical methods) or permutes pixels' seeds (horizontal) so\n"
     "  that the error is least visible. Candidates are images or render dumps of few\n"
     "  samples each, e.g. 4 single-sample renders.\n";
@@ -83,11 +84,15 @@ static const char head[] =
 static const char examples[] =
     "examples (from the source folder, on the sample renders):\n"
     "  mcpost perceptual samples/fixtures/cornell/singles/cornell_single0[0-3].exr \\\n"
-    "                    --ref samples/fixtures/cornell/cornell_reference.exr -o out/perceptual\n"
-    "  mcpost perceptual --compare --surrogate reference --ref samples/fixtures/cornell/cornell_reference.exr \\\n"
-    "                    samples/fixtures/cornell/singles/cornell_single0[0-3].exr -o out/compare\n"
+    "                    --ref samples/fixtures/cornell/cornell_reference.exr -o "
+    "out/perceptual\n"
+    "  mcpost perceptual --compare --surrogate reference --ref "
+    "samples/fixtures/cornell/cornell_reference.exr \\\n"
+    "                    samples/fixtures/cornell/singles/cornell_single0[0-3].exr -o "
+    "out/compare\n"
     "  mcpost perceptual --group 4 --method error-diffusion \\\n"
-    "                    samples/fixtures/texture/singles/texture_single*.exr -o out/perceptual_texture\n";
+    "                    samples/fixtures/texture/singles/texture_single*.exr -o "
+    "out/perceptual_texture\n";
 
 static int
 read_rgb(const char *path, mcp_image **out)
@@ -121,8 +126,8 @@ cmd_perceptual(int argc, char **argv)
     mcp_report *report = NULL;
     cJSON *summary = NULL;
     mcp__outdir od = {0}; /* the folder appears whole, or not at all */
-    int parsed = mcp_cli_parse(mcp_operation_perceptual(), head, examples, argc, argv, &st,
-                               &sh, &df, &first);
+    int parsed = mcp_cli_parse(mcp_operation_perceptual(), head, examples, argc, argv,
+                               &st, &sh, &df, &first);
     if (parsed >= 0) {
         status = parsed;
         goto done;
@@ -159,12 +164,13 @@ cmd_perceptual(int argc, char **argv)
         if (mcp_image_read(a.kernel_file, NULL, &kern)) goto fail;
         r.kernel_img = kern;
     }
-    if (!strcmp(a.surrogate, "denoise") &&
-        mcp_cli_denoiser_create(&df, &r.den))
+    if (!strcmp(a.surrogate, "denoise") && mcp_cli_denoiser_create(&df, &r.den))
         goto fail;
-    const char *named[] = {ref_path, surr ? a.surrogate : NULL, a.confidence, a.kernel_file};
+    const char *named[] = {ref_path, surr ? a.surrogate : NULL, a.confidence,
+                           a.kernel_file};
     if (mcp__outdir_begin(&od, out_dir) ||
-        mcp__outdir_check_inputs(&od, (const char *const *)argv + optind, argc - optind) ||
+        mcp__outdir_check_inputs(&od, (const char *const *)argv + optind,
+                                 argc - optind) ||
         mcp__outdir_check_inputs(&od, named, 4) ||
         mcp_report_new("mcpost perceptual", &report))
         goto fail;

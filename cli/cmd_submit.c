@@ -29,7 +29,8 @@ static const char usage[] =
     "                     [--frames SET] [--force] [--output DIR] [--dry-run]\n"
     "  Runs a job's frames on a Slurm cluster: writes OUTPUT/slurm/frames.sbatch, an\n"
     "  array job with one task per frame (or per chunk of K frames) that runs\n"
-    "  `mcpost run JOB.yaml --frames $SLURM_ARRAY_TASK_ID`, and OUTPUT/slurm/collect.sbatch,\n"
+    "  `mcpost run JOB.yaml --frames $SLURM_ARRAY_TASK_ID`, and "
+    "OUTPUT/slurm/collect.sbatch,\n"
     "  which runs `mcpost collect OUTPUT` after the array; submits both with sbatch and\n"
     "  prints their job ids. Frames already complete are left out (--force: not).\n"
     "  --partition P         sbatch --partition\n"
@@ -43,9 +44,11 @@ static const char usage[] =
     "  On a cluster: mcpost submit shot.yaml --slurm --partition cpu --time 2:00:00\n"
     "  --cpus-per-task 8 --array-parallel 50\n"
     "\n"
-    "examples (from the source folder, on the sample renders; --dry-run submits nothing):\n"
+    "examples (from the source folder, on the sample renders; --dry-run submits "
+    "nothing):\n"
     "  mcpost submit samples/jobs/shot.yaml --slurm --dry-run --force\n"
-    "  mcpost submit samples/jobs/shot.yaml --slurm --chunk 2 --cpus-per-task 2 --dry-run --force\n";
+    "  mcpost submit samples/jobs/shot.yaml --slurm --chunk 2 --cpus-per-task 2 "
+    "--dry-run --force\n";
 
 typedef struct submit_opts {
     const char *partition, *time, *output, *frames;
@@ -57,14 +60,12 @@ static int
 shell_quote(const char *s, char *buf, size_t cap)
 {
     size_t len = strlen(buf);
-    if (len + 1 >= cap)
-        return mcp_error("command too long");
+    if (len + 1 >= cap) return mcp_error("command too long");
     buf[len++] = '\'';
     for (; *s; s++) {
         const char *piece = *s == '\'' ? "'\\''" : NULL;
         size_t n = piece ? 4 : 1;
-        if (len + n + 2 >= cap)
-            return mcp_error("command too long");
+        if (len + n + 2 >= cap) return mcp_error("command too long");
         memcpy(buf + len, piece ? piece : s, n);
         len += n;
     }
@@ -77,8 +78,7 @@ shell_quote(const char *s, char *buf, size_t cap)
 static int
 check_setting(const char *flag, const char *v)
 {
-    if (v && strpbrk(v, "\n\r"))
-        return mcp_error("%s: a line break in the value", flag);
+    if (v && strpbrk(v, "\n\r")) return mcp_error("%s: a line break in the value", flag);
     return 0;
 }
 
@@ -99,8 +99,7 @@ static int
 run_capture(char *const argv[], char *out, size_t cap)
 {
     int fd[2];
-    if (pipe(fd))
-        return mcp_error("pipe: %s", strerror(errno));
+    if (pipe(fd)) return mcp_error("pipe: %s", strerror(errno));
     fflush(NULL);
     pid_t pid = fork();
     if (pid < 0) {
@@ -118,8 +117,7 @@ run_capture(char *const argv[], char *out, size_t cap)
     size_t len = 0;
     ssize_t n;
     while ((n = read(fd[0], out + len, cap - 1 - len)) > 0)
-        if ((len += (size_t)n) == cap - 1)
-            break;
+        if ((len += (size_t)n) == cap - 1) break;
     close(fd[0]);
     out[len] = '\0';
     while (len && (out[len - 1] == '\n' || out[len - 1] == ' '))
@@ -134,8 +132,7 @@ run_capture(char *const argv[], char *out, size_t cap)
     return 0;
 }
 
-static int
-append(char *buf, size_t cap, const char *fmt, ...) MCP_PRINTF(3, 4);
+static int append(char *buf, size_t cap, const char *fmt, ...) MCP_PRINTF(3, 4);
 static int
 append(char *buf, size_t cap, const char *fmt, ...)
 {
@@ -144,8 +141,7 @@ append(char *buf, size_t cap, const char *fmt, ...)
     va_start(ap, fmt);
     int n = vsnprintf(buf + len, cap - len, fmt, ap);
     va_end(ap);
-    if (n < 0 || (size_t)n >= cap - len)
-        return mcp_error("sbatch script too long");
+    if (n < 0 || (size_t)n >= cap - len) return mcp_error("sbatch script too long");
     return 0;
 }
 
@@ -160,13 +156,11 @@ array_script(const submit_opts *o, const mcp_cli_shot *s, const int *todo, int n
     int n_chunks = (n_todo + o->chunk - 1) / o->chunk;
     char array[8192] = "", set[8192];
     if (direct) {
-        if (mcp_frames_format(todo, n_todo, array, sizeof array))
-            return -1;
+        if (mcp_frames_format(todo, n_todo, array, sizeof array)) return -1;
     } else {
         snprintf(array, sizeof array, "0-%d", n_chunks - 1);
     }
-    if (o->parallel > 0)
-        append(array, sizeof array, "%%%d", o->parallel);
+    if (o->parallel > 0) append(array, sizeof array, "%%%d", o->parallel);
     script[0] = '\0';
     char cmd[16384] = "";
     if (shell_quote(self, cmd, sizeof cmd) || append(cmd, sizeof cmd, " run ") ||
@@ -188,8 +182,7 @@ array_script(const submit_opts *o, const mcp_cli_shot *s, const int *todo, int n
         return -1;
     if (o->partition && append(script, cap, "#SBATCH --partition=%s\n", o->partition))
         return -1;
-    if (o->time && append(script, cap, "#SBATCH --time=%s\n", o->time))
-        return -1;
+    if (o->time && append(script, cap, "#SBATCH --time=%s\n", o->time)) return -1;
     if (o->cpus > 0 && append(script, cap, "#SBATCH --cpus-per-task=%d\n", o->cpus))
         return -1;
     if (append(script, cap,
@@ -198,16 +191,15 @@ array_script(const submit_opts *o, const mcp_cli_shot *s, const int *todo, int n
                "export OMP_NUM_THREADS=${SLURM_CPUS_PER_TASK:-1}\n"))
         return -1;
     if (!direct) {
-        if (append(script, cap, "FRAMES=("))
-            return -1;
+        if (append(script, cap, "FRAMES=(")) return -1;
         for (int c = 0; c < n_chunks; c++) {
-            int first = c * o->chunk, n = n_todo - first < o->chunk ? n_todo - first : o->chunk;
+            int first = c * o->chunk,
+                n = n_todo - first < o->chunk ? n_todo - first : o->chunk;
             if (mcp_frames_format(todo + first, n, set, sizeof set) ||
                 append(script, cap, "%s\"%s\"", c ? " " : "", set))
                 return -1;
         }
-        if (append(script, cap, ")\n"))
-            return -1;
+        if (append(script, cap, ")\n")) return -1;
     }
     *tasks = direct ? n_todo : n_chunks;
     return append(script, cap, "exec %s\n", cmd);
@@ -240,16 +232,14 @@ submit(const submit_opts *o, const char *job)
     int rc = -1, *todo = NULL, n_todo = 0, tasks = 0;
     char self[4096], log_dir[4200], frames_path[4300], collect_path[4300];
     static char script[1 << 20];
-    if (mcp_cli_shot_open(job, o->output, o->frames, &s))
-        return -1;
+    if (mcp_cli_shot_open(job, o->output, o->frames, &s)) return -1;
     if (!s.n_all) {
         mcp_error("%s: the job has no frames: (submit runs frame jobs; mcpost run runs "
                   "this one)",
                   job);
         goto done;
     }
-    if (!(todo = mcp_calloc((size_t)s.n_chosen, sizeof *todo)))
-        goto done;
+    if (!(todo = mcp_calloc((size_t)s.n_chosen, sizeof *todo))) goto done;
     for (int i = 0; i < s.n_chosen; i++)
         if (o->force || !mcp_frame_complete(s.output_dir, s.chosen[i]))
             todo[n_todo++] = s.chosen[i];
@@ -272,17 +262,17 @@ submit(const submit_opts *o, const char *job)
         mcp_write_file_atomic(collect_path, script, strlen(script)))
         goto done;
     if (o->dry_run) {
-        printf("wrote %s (%d array tasks, %d frames) and %s\n", frames_path, tasks, n_todo,
-               collect_path);
+        printf("wrote %s (%d array tasks, %d frames) and %s\n", frames_path, tasks,
+               n_todo, collect_path);
         printf("would run: sbatch --parsable %s\n", frames_path);
-        printf("           sbatch --parsable --dependency=afterany:JOBID %s\n", collect_path);
+        printf("           sbatch --parsable --dependency=afterany:JOBID %s\n",
+               collect_path);
         rc = 0;
         goto done;
     }
     char array_id[256], collect_id[256], dep[300];
     char *argv1[] = {"sbatch", "--parsable", frames_path, NULL};
-    if (run_capture(argv1, array_id, sizeof array_id))
-        goto done;
+    if (run_capture(argv1, array_id, sizeof array_id)) goto done;
     /* --parsable prints "JOBID" or "JOBID;CLUSTER" */
     array_id[strcspn(array_id, ";\n")] = '\0';
     snprintf(dep, sizeof dep, "--dependency=afterany:%s", array_id);
@@ -292,10 +282,10 @@ submit(const submit_opts *o, const char *job)
         goto done;
     }
     collect_id[strcspn(collect_id, ";\n")] = '\0';
-    printf("submitted job %s: %d array tasks for %d frames (script %s)\n", array_id, tasks,
-           n_todo, frames_path);
-    printf("submitted job %s: mcpost collect %s, after job %s\n", collect_id, s.output_dir,
-           array_id);
+    printf("submitted job %s: %d array tasks for %d frames (script %s)\n", array_id,
+           tasks, n_todo, frames_path);
+    printf("submitted job %s: mcpost collect %s, after job %s\n", collect_id,
+           s.output_dir, array_id);
     rc = 0;
 done:
     free(todo);
@@ -325,24 +315,47 @@ cmd_submit(int argc, char **argv)
         int *count = NULL;
         const char *flag = NULL;
         switch (opt) {
-        case 'S': o.slurm = 1; break;
-        case 'p': o.partition = optarg; break;
-        case 't': o.time = optarg; break;
-        case 'c': count = &o.cpus, flag = "--cpus-per-task"; break;
-        case 'P': count = &o.parallel, flag = "--array-parallel"; break;
-        case 'k': count = &o.chunk, flag = "--chunk"; break;
-        case 'f': o.frames = optarg; break;
-        case 'F': o.force = 1; break;
-        case 'o': o.output = optarg; break;
-        case 'n': o.dry_run = 1; break;
-        case 'h': fputs(usage, stdout); return 0;
-        default: return mcp_cli_usage("submit", "bad option");
+        case 'S':
+            o.slurm = 1;
+            break;
+        case 'p':
+            o.partition = optarg;
+            break;
+        case 't':
+            o.time = optarg;
+            break;
+        case 'c':
+            count = &o.cpus, flag = "--cpus-per-task";
+            break;
+        case 'P':
+            count = &o.parallel, flag = "--array-parallel";
+            break;
+        case 'k':
+            count = &o.chunk, flag = "--chunk";
+            break;
+        case 'f':
+            o.frames = optarg;
+            break;
+        case 'F':
+            o.force = 1;
+            break;
+        case 'o':
+            o.output = optarg;
+            break;
+        case 'n':
+            o.dry_run = 1;
+            break;
+        case 'h':
+            fputs(usage, stdout);
+            return 0;
+        default:
+            return mcp_cli_usage("submit", "bad option");
         }
         if (count && (mcp__parse_int(flag, optarg, count) || *count < 1))
-            return mcp_cli_usage("submit", "%s takes a count >= 1 (got '%s')", flag, optarg);
+            return mcp_cli_usage("submit", "%s takes a count >= 1 (got '%s')", flag,
+                                 optarg);
     }
-    if (argc - optind != 1)
-        return mcp_cli_usage("submit", "give one job file");
+    if (argc - optind != 1) return mcp_cli_usage("submit", "give one job file");
     if (!o.slurm)
         return mcp_cli_usage("submit", "name the scheduler: --slurm (the only one for "
                                        "now; docs/frames.md says how others run frames)");

@@ -14,21 +14,18 @@ add_opt(mcp_cli_denoiser_flags *f, const char *key, const char *text)
     if (f->n_opts == f->cap) {
         int cap = f->cap ? 2 * f->cap : 8;
         char **o = realloc(f->opts, (size_t)cap * sizeof *o);
-        if (!o)
-            return mcp_error("out of memory (%d denoiser options)", cap);
+        if (!o) return mcp_error("out of memory (%d denoiser options)", cap);
         f->opts = o;
         f->cap = cap;
     }
     char *s;
     if (key) {
         size_t n = strlen(key) + 1 + strlen(text) + 1;
-        if ((s = mcp_malloc(n)))
-            snprintf(s, n, "%s=%s", key, text);
+        if ((s = mcp_malloc(n))) snprintf(s, n, "%s=%s", key, text);
     } else {
         s = mcp_strdup(text);
     }
-    if (!s)
-        return -1;
+    if (!s) return -1;
     f->opts[f->n_opts++] = s;
     return 0;
 }
@@ -37,12 +34,19 @@ int
 mcp_cli_denoiser_flag(mcp_cli_denoiser_flags *f, int opt, const char *arg)
 {
     switch (opt) {
-    case MCP_CLI_OPT_DENOISER: f->name = arg; return 1;
-    case MCP_CLI_OPT_DENOISER_OPT: return add_opt(f, NULL, arg) ? -1 : 1;
-    case MCP_CLI_OPT_WEIGHTS: return add_opt(f, "weights", arg) ? -1 : 1;
-    case MCP_CLI_OPT_INPUT_SCALE: return add_opt(f, "input_scale", arg) ? -1 : 1;
-    case MCP_CLI_OPT_DENOISER_COMMAND: return add_opt(f, "command", arg) ? -1 : 1;
-    default: return 0;
+    case MCP_CLI_OPT_DENOISER:
+        f->name = arg;
+        return 1;
+    case MCP_CLI_OPT_DENOISER_OPT:
+        return add_opt(f, NULL, arg) ? -1 : 1;
+    case MCP_CLI_OPT_WEIGHTS:
+        return add_opt(f, "weights", arg) ? -1 : 1;
+    case MCP_CLI_OPT_INPUT_SCALE:
+        return add_opt(f, "input_scale", arg) ? -1 : 1;
+    case MCP_CLI_OPT_DENOISER_COMMAND:
+        return add_opt(f, "command", arg) ? -1 : 1;
+    default:
+        return 0;
     }
 }
 
@@ -54,7 +58,8 @@ mcp_cli_denoiser_create(const mcp_cli_denoiser_flags *f, mcp_denoiser **out)
      * default (the U-Net, or nlm without features), which create_from_args makes the
      * U-Net when its settings (--weights, ...) are given */
     const char *name = f->name ? f->name : "default";
-    return mcp_denoiser_create_from_args(name, (const char *const *)f->opts, f->n_opts, out);
+    return mcp_denoiser_create_from_args(name, (const char *const *)f->opts, f->n_opts,
+                                         out);
 }
 
 void

@@ -1,6 +1,6 @@
 /* help_pages.h: the docs pages built into the tool (`mcpost help TOPIC`). The table is
- * generated at build time from the docs pages (docs/TOPIC.md) by cmake/embed_docs.cmake, so an installed
- * mcpost prints the pages of the source it was built from. */
+ * generated at build time from the docs pages (docs/TOPIC.md) by cmake/embed_docs.cmake,
+ * so an installed mcpost prints the pages of the source it was built from. */
 #ifndef MCP_HELP_PAGES_H
 #define MCP_HELP_PAGES_H
 

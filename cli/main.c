@@ -25,10 +25,11 @@ keep_freed_memory(void)
 static void
 print_help(void)
 {
-    printf("mcpost %s: post-processing of Monte Carlo renderings\n\n"
-           "usage: mcpost SUBCOMMAND [options]   (mcpost SUBCOMMAND --help for its own)\n\n"
-           "subcommands:\n",
-           MCP_VERSION);
+    printf(
+        "mcpost %s: post-processing of Monte Carlo renderings\n\n"
+        "usage: mcpost SUBCOMMAND [options]   (mcpost SUBCOMMAND --help for its own)\n\n"
+        "subcommands:\n",
+        MCP_VERSION);
     for (const mcp_command *const *c = mcp_commands; *c; c++)
         printf("  %-10s %s\n", (*c)->name, (*c)->summary);
     printf("\noptions:\n  --help      this text\n  --version   the version\n"

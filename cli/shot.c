@@ -22,20 +22,18 @@
 #include <unistd.h>
 
 int
-mcp_cli_shot_open(const char *job, const char *output, const char *select, mcp_cli_shot *s)
+mcp_cli_shot_open(const char *job, const char *output, const char *select,
+                  mcp_cli_shot *s)
 {
     memset(s, 0, sizeof *s);
     mcp_job_options jo = mcp_job_defaults();
     jo.output_dir = output;
-    if (!(s->job = realpath(job, NULL)))
-        return mcp_error("%s: %s", job, strerror(errno));
+    if (!(s->job = realpath(job, NULL))) return mcp_error("%s: %s", job, strerror(errno));
     /* the real path: output folders then come out absolute, for scripts run elsewhere */
-    if (mcp_job_frames(s->job, &jo, &s->all, &s->n_all, &s->output_dir))
-        goto fail;
+    if (mcp_job_frames(s->job, &jo, &s->all, &s->n_all, &s->output_dir)) goto fail;
     /* a frame job's settings are the same for every frame: a bad key is one error
        now, not one per frame (or one Slurm task per frame) later */
-    if (s->n_all && mcp_job_check_settings(s->job, mcp_job_stages()))
-        goto fail;
+    if (s->n_all && mcp_job_check_settings(s->job, mcp_job_stages())) goto fail;
     if (s->output_dir[0] != '/') { /* --output relative to here */
         char cwd[4096], *abs = NULL;
         size_t n = strlen(s->output_dir) + sizeof cwd + 2;
@@ -43,8 +41,7 @@ mcp_cli_shot_open(const char *job, const char *output, const char *select, mcp_c
             mcp_error("cannot tell the current folder: %s", strerror(errno));
             goto fail;
         }
-        if (!(abs = mcp_malloc(n)))
-            goto fail;
+        if (!(abs = mcp_malloc(n))) goto fail;
         snprintf(abs, n, "%s/%s", cwd, s->output_dir);
         free(s->output_dir);
         s->output_dir = abs;
@@ -52,8 +49,7 @@ mcp_cli_shot_open(const char *job, const char *output, const char *select, mcp_c
     if (!select) {
         if (s->n_all && !(s->chosen = mcp_calloc((size_t)s->n_all, sizeof *s->chosen)))
             goto fail;
-        if (s->n_all)
-            memcpy(s->chosen, s->all, (size_t)s->n_all * sizeof *s->chosen);
+        if (s->n_all) memcpy(s->chosen, s->all, (size_t)s->n_all * sizeof *s->chosen);
         s->n_chosen = s->n_all;
         return 0;
     }
@@ -70,8 +66,8 @@ mcp_cli_shot_open(const char *job, const char *output, const char *select, mcp_c
             char set[256];
             if (mcp_frames_format(s->all, s->n_all, set, sizeof set))
                 snprintf(set, sizeof set, "%d frames", s->n_all);
-            mcp_error("--frames: frame %d is not among the frames of %s (%s)", s->chosen[i],
-                      job, set);
+            mcp_error("--frames: frame %d is not among the frames of %s (%s)",
+                      s->chosen[i], job, set);
             goto fail;
         }
     return 0;
@@ -107,7 +103,9 @@ mcp_cli_shot_write_manifest(mcp_cli_shot *s)
         goto done;
     }
     snprintf(path, sizeof path, "%s/frames.json", s->output_dir);
-    rc = mcp_make_dirs(s->output_dir) || mcp_write_file_atomic(path, text, strlen(text)) ? -1 : 0;
+    rc = mcp_make_dirs(s->output_dir) || mcp_write_file_atomic(path, text, strlen(text))
+             ? -1
+             : 0;
     char *real = rc ? NULL : realpath(s->output_dir, NULL);
     if (real) {
         free(s->output_dir);
@@ -127,15 +125,13 @@ run_frame(const mcp_cli_shot *s, const mcp_job_options *jo, int frame)
     mcp_job_options o = *jo;
     o.frame = frame;
     char dir[4096], err_path[4200];
-    if (mcp_frame_dir(s->output_dir, frame, dir, sizeof dir))
-        return -1;
+    if (mcp_frame_dir(s->output_dir, frame, dir, sizeof dir)) return -1;
     snprintf(err_path, sizeof err_path, "%s/error.txt", dir);
     unlink(err_path);
     /* a run of this frame killed outright (SIGKILL, a node lost) left its temporaries */
     int stale = mcp_frame_clear_temporaries(dir);
     if (stale > 0) mcp_note("frame %d: removed %d stale temporary files", frame, stale);
-    if (mcp_job_run_file(s->job, mcp_job_stages(), &o) == 0)
-        return 0;
+    if (mcp_job_run_file(s->job, mcp_job_stages(), &o) == 0) return 0;
     mcp_error_prefix("frame %d: ", frame);
     char message[1100];
     snprintf(message, sizeof message, "%s\n", mcp_error_message());
@@ -152,8 +148,7 @@ static int
 frames_to_run(const mcp_cli_shot *s, int force, int **todo, int *n_todo)
 {
     *n_todo = 0;
-    if (!(*todo = mcp_calloc((size_t)s->n_chosen + 1, sizeof **todo)))
-        return -1;
+    if (!(*todo = mcp_calloc((size_t)s->n_chosen + 1, sizeof **todo))) return -1;
     for (int i = 0; i < s->n_chosen; i++)
         if (force || !mcp_frame_complete(s->output_dir, s->chosen[i]))
             (*todo)[(*n_todo)++] = s->chosen[i];
@@ -171,8 +166,7 @@ mcp_cli_shot_run(const mcp_cli_shot *s, const mcp_job_options *jo, int jobs, int
         snprintf(base, sizeof base, "%04d", s->chosen[i]);
         mcp__outdir_clear_stale(s->output_dir, base);
     }
-    if (frames_to_run(s, force, &todo, &n_todo))
-        return -1;
+    if (frames_to_run(s, force, &todo, &n_todo)) return -1;
     int skipped = s->n_chosen - n_todo;
     if (skipped)
         mcp_note("%d of %d frames already complete, skipped (--force runs them again)",
@@ -182,8 +176,7 @@ mcp_cli_shot_run(const mcp_cli_shot *s, const mcp_job_options *jo, int jobs, int
         mcp_note("nothing to run; mcpost collect %s gathers the frames", s->output_dir);
         return 0;
     }
-    if (jobs > n_todo)
-        jobs = n_todo;
+    if (jobs > n_todo) jobs = n_todo;
     if (jobs == 1) {
         for (int i = 0; i < n_todo; i++) {
             mcp_note("frame %d (%d of %d)", todo[i], i + 1, n_todo);
@@ -213,8 +206,7 @@ mcp_cli_shot_run(const mcp_cli_shot *s, const mcp_job_options *jo, int jobs, int
                 if (pid < 0) {
                     fprintf(stderr, "mcpost: frame %d: cannot start a process: %s\n",
                             todo[next], strerror(errno));
-                    if (n_failed++ < 8)
-                        first_failed[n_failed - 1] = todo[next];
+                    if (n_failed++ < 8) first_failed[n_failed - 1] = todo[next];
                     next++, finished++;
                     continue;
                 }
@@ -231,13 +223,11 @@ mcp_cli_shot_run(const mcp_cli_shot *s, const mcp_job_options *jo, int jobs, int
                 pids[slot] = pid, slot_frame[slot] = todo[next++];
                 running++;
             }
-            if (!running)
-                break;
+            if (!running) break;
             int status;
             pid_t done = wait(&status);
             if (done < 0) {
-                if (errno == EINTR)
-                    continue;
+                if (errno == EINTR) continue;
                 break;
             }
             for (int k = 0; k < jobs; k++)
@@ -246,8 +236,7 @@ mcp_cli_shot_run(const mcp_cli_shot *s, const mcp_job_options *jo, int jobs, int
                         if (WIFSIGNALED(status))
                             fprintf(stderr, "mcpost: frame %d: killed by signal %d\n",
                                     slot_frame[k], WTERMSIG(status));
-                        if (n_failed++ < 8)
-                            first_failed[n_failed - 1] = slot_frame[k];
+                        if (n_failed++ < 8) first_failed[n_failed - 1] = slot_frame[k];
                     }
                     pids[k] = 0;
                     running--, finished++;
@@ -267,7 +256,8 @@ mcp_cli_shot_run(const mcp_cli_shot *s, const mcp_job_options *jo, int jobs, int
                                     first_failed[i]);
         return mcp_error("%d of %d frames failed (%s%s); their messages are in %s/FRAME/"
                          "error.txt; running the job again retries them",
-                         n_failed, n_todo, list, n_failed > 8 ? ", ..." : "", s->output_dir);
+                         n_failed, n_todo, list, n_failed > 8 ? ", ..." : "",
+                         s->output_dir);
     }
     mcp_note("%d frames run, results in %s (mcpost collect %s gathers them)", n_todo,
              s->output_dir, s->output_dir);

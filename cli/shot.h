@@ -7,11 +7,11 @@
 #include <mcpost/job.h>
 
 typedef struct mcp_cli_shot {
-    char *job;          /* the job file's real path */
-    int *all, n_all;    /* the job's frames: (n_all 0: not a frame job) */
-    int *chosen;        /* --frames of them (all when none given) */
+    char *job;       /* the job file's real path */
+    int *all, n_all; /* the job's frames: (n_all 0: not a frame job) */
+    int *chosen;     /* --frames of them (all when none given) */
     int n_chosen;
-    char *output_dir;   /* the job's output folder (frame F in its 4-digit subfolder) */
+    char *output_dir; /* the job's output folder (frame F in its 4-digit subfolder) */
 } mcp_cli_shot;
 
 /* Reads the job's frames and output folder (output overrides it when not NULL) and
@@ -30,6 +30,7 @@ int mcp_cli_shot_write_manifest(mcp_cli_shot *s);
 /* Runs the chosen frames that are not complete (all of them with force) in `jobs`
  * processes, with a progress line for the set. A failed frame does not stop the
  * others; its message goes to <frame folder>/error.txt. Fails when any frame failed. */
-int mcp_cli_shot_run(const mcp_cli_shot *s, const mcp_job_options *jo, int jobs, int force);
+int mcp_cli_shot_run(const mcp_cli_shot *s, const mcp_job_options *jo, int jobs,
+                     int force);
 
 #endif

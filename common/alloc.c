@@ -40,8 +40,7 @@ void *
 mcp_malloc(size_t bytes)
 {
     void *p = injected_failure() ? NULL : malloc(bytes ? bytes : 1);
-    if (!p)
-        mcp_error("out of memory (%zu bytes)", bytes);
+    if (!p) mcp_error("out of memory (%zu bytes)", bytes);
     return p;
 }
 
@@ -49,8 +48,7 @@ void *
 mcp_calloc(size_t count, size_t size)
 {
     void *p = injected_failure() ? NULL : calloc(count ? count : 1, size ? size : 1);
-    if (!p)
-        mcp_error("out of memory (%zu x %zu bytes)", count, size);
+    if (!p) mcp_error("out of memory (%zu x %zu bytes)", count, size);
     return p;
 }
 
@@ -58,8 +56,7 @@ void *
 mcp_realloc(void *p, size_t bytes)
 {
     void *q = injected_failure() ? NULL : realloc(p, bytes ? bytes : 1);
-    if (!q)
-        mcp_error("out of memory (%zu bytes)", bytes);
+    if (!q) mcp_error("out of memory (%zu bytes)", bytes);
     return q;
 }
 
@@ -68,7 +65,6 @@ mcp_strdup(const char *s)
 {
     size_t n = strlen(s) + 1;
     char *p = mcp_malloc(n);
-    if (p)
-        memcpy(p, s, n);
+    if (p) memcpy(p, s, n);
     return p;
 }

@@ -35,13 +35,13 @@ level_of(double v, double lo, double scale)
     double t = (v - lo) * scale;
     if (!(t > 0)) /* also NaN */
         return 0;
-    if (t >= 255)
-        return 255;
+    if (t >= 255) return 255;
     return (unsigned char)(t + 0.5);
 }
 
 /* in mcp_colormap's order */
-static const char *const colormap_names[] = {"viridis", "magma", "inferno", "turbo", "gray"};
+static const char *const colormap_names[] = {"viridis", "magma", "inferno", "turbo",
+                                             "gray"};
 const mcp_wordlist mcp_colormap_words = {"colour map", colormap_names, 5};
 
 int
@@ -65,12 +65,10 @@ mcp_colormap_apply(const mcp_image *img, int channel, double lo, double hi,
     const char *op = "colormap";
     int which = -1;
     for (int i = 0; i < N_COLORMAPS; i++)
-        if (colormaps[i].map == map)
-            which = i;
+        if (colormaps[i].map == map) which = i;
     if (which < 0)
         return mcp_error("%s: %s: unknown colour map %d", img->source, op, (int)map);
-    if (!rgb8)
-        return mcp_error("%s: %s: no output buffer", img->source, op);
+    if (!rgb8) return mcp_error("%s: %s: no output buffer", img->source, op);
     if (channel < 0 || channel >= img->channels)
         return mcp_error("%s: %s: channel %d outside its %d channels", img->source, op,
                          channel, img->channels);

@@ -20,8 +20,7 @@ static void
 cv_load(void)
 {
     void *h = mcp__plugin_open("mcpost_cv.so", cv.error, sizeof cv.error);
-    if (!h)
-        return;
+    if (!h) return;
     mcp__cv_table_fn table = (mcp__cv_table_fn)(uintptr_t)dlsym(h, MCP__CV_TABLE);
     const mcp__cv_table *t = table ? table() : NULL;
     if (!t || t->abi != MCP__CV_ABI) {
@@ -38,8 +37,7 @@ static int
 cv_ready(char *err, size_t err_cap)
 {
     pthread_once(&cv.once, cv_load);
-    if (cv.table)
-        return 0;
+    if (cv.table) return 0;
     snprintf(err, err_cap, "the OpenCV plug-in: %s", cv.error);
     return -1;
 }
@@ -49,9 +47,10 @@ mcp__cv_sep_filter_rows(const mcp__cv_plane *src, const mcp__cv_plane *dst, int 
                         int y1, const float *kx, int kx_len, const float *ky, int ky_len,
                         char *err, size_t err_cap)
 {
-    return cv_ready(err, err_cap) ? -1
-                                  : cv.table->sep_filter_rows(src, dst, y0, y1, kx, kx_len,
-                                                              ky, ky_len, err, err_cap);
+    return cv_ready(err, err_cap)
+               ? -1
+               : cv.table->sep_filter_rows(src, dst, y0, y1, kx, kx_len, ky, ky_len, err,
+                                           err_cap);
 }
 
 int
@@ -66,11 +65,13 @@ mcp__cv_filter2d_rows(const mcp__cv_plane *src, const mcp__cv_plane *dst, int y0
 int
 mcp__cv_dft_power(const double *tile, int n, double *power, char *err, size_t err_cap)
 {
-    return cv_ready(err, err_cap) ? -1 : cv.table->dft_power(tile, n, power, err, err_cap);
+    return cv_ready(err, err_cap) ? -1
+                                  : cv.table->dft_power(tile, n, power, err, err_cap);
 }
 
 int
 mcp__cv_colormap_lut(int cv_map, unsigned char *rgb, char *err, size_t err_cap)
 {
-    return cv_ready(err, err_cap) ? -1 : cv.table->colormap_lut(cv_map, rgb, err, err_cap);
+    return cv_ready(err, err_cap) ? -1
+                                  : cv.table->colormap_lut(cv_map, rgb, err, err_cap);
 }

@@ -2,11 +2,11 @@
 // imgproc that filter.c and colormap.c use (the perceptual, blend and FLIP filters;
 // docs/libraries.md §4), through cv.c, which loads it on first use (OpenCV and what it
 // links cost every process ~10 ms of relocations at start, most of `mcpost --version`).
-// C++17 stays in this file. Caller buffers are wrapped as cv::Mat without copies (const_cast for inputs;
-// OpenCV never writes through src). Every entry point catches every exception: none may
-// cross extern "C". Borders are BORDER_REPLICATE (clamp to edge) everywhere, as
-// docs/mathematics.md §4.3 and docs/flip.md §3 ask; filters are correlations with the
-// anchor at the centre.
+// C++17 stays in this file. Caller buffers are wrapped as cv::Mat without copies
+// (const_cast for inputs; OpenCV never writes through src). Every entry point catches
+// every exception: none may cross extern "C". Borders are BORDER_REPLICATE (clamp to
+// edge) everywhere, as docs/mathematics.md §4.3 and docs/flip.md §3 ask; filters are
+// correlations with the anchor at the centre.
 #include "cv_shim.h"
 
 #include <opencv2/core.hpp>
@@ -28,12 +28,10 @@ fail(char *err, size_t cap, const std::string &msg)
 {
     std::string line = msg;
     for (char &ch : line)
-        if (ch == '\n' || ch == '\r')
-            ch = ' ';
+        if (ch == '\n' || ch == '\r') ch = ' ';
     while (!line.empty() && line.back() == ' ')
         line.pop_back();
-    if (err && cap)
-        std::snprintf(err, cap, "%s", line.c_str());
+    if (err && cap) std::snprintf(err, cap, "%s", line.c_str());
     return -1;
 }
 
@@ -63,8 +61,8 @@ wrap(const mcp__cv_plane *p)
 
 // Checks the arguments every strip filter shares; returns 0 or fails into err.
 static int
-check_strip(const mcp__cv_plane *src, const mcp__cv_plane *dst, int y0, int y1,
-            char *err, size_t cap, const char *op)
+check_strip(const mcp__cv_plane *src, const mcp__cv_plane *dst, int y0, int y1, char *err,
+            size_t cap, const char *op)
 {
     if (src->channels < 1 || src->channels > MCP__CV_MAX_CHANNELS ||
         src->width != dst->width || src->height != dst->height ||
@@ -74,14 +72,13 @@ check_strip(const mcp__cv_plane *src, const mcp__cv_plane *dst, int y0, int y1,
 }
 
 static int
-sep_filter_rows(const mcp__cv_plane *src, const mcp__cv_plane *dst, int y0,
-                        int y1, const float *kx, int kx_len, const float *ky, int ky_len,
-                        char *err, size_t err_cap)
+sep_filter_rows(const mcp__cv_plane *src, const mcp__cv_plane *dst, int y0, int y1,
+                const float *kx, int kx_len, const float *ky, int ky_len, char *err,
+                size_t err_cap)
 {
     const char *op = "separable filter";
     try {
-        if (check_strip(src, dst, y0, y1, err, err_cap, op))
-            return -1;
+        if (check_strip(src, dst, y0, y1, err, err_cap, op)) return -1;
         cv::Mat s = wrap(src), d = wrap(dst);
         // Row ranges of Mats that span the whole buffers: OpenCV locates the ROI in its
         // parent and reads the rows above and below it; only the parent's edges are
@@ -116,12 +113,11 @@ filter2d_roi(const cv::Mat &s, const cv::Mat &d, cv::Range rows, cv::Range cols,
 
 static int
 filter2d_rows(const mcp__cv_plane *src, const mcp__cv_plane *dst, int y0, int y1,
-                      const float *kernel, int kw, int kh, char *err, size_t err_cap)
+              const float *kernel, int kw, int kh, char *err, size_t err_cap)
 {
     const char *op = "2d filter";
     try {
-        if (check_strip(src, dst, y0, y1, err, err_cap, op))
-            return -1;
+        if (check_strip(src, dst, y0, y1, err, err_cap, op)) return -1;
         cv::Mat s = wrap(src), d = wrap(dst);
         cv::Mat k(kh, kw, CV_32F, const_cast<float *>(kernel));
         cv::Range all = cv::Range::all(), rows(y0, y1);
@@ -165,8 +161,7 @@ dft_power(const double *tile, int n, double *power, char *err, size_t err_cap)
 {
     const char *op = "tile dft";
     try {
-        if (n < 1)
-            return fail(err, err_cap, std::string(op) + ": bad tile size");
+        if (n < 1) return fail(err, err_cap, std::string(op) + ": bad tile size");
         cv::Mat in(n, n, CV_64F, const_cast<double *>(tile));
         cv::Mat spec; // n x n CV_64FC2, allocated by OpenCV (a scratch, not the output)
         cv::dft(in, spec, cv::DFT_COMPLEX_OUTPUT);

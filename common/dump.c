@@ -24,7 +24,8 @@ static const char *const convention_names[] = {"auto",    "pbrt",   "mitsuba",
 const char *
 mcp_convention_name(mcp_convention c)
 {
-    return (unsigned)c < (unsigned)COUNT(convention_names) ? convention_names[c] : "unknown";
+    return (unsigned)c < (unsigned)COUNT(convention_names) ? convention_names[c]
+                                                           : "unknown";
 }
 
 const mcp_wordlist mcp_convention_words = {"convention", convention_names,
@@ -37,7 +38,8 @@ mcp_convention_from_name(const char *name, mcp_convention *out)
 }
 
 static const char *const variance_kind_names[] = {"default", "per-sample", "of-mean"};
-const mcp_wordlist mcp_variance_kind_words = {"variance semantics", variance_kind_names, 3};
+const mcp_wordlist mcp_variance_kind_words = {"variance semantics", variance_kind_names,
+                                              3};
 
 int
 mcp_variance_kind_from_name(const char *name, mcp_variance_kind *out)
@@ -73,8 +75,7 @@ static double
 attr_number(const mcp_attrs *attrs, const char *name)
 {
     const mcp_attr *a = mcp_attrs_find(attrs, name);
-    if (!a)
-        return 0;
+    if (!a) return 0;
     return a->type == MCP_ATTR_INT ? (double)a->i : a->type == MCP_ATTR_STRING ? 0 : a->f;
 }
 
@@ -83,9 +84,10 @@ attr_number(const mcp_attrs *attrs, const char *name)
 static void
 read_variance_source(mcp_dump *d)
 {
-    d->variance_source = !d->var_of_mean                            ? MCP_VARSRC_NONE
-                         : d->variance_in_file == MCP_VAR_PER_SAMPLE ? MCP_VARSRC_PER_SAMPLE
-                                                                      : MCP_VARSRC_OF_MEAN;
+    d->variance_source = !d->var_of_mean ? MCP_VARSRC_NONE
+                         : d->variance_in_file == MCP_VAR_PER_SAMPLE
+                             ? MCP_VARSRC_PER_SAMPLE
+                             : MCP_VARSRC_OF_MEAN;
     const mcp_attr *a = mcp_attrs_find(&d->attrs, ATTR_VARIANCE_SOURCE);
     mcp_variance_source s;
     if (!d->var_of_mean || !a || a->type != MCP_ATTR_STRING ||
@@ -148,8 +150,7 @@ contains_ci(const char *s, const char *needle)
 {
     size_t n = strlen(needle);
     for (; *s; s++)
-        if (strncasecmp(s, needle, n) == 0)
-            return 1;
+        if (strncasecmp(s, needle, n) == 0) return 1;
     return 0;
 }
 
@@ -161,17 +162,16 @@ find_triple(const mcp_image *img, const char *word, const char *const sfx[3], ch
 {
     for (int c = 0; c < img->channels; c++) {
         const char *name = img->names[c], *dot = strrchr(name, '.');
-        if (!dot || strcmp(dot + 1, sfx[0]) != 0)
-            continue;
+        if (!dot || strcmp(dot + 1, sfx[0]) != 0) continue;
         int plen = (int)(dot - name);
         snprintf(buf, cap, "%.*s", plen, name);
         /* a Mitsuba moment integrator's second-moment twin is no feature */
-        if (strncmp(buf, "m2_", 3) == 0)
-            continue;
+        if (strncmp(buf, "m2_", 3) == 0) continue;
         const char *last = strrchr(buf, '.');
         last = last ? last + 1 : buf;
         /* "nn" is the shading normal in Mitsuba 3's own aov example ("nn:sh_normal") */
-        if (!contains_ci(buf, word) && !(strcmp(word, "normal") == 0 && strcmp(last, "nn") == 0))
+        if (!contains_ci(buf, word) &&
+            !(strcmp(word, "normal") == 0 && strcmp(last, "nn") == 0))
             continue;
         char other[512];
         int ok = 1;
@@ -179,8 +179,7 @@ find_triple(const mcp_image *img, const char *word, const char *const sfx[3], ch
             snprintf(other, sizeof other, "%s.%s", buf, sfx[k]);
             ok &= has(img, other);
         }
-        if (ok)
-            return 1;
+        if (ok) return 1;
     }
     return 0;
 }
@@ -195,11 +194,9 @@ find_moment_prefix(const mcp_image *img, char *buf, size_t cap)
     static const char *const xyz[3] = {"X", "Y", "Z"};
     for (int c = 0; c < img->channels; c++) {
         const char *name = img->names[c], *dot = strrchr(name, '.');
-        if (strncmp(name, "m2_", 3) != 0 || !dot || strcmp(dot + 1, "X") != 0)
-            continue;
+        if (strncmp(name, "m2_", 3) != 0 || !dot || strcmp(dot + 1, "X") != 0) continue;
         int plen = (int)(dot - name) - 3;
-        if (plen <= 0 || memchr(name + 3, '.', (size_t)plen))
-            continue;
+        if (plen <= 0 || memchr(name + 3, '.', (size_t)plen)) continue;
         snprintf(buf, cap, "%.*s", plen, name + 3);
         char other[600];
         int ok = 1;
@@ -209,8 +206,7 @@ find_moment_prefix(const mcp_image *img, char *buf, size_t cap)
             snprintf(other, sizeof other, "m2_%s.%s", buf, xyz[k]);
             ok &= has(img, other);
         }
-        if (ok)
-            return 1;
+        if (ok) return 1;
     }
     return 0;
 }
@@ -228,8 +224,7 @@ mcp_dump_detect(const mcp_image *img)
     if (has(img, "m2_R") || find_moment_prefix(img, moment, sizeof moment) ||
         (gen && gen->type == MCP_ATTR_STRING && strstr(gen->s, "Mitsuba")))
         return MCP_CONV_MITSUBA;
-    if (has(img, "Covariance.RG") || has(img, "SampleCount"))
-        return MCP_CONV_MCPOST;
+    if (has(img, "Covariance.RG") || has(img, "SampleCount")) return MCP_CONV_MCPOST;
     if (has(img, "Variance.R") || has(img, "Albedo.R") || has(img, "N.X") ||
         mcp_attrs_find(&img->attrs, "samplesPerPixel"))
         return MCP_CONV_PBRT;
@@ -254,7 +249,7 @@ typedef struct layout {
     int has_xyz;        /* m2 holds Mitsuba 3's XYZ second moments, xyz their mean */
     int color_from_xyz; /* no R,G,B: the mean colour is the XYZ mean in linear sRGB */
     mcp_variance_kind var_kind;
-    double spp;          /* from the header, 0 if none */
+    double spp; /* from the header, 0 if none */
     char spp_channel[64];
 } layout;
 
@@ -277,15 +272,13 @@ header_spp(const mcp_image *img, const char *blender_layer_name)
     static const char *keys[] = {"samplesPerPixel", "spp", "samples"};
     for (size_t i = 0; i < sizeof keys / sizeof *keys; i++) {
         const mcp_attr *a = mcp_attrs_find(&img->attrs, keys[i]);
-        if (a && a->type != MCP_ATTR_STRING)
-            return a->f;
+        if (a && a->type != MCP_ATTR_STRING) return a->f;
     }
     if (blender_layer_name) {
         char key[600];
         snprintf(key, sizeof key, "cycles.%s.samples", blender_layer_name);
         const mcp_attr *a = mcp_attrs_find(&img->attrs, key);
-        if (a && a->type == MCP_ATTR_STRING)
-            return atof(a->s);
+        if (a && a->type == MCP_ATTR_STRING) return atof(a->s);
     }
     return 0;
 }
@@ -346,8 +339,7 @@ layout_for(const mcp_image *img, mcp_convention conv, layout *L)
         set3(&L->cov, "Covariance.", offdiag);
         set3(&L->albedo, "Albedo.", rgb);
         set3(&L->normal, "N.", xyz);
-        if (!has3(img, &L->normal))
-            set3(&L->normal, "Ns.", xyz);
+        if (!has3(img, &L->normal)) set3(&L->normal, "Ns.", xyz);
         snprintf(L->spp_channel, sizeof L->spp_channel, "SampleCount");
         L->spp = header_spp(img, NULL);
         break;
@@ -364,8 +356,8 @@ layout_for(const mcp_image *img, mcp_convention conv, layout *L)
 static int
 rename3(mcp_image *img, const char *a, const char *b, const char *c)
 {
-    return mcp_image_set_channel_name(img, 0, a) || mcp_image_set_channel_name(img, 1, b) ||
-           mcp_image_set_channel_name(img, 2, c);
+    return mcp_image_set_channel_name(img, 0, a) ||
+           mcp_image_set_channel_name(img, 1, b) || mcp_image_set_channel_name(img, 2, c);
 }
 
 /* Where the main file's channels come from: a whole image in memory, whose triples
@@ -424,11 +416,9 @@ static int
 read_part(const char *path, const mcp_dump_buffer *buf, const char *role,
           const mcp_read_options *ro, mcp_image **out)
 {
-    if (!in_memory(buf))
-        return mcp_image_read(path, ro, out);
+    if (!in_memory(buf)) return mcp_image_read(path, ro, out);
     char name[64];
-    if (!path)
-        snprintf(name, sizeof name, "%s (in memory)", role);
+    if (!path) snprintf(name, sizeof name, "%s (in memory)", role);
     return mcp_image_read_memory(buf->data, buf->size, path ? path : name, out);
 }
 
@@ -441,8 +431,7 @@ load_part(const char *path, const mcp_dump_buffer *buf, const char *role,
     mcp_image *img = NULL;
     mcp_read_options ro = mcp_read_defaults();
     ro.srgb_decode = 0; /* data, not colour */
-    if (read_part(path, buf, role, &ro, &img))
-        return -1;
+    if (read_part(path, buf, role, &ro, &img)) return -1;
     int idx[3] = {0, 1, 2}, rc = -1;
     if (mcp_image_channels(img, names, 3, idx) && img->channels >= 3) {
         idx[0] = 0, idx[1] = 1, idx[2] = 2;
@@ -451,8 +440,7 @@ load_part(const char *path, const mcp_dump_buffer *buf, const char *role,
                   names[1], names[2], img->channels);
         goto done;
     }
-    if (!mcp_image_same_size(img, like))
-        goto done;
+    if (!mcp_image_same_size(img, like)) goto done;
     rc = mcp_image_copy_channels(img, idx, 3, out);
 done:
     mcp_image_free(img);
@@ -481,8 +469,7 @@ static int
 check_values(mcp_image *img, const char *part, int is_variance, mcp_badval_policy policy,
              long *replaced)
 {
-    if (!img)
-        return 0;
+    if (!img) return 0;
     /* bad values are rare: a parallel count over every value first, and the serial
        pass that finds the first and replaces them only when there are some */
     long any_bad = 0;
@@ -492,14 +479,14 @@ check_values(mcp_image *img, const char *part, int is_variance, mcp_badval_polic
     if ((long long)img->width * img->height * nc > 65536)
     for (int y = 0; y < img->height; y++) {
         if (packed) {
-            any_bad += count_bad(mcp_image_px(img, 0, y), (size_t)img->width * nc, is_variance);
+            any_bad +=
+                count_bad(mcp_image_px(img, 0, y), (size_t)img->width * nc, is_variance);
             continue;
         }
         for (int x = 0; x < img->width; x++)
             any_bad += count_bad(mcp_image_px(img, x, y), (size_t)nc, is_variance);
     }
-    if (!any_bad)
-        return 0;
+    if (!any_bad) return 0;
     for (int c = 0; c < img->channels; c++) {
         long bad = 0;
         int fx = -1, fy = -1;
@@ -507,12 +494,9 @@ check_values(mcp_image *img, const char *part, int is_variance, mcp_badval_polic
         for (int y = 0; y < img->height; y++)
             for (int x = 0; x < img->width; x++) {
                 float *v = &mcp_image_px(img, x, y)[c];
-                if (isfinite(*v) && !(is_variance && *v < 0))
-                    continue;
-                if (!bad++)
-                    fx = x, fy = y, first = *v;
-                if (policy == MCP_BADVAL_ZERO)
-                    *v = 0;
+                if (isfinite(*v) && !(is_variance && *v < 0)) continue;
+                if (!bad++) fx = x, fy = y, first = *v;
+                if (policy == MCP_BADVAL_ZERO) *v = 0;
             }
         if (bad && policy == MCP_BADVAL_FAIL)
             return mcp_error("%s: %s channel '%s' has %ld %s value%s (first %g at pixel "
@@ -538,12 +522,10 @@ load_spp(mcp_dump *d, channel_source *src, const mcp_dump_spec *spec,
         int ok = mcp_image_same_size(m, d->color) &&
                  !mcp_image_copy_channels(m, &idx, 1, &d->spp_map);
         mcp_image_free(m);
-        if (!ok)
-            return -1;
+        if (!ok) return -1;
     } else if (L->spp_channel[0] && has(img, L->spp_channel)) {
         const char *name = L->spp_channel;
-        if (take_part(src, PART_SPP, &name, 1, &d->spp_map))
-            return -1;
+        if (take_part(src, PART_SPP, &name, 1, &d->spp_map)) return -1;
     }
     if (d->spp_map) {
         for (int y = 0; y < d->spp_map->height; y++)
@@ -569,7 +551,8 @@ load_spp(mcp_dump *d, channel_source *src, const mcp_dump_spec *spec,
                              ? "Mitsuba writes no sample count in its EXR"
                              : "samplesPerPixel");
     if (d->spp < 0 || !isfinite(d->spp))
-        return mcp_error("%s: sample count %g in the file (must be > 0)", d->source, d->spp);
+        return mcp_error("%s: sample count %g in the file (must be > 0)", d->source,
+                         d->spp);
     return 0;
 }
 
@@ -579,10 +562,9 @@ to_variance_of_mean(mcp_dump *d)
 {
     mcp_image *parts[2] = {d->var_of_mean, d->cov_of_mean};
     for (int p = 0; p < 2; p++) {
-        if (!parts[p])
-            continue;
-#pragma omp parallel for schedule(static) \
-    if ((long long)parts[p]->width * parts[p]->height > 65536)
+        if (!parts[p]) continue;
+#pragma omp parallel for schedule(                                                       \
+    static) if ((long long)parts[p]->width * parts[p]->height > 65536)
         for (int y = 0; y < parts[p]->height; y++)
             for (int x = 0; x < parts[p]->width; x++) {
                 double n = mcp_dump_spp_at(d, x, y);
@@ -599,15 +581,14 @@ static int
 dump_layout(const mcp_image *img, const mcp_dump_spec *spec, mcp_dump *d, layout *L)
 {
     d->convention = spec->convention ? spec->convention : mcp_dump_detect(img);
-    if (!(d->source = mcp_strdup(img->source)) || mcp_attrs_copy(&img->attrs, &d->attrs) ||
-        layout_for(img, d->convention, L))
+    if (!(d->source = mcp_strdup(img->source)) ||
+        mcp_attrs_copy(&img->attrs, &d->attrs) || layout_for(img, d->convention, L))
         return -1;
     /* explicit names win over the convention */
     for (int k = 0; k < 3; k++) {
         if (spec->color[k])
             snprintf(L->color.c[k], sizeof L->color.c[k], "%s", spec->color[k]);
-        if (spec->var[k])
-            snprintf(L->var.c[k], 512, "%s", spec->var[k]), L->has_var = 1;
+        if (spec->var[k]) snprintf(L->var.c[k], 512, "%s", spec->var[k]), L->has_var = 1;
         if (spec->albedo[k])
             snprintf(L->albedo.c[k], 512, "%s", spec->albedo[k]), L->has_albedo = 1;
         if (spec->normal[k])
@@ -682,14 +663,12 @@ dump_fill(mcp_dump *d, channel_source *src, const mcp_dump_spec *spec,
 {
     if (wants_xyz(L)) {
         mcp_image *xyz = NULL;
-        if (take3(src, PART_XYZ, &L->xyz, &xyz))
-            return -1;
+        if (take3(src, PART_XYZ, &L->xyz, &xyz)) return -1;
         int rc = 0;
         if (wants_m2(L)) {
             rc = take3(src, PART_M2, &L->m2, &d->var_of_mean) ||
                  rename3(d->var_of_mean, "R", "G", "B");
-            if (!rc)
-                xyz_moments_to_rgb(xyz, d->var_of_mean, L->color_from_xyz);
+            if (!rc) xyz_moments_to_rgb(xyz, d->var_of_mean, L->color_from_xyz);
         }
         if (!rc && L->color_from_xyz) {
             d->color = xyz;
@@ -697,11 +676,10 @@ dump_fill(mcp_dump *d, channel_source *src, const mcp_dump_spec *spec,
             rc = rename3(d->color, "R", "G", "B");
         }
         mcp_image_free(xyz);
-        if (rc)
-            return -1;
+        if (rc) return -1;
     }
-    if (!L->color_from_xyz &&
-        (take3(src, PART_COLOR, &L->color, &d->color) || rename3(d->color, "R", "G", "B")))
+    if (!L->color_from_xyz && (take3(src, PART_COLOR, &L->color, &d->color) ||
+                               rename3(d->color, "R", "G", "B")))
         return -1;
     if (L->has_albedo && (take3(src, PART_ALBEDO, &L->albedo, &d->albedo) ||
                           rename3(d->albedo, "R", "G", "B")))
@@ -769,8 +747,7 @@ dump_fill(mcp_dump *d, channel_source *src, const mcp_dump_spec *spec,
         check_values(d->var_of_mean, "variance", 1, spec->bad_values, &d->n_bad_values) ||
         check_values(d->cov_of_mean, "covariance", 0, spec->bad_values, &d->n_bad_values))
         return -1;
-    if (d->variance_in_file == MCP_VAR_PER_SAMPLE)
-        to_variance_of_mean(d);
+    if (d->variance_in_file == MCP_VAR_PER_SAMPLE) to_variance_of_mean(d);
     read_variance_source(d);
     if (wants_m2(L) && L->has_xyz && d->variance_source == MCP_VARSRC_PER_SAMPLE &&
         !(spec->variance_path || in_memory(&parts->variance)))
@@ -785,8 +762,7 @@ from_image(const mcp_image *img, const mcp_dump_spec *spec, const mcp_dump_buffe
 {
     *out = NULL;
     mcp_dump *d = mcp_calloc(1, sizeof *d);
-    if (!d)
-        return -1;
+    if (!d) return -1;
     layout L;
     channel_source src = {.img = img};
     if (dump_layout(img, spec, d, &L) || dump_fill(d, &src, spec, parts, &L)) {
@@ -830,12 +806,12 @@ route_part(direct_read *r, const mcp_image *header, int w, int h, int part,
     int idx[3];
     const char *own[3];
     mcp_image *img = NULL;
-    if (mcp_image_channels(header, names, n, idx))
-        return -1;
+    if (mcp_image_channels(header, names, n, idx)) return -1;
     for (int k = 0; k < n; k++) {
         if (routes[idx[k]].base) {
             r->clash = 1;
-            return mcp_error("%s: channel '%s' is wanted twice", header->source, names[k]);
+            return mcp_error("%s: channel '%s' is wanted twice", header->source,
+                             names[k]);
         }
         own[k] = header->names[idx[k]];
     }
@@ -845,7 +821,8 @@ route_part(direct_read *r, const mcp_image *header, int w, int h, int part,
         return -1;
     }
     for (int k = 0; k < n; k++)
-        routes[idx[k]] = (mcp__exr_route){img->data + k, img->pixel_stride, img->row_stride};
+        routes[idx[k]] =
+            (mcp__exr_route){img->data + k, img->pixel_stride, img->row_stride};
     r->src.direct[part] = img;
     return 0;
 }
@@ -863,8 +840,7 @@ route_parts(const mcp_image *header, int w, int h, void *ctx, mcp__exr_route *ro
         return -1;
     r->src.img = r->header;
     r->src.header_only = 1;
-    if (dump_layout(header, r->spec, r->d, L))
-        return -1;
+    if (dump_layout(header, r->spec, r->d, L)) return -1;
     const struct {
         int part, wanted;
         const name3 *names;
@@ -886,8 +862,7 @@ route_parts(const mcp_image *header, int w, int h, void *ctx, mcp__exr_route *ro
     if (!r->spec->spp_map_path && !in_memory(&r->parts->spp_map) && L->spp_channel[0] &&
         has(header, L->spp_channel)) {
         const char *n = L->spp_channel;
-        if (route_part(r, header, w, h, PART_SPP, &n, 1, routes))
-            return -1;
+        if (route_part(r, header, w, h, PART_SPP, &n, 1, routes)) return -1;
     }
     return 0;
 }
@@ -903,8 +878,7 @@ read_direct(const mcp_dump_spec *spec, const mcp_dump_buffers *parts, mcp_dump *
     direct_read r = {.spec = spec, .parts = parts};
     *fallback = 0;
     int rc = -1;
-    if (!(r.d = mcp_calloc(1, sizeof *r.d)))
-        return -1;
+    if (!(r.d = mcp_calloc(1, sizeof *r.d))) return -1;
     int read = -1;
     if (in_memory(&parts->main))
         read = mcp__exr_read_memory_routed(parts->main.data, parts->main.size,
@@ -930,7 +904,8 @@ read_direct(const mcp_dump_spec *spec, const mcp_dump_buffers *parts, mcp_dump *
 static int
 main_is_exr(const mcp_dump_spec *spec, const mcp_dump_buffers *parts)
 {
-    if (in_memory(&parts->main)) return mcp__exr_magic(parts->main.data, parts->main.size);
+    if (in_memory(&parts->main))
+        return mcp__exr_magic(parts->main.data, parts->main.size);
     return mcp_format_from_path(spec->path) == MCP_FORMAT_EXR;
 }
 
@@ -941,10 +916,8 @@ mcp_dump_read_memory(const mcp_dump_spec *spec, const mcp_dump_buffers *parts,
     mcp_dump_spec defaults = mcp_dump_spec_defaults();
     static const mcp_dump_buffers none;
     *out = NULL;
-    if (!spec)
-        spec = &defaults;
-    if (!parts)
-        parts = &none;
+    if (!spec) spec = &defaults;
+    if (!parts) parts = &none;
     if (!spec->path && !in_memory(&parts->main))
         return mcp_error("render dump: no file given");
     if (main_is_exr(spec, parts)) {
@@ -955,8 +928,7 @@ mcp_dump_read_memory(const mcp_dump_spec *spec, const mcp_dump_buffers *parts,
     }
     mcp_image *img = NULL;
     mcp_read_options ro = mcp_read_defaults();
-    if (read_part(spec->path, &parts->main, "main", &ro, &img))
-        return -1;
+    if (read_part(spec->path, &parts->main, "main", &ro, &img)) return -1;
     int rc = from_image(img, spec, parts, out);
     mcp_image_free(img);
     return rc;
@@ -979,8 +951,7 @@ mcp_dump_read(const char *path, mcp_dump **out)
 void
 mcp_dump_free(mcp_dump *d)
 {
-    if (!d)
-        return;
+    if (!d) return;
     mcp_image_free(d->color);
     mcp_image_free(d->var_of_mean);
     mcp_image_free(d->cov_of_mean);
@@ -1029,7 +1000,8 @@ mcp_dump_write(const mcp_dump *d, const char *path, mcp_convention conv,
         conv = d->spp_map || d->cov_of_mean ? MCP_CONV_MCPOST : MCP_CONV_PBRT;
     if (d->spp_map && conv != MCP_CONV_MCPOST)
         return mcp_error("%s: per-pixel sample counts can only be written in the mcpost "
-                         "convention", path);
+                         "convention",
+                         path);
     for (int k = 0; k < 3; k++) {
         if (conv == MCP_CONV_BLENDER)
             snprintf(names[n++], 128, "%s.Combined.%s", L, rgb[k]);
@@ -1040,7 +1012,7 @@ mcp_dump_write(const mcp_dump *d, const char *path, mcp_convention conv,
         at_var = n;
         for (int k = 0; k < 3; k++)
             snprintf(names[n++], 128,
-                     conv == MCP_CONV_MITSUBA ? "m2_%s%s"
+                     conv == MCP_CONV_MITSUBA   ? "m2_%s%s"
                      : conv == MCP_CONV_BLENDER ? "ViewLayer.Variance.%s%s"
                                                 : "Variance.%s%s",
                      rgb[k], "");
@@ -1054,7 +1026,7 @@ mcp_dump_write(const mcp_dump *d, const char *path, mcp_convention conv,
         at_alb = n;
         for (int k = 0; k < 3; k++)
             snprintf(names[n++], 128,
-                     conv == MCP_CONV_MITSUBA ? "albedo.%s"
+                     conv == MCP_CONV_MITSUBA   ? "albedo.%s"
                      : conv == MCP_CONV_BLENDER ? "ViewLayer.Denoising Albedo.%s"
                                                 : "Albedo.%s",
                      rgb[k]);
@@ -1063,41 +1035,34 @@ mcp_dump_write(const mcp_dump *d, const char *path, mcp_convention conv,
         at_nrm = n;
         for (int k = 0; k < 3; k++)
             snprintf(names[n++], 128,
-                     conv == MCP_CONV_MITSUBA ? "sh_normal.%s"
+                     conv == MCP_CONV_MITSUBA   ? "sh_normal.%s"
                      : conv == MCP_CONV_BLENDER ? "ViewLayer.Denoising Normal.%s"
                                                 : "N.%s",
                      xyz[k]);
     }
-    if (d->spp_map)
-        at_spp = n, snprintf(names[n++], 128, "SampleCount");
+    if (d->spp_map) at_spp = n, snprintf(names[n++], 128, "SampleCount");
     const char *np[20];
     for (int i = 0; i < n; i++)
         np[i] = names[i];
     mcp_image *img;
-    if (mcp_image_new(d->color->width, d->color->height, n, np, &img))
-        return -1;
+    if (mcp_image_new(d->color->width, d->color->height, n, np, &img)) return -1;
     int rc = -1;
     put3(img, 0, d->color, d, 0, 0);
-    if (at_var >= 0)
-        put3(img, at_var, d->var_of_mean, d, 1, conv == MCP_CONV_MITSUBA);
-    if (at_cov >= 0)
-        put3(img, at_cov, d->cov_of_mean, d, 1, 0);
-    if (at_alb >= 0)
-        put3(img, at_alb, d->albedo, d, 0, 0);
-    if (at_nrm >= 0)
-        put3(img, at_nrm, d->normal, d, 0, 0);
+    if (at_var >= 0) put3(img, at_var, d->var_of_mean, d, 1, conv == MCP_CONV_MITSUBA);
+    if (at_cov >= 0) put3(img, at_cov, d->cov_of_mean, d, 1, 0);
+    if (at_alb >= 0) put3(img, at_alb, d->albedo, d, 0, 0);
+    if (at_nrm >= 0) put3(img, at_nrm, d->normal, d, 0, 0);
     if (at_spp >= 0)
         for (int y = 0; y < img->height; y++)
             for (int x = 0; x < img->width; x++)
                 mcp_image_px(img, x, y)[at_spp] = mcp_image_px(d->spp_map, x, y)[0];
-    if (mcp_attrs_copy(&d->attrs, &img->attrs))
-        goto done;
+    if (mcp_attrs_copy(&d->attrs, &img->attrs)) goto done;
     /* a variance that is not the renderer's own says where it came from, so that a
        later run does not take it for a per-sample variance */
-    if (d->var_of_mean && (d->variance_source == MCP_VARSRC_REPLICATES ||
-                           d->variance_source == MCP_VARSRC_INCREMENTS ||
-                           d->variance_source == MCP_VARSRC_XYZ_MOMENTS ||
-                           d->variance_pool > 0)) {
+    if (d->var_of_mean &&
+        (d->variance_source == MCP_VARSRC_REPLICATES ||
+         d->variance_source == MCP_VARSRC_INCREMENTS ||
+         d->variance_source == MCP_VARSRC_XYZ_MOMENTS || d->variance_pool > 0)) {
         if (mcp_attrs_set_string(&img->attrs, ATTR_VARIANCE_SOURCE,
                                  mcp_variance_source_name(d->variance_source)) ||
             mcp_attrs_set_double(&img->attrs, ATTR_VARIANCE_DOF, d->variance_dof) ||
@@ -1108,8 +1073,8 @@ mcp_dump_write(const mcp_dump *d, const char *path, mcp_convention conv,
     if (d->spp > 0) {
         char text[64];
         snprintf(text, sizeof text, "%.0f", d->spp);
-        if (conv == MCP_CONV_BLENDER ? mcp_attrs_set_string(&img->attrs,
-                                                            "cycles.ViewLayer.samples", text)
+        if (conv == MCP_CONV_BLENDER
+                ? mcp_attrs_set_string(&img->attrs, "cycles.ViewLayer.samples", text)
             : conv == MCP_CONV_MITSUBA ? 0 /* Mitsuba writes no sample count */
                                        : mcp_attrs_set_int(&img->attrs, "samplesPerPixel",
                                                            (int64_t)llround(d->spp)))
@@ -1126,8 +1091,7 @@ done:
 void
 mcp_series_free(mcp_series *s)
 {
-    if (!s)
-        return;
+    if (!s) return;
     /* paths is NULL when its own allocation failed (series_new) */
     for (int i = 0; s->paths && i < s->count; i++)
         free(s->paths[i]);
@@ -1140,11 +1104,9 @@ static int
 series_new(int count, mcp_series **out)
 {
     *out = NULL;
-    if (count < 1)
-        return mcp_error("a series needs at least one dump");
+    if (count < 1) return mcp_error("a series needs at least one dump");
     mcp_series *s = mcp_calloc(1, sizeof *s);
-    if (!s)
-        return -1;
+    if (!s) return -1;
     s->count = count;
     s->paths = mcp_calloc((size_t)count, sizeof *s->paths);
     s->spp = mcp_calloc((size_t)count, sizeof *s->spp);
@@ -1171,8 +1133,7 @@ check_pattern(const char *pattern)
 {
     int conversions = 0;
     for (const char *p = pattern; *p; p++) {
-        if (*p != '%')
-            continue;
+        if (*p != '%') continue;
         if (p[1] == '%') {
             p++;
             continue;
@@ -1201,11 +1162,9 @@ check_pattern(const char *pattern)
 int
 mcp_series_from_pattern(const char *pattern, const int *spps, int count, mcp_series **out)
 {
-    if (check_pattern(pattern))
-        return -1;
+    if (check_pattern(pattern)) return -1;
     mcp_series *s;
-    if (series_new(count, &s))
-        return -1;
+    if (series_new(count, &s)) return -1;
     for (int i = 0; i < count; i++) {
         if (spps[i] < 1) {
             mcp_series_free(s);
@@ -1241,8 +1200,7 @@ mcp_series_from_paths(const char *const *paths, const double *spps, int count,
                       mcp_series **out)
 {
     mcp_series *s;
-    if (series_new(count, &s))
-        return -1;
+    if (series_new(count, &s)) return -1;
     for (int i = 0; i < count; i++) {
         if (!(s->paths[i] = mcp_strdup(paths[i]))) {
             mcp_series_free(s);
@@ -1295,12 +1253,10 @@ mcp_series_load(const mcp_series *s, int i, mcp_dump **out)
         double ratio;
         if (mcp_series_increment_variance(s, i, &s->increments, out, &ratio) == 0)
             return 0;
-        if (!strstr(mcp_error_message(), "needs two blocks"))
-            return -1;
+        if (!strstr(mcp_error_message(), "needs two blocks")) return -1;
         mcp_error_clear();
     }
-    if (mcp__series_load_file(s, i, out))
-        return -1;
+    if (mcp__series_load_file(s, i, out)) return -1;
     /* a member without any variance (a plain Cycles render) takes its increments'
        whatever they say: there is nothing else */
     int none = !(*out)->var_of_mean;
@@ -1338,7 +1294,8 @@ mcp_series_load(const mcp_series *s, int i, mcp_dump **out)
 }
 
 static const char *const series_variance_names[] = {"auto", "file", "increments"};
-const mcp_wordlist mcp_series_variance_words = {"variance_from", series_variance_names, 3};
+const mcp_wordlist mcp_series_variance_words = {"variance_from", series_variance_names,
+                                                3};
 
 const char *
 mcp_series_variance_name(mcp_series_variance v)
@@ -1350,7 +1307,8 @@ int
 mcp_series_variance_from_name(const char *name, mcp_series_variance *out)
 {
     if (mcp_wordlist_find(&mcp_series_variance_words, name, (int *)out))
-        return mcp_error("variance_from must be auto, file or increments (got '%s')", name);
+        return mcp_error("variance_from must be auto, file or increments (got '%s')",
+                         name);
     return 0;
 }
 
@@ -1364,7 +1322,8 @@ const char *
 mcp__no_variance_hint(const mcp_dump *d, const char *otherwise)
 {
     return d && d->convention == MCP_CONV_BLENDER
-               ? ": Cycles writes none; render the .blend with tools/mcpost-cycles-render.py "
+               ? ": Cycles writes none; render the .blend with "
+                 "tools/mcpost-cycles-render.py "
                  "(docs/conventions.md, \"From a .blend to an estimate\")"
                : otherwise;
 }
@@ -1375,7 +1334,6 @@ mcp__series_load_file(const mcp_series *s, int i, mcp_dump **out)
     *out = NULL;
     mcp_dump_spec spec = s->spec;
     spec.path = s->paths[i];
-    if (s->spp[i] > 0)
-        spec.spp = s->spp[i];
+    if (s->spp[i] > 0) spec.spp = s->spp[i];
     return mcp_dump_load(&spec, out);
 }

@@ -19,8 +19,7 @@ static void
 keep_one_line(char *s)
 {
     for (; *s; s++)
-        if ((unsigned char)*s < 0x20 || *s == 0x7f)
-            *s = '?';
+        if ((unsigned char)*s < 0x20 || *s == 0x7f) *s = '?';
 }
 
 int
@@ -69,8 +68,7 @@ mcp_error_clear(void)
 int
 mcp_size_mul(size_t a, size_t b, size_t *out)
 {
-    if (b != 0 && a > SIZE_MAX / b)
-        return -1;
+    if (b != 0 && a > SIZE_MAX / b) return -1;
     *out = a * b;
     return 0;
 }

@@ -31,7 +31,8 @@
 extern "C" {
 #endif
 
-/* Sets the thread's error line; always returns -1 so that `return mcp_error(...)` works. */
+/* Sets the thread's error line; always returns -1 so that `return mcp_error(...)` works.
+ */
 MCP_API int mcp_error(const char *fmt, ...) MCP_PRINTF(1, 2);
 
 /* Puts formatted text in front of the current error line; returns -1. */

@@ -39,8 +39,7 @@ exr_capture_error(exr_const_context_t ctxt, exr_result_t code, const char *msg)
 static const char *
 exr_detail(exr_result_t rc)
 {
-    if (rc == EXR_ERR_OUT_OF_MEMORY)
-        return "out of memory";
+    if (rc == EXR_ERR_OUT_OF_MEMORY) return "out of memory";
     return exr_last_message[0] ? exr_last_message : exr_get_default_error_message(rc);
 }
 
@@ -53,7 +52,7 @@ exr_fail(const char *path, const char *what, exr_result_t rc)
 static const char *
 compression_name(exr_compression_t c)
 {
-    static const char *names[] = {"none", "rle",  "zips", "zip", "piz",
+    static const char *names[] = {"none",  "rle", "zips", "zip",  "piz",
                                   "pxr24", "b44", "b44a", "dwaa", "dwab"};
     return (unsigned)c < sizeof names / sizeof *names ? names[c] : "unknown";
 }
@@ -64,35 +63,37 @@ static int
 read_attributes(exr_context_t f, mcp_attrs *attrs)
 {
     int32_t count = 0;
-    if (exr_get_attribute_count(f, 0, &count) != EXR_ERR_SUCCESS)
-        return 0;
+    if (exr_get_attribute_count(f, 0, &count) != EXR_ERR_SUCCESS) return 0;
     for (int i = 0; i < count; i++) {
         const exr_attribute_t *a = NULL;
-        if (exr_get_attribute_by_index(f, 0, EXR_ATTR_LIST_FILE_ORDER, i, &a) ||
-            !a)
+        if (exr_get_attribute_by_index(f, 0, EXR_ATTR_LIST_FILE_ORDER, i, &a) || !a)
             continue;
         int rc = 0;
         switch (a->type) {
-        case EXR_ATTR_INT: rc = mcp_attrs_set_int(attrs, a->name, a->i); break;
-        case EXR_ATTR_FLOAT: rc = mcp_attrs_set_float(attrs, a->name, a->f); break;
-        case EXR_ATTR_DOUBLE: rc = mcp_attrs_set_double(attrs, a->name, a->d); break;
+        case EXR_ATTR_INT:
+            rc = mcp_attrs_set_int(attrs, a->name, a->i);
+            break;
+        case EXR_ATTR_FLOAT:
+            rc = mcp_attrs_set_float(attrs, a->name, a->f);
+            break;
+        case EXR_ATTR_DOUBLE:
+            rc = mcp_attrs_set_double(attrs, a->name, a->d);
+            break;
         case EXR_ATTR_STRING: {
             /* the part's own "name" and "type" attributes are structure, not metadata */
-            if (strcmp(a->name, "name") == 0 || strcmp(a->name, "type") == 0)
-                break;
+            if (strcmp(a->name, "name") == 0 || strcmp(a->name, "type") == 0) break;
             char *s = mcp_malloc((size_t)a->string->length + 1);
-            if (!s)
-                return -1;
+            if (!s) return -1;
             memcpy(s, a->string->str, (size_t)a->string->length);
             s[a->string->length] = '\0';
             rc = mcp_attrs_set_string(attrs, a->name, s);
             free(s);
             break;
         }
-        default: break; /* matrices, boxes, chromaticities: not needed downstream */
+        default:
+            break; /* matrices, boxes, chromaticities: not needed downstream */
         }
-        if (rc)
-            return -1;
+        if (rc) return -1;
     }
     return 0;
 }
@@ -128,8 +129,7 @@ list_chunks(exr_context_t f, exr_storage_t storage, const exr_attr_box2i_t *dw, 
         exr_tile_level_mode_t level;
         exr_tile_round_mode_t round;
         exr_result_t r = exr_get_tile_descriptor(f, 0, &tw, &th, &level, &round);
-        if (r != EXR_ERR_SUCCESS)
-            return exr_fail(path, "bad tile description", r);
+        if (r != EXR_ERR_SUCCESS) return exr_fail(path, "bad tile description", r);
         if (tw < 1 || th < 1 || tw > (uint32_t)MCP_MAX_DIM || th > (uint32_t)MCP_MAX_DIM)
             return mcp_error("%s: bad tile size %ux%u", path, tw, th);
         nx = (w + (int)tw - 1) / (int)tw;
@@ -140,8 +140,7 @@ list_chunks(exr_context_t f, exr_storage_t storage, const exr_attr_box2i_t *dw, 
                          "(truncated or corrupt)",
                          path, n, w, h, max_chunks);
     chunk_at *c = mcp_calloc((size_t)n, sizeof *c);
-    if (!c)
-        return -1;
+    if (!c) return -1;
     for (long long i = 0; i < n; i++) {
         exr_result_t r;
         if (storage == EXR_STORAGE_SCANLINE) {
@@ -235,8 +234,7 @@ check_file_holds(exr_context_t f, exr_storage_t storage, exr_compression_t comp,
                          path, chunks, (long long)w, (long long)h, file_bytes);
     chunk_at *c;
     int n;
-    if (list_chunks(f, storage, dw, w, h, 0, chunks, path, &c, &n))
-        return -1;
+    if (list_chunks(f, storage, dw, w, h, 0, chunks, path, &c, &n)) return -1;
     unsigned long long packed_bytes = 0;
     for (int i = 0; i < n; i++) {
         const exr_chunk_info_t *ci = &c[i].ci;
@@ -280,8 +278,9 @@ decompress_zip_chunk(exr_decode_pipeline_t *dec)
     }
     int rc = mcp__zip_decode(dec->decoding_user_data, dec->packed_buffer, packed,
                              dec->unpacked_buffer, unpacked);
-    return rc == 0 ? EXR_ERR_SUCCESS
-                   : rc == -2 ? EXR_ERR_OUT_OF_MEMORY : EXR_ERR_CORRUPT_CHUNK;
+    return rc == 0    ? EXR_ERR_SUCCESS
+           : rc == -2 ? EXR_ERR_OUT_OF_MEMORY
+                      : EXR_ERR_CORRUPT_CHUNK;
 }
 
 /* Decodes one chunk at (x0, y0) of the data window to where routes say, with this
@@ -296,16 +295,16 @@ decode_chunk(exr_context_t f, const chunk_at *c, exr_decode_pipeline_t *dec,
     *what = "cannot decode";
     exr_result_t rc = *initialised ? exr_decoding_update(f, 0, &c->ci, dec)
                                    : exr_decoding_initialize(f, 0, &c->ci, dec);
-    if (rc != EXR_ERR_SUCCESS)
-        return rc;
+    if (rc != EXR_ERR_SUCCESS) return rc;
     for (int k = 0; k < dec->channel_count; k++) {
         exr_coding_channel_info_t *ch = &dec->channels[k];
         /* Core sorts channels by name: map them back by name, not position */
         const mcp__exr_route *r = &routes[mcp_image_channel(named, ch->channel_name)];
         /* a channel without a place is skipped: Core unpacks none of it */
-        ch->decode_to_ptr = r->base ? (uint8_t *)(r->base + (ptrdiff_t)c->y0 * r->row_stride +
-                                                  (ptrdiff_t)c->x0 * r->pixel_stride)
-                                    : NULL;
+        ch->decode_to_ptr = r->base
+                                ? (uint8_t *)(r->base + (ptrdiff_t)c->y0 * r->row_stride +
+                                              (ptrdiff_t)c->x0 * r->pixel_stride)
+                                : NULL;
         ch->user_pixel_stride = (int32_t)(r->pixel_stride * (ptrdiff_t)sizeof(float));
         ch->user_line_stride = (int32_t)(r->row_stride * (ptrdiff_t)sizeof(float));
         ch->user_data_type = EXR_PIXEL_FLOAT;
@@ -347,20 +346,16 @@ read_pixels(exr_context_t f, const chunk_at *chunks, int n, exr_compression_t co
            machine is shared) from holding up the rest */
 #pragma omp for schedule(dynamic, 1)
         for (int i = 0; i < n; i++) {
-            if (failed(&fail))
-                continue;
+            if (failed(&fail)) continue;
             const char *what = "out of memory";
             exr_last_message[0] = '\0';
-            exr_result_t rc =
-                zip && !decoder
-                    ? EXR_ERR_OUT_OF_MEMORY
-                    : decode_chunk(f, &chunks[i], &dec, &initialised, decoder, named,
-                                   routes, &what);
-            if (rc != EXR_ERR_SUCCESS)
-                note_failure(&fail, i, rc, what);
+            exr_result_t rc = zip && !decoder
+                                  ? EXR_ERR_OUT_OF_MEMORY
+                                  : decode_chunk(f, &chunks[i], &dec, &initialised,
+                                                 decoder, named, routes, &what);
+            if (rc != EXR_ERR_SUCCESS) note_failure(&fail, i, rc, what);
         }
-        if (initialised)
-            exr_decoding_destroy(f, &dec);
+        if (initialised) exr_decoding_destroy(f, &dec);
         mcp__zip_codec_free(decoder);
     }
     return fail.idx >= 0 ? report_failure(&fail, path) : 0;
@@ -370,10 +365,10 @@ read_pixels(exr_context_t f, const chunk_at *chunks, int n, exr_compression_t co
 static int
 route_to_image(mcp_image *img, mcp__exr_route **routes)
 {
-    if (!(*routes = mcp_calloc((size_t)img->channels, sizeof **routes)))
-        return -1;
+    if (!(*routes = mcp_calloc((size_t)img->channels, sizeof **routes))) return -1;
     for (int c = 0; c < img->channels; c++)
-        (*routes)[c] = (mcp__exr_route){img->data + c, img->pixel_stride, img->row_stride};
+        (*routes)[c] =
+            (mcp__exr_route){img->data + c, img->pixel_stride, img->row_stride};
     return 0;
 }
 
@@ -423,7 +418,8 @@ read_context(exr_context_t f, unsigned long long file_bytes, const char *name,
                   path, compression_name(comp));
         goto done;
     }
-    long long w = (long long)dw.max.x - dw.min.x + 1, h = (long long)dw.max.y - dw.min.y + 1;
+    long long w = (long long)dw.max.x - dw.min.x + 1,
+              h = (long long)dw.max.y - dw.min.y + 1;
     if (w < 1 || h < 1 || w > MCP_MAX_DIM || h > MCP_MAX_DIM || chans->num_channels < 1) {
         mcp_error("%s: bad data window %lldx%lld with %d channels", path, w, h,
                   chans->num_channels);
@@ -438,8 +434,7 @@ read_context(exr_context_t f, unsigned long long file_bytes, const char *name,
                          &n_chunks))
         goto done;
     names = mcp_calloc((size_t)chans->num_channels, sizeof *names);
-    if (!names)
-        goto done;
+    if (!names) goto done;
     for (int c = 0; c < chans->num_channels; c++) {
         const exr_attr_chlist_entry_t *e = &chans->entries[c];
         if (e->x_sampling != 1 || e->y_sampling != 1) {
@@ -450,8 +445,8 @@ read_context(exr_context_t f, unsigned long long file_bytes, const char *name,
         names[c] = e->name.str;
     }
     /* the header's attributes before the pixels, so that a router sees them */
-    if (mcp_image_new(router ? 1 : (int)w, router ? 1 : (int)h, chans->num_channels, names,
-                      &img) ||
+    if (mcp_image_new(router ? 1 : (int)w, router ? 1 : (int)h, chans->num_channels,
+                      names, &img) ||
         mcp_image_set_source(img, path) || read_attributes(f, &img->attrs))
         goto done;
     /* EXR lists channels alphabetically (B, G, R): a whole image comes back with its
@@ -468,8 +463,7 @@ read_context(exr_context_t f, unsigned long long file_bytes, const char *name,
             goto done;
     } else if (route_to_image(img, &routes))
         goto done;
-    if (read_pixels(f, chunks, n_chunks, comp, img, routes, path))
-        goto done;
+    if (read_pixels(f, chunks, n_chunks, comp, img, routes, path)) goto done;
     if (!router) {
         *out = img;
         img = NULL;
@@ -495,8 +489,7 @@ read_file(const char *path, mcp__exr_router router, void *ctx, mcp_image **out)
     if (stat(path, &st) || st.st_size < 0)
         return mcp_error("%s: cannot stat: %s", path, strerror(errno));
     exr_result_t r = exr_start_read(&f, path, &init);
-    if (r != EXR_ERR_SUCCESS)
-        return exr_fail(path, "cannot read as OpenEXR", r);
+    if (r != EXR_ERR_SUCCESS) return exr_fail(path, "cannot read as OpenEXR", r);
     return read_context(f, (unsigned long long)st.st_size, path, router, ctx, out);
 }
 
@@ -529,8 +522,7 @@ memory_read(exr_const_context_t ctxt, void *userdata, void *buffer, uint64_t sz,
     (void)ctxt;
     (void)error_cb;
     const memory_stream *m = userdata;
-    if (offset >= m->size)
-        return 0;
+    if (offset >= m->size) return 0;
     uint64_t n = m->size - offset < sz ? m->size - offset : sz;
     memcpy(buffer, m->data + offset, (size_t)n);
     return (int64_t)n;
@@ -547,8 +539,7 @@ static int
 read_memory(const void *data, size_t size, const char *name, mcp__exr_router router,
             void *ctx, mcp_image **out)
 {
-    if (!data || size > (size_t)INT64_MAX)
-        return mcp_error("%s: no data to read", name);
+    if (!data || size > (size_t)INT64_MAX) return mcp_error("%s: no data to read", name);
     /* Core keeps the pointer to the stream for the context's life: read_context closes
        the context before this frame returns */
     memory_stream m = {data, size};
@@ -560,8 +551,7 @@ read_memory(const void *data, size_t size, const char *name, mcp__exr_router rou
     init.size_fn = memory_size;
     exr_last_message[0] = '\0';
     exr_result_t r = exr_start_read(&f, name, &init);
-    if (r != EXR_ERR_SUCCESS)
-        return exr_fail(name, "cannot read as OpenEXR", r);
+    if (r != EXR_ERR_SUCCESS) return exr_fail(name, "cannot read as OpenEXR", r);
     return read_context(f, (unsigned long long)size, name, router, ctx, out);
 }
 
@@ -589,11 +579,11 @@ mcp__exr_read_memory_routed(const void *data, size_t size, const char *name,
 /* ---- writing ---- */
 
 static const exr_compression_t compression_of[] = {
-    [MCP_EXR_NONE] = EXR_COMPRESSION_NONE,   [MCP_EXR_RLE] = EXR_COMPRESSION_RLE,
-    [MCP_EXR_ZIPS] = EXR_COMPRESSION_ZIPS,   [MCP_EXR_ZIP] = EXR_COMPRESSION_ZIP,
-    [MCP_EXR_PIZ] = EXR_COMPRESSION_PIZ,     [MCP_EXR_PXR24] = EXR_COMPRESSION_PXR24,
-    [MCP_EXR_B44] = EXR_COMPRESSION_B44,     [MCP_EXR_B44A] = EXR_COMPRESSION_B44A,
-    [MCP_EXR_DWAA] = EXR_COMPRESSION_DWAA,   [MCP_EXR_DWAB] = EXR_COMPRESSION_DWAB,
+    [MCP_EXR_NONE] = EXR_COMPRESSION_NONE, [MCP_EXR_RLE] = EXR_COMPRESSION_RLE,
+    [MCP_EXR_ZIPS] = EXR_COMPRESSION_ZIPS, [MCP_EXR_ZIP] = EXR_COMPRESSION_ZIP,
+    [MCP_EXR_PIZ] = EXR_COMPRESSION_PIZ,   [MCP_EXR_PXR24] = EXR_COMPRESSION_PXR24,
+    [MCP_EXR_B44] = EXR_COMPRESSION_B44,   [MCP_EXR_B44A] = EXR_COMPRESSION_B44A,
+    [MCP_EXR_DWAA] = EXR_COMPRESSION_DWAA, [MCP_EXR_DWAB] = EXR_COMPRESSION_DWAB,
 };
 
 static int
@@ -602,16 +592,25 @@ write_attributes(exr_context_t f, const mcp_attrs *attrs)
     for (int i = 0; i < attrs->count; i++) {
         const mcp_attr *a = &attrs->items[i];
         /* structural attributes are written by Core itself */
-        static const char *reserved[] = {"channels", "compression", "dataWindow",
-                                         "displayWindow", "lineOrder", "pixelAspectRatio",
-                                         "screenWindowCenter", "screenWindowWidth",
-                                         "tiles", "type", "name", "chunkCount",
-                                         "dataWindowX", "dataWindowY", NULL};
+        static const char *reserved[] = {"channels",
+                                         "compression",
+                                         "dataWindow",
+                                         "displayWindow",
+                                         "lineOrder",
+                                         "pixelAspectRatio",
+                                         "screenWindowCenter",
+                                         "screenWindowWidth",
+                                         "tiles",
+                                         "type",
+                                         "name",
+                                         "chunkCount",
+                                         "dataWindowX",
+                                         "dataWindowY",
+                                         NULL};
         int skip = 0;
         for (const char **r = reserved; *r; r++)
             skip |= strcmp(*r, a->name) == 0;
-        if (skip)
-            continue;
+        if (skip) continue;
         exr_result_t r = EXR_ERR_SUCCESS;
         switch (a->type) {
         case MCP_ATTR_INT:
@@ -620,9 +619,15 @@ write_attributes(exr_context_t f, const mcp_attrs *attrs)
             else
                 r = exr_attr_set_double(f, 0, a->name, (double)a->i);
             break;
-        case MCP_ATTR_FLOAT: r = exr_attr_set_float(f, 0, a->name, (float)a->f); break;
-        case MCP_ATTR_DOUBLE: r = exr_attr_set_double(f, 0, a->name, a->f); break;
-        case MCP_ATTR_STRING: r = exr_attr_set_string(f, 0, a->name, a->s); break;
+        case MCP_ATTR_FLOAT:
+            r = exr_attr_set_float(f, 0, a->name, (float)a->f);
+            break;
+        case MCP_ATTR_DOUBLE:
+            r = exr_attr_set_double(f, 0, a->name, a->f);
+            break;
+        case MCP_ATTR_STRING:
+            r = exr_attr_set_string(f, 0, a->name, a->s);
+            break;
         }
         if (r != EXR_ERR_SUCCESS)
             return mcp_error("cannot write attribute '%s': %s", a->name,
@@ -641,8 +646,8 @@ write_attributes(exr_context_t f, const mcp_attrs *attrs)
  * library) take a chunk whose size equals its raw size as raw. */
 typedef struct chunk_coder {
     exr_result_t (*core_compress)(exr_encode_pipeline_t *); /* NULL for zip */
-    mcp__zip_codec *zip;                                     /* zip's encoder */
-    void *raw;                                               /* core_compress's copy */
+    mcp__zip_codec *zip;                                    /* zip's encoder */
+    void *raw;                                              /* core_compress's copy */
     size_t raw_cap;
     int store_raw; /* store without trying (see store_raw_after_probe) */
     const void *out;
@@ -662,14 +667,12 @@ compress_chunk(exr_encode_pipeline_t *enc)
     chunk_coder *coder = enc->encoding_user_data;
     coder->out = enc->packed_buffer;
     coder->out_bytes = enc->packed_bytes;
-    if (coder->store_raw)
-        return EXR_ERR_SUCCESS;
+    if (coder->store_raw) return EXR_ERR_SUCCESS;
     if (coder->zip) {
         const void *stream;
-        long long size = mcp__zip_encode(coder->zip, enc->packed_buffer, enc->packed_bytes,
-                                         &stream);
-        if (size < 0)
-            return EXR_ERR_OUT_OF_MEMORY;
+        long long size =
+            mcp__zip_encode(coder->zip, enc->packed_buffer, enc->packed_bytes, &stream);
+        if (size < 0) return EXR_ERR_OUT_OF_MEMORY;
         if ((uint64_t)size < enc->packed_bytes) {
             coder->out = stream;
             coder->out_bytes = (uint64_t)size;
@@ -678,8 +681,7 @@ compress_chunk(exr_encode_pipeline_t *enc)
     }
     if (coder->raw_cap < enc->packed_bytes) {
         void *grown = mcp_realloc(coder->raw, enc->packed_bytes);
-        if (!grown)
-            return EXR_ERR_OUT_OF_MEMORY;
+        if (!grown) return EXR_ERR_OUT_OF_MEMORY;
         coder->raw = grown;
         coder->raw_cap = enc->packed_bytes;
     }
@@ -711,8 +713,7 @@ encode_chunk(exr_context_t f, const chunk_at *c, exr_encode_pipeline_t *enc,
 {
     exr_result_t rc = *initialised ? exr_encoding_update(f, 0, &c->ci, enc)
                                    : exr_encoding_initialize(f, 0, &c->ci, enc);
-    if (rc != EXR_ERR_SUCCESS)
-        return rc;
+    if (rc != EXR_ERR_SUCCESS) return rc;
     for (int k = 0; k < enc->channel_count; k++) {
         exr_coding_channel_info_t *ch = &enc->channels[k];
         /* Core sorts channels by name: map them back by name, not position */
@@ -749,7 +750,8 @@ encode_chunk(exr_context_t f, const chunk_at *c, exr_encode_pipeline_t *enc,
     rc = exr_encoding_run(f, 0, enc);
     if (rc == EXR_ERR_SUCCESS && !coder->out) { /* no compression: Core's bytes */
         coder->out = enc->compressed_buffer ? enc->compressed_buffer : enc->packed_buffer;
-        coder->out_bytes = enc->compressed_buffer ? enc->compressed_bytes : enc->packed_bytes;
+        coder->out_bytes =
+            enc->compressed_buffer ? enc->compressed_bytes : enc->packed_bytes;
     }
     return rc;
 }
@@ -760,12 +762,12 @@ encode_chunk(exr_context_t f, const chunk_at *c, exr_encode_pipeline_t *enc,
  * takes for any compression, so pixels never change; this decides that for a whole
  * image from a sample of its chunks instead of compressing every one to find out.
  * It compresses every 16th chunk (at least one), spread over the image, and says raw
- * when they shrink by less than min_saving of their bytes (1/8 by default). The sample is fixed, so
- * the file does not depend on the thread count; when the data does compress, the cost
- * is those chunks compressed twice (about 6%). The probe compresses at libdeflate's
- * level 1 whatever the file's level: its sizes are within 0.1% of level 4's on renders
- * and maps, and on float noise it runs about three times as fast, which took the
- * probe from a third of writing an incompressible 1080p map to a tenth
+ * when they shrink by less than min_saving of their bytes (1/8 by default). The sample is
+ * fixed, so the file does not depend on the thread count; when the data does compress,
+ * the cost is those chunks compressed twice (about 6%). The probe compresses at
+ * libdeflate's level 1 whatever the file's level: its sizes are within 0.1% of level 4's
+ * on renders and maps, and on float noise it runs about three times as fast, which took
+ * the probe from a third of writing an incompressible 1080p map to a tenth
  * (docs/benchmarks.md, "EXR speed"). */
 #define PROBE_EVERY 16
 #define PROBE_ZIP_LEVEL 1
@@ -794,8 +796,7 @@ store_raw_after_probe(exr_context_t f, const mcp_image *img, const chunk_at *chu
             raw_bytes += enc.packed_bytes;
             zip_bytes += coder.out_bytes;
         }
-        if (initialised)
-            exr_encoding_destroy(f, &enc);
+        if (initialised) exr_encoding_destroy(f, &enc);
         chunk_coder_free(&coder);
     }
     /* on an error, compress as asked: the real pass reports it */
@@ -810,8 +811,7 @@ store_raw_after_probe(exr_context_t f, const mcp_image *img, const chunk_at *chu
 static int
 write_pixels(exr_context_t f, const mcp_image *img, exr_storage_t storage,
              exr_compression_t comp, int zip_level, double min_saving,
-             const exr_attr_box2i_t *dw,
-             const char *path)
+             const exr_attr_box2i_t *dw, const char *path)
 {
     chunk_at *chunks;
     int n;
@@ -820,8 +820,7 @@ write_pixels(exr_context_t f, const mcp_image *img, exr_storage_t storage,
         return -1;
     /* below PROBE_EVERY chunks the probe would cost more than it could save */
     int zip = comp == EXR_COMPRESSION_ZIP || comp == EXR_COMPRESSION_ZIPS;
-    if (!zip)
-        zip_level = 0;
+    if (!zip) zip_level = 0;
     int store_raw = zip && min_saving > 0 && n >= PROBE_EVERY &&
                     store_raw_after_probe(f, img, chunks, n, min_saving);
     chunk_failure fail = {.idx = -1};
@@ -836,7 +835,8 @@ write_pixels(exr_context_t f, const mcp_image *img, exr_storage_t storage,
             const char *what = "cannot encode";
             exr_last_message[0] = '\0';
             if (!failed(&fail))
-                rc = encode_chunk(f, &chunks[i], &enc, &initialised, &coder, zip_level, img);
+                rc = encode_chunk(f, &chunks[i], &enc, &initialised, &coder, zip_level,
+                                  img);
 #pragma omp ordered
             {
                 /* a chunk after a failed one is not written: Core would refuse it */
@@ -850,12 +850,10 @@ write_pixels(exr_context_t f, const mcp_image *img, exr_storage_t storage,
                              : exr_write_tile_chunk(f, 0, ci->start_x, ci->start_y, 0, 0,
                                                     bytes, size);
                 }
-                if (rc != EXR_ERR_SUCCESS)
-                    note_failure(&fail, i, rc, what);
+                if (rc != EXR_ERR_SUCCESS) note_failure(&fail, i, rc, what);
             }
         }
-        if (initialised)
-            exr_encoding_destroy(f, &enc);
+        if (initialised) exr_encoding_destroy(f, &enc);
         chunk_coder_free(&coder);
     }
     free(chunks);
@@ -888,8 +886,7 @@ mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *
     exr_last_message[0] = '\0';
     /* imageio.c already writes to a temporary name and renames */
     exr_result_t r = exr_start_write(&f, path, EXR_WRITE_FILE_DIRECTLY, &init);
-    if (r != EXR_ERR_SUCCESS)
-        return exr_fail(path, "cannot create", r);
+    if (r != EXR_ERR_SUCCESS) return exr_fail(path, "cannot create", r);
     int part, rc = -1;
     exr_attr_box2i_t dw;
     dw.min.x = opt->exr_data_x;
@@ -920,7 +917,8 @@ mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *
                 goto done;
             }
         r = exr_add_channel(f, part, img->names[c],
-                            opt->exr_pixel == MCP_EXR_HALF ? EXR_PIXEL_HALF : EXR_PIXEL_FLOAT,
+                            opt->exr_pixel == MCP_EXR_HALF ? EXR_PIXEL_HALF
+                                                           : EXR_PIXEL_FLOAT,
                             EXR_PERCEPTUALLY_LINEAR, 1, 1);
         if (r != EXR_ERR_SUCCESS) {
             exr_fail(path, "bad channel name", r);
@@ -937,11 +935,11 @@ mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *
     }
     rc = write_pixels(f, img, opt->exr_tiled ? EXR_STORAGE_TILED : EXR_STORAGE_SCANLINE,
                       compression_of[opt->compression], zip_level,
-                      opt->exr_min_saving ? opt->exr_min_saving : MCP_EXR_MIN_SAVING_DEFAULT,
+                      opt->exr_min_saving ? opt->exr_min_saving
+                                          : MCP_EXR_MIN_SAVING_DEFAULT,
                       &dw, path);
 done:
     r = exr_finish(&f);
-    if (!rc && r != EXR_ERR_SUCCESS)
-        rc = exr_fail(path, "cannot finish writing", r);
+    if (!rc && r != EXR_ERR_SUCCESS) rc = exr_fail(path, "cannot finish writing", r);
     return rc;
 }

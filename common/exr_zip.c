@@ -30,7 +30,7 @@
 struct mcp__zip_codec {
     struct libdeflate_compressor *compressor;     /* NULL for a decoder */
     struct libdeflate_decompressor *decompressor; /* NULL for an encoder */
-    uint8_t *scratch; /* the split and delta-coded bytes */
+    uint8_t *scratch;                             /* the split and delta-coded bytes */
     size_t scratch_cap;
     uint8_t *out; /* an encoder's zlib stream */
     size_t out_cap;
@@ -40,8 +40,7 @@ mcp__zip_codec *
 mcp__zip_encoder_new(int level)
 {
     mcp__zip_codec *c = mcp_calloc(1, sizeof *c);
-    if (!c)
-        return NULL;
+    if (!c) return NULL;
     if (!(c->compressor = libdeflate_alloc_compressor(level))) {
         free(c);
         return NULL;
@@ -53,8 +52,7 @@ mcp__zip_codec *
 mcp__zip_decoder_new(void)
 {
     mcp__zip_codec *c = mcp_calloc(1, sizeof *c);
-    if (!c)
-        return NULL;
+    if (!c) return NULL;
     if (!(c->decompressor = libdeflate_alloc_decompressor())) {
         free(c);
         return NULL;
@@ -65,8 +63,7 @@ mcp__zip_decoder_new(void)
 void
 mcp__zip_codec_free(mcp__zip_codec *c)
 {
-    if (!c)
-        return;
+    if (!c) return;
     libdeflate_free_compressor(c->compressor);
     libdeflate_free_decompressor(c->decompressor);
     free(c->scratch);
@@ -78,11 +75,9 @@ mcp__zip_codec_free(mcp__zip_codec *c)
 static int
 reserve(uint8_t **buf, size_t *cap, size_t n)
 {
-    if (*cap >= n)
-        return 0;
+    if (*cap >= n) return 0;
     uint8_t *grown = mcp_realloc(*buf, n);
-    if (!grown)
-        return -1;
+    if (!grown) return -1;
     *buf = grown;
     *cap = n;
     return 0;
@@ -109,8 +104,7 @@ split(uint8_t *t, const uint8_t *src, size_t n)
         t[i] = src[2 * i];
         t[half + i] = src[2 * i + 1];
     }
-    if (n & 1)
-        t[half - 1] = src[n - 1];
+    if (n & 1) t[half - 1] = src[n - 1];
 }
 
 /* The delta step in place, t[i] = t[i] - t[i-1] + 128 for i > 0: from the end, so that
@@ -136,8 +130,7 @@ long long
 mcp__zip_encode(mcp__zip_codec *c, const void *packed, size_t n, const void **out)
 {
     const uint8_t *src = packed;
-    if (n == 0)
-        return 0;
+    if (n == 0) return 0;
     size_t bound = libdeflate_zlib_compress_bound(c->compressor, n);
     if (reserve(&c->scratch, &c->scratch_cap, n) || reserve(&c->out, &c->out_cap, bound))
         return -1;
@@ -197,18 +190,15 @@ undo_split(uint8_t *dst, const uint8_t *t, size_t n)
         dst[2 * i] = t[i];
         dst[2 * i + 1] = t[half + i];
     }
-    if (n & 1)
-        dst[n - 1] = t[half - 1];
+    if (n & 1) dst[n - 1] = t[half - 1];
 }
 
 int
 mcp__zip_decode(mcp__zip_codec *c, const void *in, size_t in_bytes, void *out,
                 size_t out_bytes)
 {
-    if (out_bytes == 0)
-        return in_bytes == 0 ? 0 : -1;
-    if (reserve(&c->scratch, &c->scratch_cap, out_bytes))
-        return -2;
+    if (out_bytes == 0) return in_bytes == 0 ? 0 : -1;
+    if (reserve(&c->scratch, &c->scratch_cap, out_bytes)) return -2;
     uint8_t *t = c->scratch;
     /* no actual-size pointer: libdeflate then fails unless the stream inflates to
        exactly out_bytes, which is what the chunk table promised */

@@ -68,8 +68,8 @@ run_strips(const mcp__cv_plane *src, const mcp__cv_plane *dst, const filter_spec
     int h = src->height, n_strips = (h + STRIP_ROWS - 1) / STRIP_ROWS, failed = 0;
     size_t floats = (size_t)src->width * (size_t)h * (size_t)src->channels;
     char first_err[ERR_CAP] = "";
-#pragma omp parallel for schedule(dynamic) \
-    if (n_strips > 1 && floats >= PARALLEL_MIN_FLOATS)
+#pragma omp parallel for schedule(dynamic) if (n_strips > 1 &&                           \
+                                               floats >= PARALLEL_MIN_FLOATS)
     for (int s = 0; s < n_strips; s++) {
         char err[ERR_CAP];
         int y0 = s * STRIP_ROWS, y1 = min_int(h, y0 + STRIP_ROWS);
@@ -79,12 +79,10 @@ run_strips(const mcp__cv_plane *src, const mcp__cv_plane *dst, const filter_spec
                                                     f->ky, f->ky_len, err, sizeof err);
         if (rc) {
 #pragma omp critical(mcp_filter_error)
-            if (!failed++)
-                memcpy(first_err, err, sizeof err);
+            if (!failed++) memcpy(first_err, err, sizeof err);
         }
     }
-    if (failed)
-        return mcp_error("%s: %s", source, first_err);
+    if (failed) return mcp_error("%s: %s", source, first_err);
     return 0;
 }
 
@@ -161,15 +159,13 @@ filter_image(const mcp_image *img, const filter_spec *f, const char *what,
     int w = img->width, h = img->height, c = img->channels, rc = -1;
     mcp_image *res = NULL;
     float *in_buf = NULL, *out_buf = NULL;
-    if (result_new(img, what, &res))
-        return -1;
+    if (result_new(img, what, &res)) return -1;
     int group = min_int(c, MCP__CV_MAX_CHANNELS);
     /* A view with pixels packed within rows goes to OpenCV as it is. */
     int wrap_input = c <= MCP__CV_MAX_CHANNELS && img->pixel_stride == c &&
                      img->row_stride >= (ptrdiff_t)w * c;
     size_t n_scratch = (size_t)w * (size_t)h * (size_t)group;
-    if (!wrap_input && !(in_buf = mcp_malloc(n_scratch * sizeof(float))))
-        goto done;
+    if (!wrap_input && !(in_buf = mcp_malloc(n_scratch * sizeof(float)))) goto done;
     if (c > MCP__CV_MAX_CHANNELS && !(out_buf = mcp_malloc(n_scratch * sizeof(float))))
         goto done;
     for (int c0 = 0; c0 < c; c0 += group) {
@@ -182,10 +178,8 @@ filter_image(const mcp_image *img, const filter_spec *f, const char *what,
             src = packed_plane(in_buf, w, h, n);
         }
         dst = packed_plane(out_buf ? out_buf : res->data, w, h, n);
-        if (run_strips(&src, &dst, f, img->source))
-            goto done;
-        if (out_buf)
-            scatter(out_buf, c0, n, res);
+        if (run_strips(&src, &dst, f, img->source)) goto done;
+        if (out_buf) scatter(out_buf, c0, n, res);
     }
     *out = res;
     res = NULL;
@@ -221,8 +215,7 @@ mcp_filter_separable(const mcp_image *img, const float *kx, int kx_len, const fl
 {
     const char *op = "separable filter";
     *out = NULL;
-    if (!kx || !ky)
-        return mcp_error("%s: %s: no kernel given", img->source, op);
+    if (!kx || !ky) return mcp_error("%s: %s: no kernel given", img->source, op);
     if (check_kernel_len(img, op, "kx length", kx_len) ||
         check_kernel_len(img, op, "ky length", ky_len))
         return -1;
@@ -235,8 +228,7 @@ mcp_filter_2d(const mcp_image *img, const float *kernel, int kw, int kh, mcp_ima
 {
     const char *op = "2d filter";
     *out = NULL;
-    if (!kernel)
-        return mcp_error("%s: %s: no kernel given", img->source, op);
+    if (!kernel) return mcp_error("%s: %s: no kernel given", img->source, op);
     if (check_kernel_len(img, op, "kernel width", kw) ||
         check_kernel_len(img, op, "kernel height", kh))
         return -1;
@@ -281,8 +273,7 @@ mcp_gaussian_blur(const mcp_image *img, int window, double sigma_px, mcp_image *
         return mcp_error("%s: gaussian blur: sigma must be finite and >= 0 (got %g)",
                          img->source, sigma_px);
     float *k = mcp_malloc((size_t)window * sizeof *k);
-    if (!k)
-        return -1;
+    if (!k) return -1;
     int rc = mcp_gaussian_kernel(sigma_px, window / 2, k);
     if (rc == 0) {
         filter_spec f = {.kx = k, .kx_len = window, .ky = k, .ky_len = window};
@@ -321,8 +312,8 @@ mcp_tile_power_spectra(const mcp_image *img, int channel, int tile_size, mcp_ima
     if (!(scratch = mcp_malloc((size_t)n_threads * 2 * tile_floats * sizeof *scratch)))
         goto done;
     size_t out_w = (size_t)res->width;
-#pragma omp parallel for schedule(static) num_threads(n_threads) \
-    if ((size_t)n_tiles * tile_floats >= PARALLEL_MIN_FLOATS)
+#pragma omp parallel for schedule(static)                                                \
+    num_threads(n_threads) if ((size_t)n_tiles * tile_floats >= PARALLEL_MIN_FLOATS)
     for (long long i = 0; i < n_tiles; i++) {
         int thread = 0;
 #ifdef _OPENMP
@@ -337,8 +328,7 @@ mcp_tile_power_spectra(const mcp_image *img, int channel, int tile_size, mcp_ima
         char err[ERR_CAP];
         if (mcp__cv_dft_power(tile, t, power, err, sizeof err)) {
 #pragma omp critical(mcp_filter_error)
-            if (!failed++)
-                memcpy(first_err, err, sizeof err);
+            if (!failed++) memcpy(first_err, err, sizeof err);
             continue;
         }
         for (int v = 0; v < t; v++) {
@@ -353,13 +343,11 @@ mcp_tile_power_spectra(const mcp_image *img, int channel, int tile_size, mcp_ima
     }
     size_t n = strlen(img->source) + 32;
     char *source = mcp_malloc(n);
-    if (!source)
-        goto done;
+    if (!source) goto done;
     snprintf(source, n, "%s (power spectra)", img->source);
     rc = mcp_image_set_source(res, source);
     free(source);
-    if (rc)
-        goto done;
+    if (rc) goto done;
     *out = res;
     res = NULL;
 done:

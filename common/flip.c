@@ -96,7 +96,8 @@ lab_f(float t, int fast)
 static inline MCP_ALWAYS_INLINE void
 xyz_to_lab_hunt(const float *xyz, float *lab, int fast)
 {
-    float fx = lab_f(xyz[0] * INV_WHITE[0], fast), fy = lab_f(xyz[1] * INV_WHITE[1], fast),
+    float fx = lab_f(xyz[0] * INV_WHITE[0], fast),
+          fy = lab_f(xyz[1] * INV_WHITE[1], fast),
           fz = lab_f(xyz[2] * INV_WHITE[2], fast);
     float L = 116.0f * fy - 16.0f, a = 500.0f * (fx - fy), b = 200.0f * (fy - fz);
     lab[0] = L;
@@ -740,12 +741,12 @@ typedef struct {
     void (*feature_row)(float *const *, int, float *);
 } filter_set;
 
-static const filter_set filters_sse = {filter_x1, filter_x2,  filter_x3,  filter_y1,
+static const filter_set filters_sse = {filter_x1, filter_x2, filter_x3,  filter_y1,
                                        filter_y2, color_row, feature_row};
 #ifdef FLIP_AVX2
-static const filter_set filters_avx2 = {
-    filter_x1_avx2, filter_x2_avx2,  filter_x3_avx2,  filter_y1_avx2,
-    filter_y2_avx2, color_row_avx2, feature_row_avx2};
+static const filter_set filters_avx2 = {filter_x1_avx2,  filter_x2_avx2, filter_x3_avx2,
+                                        filter_y1_avx2,  filter_y2_avx2, color_row_avx2,
+                                        feature_row_avx2};
 #endif
 
 static const filter_set *

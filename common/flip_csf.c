@@ -188,8 +188,7 @@ csf_run(const mcp_image *rgb, double ppd, int adjoint, mcp_image **out)
                 o->data[3 * i + q] = (float)(back[3 * q] * v[0] + back[3 * q + 1] * v[1] +
                                              back[3 * q + 2] * v[2]);
         }
-    if (rgb->source && mcp_image_set_source(o, rgb->source))
-        goto done;
+    if (rgb->source && mcp_image_set_source(o, rgb->source)) goto done;
     *out = o;
     o = NULL;
     rc = 0;

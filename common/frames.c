@@ -31,7 +31,8 @@ parse_frame(const char *text, const char **p, int *out)
     long v = 0;
     for (; isdigit((unsigned char)**p); (*p)++)
         if ((v = v * 10 + (**p - '0')) > MCP_FRAME_MAX)
-            return mcp_error("frames '%s': frame numbers go up to %d", text, MCP_FRAME_MAX);
+            return mcp_error("frames '%s': frame numbers go up to %d", text,
+                             MCP_FRAME_MAX);
     *out = (int)v;
     return 0;
 }
@@ -46,21 +47,18 @@ mcp_frames_parse(const char *text, int **frames, int *count)
         while (isspace((unsigned char)*p))
             p++;
         int first, last, step = 1;
-        if (parse_frame(text, &p, &first))
-            goto fail;
+        if (parse_frame(text, &p, &first)) goto fail;
         last = first;
         if (*p == '-') {
             p++;
-            if (parse_frame(text, &p, &last))
-                goto fail;
+            if (parse_frame(text, &p, &last)) goto fail;
             if (last < first) {
                 mcp_error("frames '%s': range %d-%d runs backwards", text, first, last);
                 goto fail;
             }
             if (*p == ':' || *p == 'x') {
                 p++;
-                if (parse_frame(text, &p, &step))
-                    goto fail;
+                if (parse_frame(text, &p, &step)) goto fail;
                 if (step < 1) {
                     mcp_error("frames '%s': a step must be >= 1", text);
                     goto fail;
@@ -70,21 +68,20 @@ mcp_frames_parse(const char *text, int **frames, int *count)
         for (long f = first; f <= last; f += step) {
             if (n == cap) {
                 if (n >= MCP_FRAMES_MAX_COUNT) {
-                    mcp_error("frames '%s': more than %d frames", text, MCP_FRAMES_MAX_COUNT);
+                    mcp_error("frames '%s': more than %d frames", text,
+                              MCP_FRAMES_MAX_COUNT);
                     goto fail;
                 }
                 cap = cap ? 2 * cap : 64;
                 int *grown = mcp_realloc(set, (size_t)cap * sizeof *grown);
-                if (!grown)
-                    goto fail;
+                if (!grown) goto fail;
                 set = grown;
             }
             set[n++] = (int)f;
         }
         while (isspace((unsigned char)*p))
             p++;
-        if (!*p)
-            break;
+        if (!*p) break;
         if (*p != ',') {
             mcp_error("frames '%s': unexpected '%c' (a set is like 1-240, 1-240:2 or "
                       "1,5,9-12)",
@@ -96,8 +93,7 @@ mcp_frames_parse(const char *text, int **frames, int *count)
     qsort(set, (size_t)n, sizeof *set, cmp_int);
     int kept = 0;
     for (int i = 0; i < n; i++)
-        if (!kept || set[kept - 1] != set[i])
-            set[kept++] = set[i];
+        if (!kept || set[kept - 1] != set[i]) set[kept++] = set[i];
     *frames = set, *count = kept;
     return 0;
 fail:
@@ -109,8 +105,7 @@ int
 mcp_frames_format(const int *frames, int count, char *buf, size_t cap)
 {
     size_t len = 0;
-    if (cap)
-        buf[0] = '\0';
+    if (cap) buf[0] = '\0';
     for (int i = 0; i < count;) {
         /* the longest run with one step from here: a range when it holds 3 or more
          * frames (or 2 adjacent ones), single numbers otherwise */
@@ -165,7 +160,8 @@ scan_tokens(const char *path, int series, tokens *t)
     for (const char *p = path; *p; p++) {
         if (*p == '#') {
             if (t->hash)
-                return mcp_error("path '%s': two '#' frame tokens (a frame has one)", path);
+                return mcp_error("path '%s': two '#' frame tokens (a frame has one)",
+                                 path);
             t->hash = p;
             while (p[1] == '#')
                 p++;
@@ -175,8 +171,7 @@ scan_tokens(const char *path, int series, tokens *t)
                                  path, TOKEN_MAX_WIDTH);
             continue;
         }
-        if (*p != '%')
-            continue;
+        if (*p != '%') continue;
         if (p[1] == '%') {
             p++;
             continue;
@@ -190,9 +185,10 @@ scan_tokens(const char *path, int series, tokens *t)
                 return mcp_error("path '%s': field widths over %d are refused", path,
                                  TOKEN_MAX_WIDTH);
         if (!*p || !strchr("diu", *p))
-            return mcp_error("path '%s': only integer conversions such as %%04d are taken "
-                             "(write %%%% for a literal %%)",
-                             path);
+            return mcp_error(
+                "path '%s': only integer conversions such as %%04d are taken "
+                "(write %%%% for a literal %%)",
+                path);
         if (t->n_conv == MAX_CONVERSIONS)
             return mcp_error("path '%s': too many %% conversions", path);
         t->conv[t->n_conv] = start;
@@ -207,12 +203,13 @@ scan_tokens(const char *path, int series, tokens *t)
         allowed++;
     }
     if (t->n_conv > allowed)
-        return series ? mcp_error("series pattern '%s': %d %% conversions; a frame job's "
-                                  "series has at most two, the frame's then the spp's (or "
-                                  "a '#' frame token and the spp's)",
-                                  path, t->n_conv)
-                      : mcp_error("path '%s': %d frame tokens; give one (####, or %%04d)",
-                                  path, t->n_conv + (t->hash != NULL));
+        return series
+                   ? mcp_error("series pattern '%s': %d %% conversions; a frame job's "
+                               "series has at most two, the frame's then the spp's (or "
+                               "a '#' frame token and the spp's)",
+                               path, t->n_conv)
+                   : mcp_error("path '%s': %d frame tokens; give one (####, or %%04d)",
+                               path, t->n_conv + (t->hash != NULL));
     return 0;
 }
 
@@ -220,8 +217,7 @@ int
 mcp_frame_token_check(const char *path, int series)
 {
     tokens t;
-    if (scan_tokens(path, series, &t))
-        return -1;
+    if (scan_tokens(path, series, &t)) return -1;
     return t.frame != NULL;
 }
 
@@ -229,10 +225,8 @@ int
 mcp_frame_expand(const char *path, int series, int frame, char *buf, size_t cap)
 {
     tokens t;
-    if (scan_tokens(path, series, &t))
-        return -1;
-    if (frame < 0)
-        return mcp_error("path '%s': frame %d (frames are >= 0)", path, frame);
+    if (scan_tokens(path, series, &t)) return -1;
+    if (frame < 0) return mcp_error("path '%s': frame %d (frames are >= 0)", path, frame);
     size_t len = 0;
     for (const char *p = path; *p;) {
         char piece[64];
@@ -286,8 +280,7 @@ mcp_frame_complete(const char *output_dir, int frame)
 {
     char dir[4096], path[4200];
     struct stat st;
-    if (mcp_frame_dir(output_dir, frame, dir, sizeof dir))
-        return 0;
+    if (mcp_frame_dir(output_dir, frame, dir, sizeof dir)) return 0;
     snprintf(path, sizeof path, "%s/report.json", dir);
     return stat(path, &st) == 0 && S_ISREG(st.st_mode);
 }

@@ -14,8 +14,7 @@ static int
 names_new(int channels, const char *const *names, char ***out)
 {
     char **n = mcp_calloc((size_t)channels, sizeof *n);
-    if (!n)
-        return -1;
+    if (!n) return -1;
     for (int c = 0; c < channels; c++) {
         char fallback[32];
         snprintf(fallback, sizeof fallback, "C%d", c);
@@ -37,8 +36,7 @@ header_new(int width, int height, int channels, const char *const *names,
            const char *source)
 {
     mcp_image *img = mcp_calloc(1, sizeof *img);
-    if (!img)
-        return NULL;
+    if (!img) return NULL;
     img->width = width;
     img->height = height;
     img->channels = channels;
@@ -101,8 +99,7 @@ mcp_image_new(int width, int height, int channels, const char *const *names,
     if (mcp_image_check_size(width, height, channels)) return -1;
     size_t n = (size_t)width * (size_t)height * (size_t)channels * sizeof(float);
     mcp_image *img = header_new(width, height, channels, names, NULL);
-    if (!img)
-        return -1;
+    if (!img) return -1;
     img->data = mcp_calloc(n / sizeof(float), sizeof(float));
     if (!img->data) {
         mcp_image_free(img);
@@ -138,16 +135,14 @@ mcp_image_wrap(float *data, int width, int height, int channels, ptrdiff_t pixel
 void
 mcp_image_free(mcp_image *img)
 {
-    if (!img)
-        return;
+    if (!img) return;
     if (img->names)
         for (int c = 0; c < img->channels; c++)
             free(img->names[c]);
     free(img->names);
     mcp_attrs_clear(&img->attrs);
     free(img->source);
-    if (img->owns_data)
-        free(img->data);
+    if (img->owns_data) free(img->data);
     free(img);
 }
 
@@ -178,8 +173,7 @@ view_new(const mcp_image *img, float *first, int width, int height, int channels
          const char *const *names, mcp_image **out)
 {
     mcp_image *v = header_new(width, height, channels, names, img->source);
-    if (!v)
-        return -1;
+    if (!v) return -1;
     v->pixel_stride = img->pixel_stride;
     v->row_stride = img->row_stride;
     v->data = first;
@@ -214,8 +208,7 @@ int
 mcp_image_channel(const mcp_image *img, const char *name)
 {
     for (int c = 0; c < img->channels; c++)
-        if (strcmp(img->names[c], name) == 0)
-            return c;
+        if (strcmp(img->names[c], name) == 0) return c;
     return -1;
 }
 
@@ -224,8 +217,7 @@ mcp_image_channels(const mcp_image *img, const char *const *names, int count, in
 {
     for (int i = 0; i < count; i++) {
         index[i] = mcp_image_channel(img, names[i]);
-        if (index[i] < 0)
-            return mcp_error("%s: no channel '%s'", img->source, names[i]);
+        if (index[i] < 0) return mcp_error("%s: no channel '%s'", img->source, names[i]);
     }
     return 0;
 }
@@ -238,11 +230,9 @@ mcp_image_find_triple(const mcp_image *img, const char *const (*triples)[3], int
         int found = 1;
         for (int c = 0; c < 3 && found; c++)
             found = (index[c] = mcp_image_channel(img, triples[t][c])) >= 0;
-        if (found)
-            return 0;
+        if (found) return 0;
     }
-    if (img->channels != 3)
-        return -1;
+    if (img->channels != 3) return -1;
     for (int c = 0; c < 3; c++)
         index[c] = c;
     return 0;
@@ -392,11 +382,9 @@ mcp_image_copy_channels(const mcp_image *img, const int *index, int count,
                         mcp_image **out)
 {
     *out = NULL;
-    if (count < 1)
-        return mcp_error("%s: no channels to copy", img->source);
+    if (count < 1) return mcp_error("%s: no channels to copy", img->source);
     const char **names = mcp_calloc((size_t)count, sizeof *names);
-    if (!names)
-        return -1;
+    if (!names) return -1;
     for (int i = 0; i < count; i++) {
         if (index[i] < 0 || index[i] >= img->channels) {
             free(names);
@@ -408,10 +396,9 @@ mcp_image_copy_channels(const mcp_image *img, const int *index, int count,
     mcp_image *sub;
     int rc = mcp_image_new(img->width, img->height, count, names, &sub);
     free(names);
-    if (rc)
-        return -1;
-#pragma omp parallel for schedule(static) \
-    if ((long long)img->width * img->height * count > 65536)
+    if (rc) return -1;
+#pragma omp parallel for schedule(                                                       \
+    static) if ((long long)img->width * img->height * count > 65536)
     for (int y = 0; y < img->height; y++)
         for (int x = 0; x < img->width; x++) {
             const float *s = mcp_image_px(img, x, y);
@@ -435,8 +422,7 @@ mcp_image_set_channel_name(mcp_image *img, int c, const char *name)
         return mcp_error("%s: channel index %d outside its %d channels", img->source, c,
                          img->channels);
     char *copy = mcp_strdup(name);
-    if (!copy)
-        return -1;
+    if (!copy) return -1;
     free(img->names[c]);
     img->names[c] = copy;
     return 0;
@@ -446,8 +432,7 @@ int
 mcp_image_set_source(mcp_image *img, const char *source)
 {
     char *copy = mcp_strdup(source ? source : "(image)");
-    if (!copy)
-        return -1;
+    if (!copy) return -1;
     free(img->source);
     img->source = copy;
     return 0;
@@ -463,8 +448,7 @@ mcp_image_is_packed(const mcp_image *img)
 int
 mcp_image_same_size(const mcp_image *a, const mcp_image *b)
 {
-    if (a->width == b->width && a->height == b->height)
-        return 1;
+    if (a->width == b->width && a->height == b->height) return 1;
     mcp_error("%s: size %dx%d does not match %s (%dx%d)", a->source, a->width, a->height,
               b->source, b->width, b->height);
     return 0;
@@ -476,8 +460,7 @@ const mcp_attr *
 mcp_attrs_find(const mcp_attrs *attrs, const char *name)
 {
     for (int i = 0; i < attrs->count; i++)
-        if (strcmp(attrs->items[i].name, name) == 0)
-            return &attrs->items[i];
+        if (strcmp(attrs->items[i].name, name) == 0) return &attrs->items[i];
     return NULL;
 }
 
@@ -508,8 +491,7 @@ attr_slot(mcp_attrs *attrs, const char *name)
     attrs->items = items;
     a = &items[attrs->count];
     memset(a, 0, sizeof *a);
-    if (!(a->name = mcp_strdup(name)))
-        return NULL;
+    if (!(a->name = mcp_strdup(name))) return NULL;
     attrs->count++;
     return a;
 }
@@ -518,8 +500,7 @@ int
 mcp_attrs_set_int(mcp_attrs *attrs, const char *name, int64_t value)
 {
     mcp_attr *a = attr_slot(attrs, name);
-    if (!a)
-        return -1;
+    if (!a) return -1;
     a->type = MCP_ATTR_INT;
     a->i = value;
     a->f = (double)value;
@@ -530,8 +511,7 @@ int
 mcp_attrs_set_float(mcp_attrs *attrs, const char *name, float value)
 {
     mcp_attr *a = attr_slot(attrs, name);
-    if (!a)
-        return -1;
+    if (!a) return -1;
     a->type = MCP_ATTR_FLOAT;
     a->f = value;
     return 0;
@@ -541,8 +521,7 @@ int
 mcp_attrs_set_double(mcp_attrs *attrs, const char *name, double value)
 {
     mcp_attr *a = attr_slot(attrs, name);
-    if (!a)
-        return -1;
+    if (!a) return -1;
     a->type = MCP_ATTR_DOUBLE;
     a->f = value;
     return 0;
@@ -552,8 +531,7 @@ int
 mcp_attrs_set_string(mcp_attrs *attrs, const char *name, const char *value)
 {
     mcp_attr *a = attr_slot(attrs, name);
-    if (!a)
-        return -1;
+    if (!a) return -1;
     a->type = MCP_ATTR_STRING;
     return (a->s = mcp_strdup(value)) ? 0 : -1;
 }
@@ -565,13 +543,20 @@ mcp_attrs_copy(const mcp_attrs *from, mcp_attrs *to)
         const mcp_attr *a = &from->items[i];
         int rc = 0;
         switch (a->type) {
-        case MCP_ATTR_INT: rc = mcp_attrs_set_int(to, a->name, a->i); break;
-        case MCP_ATTR_FLOAT: rc = mcp_attrs_set_float(to, a->name, (float)a->f); break;
-        case MCP_ATTR_DOUBLE: rc = mcp_attrs_set_double(to, a->name, a->f); break;
-        case MCP_ATTR_STRING: rc = mcp_attrs_set_string(to, a->name, a->s); break;
+        case MCP_ATTR_INT:
+            rc = mcp_attrs_set_int(to, a->name, a->i);
+            break;
+        case MCP_ATTR_FLOAT:
+            rc = mcp_attrs_set_float(to, a->name, (float)a->f);
+            break;
+        case MCP_ATTR_DOUBLE:
+            rc = mcp_attrs_set_double(to, a->name, a->f);
+            break;
+        case MCP_ATTR_STRING:
+            rc = mcp_attrs_set_string(to, a->name, a->s);
+            break;
         }
-        if (rc)
-            return -1;
+        if (rc) return -1;
     }
     return 0;
 }

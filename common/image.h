@@ -45,10 +45,10 @@ typedef struct mcp_image {
     ptrdiff_t pixel_stride; /* floats from one pixel to the next in a row */
     ptrdiff_t row_stride;   /* floats from one row to the next */
     float *data;
-    char **names;     /* channels names, owned by this image (views copy them) */
-    mcp_attrs attrs;  /* owned by this image */
-    char *source;     /* the file it came from, or a label, for messages; owned */
-    int owns_data;    /* 0 for views */
+    char **names;    /* channels names, owned by this image (views copy them) */
+    mcp_attrs attrs; /* owned by this image */
+    char *source;    /* the file it came from, or a label, for messages; owned */
+    int owns_data;   /* 0 for views */
 } mcp_image;
 
 /* The ceiling on one image, so that a corrupt or hostile header fails with a message
@@ -60,8 +60,8 @@ typedef struct mcp_image {
 
 /* A new zero-filled packed image (within the ceiling above). names may be NULL
  * (channels are then called "C0", "C1", ...). */
-MCP_API int mcp_image_new(int width, int height, int channels,
-                          const char *const *names, mcp_image **out);
+MCP_API int mcp_image_new(int width, int height, int channels, const char *const *names,
+                          mcp_image **out);
 
 MCP_API void mcp_image_free(mcp_image *img);
 
@@ -89,8 +89,8 @@ MCP_API int mcp_image_channel(const mcp_image *img, const char *name);
 
 /* Looks up several channels at once; on a missing one sets
  * "<source>: no channel '<name>'" and returns -1. */
-MCP_API int mcp_image_channels(const mcp_image *img, const char *const *names,
-                               int count, int *index);
+MCP_API int mcp_image_channels(const mcp_image *img, const char *const *names, int count,
+                               int *index);
 
 /* The three channels that make up a colour (or a vector): the first of the n name
  * triples that img has all of (e.g. {R,G,B}, {X,Y,Z}), else 0, 1, 2 when img has

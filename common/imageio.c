@@ -21,7 +21,7 @@ static const struct {
     const char *ext;
     mcp_format format;
 } extensions[] = {
-    {"exr", MCP_FORMAT_EXR},  {"pfm", MCP_FORMAT_PFM},  {"png", MCP_FORMAT_PNG},
+    {"exr", MCP_FORMAT_EXR},  {"pfm", MCP_FORMAT_PFM},   {"png", MCP_FORMAT_PNG},
     {"jpg", MCP_FORMAT_JPEG}, {"jpeg", MCP_FORMAT_JPEG}, {"hdr", MCP_FORMAT_HDR},
     {"tif", MCP_FORMAT_TIFF}, {"tiff", MCP_FORMAT_TIFF},
 };
@@ -30,11 +30,9 @@ mcp_format
 mcp_format_from_path(const char *path)
 {
     const char *dot = strrchr(path, '.'), *slash = strrchr(path, '/');
-    if (!dot || (slash && dot < slash))
-        return MCP_FORMAT_UNKNOWN;
+    if (!dot || (slash && dot < slash)) return MCP_FORMAT_UNKNOWN;
     for (size_t i = 0; i < sizeof extensions / sizeof *extensions; i++)
-        if (strcasecmp(dot + 1, extensions[i].ext) == 0)
-            return extensions[i].format;
+        if (strcasecmp(dot + 1, extensions[i].ext) == 0) return extensions[i].format;
     return MCP_FORMAT_UNKNOWN;
 }
 
@@ -61,9 +59,10 @@ mcp_write_defaults(void)
                                .srgb_encode = 1};
 }
 
-static const char *const exr_compression_names[] = {"none",  "rle", "zips", "zip",  "piz",
-                                                    "pxr24", "b44", "b44a", "dwaa", "dwab"};
-const mcp_wordlist mcp_exr_compression_words = {"EXR compression", exr_compression_names, 10};
+static const char *const exr_compression_names[] = {
+    "none", "rle", "zips", "zip", "piz", "pxr24", "b44", "b44a", "dwaa", "dwab"};
+const mcp_wordlist mcp_exr_compression_words = {"EXR compression", exr_compression_names,
+                                                10};
 
 static const char *const exr_pixel_names[] = {"float", "half"};
 const mcp_wordlist mcp_exr_pixel_words = {"pixel type", exr_pixel_names, 2};
@@ -101,8 +100,7 @@ static void
 oiio_load(void)
 {
     void *h = mcp__plugin_open("mcpost_oiio.so", oiio.error, sizeof oiio.error);
-    if (!h)
-        return;
+    if (!h) return;
     oiio.read = (mcp__oiio_read_fn)(uintptr_t)dlsym(h, MCP__OIIO_READ);
     oiio.write = (mcp__oiio_write_fn)(uintptr_t)dlsym(h, MCP__OIIO_WRITE);
     if (oiio.read && oiio.write) {
@@ -135,8 +133,7 @@ oiio_read(const char *path, const mcp_read_options *opt, mcp_image **out)
     int w, h, c, bits;
     float *data = NULL;
     char **names = NULL, err[1024] = "";
-    if (oiio_ready(path))
-        return -1;
+    if (oiio_ready(path)) return -1;
     if (oiio.read(path, &w, &h, &c, &data, &names, &bits, err, sizeof err))
         return mcp_error("%s", err);
     mcp_image *img = NULL;
@@ -179,12 +176,10 @@ oiio_write(const mcp_image *img, const char *path, mcp_format format,
                          path, mcp_format_name(format), c);
     if (format == MCP_FORMAT_HDR && c != 3)
         return mcp_error("%s: hdr takes 3 channels, not %d", path, c);
-    if (oiio_ready(path))
-        return -1;
+    if (oiio_ready(path)) return -1;
     size_t n = (size_t)img->width * img->height * c;
     float *buf = mcp_malloc(n * sizeof(float));
-    if (!buf)
-        return -1;
+    if (!buf) return -1;
     for (int y = 0; y < img->height; y++)
         for (int x = 0; x < img->width; x++)
             for (int k = 0; k < c; k++) {
@@ -194,7 +189,8 @@ oiio_write(const mcp_image *img, const char *path, mcp_format format,
                 buf[((size_t)y * img->width + x) * c + k] = v;
             }
     char err[1024] = "";
-    int rc = oiio.write(path, img->width, img->height, c, buf, ldr ? 8 : 0, err, sizeof err);
+    int rc =
+        oiio.write(path, img->width, img->height, c, buf, ldr ? 8 : 0, err, sizeof err);
     free(buf);
     return rc ? mcp_error("%s", err) : 0;
 }
@@ -213,8 +209,7 @@ static void
 on_fatal_signal(int sig)
 {
     for (int i = 0; i < MAX_IN_FLIGHT; i++)
-        if (in_flight[i])
-            unlink(in_flight[i]);
+        if (in_flight[i]) unlink(in_flight[i]);
     if (cleanup_hook) cleanup_hook();
     signal(sig, SIG_DFL);
     raise(sig);
@@ -267,8 +262,7 @@ mcp_atomic_begin(mcp_atomic_file *f, const char *path)
     memset(f, 0, sizeof *f);
     /* keep the extension last: format libraries choose the format from it */
     const char *slash = strrchr(path, '/'), *dot = strrchr(path, '.');
-    if (!dot || (slash && dot < slash))
-        dot = path + strlen(path);
+    if (!dot || (slash && dot < slash)) dot = path + strlen(path);
     size_t n = strlen(path) + 64;
     f->final_path = mcp_strdup(path);
     f->tmp_path = mcp_malloc(n);
@@ -324,10 +318,8 @@ mcp_make_dirs(const char *path)
 {
     char buf[4096];
     size_t n = strlen(path);
-    if (n == 0)
-        return mcp_error("no folder name given");
-    if (n >= sizeof buf)
-        return mcp_error("path too long: %s", path);
+    if (n == 0) return mcp_error("no folder name given");
+    if (n >= sizeof buf) return mcp_error("path too long: %s", path);
     memcpy(buf, path, n + 1);
     for (size_t i = 1; i <= n; i++)
         if (buf[i] == '/' || buf[i] == '\0') {
@@ -344,12 +336,10 @@ int
 mcp_write_file_atomic(const char *path, const void *data, size_t size)
 {
     mcp_atomic_file af;
-    if (mcp_atomic_begin(&af, path))
-        return -1;
+    if (mcp_atomic_begin(&af, path)) return -1;
     FILE *f = fopen(af.tmp_path, "wb");
     int ok = f && fwrite(data, 1, size, f) == size;
-    if (f && fclose(f) != 0)
-        ok = 0;
+    if (f && fclose(f) != 0) ok = 0;
     if (!ok) {
         mcp_atomic_abort(&af);
         return mcp_error("%s: write failed (disk full?)", path);
@@ -365,8 +355,7 @@ mcp__check_readable(const char *path)
     struct stat st;
     if (stat(path, &st) != 0)
         return mcp_error("%s: cannot open: %s", path, strerror(errno));
-    if (S_ISDIR(st.st_mode))
-        return mcp_error("%s: is a directory, not an image", path);
+    if (S_ISDIR(st.st_mode)) return mcp_error("%s: is a directory, not an image", path);
     return 0;
 }
 
@@ -375,14 +364,15 @@ mcp_image_read(const char *path, const mcp_read_options *opt, mcp_image **out)
 {
     mcp_read_options defaults = mcp_read_defaults();
     *out = NULL;
-    if (!opt)
-        opt = &defaults;
-    if (mcp__check_readable(path))
-        return -1;
+    if (!opt) opt = &defaults;
+    if (mcp__check_readable(path)) return -1;
     switch (mcp_format_from_path(path)) {
-    case MCP_FORMAT_EXR: return mcp__exr_read(path, out);
-    case MCP_FORMAT_PFM: return mcp__pfm_read(path, out);
-    case MCP_FORMAT_PNG: return mcp__png_read(path, opt, out);
+    case MCP_FORMAT_EXR:
+        return mcp__exr_read(path, out);
+    case MCP_FORMAT_PFM:
+        return mcp__pfm_read(path, out);
+    case MCP_FORMAT_PNG:
+        return mcp__png_read(path, opt, out);
     case MCP_FORMAT_UNKNOWN: {
         /* no known extension: sniff the EXR and PNG magic numbers before trying OIIO */
         unsigned char magic[8] = {0};
@@ -392,11 +382,13 @@ mcp_image_read(const char *path, const mcp_read_options *opt, mcp_image **out)
             size_t got = fread(magic, 1, 8, f);
             fclose(f);
             if (mcp__exr_magic(magic, got)) return mcp__exr_read(path, out);
-            if (got == 8 && memcmp(magic, png, 8) == 0) return mcp__png_read(path, opt, out);
+            if (got == 8 && memcmp(magic, png, 8) == 0)
+                return mcp__png_read(path, opt, out);
         }
         return oiio_read(path, opt, out);
     }
-    default: return oiio_read(path, opt, out);
+    default:
+        return oiio_read(path, opt, out);
     }
 }
 
@@ -415,10 +407,8 @@ mcp_image_read_memory(const void *data, size_t size, const char *name, mcp_image
 {
     const unsigned char *b = data;
     *out = NULL;
-    if (!name)
-        name = "(memory)";
-    if (!data && size)
-        return mcp_error("%s: no data (%zu bytes at NULL)", name, size);
+    if (!name) name = "(memory)";
+    if (!data && size) return mcp_error("%s: no data (%zu bytes at NULL)", name, size);
     if (mcp__exr_magic(data, size)) return mcp__exr_read_memory(data, size, name, out);
     if (size >= 2 && b[0] == 'P' && (b[1] == 'F' || b[1] == 'f'))
         return mcp__pfm_read_memory(data, size, name, out);
@@ -432,12 +422,12 @@ int
 mcp_image_write(const mcp_image *img, const char *path, const mcp_write_options *opt)
 {
     mcp_write_options defaults = mcp_write_defaults();
-    if (!opt)
-        opt = &defaults;
+    if (!opt) opt = &defaults;
     mcp_format format = mcp_format_from_path(path);
     if (format == MCP_FORMAT_UNKNOWN)
         return mcp_error("%s: unknown output format (use .exr, .pfm, .png, .jpg, .hdr or "
-                         ".tif)", path);
+                         ".tif)",
+                         path);
     /* Formats without channel names store colour by place: R, G, B go first, taken by
        name wherever they stand, the other channels (alpha) after them in their order
        (docs/conventions.md, "Channel order"). EXR keeps the names: the image as it is. */
@@ -457,10 +447,18 @@ mcp_image_write(const mcp_image *img, const char *path, const mcp_write_options 
     }
     int rc;
     switch (format) {
-    case MCP_FORMAT_EXR: rc = mcp__exr_write(img, af.tmp_path, opt); break;
-    case MCP_FORMAT_PFM: rc = mcp__pfm_write(img, af.tmp_path); break;
-    case MCP_FORMAT_PNG: rc = mcp__png_write(img, af.tmp_path, opt); break;
-    default: rc = oiio_write(img, af.tmp_path, format, opt); break;
+    case MCP_FORMAT_EXR:
+        rc = mcp__exr_write(img, af.tmp_path, opt);
+        break;
+    case MCP_FORMAT_PFM:
+        rc = mcp__pfm_write(img, af.tmp_path);
+        break;
+    case MCP_FORMAT_PNG:
+        rc = mcp__png_write(img, af.tmp_path, opt);
+        break;
+    default:
+        rc = oiio_write(img, af.tmp_path, format, opt);
+        break;
     }
     mcp_image_free(ordered);
     if (rc) {
@@ -485,8 +483,7 @@ mcp_write_rgb8(const unsigned char *rgb8, int width, int height, const char *pat
         return mcp_atomic_commit(&af);
     }
     mcp_image *img;
-    if (mcp_image_new(width, height, 3, (const char *[]){"R", "G", "B"}, &img))
-        return -1;
+    if (mcp_image_new(width, height, 3, (const char *[]){"R", "G", "B"}, &img)) return -1;
     for (size_t i = 0; i < (size_t)width * height * 3; i++)
         img->data[i] = rgb8[i] / 255.0f;
     mcp_write_options opt = mcp_write_defaults();
@@ -502,7 +499,7 @@ mcp_write_files(const mcp_file_write *files, int n)
     if (n <= 0) return 0;
     /* a failed file's error line, kept from its worker thread (error lines are
        thread-local; error.c's are 1024 bytes too) */
-    char (*message)[1024] = mcp_calloc((size_t)n, sizeof *message);
+    char(*message)[1024] = mcp_calloc((size_t)n, sizeof *message);
     if (!message) return -1;
     int failed = 0;
 #pragma omp parallel for schedule(dynamic, 1) if (n > 1) reduction(+ : failed)

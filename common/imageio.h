@@ -50,10 +50,7 @@ MCP_API int mcp_image_read(const char *path, const mcp_read_options *opt,
 MCP_API int mcp_image_read_memory(const void *data, size_t size, const char *name,
                                   mcp_image **out);
 
-typedef enum {
-    MCP_EXR_FLOAT,
-    MCP_EXR_HALF
-} mcp_exr_pixel;
+typedef enum { MCP_EXR_FLOAT, MCP_EXR_HALF } mcp_exr_pixel;
 
 typedef enum {
     MCP_EXR_NONE,
@@ -69,11 +66,11 @@ typedef enum {
 } mcp_exr_compression;
 
 typedef struct mcp_write_options {
-    mcp_exr_pixel exr_pixel;           /* [float] */
-    mcp_exr_compression compression;   /* [zip] */
-    int exr_tiled;                     /* write tiles of exr_tile_size instead of scanlines [0] */
-    int exr_tile_size;                 /* [64] */
-    int exr_data_x, exr_data_y;        /* data-window origin [0, 0] */
+    mcp_exr_pixel exr_pixel;         /* [float] */
+    mcp_exr_compression compression; /* [zip] */
+    int exr_tiled;     /* write tiles of exr_tile_size instead of scanlines [0] */
+    int exr_tile_size; /* [64] */
+    int exr_data_x, exr_data_y; /* data-window origin [0, 0] */
     /* zlib level of zip and zips, 1 (fastest) .. 9 (smallest); 0 is
        MCP_EXR_ZIP_LEVEL_DEFAULT [0] */
     int exr_zip_level;

@@ -25,15 +25,16 @@ long mcp__alloc_count(void);
  * (height + 1) x 3 doubles (malloc'd), and the sum over the (2r + 1)² window around
  * (x, y) clipped at the borders, with its pixel count. */
 double *mcp__window_table(const mcp_image *img);
-void mcp__window_sum(const double *table, int w, int h, int x, int y, int r, double out[3],
-                     int *count);
+void mcp__window_sum(const double *table, int w, int h, int x, int y, int r,
+                     double out[3], int *count);
 
 /* The values of ranks[0..k) (0-based, each < n) among v[0..n), as a sort would place
  * them, without sorting (select.c: a two-pass radix select). v must hold no NaN. */
 int mcp__select_ranks(const float *v, size_t n, const size_t *ranks, int k, float *out);
 /* out[j] = the nearest-rank p[j]-percentile of v[0..n) (the value of rank
  * ceil(p n) - 1, clamped), by selection. */
-int mcp__select_percentiles(const float *v, size_t n, const double *p, int k, double *out);
+int mcp__select_percentiles(const float *v, size_t n, const double *p, int k,
+                            double *out);
 
 /* Where mcpost's own files are (paths.c): the folder of the file that holds this code
  * (the shared library, or the executable it is linked into; -1 when unknown), and a
@@ -123,14 +124,15 @@ const char *mcp__no_variance_hint(const mcp_dump *d, const char *otherwise);
 /* Format back ends behind mcp_image_read / mcp_image_write (imageio.c). The writers
  * write exactly `path` (imageio.c passes a temporary name and renames). */
 #include <mcpost/imageio.h>
-/* 0 when path exists and is no folder; else -1 and "PATH: cannot open: ..." or "PATH: is a
- * directory, not an image" (imageio.c) */
+/* 0 when path exists and is no folder; else -1 and "PATH: cannot open: ..." or "PATH: is
+ * a directory, not an image" (imageio.c) */
 int mcp__check_readable(const char *path);
 int mcp__exr_read(const char *path, mcp_image **out);
 /* 1 when the first bytes (size of them) are OpenEXR's magic number. */
 int mcp__exr_magic(const void *data, size_t size);
 /* The same from a buffer (name labels it in messages); the dump loader uses it too. */
-int mcp__exr_read_memory(const void *data, size_t size, const char *name, mcp_image **out);
+int mcp__exr_read_memory(const void *data, size_t size, const char *name,
+                         mcp_image **out);
 int mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *opt);
 /* Reading an EXR's channels straight to where a caller wants them (the dump loader: no
  * whole image to copy the parts out of). Once the header is read and checked, the
@@ -149,12 +151,14 @@ int mcp__exr_read_routed(const char *path, mcp__exr_router router, void *ctx);
 int mcp__exr_read_memory_routed(const void *data, size_t size, const char *name,
                                 mcp__exr_router router, void *ctx);
 int mcp__pfm_read(const char *path, mcp_image **out);
-int mcp__pfm_read_memory(const void *data, size_t size, const char *name, mcp_image **out);
+int mcp__pfm_read_memory(const void *data, size_t size, const char *name,
+                         mcp_image **out);
 int mcp__pfm_write(const mcp_image *img, const char *path);
 int mcp__png_read(const char *path, const mcp_read_options *opt, mcp_image **out);
 int mcp__png_write(const mcp_image *img, const char *path, const mcp_write_options *opt);
 /* 8-bit samples, c = 1, 3 or 4 channels interleaved, written as they are */
-int mcp__png_write_bytes(const unsigned char *bytes, int w, int h, int c, const char *path);
+int mcp__png_write_bytes(const unsigned char *bytes, int w, int h, int c,
+                         const char *path);
 
 /* Growing strings (strbuf.c): a NUL-terminated text s[0..len) in cap bytes, zeroed to
  * start ({0}). A failed allocation sets failed, and every later call then does nothing

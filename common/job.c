@@ -39,29 +39,31 @@ struct mcp_job {
     int n_entries;
     mcp_report *report;
     mcp_job_options opt;
-    int checking; /* the stages' checks are running (job_validate) */
-    int frame_paths; /* an input path has changed with the frame (resolve_input) */
-    int skip_input_files; /* mcp_job_check_settings: inputs' files not looked for */
+    int checking;          /* the stages' checks are running (job_validate) */
+    int frame_paths;       /* an input path has changed with the frame (resolve_input) */
+    int skip_input_files;  /* mcp_job_check_settings: inputs' files not looked for */
     int *frames, n_frames; /* the job's frames: (none: n_frames 0) */
     const mcp__outdir *whole; /* the output folder being written: no input inside it */
 };
 
-static const char *const root_keys[] = {"title", "inputs", "output", "frames", "stages",
-                                         NULL};
+static const char *const root_keys[] = {"title",  "inputs", "output",
+                                        "frames", "stages", NULL};
 /* keys shared by dump and series inputs: how to read a render dump */
 #define DUMP_KEYS                                                                        \
     "convention", "variance", "spp", "bad_values", "variance_file", "albedo_file",       \
         "normal_file", "spp_map_file", "channels"
 static const char *const dump_keys[] = {"dump", DUMP_KEYS, NULL};
 static const char *const series_keys[] = {"series", "variance_from", DUMP_KEYS, NULL};
-static const char *const replicates_keys[] = {"replicates", "merge", "pool", DUMP_KEYS, NULL};
+static const char *const replicates_keys[] = {"replicates", "merge", "pool", DUMP_KEYS,
+                                              NULL};
 static const char *const image_keys[] = {"image", NULL};
 static const char *const channel_keys[] = {"color", "variance", "albedo", "normal", NULL};
 
 mcp_job_options
 mcp_job_defaults(void)
 {
-    return (mcp_job_options){.output_dir = NULL, .json_stdout = 0, .quiet = 0, .frame = -1};
+    return (mcp_job_options){
+        .output_dir = NULL, .json_stdout = 0, .quiet = 0, .frame = -1};
 }
 
 /* ---- paths ---- */
@@ -107,10 +109,8 @@ mcp_job_path(const mcp_job *job)
 static int
 make_output_dir(mcp_job *job)
 {
-    if (job->output_made)
-        return 0;
-    if (mcp_make_dirs(job->output_dir))
-        return -1;
+    if (job->output_made) return 0;
+    if (mcp_make_dirs(job->output_dir)) return -1;
     char *real = realpath(job->output_dir, NULL);
     if (real) {
         free(job->output_dir);
@@ -131,8 +131,7 @@ mcp_job_output_dir(mcp_job *job)
 static int
 output_join(mcp_job *job, const char *name, char *buf, size_t cap)
 {
-    if (make_output_dir(job))
-        return -1;
+    if (make_output_dir(job)) return -1;
     int n = snprintf(buf, cap, "%s/%s", job->output_dir, name);
     if (n < 0 || (size_t)n >= cap)
         return mcp_error("%s: output path too long: %s", job->path, name);
@@ -142,8 +141,7 @@ output_join(mcp_job *job, const char *name, char *buf, size_t cap)
 int
 mcp_job_output_path(mcp_job *job, const char *name, char *buf, size_t cap)
 {
-    if (output_join(job, name, buf, cap))
-        return -1;
+    if (output_join(job, name, buf, cap)) return -1;
     /* names may hold sub-folders ("maps/flip.png") */
     char *slash = strrchr(buf, '/');
     if (slash && slash > buf + strlen(job->output_dir)) {
@@ -179,8 +177,7 @@ static int
 file_exists(const mcp_job *job, const mcp_node *at, const char *path)
 {
     struct stat st;
-    if (job->skip_input_files)
-        return 0;
+    if (job->skip_input_files) return 0;
     if (stat(path, &st) != 0)
         return mcp_node_error(at, "input file %s: %s", path, strerror(errno));
     return 0;
@@ -189,58 +186,51 @@ file_exists(const mcp_job *job, const mcp_node *at, const char *path)
 /* Fills a dump spec from an input definition; strings point into the node tree or
  * into `store` (resolved paths), which must outlive the spec. */
 static int
-dump_spec_from(mcp_job *job, const mcp_node *def, mcp_dump_spec *spec, char store[6][4096])
+dump_spec_from(mcp_job *job, const mcp_node *def, mcp_dump_spec *spec,
+               char store[6][4096])
 {
     *spec = mcp_dump_spec_defaults();
     const char *s = NULL;
     /* a wrong type already names the line (mcp_node_opt_string); only a bad name,
      * reported without a location, gets the key's line added */
-    if (mcp_node_opt_string(def, "convention", &s))
-        return -1;
+    if (mcp_node_opt_string(def, "convention", &s)) return -1;
     if (s && mcp_convention_from_name(s, &spec->convention))
         return mcp_node_error(mcp_node_get(def, "convention"), "%s", mcp_error_message());
     s = NULL;
-    if (mcp_node_opt_string(def, "variance", &s))
-        return -1;
+    if (mcp_node_opt_string(def, "variance", &s)) return -1;
     if (s && mcp_variance_kind_from_name(s, &spec->variance))
         return mcp_node_error(mcp_node_get(def, "variance"), "%s", mcp_error_message());
     s = NULL;
-    if (mcp_node_opt_string(def, "bad_values", &s))
-        return -1;
+    if (mcp_node_opt_string(def, "bad_values", &s)) return -1;
     if (s && mcp_badval_policy_from_name(s, &spec->bad_values))
         return mcp_node_error(mcp_node_get(def, "bad_values"), "%s", mcp_error_message());
     /* a series' spp list belongs to series_from(), which checks it; anywhere else spp
      * must be one number (mcp_node_double names the line of a list or map) */
     const mcp_node *spp = mcp_node_get(def, "spp");
     if (spp && (spp->kind == MCP_NODE_SCALAR || !mcp_node_get(def, "series"))) {
-        if (mcp_node_double(spp, "spp", &spec->spp))
-            return -1;
+        if (mcp_node_double(spp, "spp", &spec->spp)) return -1;
         if (spec->spp <= 0)
             return mcp_node_error(spp, "spp must be > 0 (got %g)", spec->spp);
     }
     static const char *file_keys[] = {"variance_file", "albedo_file", "normal_file",
                                       "spp_map_file"};
-    const char **targets[] = {&spec->variance_path, &spec->albedo_path, &spec->normal_path,
-                              &spec->spp_map_path};
+    const char **targets[] = {&spec->variance_path, &spec->albedo_path,
+                              &spec->normal_path, &spec->spp_map_path};
     for (int i = 0; i < 4; i++) {
         const mcp_node *n = mcp_node_get(def, file_keys[i]);
-        if (!n)
-            continue;
+        if (!n) continue;
         if (mcp_node_string(n, file_keys[i], &s) ||
-            resolve_input(job, n, s, 0, store[i], 4096) ||
-            file_exists(job, n, store[i]))
+            resolve_input(job, n, s, 0, store[i], 4096) || file_exists(job, n, store[i]))
             return -1;
         *targets[i] = store[i];
     }
     const mcp_node *ch = mcp_node_get(def, "channels");
     if (ch) {
-        if (mcp_node_check_keys(ch, channel_keys, "channels"))
-            return -1;
+        if (mcp_node_check_keys(ch, channel_keys, "channels")) return -1;
         const char **dst[] = {spec->color, spec->var, spec->albedo, spec->normal};
         for (int k = 0; k < 4; k++) {
             const mcp_node *list = mcp_node_get(ch, channel_keys[k]);
-            if (!list)
-                continue;
+            if (!list) continue;
             if (list->kind != MCP_NODE_SEQ || list->count != 3)
                 return mcp_node_error(list, "channels.%s must list 3 channel names",
                                       channel_keys[k]);
@@ -256,8 +246,7 @@ static entry *
 find_entry(mcp_job *job, const char *name)
 {
     for (int i = 0; i < job->n_entries; i++)
-        if (strcmp(job->entries[i].name, name) == 0)
-            return &job->entries[i];
+        if (strcmp(job->entries[i].name, name) == 0) return &job->entries[i];
     return NULL;
 }
 
@@ -274,13 +263,11 @@ add_entry(mcp_job *job, const char *name)
     }
     entry *grown =
         mcp_realloc(job->entries, (size_t)(job->n_entries + 1) * sizeof *grown);
-    if (!grown)
-        return NULL;
+    if (!grown) return NULL;
     job->entries = grown;
     e = &grown[job->n_entries];
     memset(e, 0, sizeof *e);
-    if (!(e->name = mcp_strdup(name)))
-        return NULL;
+    if (!(e->name = mcp_strdup(name))) return NULL;
     job->n_entries++;
     return e;
 }
@@ -297,8 +284,7 @@ series_from(mcp_job *job, const mcp_node *def, mcp_series **out)
             return mcp_node_error(src, "a series pattern needs 'spp: [list of sample "
                                        "counts]'");
         int *counts = mcp_calloc((size_t)spp->count, sizeof *counts);
-        if (!counts)
-            return -1;
+        if (!counts) return -1;
         rc = 0;
         for (int i = 0; i < spp->count && !rc; i++)
             rc = mcp_node_int(spp->items[i], "spp", &counts[i]);
@@ -307,13 +293,11 @@ series_from(mcp_job *job, const mcp_node *def, mcp_series **out)
         else if (!rc && mcp_series_from_pattern(path, counts, spp->count, out))
             rc = mcp_node_error(src, "%s", mcp_error_message());
         free(counts);
-        if (rc)
-            return -1;
+        if (rc) return -1;
     } else if (src->kind == MCP_NODE_SEQ) {
         char **paths = mcp_calloc((size_t)src->count, sizeof *paths);
         double *counts = NULL;
-        if (!paths)
-            return -1;
+        if (!paths) return -1;
         rc = 0;
         for (int i = 0; i < src->count && !rc; i++) {
             const char *s;
@@ -325,9 +309,11 @@ series_from(mcp_job *job, const mcp_node *def, mcp_series **out)
             int n = 0;
             rc = mcp_node_opt_doubles(def, "spp", &counts, &n);
             if (!rc && n != src->count)
-                rc = mcp_node_error(spp, "spp lists %d counts for %d files", n, src->count);
+                rc = mcp_node_error(spp, "spp lists %d counts for %d files", n,
+                                    src->count);
         }
-        rc = rc || mcp_series_from_paths((const char *const *)paths, counts, src->count, out);
+        rc = rc ||
+             mcp_series_from_paths((const char *const *)paths, counts, src->count, out);
         for (int i = 0; i < src->count; i++)
             free(paths[i]);
         free(paths);
@@ -335,13 +321,13 @@ series_from(mcp_job *job, const mcp_node *def, mcp_series **out)
     } else {
         return mcp_node_error(src, "series must be a file pattern or a list of files");
     }
-    if (rc)
-        return -1;
+    if (rc) return -1;
     const char *from = NULL;
     if (mcp_node_opt_string(def, "variance_from", &from))
         rc = -1;
     else if (from && mcp_series_variance_from_name(from, &(*out)->variance_from))
-        rc = mcp_node_error(mcp_node_get(def, "variance_from"), "%s", mcp_error_message());
+        rc =
+            mcp_node_error(mcp_node_get(def, "variance_from"), "%s", mcp_error_message());
     if (rc) {
         mcp_series_free(*out);
         *out = NULL;
@@ -367,25 +353,21 @@ replicate_paths(mcp_job *job, const mcp_node *def, char ***out, int *count)
     int n = 0, rc = 0;
     if (src->kind == MCP_NODE_SCALAR) {
         glob_t g;
-        if (resolve_input(job, src, src->value, 0, path, sizeof path))
-            return -1;
+        if (resolve_input(job, src, src->value, 0, path, sizeof path)) return -1;
         if (job->skip_input_files) /* which files match is for each frame to say */
             return 0;
         int grc = glob(path, 0, NULL, &g);
         if (grc == GLOB_NOMATCH)
             return mcp_node_error(src, "replicates: no file matches %s", path);
-        if (grc != 0)
-            return mcp_node_error(src, "replicates: cannot expand %s", path);
+        if (grc != 0) return mcp_node_error(src, "replicates: cannot expand %s", path);
         n = (int)g.gl_pathc;
-        if (!(paths = mcp_calloc((size_t)n, sizeof *paths)))
-            rc = -1;
+        if (!(paths = mcp_calloc((size_t)n, sizeof *paths))) rc = -1;
         for (int i = 0; i < n && !rc; i++)
             rc = !(paths[i] = mcp_strdup(g.gl_pathv[i]));
         globfree(&g);
     } else if (src->kind == MCP_NODE_SEQ) {
         n = src->count;
-        if (!(paths = mcp_calloc((size_t)n + 1, sizeof *paths)))
-            return -1;
+        if (!(paths = mcp_calloc((size_t)n + 1, sizeof *paths))) return -1;
         for (int i = 0; i < n && !rc; i++) {
             const char *f;
             rc = mcp_node_string(src->items[i], "replicates", &f) ||
@@ -422,7 +404,8 @@ merge_options_from(const mcp_node *def, mcp_merge_options *opt)
 {
     *opt = mcp_merge_defaults();
     const char *kind = NULL;
-    if (mcp_node_opt_string(def, "merge", &kind) || mcp_node_opt_int(def, "pool", &opt->pool_radius))
+    if (mcp_node_opt_string(def, "merge", &kind) ||
+        mcp_node_opt_int(def, "pool", &opt->pool_radius))
         return -1;
     if (kind && mcp_merge_variance_from_name(kind, &opt->variance))
         return mcp_node_error(mcp_node_get(def, "merge"), "%s", mcp_error_message());
@@ -444,12 +427,10 @@ load_replicates(mcp_job *job, const mcp_node *def, mcp_dump **out)
         dump_spec_from(job, def, &spec, store))
         return -1;
     mcp_dump **parts = mcp_calloc((size_t)n, sizeof *parts);
-    if (!parts)
-        goto done;
+    if (!parts) goto done;
     for (int i = 0; i < n; i++) {
         spec.path = paths[i];
-        if (mcp_dump_load(&spec, &parts[i]))
-            goto done;
+        if (mcp_dump_load(&spec, &parts[i])) goto done;
     }
     rc = mcp_dump_merge((const mcp_dump *const *)parts, n, &mo, out);
 done:
@@ -465,8 +446,7 @@ static int
 check_inputs(mcp_job *job)
 {
     const mcp_node *inputs = mcp_node_get(job->root, "inputs");
-    if (!inputs)
-        return 0;
+    if (!inputs) return 0;
     if (inputs->kind != MCP_NODE_MAP)
         return mcp_node_error(inputs, "inputs must map names to inputs");
     for (int i = 0; i < inputs->count; i++) {
@@ -475,12 +455,12 @@ check_inputs(mcp_job *job)
         char what[256];
         snprintf(what, sizeof what, "input '%s'", name);
         if (def->kind != MCP_NODE_MAP)
-            return mcp_node_error(def, "input '%s' must be a map (dump:, image:, series: or "
+            return mcp_node_error(def,
+                                  "input '%s' must be a map (dump:, image:, series: or "
                                   "replicates:)",
                                   name);
         entry *e = add_entry(job, name);
-        if (!e)
-            return -1;
+        if (!e) return -1;
         e->def = def;
         char path[4096], store[6][4096];
         const char *file;
@@ -489,7 +469,8 @@ check_inputs(mcp_job *job)
             e->kind = ENTRY_DUMP;
             if (mcp_node_check_keys(def, dump_keys, what) ||
                 mcp_node_string(mcp_node_get(def, "dump"), "dump", &file) ||
-                resolve_input(job, mcp_node_get(def, "dump"), file, 0, path, sizeof path) ||
+                resolve_input(job, mcp_node_get(def, "dump"), file, 0, path,
+                              sizeof path) ||
                 file_exists(job, mcp_node_get(def, "dump"), path) ||
                 dump_spec_from(job, def, &spec, store))
                 return -1;
@@ -508,14 +489,15 @@ check_inputs(mcp_job *job)
             e->kind = ENTRY_IMAGE;
             if (mcp_node_check_keys(def, image_keys, what) ||
                 mcp_node_string(mcp_node_get(def, "image"), "image", &file) ||
-                resolve_input(job, mcp_node_get(def, "image"), file, 0, path, sizeof path) ||
+                resolve_input(job, mcp_node_get(def, "image"), file, 0, path,
+                              sizeof path) ||
                 file_exists(job, mcp_node_get(def, "image"), path))
                 return -1;
         } else if (mcp_node_get(def, "series")) {
             e->kind = ENTRY_SERIES;
             mcp_series *s = NULL;
-            if (mcp_node_check_keys(def, series_keys, what) || series_from(job, def, &s) ||
-                dump_spec_from(job, def, &spec, store)) {
+            if (mcp_node_check_keys(def, series_keys, what) ||
+                series_from(job, def, &s) || dump_spec_from(job, def, &spec, store)) {
                 mcp_series_free(s);
                 return -1;
             }
@@ -538,8 +520,7 @@ load_entry(mcp_job *job, entry *e)
     mcp_dump_spec spec;
     switch (e->kind) {
     case ENTRY_DUMP:
-        if (e->dump)
-            return 0;
+        if (e->dump) return 0;
         if (mcp_node_get(e->def, "replicates"))
             return load_replicates(job, e->def, &e->dump);
         mcp_node_string(mcp_node_get(e->def, "dump"), "dump", &file);
@@ -549,15 +530,12 @@ load_entry(mcp_job *job, entry *e)
         spec.path = path;
         return mcp_dump_load(&spec, &e->dump);
     case ENTRY_IMAGE:
-        if (e->image)
-            return 0;
+        if (e->image) return 0;
         mcp_node_string(mcp_node_get(e->def, "image"), "image", &file);
-        if (resolve_input(job, e->def, file, 0, path, sizeof path))
-            return -1;
+        if (resolve_input(job, e->def, file, 0, path, sizeof path)) return -1;
         return mcp_image_read(path, NULL, &e->image);
     case ENTRY_SERIES:
-        if (e->series)
-            return 0;
+        if (e->series) return 0;
         if (series_from(job, e->def, &e->series) ||
             dump_spec_from(job, e->def, &e->series->spec, store))
             return -1;
@@ -578,23 +556,20 @@ lookup(mcp_job *job, const mcp_node *settings, const char *key, entry **out)
     const char *name;
     if (!n)
         return mcp_node_error(settings, "missing key '%s' (the name of an input)", key);
-    if (mcp_node_string(n, key, &name))
-        return -1;
+    if (mcp_node_string(n, key, &name)) return -1;
     entry *e = find_entry(job, name);
-    if (!e)
-        return mcp_node_error(n, "no input or result called '%s'", name);
-    if (e->def && load_entry(job, e))
-        return mcp_node_error(n, "%s", mcp_error_message());
+    if (!e) return mcp_node_error(n, "no input or result called '%s'", name);
+    if (e->def && load_entry(job, e)) return mcp_node_error(n, "%s", mcp_error_message());
     *out = e;
     return 0;
 }
 
 int
-mcp_job_dump(mcp_job *job, const mcp_node *settings, const char *key, const mcp_dump **out)
+mcp_job_dump(mcp_job *job, const mcp_node *settings, const char *key,
+             const mcp_dump **out)
 {
     entry *e;
-    if (lookup(job, settings, key, &e))
-        return -1;
+    if (lookup(job, settings, key, &e)) return -1;
     if (!e->dump)
         return mcp_node_error(mcp_node_get(settings, key), "'%s' is not a render dump",
                               e->name);
@@ -607,8 +582,7 @@ mcp_job_image(mcp_job *job, const mcp_node *settings, const char *key,
               const mcp_image **out)
 {
     entry *e;
-    if (lookup(job, settings, key, &e))
-        return -1;
+    if (lookup(job, settings, key, &e)) return -1;
     if (!e->image && !e->dump)
         return mcp_node_error(mcp_node_get(settings, key), "'%s' is not an image",
                               e->name);
@@ -621,8 +595,7 @@ mcp_job_series(mcp_job *job, const mcp_node *settings, const char *key,
                const mcp_series **out)
 {
     entry *e;
-    if (lookup(job, settings, key, &e))
-        return -1;
+    if (lookup(job, settings, key, &e)) return -1;
     if (!e->series)
         return mcp_node_error(mcp_node_get(settings, key), "'%s' is not a series",
                               e->name);
@@ -634,8 +607,7 @@ const mcp_image *
 mcp_job_find_image(mcp_job *job, const char *name)
 {
     entry *e = find_entry(job, name);
-    if (!e || (e->def && load_entry(job, e)))
-        return NULL;
+    if (!e || (e->def && load_entry(job, e))) return NULL;
     return e->image ? e->image : e->dump ? e->dump->color : NULL;
 }
 
@@ -649,12 +621,9 @@ entry_kinds(const entry *e)
         k |= e->kind == ENTRY_DUMP    ? MCP_JOB_DUMP | MCP_JOB_IMAGE
              : e->kind == ENTRY_IMAGE ? MCP_JOB_IMAGE
                                       : MCP_JOB_SERIES;
-    if (e->dump)
-        k |= MCP_JOB_DUMP | MCP_JOB_IMAGE;
-    if (e->image)
-        k |= MCP_JOB_IMAGE;
-    if (e->series)
-        k |= MCP_JOB_SERIES;
+    if (e->dump) k |= MCP_JOB_DUMP | MCP_JOB_IMAGE;
+    if (e->image) k |= MCP_JOB_IMAGE;
+    if (e->series) k |= MCP_JOB_SERIES;
     return k;
 }
 
@@ -669,8 +638,7 @@ int
 mcp_job_check_name(mcp_job *job, const mcp_node *name_node, unsigned kinds)
 {
     const char *name;
-    if (mcp_node_string(name_node, "the name of an input", &name))
-        return -1;
+    if (mcp_node_string(name_node, "the name of an input", &name)) return -1;
     entry *e = find_entry(job, name);
     if (!e || !entry_kinds(e))
         return mcp_node_error(name_node, "no input or result called '%s'", name);
@@ -679,7 +647,8 @@ mcp_job_check_name(mcp_job *job, const mcp_node *name_node, unsigned kinds)
         int image = (kinds & MCP_JOB_IMAGE) != 0, series = (kinds & MCP_JOB_SERIES) != 0,
             dump = !image && (kinds & MCP_JOB_DUMP);
         return mcp_node_error(name_node, "'%s' is not %s%s%s%s", name,
-                              series ? "a series" : "", series && (image || dump) ? " or " : "",
+                              series ? "a series" : "",
+                              series && (image || dump) ? " or " : "",
                               image ? "an image" : "", dump ? "a render dump" : "");
     }
     return 0;
@@ -698,11 +667,9 @@ mcp_job_check_input(mcp_job *job, const mcp_node *settings, const char *key,
 int
 mcp_job_declare(mcp_job *job, const char *name, unsigned kind)
 {
-    if (!job->checking)
-        return 0;
+    if (!job->checking) return 0;
     entry *e = find_entry(job, name);
-    if (!e && !(e = add_entry(job, name)))
-        return -1;
+    if (!e && !(e = add_entry(job, name))) return -1;
     e->declared |= kind & MCP_JOB_DUMP ? MCP_JOB_DUMP | MCP_JOB_IMAGE : kind;
     return 0;
 }
@@ -755,8 +722,7 @@ static const mcp_stage *
 find_stage(const mcp_stage *const *stages, const char *name)
 {
     for (; *stages; stages++)
-        if (strcmp((*stages)->name, name) == 0)
-            return *stages;
+        if (strcmp((*stages)->name, name) == 0) return *stages;
     return NULL;
 }
 
@@ -787,9 +753,10 @@ stage_at(const mcp_node *item, const mcp_stage *const *stages, const mcp_stage *
         char known[512] = "";
         size_t n = 0;
         for (const mcp_stage *const *s = stages; *s; s++)
-            n += (size_t)snprintf(known + n, n < sizeof known ? sizeof known - n : 0, "%s%s",
-                                  s == stages ? "" : ", ", (*s)->name);
-        return mcp_node_error(item->keys[0], "unknown stage '%s' (known: %s)", name, known);
+            n += (size_t)snprintf(known + n, n < sizeof known ? sizeof known - n : 0,
+                                  "%s%s", s == stages ? "" : ", ", (*s)->name);
+        return mcp_node_error(item->keys[0], "unknown stage '%s' (known: %s)", name,
+                              known);
     }
     *settings = item->items[0];
     if ((*settings)->kind == MCP_NODE_SCALAR && (*settings)->value[0] == '\0')
@@ -802,8 +769,7 @@ stage_at(const mcp_node *item, const mcp_stage *const *stages, const mcp_stage *
 static void
 job_free(mcp_job *job)
 {
-    if (!job)
-        return;
+    if (!job) return;
     for (int i = 0; i < job->n_entries; i++) {
         free(job->entries[i].name);
         mcp_dump_free(job->entries[i].dump);
@@ -825,22 +791,22 @@ static int
 frames_from(mcp_job *job)
 {
     const mcp_node *n = mcp_node_get(job->root, "frames");
-    if (!n)
-        return 0;
+    if (!n) return 0;
     char text[4096] = "";
     size_t len = 0;
     int items = n->kind == MCP_NODE_SEQ ? n->count : 1;
     if (n->kind == MCP_NODE_MAP || items == 0)
-        return mcp_node_error(n, "frames must be a set such as 1-240, 1-240:2 or 1,5,9-12, "
-                                 "or a list of them");
+        return mcp_node_error(n,
+                              "frames must be a set such as 1-240, 1-240:2 or 1,5,9-12, "
+                              "or a list of them");
     for (int i = 0; i < items; i++) {
         const mcp_node *item = n->kind == MCP_NODE_SEQ ? n->items[i] : n;
         const char *s;
-        if (mcp_node_string(item, "frames", &s))
-            return -1;
+        if (mcp_node_string(item, "frames", &s)) return -1;
         int w = snprintf(text + len, sizeof text - len, "%s%s", i ? "," : "", s);
         if (w < 0 || (size_t)w >= sizeof text - len)
-            return mcp_node_error(n, "frames: the list is too long; write ranges (1-240)");
+            return mcp_node_error(n,
+                                  "frames: the list is too long; write ranges (1-240)");
         len += (size_t)w;
     }
     if (mcp_frames_parse(text, &job->frames, &job->n_frames))
@@ -854,10 +820,10 @@ static int
 frame_open(mcp_job *job)
 {
     int f = job->opt.frame;
-    if (f < 0)
-        return 0;
+    if (f < 0) return 0;
     if (!job->n_frames)
-        return mcp_error("%s: frame %d asked for, but the job has no frames:", job->path, f);
+        return mcp_error("%s: frame %d asked for, but the job has no frames:", job->path,
+                         f);
     if (!mcp_frames_contains(job->frames, job->n_frames, f)) {
         char set[256];
         if (mcp_frames_format(job->frames, job->n_frames, set, sizeof set))
@@ -867,8 +833,7 @@ frame_open(mcp_job *job)
                               "frame %d is not among the job's frames (%s)", f, set);
     }
     char dir[4096];
-    if (mcp_frame_dir(job->output_dir, f, dir, sizeof dir))
-        return -1;
+    if (mcp_frame_dir(job->output_dir, f, dir, sizeof dir)) return -1;
     free(job->output_dir);
     return (job->output_dir = mcp_strdup(dir)) ? 0 : -1;
 }
@@ -877,8 +842,7 @@ static int
 job_open(const char *path, const mcp_job_options *opt, mcp_job **out)
 {
     mcp_job *job = mcp_calloc(1, sizeof *job);
-    if (!job)
-        return -1;
+    if (!job) return -1;
     job->opt = opt ? *opt : mcp_job_defaults();
     char tmp[4096];
     snprintf(tmp, sizeof tmp, "%s", path);
@@ -887,7 +851,8 @@ job_open(const char *path, const mcp_job_options *opt, mcp_job **out)
         mcp_yaml_parse_file(path, &job->root))
         goto fail;
     if (job->root->kind != MCP_NODE_MAP) {
-        mcp_node_error(job->root, "a job file is a map with inputs:, output: and stages:");
+        mcp_node_error(job->root,
+                       "a job file is a map with inputs:, output: and stages:");
         goto fail;
     }
     if (mcp_node_check_keys(job->root, root_keys, "the job file") ||
@@ -901,18 +866,19 @@ job_open(const char *path, const mcp_job_options *opt, mcp_job **out)
         snprintf(tmp, sizeof tmp, "%s", path);
         snprintf(name, sizeof name, "out/%s", basename(tmp));
         char *dot = strrchr(name, '.');
-        if (dot && dot > name + 4)
-            *dot = '\0';
+        if (dot && dot > name + 4) *dot = '\0';
         if (mcp_job_resolve(job, output ? output : name, resolved, sizeof resolved))
             goto fail;
         job->output_dir = mcp_strdup(resolved);
     }
     char frame_title[4096];
     if (job->opt.frame >= 0)
-        snprintf(frame_title, sizeof frame_title, "%s, frame %d", title ? title : job->path,
-                 job->opt.frame);
+        snprintf(frame_title, sizeof frame_title, "%s, frame %d",
+                 title ? title : job->path, job->opt.frame);
     if (!job->output_dir || frames_from(job) || frame_open(job) ||
-        mcp_report_new(job->opt.frame >= 0 ? frame_title : title ? title : job->path,
+        mcp_report_new(job->opt.frame >= 0 ? frame_title
+                       : title             ? title
+                                           : job->path,
                        &job->report))
         goto fail;
     if (job->opt.frame >= 0 &&
@@ -945,9 +911,9 @@ job_validate(mcp_job *job, const mcp_stage *const *stages, const mcp_node **list
 {
     *list = mcp_node_get(job->root, "stages");
     if (!*list || (*list)->kind != MCP_NODE_SEQ || (*list)->count == 0)
-        return mcp_node_error(*list ? *list : job->root, "the job needs a list of stages");
-    if (check_inputs(job))
-        return -1;
+        return mcp_node_error(*list ? *list : job->root,
+                              "the job needs a list of stages");
+    if (check_inputs(job)) return -1;
     int rc = 0;
     job->checking = 1;
     for (int i = 0; i < (*list)->count && rc == 0; i++) {
@@ -964,8 +930,7 @@ job_validate(mcp_job *job, const mcp_stage *const *stages, const mcp_node **list
             rc = -1;
             break;
         }
-        if (!stage->check)
-            continue;
+        if (!stage->check) continue;
         mcp_node *empty = settings ? NULL : empty_map_at((*list)->items[i]);
         if (!settings && !empty) {
             rc = -1;
@@ -993,8 +958,7 @@ check_frames(mcp_job *job, const mcp_stage *const *stages)
     for (int i = 0; i < job->n_frames; i++) {
         const mcp_node *list = NULL;
         job->opt.frame = job->frames[i];
-        if (i > 0 && !job->frame_paths)
-            break;
+        if (i > 0 && !job->frame_paths) break;
         if (i == 0 ? job_validate(job, stages, &list) : check_inputs(job))
             return mcp_error_prefix("frame %d: ", job->frames[i]);
     }
@@ -1009,10 +973,8 @@ static int
 check_job_file(const char *path, const mcp_stage *const *stages, int settings_only)
 {
     mcp_job *job = NULL;
-    if (!stages)
-        stages = mcp_job_stages();
-    if (job_open(path, NULL, &job))
-        return -1;
+    if (!stages) stages = mcp_job_stages();
+    if (job_open(path, NULL, &job)) return -1;
     const mcp_node *list = NULL;
     int rc;
     if (settings_only) {
@@ -1043,16 +1005,13 @@ mcp_job_frames(const char *path, const mcp_job_options *opt, int **frames, int *
                char **output_dir)
 {
     *frames = NULL, *count = 0;
-    if (output_dir)
-        *output_dir = NULL;
+    if (output_dir) *output_dir = NULL;
     mcp_job_options base = opt ? *opt : mcp_job_defaults();
     base.frame = -1;
     mcp_job *job = NULL;
-    if (job_open(path, &base, &job))
-        return -1;
+    if (job_open(path, &base, &job)) return -1;
     int rc = 0;
-    if (output_dir && !(*output_dir = mcp_strdup(job->output_dir)))
-        rc = -1;
+    if (output_dir && !(*output_dir = mcp_strdup(job->output_dir))) rc = -1;
     if (!rc) {
         *frames = job->frames, *count = job->n_frames;
         job->frames = NULL, job->n_frames = 0;
@@ -1096,14 +1055,15 @@ begin_whole_output(mcp_job *job, mcp__outdir *o)
         dir[--n] = '\0';
     char *slash = strrchr(dir, '/');
     const char *base = slash ? slash + 1 : dir, *path = dir;
-    snprintf(parent, sizeof parent, "%.*s", slash ? (int)(slash - dir) + (slash == dir) : 1,
-             slash ? dir : ".");
+    snprintf(parent, sizeof parent, "%.*s",
+             slash ? (int)(slash - dir) + (slash == dir) : 1, slash ? dir : ".");
     char *real = NULL;
     /* ".", ".." and "/" are refused by mcp__outdir_begin, by the name given */
     if (*base && strcmp(base, ".") && strcmp(base, "..")) {
         if (mcp_make_dirs(parent)) return -1;
         if ((real = realpath(parent, NULL))) {
-            snprintf(real_dir, sizeof real_dir, "%s/%s", strcmp(real, "/") ? real : "", base);
+            snprintf(real_dir, sizeof real_dir, "%s/%s", strcmp(real, "/") ? real : "",
+                     base);
             path = real_dir;
         }
     }
@@ -1129,10 +1089,8 @@ mcp_job_run_file(const char *path, const mcp_stage *const *stages,
                  const mcp_job_options *opt)
 {
     mcp_job *job = NULL;
-    if (!stages)
-        stages = mcp_job_stages();
-    if (job_open(path, opt, &job))
-        return -1;
+    if (!stages) stages = mcp_job_stages();
+    if (job_open(path, opt, &job)) return -1;
     int rc = -1;
     const mcp_node *list = NULL;
     mcp__outdir whole = {0};
@@ -1140,8 +1098,7 @@ mcp_job_run_file(const char *path, const mcp_stage *const *stages,
      * and mcp_progress, which read the process-wide switch: it is set for the run and
      * put back as the caller had it */
     int was_quiet = mcp_progress_quiet();
-    if (job->opt.quiet)
-        mcp_progress_set_quiet(1);
+    if (job->opt.quiet) mcp_progress_set_quiet(1);
     if (job->n_frames && job->opt.frame < 0) {
         char set[256];
         if (mcp_frames_format(job->frames, job->n_frames, set, sizeof set))
@@ -1151,8 +1108,7 @@ mcp_job_run_file(const char *path, const mcp_stage *const *stages,
         goto done;
     }
     /* check everything before running anything */
-    if (job_validate(job, stages, &list))
-        goto done;
+    if (job_validate(job, stages, &list)) goto done;
     /* a frame run again (--force) stays complete, the old run's, until the new one
        is renamed into place */
     if (begin_whole_output(job, &whole)) {
@@ -1161,15 +1117,13 @@ mcp_job_run_file(const char *path, const mcp_stage *const *stages,
     }
     /* the inputs once more, now that the folder the run replaces is known */
     job->whole = &whole;
-    if (check_inputs(job))
-        goto done;
+    if (check_inputs(job)) goto done;
     for (int i = 0; i < list->count; i++) {
         const mcp_stage *stage;
         const mcp_node *settings;
         stage_at(list->items[i], stages, &stage, &settings);
         mcp_node *empty = settings ? NULL : empty_map_at(list->items[i]);
-        if (!settings && !empty)
-            goto done;
+        if (!settings && !empty) goto done;
         mcp_note("[%d/%d] %s", i + 1, list->count, stage->name);
         /* the stage's title: heads the sections it makes (its type checked before) */
         const char *title = NULL;
@@ -1184,13 +1138,12 @@ mcp_job_run_file(const char *path, const mcp_stage *const *stages,
         }
     }
     /* the report names the folder where it will be */
-    if (mcp__outdir_fix_paths(&whole, mcp_report_json(job->report)) || write_report(job) ||
-        mcp__outdir_commit(&whole))
+    if (mcp__outdir_fix_paths(&whole, mcp_report_json(job->report)) ||
+        write_report(job) || mcp__outdir_commit(&whole))
         goto done;
     if (job->opt.json_stdout) {
         char *json = cJSON_Print(mcp_report_json(job->report));
-        if (json)
-            puts(json);
+        if (json) puts(json);
         free(json);
     }
     mcp_note("results in %s (report.html, report.json)", whole.final);

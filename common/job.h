@@ -38,13 +38,13 @@ typedef enum { MCP_NODE_SCALAR, MCP_NODE_SEQ, MCP_NODE_MAP } mcp_node_kind;
 
 typedef struct mcp_node {
     mcp_node_kind kind;
-    int line, column;         /* 1-based position in the file */
-    const char *file;         /* the file's path (shared, owned by the root) */
-    char *value;              /* MCP_NODE_SCALAR: the text */
-    int quoted;               /* scalar was quoted (so "1" is a string) */
-    int count;                /* SEQ: items; MAP: pairs */
-    struct mcp_node **items;  /* SEQ items, or MAP values */
-    struct mcp_node **keys;   /* MAP keys (scalar nodes) */
+    int line, column;        /* 1-based position in the file */
+    const char *file;        /* the file's path (shared, owned by the root) */
+    char *value;             /* MCP_NODE_SCALAR: the text */
+    int quoted;              /* scalar was quoted (so "1" is a string) */
+    int count;               /* SEQ: items; MAP: pairs */
+    struct mcp_node **items; /* SEQ items, or MAP values */
+    struct mcp_node **keys;  /* MAP keys (scalar nodes) */
 } mcp_node;
 
 MCP_API int mcp_yaml_parse_file(const char *path, mcp_node **out);
@@ -57,7 +57,7 @@ MCP_API const mcp_node *mcp_node_get(const mcp_node *map, const char *key);
 /* Fails with "FILE:LINE: unknown key 'K' in WHAT (known: a, b, c)" when the map has a
  * key not in allowed (NULL-terminated). Also fails when node is not a map. */
 MCP_API int mcp_node_check_keys(const mcp_node *map, const char *const *allowed,
-                                 const char *what);
+                                const char *what);
 
 /* Typed reads of a scalar, each failing with "FILE:LINE: KEY must be ... (got 'V')".
  * `key` is only for the message. */
@@ -87,8 +87,8 @@ typedef struct mcp_job mcp_job;
 
 typedef struct mcp_stage {
     const char *name;
-    const char *summary;            /* one line for `mcpost run --list` */
-    const char *const *keys;        /* allowed settings keys, NULL-terminated */
+    const char *summary;     /* one line for `mcpost run --list` */
+    const char *const *keys; /* allowed settings keys, NULL-terminated */
     /* settings is the stage's map (never NULL: an empty map when none given) */
     int (*run)(mcp_job *job, const mcp_node *settings);
     /* Checks the settings as run would read them, without running: every key's type
@@ -101,11 +101,11 @@ typedef struct mcp_stage {
 } mcp_stage;
 
 typedef struct mcp_job_options {
-    const char *output_dir;   /* overrides the job's `output:` [NULL] */
-    int json_stdout;          /* print the report JSON on stdout when done [0] */
-    int quiet;                /* no progress on stderr [0] */
-    int frame;                /* the frame to run, of a job with frames: [-1: none]; its
-                               * results go to <output>/<frame, 4 digits>/ (frames.h) */
+    const char *output_dir; /* overrides the job's `output:` [NULL] */
+    int json_stdout;        /* print the report JSON on stdout when done [0] */
+    int quiet;              /* no progress on stderr [0] */
+    int frame;              /* the frame to run, of a job with frames: [-1: none]; its
+                             * results go to <output>/<frame, 4 digits>/ (frames.h) */
 } mcp_job_options;
 
 MCP_API mcp_job_options mcp_job_defaults(void);

@@ -71,7 +71,9 @@ mcp_metrics_set_percentiles(mcp_metrics_options *opt, const double *p, int n_p)
 const char *
 mcp_above_map_name(mcp_above_map m)
 {
-    return m == MCP_ABOVE_FLIP_LDR ? "flip_ldr" : m == MCP_ABOVE_FLIP_HDR ? "flip_hdr" : "relse";
+    return m == MCP_ABOVE_FLIP_LDR   ? "flip_ldr"
+           : m == MCP_ABOVE_FLIP_HDR ? "flip_hdr"
+                                     : "relse";
 }
 
 int
@@ -82,7 +84,8 @@ mcp_above_map_from_name(const char *name, mcp_above_map *out)
             *out = (mcp_above_map)m;
             return 0;
         }
-    return mcp_error("unknown per-pixel map '%s' (use flip_ldr, flip_hdr or relse)", name);
+    return mcp_error("unknown per-pixel map '%s' (use flip_ldr, flip_hdr or relse)",
+                     name);
 }
 
 int
@@ -215,7 +218,8 @@ mean_error(const mcp_image *t, const int *it, const mcp_image *r, const int *ir,
                     double a = pt[it[c]], b = pr[ir[c]], d;
                     if (kind == SUM_SRGB) {
                         if (!disp) continue;
-                        d = (double)disp[(size_t)c * w + x] - disp[(size_t)(3 + c) * w + x];
+                        d = (double)disp[(size_t)c * w + x] -
+                            disp[(size_t)(3 + c) * w + x];
                         s += d * d;
                     } else {
                         d = a - b;
@@ -499,7 +503,6 @@ fused_pass(const mcp_image *t, const int *it, const mcp_image *r, const int *ir,
     return 0;
 }
 
-
 void
 mcp_metrics_maps_free(mcp_metrics_maps *maps)
 {
@@ -579,13 +582,17 @@ mcp_metrics_compute(const mcp_image *test, const mcp_image *ref,
         goto done;
     if (opt->flip_ldr) {
         if (mcp_flip_ldr(test, ref, &opt->flip, &out->flip_ldr,
-                         maps ? &maps->flip_ldr : above_ldr ? &own_ldr : NULL))
+                         maps        ? &maps->flip_ldr
+                         : above_ldr ? &own_ldr
+                                     : NULL))
             goto done;
         out->has_flip_ldr = 1;
     }
     if (opt->flip_hdr) {
         if (mcp_flip_hdr(test, ref, &opt->flip, &out->flip_hdr,
-                         maps ? &maps->flip_hdr : above_hdr ? &own_hdr : NULL,
+                         maps        ? &maps->flip_hdr
+                         : above_hdr ? &own_hdr
+                                     : NULL,
                          maps ? &maps->flip_hdr_exposure : NULL))
             goto done;
         out->has_flip_hdr = 1;
@@ -822,10 +829,12 @@ mcp_metrics_write_maps(const mcp_metrics_maps *maps, const char *dir, const char
         return -1;
     if (maps->flip_hdr_exposure &&
         emit(&o, maps->flip_hdr_exposure, "flip_hdr_exposure", 1, 0, 0.0, 1.0,
-             MCP_COLORMAP_VIRIDIS, 0, "HDR-FLIP: the exposure where each pixel's error is largest",
+             MCP_COLORMAP_VIRIDIS, 0,
+             "HDR-FLIP: the exposure where each pixel's error is largest",
              "0: the start exposure, 1: the stop exposure (flip_hdr in the figures)"))
         return -1;
-    if (maps->sq_error && emit(&o, maps->sq_error, "sq_error", 1, -1, 0, 0, 0, 0, NULL, NULL))
+    if (maps->sq_error &&
+        emit(&o, maps->sq_error, "sq_error", 1, -1, 0, 0, 0, 0, NULL, NULL))
         return -1;
     if (maps->relse) {
         if (emit(&o, maps->relse, "relse", 1, -1, 0, 0, 0, 0, NULL, NULL)) return -1;

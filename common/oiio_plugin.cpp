@@ -19,8 +19,7 @@ fail(char *err, size_t cap, const std::string &msg)
 {
     std::string line = msg;
     for (char &ch : line)
-        if (ch == '\n')
-            ch = ' ';
+        if (ch == '\n') ch = ' ';
     while (!line.empty() && line.back() == ' ')
         line.pop_back();
     std::snprintf(err, cap, "%s", line.c_str());
@@ -33,8 +32,7 @@ mcp_oiio_plugin_read(const char *path, int *w, int *h, int *c, float **data,
 {
     try {
         auto in = ImageInput::open(path);
-        if (!in)
-            return fail(err, err_cap, std::string(path) + ": " + OIIO::geterror());
+        if (!in) return fail(err, err_cap, std::string(path) + ": " + OIIO::geterror());
         const ImageSpec &spec = in->spec();
         if (spec.width < 1 || spec.height < 1 || spec.nchannels < 1 || spec.depth > 1)
             return fail(err, err_cap, std::string(path) + ": unsupported image shape");
@@ -75,8 +73,7 @@ mcp_oiio_plugin_write(const char *path, int w, int h, int c, const float *data, 
 {
     try {
         auto out = ImageOutput::create(path);
-        if (!out)
-            return fail(err, err_cap, std::string(path) + ": " + OIIO::geterror());
+        if (!out) return fail(err, err_cap, std::string(path) + ": " + OIIO::geterror());
         ImageSpec spec(w, h, c, bits == 8 ? TypeDesc::UINT8 : TypeDesc::FLOAT);
         if (!out->open(path, spec))
             return fail(err, err_cap, std::string(path) + ": " + out->geterror());

@@ -2,8 +2,8 @@
  *
  * A command that writes a folder (estimate -o, blend -o, perceptual -o, compare -o,
  * metrics -o, adaptive -o, and the job runner's output: folder, a frame's folder of a
- * shot) writes it under a hidden temporary name beside it, ".NAME.tmp-PID", and renames it
- * into place once every file is written. A failed command removes its temporary
+ * shot) writes it under a hidden temporary name beside it, ".NAME.tmp-PID", and renames
+ * it into place once every file is written. A failed command removes its temporary
  * folder; one stopped by SIGINT, SIGTERM or SIGHUP removes it in the signal handler;
  * one killed outright (SIGKILL, a crash) leaves it, hidden, and the next command that
  * writes a folder beside it removes it (its process is gone). So DIR is either absent,
@@ -142,39 +142,45 @@ begin(mcp__outdir *o, const char *dir, int owned)
     size_t n = strlen(dir);
     while (n > 1 && dir[n - 1] == '/') /* "out/est/" is "out/est" */
         n--;
-    if (n == 0 || n >= sizeof o->final - 64) return mcp_error("output folder name too long or empty");
+    if (n == 0 || n >= sizeof o->final - 64)
+        return mcp_error("output folder name too long or empty");
     memcpy(o->final, dir, n);
     o->final[n] = 0;
     const char *slash = strrchr(o->final, '/');
     const char *base = slash ? slash + 1 : o->final;
     if (!*base || !strcmp(base, ".") || !strcmp(base, ".."))
-        return mcp_error("%s: the output must be a folder of its own (it is written whole "
-                         "and renamed into place), e.g. %s/out",
-                         dir, dir);
+        return mcp_error(
+            "%s: the output must be a folder of its own (it is written whole "
+            "and renamed into place), e.g. %s/out",
+            dir, dir);
     char parent[4096];
     if (slash) {
-        snprintf(parent, sizeof parent, "%.*s", slash == o->final ? 1 : (int)(slash - o->final),
-                 o->final);
+        snprintf(parent, sizeof parent, "%.*s",
+                 slash == o->final ? 1 : (int)(slash - o->final), o->final);
     } else {
         snprintf(parent, sizeof parent, ".");
     }
     struct stat st;
     if (stat(o->final, &st) == 0) {
         if (!S_ISDIR(st.st_mode))
-            return mcp_error("%s: exists and is not a folder; give another output", o->final);
-        if (!owned && !replaceable(o->final))
-            return mcp_error("%s: exists and is not an mcpost output (no report.json); give "
-                             "a new folder, or remove this one",
+            return mcp_error("%s: exists and is not a folder; give another output",
                              o->final);
+        if (!owned && !replaceable(o->final))
+            return mcp_error(
+                "%s: exists and is not an mcpost output (no report.json); give "
+                "a new folder, or remove this one",
+                o->final);
     }
     if (mcp_make_dirs(parent)) return -1;
     mcp__outdir_clear_stale(parent, base);
     snprintf(o->tmp, sizeof o->tmp, "%s/.%s.tmp-%d", parent, base, (int)getpid());
     remove_tree(o->tmp); /* ours from an earlier call in this process, if any */
     if (mkdir(o->tmp, 0777) != 0)
-        return mcp_error("%s: cannot create the output folder: %s", o->final, strerror(errno));
+        return mcp_error("%s: cannot create the output folder: %s", o->final,
+                         strerror(errno));
     /* the handler of imageio.c removes the files in flight, then calls on_signal */
-    memcpy(in_flight, o->tmp, sizeof o->tmp < sizeof in_flight ? sizeof o->tmp : sizeof in_flight);
+    memcpy(in_flight, o->tmp,
+           sizeof o->tmp < sizeof in_flight ? sizeof o->tmp : sizeof in_flight);
     in_flight[sizeof in_flight - 1] = 0;
     have_in_flight = 1;
     mcp__signal_cleanup_hook(on_signal);
@@ -202,8 +208,8 @@ mcp__outdir_commit(mcp__outdir *o)
     int rc = 0;
     if (lstat(o->final, &st) != 0) {
         if (rename(o->tmp, o->final) != 0)
-            rc = mcp_error("%s: cannot rename the finished folder into place: %s", o->final,
-                           strerror(errno));
+            rc = mcp_error("%s: cannot rename the finished folder into place: %s",
+                           o->final, strerror(errno));
     } else if (renameat2(AT_FDCWD, o->tmp, AT_FDCWD, o->final, RENAME_EXCHANGE) == 0) {
         have_in_flight = 0;
         remove_tree(o->tmp); /* the old folder, under the temporary name now */
@@ -211,14 +217,15 @@ mcp__outdir_commit(mcp__outdir *o)
         /* no atomic swap on this file system: the old one away, the new one in */
         char old[sizeof o->tmp + 8];
         const char *slash = strrchr(o->final, '/');
-        snprintf(old, sizeof old, "%.*s.%s.old-%d", slash ? (int)(slash - o->final + 1) : 0,
-                 o->final, slash ? slash + 1 : o->final, (int)getpid());
+        snprintf(old, sizeof old, "%.*s.%s.old-%d",
+                 slash ? (int)(slash - o->final + 1) : 0, o->final,
+                 slash ? slash + 1 : o->final, (int)getpid());
         if (rename(o->final, old) != 0)
             rc = mcp_error("%s: cannot move the old folder away: %s", o->final,
                            strerror(errno));
         else if (rename(o->tmp, o->final) != 0) {
-            rc = mcp_error("%s: cannot rename the finished folder into place: %s", o->final,
-                           strerror(errno));
+            rc = mcp_error("%s: cannot rename the finished folder into place: %s",
+                           o->final, strerror(errno));
             rename(old, o->final); /* the old one back */
         } else
             remove_tree(old);

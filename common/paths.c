@@ -1,6 +1,7 @@
 /* paths.c: where mcpost's own files are -- the plug-ins (imageio.c, cv.c) and data
- * files such as OIDN's weights (estimate/denoise_unet.c) -- relative to the code itself, so that an
- * installed tree can move, then the build tree and the configured install folders. */
+ * files such as OIDN's weights (estimate/denoise_unet.c) -- relative to the code itself,
+ * so that an installed tree can move, then the build tree and the configured install
+ * folders. */
 #define _GNU_SOURCE /* dladdr */
 #include "internal.h"
 
@@ -15,11 +16,9 @@ mcp__code_dir(char *buf, size_t cap)
 {
     Dl_info info;
     buf[0] = '\0';
-    if (!dladdr((void *)&mcp__code_dir, &info) || !info.dli_fname)
-        return -1;
+    if (!dladdr((void *)&mcp__code_dir, &info) || !info.dli_fname) return -1;
     const char *slash = strrchr(info.dli_fname, '/');
-    if (!slash)
-        return -1;
+    if (!slash) return -1;
     snprintf(buf, cap, "%.*s", (int)(slash - info.dli_fname), info.dli_fname);
     return 0;
 }
@@ -37,11 +36,9 @@ mcp__find_data_file(const char *name, char *buf, size_t cap)
     }
     const char *dirs[] = {from_lib, from_bin, MCP_DATA_BUILD_DIR, MCP_DATA_INSTALL_DIR};
     for (size_t i = 0; i < sizeof dirs / sizeof *dirs; i++) {
-        if (!*dirs[i])
-            continue;
+        if (!*dirs[i]) continue;
         snprintf(buf, cap, "%s/%s", dirs[i], name);
-        if (access(buf, R_OK) == 0)
-            return 0;
+        if (access(buf, R_OK) == 0) return 0;
     }
     buf[0] = '\0';
     return -1;
@@ -61,18 +58,14 @@ mcp__plugin_open(const char *file, char *err, size_t cap)
     size_t n = 0;
     err[0] = '\0';
     for (size_t i = 0; i < sizeof dirs / sizeof *dirs; i++) {
-        if (!dirs[i] || !*dirs[i])
-            continue;
+        if (!dirs[i] || !*dirs[i]) continue;
         char path[4200];
         snprintf(path, sizeof path, "%s/%s", dirs[i], file);
-        if (access(path, R_OK) != 0)
-            continue;
+        if (access(path, R_OK) != 0) continue;
         void *h = dlopen(path, RTLD_NOW | RTLD_LOCAL);
-        if (h)
-            return h;
+        if (h) return h;
         n += (size_t)snprintf(err + n, n < cap ? cap - n : 0, "%s; ", dlerror());
     }
-    if (!n)
-        snprintf(err, cap, "%s not found (set MCPOST_PLUGIN_DIR)", file);
+    if (!n) snprintf(err, cap, "%s not found (set MCPOST_PLUGIN_DIR)", file);
     return NULL;
 }

@@ -79,8 +79,7 @@ read_stream(FILE *f, const char *path, mcp_image **out)
             mcp_error("%s: truncated PFM data (row %d of %d missing)", path, h - y, h);
             goto done;
         }
-    if ((scale < 0) != host_is_little_endian())
-        swap_floats(img->data, row * (size_t)h);
+    if ((scale < 0) != host_is_little_endian()) swap_floats(img->data, row * (size_t)h);
     *out = img;
     img = NULL;
     rc = 0;
@@ -94,8 +93,7 @@ mcp__pfm_read(const char *path, mcp_image **out)
 {
     *out = NULL;
     FILE *f = fopen(path, "rb");
-    if (!f)
-        return mcp_error("%s: cannot open", path);
+    if (!f) return mcp_error("%s: cannot open", path);
     int rc = read_stream(f, path, out);
     fclose(f);
     return rc;
@@ -105,13 +103,11 @@ int
 mcp__pfm_read_memory(const void *data, size_t size, const char *name, mcp_image **out)
 {
     *out = NULL;
-    if (!data || !size)
-        return mcp_error("%s: not a PFM file (bad header)", name);
+    if (!data || !size) return mcp_error("%s: not a PFM file (bad header)", name);
     /* a read-only stream over the caller's bytes, so that one parser serves both; "r"
        never writes through the cast-away const */
     FILE *f = fmemopen((void *)(uintptr_t)data, size, "rb");
-    if (!f)
-        return mcp_error("%s: cannot read from memory", name);
+    if (!f) return mcp_error("%s: cannot read from memory", name);
     int rc = read_stream(f, name, out);
     fclose(f);
     return rc;
@@ -124,8 +120,7 @@ mcp__pfm_write(const mcp_image *img, const char *path)
         return mcp_error("%s: PFM holds 1 or 3 channels, not %d (pick channels first)",
                          path, img->channels);
     FILE *f = fopen(path, "wb");
-    if (!f)
-        return mcp_error("%s: cannot create", path);
+    if (!f) return mcp_error("%s: cannot create", path);
     size_t row = (size_t)img->width * img->channels;
     float *buf = mcp_malloc(row * sizeof(float));
     int ok = buf != NULL;
@@ -138,7 +133,6 @@ mcp__pfm_write(const mcp_image *img, const char *path)
         ok = fwrite(buf, sizeof(float), row, f) == row;
     }
     free(buf);
-    if (fclose(f) != 0 || !ok)
-        return mcp_error("%s: write failed (disk full?)", path);
+    if (fclose(f) != 0 || !ok) return mcp_error("%s: write failed (disk full?)", path);
     return 0;
 }

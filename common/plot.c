@@ -394,8 +394,9 @@ mcp_plot_svg(const mcp_plot *p, char **svg)
         if (ps->style == MCP_SERIES_BARS) {
             double half = 0.5 * bar_width(ps);
             double foot = p->y_scale == MCP_AXIS_LINEAR ? to_px(&ay, 0.0) : ay.a0;
-            sb_printf(&b, "<g fill=\"%s\" fill-opacity=\"0.45\" stroke=\"%s\" "
-                          "stroke-width=\"0.6\">\n",
+            sb_printf(&b,
+                      "<g fill=\"%s\" fill-opacity=\"0.45\" stroke=\"%s\" "
+                      "stroke-width=\"0.6\">\n",
                       colour, colour);
             for (int i = 0; i < ps->n; i++) {
                 if (!valid(p->x_scale, ps->x[i]) || !valid(p->y_scale, ps->y[i]) ||
@@ -403,9 +404,9 @@ mcp_plot_svg(const mcp_plot *p, char **svg)
                     continue;
                 double x0 = to_px(&ax, ps->x[i] - half), x1 = to_px(&ax, ps->x[i] + half);
                 double y = to_px(&ay, ps->y[i]);
-                sb_printf(&b,
-                          "<rect x=\"%.2f\" y=\"%.2f\" width=\"%.2f\" height=\"%.2f\"/>\n",
-                          x0, y < foot ? y : foot, x1 - x0, fabs(foot - y));
+                sb_printf(
+                    &b, "<rect x=\"%.2f\" y=\"%.2f\" width=\"%.2f\" height=\"%.2f\"/>\n",
+                    x0, y < foot ? y : foot, x1 - x0, fabs(foot - y));
             }
             sb_printf(&b, "</g>\n");
             continue;

@@ -61,8 +61,8 @@ mcp__png_read(const char *path, const mcp_read_options *opt, mcp_image **out)
         return mcp_error("%s: cannot open", path);
     }
     png_ctx ctx = {path, ""};
-    png_structp png = png_create_read_struct(PNG_LIBPNG_VER_STRING, &ctx, on_error,
-                                             on_warning);
+    png_structp png =
+        png_create_read_struct(PNG_LIBPNG_VER_STRING, &ctx, on_error, on_warning);
     png_infop info = png ? png_create_info_struct(png) : NULL;
     unsigned char *volatile pixels = NULL;
     png_bytep *volatile rows = NULL;

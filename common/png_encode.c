@@ -89,12 +89,16 @@ filter_row(const unsigned char *row, const unsigned char *up, int n, int bpp,
                                                                    : x - b);
     }
     switch (f) {
-    case FILTER_NONE: memcpy(o + first, row + first, (size_t)(n - first)); break;
+    case FILTER_NONE:
+        memcpy(o + first, row + first, (size_t)(n - first));
+        break;
     case FILTER_SUB:
-        for (int i = first; i < n; i++) o[i] = (unsigned char)(row[i] - row[i - bpp]);
+        for (int i = first; i < n; i++)
+            o[i] = (unsigned char)(row[i] - row[i - bpp]);
         break;
     case FILTER_UP:
-        for (int i = first; i < n; i++) o[i] = (unsigned char)(row[i] - up[i]);
+        for (int i = first; i < n; i++)
+            o[i] = (unsigned char)(row[i] - up[i]);
         break;
     case FILTER_AVERAGE:
         for (int i = first; i < n; i++)
@@ -103,8 +107,8 @@ filter_row(const unsigned char *row, const unsigned char *up, int n, int bpp,
     default:
 #pragma omp simd
         for (int i = first; i < n; i++)
-            o[i] = (unsigned char)(row[i] - paeth_predictor(row[i - bpp], up[i],
-                                                              up[i - bpp]));
+            o[i] = (unsigned char)(row[i] -
+                                   paeth_predictor(row[i - bpp], up[i], up[i - bpp]));
     }
 }
 
@@ -168,7 +172,8 @@ mcp__png_write_bytes(const unsigned char *bytes, int w, int h, int c, const char
         mcp_error("%s: cannot create", path);
         goto done;
     }
-    static const unsigned char signature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+    static const unsigned char signature[8] = {0x89, 'P',  'N',  'G',
+                                               '\r', '\n', 0x1a, '\n'};
     unsigned char ihdr[13] = {0};
     put_u32(ihdr, (uint32_t)w);
     put_u32(ihdr + 4, (uint32_t)h);

@@ -46,16 +46,14 @@ mcp_progress_begin(mcp_progress *p, const char *label, long total)
     p->total = total > 0 ? total : 1;
     p->tty = isatty(STDERR_FILENO);
     p->last_shown = -1;
-    if (!quiet && p->tty)
-        show(p, 0);
+    if (!quiet && p->tty) show(p, 0);
 }
 
 void
 mcp_progress_update(mcp_progress *p, long done)
 {
     p->done = done;
-    if (quiet)
-        return;
+    if (quiet) return;
     int percent = (int)(100 * (done < p->total ? done : p->total) / p->total);
     /* a terminal redraws each percent; a log gets a line per quarter */
     int step = p->tty ? 1 : 25;
@@ -66,19 +64,15 @@ mcp_progress_update(mcp_progress *p, long done)
 void
 mcp_progress_end(mcp_progress *p)
 {
-    if (quiet)
-        return;
-    if (p->last_shown < 100)
-        show(p, 100);
-    if (p->tty)
-        fputc('\n', stderr);
+    if (quiet) return;
+    if (p->last_shown < 100) show(p, 100);
+    if (p->tty) fputc('\n', stderr);
 }
 
 void
 mcp_note(const char *fmt, ...)
 {
-    if (quiet)
-        return;
+    if (quiet) return;
     va_list ap;
     va_start(ap, fmt);
     fputs("mcpost: ", stderr);

@@ -38,8 +38,7 @@ mcp_increment_defaults(void)
 int
 mcp_variance_pool_radius(double dof, double min_dof)
 {
-    if (!(dof > 0) || dof >= min_dof)
-        return 0;
+    if (!(dof > 0) || dof >= min_dof) return 0;
     /* the smallest odd window side 2r + 1 with dof (2r + 1)² >= min_dof */
     int side = (int)ceil(sqrt(min_dof / dof));
     return side / 2;
@@ -48,7 +47,8 @@ mcp_variance_pool_radius(double dof, double min_dof)
 static int
 new3(const mcp_image *like, const char *a, const char *b, const char *c, mcp_image **out)
 {
-    return mcp_image_new(like->width, like->height, 3, (const char *const[]){a, b, c}, out);
+    return mcp_image_new(like->width, like->height, 3, (const char *const[]){a, b, c},
+                         out);
 }
 
 /* ---- merging ---- */
@@ -70,8 +70,7 @@ add_spread(double w, const double dev[3], double ss[3], double sc[3])
 static int
 check_parts(const mcp_dump *const *parts, int count, const mcp_merge_options *opt)
 {
-    if (count < 1)
-        return mcp_error("merge: no dumps given");
+    if (count < 1) return mcp_error("merge: no dumps given");
     if (opt->variance == MCP_MERGE_REPLICATES && count < 2)
         return mcp_error("merge: replicates need at least 2 dumps (got 1): the spread "
                          "of one render says nothing");
@@ -83,7 +82,8 @@ check_parts(const mcp_dump *const *parts, int count, const mcp_merge_options *op
                              d->color->width, d->color->height, parts[0]->source,
                              c0->width, c0->height);
         if (!d->spp_map && !(d->spp > 0))
-            return mcp_error("merge: %s has no sample count (give it with spp)", d->source);
+            return mcp_error("merge: %s has no sample count (give it with spp)",
+                             d->source);
         if (opt->variance == MCP_MERGE_POOLED && !d->var_of_mean)
             return mcp_error("merge: %s has no variance, which pooling needs (merge it "
                              "as replicates instead)",
@@ -95,23 +95,22 @@ check_parts(const mcp_dump *const *parts, int count, const mcp_merge_options *op
 /* The weighted mean of one 3-channel part over all dumps (albedo, normal, colour),
  * or NULL when some dump lacks it (features) -- colour is always there. */
 static int
-merge_mean(const mcp_dump *const *parts, int count, size_t offset, const char *const *names,
-           mcp_image **out)
+merge_mean(const mcp_dump *const *parts, int count, size_t offset,
+           const char *const *names, mcp_image **out)
 {
     *out = NULL;
     for (int k = 0; k < count; k++)
-        if (!*(mcp_image *const *)((const char *)parts[k] + offset))
-            return 0;
+        if (!*(mcp_image *const *)((const char *)parts[k] + offset)) return 0;
     const mcp_image *c0 = parts[0]->color;
-    if (new3(c0, names[0], names[1], names[2], out))
-        return -1;
+    if (new3(c0, names[0], names[1], names[2], out)) return -1;
     mcp_image *m = *out;
 #pragma omp parallel for schedule(static)
     for (int y = 0; y < c0->height; y++)
         for (int x = 0; x < c0->width; x++) {
             double sum[3] = {0, 0, 0}, n = 0;
             for (int k = 0; k < count; k++) {
-                const mcp_image *part = *(mcp_image *const *)((const char *)parts[k] + offset);
+                const mcp_image *part =
+                    *(mcp_image *const *)((const char *)parts[k] + offset);
                 double nk = mcp_dump_spp_at(parts[k], x, y);
                 const float *v = mcp_image_px(part, x, y);
                 for (int c = 0; c < 3; c++)
@@ -139,8 +138,7 @@ merge_variance(const mcp_dump *const *parts, int count, const mcp_merge_options 
             for (int k = 0; k < count; k++) {
                 const mcp_dump *d = parts[k];
                 double nk = mcp_dump_spp_at(d, x, y);
-                if (!(nk > 0))
-                    continue;
+                if (!(nk > 0)) continue;
                 k_used++;
                 n += nk;
                 const float *v = mcp_image_px(d->color, x, y);
@@ -163,8 +161,9 @@ merge_variance(const mcp_dump *const *parts, int count, const mcp_merge_options 
             }
             /* replicates: Σ n_k dev² / (K - 1) estimates σ², the variance of the mean
                is σ² / N; pooled: M2 / (N - 1) is the per-sample variance, / N again */
-            double denom = opt->variance == MCP_MERGE_REPLICATES ? (double)(k_used - 1) * n
-                                                                 : (n - 1) * n;
+            double denom = opt->variance == MCP_MERGE_REPLICATES
+                               ? (double)(k_used - 1) * n
+                               : (n - 1) * n;
             float *o = mcp_image_px(var, x, y);
             float *oc = cov ? mcp_image_px(cov, x, y) : NULL;
             for (int c = 0; c < 3; c++)
@@ -184,8 +183,7 @@ merge_spp(const mcp_dump *const *parts, int count, mcp_dump *out)
         any_map |= parts[k]->spp_map != NULL;
         out->spp += parts[k]->spp;
     }
-    if (!any_map)
-        return 0;
+    if (!any_map) return 0;
     out->spp = 0;
     const mcp_image *c0 = parts[0]->color;
     if (mcp_image_new(c0->width, c0->height, 1, (const char *const[]){"SampleCount"},
@@ -206,14 +204,11 @@ mcp_dump_merge(const mcp_dump *const *parts, int count, const mcp_merge_options 
                mcp_dump **out)
 {
     mcp_merge_options defaults = mcp_merge_defaults();
-    if (!opt)
-        opt = &defaults;
+    if (!opt) opt = &defaults;
     *out = NULL;
-    if (check_parts(parts, count, opt))
-        return -1;
+    if (check_parts(parts, count, opt)) return -1;
     mcp_dump *d = mcp_calloc(1, sizeof *d);
-    if (!d)
-        return -1;
+    if (!d) return -1;
     static const char *const rgb[3] = {"R", "G", "B"}, *const xyz[3] = {"X", "Y", "Z"};
     int want_cov = opt->variance == MCP_MERGE_REPLICATES;
     for (int k = 0; k < count && !want_cov; k++)
@@ -247,13 +242,11 @@ mcp_dump_merge(const mcp_dump *const *parts, int count, const mcp_merge_options 
         for (int k = 0; k < count; k++)
             have_shape &= parts[k]->var_of_mean != NULL &&
                           mcp__variance_is_per_sample(parts[k]->variance_source);
-        if (have_shape && mcp_dump_merge(parts, count, &pooled, &shape))
-            goto fail;
+        if (have_shape && mcp_dump_merge(parts, count, &pooled, &shape)) goto fail;
         int rc = mcp_dump_pool_variance(d, shape ? shape->var_of_mean : NULL,
                                         opt->pool_radius);
         mcp_dump_free(shape);
-        if (rc)
-            goto fail;
+        if (rc) goto fail;
     }
     *out = d;
     return 0;
@@ -267,12 +260,10 @@ fail:
 int
 mcp_dump_pool_variance(mcp_dump *d, const mcp_image *shape, int radius)
 {
-    if (!d->var_of_mean)
-        return mcp_error("%s: no variance to pool", d->source);
+    if (!d->var_of_mean) return mcp_error("%s: no variance to pool", d->source);
     if (radius < 0)
         return mcp_error("variance pooling: radius must be >= 0 (got %d)", radius);
-    if (radius == 0)
-        return 0;
+    if (radius == 0) return 0;
     int w = d->var_of_mean->width, h = d->var_of_mean->height;
     if (shape && (shape->width != w || shape->height != h || shape->channels < 3))
         return mcp_error("variance pooling: the shape is %dx%d with %d channels, the "
@@ -293,8 +284,7 @@ mcp_dump_pool_variance(mcp_dump *d, const mcp_image *shape, int radius)
             double sv[3], ss[3] = {0, 0, 0};
             int n;
             mcp__window_sum(tv, w, h, x, y, radius, sv, &n);
-            if (ts)
-                mcp__window_sum(ts, w, h, x, y, radius, ss, &n);
+            if (ts) mcp__window_sum(ts, w, h, x, y, radius, ss, &n);
             /* the factor that turns the shape into the pooled level, per channel */
             double ratio[3];
             const float *sh = shape ? mcp_image_px(shape, x, y) : NULL;
@@ -302,7 +292,8 @@ mcp_dump_pool_variance(mcp_dump *d, const mcp_image *shape, int radius)
                 ratio[c] = ss[c] > 0 ? sv[c] / ss[c] : -1;
             float *v = mcp_image_px(d->var_of_mean, x, y);
             for (int c = 0; c < 3; c++)
-                v[c] = sh && ratio[c] >= 0 ? (float)(sh[c] * ratio[c]) : (float)(sv[c] / n);
+                v[c] =
+                    sh && ratio[c] >= 0 ? (float)(sh[c] * ratio[c]) : (float)(sv[c] / n);
             if (tc) {
                 /* the covariance as a pooled correlation times the pooled standard
                    deviations: Σ_W cov / sqrt(Σ_W V_a Σ_W V_b) is within [-1, 1]
@@ -331,16 +322,14 @@ done:
 
 int
 mcp_dump_increment_variance(const mcp_dump *const *members, int count,
-                            const mcp_increment_options *opt, mcp_dump **out, double *ratio)
+                            const mcp_increment_options *opt, mcp_dump **out,
+                            double *ratio)
 {
     mcp_increment_options defaults = mcp_increment_defaults();
-    if (!opt)
-        opt = &defaults;
+    if (!opt) opt = &defaults;
     *out = NULL;
-    if (ratio)
-        *ratio = 0;
-    if (count < 1)
-        return mcp_error("increments: no members given");
+    if (ratio) *ratio = 0;
+    if (count < 1) return mcp_error("increments: no members given");
     for (int k = 0; k < count; k++) {
         const mcp_dump *d = members[k];
         if (d->spp_map || !(d->spp > 0))
@@ -371,19 +360,19 @@ mcp_dump_increment_variance(const mcp_dump *const *members, int count,
     const mcp_image *X = last->color;
     mcp_image *shape = NULL;
     mcp_dump *d = mcp_calloc(1, sizeof *d);
-    if (!d)
-        return -1;
+    if (!d) return -1;
     /* the member itself, with the variance replaced */
     if (mcp_image_copy(last->color, &d->color) ||
         (last->albedo && mcp_image_copy(last->albedo, &d->albedo)) ||
         (last->normal && mcp_image_copy(last->normal, &d->normal)) ||
-        !(d->source = mcp_strdup(last->source)) || mcp_attrs_copy(&last->attrs, &d->attrs) ||
-        new3(X, "R", "G", "B", &d->var_of_mean) || new3(X, "RG", "RB", "GB", &d->cov_of_mean))
+        !(d->source = mcp_strdup(last->source)) ||
+        mcp_attrs_copy(&last->attrs, &d->attrs) ||
+        new3(X, "R", "G", "B", &d->var_of_mean) ||
+        new3(X, "RG", "RB", "GB", &d->cov_of_mean))
         goto fail;
     d->spp = n;
     d->convention = last->convention;
-    if (last->var_of_mean &&
-        mcp__variance_is_per_sample(last->variance_source) &&
+    if (last->var_of_mean && mcp__variance_is_per_sample(last->variance_source) &&
         mcp_image_copy(last->var_of_mean, &shape))
         goto fail;
 #pragma omp parallel for schedule(static)
@@ -397,7 +386,8 @@ mcp_dump_increment_variance(const mcp_dump *const *members, int count,
                    means */
                 const float *xb = mcp_image_px(members[b]->color, x, y);
                 double nb = members[b]->spp, np = b == first ? 0 : members[b - 1]->spp;
-                const float *xp = b == first ? NULL : mcp_image_px(members[b - 1]->color, x, y);
+                const float *xp =
+                    b == first ? NULL : mcp_image_px(members[b - 1]->color, x, y);
                 double size = nb - np, dev[3];
                 for (int c = 0; c < 3; c++)
                     dev[c] = (xp ? (nb * xb[c] - np * xp[c]) / size : xb[c]) - xm[c];
@@ -427,8 +417,7 @@ mcp_dump_increment_variance(const mcp_dump *const *members, int count,
     int radius = opt->pool_radius > 0    ? opt->pool_radius
                  : opt->pool_radius == 0 ? mcp_variance_pool_radius(blocks - 1, 100)
                                          : 0;
-    if (mcp_dump_pool_variance(d, shape, radius))
-        goto fail;
+    if (mcp_dump_pool_variance(d, shape, radius)) goto fail;
     mcp_image_free(shape);
     *out = d;
     return 0;
@@ -442,10 +431,10 @@ int
 mcp_series_variance_ratio(const mcp_series *s, double *ratio)
 {
     *ratio = 0;
-    if (s->count < 2)
-        return 0;
+    if (s->count < 2) return 0;
     mcp_series plain = *s;
-    plain.variance_from = MCP_SERIES_VARIANCE_FILE; /* the files' own variance is the shape */
+    plain.variance_from =
+        MCP_SERIES_VARIANCE_FILE; /* the files' own variance is the shape */
     mcp_increment_options io = s->increments;
     io.pool_radius = -1; /* the ratio is image-wide: no pooling needed */
     mcp_dump *incr = NULL, *last = NULL;
@@ -456,19 +445,18 @@ mcp_series_variance_ratio(const mcp_series *s, double *ratio)
     /* nothing to measure, unless a member could not be read at all or memory ran out
        (which says nothing about the series; tests/common/test_alloc) */
     *ratio = 0;
-    if (strstr(mcp_error_message(), "out of memory"))
-        return -1;
+    if (strstr(mcp_error_message(), "out of memory")) return -1;
     int unreadable = mcp__series_load_file(s, s->count - 1, &last);
     mcp_dump_free(last);
-    if (unreadable)
-        return -1;
+    if (unreadable) return -1;
     mcp_error_clear();
     return 0;
 }
 
 int
-mcp_series_increment_variance(const mcp_series *s, int i, const mcp_increment_options *opt,
-                              mcp_dump **out, double *ratio)
+mcp_series_increment_variance(const mcp_series *s, int i,
+                              const mcp_increment_options *opt, mcp_dump **out,
+                              double *ratio)
 {
     *out = NULL;
     if (i < 0 || i >= s->count)
@@ -487,8 +475,7 @@ mcp__series_increments_with(const mcp_series *s, int i, const mcp_dump *member,
 {
     *out = NULL;
     const mcp_dump **m = mcp_calloc((size_t)i + 1, sizeof *m);
-    if (!m)
-        return -1;
+    if (!m) return -1;
     int rc = 0;
     for (int k = 0; k < i && !rc; k++) {
         mcp_dump *d = NULL;

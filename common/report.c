@@ -151,11 +151,13 @@ mcp_report_add_map(cJSON *section, const char *rel_path, const char *caption,
         return NULL;
     }
     if (mcp_report_add_image(section, rel_path, caption)) return NULL;
-    cJSON *img = cJSON_GetArrayItem(cJSON_GetObjectItem(section, "images"),
-                                    cJSON_GetArraySize(cJSON_GetObjectItem(section, "images")) - 1);
+    cJSON *img = cJSON_GetArrayItem(
+        cJSON_GetObjectItem(section, "images"),
+        cJSON_GetArraySize(cJSON_GetObjectItem(section, "images")) - 1);
     cJSON *sc = cJSON_AddObjectToObject(img, "scale");
     if (!sc || !cJSON_AddStringToObject(sc, "colormap", name) ||
-        !cJSON_AddNumberToObject(sc, "min", lo) || !cJSON_AddNumberToObject(sc, "max", hi) ||
+        !cJSON_AddNumberToObject(sc, "min", lo) ||
+        !cJSON_AddNumberToObject(sc, "max", hi) ||
         !cJSON_AddStringToObject(sc, "axis", mcp_axis_scale_name(axis)) ||
         !cJSON_AddStringToObject(sc, "unit", unit ? unit : "")) {
         oom();
@@ -186,7 +188,8 @@ int
 mcp_report_set_verdict(cJSON *section, mcp_verdict level, const char *fmt, ...)
 {
     static const char *const levels[] = {"info", "good", "bad"};
-    if ((unsigned)level > MCP_VERDICT_BAD) return mcp_error("report: unknown verdict level");
+    if ((unsigned)level > MCP_VERDICT_BAD)
+        return mcp_error("report: unknown verdict level");
     char text[1024];
     va_list ap;
     va_start(ap, fmt);

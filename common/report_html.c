@@ -267,7 +267,8 @@ render_records(sbuf *b, const cJSON *o, int depth)
         if (!row) break;
         cJSON_AddStringToObject(row, "", m->string);
         const cJSON *f;
-        cJSON_ArrayForEach(f, m) cJSON_AddItemToObject(row, f->string, cJSON_Duplicate(f, 0));
+        cJSON_ArrayForEach(f, m)
+            cJSON_AddItemToObject(row, f->string, cJSON_Duplicate(f, 0));
         cJSON_AddItemToArray(records, row);
     }
     render_object_list(b, records, depth);
@@ -331,13 +332,15 @@ render_value(sbuf *b, const cJSON *v, int depth)
 static int
 is_reserved(const cJSON *section, const char *key)
 {
-    static const char *const reserved[] = {"title",  "stage",   "tables",   "images",
-                                           "plots",  "verdict", "json_only"};
+    static const char *const reserved[] = {"title", "stage",   "tables",   "images",
+                                           "plots", "verdict", "json_only"};
     for (size_t i = 0; i < sizeof reserved / sizeof *reserved; i++)
         if (!strcmp(key, reserved[i])) return 1;
     const cJSON *k;
-    cJSON_ArrayForEach(k, cJSON_GetObjectItem(section, "json_only"))
-    if (cJSON_IsString(k) && !strcmp(key, k->valuestring)) return 1;
+    cJSON_ArrayForEach(
+        k, cJSON_GetObjectItem(section,
+                               "json_only")) if (cJSON_IsString(k) &&
+                                                 !strcmp(key, k->valuestring)) return 1;
     return 0;
 }
 
@@ -559,9 +562,11 @@ read_rgbe(page_image *im, const char *path)
 static double
 bar_value(const cJSON *scale, double t)
 {
-    const cJSON *lo = cJSON_GetObjectItem(scale, "min"), *hi = cJSON_GetObjectItem(scale, "max");
+    const cJSON *lo = cJSON_GetObjectItem(scale, "min"),
+                *hi = cJSON_GetObjectItem(scale, "max");
     const char *axis = json_string(scale, "axis");
-    double a = cJSON_IsNumber(lo) ? lo->valuedouble : 0, z = cJSON_IsNumber(hi) ? hi->valuedouble : 1;
+    double a = cJSON_IsNumber(lo) ? lo->valuedouble : 0,
+           z = cJSON_IsNumber(hi) ? hi->valuedouble : 1;
     if (axis && !strcmp(axis, "log") && a > 0 && z > 0)
         return pow(10.0, log10(a) + t * (log10(z) - log10(a)));
     return a + t * (z - a);
@@ -625,8 +630,9 @@ render_colour_bar(sbuf *b, const cJSON *scale)
         b->failed = 1;
         return;
     }
-    sb_str(b, "<div class=\"cbar\"><div class=\"ramp\" style=\"background:linear-gradient("
-              "to right");
+    sb_str(b,
+           "<div class=\"cbar\"><div class=\"ramp\" style=\"background:linear-gradient("
+           "to right");
     for (int i = 0; i < RAMP_STOPS; i++)
         sb_printf(b, ",#%02x%02x%02x %.1f%%", rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2],
                   100.0 * i / (RAMP_STOPS - 1));
@@ -636,7 +642,8 @@ render_colour_bar(sbuf *b, const cJSON *scale)
     {
         const cJSON *v = cJSON_GetObjectItem(m, "value");
         double t = cJSON_IsNumber(v) ? bar_position(scale, v->valuedouble) : NAN;
-        if (!isnan(t)) sb_printf(b, "<i class=\"mark\" style=\"left:%.2f%%\"></i>", 100 * t);
+        if (!isnan(t))
+            sb_printf(b, "<i class=\"mark\" style=\"left:%.2f%%\"></i>", 100 * t);
     }
     sb_str(b, "</div><div class=\"ticks\">");
     if (axis && !strcmp(axis, "log")) { /* every decade, at most 7 labels */
@@ -689,7 +696,8 @@ render_figure(sbuf *b, const page_image *im)
         if (im->scale) render_colour_bar(b, im->scale);
     } else {
         sb_printf(b, "<div class=\"noimg\">%s <code>",
-                  im->mime ? "missing or too large to embed:" : "not viewable in a browser:");
+                  im->mime ? "missing or too large to embed:"
+                           : "not viewable in a browser:");
         sb_text(b, im->rel);
         sb_str(b, "</code></div>");
     }
@@ -734,23 +742,27 @@ render_compare(sbuf *b, const page_image *ims, const int *members, int n)
     if (right < 0 || right == left) right = members[members[0] == left ? 1 : 0];
     const page_image *im = &ims[left];
     int k = upscale(im, COMPARE_PX), w = k * im->width;
-    sb_str(b, "<div class=\"compare\" hidden><div class=\"cmp-bar\">left <select class=\"cmp-a\">");
+    sb_str(b, "<div class=\"compare\" hidden><div class=\"cmp-bar\">left <select "
+              "class=\"cmp-a\">");
     render_options(b, ims, n, members, left);
     sb_str(b, "</select> right <select class=\"cmp-b\">");
     render_options(b, ims, n, members, right);
-    sb_str(b, "</select> zoom <select class=\"cmp-z\"><option>1</option><option>2</option>"
-              "<option>4</option><option>8</option></select></div>\n");
+    sb_str(b,
+           "</select> zoom <select class=\"cmp-z\"><option>1</option><option>2</option>"
+           "<option>4</option><option>8</option></select></div>\n");
+    sb_printf(
+        b,
+        "<div class=\"cmp-view\" style=\"width:%dpx;aspect-ratio:%d/%d\">"
+        "<div class=\"cmp-in\"><img class=\"px cmp-b\" alt=\"right\"></div>"
+        "<div class=\"cmp-clip\"><div class=\"cmp-in\"><img class=\"px cmp-a\" "
+        "alt=\"left\"></div></div><div class=\"cmp-line\"></div></div>\n"
+        "<input class=\"cmp-pos\" type=\"range\" min=\"0\" max=\"100\" step=\"0.5\" "
+        "value=\"50\" style=\"width:%dpx\" aria-label=\"split\">\n",
+        w, im->width, im->height, w);
     sb_printf(b,
-              "<div class=\"cmp-view\" style=\"width:%dpx;aspect-ratio:%d/%d\">"
-              "<div class=\"cmp-in\"><img class=\"px cmp-b\" alt=\"right\"></div>"
-              "<div class=\"cmp-clip\"><div class=\"cmp-in\"><img class=\"px cmp-a\" "
-              "alt=\"left\"></div></div><div class=\"cmp-line\"></div></div>\n"
-              "<input class=\"cmp-pos\" type=\"range\" min=\"0\" max=\"100\" step=\"0.5\" "
-              "value=\"50\" style=\"width:%dpx\" aria-label=\"split\">\n",
-              w, im->width, im->height, w);
-    sb_printf(b, "<p class=\"hint\">%d&times;%d px shown %d&times;: drag across the picture "
-                 "(or the slider) to move the split between left and right; with zoom "
-                 "both are magnified at the pointer.</p></div>\n",
+              "<p class=\"hint\">%d&times;%d px shown %d&times;: drag across the picture "
+              "(or the slider) to move the split between left and right; with zoom "
+              "both are magnified at the pointer.</p></div>\n",
               im->width, im->height, k);
 }
 
@@ -832,7 +844,8 @@ render_plots(sbuf *b, const cJSON *section)
     const cJSON *pj;
     cJSON_ArrayForEach(pj, cJSON_GetObjectItem(section, "plots"))
     {
-        const cJSON *xa = cJSON_GetObjectItem(pj, "x"), *ya = cJSON_GetObjectItem(pj, "y");
+        const cJSON *xa = cJSON_GetObjectItem(pj, "x"),
+                    *ya = cJSON_GetObjectItem(pj, "y");
         const char *title = json_string(pj, "title"), *xs = json_string(xa, "scale"),
                    *ys = json_string(ya, "scale");
         mcp_plot p = {0};
@@ -897,8 +910,8 @@ static int
 page_has_hdr(const cJSON *sections)
 {
     const cJSON *s, *im;
-    cJSON_ArrayForEach(s, sections) cJSON_ArrayForEach(im, cJSON_GetObjectItem(s, "images"))
-    if (json_string(im, "hdr")) return 1;
+    cJSON_ArrayForEach(s, sections) cJSON_ArrayForEach(
+        im, cJSON_GetObjectItem(s, "images")) if (json_string(im, "hdr")) return 1;
     return 0;
 }
 
@@ -910,8 +923,11 @@ static void
 render_display_bar(sbuf *b, const cJSON *root)
 {
     static const char *const modes[][2] = {
-        {"clamp", "clamp (as the PNG files)"}, {"aces", "ACES"}, {"hable", "Hable"},
-        {"reinhard", "Reinhard"}, {"false-colour", "false colour: log luminance"}};
+        {"clamp", "clamp (as the PNG files)"},
+        {"aces", "ACES"},
+        {"hable", "Hable"},
+        {"reinhard", "Reinhard"},
+        {"false-colour", "false colour: log luminance"}};
     const cJSON *d = cJSON_GetObjectItem(root, "display");
     const cJSON *ej = cJSON_GetObjectItem(d, "exposure");
     const char *mode = json_string(d, "mode");
@@ -936,10 +952,11 @@ render_display_bar(sbuf *b, const cJSON *root)
               FALSE_LO, FALSE_HI);
     for (int i = 0; i < 256 * 3; i++)
         sb_printf(b, "%s%d", i ? "," : "", rgb[i]);
-    sb_printf(b, "\"><b>renders</b><label>exposure <input class=\"dsp-exp\" type=\"range\" "
-                 "min=\"-10\" max=\"10\" step=\"0.25\" value=\"%g\" aria-label=\"exposure\">"
-                 "</label><output class=\"dsp-ev\">%+.2f EV</output><label>display "
-                 "<select class=\"dsp-mode\">",
+    sb_printf(b,
+              "\"><b>renders</b><label>exposure <input class=\"dsp-exp\" type=\"range\" "
+              "min=\"-10\" max=\"10\" step=\"0.25\" value=\"%g\" aria-label=\"exposure\">"
+              "</label><output class=\"dsp-ev\">%+.2f EV</output><label>display "
+              "<select class=\"dsp-mode\">",
               ev, ev);
     for (size_t i = 0; i < sizeof modes / sizeof *modes; i++)
         sb_printf(b, "<option value=\"%s\"%s>%s</option>", modes[i][0],
@@ -981,7 +998,8 @@ static const char css[] =
     ".verdict.good{border-color:#2e7d32;background:#e8f5e9}\n"
     ".verdict.bad{border-color:#c62828;background:#ffebee}\n"
     "table{border-collapse:collapse;margin:10px 0;font-size:13px}\n"
-    "th,td{border:1px solid #e0e0e0;padding:4px 10px;text-align:left;vertical-align:top}\n"
+    "th,td{border:1px solid #e0e0e0;padding:4px "
+    "10px;text-align:left;vertical-align:top}\n"
     "table.figures>tbody>tr>th{background:#f5f5f5;font-weight:600;white-space:nowrap}\n"
     "table.figures>tbody>tr>td.num{text-align:left}\n"
     "table.kv,table.nested{margin:0;font-size:12px}"
@@ -1065,19 +1083,23 @@ static const char script[] =
     "document.querySelectorAll('img[data-hdr]').forEach(function(img){"
     "var a=img.dataset.hdr.split(','),w=+a[0],h=+a[1],s=atob(a[2]),n=w*h,"
     "f=new Float32Array(3*n);\n"
-    "for(var p=0;p<n;p++){var e=s.charCodeAt(4*p+3);if(!e)continue;var k=Math.pow(2,e-136);"
+    "for(var p=0;p<n;p++){var e=s.charCodeAt(4*p+3);if(!e)continue;var "
+    "k=Math.pow(2,e-136);"
     "for(var c=0;c<3;c++)f[3*p+c]=(s.charCodeAt(4*p+c)+0.5)*k}\n"
     "items.push({img:img,f:f,w:w,h:h})});\n"
     "function draw(){var k=Math.pow(2,+ex.value),m=md.value,t=TM[m]||TM.clamp,"
-    "fc=m==='false-colour';ev.textContent=(ex.value<0?'':'+')+(+ex.value).toFixed(2)+' EV';"
+    "fc=m==='false-colour';ev.textContent=(ex.value<0?'':'+')+(+ex.value).toFixed(2)+' "
+    "EV';"
     "lg.hidden=!fc;\n"
     "items.forEach(function(it){var cv=document.createElement('canvas');cv.width=it.w;"
     "cv.height=it.h;var x=cv.getContext('2d'),d=x.createImageData(it.w,it.h),o=d.data,"
     "f=it.f;\n"
     "for(var p=0,i=0;i<o.length;p+=3,i+=4){if(fc){var L=k*(0.2126*f[p]+0.7152*f[p+1]+"
-    "0.0722*f[p+2]),u=L>0?(Math.log10(L)-lo)/(hi-lo):0,j=3*Math.round(255*(u>0?(u<1?u:1):0));"
+    "0.0722*f[p+2]),u=L>0?(Math.log10(L)-lo)/"
+    "(hi-lo):0,j=3*Math.round(255*(u>0?(u<1?u:1):0));"
     "o[i]=ramp[j];o[i+1]=ramp[j+1];o[i+2]=ramp[j+2]}\n"
-    "else{o[i]=enc(t(k*f[p]));o[i+1]=enc(t(k*f[p+1]));o[i+2]=enc(t(k*f[p+2]))}o[i+3]=255}\n"
+    "else{o[i]=enc(t(k*f[p]));o[i+1]=enc(t(k*f[p+1]));o[i+2]=enc(t(k*f[p+2]))}o[i+3]=255}"
+    "\n"
     "x.putImageData(d,0,0);it.img.src=cv.toDataURL()});\n"
     "document.querySelectorAll('.compare select.cmp-a').forEach(function(s){"
     "if(s.onchange)s.onchange()})}\n"

@@ -14,8 +14,7 @@ mcp_channel_stats_compute(const mcp_image *img, int c, mcp_channel_stats *out)
                          img->channels);
     int h = img->height;
     mcp_channel_stats *rows = mcp_calloc((size_t)h, sizeof *rows);
-    if (!rows)
-        return -1;
+    if (!rows) return -1;
 #pragma omp parallel for schedule(static)
     for (int y = 0; y < h; y++) {
         mcp_channel_stats s = {INFINITY, -INFINITY, 0, 0, 0, 0, 0};
@@ -67,8 +66,7 @@ mcp__window_table(const mcp_image *img)
 {
     int w = img->width, h = img->height;
     double *t = mcp_calloc((size_t)(w + 1) * (h + 1) * 3, sizeof *t);
-    if (!t)
-        return NULL;
+    if (!t) return NULL;
     for (int y = 0; y < h; y++) {
         double row[3] = {0, 0, 0};
         for (int x = 0; x < w; x++) {
@@ -85,7 +83,8 @@ mcp__window_table(const mcp_image *img)
 }
 
 void
-mcp__window_sum(const double *t, int w, int h, int x, int y, int r, double out[3], int *count)
+mcp__window_sum(const double *t, int w, int h, int x, int y, int r, double out[3],
+                int *count)
 {
     int x0 = x - r < 0 ? 0 : x - r, x1 = x + r + 1 > w ? w : x + r + 1;
     int y0 = y - r < 0 ? 0 : y - r, y1 = y + r + 1 > h ? h : y + r + 1;
@@ -99,16 +98,14 @@ mcp__window_sum(const double *t, int w, int h, int x, int y, int r, double out[3
 int
 mcp_pool_window(mcp_image *values, const mcp_image *shape, int radius)
 {
-    if (radius < 0)
-        return mcp_error("pooling: radius must be >= 0 (got %d)", radius);
+    if (radius < 0) return mcp_error("pooling: radius must be >= 0 (got %d)", radius);
     if (values->channels < 3 ||
         (shape && (shape->width != values->width || shape->height != values->height ||
                    shape->channels < 3)))
         return mcp_error("pooling: the values (%dx%d, %d channels) and the shape need 3 "
                          "channels of one size",
                          values->width, values->height, values->channels);
-    if (radius == 0)
-        return 0;
+    if (radius == 0) return 0;
     int w = values->width, h = values->height;
     double *tv = mcp__window_table(values), *ts = shape ? mcp__window_table(shape) : NULL;
     if (!tv || (shape && !ts)) {

@@ -9,13 +9,14 @@ extern "C" {
 #endif
 
 typedef struct mcp_channel_stats {
-    double min, max, mean;  /* over finite values; 0 when there are none */
+    double min, max, mean; /* over finite values; 0 when there are none */
     long n_nan, n_inf, n_negative, n_finite;
 } mcp_channel_stats;
 
 /* Statistics of channel c. Sums in double per row, rows added in order, so the
  * result does not depend on the thread count. */
-MCP_API int mcp_channel_stats_compute(const mcp_image *img, int c, mcp_channel_stats *out);
+MCP_API int mcp_channel_stats_compute(const mcp_image *img, int c,
+                                      mcp_channel_stats *out);
 
 /* Pools the first 3 channels over a (2 radius + 1)² window clipped at the borders, in
  * place: with a shape (3 channels, same size) each value becomes

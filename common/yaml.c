@@ -43,12 +43,10 @@ node_new(mcp_node_kind kind, const yaml_mark_t *mark, const char *file)
 static void
 node_free(mcp_node *n)
 {
-    if (!n)
-        return;
+    if (!n) return;
     for (int i = 0; i < n->count; i++) {
         node_free(n->items[i]);
-        if (n->keys)
-            node_free(n->keys[i]);
+        if (n->keys) node_free(n->keys[i]);
     }
     free(n->items);
     free(n->keys);
@@ -61,13 +59,11 @@ append(mcp_node *parent, mcp_node *key, mcp_node *value)
 {
     size_t n = (size_t)parent->count + 1;
     mcp_node **items = mcp_realloc(parent->items, n * sizeof *items);
-    if (!items)
-        return mcp_error("out of memory reading %s", parent->file);
+    if (!items) return mcp_error("out of memory reading %s", parent->file);
     parent->items = items;
     if (parent->kind == MCP_NODE_MAP) {
         mcp_node **keys = mcp_realloc(parent->keys, n * sizeof *keys);
-        if (!keys)
-            return mcp_error("out of memory reading %s", parent->file);
+        if (!keys) return mcp_error("out of memory reading %s", parent->file);
         parent->keys = keys;
         keys[parent->count] = key;
     }
@@ -80,8 +76,8 @@ parse_error(builder *b)
 {
     const yaml_parser_t *p = &b->parser;
     return mcp_error("%s:%d: %s%s%s", b->file, (int)p->problem_mark.line + 1,
-                     p->problem ? p->problem : "bad YAML",
-                     p->context ? " " : "", p->context ? p->context : "");
+                     p->problem ? p->problem : "bad YAML", p->context ? " " : "",
+                     p->context ? p->context : "");
 }
 
 /* Parses one node whose first event is *ev (consumed) at nesting level `depth` (the
@@ -111,10 +107,9 @@ parse_node(builder *b, yaml_event_t *ev, int depth, mcp_node **out)
         if (depth >= YAML_MAX_DEPTH)
             return mcp_error("%s:%d: lists and maps nested deeper than %d levels",
                              b->file, (int)ev->start_mark.line + 1, YAML_MAX_DEPTH);
-        mcp_node *n = node_new(is_map ? MCP_NODE_MAP : MCP_NODE_SEQ, &ev->start_mark,
-                               b->file);
-        if (!n)
-            return -1;
+        mcp_node *n =
+            node_new(is_map ? MCP_NODE_MAP : MCP_NODE_SEQ, &ev->start_mark, b->file);
+        if (!n) return -1;
         for (;;) {
             yaml_event_t e;
             if (!yaml_parser_parse(&b->parser, &e)) {
@@ -197,14 +192,14 @@ parse(yaml_parser_t *parser, const char *label, mcp_node **out)
             break;
         }
         if (doc) {
-            mcp_error("%s:%d: more than one YAML document", label, (int)ev.start_mark.line + 1);
+            mcp_error("%s:%d: more than one YAML document", label,
+                      (int)ev.start_mark.line + 1);
             yaml_event_delete(&ev);
             break;
         }
         int r = parse_node(&b, &ev, 0, &doc);
         yaml_event_delete(&ev);
-        if (r)
-            break;
+        if (r) break;
     }
     *parser = b.parser;
     if (rc) {
@@ -228,8 +223,7 @@ relabel(mcp_node *n, const char *label)
     n->file = label;
     for (int i = 0; i < n->count; i++) {
         relabel(n->items[i], label);
-        if (n->keys)
-            relabel(n->keys[i], label);
+        if (n->keys) relabel(n->keys[i], label);
     }
 }
 
@@ -269,8 +263,7 @@ mcp_yaml_parse_file(const char *path, mcp_node **out)
 {
     *out = NULL;
     FILE *f = fopen(path, "rb");
-    if (!f)
-        return mcp_error("%s: cannot open: %s", path, strerror(errno));
+    if (!f) return mcp_error("%s: cannot open: %s", path, strerror(errno));
     yaml_parser_t parser;
     if (!yaml_parser_initialize(&parser)) {
         fclose(f);
@@ -287,13 +280,11 @@ mcp_yaml_parse_file(const char *path, mcp_node **out)
 void
 mcp_node_free(mcp_node *root)
 {
-    if (!root)
-        return;
+    if (!root) return;
     /* the root sits at the start of a labelled_root allocation */
     for (int i = 0; i < root->count; i++) {
         node_free(root->items[i]);
-        if (root->keys)
-            node_free(root->keys[i]);
+        if (root->keys) node_free(root->keys[i]);
     }
     free(root->items);
     free(root->keys);
@@ -317,11 +308,9 @@ mcp_node_error(const mcp_node *n, const char *fmt, ...)
 const mcp_node *
 mcp_node_get(const mcp_node *map, const char *key)
 {
-    if (!map || map->kind != MCP_NODE_MAP)
-        return NULL;
+    if (!map || map->kind != MCP_NODE_MAP) return NULL;
     for (int i = 0; i < map->count; i++)
-        if (strcmp(map->keys[i]->value, key) == 0)
-            return map->items[i];
+        if (strcmp(map->keys[i]->value, key) == 0) return map->items[i];
     return NULL;
 }
 
@@ -335,13 +324,12 @@ mcp_node_check_keys(const mcp_node *map, const char *const *allowed, const char 
         int ok = 0;
         for (const char *const *a = allowed; a && *a && !ok; a++)
             ok = strcmp(*a, map->keys[i]->value) == 0;
-        if (ok)
-            continue;
+        if (ok) continue;
         char known[512] = "";
         size_t n = 0;
         for (const char *const *a = allowed; a && *a; a++)
-            n += (size_t)snprintf(known + n, n < sizeof known ? sizeof known - n : 0, "%s%s",
-                                  a == allowed ? "" : ", ", *a);
+            n += (size_t)snprintf(known + n, n < sizeof known ? sizeof known - n : 0,
+                                  "%s%s", a == allowed ? "" : ", ", *a);
         return mcp_node_error(map->keys[i], "unknown key '%s' in %s (known: %s)",
                               map->keys[i]->value, what, known[0] ? known : "none");
     }
@@ -351,8 +339,7 @@ mcp_node_check_keys(const mcp_node *map, const char *const *allowed, const char 
 static int
 want_scalar(const mcp_node *n, const char *key, const char *type)
 {
-    if (n->kind == MCP_NODE_SCALAR)
-        return 0;
+    if (n->kind == MCP_NODE_SCALAR) return 0;
     return mcp_node_error(n, "%s must be %s, not a %s", key, type,
                           n->kind == MCP_NODE_MAP ? "map" : "list");
 }
@@ -360,12 +347,12 @@ want_scalar(const mcp_node *n, const char *key, const char *type)
 int
 mcp_node_int(const mcp_node *n, const char *key, int *out)
 {
-    if (want_scalar(n, key, "an integer"))
-        return -1;
+    if (want_scalar(n, key, "an integer")) return -1;
     char *end;
     errno = 0;
     long v = strtol(n->value, &end, 10);
-    if (n->quoted || end == n->value || *end || errno || v < -2147483647L - 1 || v > 2147483647L)
+    if (n->quoted || end == n->value || *end || errno || v < -2147483647L - 1 ||
+        v > 2147483647L)
         return mcp_node_error(n, "%s must be an integer (got '%s')", key, n->value);
     *out = (int)v;
     return 0;
@@ -374,8 +361,7 @@ mcp_node_int(const mcp_node *n, const char *key, int *out)
 int
 mcp_node_double(const mcp_node *n, const char *key, double *out)
 {
-    if (want_scalar(n, key, "a number"))
-        return -1;
+    if (want_scalar(n, key, "a number")) return -1;
     char *end;
     errno = 0;
     double v = strtod(n->value, &end);
@@ -388,14 +374,11 @@ mcp_node_double(const mcp_node *n, const char *key, double *out)
 int
 mcp_node_bool(const mcp_node *n, const char *key, int *out)
 {
-    if (want_scalar(n, key, "true or false"))
-        return -1;
+    if (want_scalar(n, key, "true or false")) return -1;
     static const char *yes[] = {"true", "yes", "on"}, *no[] = {"false", "no", "off"};
     for (int i = 0; i < 3 && !n->quoted; i++) {
-        if (strcasecmp(n->value, yes[i]) == 0)
-            return *out = 1, 0;
-        if (strcasecmp(n->value, no[i]) == 0)
-            return *out = 0, 0;
+        if (strcasecmp(n->value, yes[i]) == 0) return *out = 1, 0;
+        if (strcasecmp(n->value, no[i]) == 0) return *out = 0, 0;
     }
     return mcp_node_error(n, "%s must be true or false (got '%s')", key, n->value);
 }
@@ -403,8 +386,7 @@ mcp_node_bool(const mcp_node *n, const char *key, int *out)
 int
 mcp_node_string(const mcp_node *n, const char *key, const char **out)
 {
-    if (want_scalar(n, key, "a string"))
-        return -1;
+    if (want_scalar(n, key, "a string")) return -1;
     *out = n->value;
     return 0;
 }
@@ -441,14 +423,12 @@ int
 mcp_node_opt_doubles(const mcp_node *map, const char *key, double **out, int *count)
 {
     const mcp_node *n = mcp_node_get(map, key);
-    if (!n)
-        return 0;
+    if (!n) return 0;
     int m = n->kind == MCP_NODE_SEQ ? n->count : 1;
     if (n->kind == MCP_NODE_MAP)
         return mcp_node_error(n, "%s must be a number or a list of numbers", key);
     double *v = mcp_calloc((size_t)m, sizeof *v);
-    if (!v)
-        return -1;
+    if (!v) return -1;
     for (int i = 0; i < m; i++)
         if (mcp_node_double(n->kind == MCP_NODE_SEQ ? n->items[i] : n, key, &v[i])) {
             free(v);
@@ -465,7 +445,6 @@ mcp_node_require(const mcp_node *map, const char *key, const char *what,
                  const mcp_node **out)
 {
     *out = mcp_node_get(map, key);
-    if (!*out)
-        return mcp_node_error(map, "missing key '%s' in %s", key, what);
+    if (!*out) return mcp_node_error(map, "missing key '%s' in %s", key, what);
     return 0;
 }

@@ -17,7 +17,7 @@ typedef struct {
     mcp_denoiser self;
     mcp_denoiser *unet; /* NULL when no weights were found */
     mcp_denoiser *nlm;
-    int noted;          /* the fallback was announced */
+    int noted; /* the fallback was announced */
 } default_denoiser;
 
 /* The denoiser for this input, announcing a fallback once. */
@@ -25,15 +25,15 @@ static const mcp_denoiser *
 pick(const mcp_denoiser *self, const mcp_denoise_input *in)
 {
     default_denoiser *d = (default_denoiser *)self;
-    if (d->unet && in->albedo && in->normal)
-        return d->unet;
+    if (d->unet && in->albedo && in->normal) return d->unet;
     if (!d->noted) {
         d->noted = 1;
         d->self.name = "default (nlm)"; /* what the reports then name */
         mcp_note("denoiser: %s, so the default denoiser is nlm instead of the U-Net",
-                 d->unet ? "the input has no albedo and normal, which the U-Net's weights "
-                           "need"
-                         : "no U-Net weights were found");
+                 d->unet
+                     ? "the input has no albedo and normal, which the U-Net's weights "
+                       "need"
+                     : "no U-Net weights were found");
     }
     return d->nlm;
 }
@@ -67,8 +67,7 @@ default_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **ou
 {
     *out = NULL;
     default_denoiser *d = mcp_calloc(1, sizeof *d);
-    if (!d)
-        return -1;
+    if (!d) return -1;
     mcp_node unet = {.kind = MCP_NODE_SCALAR, .value = (char *)"unet"},
              nlm = {.kind = MCP_NODE_SCALAR, .value = (char *)"nlm"};
     unet.line = nlm.line = settings->line;

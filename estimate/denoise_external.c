@@ -27,10 +27,10 @@
 #include <unistd.h>
 
 typedef struct {
-    char *command; /* the template */
+    char *command;   /* the template */
     const char *ext; /* "pfm" or "exr" */
-    double delta;  /* unitless finite-difference step */
-    char *workdir; /* NULL: $TMPDIR or /tmp */
+    double delta;    /* unitless finite-difference step */
+    char *workdir;   /* NULL: $TMPDIR or /tmp */
     int needs_albedo, needs_normal;
 } external_state;
 
@@ -42,18 +42,25 @@ typedef struct {
 } external_settings;
 
 static const mcp_option external_options[] = {
-    {.name = "command", .type = MCP_OPT_TEXT,
-     .offset = offsetof(external_settings, command), .meta = "CMD",
+    {.name = "command",
+     .type = MCP_OPT_TEXT,
+     .offset = offsetof(external_settings, command),
+     .meta = "CMD",
      .doc = "a /bin/sh command with {color} {albedo} {normal} {output} for its files "
             "(required); --denoiser-command"},
-    {.name = "format", .type = MCP_OPT_TEXT,
-     .offset = offsetof(external_settings, format), .def = "pfm",
+    {.name = "format",
+     .type = MCP_OPT_TEXT,
+     .offset = offsetof(external_settings, format),
+     .def = "pfm",
      .doc = "the files' format: pfm or exr"},
-    {.name = "delta", .type = MCP_OPT_NUMBER,
-     .offset = offsetof(external_settings, delta), .def = "0.1",
+    {.name = "delta",
+     .type = MCP_OPT_NUMBER,
+     .offset = offsetof(external_settings, delta),
+     .def = "0.1",
      .doc = "finite-difference step of the JVP, in units of the tangent",
      .bounds = MCP_OPT_LO_OPEN},
-    {.name = "workdir", .type = MCP_OPT_TEXT,
+    {.name = "workdir",
+     .type = MCP_OPT_TEXT,
      .offset = offsetof(external_settings, workdir),
      .doc = "where the private folders go (relative to the job file) [$TMPDIR or /tmp]"},
     {0}};
@@ -100,8 +107,7 @@ remove_dir(const char *dir)
         struct dirent *e;
         char path[PATH_CAP];
         while ((e = readdir(d))) {
-            if (strcmp(e->d_name, ".") == 0 || strcmp(e->d_name, "..") == 0)
-                continue;
+            if (strcmp(e->d_name, ".") == 0 || strcmp(e->d_name, "..") == 0) continue;
             snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
             unlink(path);
         }
@@ -132,8 +138,7 @@ read_output(const external_state *s, const char *path, const mcp_image *color,
         for (int c = 0; c < 3 && !rc; c++)
             rc = mcp_image_set_channel_name(o, c, rgb[c]);
         mcp_attrs_clear(&o->attrs);
-        if (!rc)
-            rc = mcp_image_set_source(o, "external");
+        if (!rc) rc = mcp_image_set_source(o, "external");
     }
     mcp_image_free(img);
     if (rc) {
@@ -158,10 +163,8 @@ run_external(const external_state *s, const mcp_denoise_input *in, mcp_image **o
                          "normal",
                          s->command);
     const char *base = s->workdir;
-    if (!base || !*base)
-        base = getenv("TMPDIR");
-    if (!base || !*base)
-        base = "/tmp";
+    if (!base || !*base) base = getenv("TMPDIR");
+    if (!base || !*base) base = "/tmp";
     char dir[PATH_CAP];
     if ((size_t)snprintf(dir, sizeof dir, "%s/mcpost-external-XXXXXX", base) >=
         sizeof dir - 32)
@@ -181,10 +184,8 @@ run_external(const external_state *s, const mcp_denoise_input *in, mcp_image **o
         mcp_error_prefix("external: ");
         goto done;
     }
-    if (substitute(s->command, path_ptrs, &line))
-        goto done;
-    if (mcp__shell_check(mcp__shell(line), "external: command", s->command))
-        goto done;
+    if (substitute(s->command, path_ptrs, &line)) goto done;
+    if (mcp__shell_check(mcp__shell(line), "external: command", s->command)) goto done;
     if (access(paths[3], F_OK) != 0) {
         mcp_error("external: command '%s' wrote no {output} file", s->command);
         goto done;
@@ -202,8 +203,7 @@ static int
 external_apply(const mcp_denoiser *self, const mcp_denoise_input *in, mcp_image **out)
 {
     *out = NULL;
-    if (mcp__denoise_check_input("external", in))
-        return -1;
+    if (mcp__denoise_check_input("external", in)) return -1;
     return run_external(self->state, in, out);
 }
 
@@ -214,15 +214,13 @@ external_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
              const mcp_denoise_tangent *t, int n, mcp_image **primal, mcp_image **out)
 {
     const external_state *s = self->state;
-    if (primal)
-        *primal = NULL;
+    if (primal) *primal = NULL;
     for (int k = 0; k < n && out; k++)
         out[k] = NULL;
     if (mcp__denoise_check_input("external", at) ||
         mcp__denoise_check_tangents("external", at, t, n))
         return -1;
-    if (n > 0 && !out)
-        return mcp_error("external: no room for %d tangent outputs", n);
+    if (n > 0 && !out) return mcp_error("external: no room for %d tangent outputs", n);
     return mcp_jvp_finite_difference(self, at, t, n, s->delta, primal, out);
 }
 
@@ -250,9 +248,8 @@ external_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **o
     const char *command = e.command, *format = e.format, *workdir = e.workdir;
     double delta = e.delta;
     if (!strstr(command, "{color}") || !strstr(command, "{output}"))
-        return mcp_node_error(cmd_node,
-                              "external: command '%s' must name {color} and {output}",
-                              command);
+        return mcp_node_error(
+            cmd_node, "external: command '%s' must name {color} and {output}", command);
     const char *ext = NULL;
     if (strcmp(format, "pfm") == 0)
         ext = "pfm";
@@ -265,8 +262,7 @@ external_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **o
         return mcp_node_error(mcp_node_get(settings, "delta"),
                               "external: delta must be > 0 (got %g)", delta);
     mcp_denoiser *d = mcp__denoiser_new("external", sizeof(external_state));
-    if (!d)
-        return -1;
+    if (!d) return -1;
     external_state *s = d->state;
     d->destroy = external_destroy;
     d->exact = 0;

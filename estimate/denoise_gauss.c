@@ -35,12 +35,18 @@ typedef struct {
 } gauss_settings;
 
 static const mcp_option gauss_options[] = {
-    {.name = "sigma", .type = MCP_OPT_NUMBER,
-     .offset = offsetof(gauss_settings, sigma), .def = "2",
-     .doc = "standard deviation of the blur, px", .lo = 0, .hi = RADIUS_MAX,
+    {.name = "sigma",
+     .type = MCP_OPT_NUMBER,
+     .offset = offsetof(gauss_settings, sigma),
+     .def = "2",
+     .doc = "standard deviation of the blur, px",
+     .lo = 0,
+     .hi = RADIUS_MAX,
      .bounds = MCP_OPT_LO_OPEN | MCP_OPT_HI},
-    {.name = "radius", .type = MCP_OPT_INT,
-     .offset = offsetof(gauss_settings, radius), .meta = "N",
+    {.name = "radius",
+     .type = MCP_OPT_INT,
+     .offset = offsetof(gauss_settings, radius),
+     .meta = "N",
      .doc = "the window is 2 radius + 1 px wide [ceil(3 sigma)]"},
     {0}};
 
@@ -91,8 +97,7 @@ blur(const gauss_state *s, const mcp_image *img, mcp_image **out)
     static const char *const rgb[] = {"R", "G", "B"};
     mcp_image *o = NULL;
     int len = 2 * s->radius + 1;
-    if (mcp_filter_separable(img, s->kernel, len, s->kernel, len, &o))
-        return -1;
+    if (mcp_filter_separable(img, s->kernel, len, s->kernel, len, &o)) return -1;
     for (int c = 0; c < 3; c++)
         if (mcp_image_set_channel_name(o, c, rgb[c])) {
             mcp_image_free(o);
@@ -110,8 +115,7 @@ static int
 gauss_apply(const mcp_denoiser *self, const mcp_denoise_input *in, mcp_image **out)
 {
     *out = NULL;
-    if (mcp__denoise_check_input("gauss", in))
-        return -1;
+    if (mcp__denoise_check_input("gauss", in)) return -1;
     return blur(self->state, in->color, out);
 }
 
@@ -120,20 +124,16 @@ gauss_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
           const mcp_denoise_tangent *t, int n, mcp_image **primal, mcp_image **out)
 {
     const gauss_state *s = self->state;
-    if (primal)
-        *primal = NULL;
+    if (primal) *primal = NULL;
     for (int k = 0; k < n && out; k++)
         out[k] = NULL;
     if (mcp__denoise_check_input("gauss", at) ||
         mcp__denoise_check_tangents("gauss", at, t, n))
         return -1;
-    if (n > 0 && !out)
-        return mcp_error("gauss: no room for %d tangent outputs", n);
+    if (n > 0 && !out) return mcp_error("gauss: no room for %d tangent outputs", n);
     for (int k = 0; k < n; k++)
-        if (blur(s, t[k].color, &out[k]))
-            goto fail;
-    if (primal && blur(s, at->color, primal))
-        goto fail;
+        if (blur(s, t[k].color, &out[k])) goto fail;
+    if (primal && blur(s, at->color, primal)) goto fail;
     return 0;
 fail:
     for (int k = 0; k < n; k++) {
@@ -161,8 +161,7 @@ gauss_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
     double sigma = g.sigma;
     int radius = g.radius;
     mcp_denoiser *d = mcp__denoiser_new("gauss", sizeof(gauss_state));
-    if (!d)
-        return -1;
+    if (!d) return -1;
     gauss_state *s = d->state;
     s->sigma_px = sigma;
     s->radius = radius;

@@ -124,52 +124,95 @@ typedef struct {
  * (<mcpost/options.h>; docs/denoisers.md) ---- */
 
 #define P(f) offsetof(nlm_params, f)
-#define NLM_OPTIONS(RADIUS, PATCH, K_COLOR, SIGMA_SPATIAL)                                 \
-    {.name = "radius", .type = MCP_OPT_INT, .offset = P(radius),     \
-     .def = RADIUS, .doc = "search window half width R, px", .lo = 0, .hi = RADIUS_MAX,          \
-     .bounds = MCP_OPT_LO | MCP_OPT_HI},                                                   \
-        {.name = "patch_radius", .type = MCP_OPT_INT,                \
-         .offset = P(patch_radius), .def = PATCH,                                        \
-         .doc = "patch half width f, px; 0 compares single pixels", .lo = 0,      \
-         .hi = PATCH_RADIUS_MAX, .bounds = MCP_OPT_LO | MCP_OPT_HI},                       \
-        {.name = "k_color", .type = MCP_OPT_NUMBER,                  \
-         .offset = P(k_color), .def = K_COLOR,                                             \
-         .doc = "colour bandwidth, in noise standard deviations", .lo = 0, .hi = 1e6,      \
-         .bounds = MCP_OPT_LO_OPEN | MCP_OPT_HI},                                          \
-        {.name = "alpha", .type = MCP_OPT_NUMBER, .offset = P(alpha), \
-         .def = "1",                                                                       \
-         .doc = "how much of the expected noise to subtract from the squared difference", \
-         .lo = 0, .hi = 16,   \
-         .bounds = MCP_OPT_LO | MCP_OPT_HI},                                               \
-        {.name = "epsilon", .type = MCP_OPT_NUMBER,                  \
-         .offset = P(epsilon), .def = "0.0001",                                            \
-         .doc = "added to the normaliser, squared colour units", .lo = 0, .hi = 1e30,      \
-         .bounds = MCP_OPT_LO_OPEN | MCP_OPT_HI},                                          \
-        {.name = "sigma_color", .type = MCP_OPT_NUMBER,              \
-         .offset = P(sigma_color), .def = "0.05",                                          \
-         .doc = "noise standard deviation assumed where no variance is given", .lo = 0,    \
-         .hi = 1e15, .bounds = MCP_OPT_LO | MCP_OPT_HI},                                   \
-        {.name = "use_variance", .type = MCP_OPT_FLAG,               \
-         .offset = P(use_variance), .def = "true",                                         \
-         .doc = "use the input's variance; false: a constant sigma_color^2"},         \
-        {.name = "variance_blur", .type = MCP_OPT_NUMBER,            \
-         .offset = P(variance_blur), .def = "1",                                           \
-         .doc = "Gaussian prefilter of the variance, sigma in px (0: none)", .lo = 0,      \
-         .hi = 100, .bounds = MCP_OPT_LO | MCP_OPT_HI},                                    \
-        {.name = "sigma_albedo", .type = MCP_OPT_NUMBER,             \
-         .offset = P(sigma_albedo), .def = "0.2",                                          \
-         .doc = "albedo bandwidth (0: ignore albedo)", .lo = 0, .hi = 1e15,                \
-         .bounds = MCP_OPT_LO | MCP_OPT_HI},                                               \
-        {.name = "sigma_normal", .type = MCP_OPT_NUMBER,             \
-         .offset = P(sigma_normal), .def = "0.3",                                          \
-         .doc = "normal bandwidth (0: ignore normals)", .lo = 0, .hi = 1e15,               \
-         .bounds = MCP_OPT_LO | MCP_OPT_HI},                                               \
-        {.name = "sigma_spatial", .type = MCP_OPT_NUMBER,            \
-         .offset = P(sigma_spatial), .def = SIGMA_SPATIAL,                                 \
-         .doc = "Gaussian falloff over the window, px (0: a uniform window)", .lo = 0,     \
-         .hi = 1e15, .bounds = MCP_OPT_LO | MCP_OPT_HI},                                   \
-    {                                                                                      \
-        0                                                                                  \
+#define NLM_OPTIONS(RADIUS, PATCH, K_COLOR, SIGMA_SPATIAL)                               \
+    {.name = "radius",                                                                   \
+     .type = MCP_OPT_INT,                                                                \
+     .offset = P(radius),                                                                \
+     .def = RADIUS,                                                                      \
+     .doc = "search window half width R, px",                                            \
+     .lo = 0,                                                                            \
+     .hi = RADIUS_MAX,                                                                   \
+     .bounds = MCP_OPT_LO | MCP_OPT_HI},                                                 \
+        {.name = "patch_radius",                                                         \
+         .type = MCP_OPT_INT,                                                            \
+         .offset = P(patch_radius),                                                      \
+         .def = PATCH,                                                                   \
+         .doc = "patch half width f, px; 0 compares single pixels",                      \
+         .lo = 0,                                                                        \
+         .hi = PATCH_RADIUS_MAX,                                                         \
+         .bounds = MCP_OPT_LO | MCP_OPT_HI},                                             \
+        {.name = "k_color",                                                              \
+         .type = MCP_OPT_NUMBER,                                                         \
+         .offset = P(k_color),                                                           \
+         .def = K_COLOR,                                                                 \
+         .doc = "colour bandwidth, in noise standard deviations",                        \
+         .lo = 0,                                                                        \
+         .hi = 1e6,                                                                      \
+         .bounds = MCP_OPT_LO_OPEN | MCP_OPT_HI},                                        \
+        {.name = "alpha",                                                                \
+         .type = MCP_OPT_NUMBER,                                                         \
+         .offset = P(alpha),                                                             \
+         .def = "1",                                                                     \
+         .doc =                                                                          \
+             "how much of the expected noise to subtract from the squared difference",   \
+         .lo = 0,                                                                        \
+         .hi = 16,                                                                       \
+         .bounds = MCP_OPT_LO | MCP_OPT_HI},                                             \
+        {.name = "epsilon",                                                              \
+         .type = MCP_OPT_NUMBER,                                                         \
+         .offset = P(epsilon),                                                           \
+         .def = "0.0001",                                                                \
+         .doc = "added to the normaliser, squared colour units",                         \
+         .lo = 0,                                                                        \
+         .hi = 1e30,                                                                     \
+         .bounds = MCP_OPT_LO_OPEN | MCP_OPT_HI},                                        \
+        {.name = "sigma_color",                                                          \
+         .type = MCP_OPT_NUMBER,                                                         \
+         .offset = P(sigma_color),                                                       \
+         .def = "0.05",                                                                  \
+         .doc = "noise standard deviation assumed where no variance is given",           \
+         .lo = 0,                                                                        \
+         .hi = 1e15,                                                                     \
+         .bounds = MCP_OPT_LO | MCP_OPT_HI},                                             \
+        {.name = "use_variance",                                                         \
+         .type = MCP_OPT_FLAG,                                                           \
+         .offset = P(use_variance),                                                      \
+         .def = "true",                                                                  \
+         .doc = "use the input's variance; false: a constant sigma_color^2"},            \
+        {.name = "variance_blur",                                                        \
+         .type = MCP_OPT_NUMBER,                                                         \
+         .offset = P(variance_blur),                                                     \
+         .def = "1",                                                                     \
+         .doc = "Gaussian prefilter of the variance, sigma in px (0: none)",             \
+         .lo = 0,                                                                        \
+         .hi = 100,                                                                      \
+         .bounds = MCP_OPT_LO | MCP_OPT_HI},                                             \
+        {.name = "sigma_albedo",                                                         \
+         .type = MCP_OPT_NUMBER,                                                         \
+         .offset = P(sigma_albedo),                                                      \
+         .def = "0.2",                                                                   \
+         .doc = "albedo bandwidth (0: ignore albedo)",                                   \
+         .lo = 0,                                                                        \
+         .hi = 1e15,                                                                     \
+         .bounds = MCP_OPT_LO | MCP_OPT_HI},                                             \
+        {.name = "sigma_normal",                                                         \
+         .type = MCP_OPT_NUMBER,                                                         \
+         .offset = P(sigma_normal),                                                      \
+         .def = "0.3",                                                                   \
+         .doc = "normal bandwidth (0: ignore normals)",                                  \
+         .lo = 0,                                                                        \
+         .hi = 1e15,                                                                     \
+         .bounds = MCP_OPT_LO | MCP_OPT_HI},                                             \
+        {.name = "sigma_spatial",                                                        \
+         .type = MCP_OPT_NUMBER,                                                         \
+         .offset = P(sigma_spatial),                                                     \
+         .def = SIGMA_SPATIAL,                                                           \
+         .doc = "Gaussian falloff over the window, px (0: a uniform window)",            \
+         .lo = 0,                                                                        \
+         .hi = 1e15,                                                                     \
+         .bounds = MCP_OPT_LO | MCP_OPT_HI},                                             \
+    {                                                                                    \
+        0                                                                                \
     }
 
 static const mcp_option nlm_options[] = {NLM_OPTIONS("7", "2", "0.6", "0")};
@@ -230,14 +273,12 @@ work_alloc(nlm_work *wk, size_t floats)
     if (wk->n_blocks == wk->cap_blocks) {
         int cap = wk->cap_blocks ? 2 * wk->cap_blocks : 16;
         float **b = mcp_realloc(wk->blocks, (size_t)cap * sizeof *b);
-        if (!b)
-            return NULL;
+        if (!b) return NULL;
         wk->blocks = b;
         wk->cap_blocks = cap;
     }
     float *p = mcp_malloc(floats * sizeof *p);
-    if (p)
-        wk->blocks[wk->n_blocks++] = p;
+    if (p) wk->blocks[wk->n_blocks++] = p;
     return p;
 }
 
@@ -260,8 +301,7 @@ pad_image(nlm_work *wk, const mcp_image *img, int clamp_low, const float *planes
 {
     size_t plane = (size_t)wk->pw * (size_t)wk->ph;
     float *block = work_alloc(wk, 3 * plane);
-    if (!block)
-        return -1;
+    if (!block) return -1;
     int w = wk->w, h = wk->h, pad = wk->pad, pw = wk->pw, ph = wk->ph;
 #pragma omp parallel for schedule(static) if ((size_t)w * h >= PARALLEL_MIN_PIXELS)
     for (int py = 0; py < ph; py++) {
@@ -270,8 +310,7 @@ pad_image(nlm_work *wk, const mcp_image *img, int clamp_low, const float *planes
             const float *src = mcp_image_px(img, clampi(px - pad, 0, w - 1), sy);
             for (int c = 0; c < 3; c++) {
                 float v = src[c];
-                if (clamp_low && !(v > 0))
-                    v = 0;
+                if (clamp_low && !(v > 0)) v = 0;
                 block[c * plane + (size_t)py * pw + px] = v;
             }
         }
@@ -286,8 +325,7 @@ fill_constant(nlm_work *wk, float value, const float *planes_out[3])
 {
     size_t plane = (size_t)wk->pw * (size_t)wk->ph;
     float *block = work_alloc(wk, plane);
-    if (!block)
-        return -1;
+    if (!block) return -1;
     for (size_t i = 0; i < plane; i++)
         block[i] = value;
     for (int c = 0; c < 3; c++)
@@ -302,12 +340,10 @@ pad_variance(const nlm_params *p, nlm_work *wk, const mcp_image *var)
 {
     if (!var || !p->use_variance)
         return fill_constant(wk, (float)(p->sigma_color * p->sigma_color), wk->v);
-    if (p->variance_blur <= 0)
-        return pad_image(wk, var, 1, wk->v);
+    if (p->variance_blur <= 0) return pad_image(wk, var, 1, wk->v);
     mcp_image *blurred = NULL;
     int radius = (int)ceil(3 * p->variance_blur);
-    if (mcp_gaussian_blur(var, 2 * radius + 1, p->variance_blur, &blurred))
-        return -1;
+    if (mcp_gaussian_blur(var, 2 * radius + 1, p->variance_blur, &blurred)) return -1;
     int rc = pad_image(wk, blurred, 1, wk->v);
     mcp_image_free(blurred);
     return rc;
@@ -337,13 +373,11 @@ work_init(const nlm_params *p, const mcp_denoise_input *in, const mcp_denoise_ta
         (use_a && pad_image(wk, in->albedo, 0, wk->a)) ||
         (use_n && pad_image(wk, in->normal, 0, wk->n)))
         return -1;
-    if (nt == 0)
-        return 0;
+    if (nt == 0) return 0;
     wk->tx = mcp_calloc((size_t)nt * 3, sizeof *wk->tx);
     wk->ta = mcp_calloc((size_t)nt * 3, sizeof *wk->ta);
     wk->tn = mcp_calloc((size_t)nt * 3, sizeof *wk->tn);
-    if (!wk->tx || !wk->ta || !wk->tn)
-        return -1;
+    if (!wk->tx || !wk->ta || !wk->tn) return -1;
     for (int k = 0; k < nt; k++) {
         if (pad_image(wk, t[k].color, 0, wk->tx + 3 * k) ||
             (use_a && t[k].albedo && pad_image(wk, t[k].albedo, 0, wk->ta + 3 * k)) ||
@@ -519,10 +553,8 @@ strip_offset_primal(const nlm_params *p, const nlm_work *wk, nlm_scratch *s, int
             sl[x] = m * norm;
             lw[x] = -(KINK * m * m + 0.5f * (above + fabsf(above)));
         }
-        if (wk->a[0])
-            feature_term(wk->a, prow, off, wk->inv_2sa2, lw, w);
-        if (wk->n[0])
-            feature_term(wk->n, prow, off, wk->inv_2sn2, lw, w);
+        if (wk->a[0]) feature_term(wk->a, prow, off, wk->inv_2sa2, lw, w);
+        if (wk->n[0]) feature_term(wk->n, prow, off, wk->inv_2sn2, lw, w);
         /* the spatial falloff (a constant of the offset), and a floor: below -87 a
          * weight is about 1e-38, so clamping there changes F by less than float
          * rounding, and the JVP's w g stays as small. NaN (from NaN input) goes to the
@@ -584,10 +616,8 @@ strip_offset_tangent(const nlm_params *p, const nlm_work *wk, nlm_scratch *s, in
 #pragma omp simd
         for (int x = 0; x < w; x++)
             g[x] = -sl[x] * g[x];
-        if (wk->a[0] && ta[0])
-            feature_tangent(wk->a, ta, prow, off, wk->inv_2sa2, g, w);
-        if (wk->n[0] && tn[0])
-            feature_tangent(wk->n, tn, prow, off, wk->inv_2sn2, g, w);
+        if (wk->a[0] && ta[0]) feature_tangent(wk->a, ta, prow, off, wk->inv_2sa2, g, w);
+        if (wk->n[0] && tn[0]) feature_tangent(wk->n, tn, prow, off, wk->inv_2sn2, g, w);
         const float *restrict xp0 = wk->x[0] + prow, *restrict xp1 = wk->x[1] + prow;
         const float *restrict xp2 = wk->x[2] + prow;
         const float *restrict tq0 = tx[0] + prow + off;
@@ -634,8 +664,7 @@ run_strip(const nlm_params *p, const nlm_work *wk, nlm_scratch *s, int y0, int r
             float den[3];
             for (int c = 0; c < 3; c++) {
                 den[c] = s->acc[(1 + c) * sw + (size_t)y * w + x] * inv;
-                if (out->primal)
-                    out->primal[o + c] = den[c];
+                if (out->primal) out->primal[o + c] = den[c];
             }
             for (int k = 0; k < wk->nt; k++) {
                 const float *acc = s->acc + (4 + 7 * (size_t)k) * sw + (size_t)y * w + x;
@@ -703,8 +732,7 @@ run_all(const char *who, const nlm_params *p, const nlm_work *wk, const nlm_out 
         for (int i = 0; i < n_strips; i++) {
             int y0 = i * STRIP_ROWS,
                 rows = wk->h - y0 < STRIP_ROWS ? wk->h - y0 : STRIP_ROWS;
-            if (buf)
-                run_strip(p, wk, &s, y0, rows, out);
+            if (buf) run_strip(p, wk, &s, y0, rows, out);
             if (show) {
                 int n;
 #pragma omp atomic capture
@@ -733,8 +761,7 @@ nlm_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
         const mcp_denoise_tangent *t, int n, mcp_image **primal, mcp_image **out)
 {
     const nlm_params *p = self->state;
-    if (primal)
-        *primal = NULL;
+    if (primal) *primal = NULL;
     for (int k = 0; k < n && out; k++)
         out[k] = NULL;
     if (mcp__denoise_check_input(self->name, at) ||
@@ -746,20 +773,15 @@ nlm_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
     nlm_work wk;
     mcp_image *prim = NULL;
     float **tout = n ? mcp_calloc((size_t)n, sizeof *tout) : NULL;
-    if (n && !tout)
-        return -1;
-    if (work_init(p, at, t, n, &wk))
-        goto done;
-    if (primal && mcp__rgb_new(w, h, self->name, &prim))
-        goto done;
+    if (n && !tout) return -1;
+    if (work_init(p, at, t, n, &wk)) goto done;
+    if (primal && mcp__rgb_new(w, h, self->name, &prim)) goto done;
     for (int k = 0; k < n; k++) {
-        if (mcp__rgb_new(w, h, "jvp", &out[k]))
-            goto done;
+        if (mcp__rgb_new(w, h, "jvp", &out[k])) goto done;
         tout[k] = out[k]->data;
     }
     nlm_out o = {prim ? prim->data : NULL, tout};
-    if (run_all(self->name, p, &wk, &o))
-        goto done;
+    if (run_all(self->name, p, &wk, &o)) goto done;
     rc = 0;
 done:
     work_free(&wk);
@@ -772,8 +794,7 @@ done:
             out[k] = NULL;
         }
     }
-    if (primal)
-        *primal = prim;
+    if (primal) *primal = prim;
     return rc;
 }
 
@@ -794,8 +815,7 @@ create_with(const mcp_operation *op, const mcp_node *settings, mcp_denoiser **ou
     nlm_params p;
     if (mcp__options_from_node(op, settings, NULL, &p)) return -1;
     mcp_denoiser *d = mcp__denoiser_new(name, sizeof p);
-    if (!d)
-        return -1;
+    if (!d) return -1;
     memcpy(d->state, &p, sizeof p);
     d->uses_albedo = p.sigma_albedo > 0;
     d->uses_normal = p.sigma_normal > 0;

@@ -96,8 +96,7 @@ shared_load(const char *path, mcp__unet **out)
     pthread_mutex_lock(&shared_lock);
     shared_slot *slot = NULL;
     for (int i = 0; i < SHARED_SLOTS && !slot; i++)
-        if (!shared[i].net)
-            slot = &shared[i];
+        if (!shared[i].net) slot = &shared[i];
     for (int i = 0; i < SHARED_SLOTS && !slot; i++)
         if (!shared[i].users) {
             mcp__unet_free(shared[i].net);
@@ -120,8 +119,7 @@ shared_release(mcp__unet *net)
             kept = 1;
         }
     pthread_mutex_unlock(&shared_lock);
-    if (!kept)
-        mcp__unet_free(net);
+    if (!kept) mcp__unet_free(net);
 }
 
 /* ---- settings: the table (<mcpost/options.h>; docs/denoisers.md) ---- */
@@ -136,35 +134,52 @@ typedef struct {
 } unet_settings;
 
 static const mcp_option unet_options[] = {
-    {.name = "weights", .type = MCP_OPT_TEXT,
-     .offset = offsetof(unet_settings, weights), .meta = "PATH",
-     .doc = "the .tza file (relative paths: to the job file's folder); --weights [$"
-            WEIGHTS_ENV ", else the shipped share/mcpost/rt_hdr_alb_nrm.tza]"},
-    {.name = "input_scale", .type = MCP_OPT_NUMBER,
-     .offset = offsetof(unet_settings, input_scale), .def = "auto",
+    {.name = "weights",
+     .type = MCP_OPT_TEXT,
+     .offset = offsetof(unet_settings, weights),
+     .meta = "PATH",
+     .doc = "the .tza file (relative paths: to the job file's folder); --weights "
+            "[$" WEIGHTS_ENV ", else the shipped share/mcpost/rt_hdr_alb_nrm.tza]"},
+    {.name = "input_scale",
+     .type = MCP_OPT_NUMBER,
+     .offset = offsetof(unet_settings, input_scale),
+     .def = "auto",
      .doc = "auto: OIDN's autoexposure; or the number that maps the colour to 1 = 100 "
             "cd/m^2; --input-scale",
-     .bounds = MCP_OPT_LO_OPEN, .auto_word = "auto", .auto_value = 0},
-    {.name = "tile", .type = MCP_OPT_INT,
-     .offset = offsetof(unet_settings, tile), .def = "0",
+     .bounds = MCP_OPT_LO_OPEN,
+     .auto_word = "auto",
+     .auto_value = 0},
+    {.name = "tile",
+     .type = MCP_OPT_INT,
+     .offset = offsetof(unet_settings, tile),
+     .def = "0",
      .doc = "0: the whole image when it fits in the memory available, else the largest "
             "tiles that fit; or a multiple of 16: tiles of that size"},
-    {.name = "fixed_bits", .type = MCP_OPT_FLAG,
-     .offset = offsetof(unet_settings, fixed_bits), .def = "false",
+    {.name = "fixed_bits",
+     .type = MCP_OPT_FLAG,
+     .offset = offsetof(unet_settings, fixed_bits),
+     .def = "false",
      .doc = "true: the direct-loop convolutions, the same bits on every x86-64 "
             "(MCPOST_UNET_FIXED=1 does it for the whole process); false: Winograd, 2-3x "
             "faster"},
-    {.name = "exact_tangents", .type = MCP_OPT_FLAG,
-     .offset = offsetof(unet_settings, exact_tangents), .def = "false",
+    {.name = "exact_tangents",
+     .type = MCP_OPT_FLAG,
+     .offset = offsetof(unet_settings, exact_tangents),
+     .def = "false",
      .doc = "true: the JVP's convolutions as the primal's, Winograd F(2x2, 3x3); false: "
             "the tangents' convolutions as Winograd F(4x4, 3x3), 1.78x fewer "
             "multiply-adds (JVP within 2.1e-6 of the double reference against 0.8e-6; "
             "MCPOST_UNET_EXACT_TANGENTS=1 for a process)"},
-    {.name = "max_memory_mb", .type = MCP_OPT_INT,
-     .offset = offsetof(unet_settings, max_memory_mb), .def = "0", .meta = "MB",
-     .doc = "the network's working memory at most: beyond it the image runs in tiles with "
-            "the same bits; 0: $MCPOST_UNET_MAX_MEMORY_MB, else 2048",
-     .lo = 0, .bounds = MCP_OPT_LO},
+    {.name = "max_memory_mb",
+     .type = MCP_OPT_INT,
+     .offset = offsetof(unet_settings, max_memory_mb),
+     .def = "0",
+     .meta = "MB",
+     .doc =
+         "the network's working memory at most: beyond it the image runs in tiles with "
+         "the same bits; 0: $MCPOST_UNET_MAX_MEMORY_MB, else 2048",
+     .lo = 0,
+     .bounds = MCP_OPT_LO},
     {0}};
 
 const mcp_operation mcp__op_unet = {
@@ -220,21 +235,22 @@ unet_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
     int tile = u.tile, fixed_bits = u.fixed_bits;
     int exact_tangents = u.exact_tangents, max_memory_mb = u.max_memory_mb;
     if (tile < 0 || tile % 16)
-        return mcp_node_error(mcp_node_get(settings, "tile"),
-                              "unet: tile must be 0 (as memory allows) or a multiple of 16 "
-                              "(got %d)",
-                              tile);
+        return mcp_node_error(
+            mcp_node_get(settings, "tile"),
+            "unet: tile must be 0 (as memory allows) or a multiple of 16 "
+            "(got %d)",
+            tile);
     char shipped[4096];
-    if (!weights || !*weights)
-        weights = getenv(WEIGHTS_ENV);
-    if ((!weights || !*weights) && mcp__find_data_file(SHIPPED_WEIGHTS, shipped,
-                                                      sizeof shipped) == 0)
+    if (!weights || !*weights) weights = getenv(WEIGHTS_ENV);
+    if ((!weights || !*weights) &&
+        mcp__find_data_file(SHIPPED_WEIGHTS, shipped, sizeof shipped) == 0)
         weights = shipped; /* OIDN 1.4's, shipped with mcpost (weights/README.md) */
     if (!weights || !*weights)
-        return mcp_node_error(settings,
-                              "unet: no weights: give weights: PATH (--weights PATH), set "
-                              WEIGHTS_ENV " to an OIDN .tza file, or install mcpost's "
-                              "share/mcpost/" SHIPPED_WEIGHTS);
+        return mcp_node_error(
+            settings,
+            "unet: no weights: give weights: PATH (--weights PATH), set " WEIGHTS_ENV
+            " to an OIDN .tza file, or install mcpost's "
+            "share/mcpost/" SHIPPED_WEIGHTS);
     char path[PATH_CAP];
     if (weights[0] != '/' && base_dir && *base_dir)
         snprintf(path, sizeof path, "%s/%s", base_dir, weights);

@@ -42,10 +42,10 @@ typedef struct mcp_denoise_tangent {
 typedef struct mcp_denoiser mcp_denoiser;
 
 struct mcp_denoiser {
-    const char *name;     /* "gauss", "bilateral", "unet", "external", ... */
-    int exact;            /* 1: jvp is exact forward mode; 0: finite differences */
-    int uses_albedo;      /* reads in->albedo when given */
-    int uses_normal;      /* reads in->normal when given */
+    const char *name; /* "gauss", "bilateral", "unet", "external", ... */
+    int exact;        /* 1: jvp is exact forward mode; 0: finite differences */
+    int uses_albedo;  /* reads in->albedo when given */
+    int uses_normal;  /* reads in->normal when given */
     /* Var[F] changes pixel by pixel (single-pixel colour weights: bilateral, nlm with
      * patch_radius 0): the estimate's automatic s² pooling stays off for it where the
      * variance has many degrees of freedom (docs/fidelity.md) */

@@ -54,8 +54,7 @@ find_kind(const char *name)
 {
     keys_ready();
     for (int i = 0; kinds[i]; i++)
-        if (strcmp(kinds[i]->name, name) == 0)
-            return kinds[i];
+        if (strcmp(kinds[i]->name, name) == 0) return kinds[i];
     return NULL;
 }
 
@@ -86,8 +85,7 @@ check_image(const char *who, const char *part, const mcp_image *img,
 static int
 is_plain_word(const char *s)
 {
-    if (!*s || (s[0] == '-' && !s[1]))
-        return 0;
+    if (!*s || (s[0] == '-' && !s[1])) return 0;
     for (; *s; s++)
         if (!(('a' <= *s && *s <= 'z') || ('A' <= *s && *s <= 'Z') ||
               ('0' <= *s && *s <= '9') || strchr("._+-/", *s)))
@@ -98,8 +96,7 @@ is_plain_word(const char *s)
 static int
 is_key(const char *s, size_t len)
 {
-    if (len == 0 || ('0' <= s[0] && s[0] <= '9'))
-        return 0;
+    if (len == 0 || ('0' <= s[0] && s[0] <= '9')) return 0;
     for (size_t i = 0; i < len; i++)
         if (!(('a' <= s[i] && s[i] <= 'z') || ('A' <= s[i] && s[i] <= 'Z') ||
               ('0' <= s[i] && s[i] <= '9') || s[i] == '_'))
@@ -115,8 +112,7 @@ append_quoted(mcp__strbuf *b, const char *s)
     if (!p) return -1;
     *p++ = '"';
     for (; *s; s++) {
-        if (*s == '"' || *s == '\\')
-            *p++ = '\\';
+        if (*s == '"' || *s == '\\') *p++ = '\\';
         *p++ = *s;
     }
     *p++ = '"';
@@ -150,8 +146,7 @@ args_to_yaml(const char *name, const char *const *opts, int n_opts, char **out)
                                opts[i]);
                 break;
             }
-        if (rc)
-            break;
+        if (rc) break;
         const char *value = eq + 1;
         rc = mcp__strbuf_str(&buf, i ? ",\n" : ", ") ||
              mcp__strbuf_put(&buf, opts[i], klen) || mcp__strbuf_str(&buf, ": ") ||
@@ -178,8 +173,7 @@ destroy_plain(mcp_denoiser *self)
 int
 mcp__denoise_check_input(const char *who, const mcp_denoise_input *in)
 {
-    if (!in || !in->color)
-        return mcp_error("%s: no colour given", who);
+    if (!in || !in->color) return mcp_error("%s: no colour given", who);
     if (check_image(who, "colour", in->color, NULL) ||
         (in->albedo && check_image(who, "albedo", in->albedo, in->color)) ||
         (in->normal && check_image(who, "normal", in->normal, in->color)) ||
@@ -192,23 +186,17 @@ int
 mcp__denoise_check_tangents(const char *who, const mcp_denoise_input *at,
                             const mcp_denoise_tangent *t, int n)
 {
-    if (n < 0)
-        return mcp_error("%s: number of tangents must be >= 0 (got %d)", who, n);
-    if (n > 0 && !t)
-        return mcp_error("%s: %d tangents announced, none given", who, n);
+    if (n < 0) return mcp_error("%s: number of tangents must be >= 0 (got %d)", who, n);
+    if (n > 0 && !t) return mcp_error("%s: %d tangents announced, none given", who, n);
     for (int k = 0; k < n; k++) {
         char part[64];
-        if (!t[k].color)
-            return mcp_error("%s: tangent %d has no colour part", who, k);
+        if (!t[k].color) return mcp_error("%s: tangent %d has no colour part", who, k);
         snprintf(part, sizeof part, "tangent %d colour", k);
-        if (check_image(who, part, t[k].color, at->color))
-            return -1;
+        if (check_image(who, part, t[k].color, at->color)) return -1;
         snprintf(part, sizeof part, "tangent %d albedo", k);
-        if (t[k].albedo && check_image(who, part, t[k].albedo, at->color))
-            return -1;
+        if (t[k].albedo && check_image(who, part, t[k].albedo, at->color)) return -1;
         snprintf(part, sizeof part, "tangent %d normal", k);
-        if (t[k].normal && check_image(who, part, t[k].normal, at->color))
-            return -1;
+        if (t[k].normal && check_image(who, part, t[k].normal, at->color)) return -1;
     }
     return 0;
 }
@@ -218,8 +206,7 @@ mcp__rgb_new(int width, int height, const char *source, mcp_image **out)
 {
     static const char *const rgb[] = {"R", "G", "B"};
     mcp_image *img = NULL;
-    if (mcp_image_new(width, height, 3, rgb, &img))
-        return -1;
+    if (mcp_image_new(width, height, 3, rgb, &img)) return -1;
     if (source && mcp_image_set_source(img, source)) {
         mcp_image_free(img);
         return -1;
@@ -234,8 +221,7 @@ mcp__denoiser_new(const char *name, size_t state_size)
     /* one block: the struct, then the state, aligned for any type */
     size_t head = (sizeof(mcp_denoiser) + 15) / 16 * 16;
     mcp_denoiser *d = mcp_calloc(1, head + state_size);
-    if (!d)
-        return NULL;
+    if (!d) return NULL;
     d->name = name;
     d->exact = 1;
     d->destroy = destroy_plain;
@@ -256,8 +242,7 @@ int
 mcp_denoiser_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
 {
     *out = NULL;
-    if (!settings)
-        return mcp_error("denoiser: no settings given");
+    if (!settings) return mcp_error("denoiser: no settings given");
     const mcp_node *name_node = settings;
     if (settings->kind == MCP_NODE_SEQ)
         return mcp_node_error(settings, "denoiser must be a name or a map with 'name', "
@@ -266,8 +251,7 @@ mcp_denoiser_create(const mcp_node *settings, const char *base_dir, mcp_denoiser
         mcp_node_require(settings, "name", "denoiser settings", &name_node))
         return -1;
     const char *name = NULL;
-    if (mcp_node_string(name_node, "name", &name))
-        return -1;
+    if (mcp_node_string(name_node, "name", &name)) return -1;
     const mcp_denoiser_kind *kind = find_kind(name);
     if (!kind) {
         char known[256];
@@ -283,8 +267,7 @@ mcp_denoiser_create(const mcp_node *settings, const char *base_dir, mcp_denoiser
         allowed[n] = NULL;
         char what[96];
         snprintf(what, sizeof what, "denoiser '%s'", kind->name);
-        if (mcp_node_check_keys(settings, allowed, what))
-            return -1;
+        if (mcp_node_check_keys(settings, allowed, what)) return -1;
     }
     return kind->create(settings, base_dir, out);
 }
@@ -294,8 +277,7 @@ mcp_denoiser_create_from_args(const char *name, const char *const *opts, int n_o
                               mcp_denoiser **out)
 {
     *out = NULL;
-    if (!name || !*name)
-        return mcp_error("no denoiser named (give --denoiser NAME)");
+    if (!name || !*name) return mcp_error("no denoiser named (give --denoiser NAME)");
     if (!find_kind(name)) {
         char known[256];
         kind_names(known, sizeof known);
@@ -308,8 +290,7 @@ mcp_denoiser_create_from_args(const char *name, const char *const *opts, int n_o
     if (!strcmp(name, "default") && n_opts > 0) name = "unet";
     char *text = NULL;
     mcp_node *root = NULL;
-    if (args_to_yaml(name, opts, n_opts, &text))
-        return -1;
+    if (args_to_yaml(name, opts, n_opts, &text)) return -1;
     int rc = mcp_yaml_parse_string(text, "--denoiser-opt", &root) ||
              mcp_denoiser_create(root, NULL, out);
     mcp_node_free(root);
@@ -320,8 +301,7 @@ mcp_denoiser_create_from_args(const char *name, const char *const *opts, int n_o
 void
 mcp_denoiser_free(mcp_denoiser *d)
 {
-    if (!d)
-        return;
+    if (!d) return;
     if (d->destroy)
         d->destroy(d);
     else

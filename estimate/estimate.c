@@ -18,7 +18,8 @@
 #include <string.h>
 
 static const char *const variance_probes_names[] = {"sure", "rademacher"};
-const mcp_wordlist mcp_variance_probes_words = {"variance probes", variance_probes_names, 2};
+const mcp_wordlist mcp_variance_probes_words = {"variance probes", variance_probes_names,
+                                                2};
 
 mcp_estimate_options
 mcp_estimate_defaults(void)

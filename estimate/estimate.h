@@ -361,7 +361,8 @@ typedef struct mcp_estimate {
     double percentile_tau[MCP_ESTIMATE_MAX_PERCENTILES]; /* estimated error at each */
     /* wall-clock times of the steps: F and its JVPs, the error maps, block averaging, the
      * distribution and the stop decision, the percentile curve, the sampling map */
-    double ms_denoise, ms_error_terms, ms_blocks, ms_stopping, ms_percentiles, ms_sampling;
+    double ms_denoise, ms_error_terms, ms_blocks, ms_stopping, ms_percentiles,
+        ms_sampling;
     mcp_variance_source variance_source; /* what the dump's variance rests on */
     double variance_dof;                 /* its degrees of freedom (0: many/unknown) */
     int s2_pool;                         /* the radius s² was pooled over */
@@ -410,7 +411,7 @@ typedef struct mcp_series_estimate {
      * is <= τ_j; 0 when never within the series */
     double first_spp[MCP_ESTIMATE_MAX_TAUS];
     double true_first_spp[MCP_ESTIMATE_MAX_TAUS];
-    int agree[MCP_ESTIMATE_MAX_TAUS]; /* mcp_stop_agrees (with a reference) */
+    int agree[MCP_ESTIMATE_MAX_TAUS];    /* mcp_stop_agrees (with a reference) */
     mcp_variance_source variance_source; /* the last member's */
     /* Σ(the last member's own Variance/n) / Σ(the spread of the increments before it):
      * how far the renderer's per-sample variance overstates (> 1) the variance of the

@@ -71,7 +71,8 @@ typedef struct mcp__rng {
     int has_spare;
 } mcp__rng;
 
-void mcp__rng_init(mcp__rng *r, uint64_t seed, uint64_t stream, uint64_t k, uint64_t index);
+void mcp__rng_init(mcp__rng *r, uint64_t seed, uint64_t stream, uint64_t k,
+                   uint64_t index);
 uint64_t mcp__rng_u64(mcp__rng *r);
 double mcp__rng_normal(mcp__rng *r);
 
@@ -83,7 +84,8 @@ const char *mcp__no_variance_hint(const mcp_dump *d, const char *otherwise);
 
 /* The values of given ranks among n floats without sorting them (common/select.c). */
 int mcp__select_ranks(const float *v, size_t n, const size_t *ranks, int k, float *out);
-int mcp__select_percentiles(const float *v, size_t n, const double *p, int k, double *out);
+int mcp__select_percentiles(const float *v, size_t n, const double *p, int k,
+                            double *out);
 
 /* A new zero-filled packed image of n channels (names NULL: R, G, B), labelled source
  * (sure.c). */

@@ -296,7 +296,8 @@ check_dump(const char *who, const mcp_dump *d)
 {
     if (!d || !d->color) return mcp_error("%s: missing dump", who);
     if (!d->var_of_mean)
-        return mcp_error("%s: %s has no variance%s", who, d->source ? d->source : "the dump",
+        return mcp_error("%s: %s has no variance%s", who,
+                         d->source ? d->source : "the dump",
                          mcp__no_variance_hint(d, " (SURE and the variance estimate need "
                                                   "the variance of the pixel means)"));
     if (d->color->channels != 3 || d->var_of_mean->channels != 3)

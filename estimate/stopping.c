@@ -326,8 +326,7 @@ mcp_error_cdf(const mcp_error_dist *d, double tau)
         return NAN;
     }
     double f = total / (double)d->n_values;
-    if (isnan(f))
-        mcp_error("error CDF at tau %g is not a number", tau);
+    if (isnan(f)) mcp_error("error CDF at tau %g is not a number", tau);
     return f;
 }
 
@@ -645,8 +644,8 @@ refine(const binned_dist *bd, const double *p, const double *tc, int m, double *
 {
     search s[MCP_ESTIMATE_MAX_PERCENTILES];
     double t[2 * MCP_ESTIMATE_MAX_PERCENTILES], f[2 * MCP_ESTIMATE_MAX_PERCENTILES];
-    double h = bin_half_width(COARSE_SHIFT) + bin_half_width(FINE_SHIFT) +
-               2 * PERCENTILE_RTOL;
+    double h =
+        bin_half_width(COARSE_SHIFT) + bin_half_width(FINE_SHIFT) + 2 * PERCENTILE_RTOL;
     const bin_set *fine = &bd->fine;
     /* first a bracket of ±3e-4: the coarse answer is far closer than its bound, since
      * a bin's values spread on both sides of its centre */

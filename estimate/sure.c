@@ -118,8 +118,7 @@ name_denoiser(const mcp_denoiser *den)
 {
     const char *msg = mcp_error_message();
     size_t n = strlen(den->name);
-    if (strncmp(msg, den->name, n) == 0 && msg[n] == ':')
-        return -1;
+    if (strncmp(msg, den->name, n) == 0 && msg[n] == ':') return -1;
     return mcp_error_prefix("%s: ", den->name);
 }
 

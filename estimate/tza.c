@@ -18,8 +18,7 @@ typedef struct reader {
 static int
 take(reader *r, size_t n, const unsigned char **at)
 {
-    if (n > r->size - r->pos)
-        return -1;
+    if (n > r->size - r->pos) return -1;
     *at = r->p + r->pos;
     r->pos += n;
     return 0;
@@ -64,8 +63,7 @@ mcp__half_to_float(unsigned short h)
 void
 mcp__tza_free(mcp__tza *tza)
 {
-    if (!tza)
-        return;
+    if (!tza) return;
     for (int i = 0; i < tza->count; i++) {
         free(tza->tensors[i].name);
         free(tza->tensors[i].data);
@@ -78,8 +76,7 @@ const mcp__tza_tensor *
 mcp__tza_find(const mcp__tza *tza, const char *name)
 {
     for (int i = 0; i < tza->count; i++)
-        if (!strcmp(tza->tensors[i].name, name))
-            return &tza->tensors[i];
+        if (!strcmp(tza->tensors[i].name, name)) return &tza->tensors[i];
     return NULL;
 }
 
@@ -92,8 +89,7 @@ parse_tensor(reader *r, const char *src, int k, mcp__tza_tensor *t)
     size_t len = (size_t)le(at, 2);
     if (take(r, len, &at))
         return mcp_error("%s: truncated tensor table (tensor %d)", src, k);
-    if (!(t->name = mcp_malloc(len + 1)))
-        return -1;
+    if (!(t->name = mcp_malloc(len + 1))) return -1;
     memcpy(t->name, at, len);
     t->name[len] = 0;
     if (take(r, 1, &at))
@@ -135,8 +131,7 @@ parse_tensor(reader *r, const char *src, int k, mcp__tza_tensor *t)
         return mcp_error("%s: tensor '%s': data truncated (%zu bytes at offset %llu, "
                          "file is %zu bytes)",
                          src, t->name, bytes, (unsigned long long)off, r->size);
-    if (!(t->data = mcp_malloc(count * sizeof(float))))
-        return -1;
+    if (!(t->data = mcp_malloc(count * sizeof(float)))) return -1;
     const unsigned char *d = r->p + off;
     for (size_t i = 0; i < count; i++) {
         if (t->dtype == 'f') {
@@ -155,19 +150,19 @@ mcp__tza_parse(const unsigned char *bytes, size_t size, const char *source,
 {
     *out = NULL;
     const char *src = source ? source : "tza";
-    if (size < 12)
-        return mcp_error("%s: truncated .tza header (%zu bytes)", src, size);
+    if (size < 12) return mcp_error("%s: truncated .tza header (%zu bytes)", src, size);
     unsigned magic = (unsigned)le(bytes, 2);
     if (magic != TZA_MAGIC)
-        return mcp_error("%s: not a .tza file (magic 0x%04x, expected 0x%04x)", src, magic,
-                         TZA_MAGIC);
+        return mcp_error("%s: not a .tza file (magic 0x%04x, expected 0x%04x)", src,
+                         magic, TZA_MAGIC);
     if (bytes[2] != 2)
         return mcp_error("%s: unsupported .tza version %d.%d (only 2.x)", src, bytes[2],
                          bytes[3]);
     uint64_t table = le(bytes + 4, 8);
     if (table < 12 || table > size || size - table < 4)
-        return mcp_error("%s: truncated .tza file (table at offset %llu, file is %zu bytes)",
-                         src, (unsigned long long)table, size);
+        return mcp_error(
+            "%s: truncated .tza file (table at offset %llu, file is %zu bytes)", src,
+            (unsigned long long)table, size);
     reader r = {bytes, size, (size_t)table};
     const unsigned char *at = NULL;
     if (take(&r, 4, &at)) /* cannot fail after the size check above */
@@ -176,8 +171,7 @@ mcp__tza_parse(const unsigned char *bytes, size_t size, const char *source,
     if (n < 1 || n > 4096)
         return mcp_error("%s: bad tensor count %llu", src, (unsigned long long)n);
     mcp__tza *tza = mcp_calloc(1, sizeof *tza);
-    if (!tza)
-        return -1;
+    if (!tza) return -1;
     if (!(tza->tensors = mcp_calloc((size_t)n, sizeof *tza->tensors))) {
         free(tza);
         return -1;
@@ -198,12 +192,10 @@ mcp__tza_read(const char *path, mcp__tza **out)
 {
     *out = NULL;
     FILE *f = fopen(path, "rb");
-    if (!f)
-        return mcp_error("%s: cannot open weights", path);
+    if (!f) return mcp_error("%s: cannot open weights", path);
     unsigned char *buf = NULL;
     long size = -1;
-    if (fseek(f, 0, SEEK_END) == 0)
-        size = ftell(f);
+    if (fseek(f, 0, SEEK_END) == 0) size = ftell(f);
     if (size < 0 || fseek(f, 0, SEEK_SET) != 0) {
         fclose(f);
         return mcp_error("%s: cannot read weights", path);

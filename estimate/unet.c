@@ -48,20 +48,16 @@ enum { E0, E1, E2, E3, E4, E5A, E5B, D4A, D4B, D3A, D3B, D2A, D2B, D1A, D1B, D0 
 static float
 pu_raw(float y)
 {
-    if (y <= PU_Y0)
-        return PU_A * y;
-    if (y <= PU_Y1)
-        return PU_B * powf(y, PU_C) + PU_D;
+    if (y <= PU_Y0) return PU_A * y;
+    if (y <= PU_Y1) return PU_B * powf(y, PU_C) + PU_D;
     return PU_E * logf(y + PU_F) + PU_G;
 }
 
 static float
 pu_raw_inverse(float x)
 {
-    if (x <= PU_X0)
-        return x / PU_A;
-    if (x <= PU_X1)
-        return powf((x - PU_D) / PU_B, 1.0f / PU_C);
+    if (x <= PU_X0) return x / PU_A;
+    if (x <= PU_X1) return powf((x - PU_D) / PU_B, 1.0f / PU_C);
     return expf((x - PU_G) / PU_E) - PU_F;
 }
 
@@ -69,10 +65,8 @@ pu_raw_inverse(float x)
 static float
 pu_slope(float y)
 {
-    if (y <= PU_Y0)
-        return PU_A;
-    if (y <= PU_Y1)
-        return PU_B * PU_C * powf(y, PU_C - 1.0f);
+    if (y <= PU_Y0) return PU_A;
+    if (y <= PU_Y1) return PU_B * PU_C * powf(y, PU_C - 1.0f);
     return PU_E / (y + PU_F);
 }
 
@@ -80,10 +74,8 @@ pu_slope(float y)
 static float
 pu_inverse_slope(float x)
 {
-    if (x <= PU_X0)
-        return 1.0f / PU_A;
-    if (x <= PU_X1)
-        return powf((x - PU_D) / PU_B, 1.0f / PU_C - 1.0f) / (PU_B * PU_C);
+    if (x <= PU_X0) return 1.0f / PU_A;
+    if (x <= PU_X1) return powf((x - PU_D) / PU_B, 1.0f / PU_C - 1.0f) / (PU_B * PU_C);
     return expf((x - PU_G) / PU_E) / PU_E;
 }
 
@@ -110,8 +102,7 @@ mcp__pu_inverse(float x)
 void
 mcp__unet_free(mcp__unet *net)
 {
-    if (!net)
-        return;
+    if (!net) return;
     for (int k = 0; k < MCP__UNET_NCONV; k++) {
         free(net->conv[k].weight);
         free(net->conv[k].bias);
@@ -125,12 +116,18 @@ expected_cin(const mcp__unet *n, int k)
 {
     const mcp__unet_conv *c = n->conv;
     switch (k) {
-    case E0: return n->ic;
-    case D4A: return c[E5B].cout + c[E3].cout; /* concat(up, pool3) */
-    case D3A: return c[D4B].cout + c[E2].cout; /* concat(up, pool2) */
-    case D2A: return c[D3B].cout + c[E1].cout; /* concat(up, pool1) */
-    case D1A: return c[D2B].cout + n->ic;      /* concat(up, input) */
-    default: return c[k - 1].cout;
+    case E0:
+        return n->ic;
+    case D4A:
+        return c[E5B].cout + c[E3].cout; /* concat(up, pool3) */
+    case D3A:
+        return c[D4B].cout + c[E2].cout; /* concat(up, pool2) */
+    case D2A:
+        return c[D3B].cout + c[E1].cout; /* concat(up, pool1) */
+    case D1A:
+        return c[D2B].cout + n->ic; /* concat(up, input) */
+    default:
+        return c[k - 1].cout;
     }
 }
 
@@ -146,8 +143,7 @@ mcp__unet_from_tza(const mcp__tza *tza, const char *source, mcp__unet **out)
     if (mcp__tza_find(tza, "dec_conv5a.weight"))
         return mcp_error("%s: OIDN 1.0-1.2 weights (5 pools) are not supported", src);
     mcp__unet *net = mcp_calloc(1, sizeof *net);
-    if (!net)
-        return -1;
+    if (!net) return -1;
     for (int k = 0; k < MCP__UNET_NCONV; k++) {
         char wn[64], bn[64];
         snprintf(wn, sizeof wn, "%s.weight", conv_names[k]);
@@ -199,8 +195,7 @@ mcp__unet_load(const char *path, mcp__unet **out)
 {
     *out = NULL;
     mcp__tza *tza = NULL;
-    if (mcp__tza_read(path, &tza))
-        return -1;
+    if (mcp__tza_read(path, &tza)) return -1;
     int rc = mcp__unet_from_tza(tza, path, out);
     mcp__tza_free(tza);
     return rc;
@@ -239,8 +234,7 @@ plane(const batch *b, int k, int i)
 void *
 mcp__unet_alloc(size_t bytes)
 {
-    if (bytes < 2 * HUGE_PAGE)
-        return mcp_malloc(bytes);
+    if (bytes < 2 * HUGE_PAGE) return mcp_malloc(bytes);
     void *p = NULL;
     const size_t rounded = (bytes + HUGE_PAGE - 1) / HUGE_PAGE * HUGE_PAGE;
     if (!(p = aligned_alloc(HUGE_PAGE, rounded))) {
@@ -293,26 +287,23 @@ block_take(size_t bytes, size_t *cap)
         return p;
     }
     /* none holds it: in a plain apply, the cached blocks would only raise the peak */
-    if (!block_cache_keeps)
-        block_cache_drain();
-    *cap = bytes < 2 * HUGE_PAGE ? bytes : (bytes + HUGE_PAGE - 1) / HUGE_PAGE * HUGE_PAGE;
+    if (!block_cache_keeps) block_cache_drain();
+    *cap =
+        bytes < 2 * HUGE_PAGE ? bytes : (bytes + HUGE_PAGE - 1) / HUGE_PAGE * HUGE_PAGE;
     return mcp__unet_alloc(bytes);
 }
 
 static void
 block_give(void *p, size_t cap)
 {
-    if (!p)
-        return;
+    if (!p) return;
     int slot = -1;
     for (int i = 0; i < CACHE_SLOTS && slot < 0; i++)
-        if (!block_cache[i].p)
-            slot = i;
+        if (!block_cache[i].p) slot = i;
     if (slot < 0) { /* full: the smallest of the cache's blocks and this one goes */
         slot = 0;
         for (int i = 1; i < CACHE_SLOTS; i++)
-            if (block_cache[i].cap < block_cache[slot].cap)
-                slot = i;
+            if (block_cache[i].cap < block_cache[slot].cap) slot = i;
         if (block_cache[slot].cap >= cap) {
             free(p);
             return;
@@ -344,8 +335,7 @@ batch_new_unset(batch *b, int n, int c, int h, int w)
 static int
 batch_new(batch *b, int n, int c, int h, int w)
 {
-    if (batch_new_unset(b, n, c, h, w))
-        return -1;
+    if (batch_new_unset(b, n, c, h, w)) return -1;
     memset(b->d, 0, (size_t)n * c * h * w * sizeof(float));
     return 0;
 }
@@ -457,9 +447,8 @@ conv_block(const float *restrict rows, int rs, int i0, int i1, int ky0, int ky1,
 
 __attribute__((target("avx2"))) static void
 conv_block_avx2(const float *restrict rows, int rs, int i0, int i1, int ky0, int ky1,
-                const float *restrict wb, const float *restrict init,
-                float *restrict dst, const float *restrict p0, size_t hw, int on, int m,
-                int relu)
+                const float *restrict wb, const float *restrict init, float *restrict dst,
+                const float *restrict p0, size_t hw, int on, int m, int relu)
 {
     float tmp[OB][XB_AVX2];
     for (int o = 0; o < OB; o++)
@@ -476,7 +465,8 @@ conv_block_avx2(const float *restrict rows, int rs, int i0, int i1, int ky0, int
             const float *restrict r = rows + ((size_t)i * 3 + ky) * rs;
             const float *restrict wk = wb + ((size_t)i * 9 + ky * 3) * OB * WL;
             for (int kx = 0; kx < 3; kx++, wk += OB * WL) {
-                const __m256 r0 = _mm256_loadu_ps(r + kx), r1 = _mm256_loadu_ps(r + kx + 8);
+                const __m256 r0 = _mm256_loadu_ps(r + kx),
+                             r1 = _mm256_loadu_ps(r + kx + 8);
                 __m256 w = _mm256_broadcast_ss(wk);
                 MADD(a00, w, r0), MADD(a01, w, r1);
                 w = _mm256_broadcast_ss(wk + WL);
@@ -522,7 +512,8 @@ choose_kernel(int *width)
 typedef struct conv_layer {
     const batch *a, *b; /* the input: concat(a, b), b may be NULL */
     batch *out;
-    const float *wb, *bias; /* repacked weights (nob blocks of block_floats), bias or NULL */
+    const float *wb,
+        *bias; /* repacked weights (nob blocks of block_floats), bias or NULL */
     size_t block_floats;
     conv_block_fn kernel;
     int xb; /* the kernel's columns */
@@ -545,8 +536,7 @@ conv_task(const conv_layer *l, int k, int y, int c, float *rows)
         const float *src = i < ca ? plane(a, k, i) : plane(b, k, i - ca);
         for (int ky = ky0; ky < ky1; ky++) {
             float *d = rows + ((size_t)i * 3 + ky) * rs + 1;
-            if (lo == 0)
-                d[-1] = 0.0f;
+            if (lo == 0) d[-1] = 0.0f;
             memcpy(d + lo, src + (size_t)(y + ky - 1) * w + x0 + lo,
                    (size_t)(hi - lo) * sizeof(float));
             for (int j = hi; j < rs - 1; j++)
@@ -564,8 +554,8 @@ conv_task(const conv_layer *l, int k, int y, int c, float *rows)
             const int mode = i1 < cin ? 3 : l->relu ? k == 0 ? 1 : 2 : 0;
             const float *init = i0 > 0 ? NULL : k == 0 && l->bias ? l->bias + o0 : zeros;
             for (int xs = 0; xs < xn; xs += l->xb)
-                l->kernel(rows + xs, rs, i0, i1, ky0, ky1, wo, init, dst + xs, p0 + xs, hw,
-                          on, xn - xs < l->xb ? xn - xs : l->xb, mode);
+                l->kernel(rows + xs, rs, i0, i1, ky0, ky1, wo, init, dst + xs, p0 + xs,
+                          hw, on, xn - xs < l->xb ? xn - xs : l->xb, mode);
         }
     }
 }
@@ -586,7 +576,6 @@ mcp__unet_fast(const mcp__unet *net)
     return !net->fixed_bits && !(fixed && *fixed && strcmp(fixed, "0"));
 }
 
-
 /* ---- the primal's trace: what the tangents' passes need of it ----
  * A tangent passes through each layer's linearisation at the primal, which needs only
  * the primal's ReLU masks and max-pool choices, not its activations. The primal runs
@@ -600,10 +589,10 @@ mcp__unet_fast(const mcp__unet *net)
 #define N_POOLS 4
 
 typedef struct primal_trace {
-    int replay;                            /* 0: record the primal; 1: replay */
+    int replay;                           /* 0: record the primal; 1: replay */
     unsigned char *relu[MCP__UNET_NCONV]; /* bit i of plane c: value > 0 */
-    unsigned char *pick[N_POOLS];          /* per pooled value: 0 .. 3 */
-    int pools;                             /* pools passed in this pass */
+    unsigned char *pick[N_POOLS];         /* per pooled value: 0 .. 3 */
+    int pools;                            /* pools passed in this pass */
 } primal_trace;
 
 static void
@@ -632,10 +621,10 @@ winograd(const pass *ps, const mcp__unet_conv *L, const float *bias, const float
          int ca, int a_up, const float *b, int n, int h, int w, int relu, float *out)
 {
     if (ps->coarse)
-        return mcp__unet_conv_winograd4(L->weight, bias, L->cin, L->cout, a, ca, a_up, b, n,
-                                        h, w, relu, ps->bf16, out);
-    return mcp__unet_conv_winograd(L->weight, bias, L->cin, L->cout, a, ca, a_up, b, n, h, w,
-                                   relu, out);
+        return mcp__unet_conv_winograd4(L->weight, bias, L->cin, L->cout, a, ca, a_up, b,
+                                        n, h, w, relu, ps->bf16, out);
+    return mcp__unet_conv_winograd(L->weight, bias, L->cin, L->cout, a, ca, a_up, b, n, h,
+                                   w, relu, out);
 }
 
 static int
@@ -649,8 +638,7 @@ static int
 record_relu(const batch *out, unsigned char **bits)
 {
     const size_t count = (size_t)out->c * plane_size(out), whole = count / 8;
-    if (!(*bits = mcp_calloc(whole + 1, 1)))
-        return -1;
+    if (!(*bits = mcp_calloc(whole + 1, 1))) return -1;
     unsigned char *restrict m = *bits;
     const float *restrict v = out->d;
 #pragma omp parallel for schedule(static)
@@ -724,8 +712,7 @@ conv_plain(const pass *ps, const mcp__unet_conv *L, const batch *a, const batch 
     if (cin != L->cin)
         return mcp_error("unet: layer of %d input channels given %d", L->cin, cin);
     if (ps->fast) {
-        if (batch_new_unset(out, n, cout, h, w))
-            return -1;
+        if (batch_new_unset(out, n, cout, h, w)) return -1;
         if (winograd(ps, L, with_bias ? L->bias : NULL, a->d, a->c, 0, b ? b->d : NULL, n,
                      h, w, relu, out->d)) {
             batch_free(out);
@@ -765,10 +752,20 @@ conv_plain(const pass *ps, const mcp__unet_conv *L, const batch *a, const batch 
                     for (int lane = 0; lane < WL; lane++)
                         dst[lane] = wt;
                 }
-    const conv_layer l = {.a = a, .b = b, .out = out, .wb = wb, .bias = with_bias ? bias : NULL,
-                          .block_floats = block_floats, .kernel = kernel, .xb = xb,
-                          .cin = cin, .cout = cout,
-                          .nob = nob, .nic = (cin + IC - 1) / IC, .xc = xc, .rs = rs,
+    const conv_layer l = {.a = a,
+                          .b = b,
+                          .out = out,
+                          .wb = wb,
+                          .bias = with_bias ? bias : NULL,
+                          .block_floats = block_floats,
+                          .kernel = kernel,
+                          .xb = xb,
+                          .cin = cin,
+                          .cout = cout,
+                          .nob = nob,
+                          .nic = (cin + IC - 1) / IC,
+                          .xc = xc,
+                          .rs = rs,
                           .relu = relu};
 #pragma omp parallel num_threads(n_threads)
     {
@@ -804,8 +801,7 @@ static int
 trace_relu(const pass *ps, const mcp__unet_conv *L, int relu, batch *out)
 {
     primal_trace *tr = ps->trace;
-    if (!tr || !relu)
-        return 0;
+    if (!tr || !relu) return 0;
     const int layer = layer_of(ps, L);
     if (tr->replay) {
         replay_relu(out, tr->relu[layer]);
@@ -854,11 +850,9 @@ static int
 conv_replace(const pass *ps, const mcp__unet_conv *L, batch *t, batch *skip, int relu)
 {
     batch out;
-    if (conv_into(ps, L, t, skip, relu, &out))
-        return -1;
+    if (conv_into(ps, L, t, skip, relu, &out)) return -1;
     batch_free(t);
-    if (skip)
-        batch_free(skip);
+    if (skip) batch_free(skip);
     *t = out;
     return 0;
 }
@@ -879,13 +873,11 @@ maxpool_into(const pass *ps, const batch *in, batch *out)
     unsigned char *picks = NULL;
     const int replay = tr && tr->replay;
     if (tr) {
-        if (!replay &&
-            !(tr->pick[tr->pools] = mcp_malloc((size_t)in->c * h2 * w2)))
+        if (!replay && !(tr->pick[tr->pools] = mcp_malloc((size_t)in->c * h2 * w2)))
             return -1;
         picks = tr->pick[tr->pools++];
     }
-    if (batch_new_unset(out, in->n, in->c, h2, w2))
-        return -1;
+    if (batch_new_unset(out, in->n, in->c, h2, w2)) return -1;
 #pragma omp parallel for collapse(2) schedule(static)
     for (int i = 0; i < in->c; i++)
         for (int y = 0; y < h2; y++)
@@ -903,7 +895,8 @@ maxpool_into(const pass *ps, const batch *in, batch *out)
                             plane(in, t, i) + (size_t)2 * y * w + 2 * x0;
                         float *restrict dst = plane(out, t, i) + (size_t)y * w2 + x0;
                         for (int x = 0; x < xn; x++)
-                            dst[x] = src[(pick[x] >> 1) * (size_t)w + 2 * x + (pick[x] & 1)];
+                            dst[x] =
+                                src[(pick[x] >> 1) * (size_t)w + 2 * x + (pick[x] & 1)];
                     }
                     continue;
                 }
@@ -921,7 +914,8 @@ maxpool_into(const pass *ps, const batch *in, batch *out)
                     dst0[x] = m;
                 }
                 for (int t = 1; t < in->n; t++) {
-                    const float *restrict src = plane(in, t, i) + (size_t)2 * y * w + 2 * x0;
+                    const float *restrict src =
+                        plane(in, t, i) + (size_t)2 * y * w + 2 * x0;
                     float *restrict dst = plane(out, t, i) + (size_t)y * w2 + x0;
                     for (int x = 0; x < xn; x++)
                         dst[x] = src[(pick[x] >> 1) * (size_t)w + 2 * x + (pick[x] & 1)];
@@ -934,8 +928,7 @@ maxpool_into(const pass *ps, const batch *in, batch *out)
 static int
 pool_to(const pass *ps, batch *t, batch *skip)
 {
-    if (maxpool_into(ps, t, skip))
-        return -1;
+    if (maxpool_into(ps, t, skip)) return -1;
     batch_free(t);
     return 0;
 }
@@ -944,8 +937,7 @@ static int
 pool_replace(const pass *ps, batch *t)
 {
     batch out;
-    if (pool_to(ps, t, &out))
-        return -1;
+    if (pool_to(ps, t, &out)) return -1;
     *t = out;
     return 0;
 }
@@ -955,8 +947,7 @@ static int
 upsample_replace(batch *t)
 {
     batch out;
-    if (batch_new_unset(&out, t->n, t->c, 2 * t->h, 2 * t->w))
-        return -1;
+    if (batch_new_unset(&out, t->n, t->c, 2 * t->h, 2 * t->w)) return -1;
     const int planes = t->n * t->c, h = t->h, w = t->w;
 #pragma omp parallel for collapse(2) schedule(static)
     for (int k = 0; k < planes; k++)
@@ -977,22 +968,19 @@ upsample_replace(batch *t)
 static int
 conv_up_replace(const pass *ps, const mcp__unet_conv *L, batch *t, batch *skip, int relu)
 {
-    if (!ps->fast)
-        return upsample_replace(t) || conv_replace(ps, L, t, skip, relu);
+    if (!ps->fast) return upsample_replace(t) || conv_replace(ps, L, t, skip, relu);
     const int n = t->n, h = skip->h, w = skip->w, cin = t->c + skip->c;
     if (cin != L->cin || 2 * t->h != h || 2 * t->w != w)
         return mcp_error("unet: layer of %d input channels given %d", L->cin, cin);
     batch out;
-    if (batch_new_unset(&out, n, L->cout, h, w))
-        return -1;
+    if (batch_new_unset(&out, n, L->cout, h, w)) return -1;
     const int replay = is_replay(ps);
     if (winograd(ps, L, replay ? NULL : L->bias, t->d, t->c, 1, skip->d, n, h, w,
                  relu && !replay, out.d)) {
         batch_free(&out);
         return -1;
     }
-    if (trace_relu(ps, L, relu, &out))
-        return -1;
+    if (trace_relu(ps, L, relu, &out)) return -1;
     progress_step();
     batch_free(t);
     batch_free(skip);
@@ -1010,28 +998,30 @@ network(const mcp__unet *net, batch *x, batch *t, primal_trace *tr)
     const mcp__unet_conv *c = net->conv;
     batch p1 = {0}, p2 = {0}, p3 = {0};
     *t = (batch){0};
-    if (tr)
-        tr->pools = 0;
+    if (tr) tr->pools = 0;
     const int fast = mcp__unet_fast(net);
     const int coarse = fast && tr && tr->replay && !exact_tangents(net);
-    const pass ps_ = {net, fast, coarse, coarse && mcp__unet_gemm_bf16_has(), tr}, *ps = &ps_;
-    int rc = conv_into(ps, &c[E0], x, NULL, 1, t) || conv_replace(ps, &c[E1], t, NULL, 1) ||
-             pool_to(ps, t, &p1) || conv_into(ps, &c[E2], &p1, NULL, 1, t) ||
-             pool_to(ps, t, &p2) || conv_into(ps, &c[E3], &p2, NULL, 1, t) ||
-             pool_to(ps, t, &p3) || conv_into(ps, &c[E4], &p3, NULL, 1, t) ||
-             pool_replace(ps, t) || conv_replace(ps, &c[E5A], t, NULL, 1) ||
-             conv_replace(ps, &c[E5B], t, NULL, 1) ||
-             /* decoder: concat(upsampled, skip) */
-             conv_up_replace(ps, &c[D4A], t, &p3, 1) || conv_replace(ps, &c[D4B], t, NULL, 1) ||
-             conv_up_replace(ps, &c[D3A], t, &p2, 1) || conv_replace(ps, &c[D3B], t, NULL, 1) ||
-             conv_up_replace(ps, &c[D2A], t, &p1, 1) || conv_replace(ps, &c[D2B], t, NULL, 1) ||
-             conv_up_replace(ps, &c[D1A], t, x, 1) ||
-             conv_replace(ps, &c[D1B], t, NULL, 1) ||
-             /* no ReLU on the last conv (1.4); the output clamp makes 2.x's ReLU moot */
-             conv_replace(ps, &c[D0], t, NULL, 0);
+    const pass ps_ = {net, fast, coarse, coarse && mcp__unet_gemm_bf16_has(), tr},
+               *ps = &ps_;
+    int rc =
+        conv_into(ps, &c[E0], x, NULL, 1, t) || conv_replace(ps, &c[E1], t, NULL, 1) ||
+        pool_to(ps, t, &p1) || conv_into(ps, &c[E2], &p1, NULL, 1, t) ||
+        pool_to(ps, t, &p2) || conv_into(ps, &c[E3], &p2, NULL, 1, t) ||
+        pool_to(ps, t, &p3) || conv_into(ps, &c[E4], &p3, NULL, 1, t) ||
+        pool_replace(ps, t) || conv_replace(ps, &c[E5A], t, NULL, 1) ||
+        conv_replace(ps, &c[E5B], t, NULL, 1) ||
+        /* decoder: concat(upsampled, skip) */
+        conv_up_replace(ps, &c[D4A], t, &p3, 1) ||
+        conv_replace(ps, &c[D4B], t, NULL, 1) ||
+        conv_up_replace(ps, &c[D3A], t, &p2, 1) ||
+        conv_replace(ps, &c[D3B], t, NULL, 1) ||
+        conv_up_replace(ps, &c[D2A], t, &p1, 1) ||
+        conv_replace(ps, &c[D2B], t, NULL, 1) || conv_up_replace(ps, &c[D1A], t, x, 1) ||
+        conv_replace(ps, &c[D1B], t, NULL, 1) ||
+        /* no ReLU on the last conv (1.4); the output clamp makes 2.x's ReLU moot */
+        conv_replace(ps, &c[D0], t, NULL, 0);
     batch_free(&p1), batch_free(&p2), batch_free(&p3), batch_free(x);
-    if (rc)
-        batch_free(t);
+    if (rc) batch_free(t);
     return rc ? -1 : 0;
 }
 
@@ -1040,8 +1030,7 @@ network(const mcp__unet *net, batch *x, batch *t, primal_trace *tr)
 static float
 sanitize(float v, float lo, float hi)
 {
-    if (!(v == v))
-        return 0.0f;
+    if (!(v == v)) return 0.0f;
     return v < lo ? lo : v > hi ? hi : v;
 }
 
@@ -1057,7 +1046,8 @@ mcp__unet_autoexposure(const mcp_image *color, int v2)
     for (int i = 0; i < hk; i++) {
         const int y0 = (int)((int64_t)i * H / hk), y1 = (int)((int64_t)(i + 1) * H / hk);
         for (int j = 0; j < wk; j++) {
-            const int x0 = (int)((int64_t)j * W / wk), x1 = (int)((int64_t)(j + 1) * W / wk);
+            const int x0 = (int)((int64_t)j * W / wk),
+                      x1 = (int)((int64_t)(j + 1) * W / wk);
             double sum = 0.0;
             for (int y = y0; y < y1; y++)
                 for (int x = x0; x < x1; x++) {
@@ -1082,8 +1072,7 @@ static int
 check_aux(const mcp__unet *net, const char *what, const mcp_image *color,
           const mcp_image *aux, int needed)
 {
-    if (!needed)
-        return 0;
+    if (!needed) return 0;
     if (!aux)
         return mcp_error("unet: these weights (%d input channels) need the %s", net->ic,
                          what);
@@ -1110,8 +1099,7 @@ preprocess(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo
            int n, batch *x)
 {
     const int H = color->height, W = color->width, ic = net->ic, o = primal ? 1 : 0;
-    if (batch_new(x, o + n, ic, (H + 15) / 16 * 16, (W + 15) / 16 * 16))
-        return -1;
+    if (batch_new(x, o + n, ic, (H + 15) / 16 * 16, (W + 15) / 16 * 16)) return -1;
     const float ns = norm_scale();
     const int wp = x->w;
 #pragma omp parallel for schedule(static)
@@ -1121,17 +1109,16 @@ preprocess(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo
             const float *p = mcp_image_px(color, px, y);
             for (int ch = 0; ch < 3; ch++) {
                 const float v = p[ch] * s_in, yv = sanitize(v, 0.0f, FLT_MAX);
-                if (primal)
-                    plane(x, 0, ch)[at] = pu_raw(yv) * ns;
-                const float slope = clamp_slope(v, 0.0f, FLT_MAX) * s_in * ns * pu_slope(yv);
+                if (primal) plane(x, 0, ch)[at] = pu_raw(yv) * ns;
+                const float slope =
+                    clamp_slope(v, 0.0f, FLT_MAX) * s_in * ns * pu_slope(yv);
                 for (int k = 0; k < n; k++)
                     plane(x, o + k, ch)[at] = slope * mcp_image_px(t[k].color, px, y)[ch];
             }
             if (ic >= 6) {
                 const float *q = mcp_image_px(albedo, px, y);
                 for (int ch = 0; ch < 3; ch++) {
-                    if (primal)
-                        plane(x, 0, 3 + ch)[at] = sanitize(q[ch], 0.0f, 1.0f);
+                    if (primal) plane(x, 0, 3 + ch)[at] = sanitize(q[ch], 0.0f, 1.0f);
                     const float slope = clamp_slope(q[ch], 0.0f, 1.0f);
                     for (int k = 0; k < n; k++)
                         if (t[k].albedo)
@@ -1143,7 +1130,8 @@ preprocess(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo
                 const float *q = mcp_image_px(normal, px, y);
                 for (int ch = 0; ch < 3; ch++) {
                     if (primal)
-                        plane(x, 0, 6 + ch)[at] = sanitize(q[ch], -1.0f, 1.0f) * 0.5f + 0.5f;
+                        plane(x, 0, 6 + ch)[at] =
+                            sanitize(q[ch], -1.0f, 1.0f) * 0.5f + 0.5f;
                     const float slope = 0.5f * clamp_slope(q[ch], -1.0f, 1.0f);
                     for (int k = 0; k < n; k++)
                         if (t[k].normal)
@@ -1162,8 +1150,7 @@ static int
 postprocess(const batch *y0, const batch *t, int k, int W, int H, float s_out,
             mcp_image **out)
 {
-    if (mcp__rgb_new(W, H, "unet", out))
-        return -1;
+    if (mcp__rgb_new(W, H, "unet", out)) return -1;
     const float ns = norm_scale();
 #pragma omp parallel for schedule(static)
     for (int y = 0; y < H; y++)
@@ -1171,10 +1158,11 @@ postprocess(const batch *y0, const batch *t, int k, int W, int H, float s_out,
             float *dst = mcp_image_px(*out, px, y);
             const size_t at = (size_t)y * y0->w + px;
             for (int ch = 0; ch < 3; ch++) {
-                const float v = plane(y0, 0, ch)[at], xs = sanitize(v, 0.0f, FLT_MAX) / ns;
+                const float v = plane(y0, 0, ch)[at],
+                            xs = sanitize(v, 0.0f, FLT_MAX) / ns;
                 dst[ch] = !t ? pu_raw_inverse(xs) * s_out
-                                 : clamp_slope(v, 0.0f, FLT_MAX) * s_out *
-                                       pu_inverse_slope(xs) / ns * plane(t, k, ch)[at];
+                             : clamp_slope(v, 0.0f, FLT_MAX) * s_out *
+                                   pu_inverse_slope(xs) / ns * plane(t, k, ch)[at];
             }
         }
     return 0;
@@ -1208,7 +1196,7 @@ static double
 memory_bound(const mcp__unet *net)
 {
     const char *env = getenv("MCPOST_UNET_MAX_MEMORY_MB");
-    const double mb = net->max_memory_mb > 0 ? net->max_memory_mb
+    const double mb = net->max_memory_mb > 0         ? net->max_memory_mb
                       : env && *env && atof(env) > 0 ? atof(env)
                                                      : MCP__UNET_MAX_MEMORY_MB;
     return mb * 1048576.0;
@@ -1235,10 +1223,8 @@ run_whole(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
     /* the primal, recording what the tangents need; then each tangent alone */
     int rc = preprocess(net, color, albedo, normal, s_in, 1, NULL, 0, &x) ||
              network(net, &x, &y0, tr);
-    if (!rc && out)
-        rc = postprocess(&y0, NULL, 0, W, H, s_out, out);
-    if (tr)
-        trace.replay = 1;
+    if (!rc && out) rc = postprocess(&y0, NULL, 0, W, H, s_out, out);
+    if (tr) trace.replay = 1;
     for (int k = 0; k < n && !rc; k++) {
         rc = preprocess(net, color, albedo, normal, s_in, 0, t + k, 1, &x) ||
              network(net, &x, &y, tr);
@@ -1327,7 +1313,8 @@ run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
             if (!rc)
                 rc = run_whole(net, views[0], views[1], views[2], scale_in, tt, n,
                                out ? &res[0] : NULL, res + 1);
-            const int w = tx + tile < W ? tile : W - tx, h = ty + tile < H ? tile : H - ty;
+            const int w = tx + tile < W ? tile : W - tx,
+                      h = ty + tile < H ? tile : H - ty;
             if (!rc && out) paste(res[0], x0, y0, tx, ty, w, h, *out);
             for (int k = 0; k < n && !rc; k++)
                 paste(res[1 + k], x0, y0, tx, ty, w, h, jt[k]);
@@ -1350,12 +1337,10 @@ mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_imag
                     const mcp_denoise_tangent *t, int n, int tile, mcp_image **out,
                     mcp_image **jt)
 {
-    if (out)
-        *out = NULL;
+    if (out) *out = NULL;
     for (int k = 0; k < n; k++)
         jt[k] = NULL;
-    if (!color || color->channels < 3)
-        return mcp_error("unet: colour needs 3 channels");
+    if (!color || color->channels < 3) return mcp_error("unet: colour needs 3 channels");
     const mcp_denoise_input at = {color, albedo, normal, NULL};
     if (check_aux(net, "albedo", color, albedo, net->ic >= 6) ||
         check_aux(net, "normal", color, normal, net->ic >= 9) ||
@@ -1379,8 +1364,7 @@ mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_imag
         tile_margins(net, n, &overlap, &align);
         const int margin = 2 * overlap + align; /* a crop's largest extension */
         for (tile = (W > H ? W : H) / 16 * 16; tile >= 16; tile -= 16)
-            if (batch_bytes(tile + margin, tile + margin, 1) <= limit)
-                break;
+            if (batch_bytes(tile + margin, tile + margin, 1) <= limit) break;
         if (tile < 16)
             return short_of_memory
                        ? mcp_error("unet: a %dx%d image with %d tangent(s) does not fit "

@@ -194,8 +194,7 @@ choose(void)
         if (!strcmp(want, kernels[i].name) && mcp__unet_gemm_has(kernels[i].name))
             return &kernels[i];
     for (int i = 0; i < N_KERNELS; i++)
-        if (mcp__unet_gemm_has(kernels[i].name))
-            return &kernels[i];
+        if (mcp__unet_gemm_has(kernels[i].name)) return &kernels[i];
     return &kernels[N_KERNELS - 1];
 }
 
@@ -254,8 +253,7 @@ mcp__unet_gemm_bf16_has(void)
     /* opt-in: the products are 1.8 times faster, a whole tangent only about 7% (the
        transforms dominate), and the JVP's error grows from 2e-6 to 3-7e-2 */
     const char *env = getenv("MCPOST_UNET_BF16");
-    if (!env || strcmp(env, "1"))
-        return 0;
+    if (!env || strcmp(env, "1")) return 0;
     return __builtin_cpu_supports("avx512bf16");
 #else
     return 0;

@@ -15,7 +15,7 @@
 
 typedef struct mcp__tza_tensor {
     char *name;
-    int ndims;      /* 1..4 */
+    int ndims; /* 1..4 */
     int dims[4];
     char layout[5]; /* "oihw" or "x" */
     char dtype;     /* 'f' (float32) or 'h' (float16) as stored */
@@ -51,9 +51,9 @@ typedef struct mcp__unet_conv {
 } mcp__unet_conv;
 
 typedef struct mcp__unet {
-    int ic;       /* input channels: 3 colour, 6 + albedo, 9 + albedo + normal */
-    int v2;       /* 1 for float16 (OIDN 2.x) files: autoexposure bins by ceil */
-    int fixed_bits; /* 1: the direct loops (a setting, not read from the file) */
+    int ic;             /* input channels: 3 colour, 6 + albedo, 9 + albedo + normal */
+    int v2;             /* 1 for float16 (OIDN 2.x) files: autoexposure bins by ceil */
+    int fixed_bits;     /* 1: the direct loops (a setting, not read from the file) */
     int exact_tangents; /* 1: tangents on F(2x2, 3x3) as the primal, not F(4x4, 3x3) */
     int max_memory_mb;  /* the network's working memory at most (0: the default) */
     mcp__unet_conv conv[MCP__UNET_NCONV]; /* enc_conv0 ... dec_conv0 in order */
@@ -82,8 +82,8 @@ int mcp__unet_forward(const mcp__unet *net, const mcp_image *color,
  * NULL, meaning zero; they count only where the net reads those inputs). The input
  * scale is held constant for the JVP. out may be NULL. */
 int mcp__unet_run(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
-                  const mcp_image *normal, double input_scale, const mcp_denoise_tangent *t,
-                  int n, mcp_image **out, mcp_image **jt);
+                  const mcp_image *normal, double input_scale,
+                  const mcp_denoise_tangent *t, int n, mcp_image **out, mcp_image **jt);
 
 /* The network's working memory at most, by default: beyond it the image runs in tiles
  * (MCPOST_UNET_MAX_MEMORY_MB or the denoiser's max_memory_mb set another). */
@@ -107,8 +107,8 @@ int mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color,
  * alone for the tangents, with relu image 0's ReLU and its mask on the others. weight
  * is [cout][cin][3][3]. */
 int mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cout,
-                            const float *a, int ca, int a_up, const float *b, int n, int h,
-                            int w, int relu, float *out);
+                            const float *a, int ca, int a_up, const float *b, int n,
+                            int h, int w, int relu, float *out);
 /* A Winograd convolution F(m x m, 3x3): its tile, its transforms (unet_winograd.c
  * and unet_winograd4.c), and the driver that runs them over an image in tasks of
  * about chunk tiles with the matrix products of unet_gemm.c (unet_winograd.c). */

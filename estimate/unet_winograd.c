@@ -249,16 +249,16 @@ transform_output(const float *m, size_t ld, int ty, int tx0, int nt, int h, int 
 
 /* The F(2x2, 3x3) convolution: 2x2 outputs per tile, 16 elements, rows of 8 (nt + 1)
  * floats for the transforms. */
-static const mcp__unet_winograd f2x2 = {2, 16, CHUNK, 8, transform_weights, transform_input,
-                                        transform_output};
+static const mcp__unet_winograd f2x2 = {
+    2, 16, CHUNK, 8, transform_weights, transform_input, transform_output};
 
 int
 mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cout,
                         const float *a, int ca, int a_up, const float *b, int n, int h,
                         int w, int relu, float *out)
 {
-    return mcp__unet_winograd_conv(&f2x2, weight, bias, cin, cout, a, ca, a_up, b, n, h, w,
-                                   relu, 0, out);
+    return mcp__unet_winograd_conv(&f2x2, weight, bias, cin, cout, a, ca, a_up, b, n, h,
+                                   w, relu, 0, out);
 }
 
 /* A Winograd convolution of either size (unet_internal.h). */
@@ -276,7 +276,8 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
     /* tasks: the image's tiles in row-major order, chunk at a time (the last fewer),
      * chunk about k_->chunk in whole column blocks of the kernel (at least one) */
     const size_t n_tiles = (size_t)th * tw;
-    const int rounded = (k_->chunk + g.nr / 2) / g.nr * g.nr, chunk = rounded > 0 ? rounded : g.nr;
+    const int rounded = (k_->chunk + g.nr / 2) / g.nr * g.nr,
+              chunk = rounded > 0 ? rounded : g.nr;
     const int chunks = (int)((n_tiles + chunk - 1) / chunk);
     const int mp = (cout + g.mr - 1) / g.mr * g.mr; /* rows of the products */
     const size_t ld_max = (size_t)chunk;            /* whole blocks */
@@ -288,7 +289,8 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
 #endif
     /* bf16 products: the packed weights and one element's V as pairs of rows */
     const int kp = (cin + 1) / 2;
-    /* in the float kernel's blocks (the AVX-512 one's, which every AVX512-BF16 CPU has) */
+    /* in the float kernel's blocks (the AVX-512 one's, which every AVX512-BF16 CPU has)
+     */
     bf16 = bf16 && g.mr == MCP__UNET_BF16_MR && g.nr == MCP__UNET_BF16_NR;
     /* per thread: V (elems x cin x ld), M (elems x mp x ld), rows for the transforms,
        and with bf16 one element's V in pairs (kp x ld) */
@@ -311,7 +313,8 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
             mcp__unet_gemm_bf16_pack(u + e * plane, cout, cin,
                                      (uint32_t *)packed + (size_t)e * mp * kp);
         else
-            mcp__unet_gemm_pack(&g, u + e * plane, cout, cin, packed + (size_t)e * mp * cin);
+            mcp__unet_gemm_pack(&g, u + e * plane, cout, cin,
+                                packed + (size_t)e * mp * cin);
 #pragma omp parallel num_threads(n_threads)
     {
         int thread = 0;
@@ -321,7 +324,8 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
         float *v = scratch + (size_t)thread * per_thread;
         float *m = v + elems * ld_max * (size_t)cin;
         float *rows = m + elems * ld_max * (size_t)mp;
-        uint32_t *pairs = (uint32_t *)(rows + (size_t)k_->row_floats * ((size_t)chunk + 1));
+        uint32_t *pairs =
+            (uint32_t *)(rows + (size_t)k_->row_floats * ((size_t)chunk + 1));
         /* a task is one chunk of every image, the primal first: the tangents take its
          * ReLU mask while it is still in the cache */
 #pragma omp for schedule(dynamic, 1)
@@ -337,10 +341,10 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
                     const float *src = i < ca ? a + ((size_t)k * ca + i) * a_hw
                                               : b + ((size_t)k * cb + (i - ca)) * hw;
                     if (i + 1 < cin) /* the next channel's rows, while this one runs */
-                        mcp__unet_prefetch_rows(i + 1 < ca
-                                          ? a + ((size_t)k * ca + i + 1) * a_hw
-                                          : b + ((size_t)k * cb + (i + 1 - ca)) * hw,
-                                      i + 1 < ca && a_up, h, w, t0, nt, tw, tile_m);
+                        mcp__unet_prefetch_rows(
+                            i + 1 < ca ? a + ((size_t)k * ca + i + 1) * a_hw
+                                       : b + ((size_t)k * cb + (i + 1 - ca)) * hw,
+                            i + 1 < ca && a_up, h, w, t0, nt, tw, tile_m);
                     /* the chunk's pieces of tile rows */
                     for (int j = 0; j < nt;) {
                         const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
@@ -358,8 +362,9 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
                 for (int e = 0; e < elems; e++)
                     if (bf16) {
                         mcp__unet_bf16_pairs(v + e * ldv, ld, cin, ld, pairs, ld);
-                        mcp__unet_gemm_bf16_run((const uint32_t *)packed + (size_t)e * mp * kp,
-                                                cout, cin, pairs, ld, ld, m + e * ldm, ld);
+                        mcp__unet_gemm_bf16_run(
+                            (const uint32_t *)packed + (size_t)e * mp * kp, cout, cin,
+                            pairs, ld, ld, m + e * ldm, ld);
                     } else
                         mcp__unet_gemm_run(&g, packed + (size_t)e * mp * cin, cout, cin,
                                            v + e * ldv, ld, ld, m + e * ldm, ld);
@@ -367,9 +372,9 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
                     for (int j = 0; j < nt;) {
                         const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
                         const int len = tw - tx < nt - j ? tw - tx : nt - j;
-                        k_->transform_output(m + (size_t)o * ld + j, ldm, ty, tx, len, h, w,
-                                             k == 0 && bias ? bias[o] : 0.0f, relu, k == 0,
-                                             out + (size_t)o * hw,
+                        k_->transform_output(m + (size_t)o * ld + j, ldm, ty, tx, len, h,
+                                             w, k == 0 && bias ? bias[o] : 0.0f, relu,
+                                             k == 0, out + (size_t)o * hw,
                                              out + ((size_t)k * cout + o) * hw, rows);
                         j += len;
                     }

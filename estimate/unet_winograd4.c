@@ -42,9 +42,9 @@
 #define TRANSFORM_KERNEL
 #endif
 
-#define ALPHA 6            /* input tile side */
-#define ELEMS 36           /* ALPHA x ALPHA transformed elements */
-#define CHUNK4 64          /* tiles per task: 36 x (cin + cout) x CHUNK4 floats */
+#define ALPHA 6   /* input tile side */
+#define ELEMS 36  /* ALPHA x ALPHA transformed elements */
+#define CHUNK4 64 /* tiles per task: 36 x (cin + cout) x CHUNK4 floats */
 
 /* U[e][o][i] = (G g_oi G^T)[e]. */
 static void
@@ -67,7 +67,8 @@ transform_weights(const float *weight, int cin, int cout, float *u)
                     t[a][c] = G[a][0] * g[c] + G[a][1] * g[3 + c] + G[a][2] * g[6 + c];
             for (int a = 0; a < ALPHA; a++)
                 for (int b = 0; b < ALPHA; b++) {
-                    const double s = G[b][0] * t[a][0] + G[b][1] * t[a][1] + G[b][2] * t[a][2];
+                    const double s =
+                        G[b][0] * t[a][0] + G[b][1] * t[a][1] + G[b][2] * t[a][2];
                     u[(size_t)(a * ALPHA + b) * plane + (size_t)o * cin + i] = (float)s;
                 }
         }
@@ -97,8 +98,8 @@ load_row4(const float *src, int up, int h, int w, int y, int tx0, int nt, float 
 #if defined(__x86_64__)
         for (; j + 4 <= hi; j += 4) { /* 4 x 4 transposes */
             const float *s = r + x0 + 4 * j;
-            __m128 c0 = _mm_loadu_ps(s), c1 = _mm_loadu_ps(s + 4), c2 = _mm_loadu_ps(s + 8),
-                   c3 = _mm_loadu_ps(s + 12);
+            __m128 c0 = _mm_loadu_ps(s), c1 = _mm_loadu_ps(s + 4),
+                   c2 = _mm_loadu_ps(s + 8), c3 = _mm_loadu_ps(s + 12);
             _MM_TRANSPOSE4_PS(c0, c1, c2, c3);
             _mm_storeu_ps(ph[0] + j, c0), _mm_storeu_ps(ph[1] + j, c1);
             _mm_storeu_ps(ph[2] + j, c2), _mm_storeu_ps(ph[3] + j, c3);
@@ -193,9 +194,9 @@ transform_output4(const float *m, size_t ld, int ty, int tx0, int nt, int h, int
                   float bias, int relu, int primal, const float *p0, float *dst,
                   float *row)
 {
-    float *restrict o = row;               /* 16 streams of nt */
+    float *restrict o = row;                      /* 16 streams of nt */
     float *restrict line = row + 16 * (size_t)nt; /* one output row, 4 nt */
-#define M(e) m[(size_t)(e) * ld + j]
+#define M(e) m[(size_t)(e)*ld + j]
 #pragma omp simd
     for (int j = 0; j < nt; j++) {
         /* A^T down the columns: s_a_b for column b */
@@ -210,9 +211,9 @@ transform_output4(const float *m, size_t ld, int ty, int tx0, int nt, int h, int
             s3[b] = m1 - m2 + 8.0f * (m3 - m4) + m5;
         }
 #define ACROSS(a, t)                                                                     \
-    o[(4 * (a) + 0) * (size_t)nt + j] = t[0] + t[1] + t[2] + t[3] + t[4] + bias;          \
-    o[(4 * (a) + 1) * (size_t)nt + j] = t[1] - t[2] + 2.0f * (t[3] - t[4]) + bias;        \
-    o[(4 * (a) + 2) * (size_t)nt + j] = t[1] + t[2] + 4.0f * (t[3] + t[4]) + bias;        \
+    o[(4 * (a) + 0) * (size_t)nt + j] = t[0] + t[1] + t[2] + t[3] + t[4] + bias;         \
+    o[(4 * (a) + 1) * (size_t)nt + j] = t[1] - t[2] + 2.0f * (t[3] - t[4]) + bias;       \
+    o[(4 * (a) + 2) * (size_t)nt + j] = t[1] + t[2] + 4.0f * (t[3] + t[4]) + bias;       \
     o[(4 * (a) + 3) * (size_t)nt + j] = t[1] - t[2] + 8.0f * (t[3] - t[4]) + t[5] + bias;
         ACROSS(0, s0)
         ACROSS(1, s1)
@@ -256,14 +257,14 @@ transform_output4(const float *m, size_t ld, int ty, int tx0, int nt, int h, int
 
 /* 4x4 outputs per tile, 36 elements; the transforms' rows: 24 (nt + 1) floats for the
  * input's phases, more than the output's 20 nt. */
-static const mcp__unet_winograd f4x4 = {4, ELEMS, CHUNK4, 24, transform_weights,
-                                        transform_input4, transform_output4};
+static const mcp__unet_winograd f4x4 = {
+    4, ELEMS, CHUNK4, 24, transform_weights, transform_input4, transform_output4};
 
 int
 mcp__unet_conv_winograd4(const float *weight, const float *bias, int cin, int cout,
                          const float *a, int ca, int a_up, const float *b, int n, int h,
                          int w, int relu, int bf16, float *out)
 {
-    return mcp__unet_winograd_conv(&f4x4, weight, bias, cin, cout, a, ca, a_up, b, n, h, w,
-                                   relu, bf16, out);
+    return mcp__unet_winograd_conv(&f4x4, weight, bias, cin, cout, a, ca, a_up, b, n, h,
+                                   w, relu, bf16, out);
 }

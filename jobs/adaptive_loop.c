@@ -57,8 +57,7 @@ render_pass(int pass, const mcp_image *counts, mcp_dump **out, void *ctx)
     int rc = mcp__shell_check(mcp__shell(line), "the render command", c->render);
     if (rc == 0 && access(opath, F_OK))
         rc = mcp_error("the render command wrote no {output} file %s: %s", opath, line);
-    if (rc == 0)
-        rc = mcp_dump_read(opath, out);
+    if (rc == 0) rc = mcp_dump_read(opath, out);
     free(line);
     if (!c->keep_passes) {
         remove(cpath);
@@ -212,8 +211,8 @@ write_curves(const mcp__adaptive_loop *c, const mcp_adaptive_result *r)
         write_text(c, "adaptive.svg", svg))
         goto done;
     if (c->section) {
-        static const char *const cols[] = {"pass", "spp", "relMSE", "relMSE noisy",
-                                           "estimated error", "F(tau)"};
+        static const char *const cols[] = {
+            "pass", "spp", "relMSE", "relMSE noisy", "estimated error", "F(tau)"};
         cJSON *t = mcp_report_add_table(c->section, "per pass", cols, 6);
         for (int i = 0; t && i < n; i++)
             if (mcp_report_table_add_row(t, "iddddd", r->iterations[i].pass, x[i], rel[i],
@@ -237,12 +236,13 @@ write_curves(const mcp__adaptive_loop *c, const mcp_adaptive_result *r)
             char text[128];
             snprintf(text, sizeof text, "%g in every pixel (one value: no map to show)",
                      c->counts_hi);
-            if (!cJSON_AddStringToObject(c->section, "last_pass_samples", text)) goto done;
-        } else if (!mcp_report_add_map(c->section, relp, "the last pass's sample counts",
-                                       MCP_COLORMAP_INFERNO, 0.0, c->counts_hi,
-                                       MCP_AXIS_LINEAR,
-                                       "samples per pixel in the pass (brightest: its 99th "
-                                       "percentile and above)"))
+            if (!cJSON_AddStringToObject(c->section, "last_pass_samples", text))
+                goto done;
+        } else if (!mcp_report_add_map(
+                       c->section, relp, "the last pass's sample counts",
+                       MCP_COLORMAP_INFERNO, 0.0, c->counts_hi, MCP_AXIS_LINEAR,
+                       "samples per pixel in the pass (brightest: its 99th "
+                       "percentile and above)"))
             goto done;
         if (n > 1 && c->ao.map != MCP_ADAPTIVE_UNIFORM) {
             /* the map's weights sum to 1: shown as multiples of the mean weight */
@@ -278,7 +278,8 @@ adaptive_verdict(const mcp__adaptive_loop *c, const mcp_adaptive_result *r)
     int reached = last->cdf_at_tau >= p;
     char truth[96] = "";
     if (c->reference)
-        snprintf(truth, sizeof truth, "; relMSE %.3g against the reference", last->relmse);
+        snprintf(truth, sizeof truth, "; relMSE %.3g against the reference",
+                 last->relmse);
     return mcp_report_set_verdict(
         c->section, reached ? MCP_VERDICT_GOOD : MCP_VERDICT_INFO,
         "%.1f spp in %d passes, stopped by the %s: F(tau = %g) = %.3f %s p = %g, %s%s",
@@ -316,7 +317,8 @@ mcp__adaptive_run_loop(mcp__adaptive_loop *c, cJSON **json)
     if (c->section) {
         /* the page shows the settings and the per-pass table (write_curves); the
            whole result, timings included, is for report.json, which owns it now */
-        if (!cJSON_AddStringToObject(c->section, "map", mcp_adaptive_map_name(c->ao.map)) ||
+        if (!cJSON_AddStringToObject(c->section, "map",
+                                     mcp_adaptive_map_name(c->ao.map)) ||
             !cJSON_AddStringToObject(c->section, "denoiser", c->den->name) ||
             !cJSON_AddStringToObject(c->section, "render", c->render) ||
             mcp_report_json_only(c->section, "adaptive")) {

@@ -72,10 +72,11 @@ on_point(const mcp_blend_point *p, void *ctx)
             int written = shown[i] == p->method ||
                           (s->all_images && shown[i] == MCP_BLEND_DENOISED);
             /* clamped and sRGB-encoded, as the PNG writer shows linear values */
-            int rc = mcp_tonemap_apply(p->images[shown[i]], MCP_TONEMAP_CLAMP, &ldr) ||
-                     mcp_image_write(ldr, path, NULL) ||
-                     (!written && write_member_image(s, p->images[shown[i]], base,
-                                                     mcp_blend_method_name(shown[i]), files));
+            int rc =
+                mcp_tonemap_apply(p->images[shown[i]], MCP_TONEMAP_CLAMP, &ldr) ||
+                mcp_image_write(ldr, path, NULL) ||
+                (!written && write_member_image(s, p->images[shown[i]], base,
+                                                mcp_blend_method_name(shown[i]), files));
             mcp_image_free(ldr);
             if (rc) return -1;
         }
@@ -167,15 +168,18 @@ blend_verdict(cJSON *section, const mcp_blend_series_result *r)
                  "(a bound, not a method)",
                  mcp_blend_method_name(win), last->err[win].mse / last->err[m].mse);
     else if (win >= 0)
-        snprintf(other, sizeof other, "; %s does better here (%.3g\u00d7 of it; weights: %s)",
+        snprintf(other, sizeof other,
+                 "; %s does better here (%.3g\u00d7 of it; weights: %s)",
                  mcp_blend_method_name(win), last->err[win].mse / last->err[m].mse,
                  mcp_blend_method_name(win));
     return mcp_report_set_verdict(
         section, converges ? MCP_VERDICT_GOOD : MCP_VERDICT_BAD,
-        "blend (%s) %s: at %g spp %.3g\u00d7 the noisy MSE (denoised alone %.3g\u00d7); at "
+        "blend (%s) %s: at %g spp %.3g\u00d7 the noisy MSE (denoised alone %.3g\u00d7); "
+        "at "
         "best %.3g\u00d7 at %g spp%s",
-        mcp_blend_method_name(m), converges ? "converges" : "does not beat the noisy image",
-        last->spp, fin, den, best_ratio, r->rows[best].spp, other);
+        mcp_blend_method_name(m),
+        converges ? "converges" : "does not beat the noisy image", last->spp, fin, den,
+        best_ratio, r->rows[best].spp, other);
 }
 
 /* Fills a report section with the run's settings, per-member figures and, with a
@@ -206,11 +210,11 @@ fill_section(cJSON *section, const mcp_blend_series_result *r,
     if (!table) return -1;
     for (int i = 0; i < r->count; i++) {
         const mcp_blend_row *row = &r->rows[i];
-        if (mcp_report_table_add_row(
-                table, "ddddssdd", row->spp, row->denoised_spp, row->mean_var,
-                row->mean_sure, row->filtered ? "yes" : "no",
-                row->magnitude ? "magnitude" : "zero", row->mean_rho,
-                row->safeguard_pulled))
+        if (mcp_report_table_add_row(table, "ddddssdd", row->spp, row->denoised_spp,
+                                     row->mean_var, row->mean_sure,
+                                     row->filtered ? "yes" : "no",
+                                     row->magnitude ? "magnitude" : "zero", row->mean_rho,
+                                     row->safeguard_pulled))
             return -1;
     }
     if (r->has_reference) {
@@ -267,9 +271,9 @@ mcp__blend_run(const mcp_series *series, const mcp_denoiser *den, const mcp_imag
     double ratio = 0;
     if (!rc) rc = mcp_series_variance_ratio(series, &ratio);
     if (!rc)
-        mcp__report_variance_ratio(ratio, r->variance_source == MCP_VARSRC_INCREMENTS,
-                                   series->variance_from == MCP_SERIES_VARIANCE_INCREMENTS,
-                                   section);
+        mcp__report_variance_ratio(
+            ratio, r->variance_source == MCP_VARSRC_INCREMENTS,
+            series->variance_from == MCP_SERIES_VARIANCE_INCREMENTS, section);
     cJSON_Delete(s->members);
     s->members = NULL;
     mcp_blend_series_result_free(r);

@@ -21,7 +21,7 @@ mcp__estimate_path(const mcp__estimate_dir *o, const char *name, char *buf, size
 
 cJSON *
 mcp__estimate_json(const mcp_estimate *e, const char *input, const char *denoiser,
-              const mcp_estimate_options *o)
+                   const mcp_estimate_options *o)
 {
     cJSON *j = cJSON_CreateObject();
     cJSON_AddStringToObject(j, "input", input);
@@ -83,16 +83,15 @@ mcp__estimate_json(const mcp_estimate *e, const char *input, const char *denoise
  * blocks.png, whose colours only tell blocks apart, its colour bar reads as a value,
  * and a single block still shows where the error is: s² varies per pixel. */
 static int
-blocks_error_picture(const mcp_blocks *blocks, const mcp_image *dist,
-                     unsigned char *rgb8)
+blocks_error_picture(const mcp_blocks *blocks, const mcp_image *dist, unsigned char *rgb8)
 {
     int w = blocks->width, h = blocks->height, ch[6];
     int32_t *label = NULL;
     mcp_image *lg = NULL;
-    if (mcp_image_channels(dist,
-                           (const char *[]){"lambda.R", "lambda.G", "lambda.B", "s2.R",
-                                            "s2.G", "s2.B"},
-                           6, ch) ||
+    if (mcp_image_channels(
+            dist,
+            (const char *[]){"lambda.R", "lambda.G", "lambda.B", "s2.R", "s2.G", "s2.B"},
+            6, ch) ||
         mcp_blocks_label(blocks, &label) ||
         mcp_image_new(w, h, 1, (const char *const[]){"log10_error"}, &lg)) {
         free(label);
@@ -157,7 +156,7 @@ mcp__estimate_write_single(const mcp_estimate *e, const mcp__estimate_dir *o,
     enum { MAX_FILES = 14 };
     mcp_image *block_mean = NULL, *dist = NULL, *shown = NULL, *rgb_view = NULL;
     unsigned char *blocks_rgb = NULL, *error_rgb = NULL, *map_rgb = NULL;
-    char (*paths)[4352] = NULL;
+    char(*paths)[4352] = NULL;
     double map_top = 0;
     int rc = -1, n = 0, w = e->blocks->width, h = e->blocks->height, rgb[3];
     if (mcp_make_dirs(o->dir) ||
@@ -175,10 +174,9 @@ mcp__estimate_write_single(const mcp_estimate *e, const mcp__estimate_dir *o,
         goto done;
     /* what the report shows beside the error: the denoised image (its PNG as a screen
      * shows it, the page re-exposes denoised.exr) and where the next samples go */
-    if (section &&
-        (mcp_rgb_channels(e->maps.denoised, rgb) ||
-         mcp_image_copy_channels(e->maps.denoised, rgb, 3, &rgb_view) ||
-         mcp_tonemap_apply(rgb_view, MCP_TONEMAP_CLAMP, &shown)))
+    if (section && (mcp_rgb_channels(e->maps.denoised, rgb) ||
+                    mcp_image_copy_channels(e->maps.denoised, rgb, 3, &rgb_view) ||
+                    mcp_tonemap_apply(rgb_view, MCP_TONEMAP_CLAMP, &shown)))
         goto done;
     if (section && e->sampling_map &&
         (!(map_rgb = mcp_malloc((size_t)w * h * 3)) ||
@@ -207,8 +205,11 @@ mcp__estimate_write_single(const mcp_estimate *e, const mcp__estimate_dir *o,
     for (int i = 0; i < MAX_FILES; i++) {
         if (!outputs[i].image && !outputs[i].rgb8) continue; /* none, or not asked for */
         if (mcp__estimate_path(o, outputs[i].name, paths[n], sizeof *paths)) goto done;
-        files[n] = (mcp_file_write){.path = paths[n], .image = outputs[i].image,
-                                    .rgb8 = outputs[i].rgb8, .width = w, .height = h};
+        files[n] = (mcp_file_write){.path = paths[n],
+                                    .image = outputs[i].image,
+                                    .rgb8 = outputs[i].rgb8,
+                                    .width = w,
+                                    .height = h};
         n++;
     }
     if (mcp_write_files(files, n)) goto done;
@@ -309,9 +310,11 @@ mcp__estimate_report_single(cJSON *section, const cJSON *summary, const mcp_esti
                             MCP_AXIS_LOGIT, "error", MCP_AXIS_LOG);
     if (!plot ||
         !mcp_report_plot_add_series(plot, "estimated", MCP_SERIES_LINE_POINTS,
-                                    e->percentiles, e->percentile_tau, e->n_percentiles) ||
-        (has_truth && !mcp_report_plot_add_series(plot, "true", MCP_SERIES_LINE_POINTS,
-                                                  e->percentiles, truth, e->n_percentiles)))
+                                    e->percentiles, e->percentile_tau,
+                                    e->n_percentiles) ||
+        (has_truth &&
+         !mcp_report_plot_add_series(plot, "true", MCP_SERIES_LINE_POINTS, e->percentiles,
+                                     truth, e->n_percentiles)))
         return -1;
     return 0;
 }
@@ -423,7 +426,7 @@ report_series(cJSON *section, const mcp_series_estimate *s)
         snprintf(text + len, sizeof text - len, "; estimate and truth agree on %d of %d",
                  agree, s->n_taus);
     if (mcp_report_set_verdict(section,
-                               !s->has_reference     ? MCP_VERDICT_INFO
+                               !s->has_reference    ? MCP_VERDICT_INFO
                                : agree == s->n_taus ? MCP_VERDICT_GOOD
                                                     : MCP_VERDICT_BAD,
                                "%s", text))
@@ -504,7 +507,8 @@ mcp__estimate_run_series(const mcp_series *series, const mcp_denoiser *den,
     cJSON *j = series_json(s, den->name, so->est.sure.metric);
     int using_increments = s->variance_source == MCP_VARSRC_INCREMENTS;
     mcp__report_variance_ratio(s->variance_ratio, using_increments,
-                               series->variance_from == MCP_SERIES_VARIANCE_INCREMENTS, j);
+                               series->variance_from == MCP_SERIES_VARIANCE_INCREMENTS,
+                               j);
     if (section) {
         cJSON_AddStringToObject(section, "variance_source",
                                 mcp_variance_source_name(s->variance_source));

@@ -51,8 +51,7 @@ mcp__gate_add(mcp__gate *g, const char *expr, int is_fail)
     c->is_fail = is_fail;
     char text[sizeof c->text]; /* built aside: c->figure may not be both source and
                                   destination of one snprintf (restrict) */
-    snprintf(text, sizeof text, "%s %s %g", c->figure, op_text(c->op),
-             c->value);
+    snprintf(text, sizeof text, "%s %s %g", c->figure, op_text(c->op), c->value);
     memcpy(c->text, text, sizeof text);
     g->n++;
     return 0;
@@ -223,18 +222,17 @@ mcp__gate_check(const mcp__gate *g, const cJSON *figures, int *bad)
         if (cJSON_IsNumber(value_of(figures, &g->c[i]))) continue;
         if (bad) *bad = i;
         if (g->c[i].percent)
-            return mcp_error("%s '%s': the metrics have no share of pixels above %g in "
-                             "%s%s",
-                             flag_of(&g->c[i]), g->c[i].text, g->c[i].threshold,
-                             g->c[i].figure,
-                             strcmp(g->c[i].figure, "relse") ? " (is that FLIP computed?)"
-                                                             : "");
+            return mcp_error(
+                "%s '%s': the metrics have no share of pixels above %g in "
+                "%s%s",
+                flag_of(&g->c[i]), g->c[i].text, g->c[i].threshold, g->c[i].figure,
+                strcmp(g->c[i].figure, "relse") ? " (is that FLIP computed?)" : "");
         char names[600] = "";
         int count = 0;
         known_names(figures, "", names, sizeof names, &count);
         return mcp_error("%s '%s': no figure '%s' in the metrics (known: %s%s)",
-                         flag_of(&g->c[i]), g->c[i].text,
-                         g->c[i].figure, names, count >= 12 ? ", ..." : "");
+                         flag_of(&g->c[i]), g->c[i].text, g->c[i].figure, names,
+                         count >= 12 ? ", ..." : "");
     }
     return 0;
 }
@@ -246,10 +244,14 @@ holds(const mcp__gate_cond *c, double v)
      * within bounds, so it counts as holding: a gate errs on the side of failing. */
     if (isnan(v)) return 1;
     switch (c->op) {
-    case '>': return v > c->value;
-    case 'G': return v >= c->value;
-    case '<': return v < c->value;
-    default: return v <= c->value;
+    case '>':
+        return v > c->value;
+    case 'G':
+        return v >= c->value;
+    case '<':
+        return v < c->value;
+    default:
+        return v <= c->value;
     }
 }
 

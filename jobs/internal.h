@@ -237,9 +237,9 @@ typedef enum { MCP__GATE_PASS, MCP__GATE_WARNING, MCP__GATE_FAILURE } mcp__gate_
 
 typedef struct {
     char figure[128]; /* a percent condition: the map, flip_ldr, flip_hdr or relse */
-    int op; /* '>', 'G' (>=), '<', 'L' (<=) */
+    int op;           /* '>', 'G' (>=), '<', 'L' (<=) */
     double value;     /* a percent condition: the share allowed, in percent */
-    int is_fail;   /* 1: --fail / fail:, 0: --warn / warn: */
+    int is_fail;      /* 1: --fail / fail:, 0: --warn / warn: */
     /* A percent condition (--fail-percent 'MAP THRESHOLD PERCENT', idiff's
      * -failpercent): it holds when more than value percent of the pixels have the
      * map above threshold (the metrics' pixels_above). */

@@ -149,12 +149,14 @@ mcp__perc_add_file(mcp__perc_run *r, const mcp_image *img)
     mcp_image **normal = albedo ? mcp_realloc(r->normals, n * sizeof *normal) : NULL;
     if (!normal) return -1;
     r->normals = normal;
-    if (mcp_dump_from_image(img, NULL, &d) == 0) { /* the dump's parts are the run's now */
+    if (mcp_dump_from_image(img, NULL, &d) ==
+        0) { /* the dump's parts are the run's now */
         rgb = d->color;
         d->color = NULL;
     } else if (strstr(mcp_error_message(), "out of memory")) {
         /* a failed allocation is no sign that the file is a plain image: reading it as
-           one would drop its albedo and normal without a word (tests/common/test_alloc) */
+           one would drop its albedo and normal without a word (tests/common/test_alloc)
+         */
         return -1;
     } else {
         mcp_error_clear();
@@ -214,12 +216,13 @@ write_spectrum(const mcp__perc_run *r, const mcp_image *pic, const char *name,
     if (!rgb8) return -1;
     snprintf(path, sizeof path, "%s/%s", r->out_dir, name);
     snprintf(rel, sizeof rel, "%s%s", r->rel, name);
-    int rc = mcp_colormap_apply(pic, 0, 0.0, 1.0, MCP_COLORMAP_INFERNO, rgb8) ||
-             mcp_write_rgb8(rgb8, pic->width, pic->height, path) ||
-             !mcp_report_add_map(r->section, rel, caption, MCP_COLORMAP_INFERNO, 0.0, 1.0,
-                                 MCP_AXIS_LINEAR,
-                                 "c ln(1 + power), scaled to 0..1 per picture: blue noise "
-                                 "is dark at the centre of each tile");
+    int rc =
+        mcp_colormap_apply(pic, 0, 0.0, 1.0, MCP_COLORMAP_INFERNO, rgb8) ||
+        mcp_write_rgb8(rgb8, pic->width, pic->height, path) ||
+        !mcp_report_add_map(r->section, rel, caption, MCP_COLORMAP_INFERNO, 0.0, 1.0,
+                            MCP_AXIS_LINEAR,
+                            "c ln(1 + power), scaled to 0..1 per picture: blue noise "
+                            "is dark at the centre of each tile");
     free(rgb8);
     if (!rc) cJSON_AddItemToArray(outputs, cJSON_CreateString(path));
     return rc ? -1 : 0;
@@ -236,7 +239,8 @@ write_render(const mcp__perc_run *r, const mcp_image *img, const char *exr_suffi
     mcp_image *shown = NULL;
     snprintf(file, sizeof file, "%s.png", name);
     snprintf(rel_png, sizeof rel_png, "%s%s.png", r->rel, name);
-    snprintf(rel_exr, sizeof rel_exr, "%s%s%s.exr", r->rel, name, exr_suffix ? exr_suffix : "");
+    snprintf(rel_exr, sizeof rel_exr, "%s%s%s.exr", r->rel, name,
+             exr_suffix ? exr_suffix : "");
     snprintf(caption, sizeof caption, "%s: %s", name, what);
     int rc = mcp_tonemap_apply(img, MCP_TONEMAP_CLAMP, &shown) ||
              write_image(r, shown, file, outputs) ||
@@ -369,11 +373,14 @@ add_table(cJSON *section, const cJSON *rows, double mean_pmse)
          * say so, since the prediction flatters it (the seeds were not re-rendered) */
         const cJSON *again = cJSON_GetObjectItem(row, "rerendered");
         char method[64];
-        snprintf(method, sizeof method, "%s%s", cJSON_GetObjectItem(row, "method")->valuestring,
-                 !again ? "" : cJSON_IsTrue(again) ? " (re-rendered)" : " (prediction)");
-        if (mcp_report_table_add_row(t, "sddddddd", method, pm,
-                                     pm / mean_pmse, NUM("mse"), NUM("low_freq_fraction"),
-                                     NUM("energy"), NUM("seconds"), NUM("passes")))
+        snprintf(method, sizeof method, "%s%s",
+                 cJSON_GetObjectItem(row, "method")->valuestring,
+                 !again                ? ""
+                 : cJSON_IsTrue(again) ? " (re-rendered)"
+                                       : " (prediction)");
+        if (mcp_report_table_add_row(t, "sddddddd", method, pm, pm / mean_pmse,
+                                     NUM("mse"), NUM("low_freq_fraction"), NUM("energy"),
+                                     NUM("seconds"), NUM("passes")))
             return -1;
 #undef NUM
     }
@@ -482,7 +489,8 @@ mcp__perceptual_run(mcp__perc_args *a, mcp__perc_run *r, cJSON **summary,
     cJSON_AddNumberToObject(s, "height", cands[0]->height);
     cJSON_AddStringToObject(s, "surrogate", surr_desc);
     cJSON_AddStringToObject(s, "tone_map", mcp_tonemap_name(a->opt.model.tone_map));
-    mcp_report_add_number(s, "confidence", r->confidence_map ? NAN : a->opt.model.confidence);
+    mcp_report_add_number(s, "confidence",
+                          r->confidence_map ? NAN : a->opt.model.confidence);
     cJSON_AddNumberToObject(s, "passes", res.passes);
     cJSON_AddNumberToObject(s, "changes", (double)res.changes);
     mcp_report_add_number(s, "seconds", res.seconds);
@@ -511,12 +519,12 @@ mcp__perceptual_run(mcp__perc_args *a, mcp__perc_run *r, cJSON **summary,
         mcp_report_add_number(s, "white_fraction", sc.white_fraction);
     }
     /* the pictures: the result beside the candidates' mean, for the wipe */
-    if (r->section && (write_render(r, measured, again ? "_rerendered" : "", name,
-                                    "the optimised image", outputs) ||
-                       write_image(r, mean, "mean.exr", outputs) ||
-                       write_render(r, mean, NULL, "mean",
-                                    "the candidates' mean (what averaging gives)",
-                                    outputs)))
+    if (r->section &&
+        (write_render(r, measured, again ? "_rerendered" : "", name,
+                      "the optimised image", outputs) ||
+         write_image(r, mean, "mean.exr", outputs) ||
+         write_render(r, mean, NULL, "mean",
+                      "the candidates' mean (what averaging gives)", outputs)))
         goto done;
     if (spec) {
         char caption[160];
@@ -599,7 +607,8 @@ best_other(const cJSON *summary, const char *method, double ratio, char *buf, si
                  "re-render (rerender:) realises that",
                  name, best_ratio);
     else
-        snprintf(buf, cap, "; %s does better on this input (%.3g\u00d7; method: %s to use it)",
+        snprintf(buf, cap,
+                 "; %s does better on this input (%.3g\u00d7; method: %s to use it)",
                  name, best_ratio, name);
 }
 
@@ -625,7 +634,8 @@ perceptual_verdict(cJSON *section, const cJSON *summary)
             "low-frequency share of the error %.3g against the mean's %.3g: %s%s",
             method, ratio, 100 * fabs(1 - ratio), ratio < 1 ? "less" : "more: no gain",
             low, mean_low,
-            low < mean_low ? "bluer noise" : "no bluer than the mean's white noise", other);
+            low < mean_low ? "bluer noise" : "no bluer than the mean's white noise",
+            other);
     else
         rc = mcp_report_set_verdict(
             section, MCP_VERDICT_INFO,

@@ -41,7 +41,8 @@ parse_adaptive(mcp_job *job, const mcp_node *s, adaptive_plan *pl)
     if (st.size && mcp__parse_size(st.size, &c->width, &c->height))
         return mcp_node_error(mcp_node_get(s, "size"), "%s", mcp_error_message());
     pl->have_size = st.size != NULL;
-    if (pl->ref_name && mcp_job_check_input(job, s, "reference", MCP_JOB_IMAGE)) return -1;
+    if (pl->ref_name && mcp_job_check_input(job, s, "reference", MCP_JOB_IMAGE))
+        return -1;
     if (!st.size && !pl->ref_name)
         return mcp_node_error(s, "adaptive: give the image size (size: WxH) or a "
                                  "reference");

@@ -29,7 +29,8 @@ parse_blend(mcp_job *job, const mcp_node *settings, blend_plan *pl)
     if (mcp__job_settings(mcp_operation_blend(), settings, &pl->sh, &pl->s) ||
         mcp_node_require(settings, "input", "stage 'blend'", &input_node) ||
         mcp_job_check_input(job, settings, "input", MCP_JOB_SERIES) ||
-        (pl->s.reference && mcp_job_check_input(job, settings, "reference", MCP_JOB_IMAGE)) ||
+        (pl->s.reference &&
+         mcp_job_check_input(job, settings, "reference", MCP_JOB_IMAGE)) ||
         mcp__stage_denoiser(job, settings, &pl->den))
         return -1;
     return 0;
@@ -50,7 +51,8 @@ stage_blend(mcp_job *job, const mcp_node *settings)
     blend_plan pl;
     const mcp_series *series = NULL;
     const mcp_image *ref = NULL;
-    if (parse_blend(job, settings, &pl) || mcp_job_series(job, settings, "input", &series) ||
+    if (parse_blend(job, settings, &pl) ||
+        mcp_job_series(job, settings, "input", &series) ||
         (pl.s.reference && mcp_job_image(job, settings, "reference", &ref))) {
         mcp_denoiser_free(pl.den);
         return -1;

@@ -32,7 +32,8 @@ parse_convert(mcp_job *job, const mcp_node *settings, convert_plan *pl)
         mcp_node_require(settings, "output", "stage 'convert'", &out_node))
         return -1;
     if (mcp_format_from_path(pl->s.output) == MCP_FORMAT_UNKNOWN)
-        return mcp_node_error(out_node, "output: unknown image format '%s'", pl->s.output);
+        return mcp_node_error(out_node, "output: unknown image format '%s'",
+                              pl->s.output);
     if (mcp__convert_channel_names(&pl->s, &pl->names, &pl->count))
         return mcp__at_line(settings, "channels");
     return 0;
@@ -53,8 +54,7 @@ stage_convert(mcp_job *job, const mcp_node *settings)
     const mcp_image *img = NULL;
     const mcp_node *chan = mcp_node_get(settings, "channels");
     convert_plan pl;
-    if (parse_convert(job, settings, &pl))
-        return -1;
+    if (parse_convert(job, settings, &pl)) return -1;
     if (mcp_job_image(job, settings, "input", &img)) {
         mcp__free_words(pl.names, pl.count);
         return -1;
@@ -67,18 +67,18 @@ stage_convert(mcp_job *job, const mcp_node *settings)
              mcp_image_write(picked, path, &pl.s.wo);
     mcp__free_words(pl.names, pl.count);
     mcp_image_free(picked);
-    if (rc)
-        return chan ? mcp_node_error(chan, "%s", mcp_error_message()) : -1;
+    if (rc) return chan ? mcp_node_error(chan, "%s", mcp_error_message()) : -1;
     cJSON *section = mcp_report_section(mcp_job_report(job), "convert", out);
     const char *input = pl.s.input, *dot = strrchr(out, '.');
     int png = dot && !strcmp(dot, ".png");
     if (!section || mcp_report_add_image(section, out, out) ||
-        mcp_report_set_verdict(section, MCP_VERDICT_INFO, "wrote %s from %s, %dx%d%s", out,
-                               input ? input : "the input", img->width, img->height,
-                               png && pl.s.wo.srgb_encode
-                                   ? ": linear values clamped to [0, 1] and sRGB-encoded, "
-                                     "as a screen shows them"
-                                   : ""))
+        mcp_report_set_verdict(
+            section, MCP_VERDICT_INFO, "wrote %s from %s, %dx%d%s", out,
+            input ? input : "the input", img->width, img->height,
+            png && pl.s.wo.srgb_encode
+                ? ": linear values clamped to [0, 1] and sRGB-encoded, "
+                  "as a screen shows them"
+                : ""))
         return -1;
     /* by its name in the output folder: the path is the hidden folder's until the job
        ends (common/outdir.c) */
@@ -86,8 +86,9 @@ stage_convert(mcp_job *job, const mcp_node *settings)
     return 0;
 }
 
-const mcp_stage mcp_stage_convert = {"convert", "write an input in another format, with "
-                                                "chosen channels",
+const mcp_stage mcp_stage_convert = {"convert",
+                                     "write an input in another format, with "
+                                     "chosen channels",
                                      mcp__convert_keys, stage_convert, check_convert};
 
 int
@@ -139,11 +140,9 @@ mcp__convert_pick_channels(const mcp_image *img, char **names, int count,
         if (a >= 0) rgba[n++] = a;
         return mcp_image_copy_channels(img, rgba, n, out);
     }
-    if (count == 0)
-        return mcp_image_copy(img, out);
+    if (count == 0) return mcp_image_copy(img, out);
     int *idx = mcp_calloc((size_t)count, sizeof *idx);
-    if (!idx)
-        return -1;
+    if (!idx) return -1;
     int rc = mcp_image_channels(img, (const char *const *)names, count, idx) ||
              mcp_image_copy_channels(img, idx, count, out);
     free(idx);

@@ -12,7 +12,6 @@ mcp__stage_denoiser(mcp_job *job, const mcp_node *settings, mcp_denoiser **out)
                          .file = settings->file};
     char base[4096];
     /* relative paths in the settings (weights) resolve against the job file's folder */
-    if (mcp_job_resolve(job, ".", base, sizeof base))
-        return -1;
+    if (mcp_job_resolve(job, ".", base, sizeof base)) return -1;
     return mcp_denoiser_create(given ? given : &fallback, base, out);
 }

@@ -29,10 +29,12 @@ parse_estimate(mcp_job *job, const mcp_node *settings, estimate_plan *pl)
     memset(pl, 0, sizeof *pl);
     if (mcp__job_settings(mcp_operation_estimate(), settings, &pl->sh, &pl->s) ||
         mcp_job_check_input(job, settings, "input", MCP_JOB_SERIES | MCP_JOB_DUMP) ||
-        (pl->s.reference && mcp_job_check_input(job, settings, "reference", MCP_JOB_IMAGE)))
+        (pl->s.reference &&
+         mcp_job_check_input(job, settings, "reference", MCP_JOB_IMAGE)))
         return -1;
     if (mcp__stage_denoiser(job, settings, &pl->den))
-        return mcp_node_get(settings, "denoiser") ? mcp__at_line(settings, "denoiser") : -1;
+        return mcp_node_get(settings, "denoiser") ? mcp__at_line(settings, "denoiser")
+                                                  : -1;
     return 0;
 }
 
@@ -92,9 +94,9 @@ stage_estimate(mcp_job *job, const mcp_node *settings)
         char path[4352];
         char *text = bad ? NULL : cJSON_Print(j);
         bad = bad || !text || mcp__estimate_write_single(e, &od, section, j) ||
-                  mcp__estimate_path(&od, "estimate.json", path, sizeof path) ||
-                  mcp_write_file_atomic(path, text, strlen(text)) ||
-                  mcp__estimate_report_single(section, j, e);
+              mcp__estimate_path(&od, "estimate.json", path, sizeof path) ||
+              mcp_write_file_atomic(path, text, strlen(text)) ||
+              mcp__estimate_report_single(section, j, e);
         if (!bad)
             mcp_note("%s: F(%g) = %.6f, %s", name, e->tau, e->cdf_at_tau,
                      e->stop ? "stop" : "continue");

@@ -34,7 +34,8 @@ info_verdict(cJSON *section, const cJSON *channels)
     {
         const cJSON *name = cJSON_GetObjectItem(ch, "name");
         const char *nm = cJSON_IsString(name) ? name->valuestring : "?";
-        int signed_ok = !strncmp(nm, "normal.", 7) || !strncmp(nm, "covariance_of_mean.", 19);
+        int signed_ok =
+            !strncmp(nm, "normal.", 7) || !strncmp(nm, "covariance_of_mean.", 19);
         static const char *const bad[] = {"nan", "inf", "negative"};
         n_channels++;
         for (int k = 0; k < 3; k++) {
@@ -73,19 +74,19 @@ stage_info(mcp_job *job, const mcp_node *settings)
         mcp_job_image(job, settings, "input", &img))
         return -1;
     cJSON *section = mcp_report_section(mcp_job_report(job), "info", name);
-    if (!section)
-        return -1;
+    if (!section) return -1;
     cJSON_AddNumberToObject(section, "width", img->width);
     cJSON_AddNumberToObject(section, "height", img->height);
     cJSON *channels = cJSON_AddArrayToObject(section, "channels");
     const mcp_dump *d = NULL;
     /* a dump input: describe every part that it holds */
-    if (mcp_node_get(settings, "input") && mcp_job_dump(job, settings, "input", &d) == 0) {
+    if (mcp_node_get(settings, "input") &&
+        mcp_job_dump(job, settings, "input", &d) == 0) {
         mcp__info_add_dump(section, d);
-        const mcp_image *parts[] = {d->color, d->var_of_mean, d->cov_of_mean, d->albedo,
-                                    d->normal, d->spp_map};
-        const char *prefixes[] = {"", "variance_of_mean.", "covariance_of_mean.", "albedo.",
-                                  "normal.", "spp."};
+        const mcp_image *parts[] = {d->color,  d->var_of_mean, d->cov_of_mean,
+                                    d->albedo, d->normal,      d->spp_map};
+        const char *prefixes[] = {"",        "variance_of_mean.", "covariance_of_mean.",
+                                  "albedo.", "normal.",           "spp."};
         for (int i = 0; i < 6; i++)
             if (parts[i] && mcp__info_add_channels(channels, parts[i], prefixes[i]))
                 return -1;
@@ -98,8 +99,9 @@ stage_info(mcp_job *job, const mcp_node *settings)
     return 0;
 }
 
-const mcp_stage mcp_stage_info = {"info", "describe an input (channels, statistics, "
-                                          "convention, sample count) in the report",
+const mcp_stage mcp_stage_info = {"info",
+                                  "describe an input (channels, statistics, "
+                                  "convention, sample count) in the report",
                                   mcp__info_keys, stage_info, check_info};
 
 /* Appends statistics of every channel of img to the array, names prefixed. */
@@ -108,8 +110,7 @@ mcp__info_add_channels(cJSON *array, const mcp_image *img, const char *prefix)
 {
     for (int c = 0; c < img->channels; c++) {
         mcp_channel_stats s;
-        if (mcp_channel_stats_compute(img, c, &s))
-            return -1;
+        if (mcp_channel_stats_compute(img, c, &s)) return -1;
         char name[600];
         snprintf(name, sizeof name, "%s%s", prefix, img->names[c]);
         cJSON *ch = cJSON_CreateObject();
@@ -140,11 +141,10 @@ mcp__info_add_dump(cJSON *o, const mcp_dump *d)
                             : d->variance_in_file == MCP_VAR_PER_SAMPLE
                                 ? "per-sample in the file (divided by spp)"
                                 : "of the mean in the file");
-    cJSON_AddStringToObject(o, "variance_source", mcp_variance_source_name(d->variance_source));
-    if (d->variance_dof > 0)
-        cJSON_AddNumberToObject(o, "variance_dof", d->variance_dof);
-    if (d->replicates > 0)
-        cJSON_AddNumberToObject(o, "replicates", d->replicates);
+    cJSON_AddStringToObject(o, "variance_source",
+                            mcp_variance_source_name(d->variance_source));
+    if (d->variance_dof > 0) cJSON_AddNumberToObject(o, "variance_dof", d->variance_dof);
+    if (d->replicates > 0) cJSON_AddNumberToObject(o, "replicates", d->replicates);
     if (d->variance_pool > 0)
         cJSON_AddNumberToObject(o, "variance_pool", d->variance_pool);
     cJSON_AddBoolToObject(o, "covariance", d->cov_of_mean != NULL);

@@ -86,8 +86,9 @@ flip_histograms(cJSON *section, const mcp_metrics *m, const char *input,
             MCP_AXIS_LINEAR);
         if (!plot) return -1;
         for (int t = 0; t < (compare_name ? 2 : 1); t++) {
-            const mcp_flip_stats *st =
-                t ? &cmp[hdr].stats : hdr ? &m->flip_hdr.stats : &m->flip_ldr.stats;
+            const mcp_flip_stats *st = t     ? &cmp[hdr].stats
+                                       : hdr ? &m->flip_hdr.stats
+                                             : &m->flip_ldr.stats;
             for (int i = 0; i < B; i++)
                 y[i] = mcp_flip_weighted_bucket(st, i);
             if (!mcp_report_plot_add_series(plot, t ? compare_name : input,
@@ -108,7 +109,8 @@ write_preview(mcp_job *job, const mcp_image *img, const char *rel, cJSON *sectio
     char path[4096], rel_exr[1300], exr_path[4096];
     int rgb[3];
     mcp_image *view = NULL;
-    snprintf(rel_exr, sizeof rel_exr, "%.*s.exr", (int)(strlen(rel) - strlen(".png")), rel);
+    snprintf(rel_exr, sizeof rel_exr, "%.*s.exr", (int)(strlen(rel) - strlen(".png")),
+             rel);
     if (mcp_rgb_channels(img, rgb) || mcp_job_output_path(job, rel, path, sizeof path) ||
         mcp_job_output_path(job, rel_exr, exr_path, sizeof exr_path) ||
         mcp_image_copy_channels(img, rgb, 3, &view))
@@ -116,7 +118,8 @@ write_preview(mcp_job *job, const mcp_image *img, const char *rel, cJSON *sectio
     /* Displayed as the PNG writer shows linear values: clamped and sRGB-encoded. */
     mcp_image *shown = NULL;
     int rc = mcp_tonemap_apply(view, MCP_TONEMAP_CLAMP, &shown) ||
-             mcp_image_write(shown, path, NULL) || mcp_image_write(view, exr_path, NULL) ||
+             mcp_image_write(shown, path, NULL) ||
+             mcp_image_write(view, exr_path, NULL) ||
              !mcp_report_add_hdr_image(section, rel, rel_exr, caption);
     mcp_image_free(shown);
     mcp_image_free(view);
@@ -151,7 +154,7 @@ member_number(const cJSON *obj, const char *key)
  * FLIP in words, and over a series how fast the MSE falls (1/spp when unbiased). */
 int
 mcp__metrics_verdict(cJSON *section, const mcp__gate *gate, mcp__gate_verdict gv,
-                const char *gate_line)
+                     const char *gate_line)
 {
     char text[3000] = "";
     int len = 0;
@@ -163,8 +166,8 @@ mcp__metrics_verdict(cJSON *section, const mcp__gate *gate, mcp__gate_verdict gv
            fl = member_number(cJSON_GetObjectItem(section, "flip_ldr"), "mean");
     if (!isnan(relmse))
         len += snprintf(text + len, sizeof text - len,
-                        "%srelMSE %.3g (RMS relative error about %.2g%%)", len ? "; " : "", relmse,
-                        100 * sqrt(relmse));
+                        "%srelMSE %.3g (RMS relative error about %.2g%%)",
+                        len ? "; " : "", relmse, 100 * sqrt(relmse));
     if (!isnan(fh) || !isnan(fl))
         len += snprintf(text + len, sizeof text - len, "%s%s mean %.3g on 0..1: %s",
                         len ? "; " : "", isnan(fh) ? "LDR-FLIP" : "HDR-FLIP",
@@ -174,7 +177,8 @@ mcp__metrics_verdict(cJSON *section, const mcp__gate *gate, mcp__gate_verdict gv
     const cJSON *rows = cJSON_GetObjectItem(t, "rows");
     int n = cJSON_GetArraySize(rows);
     if (n > 1) {
-        const cJSON *a = cJSON_GetArrayItem(rows, 0), *z = cJSON_GetArrayItem(rows, n - 1);
+        const cJSON *a = cJSON_GetArrayItem(rows, 0),
+                    *z = cJSON_GetArrayItem(rows, n - 1);
         double s0 = number_of(cJSON_GetArrayItem(a, 0)),
                s1 = number_of(cJSON_GetArrayItem(z, 0)),
                m0 = number_of(cJSON_GetArrayItem(a, 1)),
@@ -186,7 +190,7 @@ mcp__metrics_verdict(cJSON *section, const mcp__gate *gate, mcp__gate_verdict gv
                      "spp^-1)",
                      len ? "; " : "", slope, s0, s1);
     }
-    mcp_verdict level = !gate->n                    ? MCP_VERDICT_INFO
+    mcp_verdict level = !gate->n                  ? MCP_VERDICT_INFO
                         : gv == MCP__GATE_FAILURE ? MCP_VERDICT_BAD
                         : gv == MCP__GATE_WARNING ? MCP_VERDICT_INFO
                                                   : MCP_VERDICT_GOOD;
@@ -298,11 +302,12 @@ gate_error(const mcp_node *settings, const char *key, int index)
     char msg[1024];
     const char *m = mcp_error_message();
     /* "--fail-percent 'x': ..." -> "'x': ..." */
-    const char *after_flag = strncmp(m, "--", 2) || !strchr(m, ' ') ? m : strchr(m, ' ') + 1;
+    const char *after_flag =
+        strncmp(m, "--", 2) || !strchr(m, ' ') ? m : strchr(m, ' ') + 1;
     snprintf(msg, sizeof msg, "%s", after_flag);
     const mcp_node *n = mcp_node_get(settings, key);
-    const mcp_node *item = n && n->kind == MCP_NODE_SEQ && index < n->count ? n->items[index]
-                                                                            : n;
+    const mcp_node *item =
+        n && n->kind == MCP_NODE_SEQ && index < n->count ? n->items[index] : n;
     return mcp_node_error(item, "%s: %s", key, msg);
 }
 
@@ -317,13 +322,14 @@ parse_metrics(mcp_job *job, const mcp_node *settings, metrics_plan *pl)
     if (mcp__gate_from_settings(&pl->s, &pl->o, &pl->gate, &bad_key, &bad_index))
         return gate_error(settings, bad_key, bad_index);
     if (pl->gate.n && !pl->s.input) {
-        static const char *const keys[] = {"fail", "warn", "fail_percent", "warn_percent"};
+        static const char *const keys[] = {"fail", "warn", "fail_percent",
+                                           "warn_percent"};
         const mcp_node *at = NULL;
         for (int k = 0; k < 4 && !at; k++)
             at = mcp_node_get(settings, keys[k]);
-        return mcp_node_error(at,
-                              "a gate (fail:, warn:, fail_percent:, warn_percent:) judges "
-                              "'input' against the reference; give 'input'");
+        return mcp_node_error(
+            at, "a gate (fail:, warn:, fail_percent:, warn_percent:) judges "
+                "'input' against the reference; give 'input'");
     }
     if (pl->s.compare && !pl->s.input)
         return mcp_node_error(mcp_node_get(settings, "compare"),
@@ -342,12 +348,14 @@ parse_metrics(mcp_job *job, const mcp_node *settings, metrics_plan *pl)
         return mcp_node_error(mcp_node_get(settings, "estimate"),
                               "'estimate' needs 'input' (the image it estimates)");
     return mcp_job_check_input(job, settings, "reference", MCP_JOB_IMAGE) ||
-           (pl->s.input && mcp_job_check_input(job, settings, "input", MCP_JOB_IMAGE)) ||
-           (pl->s.estimate &&
-            mcp_job_check_input(job, settings, "estimate", MCP_JOB_IMAGE)) ||
-           (pl->s.compare &&
-            mcp_job_check_input(job, settings, "compare", MCP_JOB_IMAGE)) ||
-           (pl->s.series && mcp_job_check_input(job, settings, "series", MCP_JOB_SERIES))
+                   (pl->s.input &&
+                    mcp_job_check_input(job, settings, "input", MCP_JOB_IMAGE)) ||
+                   (pl->s.estimate &&
+                    mcp_job_check_input(job, settings, "estimate", MCP_JOB_IMAGE)) ||
+                   (pl->s.compare &&
+                    mcp_job_check_input(job, settings, "compare", MCP_JOB_IMAGE)) ||
+                   (pl->s.series &&
+                    mcp_job_check_input(job, settings, "series", MCP_JOB_SERIES))
                ? -1
                : 0;
 }
@@ -363,8 +371,7 @@ static int
 stage_metrics(mcp_job *job, const mcp_node *settings)
 {
     metrics_plan pl;
-    if (parse_metrics(job, settings, &pl))
-        return -1;
+    if (parse_metrics(job, settings, &pl)) return -1;
     mcp_metrics_options o = pl.o;
     const char *input = pl.s.input, *reference = pl.s.reference, *output = pl.sh.output,
                *series_name = pl.s.series, *estimate_name = pl.s.estimate;
@@ -411,7 +418,8 @@ stage_metrics(mcp_job *job, const mcp_node *settings)
             cJSON_AddStringToObject(c, "input", pl.s.compare);
             mcp_note("metrics: FLIP of %s against %s", pl.s.compare, reference);
             if ((o.flip_ldr && mcp_flip_ldr(compare, ref, &o.flip, &cmp[0], NULL)) ||
-                (o.flip_hdr && mcp_flip_hdr(compare, ref, &o.flip, &cmp[1], NULL, NULL))) {
+                (o.flip_hdr &&
+                 mcp_flip_hdr(compare, ref, &o.flip, &cmp[1], NULL, NULL))) {
                 mcp__at_line(settings, "compare");
                 goto done;
             }

@@ -66,7 +66,7 @@ parse_perceptual(mcp_job *job, const mcp_node *settings, mcp__perc_args *a,
     if (mcp__perc_args_from_settings(&st, a)) {
         /* the kernel's or the confidence's error at its line, else the stage's */
         const char *m = mcp_error_message();
-        const char *key = !strncmp(m, "kernel", 6)                ? "kernel"
+        const char *key = !strncmp(m, "kernel", 6)                    ? "kernel"
                           : !strncmp(m, "perceptual: confidence", 22) ? "confidence"
                                                                       : NULL;
         return key && mcp_node_get(settings, key)
@@ -76,8 +76,7 @@ parse_perceptual(mcp_job *job, const mcp_node *settings, mcp__perc_args *a,
     *name = st.name;
     *folder = sh.output ? sh.output : st.name;
     const mcp_node *n = NULL;
-    if (mcp_node_require(settings, "candidates", "stage 'perceptual'", &n))
-        return -1;
+    if (mcp_node_require(settings, "candidates", "stage 'perceptual'", &n)) return -1;
     if (n->kind == MCP_NODE_SCALAR) {
         if (mcp_job_check_name(job, n, MCP_JOB_SERIES)) return -1;
     } else if (n->kind == MCP_NODE_SEQ) {
@@ -87,11 +86,14 @@ parse_perceptual(mcp_job *job, const mcp_node *settings, mcp__perc_args *a,
         return mcp_node_error(n,
                               "candidates must name a series input or list image inputs");
     }
-    if ((st.reference && mcp_job_check_input(job, settings, "reference", MCP_JOB_IMAGE)) ||
+    if ((st.reference &&
+         mcp_job_check_input(job, settings, "reference", MCP_JOB_IMAGE)) ||
         (strcmp(a->surrogate, "denoise") && strcmp(a->surrogate, "reference") &&
          mcp_job_check_input(job, settings, "surrogate", MCP_JOB_IMAGE)) ||
-        (a->confidence && mcp_job_check_input(job, settings, "confidence", MCP_JOB_IMAGE)) ||
-        (a->kernel_file && mcp_job_check_file(job, mcp_node_get(settings, "kernel"), "kernel")))
+        (a->confidence &&
+         mcp_job_check_input(job, settings, "confidence", MCP_JOB_IMAGE)) ||
+        (a->kernel_file &&
+         mcp_job_check_file(job, mcp_node_get(settings, "kernel"), "kernel")))
         return -1;
     if (!strcmp(a->surrogate, "denoise") && mcp__stage_denoiser(job, settings, den))
         return -1;

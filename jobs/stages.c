@@ -12,14 +12,8 @@ extern const mcp_stage mcp_stage_estimate;
 extern const mcp_stage mcp_stage_blend;
 extern const mcp_stage mcp_stage_adaptive;
 static const mcp_stage *const stages[] = {
-    &mcp_stage_info,
-    &mcp_stage_convert,
-    &mcp_stage_metrics,
-    &mcp_stage_perceptual,
-    &mcp_stage_estimate,
-    &mcp_stage_blend,
-    &mcp_stage_adaptive,
-    NULL,
+    &mcp_stage_info,     &mcp_stage_convert, &mcp_stage_metrics,  &mcp_stage_perceptual,
+    &mcp_stage_estimate, &mcp_stage_blend,   &mcp_stage_adaptive, NULL,
 };
 
 /* The keys of the stages that read their settings through an operation's table
@@ -39,10 +33,12 @@ fill_keys(void)
 {
     mcp__op_job_keys(mcp_operation_estimate(), stage_extras, mcp__estimate_keys,
                      MCP__OPTION_KEYS_MAX);
-    mcp__op_job_keys(mcp_operation_blend(), stage_extras, mcp__blend_keys, MCP__OPTION_KEYS_MAX);
+    mcp__op_job_keys(mcp_operation_blend(), stage_extras, mcp__blend_keys,
+                     MCP__OPTION_KEYS_MAX);
     mcp__op_job_keys(mcp_operation_adaptive(), stage_extras, mcp__adaptive_keys,
                      MCP__OPTION_KEYS_MAX);
-    mcp__op_job_keys(mcp_operation_info(), stage_extras, mcp__info_keys, MCP__OPTION_KEYS_MAX);
+    mcp__op_job_keys(mcp_operation_info(), stage_extras, mcp__info_keys,
+                     MCP__OPTION_KEYS_MAX);
     mcp__op_job_keys(mcp_operation_convert(), stage_extras, mcp__convert_keys,
                      MCP__OPTION_KEYS_MAX);
     mcp__op_job_keys(mcp_operation_metrics(), stage_extras, mcp__metrics_keys,
@@ -63,7 +59,6 @@ const mcp_stage *
 mcp_job_stage_find(const char *name)
 {
     for (const mcp_stage *const *s = mcp_job_stages(); name && *s; s++)
-        if (!strcmp((*s)->name, name))
-            return *s;
+        if (!strcmp((*s)->name, name)) return *s;
     return NULL;
 }

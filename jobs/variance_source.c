@@ -21,8 +21,7 @@ void
 mcp__add_variance_source(cJSON *j, mcp_variance_source src, double dof)
 {
     cJSON_AddStringToObject(j, "variance_source", mcp_variance_source_name(src));
-    if (dof > 0)
-        cJSON_AddNumberToObject(j, "variance_dof", dof);
+    if (dof > 0) cJSON_AddNumberToObject(j, "variance_dof", dof);
     if (src == MCP_VARSRC_PER_SAMPLE)
         cJSON_AddStringToObject(j, "variance_note", per_sample_note);
     if (src == MCP_VARSRC_XYZ_MOMENTS)
@@ -33,13 +32,17 @@ const char *
 mcp__variance_source_words(mcp_variance_source src)
 {
     switch (src) {
-    case MCP_VARSRC_NONE: return "none";
+    case MCP_VARSRC_NONE:
+        return "none";
     case MCP_VARSRC_PER_SAMPLE:
         return "per-sample / n (assumes independent samples; see mcpost merge, "
                "--variance-from increments)";
-    case MCP_VARSRC_OF_MEAN: return "of the mean, as the file stores it";
-    case MCP_VARSRC_REPLICATES: return "the spread between replicates";
-    case MCP_VARSRC_INCREMENTS: return "the spread between the series' increments";
+    case MCP_VARSRC_OF_MEAN:
+        return "of the mean, as the file stores it";
+    case MCP_VARSRC_REPLICATES:
+        return "the spread between replicates";
+    case MCP_VARSRC_INCREMENTS:
+        return "the spread between the series' increments";
     case MCP_VARSRC_XYZ_MOMENTS:
         return "per-sample / n from Mitsuba's XYZ moments (no XYZ covariances: X, Y, Z "
                "taken as perfectly correlated; assumes independent samples)";
@@ -50,20 +53,17 @@ mcp__variance_source_words(mcp_variance_source src)
 void
 mcp__report_variance_ratio(double ratio, int using_increments, int asked, cJSON *j)
 {
-    if (!(ratio > 0))
-        return;
-    if (j)
-        cJSON_AddNumberToObject(j, "variance_ratio", ratio);
-    if (!mcp_variance_ratio_off(ratio))
-        return;
+    if (!(ratio > 0)) return;
+    if (j) cJSON_AddNumberToObject(j, "variance_ratio", ratio);
+    if (!mcp_variance_ratio_off(ratio)) return;
     const char *w = mcp__variance_ratio_warning(ratio, using_increments);
     /* taken care of (the increments are used) is news, not a warning; and no news when
      * the job or command asked for the increments itself */
     if (!using_increments || !asked)
         fprintf(stderr, "mcpost: %s%s\n", using_increments ? "" : "warning: ", w);
     if (j)
-        cJSON_AddStringToObject(j, using_increments ? "variance_choice" : "variance_warning",
-                                w);
+        cJSON_AddStringToObject(
+            j, using_increments ? "variance_choice" : "variance_warning", w);
 }
 
 const char *

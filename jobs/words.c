@@ -37,23 +37,22 @@ int
 mcp__split_words(const char *text, char ***words, int *count)
 {
     char *copy = mcp_strdup(text), *save = NULL;
-    if (!copy)
-        return -1;
+    if (!copy) return -1;
     int n = 1;
     for (const char *p = text; *p; p++)
         n += *p == ',';
     char **w = mcp_calloc((size_t)n, sizeof *w);
     int k = 0;
     int lost = 0; /* a word whose copy ran out of memory */
-    for (char *tok = strtok_r(copy, ",", &save); w && tok; tok = strtok_r(NULL, ",", &save))
+    for (char *tok = strtok_r(copy, ",", &save); w && tok;
+         tok = strtok_r(NULL, ",", &save))
         lost |= !(w[k++] = mcp_strdup(tok));
     free(copy);
     if (w && lost) {
         mcp__free_words(w, k);
         w = NULL;
     }
-    if (!w)
-        return -1;
+    if (!w) return -1;
     *words = w;
     *count = k;
     return 0;

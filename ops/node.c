@@ -36,12 +36,21 @@ node_text(const mcp_node *n, const mcp_option *o, const char *key, char **joined
         *text = n->value;
         return 0;
     }
-    if (n->kind == MCP_NODE_MAP || (o->type != MCP_OPT_LIST && o->type != MCP_OPT_WORDSET)) {
+    if (n->kind == MCP_NODE_MAP ||
+        (o->type != MCP_OPT_LIST && o->type != MCP_OPT_WORDSET)) {
         /* as mcp_node_int and its kin say it */
-        static const char *const what[] = {
-            "a number", "an integer",        "an integer", "a number", "true or false",
-            "a word",   "a list of numbers", "a string",   "a string", "a denoiser",
-            "a string or a list of them",    "a word or a list of words"};
+        static const char *const what[] = {"a number",
+                                           "an integer",
+                                           "an integer",
+                                           "a number",
+                                           "true or false",
+                                           "a word",
+                                           "a list of numbers",
+                                           "a string",
+                                           "a string",
+                                           "a denoiser",
+                                           "a string or a list of them",
+                                           "a word or a list of words"};
         return mcp_node_error(n, "%s must be %s, not a %s", key, what[o->type],
                               n->kind == MCP_NODE_MAP ? "map" : "list");
     }
@@ -89,8 +98,10 @@ mcp__options_from_node(const mcp_operation *op, const mcp_node *map,
             /* each item one value, refused at its own line */
             for (int k = 0; k < v->count; k++) {
                 if (v->items[k]->kind != MCP_NODE_SCALAR)
-                    return mcp_node_error(v->items[k], "%s must be a string or a list of "
-                                          "them", key);
+                    return mcp_node_error(v->items[k],
+                                          "%s must be a string or a list of "
+                                          "them",
+                                          key);
                 if (mcp_operation_set(target, o, key, v->items[k]->value, dst))
                     return mcp_node_error(v->items[k], "%s", mcp_error_message());
             }

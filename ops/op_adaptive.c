@@ -98,7 +98,9 @@ static const mcp_option adaptive_options[] = {
      .def = "0",
      .doc = "share of every pass spread evenly, the rest by the map: a floor for rare "
             "paths no pixel has drawn yet",
-     .lo = 0, .hi = 1, .bounds = MCP_OPT_LO | MCP_OPT_HI},
+     .lo = 0,
+     .hi = 1,
+     .bounds = MCP_OPT_LO | MCP_OPT_HI},
     {.name = "probes",
      .type = MCP_OPT_INT,
      .where = CJ,

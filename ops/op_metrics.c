@@ -36,12 +36,12 @@ const mcp_wordlist mcp__flip_kind_words = {"FLIP", flip_kind_names, 2};
     GATE_ROW(fail, GW, "'EXPR'",                                                         \
              "FAILURE when EXPR holds: FIGURE OP NUMBER, OP one of > >= < <=, "          \
              "FIGURE a number of the JSON, dots for nesting (flip_ldr.mean)"),           \
-    GATE_ROW(warn, GW, "'EXPR'", "WARNING when EXPR holds"),                             \
-    GATE_ROW(fail_percent, GW, "'MAP T P'",                                              \
-             "FAILURE when more than P% of the pixels have MAP (flip_ldr, "              \
-             "flip_hdr, relse) above T (idiff's -failpercent)"),                         \
-    GATE_ROW(warn_percent, GW, "'MAP T P'",                                              \
-             "WARNING when more than P% of the pixels have MAP above T")
+        GATE_ROW(warn, GW, "'EXPR'", "WARNING when EXPR holds"),                         \
+        GATE_ROW(fail_percent, GW, "'MAP T P'",                                          \
+                 "FAILURE when more than P% of the pixels have MAP (flip_ldr, "          \
+                 "flip_hdr, relse) above T (idiff's -failpercent)"),                     \
+        GATE_ROW(warn_percent, GW, "'MAP T P'",                                          \
+                 "WARNING when more than P% of the pixels have MAP above T")
 
 /* The figures' options and the gates, the rows metrics and compare share: W is where
  * the figures' options are taken, GW the gates' (metrics: everywhere and not in Python;
@@ -287,14 +287,16 @@ metrics_finish(void *p)
     S *s = p;
     s->o.flip_ldr = (s->flip & 1) != 0;
     s->o.flip_hdr = (s->flip & 2) != 0;
-    if (s->o.flip_hdr && mcp_tonemap_flip_coefficients(s->o.flip.tone_mapper, (float[6]){0}))
+    if (s->o.flip_hdr &&
+        mcp_tonemap_flip_coefficients(s->o.flip.tone_mapper, (float[6]){0}))
         return -1;
     return 0;
 }
 
 const mcp_operation mcp__op_metrics = {
     .name = "metrics",
-    .summary = "compare test images with a reference (MSE, relMSE, PSNR, pMSE, FLIP, ...)",
+    .summary =
+        "compare test images with a reference (MSE, relMSE, PSNR, pMSE, FLIP, ...)",
     .options = metrics_options,
     .size = sizeof(S),
     .defaults = metrics_defaults,
@@ -361,16 +363,18 @@ compare_finish(void *p)
 
 const mcp_operation mcp__op_compare = {
     .name = "compare",
-    .summary = "a page to look at renders against a reference (wipe, error maps, figures, "
-               "gates)",
+    .summary =
+        "a page to look at renders against a reference (wipe, error maps, figures, "
+        "gates)",
     .options = compare_options,
     .size = sizeof(C),
     .defaults = compare_defaults,
     .finish = compare_finish,
     .given_offset = offsetof(S, given),
     .shared = MCP_SHARED_JSON | MCP_SHARED_OUTPUT | MCP_SHARED_QUIET | MCP_SHARED_THREADS,
-    .output_doc = "the page's folder: report.html, report.json, the previews and maps (one "
-                  "TEST: in it; several: in test1, test2, ...), written whole",
+    .output_doc =
+        "the page's folder: report.html, report.json, the previews and maps (one "
+        "TEST: in it; several: in test1, test2, ...), written whole",
     .output_def = "compare",
 };
 
@@ -380,7 +384,8 @@ mcp_operation_compare(void)
     return &mcp__op_compare;
 }
 
-/* ---- collect: the gates alone, judged on every frame of a shot (cli/cmd_collect.c) ---- */
+/* ---- collect: the gates alone, judged on every frame of a shot (cli/cmd_collect.c) ----
+ */
 
 static const mcp_option collect_options[] = {GATE_ROWS(MCP_OPT_CLI), {0}};
 

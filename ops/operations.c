@@ -3,11 +3,17 @@
 
 #include <string.h>
 
-static const mcp_operation *const list[] = {&mcp__op_estimate, &mcp__op_blend,
-                                            &mcp__op_adaptive, &mcp__op_info, &mcp__op_merge,
-                                            &mcp__op_denoise, &mcp__op_convert,
-                                            &mcp__op_metrics, &mcp__op_compare,
-                                            &mcp__op_perceptual, NULL};
+static const mcp_operation *const list[] = {&mcp__op_estimate,
+                                            &mcp__op_blend,
+                                            &mcp__op_adaptive,
+                                            &mcp__op_info,
+                                            &mcp__op_merge,
+                                            &mcp__op_denoise,
+                                            &mcp__op_convert,
+                                            &mcp__op_metrics,
+                                            &mcp__op_compare,
+                                            &mcp__op_perceptual,
+                                            NULL};
 
 const mcp_operation *const *
 mcp_operations(void)

@@ -23,10 +23,10 @@ extern "C" {
 typedef struct mcp_estimate_settings {
     mcp_series_estimate_options so; /* so.taus: a single tau when given alone */
     mcp_series_variance variance_from;
-    const char *input;      /* a job's input: a dump or a series */
-    const char *reference;  /* a file (command line), an input (job) */
-    const char *series;     /* command line: a printf pattern, with spp */
-    const char *spp;        /* command line: the pattern's sample counts, "1,2,4" */
+    const char *input;         /* a job's input: a dump or a series */
+    const char *reference;     /* a file (command line), an input (job) */
+    const char *series;        /* command line: a printf pattern, with spp */
+    const char *spp;           /* command line: the pattern's sample counts, "1,2,4" */
     mcp_convention convention; /* command line: how to read the dumps */
     mcp_variance_kind variance;
     int exit_status; /* command line: exit 0 to stop, 10 to go on */
@@ -57,8 +57,8 @@ typedef struct mcp_adaptive_settings {
 
 /* `info`: images and render dumps described. */
 typedef struct mcp_info_settings {
-    mcp_dump_spec spec;  /* how the command line reads a dump: spp, convention, variance */
-    const char *input;   /* a job's input */
+    mcp_dump_spec spec; /* how the command line reads a dump: spp, convention, variance */
+    const char *input;  /* a job's input */
 } mcp_info_settings;
 
 /* `merge`: render dumps of one frame combined into one (command line only). */
@@ -84,13 +84,13 @@ typedef struct mcp_convert_settings {
     mcp_write_options wo;     /* pixel, compression; tiled and linear by finish */
     const char *channels[64]; /* names, or "A,B,C" (each split at commas) */
     int n_channels;
-    int half;                 /* command line: --half, pixel half */
-    int tiled;                /* EXR tiles of tiled x tiled (0: scanlines) */
-    int linear;               /* LDR outputs: no sRGB encoding */
-    mcp_convention dump;      /* command line: rewrite a dump in this convention */
-    const char *spp;          /* command line: the dump's sample count */
-    const char *input;        /* a job's input */
-    const char *output;       /* a job's output file */
+    int half;            /* command line: --half, pixel half */
+    int tiled;           /* EXR tiles of tiled x tiled (0: scanlines) */
+    int linear;          /* LDR outputs: no sRGB encoding */
+    mcp_convention dump; /* command line: rewrite a dump in this convention */
+    const char *spp;     /* command line: the dump's sample count */
+    const char *input;   /* a job's input */
+    const char *output;  /* a job's output file */
     uint64_t given;
 } mcp_convert_settings;
 
@@ -106,9 +106,9 @@ typedef struct mcp_metrics_settings {
     const char *fail[MCP_METRICS_MAX_GATES], *warn[MCP_METRICS_MAX_GATES];
     const char *fail_percent[MCP_METRICS_MAX_GATES], *warn_percent[MCP_METRICS_MAX_GATES];
     int n_fail, n_warn, n_fail_percent, n_warn_percent;
-    const char *csv;       /* command line: the figures as CSV too */
+    const char *csv; /* command line: the figures as CSV too */
     const char *input, *reference, *series, *estimate, *compare; /* a job's inputs */
-    int maps;              /* a job: write maps and previews */
+    int maps; /* a job: write maps and previews */
     uint64_t given;
 } mcp_metrics_settings;
 

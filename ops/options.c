@@ -179,32 +179,41 @@ parse_flag(const char *label, const char *text, int *out)
     return mcp_error("%s must be true or false (got '%s')", label, text);
 }
 
+/* The next item of a comma-separated list at *p, without its surrounding blanks: its
+ * start and length; *p moves past the comma, or to NULL after the last item. */
+static const char *
+list_item(const char **p, size_t *len)
+{
+    const char *start = *p, *comma = strchr(start, ',');
+    size_t n = comma ? (size_t)(comma - start) : strlen(start);
+    while (n && *start == ' ')
+        start++, n--;
+    while (n && start[n - 1] == ' ')
+        n--;
+    *p = comma ? comma + 1 : NULL;
+    *len = n;
+    return start;
+}
+
 static int
 parse_list(const mcp_operation *op, const mcp_option *o, const char *label,
            const char *text, double *out, int *count)
 {
     double v[64];
     int n = 0, max = o->max_count < 64 ? o->max_count : 64;
-    const char *p = text;
-    for (;;) {
-        const char *comma = strchr(p, ',');
-        size_t len = comma ? (size_t)(comma - p) : strlen(p);
+    for (const char *p = text; p;) {
+        size_t len;
+        const char *item = list_item(&p, &len);
         char word[64];
-        while (len && *p == ' ')
-            p++, len--;
-        while (len && p[len - 1] == ' ')
-            len--;
-        if (len == 0 && !comma && n == 0 && !*text) break; /* "": no values */
+        if (len == 0 && !p && n == 0 && !*text) break; /* "": no values */
         if (len >= sizeof word)
-            return mcp_error("%s must be a number (got '%.*s')", label, (int)len, p);
-        memcpy(word, p, len);
+            return mcp_error("%s must be a number (got '%.*s')", label, (int)len, item);
+        memcpy(word, item, len);
         word[len] = '\0';
         if (n < 64) {
             if (parse_number(op, o, label, word, &v[n])) return -1;
         }
         n++;
-        if (!comma) break;
-        p = comma + 1;
     }
     if (n < 1 || n > max)
         return mcp_error("%s needs 1 to %d values (got %d)", label, max, n);
@@ -218,17 +227,12 @@ static int
 parse_wordset(const mcp_option *o, const char *label, const char *text, int *out)
 {
     int bits = 0, n = 0, none = 0;
-    const char *p = text;
-    for (;;) {
-        const char *comma = strchr(p, ',');
-        size_t len = comma ? (size_t)(comma - p) : strlen(p);
+    for (const char *p = text; p;) {
+        size_t len;
+        const char *item = list_item(&p, &len);
         char word[64];
-        while (len && *p == ' ')
-            p++, len--;
-        while (len && p[len - 1] == ' ')
-            len--;
         if (len >= sizeof word) len = sizeof word - 1;
-        memcpy(word, p, len);
+        memcpy(word, item, len);
         word[len] = '\0';
         int v = 0;
         if (!strcasecmp(word, "none")) {
@@ -241,11 +245,8 @@ parse_wordset(const mcp_option *o, const char *label, const char *text, int *out
             bits |= 1 << v;
         }
         n++;
-        if (!comma) break;
-        p = comma + 1;
     }
-    if (none && n > 1)
-        return mcp_error("%s: none goes alone (got '%s')", label, text);
+    if (none && n > 1) return mcp_error("%s: none goes alone (got '%s')", label, text);
     *out = bits;
     return 0;
 }
@@ -509,10 +510,9 @@ markdown_row(mcp__strbuf *b, const mcp_operation *op, const mcp_option *o,
     if (!rc && (o->type == MCP_OPT_ENUM || o->type == MCP_OPT_WORDSET)) {
         char words[512];
         mcp_wordlist_join(o->words, "`, `", words, sizeof words);
-        rc = mcp__strbuf_printf(b,
-                                o->type == MCP_OPT_ENUM ? "; one of `%s`"
-                                                        : "; any of `%s`, or `none`",
-                                words);
+        rc = mcp__strbuf_printf(
+            b, o->type == MCP_OPT_ENUM ? "; one of `%s`" : "; any of `%s`, or `none`",
+            words);
     }
     if (!rc && o->type == MCP_OPT_TEXTS)
         rc = mcp__strbuf_str(b, " (repeatable: a job gives a list)");

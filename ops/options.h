@@ -29,28 +29,28 @@ extern "C" {
 
 /* What a value is, and the C type of its field in the settings struct. */
 typedef enum {
-    MCP_OPT_NUMBER,  /* double; lo/hi per bounds; auto_word may stand for auto_value */
-    MCP_OPT_INT,     /* int; lo/hi per bounds; auto_word may stand for auto_value */
-    MCP_OPT_SEED,    /* uint64_t, a non-negative integer */
-    MCP_OPT_WHOLE,   /* int64_t, a whole number >= 0 (up to 2^52: exact as a double) */
-    MCP_OPT_FLAG,    /* int, 0 or 1: true/false, yes/no, on/off; the command line takes
-                      * --NAME (1) and --no-NAME (0) */
-    MCP_OPT_ENUM,    /* an enum (int-sized): one of words' words */
-    MCP_OPT_LIST,    /* double[max_count] at offset, the count (int) at count_offset;
-                      * comma-separated on the command line, a YAML list in a job */
-    MCP_OPT_TEXT,    /* const char *, borrowed from the front end's text */
-    MCP_OPT_INPUT,   /* const char *: a file on the command line, an input's name in a
-                      * job, an array or a path in Python (each front end reads it) */
+    MCP_OPT_NUMBER,   /* double; lo/hi per bounds; auto_word may stand for auto_value */
+    MCP_OPT_INT,      /* int; lo/hi per bounds; auto_word may stand for auto_value */
+    MCP_OPT_SEED,     /* uint64_t, a non-negative integer */
+    MCP_OPT_WHOLE,    /* int64_t, a whole number >= 0 (up to 2^52: exact as a double) */
+    MCP_OPT_FLAG,     /* int, 0 or 1: true/false, yes/no, on/off; the command line takes
+                       * --NAME (1) and --no-NAME (0) */
+    MCP_OPT_ENUM,     /* an enum (int-sized): one of words' words */
+    MCP_OPT_LIST,     /* double[max_count] at offset, the count (int) at count_offset;
+                       * comma-separated on the command line, a YAML list in a job */
+    MCP_OPT_TEXT,     /* const char *, borrowed from the front end's text */
+    MCP_OPT_INPUT,    /* const char *: a file on the command line, an input's name in a
+                       * job, an array or a path in Python (each front end reads it) */
     MCP_OPT_DENOISER, /* the denoiser and its settings: each front end reads it
                        * (--denoiser and --denoiser-opt, a job's denoiser map, a
                        * Python name or dict); declared here for the docs and keys */
-    MCP_OPT_TEXTS,   /* const char *[max_count] at offset, the count (int) at
-                      * count_offset: each value given adds one (the command line
-                      * repeats the flag, a job gives one or a YAML list, Python a str
-                      * or a sequence of str); borrowed like MCP_OPT_TEXT */
-    MCP_OPT_WORDSET  /* int: a set of words' words, bit i for words[i], given
-                      * comma-separated ("ldr,hdr"; a YAML list in a job, a str or a
-                      * sequence of str in Python); the word "none" is the empty set */
+    MCP_OPT_TEXTS,    /* const char *[max_count] at offset, the count (int) at
+                       * count_offset: each value given adds one (the command line
+                       * repeats the flag, a job gives one or a YAML list, Python a str
+                       * or a sequence of str); borrowed like MCP_OPT_TEXT */
+    MCP_OPT_WORDSET   /* int: a set of words' words, bit i for words[i], given
+                       * comma-separated ("ldr,hdr"; a YAML list in a job, a str or a
+                       * sequence of str in Python); the word "none" is the empty set */
 } mcp_opt_type;
 
 /* Where an option is taken (the `where` bits; 0 means all three). */

@@ -38,10 +38,10 @@ typedef struct {
     const int *rgb, *srgb;
     int w, h, m;
     mcp_tonemap tm;
-    float *ring;       /* RING slots of ring_row */
-    double *below;     /* the scan's: error pushed down to this row */
-    double *e;         /* the row's errors, a zero pixel at each end */
-    int *choice;       /* RING rows of the scan's choices, [RING][w] */
+    float *ring;   /* RING slots of ring_row */
+    double *below; /* the scan's: error pushed down to this row */
+    double *e;     /* the row's errors, a zero pixel at each end */
+    int *choice;   /* RING rows of the scan's choices, [RING][w] */
     mcp_image *image, *index;
     long n_bad;
     atomic_int prepared, scanned; /* rows done by each side */
@@ -72,14 +72,15 @@ mask_select(__m128d mask, __m128d a, __m128d b)
 
 /* |q - (T(Q_j) - T(I'))|^2 for the candidate at t, and its differences */
 static inline __m128d
-distance(__m128d q01, __m128d q2, __m128d s01, __m128d s2, const float *t,
-         __m128d *d01, __m128d *d2)
+distance(__m128d q01, __m128d q2, __m128d s01, __m128d s2, const float *t, __m128d *d01,
+         __m128d *d2)
 {
     *d01 = _mm_sub_pd(q01, _mm_sub_pd(load2(t), s01));
     *d2 = _mm_sub_sd(q2, _mm_sub_sd(load1(t + 2), s2));
     /* the sum in both lanes, so that comparisons give whole masks */
     __m128d sq = _mm_mul_pd(*d01, *d01), sq2 = _mm_mul_sd(*d2, *d2);
-    return _mm_add_pd(_mm_add_pd(sq, _mm_shuffle_pd(sq, sq, 1)), _mm_unpacklo_pd(sq2, sq2));
+    return _mm_add_pd(_mm_add_pd(sq, _mm_shuffle_pd(sq, sq, 1)),
+                      _mm_unpacklo_pd(sq2, sq2));
 }
 
 /* The nearer of the candidates at t and t + stride (only the first when !two, and
@@ -191,10 +192,18 @@ static void
 scan_row(diffusion_run *r, int y)
 {
     switch (r->m) {
-    case 2: scan_row_m(r, y, 2); break;
-    case 3: scan_row_m(r, y, 3); break;
-    case 4: scan_row_m(r, y, 4); break;
-    default: scan_row_m(r, y, r->m); break;
+    case 2:
+        scan_row_m(r, y, 2);
+        break;
+    case 3:
+        scan_row_m(r, y, 3);
+        break;
+    case 4:
+        scan_row_m(r, y, 4);
+        break;
+    default:
+        scan_row_m(r, y, r->m);
+        break;
     }
 }
 
@@ -204,7 +213,8 @@ write_row(diffusion_run *r, int y)
 {
     int w = r->w;
     const int *choice = r->choice + (size_t)(y % RING) * w;
-    float *img = r->image->data + (size_t)y * w * 3, *idx = r->index->data + (size_t)y * w;
+    float *img = r->image->data + (size_t)y * w * 3,
+          *idx = r->index->data + (size_t)y * w;
     for (int x = 0; x < w; x++) {
         int j = choice[x];
         const float *p = mcp_image_px(r->cands[j], x, y);
@@ -285,8 +295,13 @@ mcp_perc_error_diffusion(const mcp_image *const *cands, int m, const mcp_image *
     double t0 = mcp__seconds();
     int w = cands[0]->width, h = cands[0]->height, rc = -1, srgb[3];
     size_t row3 = (size_t)w * 3;
-    diffusion_run r = {.cands = cands, .surrogate = surrogate, .srgb = srgb, .w = w,
-                       .h = h, .m = m, .tm = opt->model.tone_map};
+    diffusion_run r = {.cands = cands,
+                       .surrogate = surrogate,
+                       .srgb = srgb,
+                       .w = w,
+                       .h = h,
+                       .m = m,
+                       .tm = opt->model.tone_map};
     atomic_init(&r.prepared, 0);
     atomic_init(&r.scanned, 0);
     int *rgb = mcp_malloc((size_t)m * 3 * sizeof *rgb);
@@ -334,7 +349,6 @@ mcp_perc_error_diffusion(const mcp_image *const *cands, int m, const mcp_image *
     rc = 0;
 done:
     mcp_perc_result_free(&res);
-    free(rgb), free(r.ring), free(r.below), free(r.e),
-        free(r.choice);
+    free(rgb), free(r.ring), free(r.below), free(r.e), free(r.choice);
     return rc;
 }

@@ -74,8 +74,9 @@ pick_row(const float *lum, size_t stride, int m, const float *ls, const float *t
             lo = select_epi32(_mm_castps_si128(a), jv, lo);
             hi = select_epi32(_mm_castps_si128(b), jv, hi);
         }
-        __m128 below = _mm_cmplt_ps(_mm_sub_ps(s, l_lo),
-                                    _mm_mul_ps(_mm_loadu_ps(thr + x), _mm_sub_ps(l_hi, l_lo)));
+        __m128 below =
+            _mm_cmplt_ps(_mm_sub_ps(s, l_lo),
+                         _mm_mul_ps(_mm_loadu_ps(thr + x), _mm_sub_ps(l_hi, l_lo)));
         __m128i has_lo = _mm_cmpgt_epi32(lo, none), no_hi = _mm_cmplt_epi32(hi, zero);
         __m128i take_lo =
             _mm_and_si128(has_lo, _mm_or_si128(no_hi, _mm_castps_si128(below)));

@@ -17,15 +17,12 @@ mcp_py_image_get(PyObject *obj, const char *what, int channels, const char *cons
     out->img = NULL;
     if (PyUnicode_Check(obj) || PyObject_HasAttrString(obj, "__fspath__")) {
         PyObject *path = mcp_py_path(obj, what);
-        if (!path)
-            return -1;
+        if (!path) return -1;
         int rc;
-        Py_BEGIN_ALLOW_THREADS
-        rc = mcp_image_read(PyBytes_AS_STRING(path), NULL, &out->img);
-        Py_END_ALLOW_THREADS
-        Py_DECREF(path);
-        if (rc)
-            return mcp_py_fail_int();
+        Py_BEGIN_ALLOW_THREADS rc =
+            mcp_image_read(PyBytes_AS_STRING(path), NULL, &out->img);
+        Py_END_ALLOW_THREADS Py_DECREF(path);
+        if (rc) return mcp_py_fail_int();
         if (channels && out->img->channels != channels) {
             PyErr_Format(mcp_py_error, "%s: %s has %d channels (needs %d)", what,
                          out->img->source, out->img->channels, channels);
@@ -44,27 +41,29 @@ mcp_py_image_get(PyObject *obj, const char *what, int channels, const char *cons
     }
     PyArray_Descr *dt = PyArray_DESCR((PyArrayObject *)probe);
     if (dt->kind != 'f' && dt->kind != 'i' && dt->kind != 'u' && dt->kind != 'b') {
-        PyErr_Format(PyExc_TypeError, "%s must hold real numbers (float32 preferred), not %S",
-                     what, (PyObject *)dt);
+        PyErr_Format(PyExc_TypeError,
+                     "%s must hold real numbers (float32 preferred), not %S", what,
+                     (PyObject *)dt);
         Py_DECREF(probe);
         return -1;
     }
     PyArrayObject *a = (PyArrayObject *)PyArray_FROMANY(
         probe, NPY_FLOAT32, 0, 0, NPY_ARRAY_IN_ARRAY | NPY_ARRAY_FORCECAST);
     Py_DECREF(probe);
-    if (!a)
-        return -1;
+    if (!a) return -1;
     int nd = PyArray_NDIM(a);
     npy_intp *dims = PyArray_DIMS(a);
     if (nd != 2 && nd != 3) {
-        PyErr_Format(mcp_py_error, "%s: needs an H x W x C or H x W array (got %d dimensions)",
-                     what, nd);
+        PyErr_Format(mcp_py_error,
+                     "%s: needs an H x W x C or H x W array (got %d dimensions)", what,
+                     nd);
         Py_DECREF(a);
         return -1;
     }
     npy_intp h = dims[0], w = dims[1], c = nd == 3 ? dims[2] : 1;
     if (channels && c != channels) {
-        PyErr_Format(mcp_py_error, "%s: needs %d channels (got an array of shape %zd x %zd x %zd)",
+        PyErr_Format(mcp_py_error,
+                     "%s: needs %d channels (got an array of shape %zd x %zd x %zd)",
                      what, channels, (Py_ssize_t)h, (Py_ssize_t)w, (Py_ssize_t)c);
         Py_DECREF(a);
         return -1;
@@ -75,8 +74,7 @@ mcp_py_image_get(PyObject *obj, const char *what, int channels, const char *cons
         Py_DECREF(a);
         return -1;
     }
-    if (!names)
-        names = c == 3 ? rgb_names : c == 4 ? rgba_names : NULL;
+    if (!names) names = c == 3 ? rgb_names : c == 4 ? rgba_names : NULL;
     if (mcp_image_wrap((float *)PyArray_DATA(a), (int)w, (int)h, (int)c, (ptrdiff_t)c,
                        (ptrdiff_t)(w * c), names, what, &out->img)) {
         Py_DECREF(a);
@@ -92,8 +90,7 @@ mcp_py_image_opt(PyObject *obj, const char *what, int channels, const char *cons
 {
     out->array = NULL;
     out->img = NULL;
-    if (!obj || obj == Py_None)
-        return 0;
+    if (!obj || obj == Py_None) return 0;
     return mcp_py_image_get(obj, what, channels, names, out);
 }
 
@@ -116,8 +113,7 @@ free_image_capsule(PyObject *capsule)
 PyObject *
 mcp_py_array(mcp_image *img)
 {
-    if (!img)
-        Py_RETURN_NONE;
+    if (!img) Py_RETURN_NONE;
     npy_intp dims[3] = {img->height, img->width, img->channels};
     int nd = img->channels == 1 ? 2 : 3;
     if (!mcp_image_is_packed(img) || !img->owns_data) {
@@ -148,8 +144,7 @@ mcp_py_array_channels(const mcp_image *img, int first, int count)
 {
     npy_intp dims[3] = {img->height, img->width, count};
     PyObject *a = PyArray_SimpleNew(count == 1 ? 2 : 3, dims, NPY_FLOAT32);
-    if (!a)
-        return NULL;
+    if (!a) return NULL;
     float *dst = PyArray_DATA((PyArrayObject *)a);
     for (int y = 0; y < img->height; y++)
         for (int x = 0; x < img->width; x++)

@@ -33,8 +33,7 @@ on_point(const mcp_blend_point *p, void *ctx)
     PyEval_RestoreThread(s->thread);
     int interrupted = PyErr_CheckSignals();
     s->thread = PyEval_SaveThread();
-    if (interrupted)
-        return mcp_error("blend: interrupted");
+    if (interrupted) return mcp_error("blend: interrupted");
     member *m = &s->members[p->index];
     memset(m, 0, sizeof *m);
     m->row = *p->row;
@@ -78,11 +77,11 @@ member_dict(member *m, int has_reference, int has_flip)
         goto fail;
     mcp_image *blend = m->images[m->method], *w = m->weights;
     m->images[m->method] = m->weights = NULL;
-    if (mcp_py_set(d, "blend", mcp_py_array(blend)) || mcp_py_set(d, "weights", mcp_py_array(w)))
+    if (mcp_py_set(d, "blend", mcp_py_array(blend)) ||
+        mcp_py_set(d, "weights", mcp_py_array(w)))
         goto fail;
     images = PyDict_New();
-    if (!images)
-        goto fail;
+    if (!images) goto fail;
     for (int k = 0; k < MCP_BLEND_N_METHODS; k++)
         if (m->images[k]) {
             mcp_image *img = m->images[k];
@@ -90,22 +89,19 @@ member_dict(member *m, int has_reference, int has_flip)
             if (mcp_py_set(images, mcp_blend_method_name(k), mcp_py_array(img)))
                 goto fail;
         }
-    if (mcp_py_set(d, "images", images))
-        goto fail;
+    if (mcp_py_set(d, "images", images)) goto fail;
     images = NULL;
     if (has_reference) {
         errors = PyDict_New();
         for (int k = 0; errors && k < MCP_BLEND_N_METHODS; k++) {
             const mcp_blend_errors *e = &m->row.err[k];
-            PyObject *one = has_flip ? Py_BuildValue("{s:d,s:d,s:d}", "mse", e->mse, "relmse",
-                                                     e->relmse, "flip_hdr", e->flip_hdr)
-                                     : Py_BuildValue("{s:d,s:d}", "mse", e->mse, "relmse",
-                                                     e->relmse);
-            if (mcp_py_set(errors, mcp_blend_method_name(k), one))
-                goto fail;
+            PyObject *one =
+                has_flip ? Py_BuildValue("{s:d,s:d,s:d}", "mse", e->mse, "relmse",
+                                         e->relmse, "flip_hdr", e->flip_hdr)
+                         : Py_BuildValue("{s:d,s:d}", "mse", e->mse, "relmse", e->relmse);
+            if (mcp_py_set(errors, mcp_blend_method_name(k), one)) goto fail;
         }
-        if (mcp_py_set(d, "errors", errors))
-            goto fail;
+        if (mcp_py_set(d, "errors", errors)) goto fail;
         errors = NULL;
     }
     return d;
@@ -131,22 +127,23 @@ py_blend(PyObject *self, PyObject *args, PyObject *kw)
     if (bad) return NULL;
     if (!PyArg_UnpackTuple(args, "blend", 0, 1, &list)) return NULL;
     if (list && vals[0]) {
-        PyErr_SetString(PyExc_TypeError, "blend() got multiple values for argument 'dumps'");
+        PyErr_SetString(PyExc_TypeError,
+                        "blend() got multiple values for argument 'dumps'");
         return NULL;
     }
     if (!list && !(list = vals[0])) {
         PyErr_SetString(PyExc_TypeError, "blend() missing required argument 'dumps'");
         return NULL;
     }
-    PyObject *den_obj = vals[1] ? vals[1] : Py_None, *ref_obj = vals[2] ? vals[2] : Py_None;
+    PyObject *den_obj = vals[1] ? vals[1] : Py_None,
+             *ref_obj = vals[2] ? vals[2] : Py_None;
     mcp_blend_series_options o = st.o;
     mcp_blend_options *b = &o.blend;
     mcp_series_variance vsrc = st.variance_from;
     int all_images = st.all_images;
     /* the members: paths in increasing spp (the driver loads them one at a time) */
     PyObject *fast = PySequence_Fast(list, "dumps must be a list of paths");
-    if (!fast)
-        return NULL;
+    if (!fast) return NULL;
     Py_ssize_t n = PySequence_Fast_GET_SIZE(fast);
     PyObject **held = PyMem_Calloc((size_t)(n ? n : 1), sizeof *held);
     const char **paths = PyMem_Calloc((size_t)(n ? n : 1), sizeof *paths);
@@ -167,8 +164,7 @@ py_blend(PyObject *self, PyObject *args, PyObject *kw)
     for (Py_ssize_t i = 0; i < n; i++) {
         char what[32];
         snprintf(what, sizeof what, "dumps[%zd]", i);
-        if (!(held[i] = mcp_py_path(PySequence_Fast_GET_ITEM(fast, i), what)))
-            goto done;
+        if (!(held[i] = mcp_py_path(PySequence_Fast_GET_ITEM(fast, i), what))) goto done;
         paths[i] = PyBytes_AS_STRING(held[i]);
     }
     if (mcp_series_from_paths(paths, NULL, (int)n, &series)) {
@@ -188,8 +184,7 @@ py_blend(PyObject *self, PyObject *args, PyObject *kw)
     s.thread = PyEval_SaveThread();
     rc = mcp_blend_series(series, den, ref.img, &o, on_point, &s, &r);
     PyEval_RestoreThread(s.thread);
-    if (PyErr_Occurred() || mcp_py_check_signals())
-        goto done;
+    if (PyErr_Occurred() || mcp_py_check_signals()) goto done;
     if (rc) {
         mcp_py_fail();
         goto done;
@@ -204,11 +199,11 @@ py_blend(PyObject *self, PyObject *args, PyObject *kw)
             PyList_SET_ITEM(members, i, m);
     }
     if (members)
-        result = Py_BuildValue(
-            "{s:N,s:s,s:s,s:O,s:s}", "members", members, "denoiser", den->name,
-            "variance_source", mcp_variance_source_name(r->variance_source), "has_reference",
-            r->has_reference ? Py_True : Py_False, "weights",
-            mcp_blend_weighting_name(b->weights));
+        result = Py_BuildValue("{s:N,s:s,s:s,s:O,s:s}", "members", members, "denoiser",
+                               den->name, "variance_source",
+                               mcp_variance_source_name(r->variance_source),
+                               "has_reference", r->has_reference ? Py_True : Py_False,
+                               "weights", mcp_blend_weighting_name(b->weights));
 done:
     sink_free(&s, (int)n);
     mcp_blend_series_result_free(r);

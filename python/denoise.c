@@ -24,13 +24,13 @@ setting_word(PyObject *key, PyObject *value)
     else if (PyLong_Check(value) || PyFloat_Check(value))
         text = PyObject_Repr(value);
     else {
-        PyErr_Format(PyExc_TypeError,
-                     "denoiser setting '%s' must be a number, str, path or bool, not %.80s",
-                     k, Py_TYPE(value)->tp_name);
+        PyErr_Format(
+            PyExc_TypeError,
+            "denoiser setting '%s' must be a number, str, path or bool, not %.80s", k,
+            Py_TYPE(value)->tp_name);
         return NULL;
     }
-    if (!text)
-        return NULL;
+    if (!text) return NULL;
     const char *v = PyUnicode_Check(text) ? PyUnicode_AsUTF8(text) : NULL;
     char *word = NULL;
     if (v) {
@@ -58,10 +58,8 @@ mcp_py_denoiser(const char *name, PyObject *settings, mcp_denoiser **out)
     PyObject *k, *v;
     Py_ssize_t pos = 0;
     while (settings && PyDict_Next(settings, &pos, &k, &v)) {
-        if (PyUnicode_Check(k) && !strcmp(PyUnicode_AsUTF8(k), "name"))
-            continue;
-        if (!(words[count] = setting_word(k, v)))
-            goto done;
+        if (PyUnicode_Check(k) && !strcmp(PyUnicode_AsUTF8(k), "name")) continue;
+        if (!(words[count] = setting_word(k, v))) goto done;
         count++;
     }
     if (mcp_denoiser_create_from_args(name, (const char *const *)words, count, out))
@@ -79,10 +77,8 @@ int
 mcp_py_denoiser_arg(PyObject *arg, mcp_denoiser **out)
 {
     *out = NULL;
-    if (!arg || arg == Py_None)
-        return mcp_py_denoiser("default", NULL, out);
-    if (PyUnicode_Check(arg))
-        return mcp_py_denoiser(PyUnicode_AsUTF8(arg), NULL, out);
+    if (!arg || arg == Py_None) return mcp_py_denoiser("default", NULL, out);
+    if (PyUnicode_Check(arg)) return mcp_py_denoiser(PyUnicode_AsUTF8(arg), NULL, out);
     if (PyDict_Check(arg)) {
         PyObject *name = PyDict_GetItemString(arg, "name");
         if (!name || !PyUnicode_Check(name)) {
@@ -141,12 +137,13 @@ release_inputs(inputs *in)
  * name of variance_of_mean) and **settings: any other keyword is a setting of the
  * denoiser, checked by its own table when it is made. */
 static int
-parse_call(const char *fn, PyObject *args, PyObject *kw, int with_tangent, PyObject **color,
-           PyObject **tangent, PyObject **albedo, PyObject **normal, PyObject **variance,
-           const char **name, PyObject **settings)
+parse_call(const char *fn, PyObject *args, PyObject *kw, int with_tangent,
+           PyObject **color, PyObject **tangent, PyObject **albedo, PyObject **normal,
+           PyObject **variance, const char **name, PyObject **settings)
 {
-    static const char *const own[] = {"color",    "tangent",          "albedo", "normal",
-                                      "variance", "variance_of_mean", "denoiser", NULL};
+    static const char *const own[] = {"color",    "tangent",  "albedo",
+                                      "normal",   "variance", "variance_of_mean",
+                                      "denoiser", NULL};
     PyObject *mine = PyDict_New(), *keep = PyList_New(0), *vals[7], *pos[2];
     mcp_denoise_settings st;
     *settings = PyDict_New();
@@ -167,7 +164,8 @@ parse_call(const char *fn, PyObject *args, PyObject *kw, int with_tangent, PyObj
                            (PyObject *const[]){vals[0], vals[1]}, pos))
         goto fail;
     if (vals[4] && vals[5]) {
-        PyErr_Format(PyExc_TypeError, "%s(): give variance or variance_of_mean, not both", fn);
+        PyErr_Format(PyExc_TypeError, "%s(): give variance or variance_of_mean, not both",
+                     fn);
         goto fail;
     }
     *color = pos[0];
@@ -178,8 +176,10 @@ parse_call(const char *fn, PyObject *args, PyObject *kw, int with_tangent, PyObj
     *name = "default";
     if (vals[6] && vals[6] != Py_None) {
         if (!PyUnicode_Check(vals[6])) {
-            PyErr_Format(PyExc_TypeError, "%s(): denoiser must be a str, its settings "
-                         "keywords", fn);
+            PyErr_Format(PyExc_TypeError,
+                         "%s(): denoiser must be a str, its settings "
+                         "keywords",
+                         fn);
             goto fail;
         }
         *name = PyUnicode_AsUTF8(vals[6]);
@@ -213,10 +213,8 @@ py_denoise(PyObject *self, PyObject *args, PyObject *kw)
     }
     mcp_denoise_input di = {in.color.img, in.albedo.img, in.normal.img, in.variance.img};
     mcp_image *out = NULL;
-    Py_BEGIN_ALLOW_THREADS
-    rc = den->apply(den, &di, &out);
-    Py_END_ALLOW_THREADS
-    release_inputs(&in);
+    Py_BEGIN_ALLOW_THREADS rc = den->apply(den, &di, &out);
+    Py_END_ALLOW_THREADS release_inputs(&in);
     mcp_denoiser_free(den);
     if (mcp_py_check_signals())
         mcp_image_free(out);
@@ -231,8 +229,7 @@ py_jvp(PyObject *self, PyObject *args, PyObject *kw)
     (void)self;
     PyObject *c, *t, *a, *n, *v, *settings;
     const char *name;
-    if (parse_call("jvp", args, kw, 1, &c, &t, &a, &n, &v, &name, &settings))
-        return NULL;
+    if (parse_call("jvp", args, kw, 1, &c, &t, &a, &n, &v, &name, &settings)) return NULL;
     mcp_denoiser *den = NULL;
     inputs in;
     int rc = mcp_py_denoiser(name, settings, &den);
@@ -242,27 +239,27 @@ py_jvp(PyObject *self, PyObject *args, PyObject *kw)
         return NULL;
     }
     /* one tangent (an image) or several (a list of images, or an N x H x W x 3 array) */
-    int single = PyUnicode_Check(t) || (PyArray_Check(t) && PyArray_NDIM((PyArrayObject *)t) <= 3) ||
+    int single = PyUnicode_Check(t) ||
+                 (PyArray_Check(t) && PyArray_NDIM((PyArrayObject *)t) <= 3) ||
                  !PySequence_Check(t);
-    PyObject *fast = single ? NULL : PySequence_Fast(t, "tangent must be an image or a list");
+    PyObject *fast =
+        single ? NULL : PySequence_Fast(t, "tangent must be an image or a list");
     Py_ssize_t count = single ? 1 : fast ? PySequence_Fast_GET_SIZE(fast) : -1;
     mcp_py_image *tan = count > 0 ? PyMem_Calloc((size_t)count, sizeof *tan) : NULL;
     mcp_denoise_tangent *dt = count > 0 ? PyMem_Calloc((size_t)count, sizeof *dt) : NULL;
     mcp_image **outs = count > 0 ? PyMem_Calloc((size_t)count, sizeof *outs) : NULL;
     mcp_image *primal = NULL;
     PyObject *result = NULL;
-    if (count == 0)
-        PyErr_SetString(mcp_py_error, "tangent: an empty list");
+    if (count == 0) PyErr_SetString(mcp_py_error, "tangent: an empty list");
     if (!tan || !dt || !outs) {
-        if (!PyErr_Occurred())
-            PyErr_NoMemory();
+        if (!PyErr_Occurred()) PyErr_NoMemory();
         goto done;
     }
     for (Py_ssize_t i = 0; i < count; i++) {
         char what[32];
         snprintf(what, sizeof what, single ? "tangent" : "tangent[%zd]", i);
-        if (mcp_py_image_get(single ? t : PySequence_Fast_GET_ITEM(fast, i), what, 3, NULL,
-                             &tan[i]))
+        if (mcp_py_image_get(single ? t : PySequence_Fast_GET_ITEM(fast, i), what, 3,
+                             NULL, &tan[i]))
             goto done;
         if (!mcp_image_same_size(tan[i].img, in.color.img)) {
             mcp_py_fail();
@@ -271,11 +268,8 @@ py_jvp(PyObject *self, PyObject *args, PyObject *kw)
         dt[i].color = tan[i].img;
     }
     mcp_denoise_input di = {in.color.img, in.albedo.img, in.normal.img, in.variance.img};
-    Py_BEGIN_ALLOW_THREADS
-    rc = den->jvp(den, &di, dt, (int)count, &primal, outs);
-    Py_END_ALLOW_THREADS
-    if (mcp_py_check_signals())
-        goto done;
+    Py_BEGIN_ALLOW_THREADS rc = den->jvp(den, &di, dt, (int)count, &primal, outs);
+    Py_END_ALLOW_THREADS if (mcp_py_check_signals()) goto done;
     if (rc) {
         mcp_py_fail();
         goto done;
@@ -303,10 +297,8 @@ py_jvp(PyObject *self, PyObject *args, PyObject *kw)
         Py_XDECREF(jvps), Py_XDECREF(p);
 done:
     for (Py_ssize_t i = 0; i < count; i++) {
-        if (tan)
-            mcp_py_image_release(&tan[i]);
-        if (outs)
-            mcp_image_free(outs[i]);
+        if (tan) mcp_py_image_release(&tan[i]);
+        if (outs) mcp_image_free(outs[i]);
     }
     PyMem_Free(tan);
     PyMem_Free(dt);
@@ -327,15 +319,13 @@ py_denoisers(PyObject *self, PyObject *unused)
         PyObject *keys = PyList_New(0);
         for (const char *const *key = (*k)->keys; keys && key && *key; key++) {
             PyObject *s = PyUnicode_FromString(*key);
-            if (!s || PyList_Append(keys, s))
-                Py_CLEAR(keys);
+            if (!s || PyList_Append(keys, s)) Py_CLEAR(keys);
             Py_XDECREF(s);
         }
-        PyObject *entry = keys ? Py_BuildValue("{s:s,s:N}", "summary", (*k)->summary,
-                                               "settings", keys)
-                               : NULL;
-        if (mcp_py_set(d, (*k)->name, entry))
-            Py_CLEAR(d);
+        PyObject *entry =
+            keys ? Py_BuildValue("{s:s,s:N}", "summary", (*k)->summary, "settings", keys)
+                 : NULL;
+        if (mcp_py_set(d, (*k)->name, entry)) Py_CLEAR(d);
     }
     return d;
 }

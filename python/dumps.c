@@ -20,29 +20,29 @@ PyObject *
 mcp_py_dump_dict(mcp_dump *dump)
 {
     PyObject *d = PyDict_New();
-    if (!d)
-        goto fail;
+    if (!d) goto fail;
     for (int i = 0; i < 6; i++) {
         mcp_image **slot = part_slot(dump, i);
         mcp_image *img = *slot;
         *slot = NULL; /* the array takes it over */
-        if (mcp_py_set(d, part_keys[i], mcp_py_array(img)))
-            goto fail;
+        if (mcp_py_set(d, part_keys[i], mcp_py_array(img))) goto fail;
     }
-    if (mcp_py_set(d, "spp", PyDict_GetItemString(d, "spp_map") != Py_None
-                                 ? Py_NewRef(Py_None)
-                                 : PyFloat_FromDouble(dump->spp)) ||
+    if (mcp_py_set(d, "spp",
+                   PyDict_GetItemString(d, "spp_map") != Py_None
+                       ? Py_NewRef(Py_None)
+                       : PyFloat_FromDouble(dump->spp)) ||
         mcp_py_set(d, "convention",
                    PyUnicode_FromString(mcp_convention_name(dump->convention))) ||
-        mcp_py_set(d, "variance_source", PyUnicode_FromString(mcp_variance_source_name(
-                                             dump->variance_source))) ||
+        mcp_py_set(
+            d, "variance_source",
+            PyUnicode_FromString(mcp_variance_source_name(dump->variance_source))) ||
         mcp_py_set(d, "variance_dof", PyFloat_FromDouble(dump->variance_dof)) ||
         mcp_py_set(d, "replicates", PyLong_FromLong(dump->replicates)) ||
         mcp_py_set(d, "variance_pool", PyFloat_FromDouble(dump->variance_pool)) ||
         mcp_py_set(d, "bad_values", PyLong_FromLong(dump->n_bad_values)) ||
         mcp_py_set(d, "attributes", mcp_py_attrs_dict(&dump->attrs)) ||
-        mcp_py_set(d, "source", PyUnicode_DecodeFSDefault(dump->source ? dump->source
-                                                                       : "")))
+        mcp_py_set(d, "source",
+                   PyUnicode_DecodeFSDefault(dump->source ? dump->source : "")))
         goto fail;
     mcp_dump_free(dump);
     return d;
@@ -57,8 +57,7 @@ static int
 dict_name(PyObject *d, const char *key, int (*parse)(const char *, void *), void *out)
 {
     PyObject *v = PyDict_GetItemString(d, key);
-    if (!v || v == Py_None)
-        return 0;
+    if (!v || v == Py_None) return 0;
     const char *s = PyUnicode_Check(v) ? PyUnicode_AsUTF8(v) : NULL;
     if (!s) {
         PyErr_Format(PyExc_TypeError, "dump['%s'] must be a str", key);
@@ -71,8 +70,7 @@ static int
 dict_number(PyObject *d, const char *key, double *out)
 {
     PyObject *v = PyDict_GetItemString(d, key);
-    if (!v || v == Py_None)
-        return 0;
+    if (!v || v == Py_None) return 0;
     *out = PyFloat_AsDouble(v);
     if (*out == -1.0 && PyErr_Occurred()) {
         PyErr_Format(PyExc_TypeError, "dump['%s'] must be a number", key);
@@ -81,8 +79,16 @@ dict_number(PyObject *d, const char *key, double *out)
     return 0;
 }
 
-static int parse_convention(const char *s, void *o) { return mcp_convention_from_name(s, o); }
-static int parse_source(const char *s, void *o) { return mcp_variance_source_from_name(s, o); }
+static int
+parse_convention(const char *s, void *o)
+{
+    return mcp_convention_from_name(s, o);
+}
+static int
+parse_source(const char *s, void *o)
+{
+    return mcp_variance_source_from_name(s, o);
+}
 
 int
 mcp_py_dump_get(PyObject *obj, const char *what, mcp_py_dump *out)
@@ -99,17 +105,15 @@ mcp_py_dump_get(PyObject *obj, const char *what, mcp_py_dump *out)
             return -1;
         }
         int rc;
-        Py_BEGIN_ALLOW_THREADS
-        rc = mcp_dump_read(PyBytes_AS_STRING(path), &out->dump);
-        Py_END_ALLOW_THREADS
-        Py_DECREF(path);
+        Py_BEGIN_ALLOW_THREADS rc = mcp_dump_read(PyBytes_AS_STRING(path), &out->dump);
+        Py_END_ALLOW_THREADS Py_DECREF(path);
         return rc ? mcp_py_fail_int() : 0;
     }
     mcp_dump *d = out->dump = mcp_calloc(1, sizeof *d);
-    if (!d)
-        return mcp_py_fail_int();
+    if (!d) return mcp_py_fail_int();
     static const char *const rgb[] = {"R", "G", "B"}, *const xyz[] = {"X", "Y", "Z"},
-                             *const cov[] = {"RG", "RB", "GB"}, *const count[] = {"SampleCount"};
+                             *const cov[] = {"RG", "RB", "GB"},
+                             *const count[] = {"SampleCount"};
     const char *const *names[6] = {rgb, rgb, cov, rgb, xyz, count};
     const int channels[6] = {3, 3, 3, 3, 3, 1};
     char label[6][64];
@@ -124,7 +128,8 @@ mcp_py_dump_get(PyObject *obj, const char *what, mcp_py_dump *out)
             goto fail;
         /* the dump holds the views; release frees them through mcp_dump_free */
         *part_slot(d, i) = out->parts[i].img;
-        if (out->parts[i].img && i > 0 && !mcp_image_same_size(out->parts[i].img, d->color)) {
+        if (out->parts[i].img && i > 0 &&
+            !mcp_image_same_size(out->parts[i].img, d->color)) {
             mcp_py_fail();
             goto fail;
         }
@@ -154,8 +159,7 @@ mcp_py_dump_get(PyObject *obj, const char *what, mcp_py_dump *out)
         PyObject *k, *v;
         Py_ssize_t pos = 0;
         while (PyDict_Next(attrs, &pos, &k, &v))
-            if (mcp_py_attrs_set(&d->attrs, k, v))
-                goto fail;
+            if (mcp_py_attrs_set(&d->attrs, k, v)) goto fail;
     }
     PyObject *src = PyDict_GetItemString(obj, "source");
     const char *s = src && PyUnicode_Check(src) ? PyUnicode_AsUTF8(src) : NULL;
@@ -186,9 +190,9 @@ static PyObject *
 py_read_dump(PyObject *self, PyObject *args, PyObject *kw)
 {
     (void)self;
-    static char *keys[] = {"path",          "spp",         "convention",  "variance",
-                           "bad_values",    "variance_path", "albedo_path", "normal_path",
-                           "spp_map_path", NULL};
+    static char *keys[] = {
+        "path",          "spp",         "convention",  "variance",     "bad_values",
+        "variance_path", "albedo_path", "normal_path", "spp_map_path", NULL};
     PyObject *path_obj, *paths[4] = {Py_None, Py_None, Py_None, Py_None};
     double spp = 0;
     const char *convention = NULL, *variance = NULL, *bad = NULL;
@@ -212,21 +216,17 @@ py_read_dump(PyObject *self, PyObject *args, PyObject *kw)
                                         "spp_map_path"};
     const char **fields[4] = {&spec.variance_path, &spec.albedo_path, &spec.normal_path,
                               &spec.spp_map_path};
-    if (!(held[0] = mcp_py_path(path_obj, "path")))
-        goto done;
+    if (!(held[0] = mcp_py_path(path_obj, "path"))) goto done;
     spec.path = PyBytes_AS_STRING(held[0]);
     for (int i = 0; i < 4; i++)
         if (paths[i] != Py_None) {
-            if (!(held[i + 1] = mcp_py_path(paths[i], what[i])))
-                goto done;
+            if (!(held[i + 1] = mcp_py_path(paths[i], what[i]))) goto done;
             *fields[i] = PyBytes_AS_STRING(held[i + 1]);
         }
     mcp_dump *dump = NULL;
     int rc;
-    Py_BEGIN_ALLOW_THREADS
-    rc = mcp_dump_load(&spec, &dump);
-    Py_END_ALLOW_THREADS
-    result = rc ? mcp_py_fail() : mcp_py_dump_dict(dump);
+    Py_BEGIN_ALLOW_THREADS rc = mcp_dump_load(&spec, &dump);
+    Py_END_ALLOW_THREADS result = rc ? mcp_py_fail() : mcp_py_dump_dict(dump);
 done:
     for (int i = 0; i < 5; i++)
         Py_XDECREF(held[i]);
@@ -245,26 +245,22 @@ py_write_dump(PyObject *self, PyObject *args, PyObject *kw)
                                      &dump_obj, &convention, &half))
         return NULL;
     mcp_convention conv;
-    if (mcp_convention_from_name(convention, &conv))
-        return mcp_py_fail();
+    if (mcp_convention_from_name(convention, &conv)) return mcp_py_fail();
     mcp_write_options wo = mcp_write_defaults();
     wo.exr_pixel = half ? MCP_EXR_HALF : MCP_EXR_FLOAT;
     PyObject *path = mcp_py_path(path_obj, "path");
-    if (!path)
-        return NULL;
+    if (!path) return NULL;
     mcp_py_dump d;
     if (mcp_py_dump_get(dump_obj, "dump", &d)) {
         Py_DECREF(path);
         return NULL;
     }
     int rc;
-    Py_BEGIN_ALLOW_THREADS
-    rc = mcp_dump_write(d.dump, PyBytes_AS_STRING(path), conv, &wo);
-    Py_END_ALLOW_THREADS
-    mcp_py_dump_release(&d);
+    Py_BEGIN_ALLOW_THREADS rc =
+        mcp_dump_write(d.dump, PyBytes_AS_STRING(path), conv, &wo);
+    Py_END_ALLOW_THREADS mcp_py_dump_release(&d);
     Py_DECREF(path);
-    if (rc)
-        return mcp_py_fail();
+    if (rc) return mcp_py_fail();
     Py_RETURN_NONE;
 }
 
@@ -307,19 +303,19 @@ py_merge(PyObject *self, PyObject *args, PyObject *kw)
     PyObject *list;
     const char *variance = "replicates";
     int pool = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kw, "O|$si:merge", keys, &list, &variance, &pool))
+    if (!PyArg_ParseTupleAndKeywords(args, kw, "O|$si:merge", keys, &list, &variance,
+                                     &pool))
         return NULL;
     mcp_merge_options mo = mcp_merge_defaults();
-    if (mcp_merge_variance_from_name(variance, &mo.variance))
-        return mcp_py_fail();
+    if (mcp_merge_variance_from_name(variance, &mo.variance)) return mcp_py_fail();
     if (pool < 0) {
         PyErr_Format(mcp_py_error, "pool must be >= 0 (got %d)", pool);
         return NULL;
     }
     mo.pool_radius = pool;
-    PyObject *fast = PySequence_Fast(list, "dumps must be a list of dumps (paths or dicts)");
-    if (!fast)
-        return NULL;
+    PyObject *fast =
+        PySequence_Fast(list, "dumps must be a list of dumps (paths or dicts)");
+    if (!fast) return NULL;
     Py_ssize_t n = PySequence_Fast_GET_SIZE(fast);
     if (n < 1) {
         Py_DECREF(fast);
@@ -329,14 +325,11 @@ py_merge(PyObject *self, PyObject *args, PyObject *kw)
     mcp_py_dump *parts = NULL;
     const mcp_dump **dumps = NULL;
     PyObject *result = NULL;
-    if (get_dump_list(fast, n, &parts, &dumps))
-        goto done;
+    if (get_dump_list(fast, n, &parts, &dumps)) goto done;
     mcp_dump *merged = NULL;
     int rc;
-    Py_BEGIN_ALLOW_THREADS
-    rc = mcp_dump_merge(dumps, (int)n, &mo, &merged);
-    Py_END_ALLOW_THREADS
-    result = rc ? mcp_py_fail() : mcp_py_dump_dict(merged);
+    Py_BEGIN_ALLOW_THREADS rc = mcp_dump_merge(dumps, (int)n, &mo, &merged);
+    Py_END_ALLOW_THREADS result = rc ? mcp_py_fail() : mcp_py_dump_dict(merged);
 done:
     release_dump_list(parts, dumps, n);
     Py_DECREF(fast);
@@ -353,22 +346,21 @@ py_increment_variance(PyObject *self, PyObject *args, PyObject *kw)
     if (!PyArg_ParseTupleAndKeywords(args, kw, "O|$di:increment_variance", keys, &list,
                                      &io.first_spp, &io.pool_radius))
         return NULL;
-    PyObject *fast = PySequence_Fast(list, "dumps must be a list of dumps (paths or dicts)");
-    if (!fast)
-        return NULL;
+    PyObject *fast =
+        PySequence_Fast(list, "dumps must be a list of dumps (paths or dicts)");
+    if (!fast) return NULL;
     Py_ssize_t n = PySequence_Fast_GET_SIZE(fast);
     mcp_py_dump *parts = NULL;
     const mcp_dump **members = NULL;
     PyObject *result = NULL;
-    if (get_dump_list(fast, n, &parts, &members))
-        goto done;
+    if (get_dump_list(fast, n, &parts, &members)) goto done;
     mcp_dump *out = NULL;
     double ratio = 0;
     int rc;
-    Py_BEGIN_ALLOW_THREADS
-    rc = mcp_dump_increment_variance(members, (int)n, &io, &out, &ratio);
-    Py_END_ALLOW_THREADS
-    if (rc) {
+    Py_BEGIN_ALLOW_THREADS rc =
+        mcp_dump_increment_variance(members, (int)n, &io, &out, &ratio);
+    Py_END_ALLOW_THREADS if (rc)
+    {
         mcp_py_fail();
         goto done;
     }
@@ -397,7 +389,8 @@ PyMethodDef mcp_py_dump_methods[] = {
      "'covariance', 'albedo', 'normal', 'spp_map' (arrays or None), 'spp' (None with a\n"
      "map), 'convention', 'variance_source', 'variance_dof', 'replicates',\n"
      "'variance_pool', 'bad_values', 'attributes', 'source'."},
-    {"write_dump", (PyCFunction)(void (*)(void))py_write_dump, METH_VARARGS | METH_KEYWORDS,
+    {"write_dump", (PyCFunction)(void (*)(void))py_write_dump,
+     METH_VARARGS | METH_KEYWORDS,
      "write_dump(path, dump, *, convention='mcpost', half=False)\n\n"
      "Writes a dump (dict or path) as one EXR in a convention (pbrt, mcpost, mitsuba,\n"
      "blender), the variance stored as that convention stores it."},

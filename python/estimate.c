@@ -22,14 +22,13 @@ take(PyObject *d, const char *key, mcp_image **slot)
 
 /* The result dict; takes the estimate's images over. */
 static PyObject *
-result_dict(mcp_estimate *e, const mcp_estimate_options *o, const double *taus, int n_taus,
-            const double *truth, const char *denoiser)
+result_dict(mcp_estimate *e, const mcp_estimate_options *o, const double *taus,
+            int n_taus, const double *truth, const char *denoiser)
 {
     PyObject *d = PyDict_New();
     mcp_image *dist = NULL, *block_mean = NULL;
     int32_t *label = NULL;
-    if (!d)
-        return NULL;
+    if (!d) return NULL;
     /* the distribution and the block-averaged SURE, before the maps are taken */
     if (mcp_error_dist_image(e->dist, &dist) ||
         mcp_blocks_mean_image(e->blocks, e->maps.sure_rel, &block_mean) ||
@@ -57,7 +56,8 @@ result_dict(mcp_estimate *e, const mcp_estimate_options *o, const double *taus, 
         memcpy(PyArray_DATA((PyArrayObject *)labels), label,
                (size_t)dims[0] * dims[1] * sizeof *label);
     if (mcp_py_set(d, "denoiser", PyUnicode_FromString(denoiser)) ||
-        mcp_py_set(d, "metric", PyUnicode_FromString(mcp_error_metric_name(o->sure.metric))) ||
+        mcp_py_set(d, "metric",
+                   PyUnicode_FromString(mcp_error_metric_name(o->sure.metric))) ||
         mcp_py_set(d, "tau", PyFloat_FromDouble(e->tau)) ||
         mcp_py_set(d, "p", PyFloat_FromDouble(e->p)) ||
         mcp_py_set(d, "cdf_at_tau", PyFloat_FromDouble(e->cdf_at_tau)) ||
@@ -66,12 +66,14 @@ result_dict(mcp_estimate *e, const mcp_estimate_options *o, const double *taus, 
         mcp_py_set(d, "taus", mcp_py_vector(taus, n_taus)) ||
         mcp_py_set(d, "cdf", mcp_py_vector(cdf, n_taus)) ||
         mcp_py_set(d, "percentiles", mcp_py_vector(e->percentiles, e->n_percentiles)) ||
-        mcp_py_set(d, "percentile_error", mcp_py_vector(e->percentile_tau, e->n_percentiles)) ||
+        mcp_py_set(d, "percentile_error",
+                   mcp_py_vector(e->percentile_tau, e->n_percentiles)) ||
         mcp_py_set(d, "true_percentiles",
                    truth ? mcp_py_vector(truth, e->n_percentiles) : Py_NewRef(Py_None)) ||
         mcp_py_set(d, "blocks", PyLong_FromLong(e->blocks->count)) ||
         mcp_py_set(d, "block_labels", labels) ||
-        mcp_py_set(d, "expected_mean_error", PyFloat_FromDouble(mcp_error_dist_mean(e->dist))) ||
+        mcp_py_set(d, "expected_mean_error",
+                   PyFloat_FromDouble(mcp_error_dist_mean(e->dist))) ||
         mcp_py_set(d, "mean_lambda", PyFloat_FromDouble(lambda / n)) ||
         mcp_py_set(d, "mean_s2", PyFloat_FromDouble(s2 / n)) ||
         mcp_py_set(d, "lambda", mcp_py_array_channels(dist, 0, 3)) ||
@@ -84,12 +86,13 @@ result_dict(mcp_estimate *e, const mcp_estimate_options *o, const double *taus, 
         mcp_py_set(d, "time_ms",
                    Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:d}", "denoise_and_jvp",
                                  e->ms_denoise, "sure_and_variance", e->ms_error_terms,
-                                 "block_averaging", e->ms_blocks, "stopping", e->ms_stopping,
-                                 "percentiles", e->ms_percentiles, "sampling_map",
-                                 e->ms_sampling)) ||
-        take(d, "blocks_sure_rel", &block_mean) || take(d, "denoised", &e->maps.denoised) ||
-        take(d, "sure", &e->maps.sure) || take(d, "sure_rel", &e->maps.sure_rel) ||
-        take(d, "variance", &e->maps.var) || take(d, "variance_rel", &e->maps.var_rel) ||
+                                 "block_averaging", e->ms_blocks, "stopping",
+                                 e->ms_stopping, "percentiles", e->ms_percentiles,
+                                 "sampling_map", e->ms_sampling)) ||
+        take(d, "blocks_sure_rel", &block_mean) ||
+        take(d, "denoised", &e->maps.denoised) || take(d, "sure", &e->maps.sure) ||
+        take(d, "sure_rel", &e->maps.sure_rel) || take(d, "variance", &e->maps.var) ||
+        take(d, "variance_rel", &e->maps.var_rel) ||
         take(d, "sigma_rel", &e->maps.sigma_rel) ||
         take(d, "denominator", &e->maps.denominator) ||
         take(d, "sampling_map", &e->sampling_map) ||
@@ -114,7 +117,8 @@ positional(const char *fn, const char *name, PyObject *args, PyObject *own_value
     PyObject *given = NULL;
     if (!PyArg_UnpackTuple(args, fn, 0, 1, &given)) return -1;
     if (given && own_value) {
-        PyErr_Format(PyExc_TypeError, "%s() got multiple values for argument '%s'", fn, name);
+        PyErr_Format(PyExc_TypeError, "%s() got multiple values for argument '%s'", fn,
+                     name);
         return -1;
     }
     if (!given && !(given = own_value)) {
@@ -141,7 +145,8 @@ py_estimate(PyObject *self, PyObject *args, PyObject *kw)
         return NULL;
     }
     Py_DECREF(keep); /* no path of the settings is used below */
-    PyObject *den_obj = vals[1] ? vals[1] : Py_None, *ref_obj = vals[2] ? vals[2] : Py_None;
+    PyObject *den_obj = vals[1] ? vals[1] : Py_None,
+             *ref_obj = vals[2] ? vals[2] : Py_None;
     mcp_estimate_options o = st.so.est;
     /* one dump: F at the taus given, else at tau */
     const mcp_operation *op = mcp_operation_estimate();
@@ -154,8 +159,7 @@ py_estimate(PyObject *self, PyObject *args, PyObject *kw)
     mcp_py_dump dump;
     mcp_py_image ref = {0};
     mcp_denoiser *den = NULL;
-    if (mcp_py_dump_get(dump_obj, "dump", &dump))
-        return NULL;
+    if (mcp_py_dump_get(dump_obj, "dump", &dump)) return NULL;
     PyObject *result = NULL;
     mcp_estimate *e = NULL;
     mcp_image *err = NULL;
@@ -164,14 +168,11 @@ py_estimate(PyObject *self, PyObject *args, PyObject *kw)
         goto done;
     double truth[MCP_ESTIMATE_MAX_PERCENTILES];
     int rc;
-    Py_BEGIN_ALLOW_THREADS
-    rc = mcp_estimate_compute(dump.dump, den, &o, &e);
+    Py_BEGIN_ALLOW_THREADS rc = mcp_estimate_compute(dump.dump, den, &o, &e);
     if (!rc && ref.img)
         rc = mcp_true_error(e->maps.denoised, ref.img, o.sure.metric, o.sure.ppd, &err) ||
              mcp_true_percentiles(err, e->percentiles, e->n_percentiles, truth);
-    Py_END_ALLOW_THREADS
-    if (mcp_py_check_signals())
-        goto done;
+    Py_END_ALLOW_THREADS if (mcp_py_check_signals()) goto done;
     if (rc) {
         mcp_py_fail();
         goto done;
@@ -198,21 +199,17 @@ py_true_error(PyObject *self, PyObject *args, PyObject *kw)
     if (!PyArg_ParseTupleAndKeywords(args, kw, "OO|$zd:true_error", keys, &a, &b, &metric,
                                      &ppd))
         return NULL;
-    if (metric && mcp_error_metric_from_name(metric, &m))
-        return mcp_py_fail();
+    if (metric && mcp_error_metric_from_name(metric, &m)) return mcp_py_fail();
     mcp_py_image f, r;
-    if (mcp_py_image_get(a, "denoised", 0, NULL, &f))
-        return NULL;
+    if (mcp_py_image_get(a, "denoised", 0, NULL, &f)) return NULL;
     if (mcp_py_image_get(b, "reference", 0, NULL, &r)) {
         mcp_py_image_release(&f);
         return NULL;
     }
     mcp_image *err = NULL;
     int rc;
-    Py_BEGIN_ALLOW_THREADS
-    rc = mcp_true_error(f.img, r.img, m, ppd, &err);
-    Py_END_ALLOW_THREADS
-    mcp_py_image_release(&f);
+    Py_BEGIN_ALLOW_THREADS rc = mcp_true_error(f.img, r.img, m, ppd, &err);
+    Py_END_ALLOW_THREADS mcp_py_image_release(&f);
     mcp_py_image_release(&r);
     return rc ? mcp_py_fail() : mcp_py_array(err);
 }

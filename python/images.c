@@ -32,18 +32,14 @@ py_read_image(PyObject *self, PyObject *args, PyObject *kw)
     if (!PyArg_ParseTupleAndKeywords(args, kw, "O|$p:read_image", keys, &path_obj, &srgb))
         return NULL;
     PyObject *path = mcp_py_path(path_obj, "path");
-    if (!path)
-        return NULL;
+    if (!path) return NULL;
     mcp_read_options ro = mcp_read_defaults();
     ro.srgb_decode = srgb;
     mcp_image *img = NULL;
     int rc;
-    Py_BEGIN_ALLOW_THREADS
-    rc = mcp_image_read(PyBytes_AS_STRING(path), &ro, &img);
-    Py_END_ALLOW_THREADS
-    Py_DECREF(path);
-    if (rc)
-        return mcp_py_fail();
+    Py_BEGIN_ALLOW_THREADS rc = mcp_image_read(PyBytes_AS_STRING(path), &ro, &img);
+    Py_END_ALLOW_THREADS Py_DECREF(path);
+    if (rc) return mcp_py_fail();
     PyObject *names = PyList_New(img->channels);
     for (int c = 0; names && c < img->channels; c++)
         PyList_SET_ITEM(names, c, PyUnicode_FromString(img->names[c]));
@@ -67,19 +63,18 @@ mcp_py_attrs_set(mcp_attrs *attrs, PyObject *key, PyObject *value)
     int rc;
     if (PyBool_Check(value) || PyLong_Check(value)) {
         long long v = PyLong_AsLongLong(value);
-        if (v == -1 && PyErr_Occurred())
-            return -1;
+        if (v == -1 && PyErr_Occurred()) return -1;
         rc = mcp_attrs_set_int(attrs, name, v);
     } else if (PyFloat_Check(value)) {
         rc = mcp_attrs_set_double(attrs, name, PyFloat_AS_DOUBLE(value));
     } else if (PyUnicode_Check(value)) {
         const char *s = PyUnicode_AsUTF8(value);
-        if (!s)
-            return -1;
+        if (!s) return -1;
         rc = mcp_attrs_set_string(attrs, name, s);
     } else {
-        PyErr_Format(PyExc_TypeError, "attributes['%s'] must be int, float or str, not %.80s",
-                     name, Py_TYPE(value)->tp_name);
+        PyErr_Format(PyExc_TypeError,
+                     "attributes['%s'] must be int, float or str, not %.80s", name,
+                     Py_TYPE(value)->tp_name);
         return -1;
     }
     return rc ? mcp_py_fail_int() : 0;
@@ -89,8 +84,8 @@ static PyObject *
 py_write_image(PyObject *self, PyObject *args, PyObject *kw)
 {
     (void)self;
-    static char *keys[] = {"path", "pixels", "channels", "attributes", "half",
-                           "compression", "srgb_encode", NULL};
+    static char *keys[] = {"path", "pixels",      "channels",    "attributes",
+                           "half", "compression", "srgb_encode", NULL};
     PyObject *path_obj, *pixels, *channels = Py_None, *attributes = Py_None;
     int half = 0, srgb = 1;
     const char *compression = "zip";
@@ -101,19 +96,15 @@ py_write_image(PyObject *self, PyObject *args, PyObject *kw)
     mcp_write_options wo = mcp_write_defaults();
     wo.exr_pixel = half ? MCP_EXR_HALF : MCP_EXR_FLOAT;
     wo.srgb_encode = srgb;
-    if (mcp_exr_compression_from_name(compression, &wo.compression))
-        return mcp_py_fail();
+    if (mcp_exr_compression_from_name(compression, &wo.compression)) return mcp_py_fail();
     PyObject *path = mcp_py_path(path_obj, "path");
-    if (!path)
-        return NULL;
+    if (!path) return NULL;
     mcp_py_image im = {0};
     PyObject *result = NULL;
-    if (mcp_py_image_get(pixels, "pixels", 0, NULL, &im))
-        goto done;
+    if (mcp_py_image_get(pixels, "pixels", 0, NULL, &im)) goto done;
     if (channels != Py_None) {
         PyObject *fast = PySequence_Fast(channels, "channels must be a list of names");
-        if (!fast)
-            goto done;
+        if (!fast) goto done;
         Py_ssize_t n = PySequence_Fast_GET_SIZE(fast);
         if (n != im.img->channels) {
             PyErr_Format(mcp_py_error, "channels: %zd names for %d channels", n,
@@ -145,14 +136,12 @@ py_write_image(PyObject *self, PyObject *args, PyObject *kw)
         PyObject *k, *v;
         Py_ssize_t pos = 0;
         while (PyDict_Next(attributes, &pos, &k, &v))
-            if (mcp_py_attrs_set(&im.img->attrs, k, v))
-                goto done;
+            if (mcp_py_attrs_set(&im.img->attrs, k, v)) goto done;
     }
     int rc;
-    Py_BEGIN_ALLOW_THREADS
-    rc = mcp_image_write(im.img, PyBytes_AS_STRING(path), &wo);
-    Py_END_ALLOW_THREADS
-    if (rc) {
+    Py_BEGIN_ALLOW_THREADS rc = mcp_image_write(im.img, PyBytes_AS_STRING(path), &wo);
+    Py_END_ALLOW_THREADS if (rc)
+    {
         mcp_py_fail();
         goto done;
     }
@@ -164,7 +153,8 @@ done:
 }
 
 PyMethodDef mcp_py_image_methods[] = {
-    {"read_image", (PyCFunction)(void (*)(void))py_read_image, METH_VARARGS | METH_KEYWORDS,
+    {"read_image", (PyCFunction)(void (*)(void))py_read_image,
+     METH_VARARGS | METH_KEYWORDS,
      "read_image(path, *, srgb_decode=True) -> (pixels, channels, attributes)\n\n"
      "Every channel of an EXR, PFM, PNG, JPEG, HDR or TIFF file as float32 H x W x C\n"
      "(H x W for one channel), the channel names and the header attributes. Colour\n"

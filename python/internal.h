@@ -96,8 +96,9 @@ int mcp_py_denoiser_arg(PyObject *arg, mcp_denoiser **out);
  * are the caller's: their values come back in own_values (borrowed, NULL when absent).
  * Paths the settings borrow are kept alive in the list keep. 0, or -1 with an
  * exception. fn names the function in messages. */
-int mcp_py_settings(const mcp_operation *op, const char *fn, PyObject *kw, const char *const *own,
-                    PyObject **own_values, void *settings, PyObject *keep);
+int mcp_py_settings(const mcp_operation *op, const char *fn, PyObject *kw,
+                    const char *const *own, PyObject **own_values, void *settings,
+                    PyObject *keep);
 /* The docstring of op's function fn: "FN(POSITIONAL, *, keyword=default, ..., EXTRAS)
  * -> RETURNS", prose, and a line per keyword from the table; EXTRAS (may be NULL) are
  * the keywords the function reads itself that the table lacks ("maps=False").

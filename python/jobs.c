@@ -15,15 +15,11 @@ py_check_job(PyObject *self, PyObject *args, PyObject *kw)
     if (!PyArg_ParseTupleAndKeywords(args, kw, "O:check_job", kwlist, &path_obj))
         return NULL;
     PyObject *path = mcp_py_path(path_obj, "path");
-    if (!path)
-        return NULL;
+    if (!path) return NULL;
     int rc;
-    Py_BEGIN_ALLOW_THREADS
-    rc = mcp_job_check(PyBytes_AS_STRING(path), NULL);
-    Py_END_ALLOW_THREADS
-    Py_DECREF(path);
-    if (rc)
-        return mcp_py_fail();
+    Py_BEGIN_ALLOW_THREADS rc = mcp_job_check(PyBytes_AS_STRING(path), NULL);
+    Py_END_ALLOW_THREADS Py_DECREF(path);
+    if (rc) return mcp_py_fail();
     Py_RETURN_NONE;
 }
 
@@ -38,7 +34,8 @@ py_run_job(PyObject *self, PyObject *args, PyObject *kw)
                                      &output_obj, &quiet))
         return NULL;
     PyObject *path = mcp_py_path(path_obj, "path"), *output = NULL;
-    if (!path || (output_obj != Py_None && !(output = mcp_py_path(output_obj, "output")))) {
+    if (!path ||
+        (output_obj != Py_None && !(output = mcp_py_path(output_obj, "output")))) {
         Py_XDECREF(path);
         return NULL;
     }
@@ -47,11 +44,10 @@ py_run_job(PyObject *self, PyObject *args, PyObject *kw)
     o.quiet = quiet;
     char *dir = NULL;
     int *frames = NULL, n_frames = 0, rc;
-    Py_BEGIN_ALLOW_THREADS
-    rc = mcp_job_run_file(PyBytes_AS_STRING(path), NULL, &o) ||
-         mcp_job_frames(PyBytes_AS_STRING(path), &o, &frames, &n_frames, &dir);
-    Py_END_ALLOW_THREADS
-    Py_DECREF(path);
+    Py_BEGIN_ALLOW_THREADS rc =
+        mcp_job_run_file(PyBytes_AS_STRING(path), NULL, &o) ||
+        mcp_job_frames(PyBytes_AS_STRING(path), &o, &frames, &n_frames, &dir);
+    Py_END_ALLOW_THREADS Py_DECREF(path);
     Py_XDECREF(output);
     free(frames);
     PyObject *result = NULL;

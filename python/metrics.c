@@ -15,8 +15,7 @@
 static int
 get_pair(PyObject *test, PyObject *ref, mcp_py_image *t, mcp_py_image *r)
 {
-    if (mcp_py_image_get(test, "test", 0, NULL, t))
-        return -1;
+    if (mcp_py_image_get(test, "test", 0, NULL, t)) return -1;
     if (mcp_py_image_get(ref, "ref", 0, NULL, r)) {
         mcp_py_image_release(t);
         return -1;
@@ -88,10 +87,8 @@ pmse_options(const char *kernel, double dpi, double distance_in, int filter_refe
     if ((kernel && mcp_pkernel_kind_from_name(kernel, &o->kernel.kind)) ||
         (tone_map && mcp_tonemap_from_name(tone_map, &o->tone_map)))
         return mcp_py_fail_int();
-    if (dpi > 0)
-        o->kernel.dpi = dpi;
-    if (distance_in > 0)
-        o->kernel.distance_in = distance_in;
+    if (dpi > 0) o->kernel.dpi = dpi;
+    if (distance_in > 0) o->kernel.distance_in = distance_in;
     o->filter_reference = filter_reference;
     return 0;
 }
@@ -100,8 +97,9 @@ static PyObject *
 py_pmse(PyObject *self, PyObject *args, PyObject *kw)
 {
     (void)self;
-    static char *keys[] = {"test", "ref", "kernel", "dpi", "distance_in",
-                           "filter_reference", "tone_map", NULL};
+    static char *keys[] = {"test",     "ref",         "kernel",
+                           "dpi",      "distance_in", "filter_reference",
+                           "tone_map", NULL};
     PyObject *a, *b;
     const char *kernel = NULL, *tone = NULL;
     double dpi = 0, dist = 0, v;
@@ -113,12 +111,9 @@ py_pmse(PyObject *self, PyObject *args, PyObject *kw)
         pmse_options(kernel, dpi, dist, filter, tone, &o) || get_pair(a, b, &t, &r))
         return NULL;
     int rc;
-    Py_BEGIN_ALLOW_THREADS
-    rc = mcp_pmse(t.img, r.img, &o, &v);
-    Py_END_ALLOW_THREADS
-    release_pair(&t, &r);
-    if (mcp_py_check_signals())
-        return NULL;
+    Py_BEGIN_ALLOW_THREADS rc = mcp_pmse(t.img, r.img, &o, &v);
+    Py_END_ALLOW_THREADS release_pair(&t, &r);
+    if (mcp_py_check_signals()) return NULL;
     return rc ? mcp_py_fail() : PyFloat_FromDouble(v);
 }
 
@@ -132,12 +127,9 @@ flip_options(double ppd, double distance_m, double width_m, double width_px,
     if (tone_mapper && mcp_tonemap_from_name(tone_mapper, &o->tone_mapper))
         return mcp_py_fail_int();
     o->ppd = ppd;
-    if (distance_m > 0)
-        o->distance_m = distance_m;
-    if (width_m > 0)
-        o->display_width_m = width_m;
-    if (width_px > 0)
-        o->display_width_px = width_px;
+    if (distance_m > 0) o->distance_m = distance_m;
+    if (width_m > 0) o->display_width_m = width_m;
+    if (width_px > 0) o->display_width_px = width_px;
     o->start_exposure = start;
     o->stop_exposure = stop;
     o->num_exposures = num;
@@ -163,10 +155,20 @@ static PyObject *
 py_flip(PyObject *self, PyObject *args, PyObject *kw)
 {
     (void)self;
-    static char *keys[] = {"test",          "ref",         "hdr",
-                           "ppd",           "distance_m",  "display_width_m",
-                           "display_width_px", "tone_mapper", "start_exposure",
-                           "stop_exposure", "num_exposures", "exposure_map", "srgb", NULL};
+    static char *keys[] = {"test",
+                           "ref",
+                           "hdr",
+                           "ppd",
+                           "distance_m",
+                           "display_width_m",
+                           "display_width_px",
+                           "tone_mapper",
+                           "start_exposure",
+                           "stop_exposure",
+                           "num_exposures",
+                           "exposure_map",
+                           "srgb",
+                           NULL};
     PyObject *a, *b;
     int hdr = 0, num = 0, want_exposure = 0, srgb = 0;
     double ppd = 0, dist = 0, wm = 0, wpx = 0, start = NAN, stop = NAN;
@@ -181,7 +183,8 @@ py_flip(PyObject *self, PyObject *args, PyObject *kw)
         return NULL;
     if (srgb && hdr) {
         release_pair(&t, &r);
-        PyErr_SetString(mcp_py_error, "flip: srgb=True is for LDR-FLIP (HDR input is linear)");
+        PyErr_SetString(mcp_py_error,
+                        "flip: srgb=True is for LDR-FLIP (HDR input is linear)");
         return NULL;
     }
     /* srgb: the arrays are sRGB-encoded, as NVIDIA's flip takes them (inputsRGB); the
@@ -196,11 +199,10 @@ py_flip(PyObject *self, PyObject *args, PyObject *kw)
     mcp_flip_result res;
     mcp_image *map = NULL, *exposure = NULL;
     int rc;
-    Py_BEGIN_ALLOW_THREADS
-    rc = hdr ? mcp_flip_hdr(ti, ri, &o, &res, &map, want_exposure ? &exposure : NULL)
-             : mcp_flip_ldr(ti, ri, &o, &res, &map);
-    Py_END_ALLOW_THREADS
-    mcp_image_free(lin_t);
+    Py_BEGIN_ALLOW_THREADS rc =
+        hdr ? mcp_flip_hdr(ti, ri, &o, &res, &map, want_exposure ? &exposure : NULL)
+            : mcp_flip_ldr(ti, ri, &o, &res, &map);
+    Py_END_ALLOW_THREADS mcp_image_free(lin_t);
     mcp_image_free(lin_r);
     release_pair(&t, &r);
     if (mcp_py_check_signals()) {
@@ -208,10 +210,10 @@ py_flip(PyObject *self, PyObject *args, PyObject *kw)
         mcp_image_free(exposure);
         return NULL;
     }
-    if (rc)
-        return mcp_py_fail();
+    if (rc) return mcp_py_fail();
     if (hdr && want_exposure)
-        return Py_BuildValue("(dNN)", res.mean, mcp_py_array(map), mcp_py_array(exposure));
+        return Py_BuildValue("(dNN)", res.mean, mcp_py_array(map),
+                             mcp_py_array(exposure));
     return Py_BuildValue("(dN)", res.mean, mcp_py_array(map));
 }
 
@@ -222,26 +224,26 @@ py_relse_percentiles(PyObject *self, PyObject *args, PyObject *kw)
     static char *keys[] = {"test", "ref", "percentiles", "eps_rel", NULL};
     PyObject *a, *b, *plist = NULL;
     double eps = MCP_EPS_REL;
-    double p[MCP_METRICS_MAX_PERCENTILES] = {0.5, 0.9, 0.99}, v[MCP_METRICS_MAX_PERCENTILES];
+    double p[MCP_METRICS_MAX_PERCENTILES] = {0.5, 0.9, 0.99},
+           v[MCP_METRICS_MAX_PERCENTILES];
     int n = 3;
     mcp_py_image t, r;
     if (!PyArg_ParseTupleAndKeywords(args, kw, "OO|$Od:relse_percentiles", keys, &a, &b,
                                      &plist, &eps) ||
-        (plist && mcp_py_doubles(plist, "percentiles", p, MCP_METRICS_MAX_PERCENTILES, &n)))
+        (plist &&
+         mcp_py_doubles(plist, "percentiles", p, MCP_METRICS_MAX_PERCENTILES, &n)))
         return NULL;
     for (int k = 0; k < n; k++)
         if (!(p[k] >= 0 && p[k] <= 1)) {
             PyErr_Format(mcp_py_error, "percentiles: %g is not in [0, 1]", p[k]);
             return NULL;
         }
-    if (get_pair(a, b, &t, &r))
-        return NULL;
+    if (get_pair(a, b, &t, &r)) return NULL;
     mcp_image *relse = NULL;
     int rc;
-    Py_BEGIN_ALLOW_THREADS
-    rc = mcp_relse_map(t.img, r.img, eps, &relse) || mcp_image_percentiles(relse, p, n, v);
-    Py_END_ALLOW_THREADS
-    mcp_image_free(relse);
+    Py_BEGIN_ALLOW_THREADS rc =
+        mcp_relse_map(t.img, r.img, eps, &relse) || mcp_image_percentiles(relse, p, n, v);
+    Py_END_ALLOW_THREADS mcp_image_free(relse);
     release_pair(&t, &r);
     return rc ? mcp_py_fail() : mcp_py_vector(v, n);
 }
@@ -275,19 +277,14 @@ py_blue_noise(PyObject *self, PyObject *args, PyObject *kw)
     if (!PyArg_ParseTupleAndKeywords(args, kw, "OO|$idz:blue_noise", keys, &a, &b,
                                      &o.tile_size, &o.cutoff, &tone))
         return NULL;
-    if (tone && mcp_tonemap_from_name(tone, &o.tone_map))
-        return mcp_py_fail();
-    if (get_pair(a, b, &t, &r))
-        return NULL;
+    if (tone && mcp_tonemap_from_name(tone, &o.tone_map)) return mcp_py_fail();
+    if (get_pair(a, b, &t, &r)) return NULL;
     mcp_spectra_result res;
     mcp_image *picture = NULL;
     int rc;
-    Py_BEGIN_ALLOW_THREADS
-    rc = mcp_spectra_blue_noise(t.img, r.img, &o, &res, &picture);
-    Py_END_ALLOW_THREADS
-    release_pair(&t, &r);
-    if (rc)
-        return mcp_py_fail();
+    Py_BEGIN_ALLOW_THREADS rc = mcp_spectra_blue_noise(t.img, r.img, &o, &res, &picture);
+    Py_END_ALLOW_THREADS release_pair(&t, &r);
+    if (rc) return mcp_py_fail();
     PyObject *d = PyDict_New();
     if (!d || mcp_py_set(d, "low_fraction", PyFloat_FromDouble(res.low_fraction)) ||
         mcp_py_set(d, "white_fraction", PyFloat_FromDouble(res.white_fraction)) ||
@@ -306,10 +303,8 @@ py_blue_noise(PyObject *self, PyObject *args, PyObject *kw)
 static PyObject *
 from_json(const cJSON *j)
 {
-    if (cJSON_IsNumber(j))
-        return PyFloat_FromDouble(j->valuedouble);
-    if (cJSON_IsBool(j))
-        return PyBool_FromLong(cJSON_IsTrue(j));
+    if (cJSON_IsNumber(j)) return PyFloat_FromDouble(j->valuedouble);
+    if (cJSON_IsBool(j)) return PyBool_FromLong(cJSON_IsTrue(j));
     if (cJSON_IsString(j))
         return !strcmp(j->valuestring, "inf") ? PyFloat_FromDouble(INFINITY)
                                               : PyUnicode_FromString(j->valuestring);
@@ -366,16 +361,15 @@ py_flip_stats(PyObject *self, PyObject *args, PyObject *kw)
     mcp_py_image_release(&m);
     mcp_flip_stats st;
     int rc;
-    Py_BEGIN_ALLOW_THREADS
-    rc = mcp_flip_statistics(v, n, &st);
-    Py_END_ALLOW_THREADS
-    PyMem_Free(v);
+    Py_BEGIN_ALLOW_THREADS rc = mcp_flip_statistics(v, n, &st);
+    Py_END_ALLOW_THREADS PyMem_Free(v);
     if (rc) return mcp_py_fail();
     PyObject *counts = PyList_New(MCP_FLIP_HISTOGRAM_BUCKETS),
              *weighted = PyList_New(MCP_FLIP_HISTOGRAM_BUCKETS);
     for (int i = 0; counts && weighted && i < MCP_FLIP_HISTOGRAM_BUCKETS; i++) {
         PyList_SET_ITEM(counts, i, PyLong_FromLongLong(st.histogram[i]));
-        PyList_SET_ITEM(weighted, i, PyFloat_FromDouble(mcp_flip_weighted_bucket(&st, i)));
+        PyList_SET_ITEM(weighted, i,
+                        PyFloat_FromDouble(mcp_flip_weighted_bucket(&st, i)));
     }
     if (!counts || !weighted) {
         Py_XDECREF(counts);
@@ -384,15 +378,16 @@ py_flip_stats(PyObject *self, PyObject *args, PyObject *kw)
     }
     return Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:N,s:N}", "weighted_median",
                          st.weighted_median, "weighted_q1", st.weighted_q1, "weighted_q3",
-                         st.weighted_q3, "min", st.min, "max", st.max, "histogram", counts,
-                         "weighted_histogram", weighted);
+                         st.weighted_q3, "min", st.min, "max", st.max, "histogram",
+                         counts, "weighted_histogram", weighted);
 }
 
 /* pixels_above=[(map, threshold), ...] into the options. */
 static int
 above_options(PyObject *list, mcp_metrics_options *o)
 {
-    PyObject *seq = PySequence_Fast(list, "pixels_above: want a list of (map, threshold)");
+    PyObject *seq =
+        PySequence_Fast(list, "pixels_above: want a list of (map, threshold)");
     if (!seq) return -1;
     for (Py_ssize_t i = 0; i < PySequence_Fast_GET_SIZE(seq); i++) {
         const char *name;
@@ -423,8 +418,9 @@ py_metrics(PyObject *self, PyObject *args, PyObject *kw)
     PyObject *vals[4], *pair_args[2], *keep = PyList_New(0);
     mcp_metrics_settings st;
     if (!keep) return NULL;
-    int bad = mcp_py_settings(mcp_operation_metrics(), "metrics", kw, own, vals, &st, keep) ||
-              mcp_py_positionals("metrics", own, 2, args, vals, pair_args);
+    int bad =
+        mcp_py_settings(mcp_operation_metrics(), "metrics", kw, own, vals, &st, keep) ||
+        mcp_py_positionals("metrics", own, 2, args, vals, pair_args);
     Py_DECREF(keep); /* no text of the settings is used below */
     if (bad) return NULL;
     PyObject *a = pair_args[0], *b = pair_args[1], *above = vals[3];
@@ -433,19 +429,16 @@ py_metrics(PyObject *self, PyObject *args, PyObject *kw)
     if (want_maps < 0) return NULL;
     if (above && above != Py_None && above_options(above, &o)) return NULL;
     mcp_py_image t, r;
-    if (get_pair(a, b, &t, &r))
-        return NULL;
+    if (get_pair(a, b, &t, &r)) return NULL;
     mcp_metrics m;
     mcp_metrics_maps maps = {0};
     int rc;
-    Py_BEGIN_ALLOW_THREADS
-    rc = mcp_metrics_compute(t.img, r.img, &o, &m, want_maps ? &maps : NULL);
-    Py_END_ALLOW_THREADS
-    release_pair(&t, &r);
+    Py_BEGIN_ALLOW_THREADS rc =
+        mcp_metrics_compute(t.img, r.img, &o, &m, want_maps ? &maps : NULL);
+    Py_END_ALLOW_THREADS release_pair(&t, &r);
     PyObject *result = NULL;
     cJSON *doc = NULL;
-    if (mcp_py_check_signals())
-        goto done;
+    if (mcp_py_check_signals()) goto done;
     if (rc || !(doc = cJSON_CreateObject()) || mcp_metrics_json(&m, &o, doc)) {
         mcp_py_fail();
         goto done;
@@ -453,19 +446,18 @@ py_metrics(PyObject *self, PyObject *args, PyObject *kw)
     result = from_json(doc);
     if (result && want_maps) {
         PyObject *md = PyDict_New();
-        mcp_image **items[] = {&maps.sq_error, &maps.relse, &maps.flip_ldr, &maps.flip_hdr,
+        mcp_image **items[] = {&maps.sq_error,          &maps.relse,
+                               &maps.flip_ldr,          &maps.flip_hdr,
                                &maps.flip_hdr_exposure, &maps.spectra};
-        static const char *const names[] = {"sq_error", "relse",   "flip_ldr",
-                                            "flip_hdr", "flip_hdr_exposure", "spectra"};
+        static const char *const names[] = {
+            "sq_error", "relse", "flip_ldr", "flip_hdr", "flip_hdr_exposure", "spectra"};
         for (int i = 0; md && i < 6; i++) {
             mcp_image *img = *items[i];
             *items[i] = NULL;
-            if (mcp_py_set(md, names[i], mcp_py_array(img)))
-                Py_CLEAR(md);
+            if (mcp_py_set(md, names[i], mcp_py_array(img))) Py_CLEAR(md);
         }
         PyObject *pair = md ? Py_BuildValue("(NN)", result, md) : NULL;
-        if (!pair)
-            Py_CLEAR(result);
+        if (!pair) Py_CLEAR(result);
         result = pair;
     }
 done:
@@ -484,7 +476,8 @@ PyMethodDef mcp_py_metrics_methods[] = {
      "psnr(test, ref) -> float: PSNR of the displayed images (clamped to [0, 1], sRGB),\n"
      "inf for identical displays"},
     {"pmse", FN(py_pmse), KW,
-     "pmse(test, ref, *, kernel='tap3', dpi=300, distance_in=16, filter_reference=False,\n"
+     "pmse(test, ref, *, kernel='tap3', dpi=300, distance_in=16, "
+     "filter_reference=False,\n"
      "     tone_map='clamp') -> float: perceptual MSE (Chizhov et al. 2022)"},
     {"flip", FN(py_flip), KW,
      "flip(test, ref, *, hdr=False, ppd=0, distance_m=0.7, display_width_m=0.7,\n"
@@ -498,7 +491,8 @@ PyMethodDef mcp_py_metrics_methods[] = {
      "exposure map)."},
     {"relse_percentiles", FN(py_relse_percentiles), KW,
      "relse_percentiles(test, ref, *, percentiles=(0.5, 0.9, 0.99), eps_rel=0.01)\n"
-     "    -> ndarray: RelSE = (t - r)^2 / (maxc(t)^2 + eps_rel) at each p (nearest rank)"},
+     "    -> ndarray: RelSE = (t - r)^2 / (maxc(t)^2 + eps_rel) at each p (nearest "
+     "rank)"},
     {"relse_map", FN(py_relse_map), KW,
      "relse_map(test, ref, *, eps_rel=0.01) -> ndarray H x W x 3: RelSE per value"},
     {"blue_noise", FN(py_blue_noise), KW,

@@ -33,8 +33,7 @@ mcp_py_path(PyObject *obj, const char *what)
                      what, Py_TYPE(obj)->tp_name);
         return NULL;
     }
-    if (!PyUnicode_FSConverter(obj, &bytes))
-        return NULL;
+    if (!PyUnicode_FSConverter(obj, &bytes)) return NULL;
     return bytes;
 }
 
@@ -49,7 +48,8 @@ mcp_py_doubles(PyObject *seq, const char *what, double *out, int max, int *n)
     Py_ssize_t count = PySequence_Fast_GET_SIZE(fast);
     if (count < 1 || count > max) {
         Py_DECREF(fast);
-        PyErr_Format(mcp_py_error, "%s: needs 1 to %d values (got %zd)", what, max, count);
+        PyErr_Format(mcp_py_error, "%s: needs 1 to %d values (got %zd)", what, max,
+                     count);
         return -1;
     }
     for (Py_ssize_t i = 0; i < count; i++) {
@@ -70,16 +70,14 @@ mcp_py_vector(const double *v, int n)
 {
     npy_intp dims[1] = {n};
     PyObject *a = PyArray_SimpleNew(1, dims, NPY_FLOAT64);
-    if (a)
-        memcpy(PyArray_DATA((PyArrayObject *)a), v, (size_t)n * sizeof *v);
+    if (a) memcpy(PyArray_DATA((PyArrayObject *)a), v, (size_t)n * sizeof *v);
     return a;
 }
 
 int
 mcp_py_set(PyObject *d, const char *key, PyObject *value)
 {
-    if (!value)
-        return -1;
+    if (!value) return -1;
     int rc = PyDict_SetItemString(d, key, value);
     Py_DECREF(value);
     return rc;
@@ -103,8 +101,7 @@ py_set_quiet(PyObject *self, PyObject *arg)
 {
     (void)self;
     int quiet = PyObject_IsTrue(arg);
-    if (quiet < 0)
-        return NULL;
+    if (quiet < 0) return NULL;
     mcp_progress_set_quiet(quiet);
     Py_RETURN_NONE;
 }
@@ -134,8 +131,7 @@ join_tables(void)
     size_t n = 0;
     for (size_t t = 0; t < sizeof tables / sizeof *tables; t++)
         for (PyMethodDef *m = tables[t]; m->ml_name; m++) {
-            if (n + 1 >= sizeof all_methods / sizeof *all_methods)
-                return -1;
+            if (n + 1 >= sizeof all_methods / sizeof *all_methods) return -1;
             all_methods[n++] = *m;
         }
     all_methods[n] = (PyMethodDef){NULL, NULL, 0, NULL};
@@ -143,23 +139,24 @@ join_tables(void)
        it (python/options.c), before the prose their file gives */
     static const struct {
         const char *name, *op, *positional, *extras, *returns;
-    } ops[] = {{"estimate", "estimate", "dump", NULL, "dict"},
-               {"blend", "blend", "dumps", NULL, "dict"},
-               {"metrics", "metrics", "test, ref", "maps=False, pixels_above=None",
-                "dict (or (dict, maps) with maps=True)"},
-               {"perceptual", "perceptual", "candidates", "albedo=None, normal=None, mask=None",
-                "dict"},
-               {"denoise", "denoise", "color", "variance=None, **settings",
-                "ndarray H x W x 3"},
-               {"jvp", "denoise", "color, tangent", "variance=None, **settings",
-                "(denoised, J·tangent)"}};
+    } ops[] = {
+        {"estimate", "estimate", "dump", NULL, "dict"},
+        {"blend", "blend", "dumps", NULL, "dict"},
+        {"metrics", "metrics", "test, ref", "maps=False, pixels_above=None",
+         "dict (or (dict, maps) with maps=True)"},
+        {"perceptual", "perceptual", "candidates", "albedo=None, normal=None, mask=None",
+         "dict"},
+        {"denoise", "denoise", "color", "variance=None, **settings", "ndarray H x W x 3"},
+        {"jvp", "denoise", "color, tangent", "variance=None, **settings",
+         "(denoised, J·tangent)"}};
     for (size_t i = 0; i < n; i++)
         for (size_t k = 0; k < sizeof ops / sizeof *ops; k++)
             if (!strcmp(all_methods[i].ml_name, ops[k].name)) {
                 const mcp_operation *op = mcp_operation_find(ops[k].op);
-                char *doc = op ? mcp_py_doc(op, ops[k].name, ops[k].positional, ops[k].extras,
-                                            ops[k].returns, all_methods[i].ml_doc)
-                               : NULL;
+                char *doc =
+                    op ? mcp_py_doc(op, ops[k].name, ops[k].positional, ops[k].extras,
+                                    ops[k].returns, all_methods[i].ml_doc)
+                       : NULL;
                 if (!doc) return -1;
                 all_methods[i].ml_doc = doc; /* the module's, for the process */
             }
@@ -167,12 +164,18 @@ join_tables(void)
 }
 
 static struct PyModuleDef module_def = {
-    PyModuleDef_HEAD_INIT, "mcpost",
+    PyModuleDef_HEAD_INIT,
+    "mcpost",
     "mcpost: post-processing of Monte Carlo renderings on numpy arrays.\n\n"
     "Images are float32 arrays H x W x C (H x W for one channel); dumps are dicts as\n"
     "read_dump returns them, or paths. Failures raise mcpost.Error with the library's\n"
     "one-line message. See docs/python.md.",
-    -1, all_methods, NULL, NULL, NULL, NULL};
+    -1,
+    all_methods,
+    NULL,
+    NULL,
+    NULL,
+    NULL};
 
 PyMODINIT_FUNC
 PyInit_mcpost(void)
@@ -183,11 +186,12 @@ PyInit_mcpost(void)
         return NULL;
     }
     PyObject *m = PyModule_Create(&module_def);
-    if (!m)
-        return NULL;
+    if (!m) return NULL;
     mcp_py_error = PyErr_NewExceptionWithDoc(
-        "mcpost.Error", "what libmcpost reported: one line naming the file, argument, "
-        "channel or field and the value", PyExc_ValueError, NULL);
+        "mcpost.Error",
+        "what libmcpost reported: one line naming the file, argument, "
+        "channel or field and the value",
+        PyExc_ValueError, NULL);
     if (!mcp_py_error || PyModule_AddObjectRef(m, "Error", mcp_py_error) ||
         PyModule_AddStringConstant(m, "__version__", MCP_VERSION)) {
         Py_DECREF(m);

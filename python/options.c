@@ -49,7 +49,8 @@ value_text(const char *fn, const mcp_option *o, PyObject *v, char *buf, size_t c
     case MCP_OPT_NUMBER:
         if (o->auto_word && PyUnicode_Check(v)) return text_of(v, 0, buf, cap);
         if (!is_number(v))
-            return type_error(fn, o->name, o->auto_word ? "a number or 'auto'" : "a number");
+            return type_error(fn, o->name,
+                              o->auto_word ? "a number or 'auto'" : "a number");
         return text_of(v, 1, buf, cap);
     case MCP_OPT_INT:
         if (o->auto_word && PyUnicode_Check(v)) return text_of(v, 0, buf, cap);
@@ -121,15 +122,18 @@ value_text(const char *fn, const mcp_option *o, PyObject *v, char *buf, size_t c
             const char *w = PyUnicode_Check(x) ? PyUnicode_AsUTF8(x) : NULL;
             if (!w) {
                 Py_DECREF(fast);
-                return PyErr_Occurred() ? -1 : type_error(fn, o->name, "a sequence of str");
+                return PyErr_Occurred() ? -1
+                                        : type_error(fn, o->name, "a sequence of str");
             }
-            n += (size_t)snprintf(buf + n, n < cap ? cap - n : 0, "%s%s", i ? "," : "", w);
+            n +=
+                (size_t)snprintf(buf + n, n < cap ? cap - n : 0, "%s%s", i ? "," : "", w);
         }
         Py_DECREF(fast);
         return 0;
     }
     case MCP_OPT_TEXTS: /* one str here; a sequence is taken item by item */
-        if (!PyUnicode_Check(v)) return type_error(fn, o->name, "a str or a sequence of str");
+        if (!PyUnicode_Check(v))
+            return type_error(fn, o->name, "a str or a sequence of str");
         *text = PyUnicode_AsUTF8(v);
         return *text ? 0 : -1;
     case MCP_OPT_DENOISER:
@@ -178,7 +182,9 @@ mcp_py_settings(const mcp_operation *op, const char *fn, PyObject *kw,
             for (Py_ssize_t i = 0; !rc && i < PySequence_Fast_GET_SIZE(fast); i++) {
                 PyObject *x = PySequence_Fast_GET_ITEM(fast, i);
                 const char *t = PyUnicode_Check(x) ? PyUnicode_AsUTF8(x) : NULL;
-                if (!t) return PyErr_Occurred() ? -1 : type_error(fn, name, "a sequence of str");
+                if (!t)
+                    return PyErr_Occurred() ? -1
+                                            : type_error(fn, name, "a sequence of str");
                 if (mcp_operation_set(op, o, name, t, settings)) return mcp_py_fail_int();
             }
             if (rc) return -1;
@@ -237,15 +243,16 @@ mcp_py_positionals(const char *fn, const char *const *names, int n, PyObject *ar
 {
     Py_ssize_t given = PyTuple_GET_SIZE(args);
     if (given > n) {
-        PyErr_Format(PyExc_TypeError, "%s() takes %d positional arguments but %zd were given",
-                     fn, n, given);
+        PyErr_Format(PyExc_TypeError,
+                     "%s() takes %d positional arguments but %zd were given", fn, n,
+                     given);
         return -1;
     }
     for (int i = 0; i < n; i++) {
         out[i] = i < given ? PyTuple_GET_ITEM(args, i) : own_values[i];
         if (i < given && own_values[i]) {
-            PyErr_Format(PyExc_TypeError, "%s() got multiple values for argument '%s'", fn,
-                         names[i]);
+            PyErr_Format(PyExc_TypeError, "%s() got multiple values for argument '%s'",
+                         fn, names[i]);
             return -1;
         }
         if (!out[i]) {
@@ -353,9 +360,9 @@ static PyObject *
 py_options(PyObject *self, PyObject *args)
 {
     (void)self;
-    static const char *const types[] = {"number", "int",  "seed", "whole", "flag",
-                                        "enum",   "list", "text", "input", "denoiser",
-                                        "texts",  "wordset"};
+    static const char *const types[] = {"number", "int",      "seed",  "whole",
+                                        "flag",   "enum",     "list",  "text",
+                                        "input",  "denoiser", "texts", "wordset"};
     const char *name;
     if (!PyArg_ParseTuple(args, "s:options", &name)) return NULL;
     const mcp_operation *op = mcp_operation_find(name);

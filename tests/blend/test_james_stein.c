@@ -46,8 +46,8 @@ test_apply_and_jvp(void **state)
         for (int xx = 0; xx < 21; xx++)
             for (int c = 0; c < 3; c++) {
                 double r = mcp_image_px(rho, xx, y)[rho->channels >= 3 ? c : 0];
-                double e = r * mcp_image_px(gt, xx, y)[c] +
-                           (1 - r) * mcp_image_px(t, xx, y)[c];
+                double e =
+                    r * mcp_image_px(gt, xx, y)[c] + (1 - r) * mcp_image_px(t, xx, y)[c];
                 assert_close(mcp_image_px(jt, xx, y)[c], e, 1e-5, 1e-6);
             }
     assert_true(mcp_test_max_abs_diff(primal, f) < 1e-6);
@@ -71,8 +71,7 @@ test_settings(void **state)
     (void)state;
     const mcp_denoiser_kind *const *kinds = mcp_denoiser_kinds(), *js = NULL;
     for (int i = 0; kinds[i]; i++)
-        if (!strcmp(kinds[i]->name, "james-stein"))
-            js = kinds[i];
+        if (!strcmp(kinds[i]->name, "james-stein")) js = kinds[i];
     assert_non_null(js);
     for (int i = 0; kinds[i]; i++)
         for (const char *const *k = kinds[i]->keys; k && *k; k++) {
@@ -80,7 +79,8 @@ test_settings(void **state)
             for (const char *const *j = js->keys; *j; j++)
                 found |= !strcmp(*j, *k);
             if (!found)
-                fail_msg("james-stein does not pass on %s's key '%s'", kinds[i]->name, *k);
+                fail_msg("james-stein does not pass on %s's key '%s'", kinds[i]->name,
+                         *k);
         }
     mcp_denoiser *d = NULL;
     const char *bad[] = {"inner=gauss", "weights=x.tza"};

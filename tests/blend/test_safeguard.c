@@ -217,7 +217,8 @@ test_option(void **state)
     assert_int_equal(mcp_blend_step(&in, NULL, NULL, NULL, &r), 0);
     for (size_t i = 0; i < (size_t)W * H * 3; i++) {
         assert_true(r.blend->data[i] == js->data[i]);
-        double want = rho->data[i] >= 1 ? INFINITY : 64 * rho->data[i] / (1 - rho->data[i]);
+        double want =
+            rho->data[i] >= 1 ? INFINITY : 64 * rho->data[i] / (1 - rho->data[i]);
         if (isinf(want))
             assert_true(isinf(r.weights->data[i]));
         else

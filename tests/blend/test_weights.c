@@ -221,16 +221,18 @@ test_step_vector_is_scalar(void **state)
         mcp_blend_options o = mcp_blend_defaults();
         o.filter = MCP_BLEND_FILTER_NONE;
         o.negative_sure = magnitude ? MCP_NEG_SURE_MAGNITUDE : MCP_NEG_SURE_ZERO;
-        o.max_weight = 100; /* the cap in play too */
+        o.max_weight = 100;                   /* the cap in play too */
         o.weights = MCP_BLEND_WEIGHTS_CURVES; /* the SSE pass (JS: test_safeguard.c) */
-        mcp_blend_input packed = {n, v, 32, d, s, NULL}, strided = {n4, v, 32, d4, s, NULL};
+        mcp_blend_input packed = {n, v, 32, d, s, NULL},
+                        strided = {n4, v, 32, d4, s, NULL};
         mcp_blend_result a, b;
         assert_int_equal(mcp_blend_step(&packed, &o, NULL, NULL, &a), 0);
         assert_int_equal(mcp_blend_step(&strided, &o, NULL, NULL, &b), 0);
         for (int i = 0; i < w * h * 3; i++) {
             assert_memory_equal(&a.weights->data[i], &b.weights->data[i], sizeof(float));
             assert_memory_equal(&a.blend->data[i], &b.blend->data[i], sizeof(float));
-            assert_memory_equal(&a.est.sure->data[i], &b.est.sure->data[i], sizeof(float));
+            assert_memory_equal(&a.est.sure->data[i], &b.est.sure->data[i],
+                                sizeof(float));
         }
         mcp_blend_result_free(&a);
         mcp_blend_result_free(&b);
@@ -341,14 +343,15 @@ curve_mse(const proc_series *ps, int i, const mcp_image *curves, int safeguard)
     double mse;
     const mcp_dump *dump = ps->dump[i];
     assert_int_equal(mcp_blend_weights(curves, ps->est[i].sure, NULL, &w), 0);
-    assert_int_equal(mcp_blend_mix(dump->color, ps->spp[i], ps->maps[i].denoised, w, &r), 0);
+    assert_int_equal(mcp_blend_mix(dump->color, ps->spp[i], ps->maps[i].denoised, w, &r),
+                     0);
     if (safeguard) {
         mcp_image *js = NULL, *rho = NULL;
         assert_int_equal(mcp_blend_james_stein(dump->color, ps->maps[i].denoised,
                                                dump->var_of_mean, 7, &js, &rho),
                          0);
-        assert_int_equal(mcp_blend_safeguard(dump->color, ps->spp[i], ps->maps[i].denoised,
-                                             rho, w, r, NULL),
+        assert_int_equal(mcp_blend_safeguard(dump->color, ps->spp[i],
+                                             ps->maps[i].denoised, rho, w, r, NULL),
                          0);
         mcp_image_free(js);
         mcp_image_free(rho);
@@ -377,7 +380,8 @@ test_series_converges_procedural(void **state)
         mcp_image *otf_curves = NULL;
         double noisy, den;
         assert_int_equal(mcp_blend_curves(&v[i], &ps.spp[i], 1, NULL, &otf_curves), 0);
-        double otf = curve_mse(&ps, i, otf_curves, 0), ret = curve_mse(&ps, i, retro_curves, 0);
+        double otf = curve_mse(&ps, i, otf_curves, 0),
+               ret = curve_mse(&ps, i, retro_curves, 0);
         double safe = curve_mse(&ps, i, otf_curves, 1);
         assert_int_equal(mcp_mse(ps.dump[i]->color, ps.truth, &noisy), 0);
         assert_int_equal(mcp_mse(ps.maps[i].denoised, ps.truth, &den), 0);

@@ -168,9 +168,9 @@ test_job_stage(void **state)
     free(text);
     const cJSON *im;
     int maps = 0;
-    cJSON_ArrayForEach(im, cJSON_GetObjectItem(
-                               cJSON_GetArrayItem(cJSON_GetObjectItem(j, "sections"), 0),
-                               "images"))
+    cJSON_ArrayForEach(
+        im, cJSON_GetObjectItem(cJSON_GetArrayItem(cJSON_GetObjectItem(j, "sections"), 0),
+                                "images"))
     {
         const cJSON *sc = cJSON_GetObjectItem(im, "scale");
         assert_non_null(sc);

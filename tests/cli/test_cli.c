@@ -24,7 +24,8 @@ assert_one_line_error(int status, const char *needle)
 {
     if (status == 0 || strncmp(err, "mcpost: ", 8) != 0 || !strstr(err, needle) ||
         strchr(err, '\n') != err + strlen(err) - 1)
-        fail_msg("status %d, stderr \"%s\", wanted one line with \"%s\"", status, err, needle);
+        fail_msg("status %d, stderr \"%s\", wanted one line with \"%s\"", status, err,
+                 needle);
 }
 
 static mcp_dump *
@@ -32,9 +33,11 @@ sample_dump(void)
 {
     mcp_dump *d = calloc(1, sizeof *d);
     d->color = mcp_test_random(16, 8, 3, 0.0f, 2.0f, 1, (const char *[]){"R", "G", "B"});
-    d->var_of_mean = mcp_test_random(16, 8, 3, 0.0f, 0.1f, 2, (const char *[]){"R", "G", "B"});
+    d->var_of_mean =
+        mcp_test_random(16, 8, 3, 0.0f, 0.1f, 2, (const char *[]){"R", "G", "B"});
     d->albedo = mcp_test_random(16, 8, 3, 0.0f, 1.0f, 3, (const char *[]){"R", "G", "B"});
-    d->normal = mcp_test_random(16, 8, 3, -1.0f, 1.0f, 4, (const char *[]){"X", "Y", "Z"});
+    d->normal =
+        mcp_test_random(16, 8, 3, -1.0f, 1.0f, 4, (const char *[]){"X", "Y", "Z"});
     d->spp = 128;
     d->source = strdup("sample");
     return d;
@@ -49,10 +52,12 @@ test_info_describes_each_renderer(void **state)
         mcp_convention conv;
         const char *file, *convention, *samples, *channel;
     } cases[] = {
-        {MCP_CONV_PBRT, "pbrt.exr", "convention:  pbrt", "samples:     128 per pixel", "Variance.R"},
-        {MCP_CONV_MITSUBA, "mitsuba.exr", "convention:  mitsuba", "samples:     unknown", "m2_R"},
-        {MCP_CONV_BLENDER, "blender.exr", "convention:  blender", "samples:     128 per pixel",
-         "ViewLayer.Denoising Albedo.G"},
+        {MCP_CONV_PBRT, "pbrt.exr", "convention:  pbrt", "samples:     128 per pixel",
+         "Variance.R"},
+        {MCP_CONV_MITSUBA, "mitsuba.exr", "convention:  mitsuba", "samples:     unknown",
+         "m2_R"},
+        {MCP_CONV_BLENDER, "blender.exr", "convention:  blender",
+         "samples:     128 per pixel", "ViewLayer.Denoising Albedo.G"},
     };
     for (int i = 0; i < 3; i++) {
         const char *path = mcp_test_path(cases[i].file);
@@ -65,8 +70,9 @@ test_info_describes_each_renderer(void **state)
     }
     /* Mitsuba 3's moment integrator layout: the convention and the variance source */
     {
-        const char *names[] = {"R", "G", "B", "A", "m2_nested.X", "m2_nested.Y", "m2_nested.Z",
-                               "nested.X", "nested.Y", "nested.Z"};
+        const char *names[] = {"R",           "G",           "B",           "A",
+                               "m2_nested.X", "m2_nested.Y", "m2_nested.Z", "nested.X",
+                               "nested.Y",    "nested.Z"};
         mcp_image *img = NULL;
         assert_int_equal(mcp_image_new(4, 2, 10, names, &img), 0);
         for (int i = 0; i < 4 * 2 * 10; i++)
@@ -97,7 +103,8 @@ test_info_describes_each_renderer(void **state)
     cJSON_ArrayForEach(ch, cJSON_GetObjectItem(j, "channels"))
     {
         if (!strcmp(cJSON_GetObjectItem(ch, "name")->valuestring, "R"))
-            assert_close(cJSON_GetObjectItem(ch, "mean")->valuedouble, mean / 128, 1e-12, 0);
+            assert_close(cJSON_GetObjectItem(ch, "mean")->valuedouble, mean / 128, 1e-12,
+                         0);
     }
     cJSON_Delete(j);
     mcp_dump_free(d);
@@ -131,14 +138,16 @@ test_convert(void **state)
     mcp_dump *d = sample_dump();
     assert_int_equal(mcp_dump_write(d, mcp_test_path("c.exr"), MCP_CONV_PBRT, NULL), 0);
     assert_int_equal(run("convert '%s' '%s' --channels B,R --half --compression piz",
-                         mcp_test_path("c.exr"), mcp_test_path("br.exr")), 0);
+                         mcp_test_path("c.exr"), mcp_test_path("br.exr")),
+                     0);
     mcp_image *img = NULL;
     assert_int_equal(mcp_image_read(mcp_test_path("br.exr"), NULL, &img), 0);
     assert_int_equal(img->channels, 2);
     mcp_image_free(img);
     /* a dump rewritten in Blender's convention keeps its meaning */
     assert_int_equal(run("convert --dump blender '%s' '%s'", mcp_test_path("c.exr"),
-                         mcp_test_path("b.exr")), 0);
+                         mcp_test_path("b.exr")),
+                     0);
     mcp_dump *back = NULL;
     assert_int_equal(mcp_dump_read(mcp_test_path("b.exr"), &back), 0);
     assert_int_equal(back->convention, MCP_CONV_BLENDER);
@@ -156,10 +165,12 @@ test_every_bad_input_class(void **state)
     snprintf(good, sizeof good, "%s", mcp_test_path("good.exr"));
     assert_int_equal(mcp_dump_write(d, good, MCP_CONV_PBRT, NULL), 0);
     /* missing or misnamed channel */
-    assert_one_line_error(run("convert '%s' '%s' --channels R,Q", good, mcp_test_path("q.exr")),
-                          "good.exr: no channel 'Q'");
+    assert_one_line_error(
+        run("convert '%s' '%s' --channels R,Q", good, mcp_test_path("q.exr")),
+        "good.exr: no channel 'Q'");
     /* unreadable, corrupt, truncated */
-    assert_one_line_error(run("info '%s'", mcp_test_path("nothing.exr")), "nothing.exr: cannot open");
+    assert_one_line_error(run("info '%s'", mcp_test_path("nothing.exr")),
+                          "nothing.exr: cannot open");
     mcp_test_write_text(mcp_test_path("junk.exr"), "not an exr");
     assert_one_line_error(run("info '%s'", mcp_test_path("junk.exr")), "junk.exr");
     char *bytes = mcp_test_read_text(good);
@@ -170,14 +181,14 @@ test_every_bad_input_class(void **state)
     assert_one_line_error(run("info '%s'", mcp_test_path("cut.exr")), "cut.exr");
     /* NaN in colour, negative variance */
     mcp_image *img = NULL;
-    if (mcp_image_read(good, NULL, &img))
-        fail_msg("%s", mcp_error_message());
+    if (mcp_image_read(good, NULL, &img)) fail_msg("%s", mcp_error_message());
     int r = mcp_image_channel(img, "R"), vg = mcp_image_channel(img, "Variance.G");
     mcp_image_px(img, 3, 2)[r] = NAN;
     assert_int_equal(mcp_image_write(img, mcp_test_path("nan.exr"), NULL), 0);
-    assert_one_line_error(run("convert --dump pbrt '%s' '%s'", mcp_test_path("nan.exr"),
-                              mcp_test_path("o.exr")),
-                          "nan.exr: colour channel 'R' has 1 NaN/Inf value (first nan at pixel 3,2");
+    assert_one_line_error(
+        run("convert --dump pbrt '%s' '%s'", mcp_test_path("nan.exr"),
+            mcp_test_path("o.exr")),
+        "nan.exr: colour channel 'R' has 1 NaN/Inf value (first nan at pixel 3,2");
     mcp_image_px(img, 3, 2)[r] = 1;
     mcp_image_px(img, 5, 1)[vg] = -1;
     assert_int_equal(mcp_image_write(img, mcp_test_path("neg.exr"), NULL), 0);
@@ -188,8 +199,8 @@ test_every_bad_input_class(void **state)
     mcp_image_px(img, 5, 1)[vg] = 1;
     mcp_attrs_set_int(&img->attrs, "samplesPerPixel", 0);
     assert_int_equal(mcp_image_write(img, mcp_test_path("zero.exr"), NULL), 0);
-    assert_one_line_error(run("convert --dump mcpost '%s' '%s'", mcp_test_path("zero.exr"),
-                              mcp_test_path("o.exr")),
+    assert_one_line_error(run("convert --dump mcpost '%s' '%s'",
+                              mcp_test_path("zero.exr"), mcp_test_path("o.exr")),
                           "zero.exr: no sample count");
     assert_int_equal(access(mcp_test_path("o.exr"), F_OK), -1);
     mcp_image_free(img);
@@ -211,7 +222,8 @@ test_every_bad_input_class(void **state)
         mcp_image *before = NULL, *after = NULL;
         assert_int_equal(mcp_image_read(good, NULL, &before), 0);
         char same[4200];
-        snprintf(same, sizeof same, "%s/good.exr", mcp_test_path(".")); /* dir/./good.exr */
+        snprintf(same, sizeof same, "%s/good.exr",
+                 mcp_test_path(".")); /* dir/./good.exr */
         assert_one_line_error(run("denoise '%s' --denoiser gauss -o '%s'", good, same),
                               "denoise: the output");
         assert_one_line_error(run("convert '%s' '%s'", good, good), "is the input");
@@ -251,7 +263,8 @@ test_run_job_with_info_and_convert(void **state)
 {
     (void)state;
     mcp_dump *d = sample_dump();
-    assert_int_equal(mcp_dump_write(d, mcp_test_path("job_in.exr"), MCP_CONV_PBRT, NULL), 0);
+    assert_int_equal(mcp_dump_write(d, mcp_test_path("job_in.exr"), MCP_CONV_PBRT, NULL),
+                     0);
     mcp_test_write_text(mcp_test_path("job.yaml"),
                         "title: test job\n"
                         "inputs:\n  noisy: {dump: job_in.exr}\n"
@@ -259,7 +272,8 @@ test_run_job_with_info_and_convert(void **state)
                         "stages:\n"
                         "  - info: {input: noisy}\n"
                         "  - convert: {input: noisy, output: noisy.png}\n"
-                        "  - convert: {input: noisy, output: maps/noisy.exr, channels: [G], pixel: half}\n");
+                        "  - convert: {input: noisy, output: maps/noisy.exr, channels: "
+                        "[G], pixel: half}\n");
     assert_int_equal(run("run --json '%s'", mcp_test_path("job.yaml")), 0);
     cJSON *j = cJSON_Parse(out);
     assert_non_null(j);
@@ -268,7 +282,8 @@ test_run_job_with_info_and_convert(void **state)
     assert_true(cJSON_GetObjectItem(info, "spp")->valuedouble == 128);
     cJSON_Delete(j);
     mcp_image *img = NULL;
-    assert_int_equal(mcp_image_read(mcp_test_path("results/maps/noisy.exr"), NULL, &img), 0);
+    assert_int_equal(mcp_image_read(mcp_test_path("results/maps/noisy.exr"), NULL, &img),
+                     0);
     assert_string_equal(img->names[0], "G");
     mcp_image_free(img);
     assert_int_equal(access(mcp_test_path("results/noisy.png"), R_OK), 0);
@@ -284,8 +299,7 @@ rgb_of(const char *path)
     static const char *const rgb[] = {"R", "G", "B"};
     mcp_image *img = NULL, *out = NULL;
     int idx[3];
-    if (mcp_image_read(path, NULL, &img))
-        fail_msg("%s", mcp_error_message());
+    if (mcp_image_read(path, NULL, &img)) fail_msg("%s", mcp_error_message());
     for (int c = 0; c < 3; c++)
         assert_true((idx[c] = mcp_image_channel(img, rgb[c])) >= 0);
     assert_int_equal(mcp_image_copy_channels(img, idx, 3, &out), 0);
@@ -316,34 +330,42 @@ test_denoiser_flags(void **state)
     assert_int_equal(st, 1);
     assert_one_line_error(st, "unknown key 'weights' in denoiser 'gauss'");
     assert_int_equal(access(mcp_test_path("dn_w.exr"), F_OK), -1);
-    st = run("denoise --color '%s' --denoiser gauss --denoiser-opt weights='%s'", color, w);
+    st = run("denoise --color '%s' --denoiser gauss --denoiser-opt weights='%s'", color,
+             w);
     assert_int_equal(st, 1);
     assert_one_line_error(st, "unknown key 'weights' in denoiser 'gauss'");
-    assert_one_line_error(run("denoise --color '%s' --denoiser gauss --input-scale auto", color),
-                          "unknown key 'input_scale' in denoiser 'gauss'");
-    assert_one_line_error(run("denoise --color '%s' --denoiser gauss --denoiser-command 'cp "
-                              "{color} {output}'",
-                              color),
-                          "unknown key 'command' in denoiser 'gauss'");
+    assert_one_line_error(
+        run("denoise --color '%s' --denoiser gauss --input-scale auto", color),
+        "unknown key 'input_scale' in denoiser 'gauss'");
+    assert_one_line_error(
+        run("denoise --color '%s' --denoiser gauss --denoiser-command 'cp "
+            "{color} {output}'",
+            color),
+        "unknown key 'command' in denoiser 'gauss'");
 
     /* a shorthand and --denoiser-opt naming one key, in either order, or twice */
     const char *twice[][2] = {
         {"--weights a.tza --denoiser-opt weights=b.tza", "key 'weights' given twice"},
         {"--denoiser-opt weights=b.tza --weights a.tza", "key 'weights' given twice"},
         {"--weights a.tza --weights b.tza", "key 'weights' given twice"},
-        {"--input-scale 2 --denoiser-opt input_scale=auto", "key 'input_scale' given twice"},
-        {"--denoiser-command true --denoiser-opt command=false", "key 'command' given twice"},
+        {"--input-scale 2 --denoiser-opt input_scale=auto",
+         "key 'input_scale' given twice"},
+        {"--denoiser-command true --denoiser-opt command=false",
+         "key 'command' given twice"},
     };
     for (size_t i = 0; i < sizeof twice / sizeof twice[0]; i++)
-        assert_one_line_error(run("denoise --color '%s' --denoiser gauss %s", color, twice[i][0]),
-                              twice[i][1]);
+        assert_one_line_error(
+            run("denoise --color '%s' --denoiser gauss %s", color, twice[i][0]),
+            twice[i][1]);
 
-    /* --denoiser-opt still sets the denoiser: the output is the library's gauss with sigma 3
-     * (not its default 2) */
-    assert_int_equal(run("denoise --color '%s' --denoiser gauss --denoiser-opt sigma=3 -o '%s'",
-                         color, mcp_test_path("dn_s3.exr")),
-                     0);
-    mcp_image *in = rgb_of(color), *got = rgb_of(mcp_test_path("dn_s3.exr")), *want = NULL;
+    /* --denoiser-opt still sets the denoiser: the output is the library's gauss with
+     * sigma 3 (not its default 2) */
+    assert_int_equal(
+        run("denoise --color '%s' --denoiser gauss --denoiser-opt sigma=3 -o '%s'", color,
+            mcp_test_path("dn_s3.exr")),
+        0);
+    mcp_image *in = rgb_of(color), *got = rgb_of(mcp_test_path("dn_s3.exr")),
+              *want = NULL;
     mcp_denoiser *den = NULL;
     const char *sigma[] = {"sigma=3"};
     assert_int_equal(mcp_denoiser_create_from_args("gauss", sigma, 1, &den), 0);
@@ -354,25 +376,30 @@ test_denoiser_flags(void **state)
     mcp_denoiser_free(den);
 
     /* the same flags in the other commands */
-    assert_int_equal(run("estimate '%s' --denoiser gauss --denoiser-opt sigma=2 --json", dump), 0);
+    assert_int_equal(
+        run("estimate '%s' --denoiser gauss --denoiser-opt sigma=2 --json", dump), 0);
     cJSON *j = cJSON_Parse(out);
     assert_non_null(j);
     assert_string_equal(cJSON_GetObjectItem(j, "denoiser")->valuestring, "gauss");
     cJSON_Delete(j);
     assert_one_line_error(run("estimate '%s' --denoiser gauss --weights '%s'", dump, w),
                           "unknown key 'weights' in denoiser 'gauss'");
+    assert_one_line_error(run("estimate '%s' --denoiser gauss --denoiser-opt sigma=2 "
+                              "--denoiser-opt sigma=3",
+                              dump),
+                          "key 'sigma' given twice");
     assert_one_line_error(
-        run("estimate '%s' --denoiser gauss --denoiser-opt sigma=2 --denoiser-opt sigma=3", dump),
-        "key 'sigma' given twice");
-    assert_one_line_error(run("blend --quiet '%s' -o '%s' --denoiser gauss --weights '%s'", dump,
-                              mcp_test_path("dn_blend"), w),
-                          "unknown key 'weights' in denoiser 'gauss'");
-    assert_one_line_error(run("perceptual '%s' '%s' -o '%s' --denoiser gauss --weights '%s'", color,
-                              color, mcp_test_path("dn_perc"), w),
-                          "unknown key 'weights' in denoiser 'gauss'");
-    assert_one_line_error(run("perceptual '%s' '%s' -o '%s' --weights a --denoiser-opt weights=b",
-                              color, color, mcp_test_path("dn_perc")),
-                          "key 'weights' given twice");
+        run("blend --quiet '%s' -o '%s' --denoiser gauss --weights '%s'", dump,
+            mcp_test_path("dn_blend"), w),
+        "unknown key 'weights' in denoiser 'gauss'");
+    assert_one_line_error(
+        run("perceptual '%s' '%s' -o '%s' --denoiser gauss --weights '%s'", color, color,
+            mcp_test_path("dn_perc"), w),
+        "unknown key 'weights' in denoiser 'gauss'");
+    assert_one_line_error(
+        run("perceptual '%s' '%s' -o '%s' --weights a --denoiser-opt weights=b", color,
+            color, mcp_test_path("dn_perc")),
+        "key 'weights' given twice");
 
     /* every one of them lists the shorthands */
     const char *cmds[] = {"denoise", "estimate", "blend", "perceptual"};
@@ -399,8 +426,8 @@ test_merge_and_variance_sources(void **state)
         parts[k] = sample_dump();
         for (int i = 0; i < 16 * 8 * 3; i++)
             parts[k]->color->data[i] += 0.1f * (float)((k * 7 + i) % 5);
-        assert_int_equal(mcp_dump_write(parts[k], mcp_test_path(names[k]), MCP_CONV_PBRT, NULL),
-                         0);
+        assert_int_equal(
+            mcp_dump_write(parts[k], mcp_test_path(names[k]), MCP_CONV_PBRT, NULL), 0);
     }
     mcp_dump *want = NULL, *got = NULL;
     assert_int_equal(mcp_dump_merge((const mcp_dump *const *)parts, 4, NULL, &want), 0);
@@ -408,46 +435,54 @@ test_merge_and_variance_sources(void **state)
                          mcp_test_path(names[1]), mcp_test_path(names[2]),
                          mcp_test_path(names[3]), mcp_test_path("merged.exr")),
                      0);
-    assert_non_null(strstr(out, "512 spp; variance of the mean from their spread (3 degrees"));
+    assert_non_null(
+        strstr(out, "512 spp; variance of the mean from their spread (3 degrees"));
     assert_int_equal(mcp_dump_read(mcp_test_path("merged.exr"), &got), 0);
     assert_int_equal(got->variance_source, MCP_VARSRC_REPLICATES);
     assert_true(mcp_test_max_abs_diff(got->color, want->color) == 0);
     for (int i = 0; i < 16 * 8 * 3; i++)
         assert_close(got->var_of_mean->data[i], want->var_of_mean->data[i], 1e-6, 1e-12);
     assert_int_equal(run("info '%s'", mcp_test_path("merged.exr")), 0);
-    assert_non_null(strstr(out, "replicates: the spread of 4 renders (3 degrees of freedom)"));
+    assert_non_null(
+        strstr(out, "replicates: the spread of 4 renders (3 degrees of freedom)"));
     assert_int_equal(run("info '%s'", mcp_test_path(names[0])), 0);
     assert_non_null(strstr(out, "per-sample / n (assumes independent samples"));
     /* estimate says what the variance rests on */
-    assert_int_equal(run("estimate '%s' --denoiser gauss --json", mcp_test_path("merged.exr")),
-                     0);
+    assert_int_equal(
+        run("estimate '%s' --denoiser gauss --json", mcp_test_path("merged.exr")), 0);
     cJSON *j = cJSON_Parse(out);
     assert_non_null(j);
-    assert_string_equal(cJSON_GetObjectItem(j, "variance_source")->valuestring, "replicates");
+    assert_string_equal(cJSON_GetObjectItem(j, "variance_source")->valuestring,
+                        "replicates");
     assert_true(cJSON_GetObjectItem(j, "variance_dof")->valuedouble == 3);
     cJSON_Delete(j);
-    assert_int_equal(run("estimate '%s' --denoiser gauss --json", mcp_test_path(names[0])), 0);
+    assert_int_equal(
+        run("estimate '%s' --denoiser gauss --json", mcp_test_path(names[0])), 0);
     j = cJSON_Parse(out);
-    assert_string_equal(cJSON_GetObjectItem(j, "variance_source")->valuestring, "per-sample");
+    assert_string_equal(cJSON_GetObjectItem(j, "variance_source")->valuestring,
+                        "per-sample");
     assert_non_null(cJSON_GetObjectItem(j, "variance_note"));
     cJSON_Delete(j);
     /* the job input: a glob, merged once, the same dump */
-    mcp_test_write_text(mcp_test_path("merge.yaml"),
-                        "inputs:\n  frame: {replicates: rep*.exr}\n"
-                        "  progress: {series: [rep0.exr, merged.exr], variance_from: increments}\n"
-                        "output: merge_out\n"
-                        "stages:\n  - info: {input: frame}\n"
-                        "  - estimate: {input: progress, denoiser: gauss, taus: [0.5]}\n"
-                        "  - estimate: {input: frame, output: default}\n");
+    mcp_test_write_text(
+        mcp_test_path("merge.yaml"),
+        "inputs:\n  frame: {replicates: rep*.exr}\n"
+        "  progress: {series: [rep0.exr, merged.exr], variance_from: increments}\n"
+        "output: merge_out\n"
+        "stages:\n  - info: {input: frame}\n"
+        "  - estimate: {input: progress, denoiser: gauss, taus: [0.5]}\n"
+        "  - estimate: {input: frame, output: default}\n");
     assert_int_equal(run("run --json '%s'", mcp_test_path("merge.yaml")), 0);
     j = cJSON_Parse(out);
     assert_non_null(j);
     const cJSON *info = cJSON_GetArrayItem(cJSON_GetObjectItem(j, "sections"), 0);
-    assert_string_equal(cJSON_GetObjectItem(info, "variance_source")->valuestring, "replicates");
+    assert_string_equal(cJSON_GetObjectItem(info, "variance_source")->valuestring,
+                        "replicates");
     assert_true(cJSON_GetObjectItem(info, "spp")->valuedouble == 512);
     /* a stage without denoiser: the default, the U-Net (the dumps have features) */
     const cJSON *est = cJSON_GetArrayItem(cJSON_GetObjectItem(j, "sections"), 2);
-    assert_string_equal(cJSON_GetObjectItem(est, "denoiser")->valuestring, "default (unet)");
+    assert_string_equal(cJSON_GetObjectItem(est, "denoiser")->valuestring,
+                        "default (unet)");
     cJSON_Delete(j);
     /* blend on the stratified texture series: the source, the measured ratio and the
        line in blend.json. By default (auto) its increments, which show Variance/n 2x
@@ -459,7 +494,8 @@ test_merge_and_variance_sources(void **state)
         assert_int_equal(run("blend '%s/samples/fixtures/strat/texture/series/"
                              "texture_spp%%04d.exr' --spp 32,64,128 --denoiser gauss "
                              "--no-flip --quiet -o '%s'%s",
-                             MCP_TEST_SOURCE_DIR, mcp_test_path("strat_blend"), sources[k]),
+                             MCP_TEST_SOURCE_DIR, mcp_test_path("strat_blend"),
+                             sources[k]),
                          0);
         char *text = mcp_test_read_text(mcp_test_path("strat_blend/blend.json"));
         cJSON *b = cJSON_Parse(text);
@@ -470,11 +506,14 @@ test_merge_and_variance_sources(void **state)
         double ratio = cJSON_GetObjectItem(b, "variance_ratio")->valuedouble;
         assert_true(ratio > 1.6 && ratio < 2.4);
         int used = k < 2;
-        const cJSON *line = cJSON_GetObjectItem(b, used ? "variance_choice" : "variance_warning");
+        const cJSON *line =
+            cJSON_GetObjectItem(b, used ? "variance_choice" : "variance_warning");
         assert_non_null(line);
-        assert_null(cJSON_GetObjectItem(b, used ? "variance_warning" : "variance_choice"));
-        assert_non_null(strstr(line->valuestring, used ? "the estimates use the increments"
-                                                       : "use --variance-from increments"));
+        assert_null(
+            cJSON_GetObjectItem(b, used ? "variance_warning" : "variance_choice"));
+        assert_non_null(
+            strstr(line->valuestring, used ? "the estimates use the increments"
+                                           : "use --variance-from increments"));
         /* stderr says it when the choice was automatic, or warns when Variance/n is
            kept; asked for (--variance-from increments), it is no news */
         if (k == 1)
@@ -485,18 +524,19 @@ test_merge_and_variance_sources(void **state)
         cJSON_Delete(b);
     }
     /* errors: one render; a pattern that matches nothing; a bad variance_from */
-    assert_one_line_error(run("merge '%s' -o '%s'", mcp_test_path(names[0]),
-                              mcp_test_path("m1.exr")),
-                          "at least 2");
+    assert_one_line_error(
+        run("merge '%s' -o '%s'", mcp_test_path(names[0]), mcp_test_path("m1.exr")),
+        "at least 2");
     assert_int_equal(access(mcp_test_path("m1.exr"), F_OK), -1);
     mcp_test_write_text(mcp_test_path("merge_bad.yaml"),
                         "inputs:\n  frame: {replicates: none*.exr}\n"
                         "stages:\n  - info: {input: frame}\n");
     assert_one_line_error(run("run '%s'", mcp_test_path("merge_bad.yaml")),
                           "merge_bad.yaml:2: replicates: no file matches");
-    mcp_test_write_text(mcp_test_path("merge_bad2.yaml"),
-                        "inputs:\n  p: {series: [rep0.exr, merged.exr], variance_from: spread}\n"
-                        "stages:\n  - info: {input: p}\n");
+    mcp_test_write_text(
+        mcp_test_path("merge_bad2.yaml"),
+        "inputs:\n  p: {series: [rep0.exr, merged.exr], variance_from: spread}\n"
+        "stages:\n  - info: {input: p}\n");
     assert_one_line_error(run("run '%s'", mcp_test_path("merge_bad2.yaml")),
                           "variance_from must be auto, file or increments");
     mcp_dump_free(want);
@@ -518,18 +558,19 @@ test_help_and_version(void **state)
     assert_non_null(strstr(out, "convert"));
     /* every subcommand accepts --quiet (main takes it for those that do not parse it),
        and a "--quiet" after "--" is left for the subcommand */
-    static const char *const subs[] = {"info",     "convert", "merge",  "run",
-                                       "submit",   "collect", "metrics", "denoise",
-                                       "perceptual", "estimate", "blend", "adaptive"};
+    static const char *const subs[] = {"info",       "convert",  "merge",   "run",
+                                       "submit",     "collect",  "metrics", "denoise",
+                                       "perceptual", "estimate", "blend",   "adaptive"};
     for (size_t i = 0; i < sizeof subs / sizeof *subs; i++) {
         int rc = run("%s --quiet --help", subs[i]);
         if (rc != 0) fail_msg("mcpost %s --quiet --help: %d: %s", subs[i], rc, err);
         assert_non_null(strstr(out, "usage"));
     }
-    assert_int_equal(run("estimate '%s/samples/fixtures/cornell/series/cornell_spp0016.exr' "
-                         "--denoiser gauss --probes 1 --quiet --json",
-                         MCP_TEST_SOURCE_DIR),
-                     0);
+    assert_int_equal(
+        run("estimate '%s/samples/fixtures/cornell/series/cornell_spp0016.exr' "
+            "--denoiser gauss --probes 1 --quiet --json",
+            MCP_TEST_SOURCE_DIR),
+        0);
     assert_int_equal(run("info --quiet -- --quiet"), 1);
     assert_non_null(strstr(err, "--quiet"));
 }
@@ -538,10 +579,10 @@ test_help_and_version(void **state)
 static void
 assert_usage_error(int status, const char *needle)
 {
-    if (status != 2 || strncmp(err, "mcpost metrics: ", 16) != 0 || !strstr(err, needle) ||
-        strchr(err, '\n') != err + strlen(err) - 1)
-        fail_msg("status %d, stderr \"%s\", wanted a usage error with \"%s\"", status, err,
-                 needle);
+    if (status != 2 || strncmp(err, "mcpost metrics: ", 16) != 0 ||
+        !strstr(err, needle) || strchr(err, '\n') != err + strlen(err) - 1)
+        fail_msg("status %d, stderr \"%s\", wanted a usage error with \"%s\"", status,
+                 err, needle);
 }
 
 /* The last line of out (without its newline). */
@@ -555,9 +596,10 @@ last_line(void)
     return nl ? nl + 1 : out;
 }
 
-#define CORNELL_PAIR                                                                       \
-    "'" MCP_TEST_SOURCE_DIR "/samples/fixtures/cornell/series/cornell_spp0016.exr' '"       \
-    MCP_TEST_SOURCE_DIR "/samples/fixtures/cornell/cornell_reference.exr' --no-spectra "     \
+#define CORNELL_PAIR                                                                     \
+    "'" MCP_TEST_SOURCE_DIR                                                              \
+    "/samples/fixtures/cornell/series/cornell_spp0016.exr' '" MCP_TEST_SOURCE_DIR        \
+    "/samples/fixtures/cornell/cornell_reference.exr' --no-spectra "                     \
     "--flip ldr"
 
 /* Gates on the 16-spp Cornell box (LDR-FLIP about 0.135, relMSE about 0.40): the
@@ -574,12 +616,14 @@ test_metrics_gates(void **state)
     assert_int_equal(run("metrics " CORNELL_PAIR " --fail 'flip_ldr.mean > 0.15' "
                          "--warn 'relmse >= 0.3' --warn 'psnr<10'"),
                      3);
-    assert_true(!strncmp(last_line(), "WARNING: relmse >= 0.3 (0.39", strlen("WARNING: relmse >= 0.3 (0.39")));
+    assert_true(!strncmp(last_line(), "WARNING: relmse >= 0.3 (0.39",
+                         strlen("WARNING: relmse >= 0.3 (0.39")));
     assert_null(strstr(last_line(), "psnr"));
     assert_int_equal(run("metrics " CORNELL_PAIR " --fail 'flip_ldr.mean > 0.12' "
                          "--warn 'relmse >= 0.3'"),
                      4);
-    assert_true(!strncmp(last_line(), "FAILURE: flip_ldr.mean > 0.12 (0.13", strlen("FAILURE: flip_ldr.mean > 0.12 (0.13")));
+    assert_true(!strncmp(last_line(), "FAILURE: flip_ldr.mean > 0.12 (0.13",
+                         strlen("FAILURE: flip_ldr.mean > 0.12 (0.13")));
     /* --json: the gate object, and still the gate's status */
     assert_int_equal(run("metrics --json " CORNELL_PAIR " --fail 'flip_ldr.mean<=0.12' "
                          "--warn 'relse_percentiles.value.0 > 0.001' --warn 'mse > 1'"),
@@ -629,9 +673,8 @@ test_metrics_percent_gates(void **state)
     mcp_image_free(test);
     mcp_image_free(ref);
 #define PCT_PAIR "'%s' '%s' --no-spectra --flip ldr"
-    assert_int_equal(run("metrics " PCT_PAIR " --fail-percent 'relse 0.1 5%%'", t_path,
-                         r_path),
-                     4);
+    assert_int_equal(
+        run("metrics " PCT_PAIR " --fail-percent 'relse 0.1 5%%'", t_path, r_path), 4);
     assert_string_equal(last_line(),
                         "FAILURE: relse > 0.1 on more than 5% of the pixels (7%)");
     assert_int_equal(run("metrics " PCT_PAIR " --fail-percent 'relse 0.1 7' "
@@ -653,10 +696,12 @@ test_metrics_percent_gates(void **state)
     cJSON *j = cJSON_Parse(out);
     const cJSON *above = cJSON_GetObjectItem(j, "pixels_above");
     assert_int_equal(cJSON_GetArraySize(above), 2);
-    assert_string_equal(cJSON_GetObjectItem(cJSON_GetArrayItem(above, 0), "map")->valuestring,
-                        "relse");
-    assert_true(cJSON_GetObjectItem(cJSON_GetArrayItem(above, 0), "percent")->valuedouble == 7.0);
-    assert_true(cJSON_GetObjectItem(cJSON_GetArrayItem(above, 1), "percent")->valuedouble == 0.0);
+    assert_string_equal(
+        cJSON_GetObjectItem(cJSON_GetArrayItem(above, 0), "map")->valuestring, "relse");
+    assert_true(
+        cJSON_GetObjectItem(cJSON_GetArrayItem(above, 0), "percent")->valuedouble == 7.0);
+    assert_true(
+        cJSON_GetObjectItem(cJSON_GetArrayItem(above, 1), "percent")->valuedouble == 0.0);
     cJSON_Delete(j);
 
     /* FLIP: the share agrees with a count over the FLIP map written by -o */
@@ -666,8 +711,10 @@ test_metrics_percent_gates(void **state)
                          dir),
                      0);
     j = cJSON_Parse(out);
-    double share = cJSON_GetObjectItem(cJSON_GetArrayItem(cJSON_GetObjectItem(j, "pixels_above"), 0),
-                                       "percent")->valuedouble;
+    double share =
+        cJSON_GetObjectItem(cJSON_GetArrayItem(cJSON_GetObjectItem(j, "pixels_above"), 0),
+                            "percent")
+            ->valuedouble;
     char path[4300];
     snprintf(path, sizeof path, "%s/flip_ldr.exr", dir);
     mcp_image *map = NULL;
@@ -681,13 +728,15 @@ test_metrics_percent_gates(void **state)
     mcp_flip_stats st;
     assert_int_equal(mcp_flip_statistics(map->data, (size_t)n, &st), 0);
     const cJSON *fl = cJSON_GetObjectItem(j, "flip_ldr");
-    assert_true(cJSON_GetObjectItem(fl, "weighted_median")->valuedouble == st.weighted_median);
+    assert_true(cJSON_GetObjectItem(fl, "weighted_median")->valuedouble ==
+                st.weighted_median);
     assert_true(cJSON_GetObjectItem(fl, "max")->valuedouble == st.max);
     const cJSON *counts =
         cJSON_GetObjectItem(cJSON_GetObjectItem(j, "flip_histogram"), "flip_ldr");
     assert_int_equal(cJSON_GetArraySize(counts), MCP_FLIP_HISTOGRAM_BUCKETS);
     for (int i = 0; i < MCP_FLIP_HISTOGRAM_BUCKETS; i++)
-        assert_true(cJSON_GetArrayItem(counts, i)->valuedouble == (double)st.histogram[i]);
+        assert_true(cJSON_GetArrayItem(counts, i)->valuedouble ==
+                    (double)st.histogram[i]);
     mcp_image_free(map);
     cJSON_Delete(j);
 
@@ -698,8 +747,9 @@ test_metrics_percent_gates(void **state)
                        "want MAP THRESHOLD PERCENT");
     assert_usage_error(run("metrics " CORNELL_PAIR " --fail-percent 'relse 0.1 120'"),
                        "PERCENT in [0, 100]");
-    assert_usage_error(run("metrics " CORNELL_PAIR " --fail-percent 'flip_hdr 0.1 1'"),
-                       "no share of pixels above 0.1 in flip_hdr (is that FLIP computed?)");
+    assert_usage_error(
+        run("metrics " CORNELL_PAIR " --fail-percent 'flip_hdr 0.1 1'"),
+        "no share of pixels above 0.1 in flip_hdr (is that FLIP computed?)");
 #undef PCT_PAIR
 }
 
@@ -713,17 +763,20 @@ test_metrics_several_tests(void **state)
     (void)state;
     const char *csv = mcp_test_path("several.csv"), *dir = mcp_test_path("several");
 #define SERIES MCP_TEST_SOURCE_DIR "/samples/fixtures/cornell/series/"
-#define THREE "'" SERIES "cornell_spp0016.exr' '" SERIES "cornell_spp0064.exr' '" \
-    SERIES "cornell_spp0256.exr' '" MCP_TEST_SOURCE_DIR \
+#define THREE                                                                            \
+    "'" SERIES "cornell_spp0016.exr' '" SERIES "cornell_spp0064.exr' '" SERIES           \
+    "cornell_spp0256.exr' '" MCP_TEST_SOURCE_DIR                                         \
     "/samples/fixtures/cornell/cornell_reference.exr' --no-spectra --flip ldr"
-    assert_int_equal(run("metrics " THREE " --fail 'flip_ldr.mean > 0.13' --csv '%s' -o '%s'",
+    assert_int_equal(run("metrics " THREE
+                         " --fail 'flip_ldr.mean > 0.13' --csv '%s' -o '%s'",
                          csv, dir),
                      4);
     assert_string_equal(last_line(), "FAILURE: " SERIES "cornell_spp0016.exr: "
                                      "flip_ldr.mean > 0.13 (0.135066)");
     /* the text: a header and a row per test, each with its verdict */
     assert_non_null(strstr(out, "LDR-FLIP median"));
-    const char *row16 = strstr(out, "cornell_spp0016.exr "), *row64 = strstr(out, "cornell_spp0064.exr ");
+    const char *row16 = strstr(out, "cornell_spp0016.exr "),
+               *row64 = strstr(out, "cornell_spp0064.exr ");
     assert_non_null(row16);
     assert_non_null(row64);
     assert_non_null(strstr(row16, "FAILURE\n"));
@@ -751,15 +804,17 @@ test_metrics_several_tests(void **state)
         const cJSON *one = cJSON_GetArrayItem(tests, t);
         const cJSON *fl = cJSON_GetObjectItem(one, "flip_ldr");
         char want[200];
-        snprintf(want, sizeof want, ",%.9g,%.9g,", cJSON_GetObjectItem(fl, "mean")->valuedouble,
+        snprintf(want, sizeof want, ",%.9g,%.9g,",
+                 cJSON_GetObjectItem(fl, "mean")->valuedouble,
                  cJSON_GetObjectItem(fl, "weighted_median")->valuedouble);
         char *end = strchr(row, '\n');
         *end = '\0';
         assert_non_null(strstr(row, want));
         assert_non_null(strstr(row, t == 0 ? ",FAILURE" : ",PASS"));
         row = end + 1;
-        assert_string_equal(cJSON_GetObjectItem(cJSON_GetObjectItem(one, "gate"), "verdict")->valuestring,
-                            t == 0 ? "failure" : "pass");
+        assert_string_equal(
+            cJSON_GetObjectItem(cJSON_GetObjectItem(one, "gate"), "verdict")->valuestring,
+            t == 0 ? "failure" : "pass");
     }
     free(text);
     cJSON_Delete(j);
@@ -773,7 +828,8 @@ test_metrics_several_tests(void **state)
     assert_non_null(strstr(text, "cornell_spp0256.exr"));
     assert_non_null(strstr(text, "fill-opacity=\"0.45\""));
     free(text);
-    assert_usage_error(run("metrics '" SERIES "cornell_spp0016.exr'"), "give TEST... and REF");
+    assert_usage_error(run("metrics '" SERIES "cornell_spp0016.exr'"),
+                       "give TEST... and REF");
 #undef THREE
 #undef SERIES
 }
@@ -807,10 +863,11 @@ test_metrics_percent_job(void **state)
     snprintf(text, sizeof text, job, MCP_TEST_SOURCE_DIR, MCP_TEST_SOURCE_DIR,
              MCP_TEST_SOURCE_DIR, "flip_hdr 0.3 1%");
     mcp_test_write_text(path, text);
-    assert_one_line_error(run("run --check '%s'", path),
-                          "percent.yaml:14: fail_percent: 'flip_hdr > 0.3 on more than 1% of "
-                          "the pixels': the metrics have no share of pixels above 0.3 in "
-                          "flip_hdr");
+    assert_one_line_error(
+        run("run --check '%s'", path),
+        "percent.yaml:14: fail_percent: 'flip_hdr > 0.3 on more than 1% of "
+        "the pixels': the metrics have no share of pixels above 0.3 in "
+        "flip_hdr");
     snprintf(text, sizeof text, job, MCP_TEST_SOURCE_DIR, MCP_TEST_SOURCE_DIR,
              MCP_TEST_SOURCE_DIR, "flip_ldr 0.3 1%");
     mcp_test_write_text(path, text);
@@ -818,28 +875,36 @@ test_metrics_percent_job(void **state)
     cJSON *j = cJSON_Parse(out);
     const cJSON *sec = cJSON_GetArrayItem(cJSON_GetObjectItem(j, "sections"), 0);
     assert_string_equal(
-        cJSON_GetArrayItem(cJSON_GetObjectItem(cJSON_GetObjectItem(sec, "gate"), "failed"), 0)
+        cJSON_GetArrayItem(
+            cJSON_GetObjectItem(cJSON_GetObjectItem(sec, "gate"), "failed"), 0)
             ->valuestring,
         "flip_ldr > 0.3 on more than 1% of the pixels");
-    double share = cJSON_GetObjectItem(cJSON_GetArrayItem(cJSON_GetObjectItem(sec, "pixels_above"), 0),
-                                       "percent")->valuedouble;
-    double cmp_median = cJSON_GetObjectItem(
-        cJSON_GetObjectItem(cJSON_GetObjectItem(sec, "compare"), "flip_ldr"),
-        "weighted_median")->valuedouble;
+    double share =
+        cJSON_GetObjectItem(
+            cJSON_GetArrayItem(cJSON_GetObjectItem(sec, "pixels_above"), 0), "percent")
+            ->valuedouble;
+    double cmp_median =
+        cJSON_GetObjectItem(
+            cJSON_GetObjectItem(cJSON_GetObjectItem(sec, "compare"), "flip_ldr"),
+            "weighted_median")
+            ->valuedouble;
     /* the LDR-FLIP histogram's bars: input and compare overlapped */
     const cJSON *plot = NULL, *p;
-    cJSON_ArrayForEach(p, cJSON_GetObjectItem(sec, "plots"))
-    if (!strcmp(cJSON_GetObjectItem(p, "title")->valuestring, "weighted LDR-FLIP histogram"))
-        plot = p;
+    cJSON_ArrayForEach(
+        p, cJSON_GetObjectItem(
+               sec, "plots")) if (!strcmp(cJSON_GetObjectItem(p, "title")->valuestring,
+                                          "weighted LDR-FLIP histogram")) plot = p;
     assert_non_null(plot);
     const cJSON *series = cJSON_GetObjectItem(plot, "series");
     assert_int_equal(cJSON_GetArraySize(series), 2);
-    assert_string_equal(cJSON_GetObjectItem(cJSON_GetArrayItem(series, 1), "name")->valuestring,
-                        "better");
-    assert_string_equal(cJSON_GetObjectItem(cJSON_GetArrayItem(series, 0), "style")->valuestring,
-                        "bars");
-    assert_string_equal(cJSON_GetArrayItem(cJSON_GetObjectItem(sec, "json_only"), 0)->valuestring,
-                        "flip_histogram");
+    assert_string_equal(
+        cJSON_GetObjectItem(cJSON_GetArrayItem(series, 1), "name")->valuestring,
+        "better");
+    assert_string_equal(
+        cJSON_GetObjectItem(cJSON_GetArrayItem(series, 0), "style")->valuestring, "bars");
+    assert_string_equal(
+        cJSON_GetArrayItem(cJSON_GetObjectItem(sec, "json_only"), 0)->valuestring,
+        "flip_histogram");
     cJSON_Delete(j);
     /* the same numbers from the command */
     assert_int_equal(run("metrics --json --no-spectra --flip ldr "
@@ -851,12 +916,16 @@ test_metrics_percent_job(void **state)
                      4);
     j = cJSON_Parse(out);
     const cJSON *tests = cJSON_GetObjectItem(j, "tests");
-    assert_true(cJSON_GetObjectItem(cJSON_GetArrayItem(cJSON_GetObjectItem(
-                    cJSON_GetArrayItem(tests, 0), "pixels_above"), 0), "percent")
-                    ->valuedouble == share);
-    assert_true(cJSON_GetObjectItem(cJSON_GetObjectItem(cJSON_GetArrayItem(tests, 1),
-                                                        "flip_ldr"),
-                                    "weighted_median")->valuedouble == cmp_median);
+    assert_true(
+        cJSON_GetObjectItem(
+            cJSON_GetArrayItem(
+                cJSON_GetObjectItem(cJSON_GetArrayItem(tests, 0), "pixels_above"), 0),
+            "percent")
+            ->valuedouble == share);
+    assert_true(
+        cJSON_GetObjectItem(cJSON_GetObjectItem(cJSON_GetArrayItem(tests, 1), "flip_ldr"),
+                            "weighted_median")
+            ->valuedouble == cmp_median);
     cJSON_Delete(j);
 }
 
@@ -883,8 +952,9 @@ test_metrics_gate_job(void **state)
     snprintf(text, sizeof text, job, MCP_TEST_SOURCE_DIR, MCP_TEST_SOURCE_DIR,
              "flip_ldr.men > 0.1");
     mcp_test_write_text(path, text);
-    assert_one_line_error(run("run --check '%s'", path),
-                          "gate.yaml:11: fail: 'flip_ldr.men > 0.1': no figure 'flip_ldr.men'");
+    assert_one_line_error(
+        run("run --check '%s'", path),
+        "gate.yaml:11: fail: 'flip_ldr.men > 0.1': no figure 'flip_ldr.men'");
     assert_int_equal(run("run -q '%s'", path), 1);
     snprintf(text, sizeof text, job, MCP_TEST_SOURCE_DIR, MCP_TEST_SOURCE_DIR,
              "flip_ldr.mean > 0.12");
@@ -895,11 +965,12 @@ test_metrics_gate_job(void **state)
     const cJSON *sec = cJSON_GetArrayItem(cJSON_GetObjectItem(j, "sections"), 0);
     const cJSON *g = cJSON_GetObjectItem(sec, "gate");
     assert_string_equal(cJSON_GetObjectItem(g, "verdict")->valuestring, "failure");
-    assert_string_equal(cJSON_GetArrayItem(cJSON_GetObjectItem(g, "failed"), 0)->valuestring,
-                        "flip_ldr.mean > 0.12");
-    assert_string_equal(cJSON_GetObjectItem(cJSON_GetObjectItem(sec, "verdict"), "level")
-                            ->valuestring,
-                        "bad");
+    assert_string_equal(
+        cJSON_GetArrayItem(cJSON_GetObjectItem(g, "failed"), 0)->valuestring,
+        "flip_ldr.mean > 0.12");
+    assert_string_equal(
+        cJSON_GetObjectItem(cJSON_GetObjectItem(sec, "verdict"), "level")->valuestring,
+        "bad");
     cJSON_Delete(j);
     /* only the warning holding: status 3, an info verdict; none: 0, good */
     snprintf(text, sizeof text, job, MCP_TEST_SOURCE_DIR, MCP_TEST_SOURCE_DIR,
@@ -914,9 +985,9 @@ test_metrics_gate_job(void **state)
     assert_int_equal(run("run -q --json '%s'", path), 0);
     j = cJSON_Parse(out);
     sec = cJSON_GetArrayItem(cJSON_GetObjectItem(j, "sections"), 0);
-    assert_string_equal(cJSON_GetObjectItem(cJSON_GetObjectItem(sec, "verdict"), "level")
-                            ->valuestring,
-                        "good");
+    assert_string_equal(
+        cJSON_GetObjectItem(cJSON_GetObjectItem(sec, "verdict"), "level")->valuestring,
+        "good");
     cJSON_Delete(j);
 }
 

@@ -54,15 +54,15 @@ static void
 test_figures_and_gates(void **state)
 {
     (void)state;
-    const char *ref = scratch("ref.exr"), *a = scratch("a.exr"),
-               *b = scratch("b.exr"), *dir = scratch("page");
+    const char *ref = scratch("ref.exr"), *a = scratch("a.exr"), *b = scratch("b.exr"),
+               *dir = scratch("page");
     char path[4400];
     write_pair(ref, a, 0.1f);
     write_pair(ref, b, 0.3f);
     /* no gate: exit 0, the figures in JSON */
-    assert_int_equal(run("compare '%s' '%s' '%s' -o '%s' --json --flip none --quiet", ref,
-                         a, b, dir),
-                     0);
+    assert_int_equal(
+        run("compare '%s' '%s' '%s' -o '%s' --json --flip none --quiet", ref, a, b, dir),
+        0);
     cJSON *doc = cJSON_Parse(out);
     assert_non_null(doc);
     const cJSON *tests = cJSON_GetObjectItem(doc, "tests");
@@ -71,14 +71,15 @@ test_figures_and_gates(void **state)
     for (int i = 0; i < 2; i++) {
         const cJSON *t = cJSON_GetArrayItem(tests, i);
         assert_close(cJSON_GetObjectItem(t, "mse")->valuedouble, d[i] * d[i], 1e-5, 0);
-        assert_close(cJSON_GetObjectItem(t, "relmse")->valuedouble, d[i] * d[i] / 0.26, 1e-5,
-                     0);
+        assert_close(cJSON_GetObjectItem(t, "relmse")->valuedouble, d[i] * d[i] / 0.26,
+                     1e-5, 0);
         assert_null(cJSON_GetObjectItem(t, "images")); /* page matters stay on the page */
     }
     cJSON_Delete(doc);
     /* one folder per test, and the page */
-    const char *files[] = {"report.html", "report.json", "test1/test.png", "test1/test.exr",
-                           "test1/reference.png", "test2/relse.png", "test2/test.exr"};
+    const char *files[] = {"report.html",    "report.json",         "test1/test.png",
+                           "test1/test.exr", "test1/reference.png", "test2/relse.png",
+                           "test2/test.exr"};
     for (size_t i = 0; i < sizeof files / sizeof *files; i++) {
         snprintf(path, sizeof path, "%s/%s", dir, files[i]);
         if (!exists(path)) fail_msg("no %s", path);
@@ -105,12 +106,14 @@ test_figures_and_gates(void **state)
     assert_string_equal(cols, "[\"test\",\"relMSE\",\"PSNR (dB)\",\"gate\"]");
     free(cols);
     const cJSON *rows = cJSON_GetObjectItem(table, "rows");
-    assert_string_equal(cJSON_GetArrayItem(cJSON_GetArrayItem(rows, 0), 3)->valuestring, "pass");
+    assert_string_equal(cJSON_GetArrayItem(cJSON_GetArrayItem(rows, 0), 3)->valuestring,
+                        "pass");
     assert_string_equal(cJSON_GetArrayItem(cJSON_GetArrayItem(rows, 1), 3)->valuestring,
                         "warning");
     assert_close(cJSON_GetArrayItem(cJSON_GetArrayItem(rows, 1), 1)->valuedouble,
                  0.09 / 0.26, 1e-5, 0);
-    const char *sv = cJSON_GetObjectItem(cJSON_GetObjectItem(sum, "verdict"), "text")->valuestring;
+    const char *sv =
+        cJSON_GetObjectItem(cJSON_GetObjectItem(sum, "verdict"), "text")->valuestring;
     assert_non_null(strstr(sv, "gate WARNING, first in "));
     assert_non_null(strstr(sv, "b.exr"));
     cJSON_Delete(rep);
@@ -119,9 +122,10 @@ test_figures_and_gates(void **state)
                          ref, a, b, dir),
                      4);
     assert_non_null(strstr(out, "FAILURE: mse > 0.05"));
-    assert_int_equal(run("compare '%s' '%s' -o '%s' --flip none --quiet --fail 'mse > 0.05'",
-                         ref, a, dir),
-                     0);
+    assert_int_equal(
+        run("compare '%s' '%s' -o '%s' --flip none --quiet --fail 'mse > 0.05'", ref, a,
+            dir),
+        0);
     assert_non_null(strstr(out, "\nPASS\n"));
     /* one test: the files directly in the folder, the rerun replaced test1/ */
     snprintf(path, sizeof path, "%s/test.exr", dir);
@@ -136,7 +140,8 @@ test_figures_and_gates(void **state)
     const cJSON *s = cJSON_GetArrayItem(cJSON_GetObjectItem(doc, "sections"), 0);
     const cJSON *v = cJSON_GetObjectItem(s, "verdict");
     assert_string_equal(cJSON_GetObjectItem(v, "level")->valuestring, "good");
-    assert_non_null(strstr(cJSON_GetObjectItem(v, "text")->valuestring, "gate PASS; relMSE"));
+    assert_non_null(
+        strstr(cJSON_GetObjectItem(v, "text")->valuestring, "gate PASS; relMSE"));
     cJSON_Delete(doc);
 }
 
@@ -149,7 +154,8 @@ unbase64(const char *s, size_t n, size_t *len)
     unsigned v = 0;
     int bits = 0;
     for (size_t i = 0; i < n && s[i] != '='; i++) {
-        const char *tab = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+        const char *tab =
+            "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
         const char *p = strchr(tab, s[i]);
         assert_non_null(p);
         v = v << 6 | (unsigned)(p - tab);
@@ -177,15 +183,17 @@ test_page_embeds_linear_values(void **state)
     mcp_image *r = mcp_test_constant(20, 12, 3, 1.0f, RGB);
     assert_int_equal(mcp_image_write(t, test, NULL), 0);
     assert_int_equal(mcp_image_write(r, ref, NULL), 0);
-    assert_int_equal(run("compare '%s' '%s' -o '%s' --quiet --exposure -1.5 --display aces",
-                         ref, test, dir),
-                     0);
+    assert_int_equal(
+        run("compare '%s' '%s' -o '%s' --quiet --exposure -1.5 --display aces", ref, test,
+            dir),
+        0);
     char path[4400];
     snprintf(path, sizeof path, "%s/report.html", dir);
     char *html = mcp_test_read_text(path);
     /* the display starts where --exposure and --display say */
-    assert_non_null(strstr(html, "class=\"dsp-exp\" type=\"range\" min=\"-10\" max=\"10\" "
-                                 "step=\"0.25\" value=\"-1.5\""));
+    assert_non_null(strstr(html,
+                           "class=\"dsp-exp\" type=\"range\" min=\"-10\" max=\"10\" "
+                           "step=\"0.25\" value=\"-1.5\""));
     assert_non_null(strstr(html, "<option value=\"aces\" selected>"));
     /* the first HDR image is the test */
     const char *at = strstr(html, "data-hdr=\"");
@@ -220,7 +228,8 @@ test_page_embeds_linear_values(void **state)
     assert_int_equal(back->width * back->height, 20 * 12);
     for (int p = 0; p < 20 * 12; p++) /* as written: half floats at worst (2^-11) */
         for (int c = 0; c < 3; c++)
-            assert_close(mcp_image_px(back, p % 20, p / 20)[c], t->data[3 * p + c], 1e-3, 0);
+            assert_close(mcp_image_px(back, p % 20, p / 20)[c], t->data[3 * p + c], 1e-3,
+                         0);
     mcp_image_free(back);
     mcp_image_free(t);
     mcp_image_free(r);
@@ -241,11 +250,12 @@ test_errors(void **state)
     assert_non_null(strstr(err, "give REF and at least one TEST"));
     assert_int_equal(run("compare '%s' '%s' -o '%s' --display sepia", ref, ref, dir), 2);
     assert_non_null(strstr(err, "unknown display 'sepia'"));
-    assert_int_equal(run("compare '%s' '%s' -o '%s' --fail 'no_such > 1'", ref, ref, dir), 2);
+    assert_int_equal(run("compare '%s' '%s' -o '%s' --fail 'no_such > 1'", ref, ref, dir),
+                     2);
     assert_non_null(strstr(err, "no figure 'no_such'"));
     /* a test of another size, found after the reference is read: one line, no folder */
-    assert_int_equal(run("compare '%s' '%s' '%s' -o '%s' --quiet", ref, ref, small_path, dir),
-                     1);
+    assert_int_equal(
+        run("compare '%s' '%s' '%s' -o '%s' --quiet", ref, ref, small_path, dir), 1);
     assert_non_null(strstr(err, "does not match"));
     assert_non_null(strstr(err, "e_small.exr"));
     assert_ptr_equal(strchr(err, '\n'), err + strlen(err) - 1);

@@ -1,11 +1,11 @@
 /* test_frames_cli.c: frame jobs through the executable (docs/frames.md) -- `run` over
  * frames in parallel into OUTPUT/NNNN/, resuming (complete frames skipped, a killed
  * frame run again), --force and --frames, a failed frame that does not stop the others,
- * a series pattern with frame and spp tokens, `collect` (figures per frame equal to each frame's own, worst first, the failed frame
- * listed), and `submit --slurm` (the scripts, and the sbatch calls through a stand-in
- * sbatch). The real Slurm runs in tests/cli/slurm_frames.sh. The frames are 4 renders
- * of the procedural scene with other seeds; their MSE is recomputed here from the
- * files. */
+ * a series pattern with frame and spp tokens, `collect` (figures per frame equal to each
+ * frame's own, worst first, the failed frame listed), and `submit --slurm` (the scripts,
+ * and the sbatch calls through a stand-in sbatch). The real Slurm runs in
+ * tests/cli/slurm_frames.sh. The frames are 4 renders of the procedural scene with other
+ * seeds; their MSE is recomputed here from the files. */
 #include "testing.h"
 
 #include <cjson/cJSON.h>
@@ -30,8 +30,7 @@ sh(const char *fmt, ...)
     va_start(ap, fmt);
     vsnprintf(cmd, sizeof cmd, fmt, ap);
     va_end(ap);
-    if (system(cmd) != 0)
-        fail_msg("failed: %s", cmd);
+    if (system(cmd) != 0) fail_msg("failed: %s", cmd);
 }
 
 static cJSON *
@@ -45,8 +44,7 @@ read_json(const char *fmt, ...)
     char *text = mcp_test_read_text(path);
     cJSON *j = cJSON_Parse(text);
     free(text);
-    if (!j)
-        fail_msg("%s: not JSON", path);
+    if (!j) fail_msg("%s: not JSON", path);
     return j;
 }
 
@@ -70,8 +68,7 @@ frame_figure(cJSON *rep, const char *key)
     cJSON_ArrayForEach(sec, cJSON_GetObjectItem(rep, "sections"))
     {
         cJSON *v = cJSON_GetObjectItem(sec, key);
-        if (cJSON_IsNumber(v))
-            return v->valuedouble;
+        if (cJSON_IsNumber(v)) return v->valuedouble;
     }
     fail_msg("no figure %s", key);
     return NAN;
@@ -254,16 +251,18 @@ test_a_failed_frame_is_listed_by_run_and_collect(void **state)
     assert_int_equal(cJSON_GetArraySize(list), 5);
     /* the table: complete frames by relMSE, largest first, each with its page */
     cJSON *table = NULL, *t;
-    cJSON_ArrayForEach(t, cJSON_GetObjectItem(sec, "tables"))
-    if (!strcmp(cJSON_GetObjectItem(t, "title")->valuestring, "frames, worst first"))
-        table = t;
+    cJSON_ArrayForEach(
+        t, cJSON_GetObjectItem(
+               sec, "tables")) if (!strcmp(cJSON_GetObjectItem(t, "title")->valuestring,
+                                           "frames, worst first")) table = t;
     assert_non_null(table);
     cJSON *rows = cJSON_GetObjectItem(table, "rows");
     assert_int_equal(cJSON_GetArraySize(rows), 4);
     double last = INFINITY;
     int rel_col = 2; /* frame, MSE, relMSE, ... */
     assert_string_equal(
-        cJSON_GetArrayItem(cJSON_GetObjectItem(table, "columns"), rel_col)->valuestring, rel_key);
+        cJSON_GetArrayItem(cJSON_GetObjectItem(table, "columns"), rel_col)->valuestring,
+        rel_key);
     cJSON *row;
     cJSON_ArrayForEach(row, rows)
     {
@@ -274,8 +273,8 @@ test_a_failed_frame_is_listed_by_run_and_collect(void **state)
         last = v;
         char page[32];
         snprintf(page, sizeof page, "%04d/report.html", n);
-        assert_string_equal(cJSON_GetArrayItem(row, cJSON_GetArraySize(row) - 1)->valuestring,
-                            page);
+        assert_string_equal(
+            cJSON_GetArrayItem(row, cJSON_GetArraySize(row) - 1)->valuestring, page);
     }
     /* a plot per figure, against the frame number */
     assert_true(cJSON_GetArraySize(cJSON_GetObjectItem(sec, "plots")) >= 4);
@@ -335,22 +334,34 @@ test_collect_gates(void **state)
         mcp_image_free(map);
     }
     /* thresholds between the frames' values: the middle of the sorted four */
-    double r_sorted[4] = {rel[1], rel[2], rel[3], rel[4]}, s_sorted[4] = {share[1], share[2], share[3], share[4]};
+    double r_sorted[4] = {rel[1], rel[2], rel[3], rel[4]},
+           s_sorted[4] = {share[1], share[2], share[3], share[4]};
     for (int i = 0; i < 4; i++)
         for (int j = i + 1; j < 4; j++) {
-            if (r_sorted[j] < r_sorted[i]) { double t = r_sorted[i]; r_sorted[i] = r_sorted[j]; r_sorted[j] = t; }
-            if (s_sorted[j] < s_sorted[i]) { double t = s_sorted[i]; s_sorted[i] = s_sorted[j]; s_sorted[j] = t; }
+            if (r_sorted[j] < r_sorted[i]) {
+                double t = r_sorted[i];
+                r_sorted[i] = r_sorted[j];
+                r_sorted[j] = t;
+            }
+            if (s_sorted[j] < s_sorted[i]) {
+                double t = s_sorted[i];
+                s_sorted[i] = s_sorted[j];
+                s_sorted[j] = t;
+            }
         }
-    double r_cut = 0.5 * (r_sorted[1] + r_sorted[2]), s_cut = 0.5 * (s_sorted[1] + s_sorted[2]);
+    double r_cut = 0.5 * (r_sorted[1] + r_sorted[2]),
+           s_cut = 0.5 * (s_sorted[1] + s_sorted[2]);
     assert_true(r_sorted[1] < r_sorted[2]);
     assert_true(s_sorted[1] < s_sorted[2]);
-    assert_int_equal(run("collect '%s/out/gates.yaml' --quiet --warn 'relmse > %.9g'", dir, r_cut), 3);
+    assert_int_equal(
+        run("collect '%s/out/gates.yaml' --quiet --warn 'relmse > %.9g'", dir, r_cut), 3);
     char want[512];
     int len = snprintf(want, sizeof want, "WARNING");
     for (int f = 1, shown = 0; f <= 4; f++)
         if (rel[f] > r_cut)
-            len += snprintf(want + len, sizeof want - len, "%s frame %d: noisy: relmse > %g (%.6g)",
-                            shown++ ? ";" : ":", f, r_cut, rel[f]);
+            len += snprintf(want + len, sizeof want - len,
+                            "%s frame %d: noisy: relmse > %g (%.6g)", shown++ ? ";" : ":",
+                            f, r_cut, rel[f]);
     assert_string_equal(out, (strcat(want, "\n"), want));
     /* a failure outranks it: only the failing frames are named */
     assert_int_equal(run("collect '%s/out/gates.yaml' --quiet --warn 'relmse > %.9g' "
@@ -363,20 +374,28 @@ test_collect_gates(void **state)
     {
         int n = cJSON_GetObjectItem(f, "frame")->valueint;
         const char *g = cJSON_GetObjectItem(f, "gate")->valuestring;
-        assert_string_equal(g, share[n] > s_cut ? "failure" : rel[n] > r_cut ? "warning" : "pass");
+        assert_string_equal(g, share[n] > s_cut ? "failure"
+                               : rel[n] > r_cut ? "warning"
+                                                : "pass");
         snprintf(want, sizeof want, "frame %d: noisy: flip_ldr > 0.4 on more than", n);
         assert_true((strstr(out, want) != NULL) == (share[n] > s_cut));
     }
-    assert_string_equal(cJSON_GetObjectItem(cJSON_GetObjectItem(sec, "verdict"), "level")->valuestring,
-                        "bad");
+    assert_string_equal(
+        cJSON_GetObjectItem(cJSON_GetObjectItem(sec, "verdict"), "level")->valuestring,
+        "bad");
     cJSON_Delete(rep);
     /* every frame within bounds: PASS and 0 */
-    assert_int_equal(run("collect '%s/out/gates.yaml' --quiet --fail 'relmse > 1e9'", dir), 0);
+    assert_int_equal(
+        run("collect '%s/out/gates.yaml' --quiet --fail 'relmse > 1e9'", dir), 0);
     assert_string_equal(out, "PASS\n");
     /* a figure no section has: exit 1, naming the frame */
-    assert_int_equal(run("collect '%s/out/gates.yaml' --quiet --fail 'flip_ldr.median > 0.1'", dir), 1);
-    assert_non_null(strstr(err, "frame 1, metrics of noisy: --fail 'flip_ldr.median > 0.1': no figure"));
-    assert_int_equal(run("collect '%s/out/gates.yaml' --fail-percent 'flip 1 2'", dir), 2);
+    assert_int_equal(
+        run("collect '%s/out/gates.yaml' --quiet --fail 'flip_ldr.median > 0.1'", dir),
+        1);
+    assert_non_null(strstr(
+        err, "frame 1, metrics of noisy: --fail 'flip_ldr.median > 0.1': no figure"));
+    assert_int_equal(run("collect '%s/out/gates.yaml' --fail-percent 'flip 1 2'", dir),
+                     2);
 }
 
 /* A series with both tokens: '#' (or the first %d) is the frame, the other the spp. */
@@ -388,13 +407,14 @@ test_a_shared_mistake_stops_the_shot_before_its_frames(void **state)
     (void)state;
     char path[4200];
     snprintf(path, sizeof path, "%s/typo.yaml", dir);
-    mcp_test_write_text(path, "frames: 1-4\n"
-                              "inputs:\n"
-                              "  noisy: {dump: r/shot_####_0000.exr}\n"
-                              "  reference: {image: r/shot_%04d_truth.exr}\n"
-                              "output: out/typo\n"
-                              "stages:\n"
-                              "  - metrics: {input: noisy, reference: reference, flp: [ldr]}\n");
+    mcp_test_write_text(
+        path, "frames: 1-4\n"
+              "inputs:\n"
+              "  noisy: {dump: r/shot_####_0000.exr}\n"
+              "  reference: {image: r/shot_%04d_truth.exr}\n"
+              "output: out/typo\n"
+              "stages:\n"
+              "  - metrics: {input: noisy, reference: reference, flp: [ldr]}\n");
     const char *cmds[] = {"run '%s' -j 2", "submit '%s' --slurm --dry-run"};
     for (int i = 0; i < 2; i++) {
         assert_int_equal(run(cmds[i], path), 1);
@@ -436,7 +456,7 @@ test_series_pattern_holds_frame_and_spp(void **state)
         cJSON *rep = read_json("%s/out/series%d/0001/report.json", dir, p), *sec, *t;
         double mse4 = NAN;
         cJSON_ArrayForEach(sec, cJSON_GetObjectItem(rep, "sections"))
-        cJSON_ArrayForEach(t, cJSON_GetObjectItem(sec, "tables"))
+            cJSON_ArrayForEach(t, cJSON_GetObjectItem(sec, "tables"))
         {
             cJSON *row = cJSON_GetArrayItem(cJSON_GetObjectItem(t, "rows"), 0);
             if (!strcmp(cJSON_GetObjectItem(t, "title")->valuestring,
@@ -471,17 +491,20 @@ test_submit_writes_an_array_job_and_its_collect_job(void **state)
     assert_non_null(strstr(s, "#SBATCH --cpus-per-task=3\n"));
     assert_non_null(strstr(s, "export OMP_NUM_THREADS=${SLURM_CPUS_PER_TASK:-1}\n"));
     char want[8192];
-    snprintf(want, sizeof want, "run '%s' --frames \"$SLURM_ARRAY_TASK_ID\" --quiet\n", job);
+    snprintf(want, sizeof want, "run '%s' --frames \"$SLURM_ARRAY_TASK_ID\" --quiet\n",
+             job);
     assert_non_null(strstr(s, want));
     free(s);
-    s = mcp_test_read_text((snprintf(out, sizeof out, "%s/slurm/collect.sbatch", outdir), out));
+    s = mcp_test_read_text(
+        (snprintf(out, sizeof out, "%s/slurm/collect.sbatch", outdir), out));
     snprintf(want, sizeof want, "collect '%s'\n", outdir);
     assert_non_null(strstr(s, want));
     free(s);
 
     /* chunks: task i runs chunk i */
     assert_int_equal(run("submit '%s' --slurm --dry-run --chunk 3", job), 0);
-    s = mcp_test_read_text((snprintf(out, sizeof out, "%s/slurm/frames.sbatch", outdir), out));
+    s = mcp_test_read_text(
+        (snprintf(out, sizeof out, "%s/slurm/frames.sbatch", outdir), out));
     assert_non_null(strstr(s, "#SBATCH --array=0-1\n"));
     assert_non_null(strstr(s, "FRAMES=(\"1-3\" \"4,10\")\n"));
     assert_non_null(strstr(s, "--frames \"${FRAMES[$SLURM_ARRAY_TASK_ID]}\""));
@@ -501,18 +524,21 @@ test_submit_writes_an_array_job_and_its_collect_job(void **state)
     snprintf(cmd, sizeof cmd, "PATH='%s':\"$PATH\" '%s' %s > '%s/submit.out' 2>&1", bin,
              MCP_TEST_MCPOST, args, dir);
     assert_int_equal(system(cmd), 0);
-    char *printed = mcp_test_read_text((snprintf(out, sizeof out, "%s/submit.out", dir), out));
+    char *printed =
+        mcp_test_read_text((snprintf(out, sizeof out, "%s/submit.out", dir), out));
     assert_non_null(strstr(printed, "submitted job 42: 3 array tasks for 3 frames"));
     assert_non_null(strstr(printed, "submitted job 43: mcpost collect"));
     free(printed);
-    char *log = mcp_test_read_text((snprintf(out, sizeof out, "%s/sbatch.log", bin), out));
+    char *log =
+        mcp_test_read_text((snprintf(out, sizeof out, "%s/sbatch.log", bin), out));
     snprintf(want, sizeof want, "--parsable %s/slurm/frames.sbatch\n", outdir);
     assert_non_null(strstr(log, want));
-    snprintf(want, sizeof want, "--parsable --dependency=afterany:42 %s/slurm/collect.sbatch\n",
-             outdir);
+    snprintf(want, sizeof want,
+             "--parsable --dependency=afterany:42 %s/slurm/collect.sbatch\n", outdir);
     assert_non_null(strstr(log, want));
     free(log);
-    s = mcp_test_read_text((snprintf(out, sizeof out, "%s/slurm/frames.sbatch", outdir), out));
+    s = mcp_test_read_text(
+        (snprintf(out, sizeof out, "%s/slurm/frames.sbatch", outdir), out));
     assert_non_null(strstr(s, "#SBATCH --array=3-4,10\n")); /* 1 and 2 were complete */
     free(s);
 

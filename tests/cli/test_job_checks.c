@@ -22,18 +22,18 @@ write_job(const char *path, const char *outdir, const char *stages)
 {
     char text[8192];
     snprintf(text, sizeof text,
-             "inputs:\n"                                                            /* 1 */
-             "  noisy: {dump: " FIXTURES "/series/cornell_spp0016.exr}\n"           /* 2 */
-             "  reference: {image: " FIXTURES "/cornell_reference.exr}\n"           /* 3 */
-             "  progress:\n"                                                        /* 4 */
-             "    series: " FIXTURES "/series/cornell_spp%%04d.exr\n"               /* 5 */
-             "    spp: [16, 32, 64]\n"                                              /* 6 */
-             "  s0: {dump: " FIXTURES "/singles/cornell_single00.exr}\n"            /* 7 */
-             "  s1: {dump: " FIXTURES "/singles/cornell_single01.exr}\n"            /* 8 */
-             "output: %s\n"                                                         /* 9 */
-             "stages:\n"                                                            /* 10 */
-             "  - info: {input: noisy}\n"                                           /* 11 */
-             "  - convert: {input: reference, output: reference.png}\n"             /* 12 */
+             "inputs:\n"                                                  /* 1 */
+             "  noisy: {dump: " FIXTURES "/series/cornell_spp0016.exr}\n" /* 2 */
+             "  reference: {image: " FIXTURES "/cornell_reference.exr}\n" /* 3 */
+             "  progress:\n"                                              /* 4 */
+             "    series: " FIXTURES "/series/cornell_spp%%04d.exr\n"     /* 5 */
+             "    spp: [16, 32, 64]\n"                                    /* 6 */
+             "  s0: {dump: " FIXTURES "/singles/cornell_single00.exr}\n"  /* 7 */
+             "  s1: {dump: " FIXTURES "/singles/cornell_single01.exr}\n"  /* 8 */
+             "output: %s\n"                                               /* 9 */
+             "stages:\n"                                                  /* 10 */
+             "  - info: {input: noisy}\n"                                 /* 11 */
+             "  - convert: {input: reference, output: reference.png}\n"   /* 12 */
              "%s",
              outdir, stages);
     mcp_test_write_text(path, text);
@@ -64,14 +64,13 @@ assert_fails_up_front(const char *stages, int line, const char *needle)
     int status = mcp_test_run_mcpost(args, out, sizeof out, err, sizeof err);
     if (status == 0 || strncmp(err, want, strlen(want)) != 0 || !strstr(err, needle) ||
         strchr(err, '\n') != err + strlen(err) - 1)
-        fail_msg("run: status %d, stderr \"%s\", wanted one line \"%s...%s\"", status, err,
-                 want, needle);
+        fail_msg("run: status %d, stderr \"%s\", wanted one line \"%s...%s\"", status,
+                 err, want, needle);
     if (strstr(err + strlen(want), job_copy))
         fail_msg("the job file's place is given twice: %s", err);
     if (strstr(err, "[1/") || strstr(out, "[1/"))
         fail_msg("a stage ran before the error: %s", err);
-    if (exists(outdir))
-        fail_msg("the output folder %s was made", outdir);
+    if (exists(outdir)) fail_msg("the output folder %s was made", outdir);
 
     char first_error[1 << 12];
     snprintf(first_error, sizeof first_error, "%s", err);
@@ -80,8 +79,7 @@ assert_fails_up_front(const char *stages, int line, const char *needle)
     if (status == 0 || strcmp(err, first_error) != 0)
         fail_msg("run --check: status %d, stderr \"%s\", wanted \"%s\"", status, err,
                  first_error);
-    if (exists(outdir))
-        fail_msg("run --check made the output folder %s", outdir);
+    if (exists(outdir)) fail_msg("run --check made the output folder %s", outdir);
 }
 
 /* The issue's case: the third stage is wrong; the first two (info, convert: they
@@ -90,11 +88,11 @@ static void
 test_third_stage_wrong_nothing_runs(void **state)
 {
     (void)state;
-    assert_fails_up_front("  - estimate:\n"        /* 13 */
-                          "      input: noisy\n"   /* 14 */
+    assert_fails_up_front("  - estimate:\n"         /* 13 */
+                          "      input: noisy\n"    /* 14 */
                           "      denoiser: gauss\n" /* 15 */
-                          "      tau: 0.01\n"      /* 16 */
-                          "      probes: many\n",  /* 17 */
+                          "      tau: 0.01\n"       /* 16 */
+                          "      probes: many\n",   /* 17 */
                           17, "probes must be");
 }
 
@@ -103,7 +101,7 @@ static void
 test_info_names_a_missing_input(void **state)
 {
     (void)state;
-    assert_fails_up_front("  - info: {input: noisy}\n"  /* 13 */
+    assert_fails_up_front("  - info: {input: noisy}\n"   /* 13 */
                           "  - info: {input: nosuch}\n", /* 14 */
                           14, "no input or result called 'nosuch'");
 }
@@ -112,10 +110,10 @@ static void
 test_convert_bad_pixel_type(void **state)
 {
     (void)state;
-    assert_fails_up_front("  - convert:\n"                 /* 13 */
-                          "      input: noisy\n"           /* 14 */
-                          "      output: noisy.exr\n"      /* 15 */
-                          "      pixel: double\n",         /* 16 */
+    assert_fails_up_front("  - convert:\n"            /* 13 */
+                          "      input: noisy\n"      /* 14 */
+                          "      output: noisy.exr\n" /* 15 */
+                          "      pixel: double\n",    /* 16 */
                           16, "unknown pixel type 'double' (known: float, half)");
     assert_fails_up_front("  - convert: {input: noisy, output: noisy.xyz}\n", /* 13 */
                           13, "unknown image format");
@@ -125,15 +123,15 @@ static void
 test_metrics_bad_tone_mapper_and_kinds(void **state)
 {
     (void)state;
-    assert_fails_up_front("  - metrics:\n"                  /* 13 */
-                          "      input: noisy\n"            /* 14 */
-                          "      reference: reference\n"    /* 15 */
-                          "      tone_mapper: sepia\n",     /* 16 */
+    assert_fails_up_front("  - metrics:\n"               /* 13 */
+                          "      input: noisy\n"         /* 14 */
+                          "      reference: reference\n" /* 15 */
+                          "      tone_mapper: sepia\n",  /* 16 */
                           16, "sepia");
     /* a dump where a series is wanted */
-    assert_fails_up_front("  - metrics:\n"                  /* 13 */
-                          "      series: noisy\n"           /* 14 */
-                          "      reference: reference\n",   /* 15 */
+    assert_fails_up_front("  - metrics:\n"                /* 13 */
+                          "      series: noisy\n"         /* 14 */
+                          "      reference: reference\n", /* 15 */
                           14, "'noisy' is not a series");
 }
 
@@ -141,20 +139,20 @@ static void
 test_estimate_bad_metric(void **state)
 {
     (void)state;
-    assert_fails_up_front("  - estimate:\n"                 /* 13 */
-                          "      input: noisy\n"            /* 14 */
-                          "      denoiser: gauss\n"         /* 15 */
-                          "      metric: relse-wrong\n",    /* 16 */
+    assert_fails_up_front("  - estimate:\n"              /* 13 */
+                          "      input: noisy\n"         /* 14 */
+                          "      denoiser: gauss\n"      /* 15 */
+                          "      metric: relse-wrong\n", /* 16 */
                           16, "unknown metric 'relse-wrong'");
     /* the denoiser's settings are checked too */
-    assert_fails_up_front("  - estimate:\n"                          /* 13 */
-                          "      input: noisy\n"                     /* 14 */
+    assert_fails_up_front("  - estimate:\n"                             /* 13 */
+                          "      input: noisy\n"                        /* 14 */
                           "      denoiser: {name: gauss, sigma: -1}\n", /* 15 */
                           15, "sigma");
     /* an unknown setting of the denoiser, named at its line once */
-    assert_fails_up_front("  - estimate:\n"                               /* 13 */
-                          "      input: noisy\n"                          /* 14 */
-                          "      denoiser: {name: gauss, sigmaa: 2}\n",   /* 15 */
+    assert_fails_up_front("  - estimate:\n"                             /* 13 */
+                          "      input: noisy\n"                        /* 14 */
+                          "      denoiser: {name: gauss, sigmaa: 2}\n", /* 15 */
                           15, "unknown key 'sigmaa' in denoiser 'gauss'");
 }
 
@@ -162,11 +160,11 @@ static void
 test_blend_bad_fit(void **state)
 {
     (void)state;
-    assert_fails_up_front("  - blend:\n"                    /* 13 */
-                          "      input: progress\n"         /* 14 */
-                          "      reference: reference\n"    /* 15 */
-                          "      denoiser: gauss\n"         /* 16 */
-                          "      fit: sideways\n",          /* 17 */
+    assert_fails_up_front("  - blend:\n"                 /* 13 */
+                          "      input: progress\n"      /* 14 */
+                          "      reference: reference\n" /* 15 */
+                          "      denoiser: gauss\n"      /* 16 */
+                          "      fit: sideways\n",       /* 17 */
                           17, "sideways");
     assert_fails_up_front("  - blend: {input: noisy, denoiser: gauss}\n", /* 13 */
                           13, "'noisy' is not a series");
@@ -176,16 +174,16 @@ static void
 test_perceptual_bad_method_and_missing_kernel_file(void **state)
 {
     (void)state;
-    assert_fails_up_front("  - perceptual:\n"                /* 13 */
-                          "      candidates: [s0, s1]\n"     /* 14 */
-                          "      surrogate: reference\n"     /* 15 */
-                          "      reference: reference\n"     /* 16 */
-                          "      method: sideways\n",        /* 17 */
+    assert_fails_up_front("  - perceptual:\n"            /* 13 */
+                          "      candidates: [s0, s1]\n" /* 14 */
+                          "      surrogate: reference\n" /* 15 */
+                          "      reference: reference\n" /* 16 */
+                          "      method: sideways\n",    /* 17 */
                           17, "sideways");
-    assert_fails_up_front("  - perceptual:\n"                 /* 13 */
-                          "      candidates: [s0, s1]\n"      /* 14 */
-                          "      surrogate: reference\n"      /* 15 */
-                          "      reference: reference\n"      /* 16 */
+    assert_fails_up_front("  - perceptual:\n"                   /* 13 */
+                          "      candidates: [s0, s1]\n"        /* 14 */
+                          "      surrogate: reference\n"        /* 15 */
+                          "      reference: reference\n"        /* 16 */
                           "      kernel: no_such_kernel.exr\n", /* 17 */
                           17, "no such file");
 }
@@ -196,11 +194,11 @@ test_results_of_earlier_stages_only(void **state)
 {
     (void)state;
     assert_fails_up_front("  - metrics: {input: p, reference: reference}\n" /* 13 */
-                          "  - perceptual:\n"                                /* 14 */
-                          "      name: p\n"                                  /* 15 */
-                          "      candidates: [s0, s1]\n"                     /* 16 */
-                          "      surrogate: reference\n"                     /* 17 */
-                          "      reference: reference\n",                    /* 18 */
+                          "  - perceptual:\n"                               /* 14 */
+                          "      name: p\n"                                 /* 15 */
+                          "      candidates: [s0, s1]\n"                    /* 16 */
+                          "      surrogate: reference\n"                    /* 17 */
+                          "      reference: reference\n",                   /* 18 */
                           13, "no input or result called 'p'");
     const char *job = mcp_test_path("ordered.yaml");
     char job_copy[4096], args[4400];

@@ -108,7 +108,8 @@ start_slow_estimate(const char *dir, pid_t *shell)
     snprintf(pidfile, sizeof pidfile, "%s/denoiser.pid", dir);
     snprintf(args, sizeof args,
              "estimate " CORNELL "/series/cornell_spp0064.exr --quiet -o '%s/est' "
-             "--denoiser external --denoiser-command 'echo $$ > %s; exec sleep 60 # {color} {output}'",
+             "--denoiser external --denoiser-command 'echo $$ > %s; exec sleep 60 # "
+             "{color} {output}'",
              dir, pidfile);
     return start_until_pidfile(args, pidfile, shell);
 }
@@ -173,8 +174,9 @@ test_rerun_replaces_and_foreign_folder_is_refused(void **state)
     const char *dir = fresh_dir("estimate_rerun");
     char est[4200], path[4400];
     snprintf(est, sizeof est, "%s/est", dir);
-    const char *args = "estimate " CORNELL "/series/cornell_spp0064.exr --quiet --denoiser "
-                       "external --denoiser-command 'cp {color} {output}' -o";
+    const char *args =
+        "estimate " CORNELL "/series/cornell_spp0064.exr --quiet --denoiser "
+        "external --denoiser-command 'cp {color} {output}' -o";
     assert_int_equal(run("%s '%s'", args, est), 0);
     /* a file of the old output that the new one does not write goes with the old one */
     snprintf(path, sizeof path, "%s/stale.txt", est);
@@ -198,7 +200,6 @@ test_rerun_replaces_and_foreign_folder_is_refused(void **state)
     assert_non_null(strstr(err, "must be a folder of its own"));
 }
 
-
 /* The text of DIR/NAME (malloc'd). */
 static char *
 read_in(const char *dir, const char *name)
@@ -217,8 +218,9 @@ test_metrics_output_appears_whole(void **state)
     snprintf(m, sizeof m, "%s/m", dir);
     snprintf(bad, sizeof bad, "%s/broken.exr", dir);
     mcp_test_write_text(bad, "not an image");
-    const char *two = CORNELL "/series/cornell_spp0016.exr " CORNELL
-                              "/series/cornell_spp0064.exr " CORNELL "/cornell_reference.exr";
+    const char *two =
+        CORNELL "/series/cornell_spp0016.exr " CORNELL
+                "/series/cornell_spp0064.exr " CORNELL "/cornell_reference.exr";
     /* the second test cannot be read: the first one's maps were written, but no folder */
     assert_int_equal(run("metrics " CORNELL "/series/cornell_spp0016.exr '%s' " CORNELL
                          "/cornell_reference.exr --flip ldr --no-spectra -o '%s'",
@@ -228,9 +230,10 @@ test_metrics_output_appears_whole(void **state)
     assert_false(exists(m));
     assert_int_equal(count_named(dir, ".m."), 0);
     /* a good run writes it whole, the CSV asked for inside it included */
-    assert_int_equal(run("metrics %s --flip ldr --no-spectra -o '%s' --csv '%s/figures.csv'",
-                         two, m, m),
-                     0);
+    assert_int_equal(
+        run("metrics %s --flip ldr --no-spectra -o '%s' --csv '%s/figures.csv'", two, m,
+            m),
+        0);
     char *first = read_in(m, "metrics.json");
     snprintf(path, sizeof path, "%s/cornell_spp0016.flip_ldr.exr", m);
     assert_true(exists(path));
@@ -238,8 +241,8 @@ test_metrics_output_appears_whole(void **state)
     assert_true(exists(path));
     /* a failed rerun leaves the old output as it was; a good one replaces it (its
        metrics.json marks it as mcpost's) */
-    assert_int_equal(run("metrics '%s' " CORNELL "/cornell_reference.exr -o '%s'", bad, m),
-                     1);
+    assert_int_equal(
+        run("metrics '%s' " CORNELL "/cornell_reference.exr -o '%s'", bad, m), 1);
     char *same = read_in(m, "metrics.json");
     assert_string_equal(same, first);
     free(same);
@@ -258,9 +261,8 @@ test_metrics_output_appears_whole(void **state)
     char cmd[9000];
     snprintf(cmd, sizeof cmd, "cp " CORNELL "/cornell_reference.exr '%s'", inside);
     assert_int_equal(system(cmd), 0);
-    assert_int_equal(run("metrics " CORNELL "/series/cornell_spp0064.exr '%s' -o '%s'",
-                         inside, m),
-                     1);
+    assert_int_equal(
+        run("metrics " CORNELL "/series/cornell_spp0064.exr '%s' -o '%s'", inside, m), 1);
     assert_non_null(strstr(err, "is inside the output folder"));
     assert_true(exists(inside));
     assert_int_equal(count_named(dir, ".m."), 0);
@@ -274,10 +276,11 @@ test_adaptive_output_appears_whole(void **state)
     char a[4200], path[4400];
     snprintf(a, sizeof a, "%s/a", dir);
     /* the renderer fails in the second pass, after the first pass's files were written */
-    const char *args = "adaptive --size 16x16 --budget 32 --spp-per-iteration 16 "
-                       "--denoiser gauss --quiet -o '%s' --render \"test {pass} -lt %d && "
-                       "'" MCP_TEST_PROCEDURAL "' --sample-counts {counts} --pass {pass} "
-                       "--seed {seed} -o {output}\"";
+    const char *args =
+        "adaptive --size 16x16 --budget 32 --spp-per-iteration 16 "
+        "--denoiser gauss --quiet -o '%s' --render \"test {pass} -lt %d && "
+        "'" MCP_TEST_PROCEDURAL "' --sample-counts {counts} --pass {pass} "
+        "--seed {seed} -o {output}\"";
     assert_int_equal(run(args, a, 1), 1);
     assert_non_null(strstr(err, "pass 1: the render command"));
     assert_false(exists(a));
@@ -330,11 +333,10 @@ static void
 test_estimate_refuses_an_input_inside_its_output(void **state)
 {
     (void)state;
-    assert_input_inside_refused("estimate_inside",
-                                "estimate " CORNELL "/series/cornell_spp0064.exr "
-                                ESTIMATE_EXTERNAL,
-                                CORNELL "/series/cornell_spp0064.exr", "dump.exr",
-                                "estimate", ESTIMATE_EXTERNAL);
+    assert_input_inside_refused(
+        "estimate_inside",
+        "estimate " CORNELL "/series/cornell_spp0064.exr " ESTIMATE_EXTERNAL,
+        CORNELL "/series/cornell_spp0064.exr", "dump.exr", "estimate", ESTIMATE_EXTERNAL);
 }
 
 static void
@@ -359,7 +361,7 @@ test_perceptual_refuses_an_input_inside_its_output(void **state)
                                 CORNELL "/singles/cornell_single00.exr", "single00.exr",
                                 "perceptual",
                                 CORNELL "/singles/cornell_single0[1-3].exr "
-                                "-m permutation -s denoise --denoiser gauss");
+                                        "-m permutation -s denoise --denoiser gauss");
 }
 
 static void
@@ -382,19 +384,20 @@ write_slow_frame_job(const char *dir)
 {
     char job[4200], text[8192];
     snprintf(job, sizeof job, "%s/shot.yaml", dir);
-    snprintf(text, sizeof text,
-             "frames: 1-2\n"
-             "inputs:\n"
-             "  noisy: {dump: r/f_####_0000.exr}\n"
-             "output: out\n"
-             "stages:\n"
-             "  - estimate:\n"
-             "      input: noisy\n"
-             "      denoiser:\n"
-             "        name: external\n"
-             "        command: 'if [ -e %s/fail ]; then exit 3; elif [ -e %s/go ]; then cp "
-             "{color} {output}; else echo $$ > %s/denoiser.pid; exec sleep 60; fi'\n",
-             dir, dir, dir);
+    snprintf(
+        text, sizeof text,
+        "frames: 1-2\n"
+        "inputs:\n"
+        "  noisy: {dump: r/f_####_0000.exr}\n"
+        "output: out\n"
+        "stages:\n"
+        "  - estimate:\n"
+        "      input: noisy\n"
+        "      denoiser:\n"
+        "        name: external\n"
+        "        command: 'if [ -e %s/fail ]; then exit 3; elif [ -e %s/go ]; then cp "
+        "{color} {output}; else echo $$ > %s/denoiser.pid; exec sleep 60; fi'\n",
+        dir, dir, dir);
     mcp_test_write_text(job, text);
     for (int f = 1; f <= 2; f++) {
         char cmd[8400];
@@ -433,7 +436,8 @@ test_killed_frame_leaves_no_folder(void **state)
     assert_false(exists((snprintf(out, sizeof out, "%s/0001", out_dir), out)));
     assert_int_equal(count_named(out_dir, ".0001.tmp-"), 1);
     assert_int_equal(run("collect '%s'", out_dir), 1);
-    assert_non_null(strstr(err, "2 of 2 frames not complete: 1 (unfinished), 2 (missing)"));
+    assert_non_null(
+        strstr(err, "2 of 2 frames not complete: 1 (unfinished), 2 (missing)"));
     /* the next run removes what the killed one left, says so, and runs both */
     mcp_test_write_text(go, "");
     assert_int_equal(run("run '%s/shot.yaml'", dir), 0);

@@ -45,10 +45,11 @@ setup(void **state)
     omp_set_num_threads(1);
     snprintf(dir, sizeof dir, "%s", mcp_test_path("alloc"));
     char cmd[8192];
-    snprintf(cmd, sizeof cmd,
-             "mkdir -p '%s' && '%s' --width 8 --height 8 --spp 4 --singles 4 -o '%s/p' "
-             ">/dev/null && '%s' --width 8 --height 8 --spp 8 --seed 2 -o '%s/q' >/dev/null",
-             dir, MCP_TEST_PROCEDURAL, dir, MCP_TEST_PROCEDURAL, dir);
+    snprintf(
+        cmd, sizeof cmd,
+        "mkdir -p '%s' && '%s' --width 8 --height 8 --spp 4 --singles 4 -o '%s/p' "
+        ">/dev/null && '%s' --width 8 --height 8 --spp 8 --seed 2 -o '%s/q' >/dev/null",
+        dir, MCP_TEST_PROCEDURAL, dir, MCP_TEST_PROCEDURAL, dir);
     return system(cmd) == 0 ? 0 : -1;
 }
 
@@ -64,8 +65,7 @@ run_command(const char *args)
     argv[argc] = NULL;
     const mcp_command *cmd = NULL;
     for (const mcp_command *const *c = mcp_commands; *c; c++)
-        if (!strcmp((*c)->name, argv[0]))
-            cmd = *c;
+        if (!strcmp((*c)->name, argv[0])) cmd = *c;
     assert_non_null(cmd);
     /* the commands print results and notes: into a file, not the test's output */
     fflush(stdout);
@@ -107,11 +107,9 @@ static void
 assert_no_partial_files(const char *path)
 {
     DIR *d = opendir(path);
-    if (!d)
-        return; /* no folder: nothing written */
+    if (!d) return; /* no folder: nothing written */
     for (struct dirent *e; (e = readdir(d));) {
-        if (e->d_name[0] == '.')
-            continue;
+        if (e->d_name[0] == '.') continue;
         char file[4400];
         snprintf(file, sizeof file, "%s/%s", path, e->d_name);
         if (e->d_type == DT_DIR) {
@@ -135,8 +133,7 @@ assert_no_partial_files(const char *path)
             int whole = !strcmp(ext, ".json") ? n > 0 && strchr("}]", text[n - 1]) != NULL
                                               : strstr(text, "</html>") != NULL;
             free(text);
-            if (!whole)
-                fail_msg("partial output %s", file);
+            if (!whole) fail_msg("partial output %s", file);
         }
     }
     closedir(d);
@@ -195,7 +192,8 @@ test_estimate_fails_cleanly_at_every_allocation(void **state)
     (void)state;
     char args[4096], out[4096];
     snprintf(out, sizeof out, "%s/estimate-out", dir);
-    snprintf(args, sizeof args, "estimate %s/p_0000.exr --denoiser gauss -o %s", dir, out);
+    snprintf(args, sizeof args, "estimate %s/p_0000.exr --denoiser gauss -o %s", dir,
+             out);
     assert_true(fail_each_allocation(args, out) > 10);
 }
 
@@ -205,8 +203,8 @@ test_blend_fails_cleanly_at_every_allocation(void **state)
     (void)state;
     char args[4096], out[4096];
     snprintf(out, sizeof out, "%s/blend-out", dir);
-    snprintf(args, sizeof args, "blend %s/p_0000.exr %s/q_0000.exr --denoiser gauss -o %s",
-             dir, dir, out);
+    snprintf(args, sizeof args,
+             "blend %s/p_0000.exr %s/q_0000.exr --denoiser gauss -o %s", dir, dir, out);
     assert_true(fail_each_allocation(args, out) > 10);
 }
 
@@ -216,10 +214,11 @@ test_perceptual_fails_cleanly_at_every_allocation(void **state)
     (void)state;
     char args[4096], out[4096];
     snprintf(out, sizeof out, "%s/perceptual-out", dir);
-    snprintf(args, sizeof args,
-             "perceptual --denoiser gauss -o %s %s/p_single_0000.exr %s/p_single_0001.exr "
-             "%s/p_single_0002.exr %s/p_single_0003.exr",
-             out, dir, dir, dir, dir);
+    snprintf(
+        args, sizeof args,
+        "perceptual --denoiser gauss -o %s %s/p_single_0000.exr %s/p_single_0001.exr "
+        "%s/p_single_0002.exr %s/p_single_0003.exr",
+        out, dir, dir, dir, dir);
     assert_true(fail_each_allocation(args, out) > 10);
 }
 
@@ -229,8 +228,8 @@ test_compare_fails_cleanly_at_every_allocation(void **state)
     (void)state;
     char args[4096], out[4096];
     snprintf(out, sizeof out, "%s/compare-out", dir);
-    snprintf(args, sizeof args, "compare %s/p_0000.exr %s/q_0000.exr --flip ldr -o %s", dir,
-             dir, out);
+    snprintf(args, sizeof args, "compare %s/p_0000.exr %s/q_0000.exr --flip ldr -o %s",
+             dir, dir, out);
     assert_true(fail_each_allocation(args, out) > 10);
 }
 
@@ -243,16 +242,17 @@ test_full_disk_leaves_no_partial_output(void **state)
     (void)state;
     char args[4][4096], out[4096];
     snprintf(out, sizeof out, "%s/disk-out", dir);
-    snprintf(args[0], sizeof args[0], "estimate %s/p_0000.exr --denoiser gauss -o %s", dir,
-             out);
+    snprintf(args[0], sizeof args[0], "estimate %s/p_0000.exr --denoiser gauss -o %s",
+             dir, out);
     snprintf(args[1], sizeof args[1],
              "blend %s/p_0000.exr %s/q_0000.exr --denoiser gauss -o %s", dir, dir, out);
-    snprintf(args[2], sizeof args[2],
-             "perceptual --denoiser gauss -o %s %s/p_single_0000.exr %s/p_single_0001.exr "
-             "%s/p_single_0002.exr %s/p_single_0003.exr",
-             out, dir, dir, dir, dir);
-    snprintf(args[3], sizeof args[3], "compare %s/p_0000.exr %s/q_0000.exr -o %s", dir, dir,
-             out);
+    snprintf(
+        args[2], sizeof args[2],
+        "perceptual --denoiser gauss -o %s %s/p_single_0000.exr %s/p_single_0001.exr "
+        "%s/p_single_0002.exr %s/p_single_0003.exr",
+        out, dir, dir, dir, dir);
+    snprintf(args[3], sizeof args[3], "compare %s/p_0000.exr %s/q_0000.exr -o %s", dir,
+             dir, out);
     mcp_progress_set_quiet(1);
     void (*old)(int) = signal(SIGXFSZ, SIG_IGN);
     struct rlimit saved;

@@ -15,7 +15,8 @@ make_dump(int w, int h, double spp)
 {
     mcp_dump *d = calloc(1, sizeof *d);
     d->color = mcp_test_random(w, h, 3, 0.0f, 4.0f, 1, (const char *[]){"R", "G", "B"});
-    d->var_of_mean = mcp_test_random(w, h, 3, 0.0f, 0.5f, 2, (const char *[]){"R", "G", "B"});
+    d->var_of_mean =
+        mcp_test_random(w, h, 3, 0.0f, 0.5f, 2, (const char *[]){"R", "G", "B"});
     d->albedo = mcp_test_random(w, h, 3, 0.0f, 1.0f, 3, (const char *[]){"R", "G", "B"});
     d->normal = mcp_test_random(w, h, 3, -1.0f, 1.0f, 4, (const char *[]){"X", "Y", "Z"});
     d->spp = spp;
@@ -46,8 +47,7 @@ roundtrip(mcp_convention conv, const char *file, int give_spp)
     mcp_image_free(raw);
     mcp_dump_spec spec = mcp_dump_spec_defaults();
     spec.path = path;
-    if (give_spp)
-        spec.spp = 64;
+    if (give_spp) spec.spp = 64;
     assert_int_equal(mcp_dump_load(&spec, &back), 0);
     assert_int_equal(back->convention, conv);
     assert_true(back->spp == 64);
@@ -120,7 +120,8 @@ test_mcpost_convention_per_pixel_spp_and_covariance(void **state)
     d->spp_map = mcp_test_random(8, 6, 1, 1.0f, 100.0f, 9, (const char *[]){"n"});
     for (int i = 0; i < 48; i++)
         d->spp_map->data[i] = floorf(d->spp_map->data[i]);
-    d->cov_of_mean = mcp_test_random(8, 6, 3, -0.1f, 0.1f, 5, (const char *[]){"RG", "RB", "GB"});
+    d->cov_of_mean =
+        mcp_test_random(8, 6, 3, -0.1f, 0.1f, 5, (const char *[]){"RG", "RB", "GB"});
     const char *path = mcp_test_path("mcpost.exr");
     assert_int_equal(mcp_dump_write(d, path, MCP_CONV_MCPOST, NULL), 0);
     assert_int_equal(mcp_dump_read(path, &back), 0);
@@ -188,7 +189,8 @@ test_direct_read_matches_whole_image(void **state)
             /* tall enough for many chunks, so that they are decoded in parallel */
             mcp_dump *d = make_dump(37, 150, convs[i] == MCP_CONV_MCPOST ? 0 : 16);
             if (convs[i] == MCP_CONV_MCPOST) {
-                d->spp_map = mcp_test_random(37, 150, 1, 1.0f, 9.0f, 9, (const char *[]){"n"});
+                d->spp_map =
+                    mcp_test_random(37, 150, 1, 1.0f, 9.0f, 9, (const char *[]){"n"});
                 d->cov_of_mean = mcp_test_random(37, 150, 3, -0.1f, 0.1f, 5,
                                                  (const char *[]){"RG", "RB", "GB"});
             }
@@ -203,10 +205,12 @@ test_direct_read_matches_whole_image(void **state)
             spec.path = path;
             spec.spp = convs[i] == MCP_CONV_MITSUBA ? 16 : 0;
             spec.bad_values = variant == 1 ? MCP_BADVAL_ZERO : MCP_BADVAL_FAIL;
-            static char names[3][64]; /* variant 2: the colour's channels for the albedo */
+            static char names[3]
+                             [64]; /* variant 2: the colour's channels for the albedo */
             for (int k = 0; variant == 2 && k < 3; k++) {
                 snprintf(names[k], sizeof names[k], "%s%c",
-                         convs[i] == MCP_CONV_BLENDER ? "ViewLayer.Combined." : "", "RGB"[k]);
+                         convs[i] == MCP_CONV_BLENDER ? "ViewLayer.Combined." : "",
+                         "RGB"[k]);
                 spec.albedo[k] = names[k];
             }
             mcp_dump *direct = NULL, *whole = NULL;
@@ -217,9 +221,9 @@ test_direct_read_matches_whole_image(void **state)
             assert_same_dump(direct, whole);
             assert_int_equal(direct->n_bad_values, whole->n_bad_values);
             /* Mitsuba's second moment carries the colour's NaN into the variance too */
-            assert_true(variant == 1 ? direct->n_bad_values >= 2 : direct->n_bad_values == 0);
-            if (variant == 2)
-                assert_same_image(direct->albedo, direct->color);
+            assert_true(variant == 1 ? direct->n_bad_values >= 2
+                                     : direct->n_bad_values == 0);
+            if (variant == 2) assert_same_image(direct->albedo, direct->color);
             mcp_image_free(raw);
             mcp_dump_free(whole);
             mcp_dump_free(direct);
@@ -274,9 +278,10 @@ test_bad_values(void **state)
     mcp_image_px(img, 2, 1)[1] = NAN;
     mcp_image_px(img, 3, 1)[1] = INFINITY;
     mcp_dump *d = NULL;
-    assert_error_contains(mcp_dump_from_image(img, NULL, &d),
-                          "bad.exr: colour channel 'G' has 2 NaN/Inf values (first nan at "
-                          "pixel 2,1");
+    assert_error_contains(
+        mcp_dump_from_image(img, NULL, &d),
+        "bad.exr: colour channel 'G' has 2 NaN/Inf values (first nan at "
+        "pixel 2,1");
     mcp_dump_spec spec = mcp_dump_spec_defaults();
     spec.bad_values = MCP_BADVAL_ZERO;
     assert_int_equal(mcp_dump_from_image(img, &spec, &d), 0);
@@ -298,7 +303,8 @@ test_bad_values(void **state)
     /* missing colour channels */
     mcp_image *nocolor = mcp_test_constant(4, 4, 1, 0, (const char *[]){"Y"});
     mcp_image_set_source(nocolor, "grey.exr");
-    assert_error_contains(mcp_dump_from_image(nocolor, NULL, &d), "grey.exr: no channel 'R'");
+    assert_error_contains(mcp_dump_from_image(nocolor, NULL, &d),
+                          "grey.exr: no channel 'R'");
     mcp_image_free(nocolor);
     mcp_image_free(img);
 }
@@ -396,9 +402,9 @@ test_read_memory_fixture(void **state)
     /* every separate part, in both formats, from files and from memory */
     static const char *const files[5] = {"m_main.pfm", "m_var.exr", "m_alb.pfm",
                                          "m_nrm.exr", "m_spp.pfm"};
-    mcp_image *spp_map = mcp_test_random(from_file->color->width,
-                                         from_file->color->height, 1, 1.0f, 64.0f, 7,
-                                         (const char *[]){"n"});
+    mcp_image *spp_map =
+        mcp_test_random(from_file->color->width, from_file->color->height, 1, 1.0f, 64.0f,
+                        7, (const char *[]){"n"});
     const mcp_image *images[5] = {from_file->color, from_file->var_of_mean,
                                   from_file->albedo, from_file->normal, spp_map};
     for (int i = 0; i < 5; i++)
@@ -437,14 +443,13 @@ test_read_memory_fixture(void **state)
             spec = mcp_dump_spec_defaults();
             spec.spp = 16;
             mcp_dump_buffers bad = {.main = {data[0], sizes[0]}};
-            mcp_dump_buffer *b = (mcp_dump_buffer *[]){&bad.main, &bad.variance,
-                                                       &bad.albedo, &bad.normal,
-                                                       &bad.spp_map}[i];
+            mcp_dump_buffer *b = (mcp_dump_buffer *[]){
+                &bad.main, &bad.variance, &bad.albedo, &bad.normal, &bad.spp_map}[i];
             unsigned char *copy = malloc(sizes[i]);
             assert_non_null(copy);
             memcpy(copy, data[i], sizes[i]);
             size_t n = sizes[i] / 2; /* truncated in its pixels */
-            if (corrupt) /* a PFM header that promises more than it holds */
+            if (corrupt)             /* a PFM header that promises more than it holds */
                 n = (size_t)snprintf((char *)copy, sizes[i], "PF\n3 99999\n-1\n");
             *b = (mcp_dump_buffer){copy, n};
             char needle[64];

@@ -15,7 +15,8 @@ test_message_stays_one_line(void **state)
     assert_int_equal(mcp_error("f.exr: no channel '%s'", "R\nG\r\tB\x7f"), -1);
     assert_string_equal(mcp_error_message(), "f.exr: no channel 'R?G??B?'");
     assert_int_equal(mcp_error_prefix("job.yaml:%d: %s", 3, "a\nb: "), -1);
-    assert_string_equal(mcp_error_message(), "job.yaml:3: a?b: f.exr: no channel 'R?G??B?'");
+    assert_string_equal(mcp_error_message(),
+                        "job.yaml:3: a?b: f.exr: no channel 'R?G??B?'");
     /* UTF-8 names are left alone */
     mcp_error("f.exr: no channel '%s'", "\xc3\xa9t\xc3\xa9");
     assert_string_equal(mcp_error_message(), "f.exr: no channel '\xc3\xa9t\xc3\xa9'");

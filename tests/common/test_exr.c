@@ -45,8 +45,8 @@ nasty_image(int w, int h, uint64_t seed)
     uint32_t nan_payload = 0x7fc01234u;
     float nan;
     memcpy(&nan, &nan_payload, sizeof nan);
-    const float special[] = {nan, INFINITY, -INFINITY, -0.0f, FLT_MAX, -FLT_MAX,
-                             1e-45f, FLT_MIN};
+    const float special[] = {nan,     INFINITY, -INFINITY, -0.0f,
+                             FLT_MAX, -FLT_MAX, 1e-45f,    FLT_MIN};
     uint64_t s = seed;
     for (int k = 0; k < 64; k++) {
         int x = (int)(mcp_test_rand_u64(&s) % (uint64_t)w);
@@ -80,8 +80,7 @@ static int
 same_file_bytes(const char *p, const char *q)
 {
     long n = file_size(p);
-    if (n < 0 || n != file_size(q))
-        return 0;
+    if (n < 0 || n != file_size(q)) return 0;
     char *a = mcp_test_read_text(p), *b = mcp_test_read_text(q);
     int same = memcmp(a, b, (size_t)n) == 0;
     free(a);
@@ -102,8 +101,7 @@ roundtrip_all_threads(const mcp_image *img, const mcp_write_options *o, int loss
         omp_set_num_threads(thread_counts[i]);
         const char *path = i == 0 ? first : mcp_test_path("par_tn.exr");
         assert_int_equal(mcp_image_write(img, path, o), 0);
-        if (i > 0)
-            assert_true(same_file_bytes(first, path));
+        if (i > 0) assert_true(same_file_bytes(first, path));
         for (size_t j = 0; j < sizeof thread_counts / sizeof *thread_counts; j++) {
             omp_set_num_threads(thread_counts[j]);
             mcp_image *back = NULL;
@@ -133,7 +131,8 @@ test_every_compression_every_thread_count(void **state)
     for (int tiled = 0; tiled <= 1; tiled++)
         for (size_t k = 0; k < sizeof lossless / sizeof *lossless; k++) {
             mcp_write_options o = mcp_write_defaults();
-            assert_int_equal(mcp_exr_compression_from_name(lossless[k], &o.compression), 0);
+            assert_int_equal(mcp_exr_compression_from_name(lossless[k], &o.compression),
+                             0);
             o.exr_tiled = tiled;
             o.exr_tile_size = 16;
             roundtrip_all_threads(img, &o, 1);
@@ -220,7 +219,8 @@ test_probe_stores_raw_only_what_does_not_compress(void **state)
     mcp_image_free(back);
     /* bad settings name the file and the field */
     o.exr_min_saving = 1;
-    assert_error_contains(mcp_image_write(half, path, &o), "probe.exr: bad exr_min_saving 1");
+    assert_error_contains(mcp_image_write(half, path, &o),
+                          "probe.exr: bad exr_min_saving 1");
     o = mcp_write_defaults();
     o.exr_zip_level = 10;
     assert_error_contains(mcp_image_write(half, path, &o), "probe.exr: bad zip level 10");
@@ -296,12 +296,14 @@ read_with_core_only(const char *path)
             exr_coding_channel_info_t *ch = &dec.channels[k];
             int ic = mcp_image_channel(img, ch->channel_name);
             ch->decode_to_ptr = (uint8_t *)(mcp_image_px(img, 0, y - dw.min.y) + ic);
-            ch->user_pixel_stride = (int32_t)(img->pixel_stride * (ptrdiff_t)sizeof(float));
+            ch->user_pixel_stride =
+                (int32_t)(img->pixel_stride * (ptrdiff_t)sizeof(float));
             ch->user_line_stride = (int32_t)(img->row_stride * (ptrdiff_t)sizeof(float));
             ch->user_data_type = EXR_PIXEL_FLOAT;
             ch->user_bytes_per_element = 4;
         }
-        assert_int_equal(exr_decoding_choose_default_routines(f, 0, &dec), EXR_ERR_SUCCESS);
+        assert_int_equal(exr_decoding_choose_default_routines(f, 0, &dec),
+                         EXR_ERR_SUCCESS);
         assert_int_equal(exr_decoding_run(f, 0, &dec), EXR_ERR_SUCCESS);
         exr_decoding_destroy(f, &dec);
     }

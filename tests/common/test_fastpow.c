@@ -13,26 +13,25 @@ static void
 test_relative_error_bound(void **state)
 {
     (void)state;
-    const float ys[] = {1.0f / 3.0f, 0.7f, 0.5f, 0.999f, 0.01f, 1e-4f, 1.0f, 2.0f,
-                        2.4f, 1.0f / 2.4f, -0.5f, -1.0f, -3.7f};
+    const float ys[] = {1.0f / 3.0f, 0.7f, 0.5f,        0.999f, 0.01f, 1e-4f, 1.0f,
+                        2.0f,        2.4f, 1.0f / 2.4f, -0.5f,  -1.0f, -3.7f};
     uint64_t seed = 7;
     double worst = 0;
     for (size_t k = 0; k < sizeof ys / sizeof *ys; k++)
         for (int i = 0; i < 200000; i++) {
             /* x log-uniform over 2^-60 .. 2^60, and some near 1 */
             double u = (double)(mcp_test_rand_u64(&seed) >> 11) / 9007199254740992.0;
-            float x = i % 4 == 0 ? (float)(1.0 + (u - 0.5) * 1e-3) : (float)exp2(120 * u - 60);
+            float x =
+                i % 4 == 0 ? (float)(1.0 + (u - 0.5) * 1e-3) : (float)exp2(120 * u - 60);
             float y = ys[k];
             double exact = pow((double)x, (double)y);
             double zl = fabs((double)y * log2((double)x));
-            if (zl > 16)
-                continue;
+            if (zl > 16) continue;
             double rel = fabs((double)mcp__powf_pos(x, y) - exact) / exact;
             double bound = (1 + zl) * 1.5e-7;
             if (rel > bound)
                 fail_msg("%.9g^%.9g: relative error %.3g above %.3g", x, y, rel, bound);
-            if (rel / bound > worst)
-                worst = rel / bound;
+            if (rel / bound > worst) worst = rel / bound;
         }
     print_message("worst error: %.2f of the bound\n", worst);
 }

@@ -111,8 +111,8 @@ check_2d(const mcp_image *img, int kw, int kh, uint64_t seed)
 /* Runs check(img) on a packed image, a crop view (packed pixels, wider rows), a
  * channel view (pixel_stride != channels) and a channel view of a crop. */
 static void
-check_on_views(void (*check)(const mcp_image *, int, int, uint64_t), int channels,
-               int kw, int kh)
+check_on_views(void (*check)(const mcp_image *, int, int, uint64_t), int channels, int kw,
+               int kh)
 {
     const char *names[] = {"R", "G", "B", "A", "N.X", "N.Y", "N.Z", "V"};
     mcp_image *parent = mcp_test_random(41, 33, channels, 0, 1, 7, names);
@@ -358,9 +358,9 @@ test_colormap_endpoints(void **state)
     mcp_image *parent = mcp_test_constant(4, 1, 2, 0, NULL), *img = NULL;
     assert_int_equal(mcp_image_channel_view(parent, 1, 1, &img), 0);
     float *p = img->data;
-    p[0] = -1;    /* lo */
-    p[2] = NAN;   /* -> first colour */
-    p[4] = 3;     /* hi */
+    p[0] = -1;     /* lo */
+    p[2] = NAN;    /* -> first colour */
+    p[4] = 3;      /* hi */
     p[6] = -1e30f; /* clamped */
     for (int m = 0; m < 5; m++) {
         unsigned char rgb[12];

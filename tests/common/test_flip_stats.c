@@ -143,9 +143,10 @@ flip_tool(const char **why)
     state = -1;
     *why = reason;
     if (!anchor_dir()) {
-        snprintf(reason, sizeof reason,
-                 "MCPOST_FLIP_ANCHOR is not set (a checkout of NVlabs/flip v1.6; CMake or "
-                 "the environment)");
+        snprintf(
+            reason, sizeof reason,
+            "MCPOST_FLIP_ANCHOR is not set (a checkout of NVlabs/flip v1.6; CMake or "
+            "the environment)");
         return NULL;
     }
     snprintf(src, sizeof src, "%s/cpp/tool/FLIP-tool.cpp", anchor_dir());
@@ -228,8 +229,8 @@ read_tool_counts(const char *path, long long counts[MCP_FLIP_HISTOGRAM_BUCKETS])
 }
 
 /* One pair through the tool and through mcp_flip_*: the six numbers agree within
- * 1e-5 (per-pixel values agree within 1e-4 by docs/flip.md, in practice ~1e-6, and the tool
- * prints six decimals); the bucket counts differ only by pixels that sit within 1e-5
+ * 1e-5 (per-pixel values agree within 1e-4 by docs/flip.md, in practice ~1e-6, and the
+ * tool prints six decimals); the bucket counts differ only by pixels that sit within 1e-5
  * of a bucket edge, where the two builds' last-bit differences may put them apart. */
 static void
 compare_with_tool(const char *tool, const char *test_path, const char *ref_path, int hdr)
@@ -237,10 +238,11 @@ compare_with_tool(const char *tool, const char *test_path, const char *ref_path,
     const char *dir = mcp_test_path("tool-out");
     char cmd[20000], csv[4200];
     snprintf(csv, sizeof csv, "%s/pooled.csv", dir);
-    snprintf(cmd, sizeof cmd,
-             "rm -rf '%s' && mkdir -p '%s' && cd '%s' && '%s' -r '%s' -t '%s' -nerm -nexm "
-             "-v 0 -hist -c '%s' >tool.log 2>&1",
-             dir, dir, dir, tool, ref_path, test_path, csv);
+    snprintf(
+        cmd, sizeof cmd,
+        "rm -rf '%s' && mkdir -p '%s' && cd '%s' && '%s' -r '%s' -t '%s' -nerm -nexm "
+        "-v 0 -hist -c '%s' >tool.log 2>&1",
+        dir, dir, dir, tool, ref_path, test_path, csv);
     assert_int_equal(system(cmd), 0);
     double want[6];
     read_tool_csv(csv, want);
@@ -264,10 +266,14 @@ compare_with_tool(const char *tool, const char *test_path, const char *ref_path,
     else
         assert_int_equal(mcp_flip_ldr(test, ref, &o, &r, &map), 0);
     const mcp_flip_stats *s = &r.stats;
-    const double got[6] = {r.mean, s->weighted_median, s->weighted_q1,
-                           s->weighted_q3, s->min, s->max};
-    static const char *const names[6] = {"mean", "weighted median", "1st weighted quartile",
-                                         "3rd weighted quartile", "min", "max"};
+    const double got[6] = {
+        r.mean, s->weighted_median, s->weighted_q1, s->weighted_q3, s->min, s->max};
+    static const char *const names[6] = {"mean",
+                                         "weighted median",
+                                         "1st weighted quartile",
+                                         "3rd weighted quartile",
+                                         "min",
+                                         "max"};
     for (int k = 0; k < 6; k++) {
         printf("  %-22s tool %.6f  mcpost %.8f\n", names[k], want[k], got[k]);
         assert_close(got[k], want[k], 0, 1e-5);

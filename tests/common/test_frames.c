@@ -17,8 +17,7 @@ static void
 assert_set(const char *text, const int *want, int n_want)
 {
     int *got = NULL, n = -1;
-    if (mcp_frames_parse(text, &got, &n))
-        fail_msg("'%s': %s", text, mcp_error_message());
+    if (mcp_frames_parse(text, &got, &n)) fail_msg("'%s': %s", text, mcp_error_message());
     assert_int_equal(n, n_want);
     for (int i = 0; i < n; i++)
         if (got[i] != want[i])
@@ -49,14 +48,17 @@ test_bad_sets_name_the_text(void **state)
 {
     (void)state;
     int *f = NULL, n;
-    assert_error_contains(mcp_frames_parse("4-1", &f, &n), "frames '4-1': range 4-1 runs backwards");
+    assert_error_contains(mcp_frames_parse("4-1", &f, &n),
+                          "frames '4-1': range 4-1 runs backwards");
     assert_error_contains(mcp_frames_parse("1-9:0", &f, &n), "a step must be >= 1");
-    assert_error_contains(mcp_frames_parse("1-x", &f, &n), "expected a frame number at 'x'");
+    assert_error_contains(mcp_frames_parse("1-x", &f, &n),
+                          "expected a frame number at 'x'");
     assert_error_contains(mcp_frames_parse("", &f, &n), "expected a frame number");
     assert_error_contains(mcp_frames_parse("-3", &f, &n), "frames '-3'");
     assert_error_contains(mcp_frames_parse("1;2", &f, &n), "unexpected ';'");
     assert_error_contains(mcp_frames_parse("99999999", &f, &n), "frame numbers go up to");
-    assert_error_contains(mcp_frames_parse("0-9999999", &f, &n), "more than 100000 frames");
+    assert_error_contains(mcp_frames_parse("0-9999999", &f, &n),
+                          "more than 100000 frames");
     assert_null(f);
 }
 
@@ -66,8 +68,12 @@ test_sets_format_compactly_and_parse_back(void **state)
     (void)state;
     struct {
         const char *in, *out;
-    } cases[] = {{"1-4", "1-4"},         {"1-9:2", "1-9:2"},  {"1,2", "1-2"},
-                 {"1,3", "1,3"},         {"1-4,7", "1-4,7"},  {"5", "5"},
+    } cases[] = {{"1-4", "1-4"},
+                 {"1-9:2", "1-9:2"},
+                 {"1,2", "1-2"},
+                 {"1,3", "1,3"},
+                 {"1-4,7", "1-4,7"},
+                 {"5", "5"},
                  {"1-3,10-20:5", "1-3,10-20:5"}};
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         int *f, n, *back, m;
@@ -146,9 +152,11 @@ test_ambiguous_tokens_are_refused(void **state)
                           "only integer conversions");
     assert_error_contains(mcp_frame_expand("r/%099d.exr", 0, 1, buf, sizeof buf),
                           "field widths over 16");
-    assert_error_contains(mcp_frame_expand("r/#################.exr", 0, 1, buf, sizeof buf),
-                          "wider than 16");
-    assert_error_contains(mcp_frame_expand("r/####.exr", 0, 1, buf, 8), "too long for frame 1");
+    assert_error_contains(
+        mcp_frame_expand("r/#################.exr", 0, 1, buf, sizeof buf),
+        "wider than 16");
+    assert_error_contains(mcp_frame_expand("r/####.exr", 0, 1, buf, 8),
+                          "too long for frame 1");
     assert_error_contains(mcp_frame_expand("r/####.exr", 0, -1, buf, sizeof buf),
                           "frames are >= 0");
 }

@@ -28,7 +28,8 @@ test_bad_sizes_are_refused(void **state)
     mcp_image *img = (mcp_image *)1;
     assert_error_contains(mcp_image_new(0, 3, 1, NULL, &img), "bad image size 0x3x1");
     assert_null(img);
-    assert_error_contains(mcp_image_new(MCP_MAX_DIM + 1, 1, 1, NULL, &img), "bad image size");
+    assert_error_contains(mcp_image_new(MCP_MAX_DIM + 1, 1, 1, NULL, &img),
+                          "bad image size");
     assert_error_contains(mcp_image_new(4, 4, -1, NULL, &img), "bad image size");
 }
 
@@ -131,7 +132,8 @@ test_channel_view_and_subset(void **state)
     assert_string_equal(var->names[0], "Variance.R");
     assert_true(mcp_image_px(var, 2, 3)[1] == 2 + 30 + 400);
     int idx[3];
-    assert_int_equal(mcp_image_channels(img, (const char *[]){"B", "R", "Variance.G"}, 3, idx), 0);
+    assert_int_equal(
+        mcp_image_channels(img, (const char *[]){"B", "R", "Variance.G"}, 3, idx), 0);
     assert_int_equal(idx[0], 2);
     assert_int_equal(mcp_image_copy_channels(img, idx, 3, &sub), 0);
     assert_string_equal(sub->names[2], "Variance.G");
@@ -168,11 +170,13 @@ static void
 test_same_size_message(void **state)
 {
     (void)state;
-    mcp_image *a = mcp_test_constant(4, 4, 1, 0, NULL), *b = mcp_test_constant(4, 5, 1, 0, NULL);
+    mcp_image *a = mcp_test_constant(4, 4, 1, 0, NULL),
+              *b = mcp_test_constant(4, 5, 1, 0, NULL);
     mcp_image_set_source(a, "a.exr");
     mcp_image_set_source(b, "b.exr");
     assert_false(mcp_image_same_size(a, b));
-    assert_string_equal(mcp_error_message(), "a.exr: size 4x4 does not match b.exr (4x5)");
+    assert_string_equal(mcp_error_message(),
+                        "a.exr: size 4x4 does not match b.exr (4x5)");
     mcp_image_free(a);
     mcp_image_free(b);
 }

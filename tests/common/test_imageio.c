@@ -33,8 +33,7 @@ read_both(const char *path, mcp_image **out)
     char msg[2048];
     snprintf(msg, sizeof msg, "%s", rc ? mcp_error_message() : "");
     long n = file_size(path);
-    if (n < 0)
-        return rc ? mcp_error("%s", msg) : rc;
+    if (n < 0) return rc ? mcp_error("%s", msg) : rc;
     unsigned char *bytes = (unsigned char *)mcp_test_read_text(path);
     mcp_image *mem = NULL;
     int mrc = mcp_image_read_memory(bytes, (size_t)n, path, &mem);
@@ -93,7 +92,8 @@ test_exr_float_roundtrip_all_compressions(void **state)
             assert_true(b >= 0);
             for (int y = 0; y < 45; y++)
                 for (int x = 0; x < 37; x++)
-                    assert_true(mcp_image_px(back, x, y)[b] == mcp_image_px(img, x, y)[c]);
+                    assert_true(mcp_image_px(back, x, y)[b] ==
+                                mcp_image_px(img, x, y)[c]);
         }
         assert_int_equal(mcp_attrs_find(&back->attrs, "samplesPerPixel")->i, 64);
         assert_string_equal(mcp_attrs_find(&back->attrs, "renderer")->s, "test");
@@ -152,7 +152,8 @@ test_exr_incompressible_chunks(void **state)
                 mcp_image *img = mcp_test_random(size, size, 3, 0.13f, 1.9f, seed,
                                                  (const char *[]){"R", "G", "B"});
                 mcp_write_options o = mcp_write_defaults();
-                assert_int_equal(mcp_exr_compression_from_name(comps[i], &o.compression), 0);
+                assert_int_equal(mcp_exr_compression_from_name(comps[i], &o.compression),
+                                 0);
                 /* every chunk through zlib (not raw by the probe): the workaround is
                    what this tests */
                 o.exr_min_saving = -1;
@@ -171,7 +172,8 @@ static void
 test_exr_half_tiled_and_data_window(void **state)
 {
     (void)state;
-    mcp_image *img = mcp_test_random(70, 33, 3, 0.0f, 100.0f, 3, (const char *[]){"R", "G", "B"});
+    mcp_image *img =
+        mcp_test_random(70, 33, 3, 0.0f, 100.0f, 3, (const char *[]){"R", "G", "B"});
     mcp_write_options o = mcp_write_defaults();
     o.exr_pixel = MCP_EXR_HALF;
     o.exr_tiled = 1;
@@ -242,8 +244,7 @@ maps_mention(const char *what)
     int found = 0;
     while (f && fgets(line, sizeof line, f))
         found |= strstr(line, what) != NULL;
-    if (f)
-        fclose(f);
+    if (f) fclose(f);
     return found;
 }
 
@@ -322,7 +323,8 @@ test_png_roundtrip_then_tiff_loads_plugin(void **state)
 {
     (void)state;
     /* linear values; PNG stores sRGB-encoded 8-bit, decoded on read */
-    mcp_image *img = mcp_test_random(16, 9, 3, 0.0f, 1.0f, 5, (const char *[]){"R", "G", "B"});
+    mcp_image *img =
+        mcp_test_random(16, 9, 3, 0.0f, 1.0f, 5, (const char *[]){"R", "G", "B"});
     mcp_image *back = NULL;
     const char *path = mcp_test_path("x.png");
     assert_int_equal(mcp_image_write(img, path, NULL), 0);
@@ -358,7 +360,8 @@ smooth_image(int w, int h)
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++)
             for (int c = 0; c < 3; c++) {
-                double e = 0.1 + 0.8 * (0.5 * x / (w - 1) + 0.3 * y / (h - 1) + 0.2 * c / 2.0);
+                double e =
+                    0.1 + 0.8 * (0.5 * x / (w - 1) + 0.3 * y / (h - 1) + 0.2 * c / 2.0);
                 mcp_image_px(img, x, y)[c] = mcp_srgb_to_linear((float)e);
             }
     return img;
@@ -386,8 +389,10 @@ test_jpeg_roundtrip(void **state)
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++)
             for (int c = 0; c < 3; c++) {
-                float want = mcp_image_px(img, x, y)[c], got = mcp_image_px(back, x, y)[c];
-                assert_close(mcp_linear_to_srgb(got), mcp_linear_to_srgb(want), 0, 4.0 / 255);
+                float want = mcp_image_px(img, x, y)[c],
+                      got = mcp_image_px(back, x, y)[c];
+                assert_close(mcp_linear_to_srgb(got), mcp_linear_to_srgb(want), 0,
+                             4.0 / 255);
                 assert_close(got, want, 0, 4.0 / 255 * 2.3);
             }
     mcp_image_free(back);
@@ -395,8 +400,8 @@ test_jpeg_roundtrip(void **state)
     mcp_read_options raw = mcp_read_defaults();
     raw.srgb_decode = 0;
     assert_int_equal(mcp_image_read(path, &raw, &back), 0);
-    assert_close(mcp_image_px(back, 5, 7)[1], mcp_linear_to_srgb(mcp_image_px(img, 5, 7)[1]), 0,
-                 4.0 / 255);
+    assert_close(mcp_image_px(back, 5, 7)[1],
+                 mcp_linear_to_srgb(mcp_image_px(img, 5, 7)[1]), 0, 4.0 / 255);
     mcp_image_free(back);
     mcp_image_free(img);
 }
@@ -407,9 +412,11 @@ test_hdr_roundtrip(void **state)
     (void)state;
     /* HDR values over several decades, including values above 1 */
     const int w = 16, h = 9;
-    mcp_image *img = mcp_test_random(w, h, 3, 0.0f, 1.0f, 11, (const char *[]){"R", "G", "B"});
+    mcp_image *img =
+        mcp_test_random(w, h, 3, 0.0f, 1.0f, 11, (const char *[]){"R", "G", "B"});
     for (size_t i = 0; i < (size_t)w * h * 3; i++)
-        img->data[i] = (float)(0.01 + pow(10.0, 4.0 * img->data[i] - 1.0)); /* 0.11 .. 1000 */
+        img->data[i] =
+            (float)(0.01 + pow(10.0, 4.0 * img->data[i] - 1.0)); /* 0.11 .. 1000 */
     mcp_image *back = NULL;
     const char *path = mcp_test_path("x.hdr");
     assert_int_equal(mcp_image_write(img, path, NULL), 0);
@@ -495,8 +502,7 @@ test_bad_files(void **state)
     /* PFM truncated */
     assert_int_equal(mcp_image_write(big, mcp_test_path("t.pfm"), NULL), 0);
     assert_int_equal(truncate(mcp_test_path("t.pfm"), 200), 0);
-    assert_error_contains(read_both(mcp_test_path("t.pfm"), &img),
-                          "truncated PFM data");
+    assert_error_contains(read_both(mcp_test_path("t.pfm"), &img), "truncated PFM data");
     /* unwritable output leaves nothing behind */
     assert_error_contains(mcp_image_write(big, "/nonexistent-dir/x.exr", NULL),
                           "/nonexistent-dir/x.exr: cannot write");
@@ -532,15 +538,12 @@ test_pfm_header_checked_before_allocation(void **state)
     const char *path = mcp_test_path("h.pfm");
     /* the fuzzer's 16 bytes: no whitespace after the magic */
     mcp_test_write_text(path, "Pf51110 31110 1\n");
-    assert_error_contains(read_both(path, &img),
-                          "h.pfm: not a PFM file (bad header)");
+    assert_error_contains(read_both(path, &img), "h.pfm: not a PFM file (bad header)");
     assert_null(img);
     mcp_test_write_text(path, "PF\n2 2 0\n");
-    assert_error_contains(read_both(path, &img),
-                          "h.pfm: not a PFM file (bad header)");
+    assert_error_contains(read_both(path, &img), "h.pfm: not a PFM file (bad header)");
     mcp_test_write_text(path, "PF\n2 2 -1x");
-    assert_error_contains(read_both(path, &img),
-                          "h.pfm: not a PFM file (bad header)");
+    assert_error_contains(read_both(path, &img), "h.pfm: not a PFM file (bad header)");
     /* with the space: over the default ceiling of 2^28 pixels */
     mcp_test_write_text(path, "Pf 51110 31110 1\n");
     assert_error_contains(
@@ -658,7 +661,8 @@ test_atomic_write_keeps_old_file_on_failure(void **state)
 {
     (void)state;
     const char *path = mcp_test_path("keep.pfm");
-    mcp_image *good = mcp_test_constant(4, 4, 3, 1, NULL), *bad = mcp_test_constant(4, 4, 2, 1, NULL);
+    mcp_image *good = mcp_test_constant(4, 4, 3, 1, NULL),
+              *bad = mcp_test_constant(4, 4, 2, 1, NULL);
     assert_int_equal(mcp_image_write(good, path, NULL), 0);
     long before = file_size(path);
     assert_int_equal(mcp_image_write(bad, path, NULL), -1);

@@ -38,14 +38,17 @@ test_yaml_tree_and_lines(void **state)
     free(p);
     assert_int_equal(mcp_node_get(m, "percentiles")->line, 7);
     int spp = 0;
-    assert_int_equal(mcp_node_opt_int(mcp_node_get(mcp_node_get(root, "inputs"), "noisy"), "spp", &spp), 0);
+    assert_int_equal(mcp_node_opt_int(mcp_node_get(mcp_node_get(root, "inputs"), "noisy"),
+                                      "spp", &spp),
+                     0);
     assert_int_equal(spp, 64);
     /* a quoted number is a string, not a number */
     assert_error_contains(mcp_node_opt_int(m, "quoted", &spp),
                           "job.yaml:8: quoted must be an integer (got '12')");
     const char *allowed[] = {"percentiles", NULL};
-    assert_error_contains(mcp_node_check_keys(m, allowed, "stage 'metrics'"),
-                          "job.yaml:8: unknown key 'quoted' in stage 'metrics' (known: percentiles)");
+    assert_error_contains(
+        mcp_node_check_keys(m, allowed, "stage 'metrics'"),
+        "job.yaml:8: unknown key 'quoted' in stage 'metrics' (known: percentiles)");
     mcp_node_free(root);
 }
 
@@ -54,8 +57,10 @@ test_json_parses_too(void **state)
 {
     (void)state;
     mcp_node *root = NULL;
-    assert_int_equal(mcp_yaml_parse_string("{\"a\": [1, 2.5, true], \"b\": {\"c\": \"x\"}}",
-                                           "j.json", &root), 0);
+    assert_int_equal(
+        mcp_yaml_parse_string("{\"a\": [1, 2.5, true], \"b\": {\"c\": \"x\"}}", "j.json",
+                              &root),
+        0);
     int b = 0;
     double d = 0;
     assert_int_equal(mcp_node_bool(mcp_node_get(root, "a")->items[2], "a", &b), 0);
@@ -70,13 +75,14 @@ test_yaml_errors_name_the_line(void **state)
 {
     (void)state;
     mcp_node *root = NULL;
-    assert_error_contains(mcp_yaml_parse_string("a: 1\nb: [1, 2\nc: 3\n", "bad.yaml", &root),
-                          "bad.yaml:");
+    assert_error_contains(
+        mcp_yaml_parse_string("a: 1\nb: [1, 2\nc: 3\n", "bad.yaml", &root), "bad.yaml:");
     assert_error_contains(mcp_yaml_parse_string("a: 1\na: 2\n", "dup.yaml", &root),
                           "dup.yaml:2: key 'a' appears twice (first at line 1)");
     assert_error_contains(mcp_yaml_parse_string("a: &x 1\nb: *x\n", "al.yaml", &root),
                           "al.yaml:2: aliases are not supported");
-    assert_error_contains(mcp_yaml_parse_string("", "empty.yaml", &root), "empty job file");
+    assert_error_contains(mcp_yaml_parse_string("", "empty.yaml", &root),
+                          "empty job file");
     assert_error_contains(mcp_yaml_parse_file("/nonexistent/job.yaml", &root),
                           "/nonexistent/job.yaml: cannot open");
 }
@@ -142,7 +148,8 @@ stage_probe(mcp_job *job, const mcp_node *settings)
 {
     const mcp_dump *d = NULL;
     int scale = 1;
-    if (mcp_node_opt_int(settings, "scale", &scale) || mcp_job_dump(job, settings, "input", &d))
+    if (mcp_node_opt_int(settings, "scale", &scale) ||
+        mcp_job_dump(job, settings, "input", &d))
         return -1;
     seen_mean = d->color->data[0] * scale;
     calls++;
@@ -160,14 +167,11 @@ static int
 stage_consume(mcp_job *job, const mcp_node *settings)
 {
     const mcp_image *img = NULL;
-    if (mcp_job_image(job, settings, "input", &img))
-        return -1;
+    if (mcp_job_image(job, settings, "input", &img)) return -1;
     char path[4096], dir[4096];
-    if (mcp_job_output_path(job, "sub/out.exr", path, sizeof path))
-        return -1;
+    if (mcp_job_output_path(job, "sub/out.exr", path, sizeof path)) return -1;
     /* a stage's own folder, made with its parents: <output>/made/here */
-    if (mcp_job_output_subdir(job, "made/here", dir, sizeof dir))
-        return -1;
+    if (mcp_job_output_subdir(job, "made/here", dir, sizeof dir)) return -1;
     snprintf(subdir_seen, sizeof subdir_seen, "%s", dir);
     calls++;
     return mcp_image_write(img, path, NULL);
@@ -175,7 +179,8 @@ stage_consume(mcp_job *job, const mcp_node *settings)
 
 static const char *const probe_keys[] = {"input", "scale", NULL};
 static const mcp_stage probe = {"probe", "test stage", probe_keys, stage_probe, NULL};
-static const mcp_stage consume = {"consume", "test stage", probe_keys, stage_consume, NULL};
+static const mcp_stage consume = {"consume", "test stage", probe_keys, stage_consume,
+                                  NULL};
 static const mcp_stage *const table[] = {&probe, &consume, NULL};
 
 static const char *
@@ -242,31 +247,39 @@ test_runner_checks_everything_first(void **state)
         {"inputs:\n  noisy: {dump: in.exr}\nstages:\n  - probe: {input: noisy}\n"
          "  - probe: {input: noisy, scael: 2}\n",
          "bad.yaml:5: unknown key 'scael' in stage 'probe' (known: input, scale)"},
-        {"inputs:\n  noisy: {dump: in.exr}\nstages:\n  - probe: {input: noisy}\n  - frobnicate:\n",
+        {"inputs:\n  noisy: {dump: in.exr}\nstages:\n  - probe: {input: noisy}\n  - "
+         "frobnicate:\n",
          "bad.yaml:5: unknown stage 'frobnicate' (known: probe, consume)"},
         {"inputs:\n  noisy: {dump: missing.exr}\nstages:\n  - probe: {input: noisy}\n",
          "bad.yaml:2: input file"},
-        {"inputs:\n  noisy: {dump: in.exr, spp: many}\nstages:\n  - probe: {input: noisy}\n",
+        {"inputs:\n  noisy: {dump: in.exr, spp: many}\nstages:\n  - probe: {input: "
+         "noisy}\n",
          "bad.yaml:2: spp must be a number (got 'many')"},
         {"inputs:\n  noisy: {dump: in.exr}\nstages:\n  - probe: {input: nosiy}\n",
          "bad.yaml:4: no input or result called 'nosiy'"},
-        {"inputs:\n  noisy: {dump: in.exr}\nstages:\n  - probe: {input: noisy, scale: 1.5}\n",
+        {"inputs:\n  noisy: {dump: in.exr}\nstages:\n  - probe: {input: noisy, scale: "
+         "1.5}\n",
          "bad.yaml:4: scale must be an integer (got '1.5')"},
         {"inptus:\n  noisy: {dump: in.exr}\nstages:\n  - probe: {input: noisy}\n",
          "bad.yaml:1: unknown key 'inptus' in the job file"},
-        {"inputs:\n  s: {series: 'x_%04d.exr', spp: [1, 2]}\nstages:\n  - probe: {input: s}\n",
+        {"inputs:\n  s: {series: 'x_%04d.exr', spp: [1, 2]}\nstages:\n  - probe: {input: "
+         "s}\n",
          "bad.yaml:2: input file"},
-        {"inputs:\n  noisy: {dump: in.exr, convention: povray}\nstages:\n  - probe: {input: noisy}\n",
+        {"inputs:\n  noisy: {dump: in.exr, convention: povray}\nstages:\n  - probe: "
+         "{input: noisy}\n",
          "bad.yaml:2: unknown convention 'povray'"},
         /* spp of a dump is one number: a list or a map is an error, not ignored */
-        {"inputs:\n  noisy: {dump: in.exr, spp: [1]}\nstages:\n  - probe: {input: noisy}\n",
+        {"inputs:\n  noisy: {dump: in.exr, spp: [1]}\nstages:\n  - probe: {input: "
+         "noisy}\n",
          "bad.yaml:2: spp must be a number, not a list"},
-        {"inputs:\n  noisy:\n    dump: in.exr\n    spp: {a: 1}\nstages:\n  - probe: {input: noisy}\n",
+        {"inputs:\n  noisy:\n    dump: in.exr\n    spp: {a: 1}\nstages:\n  - probe: "
+         "{input: noisy}\n",
          "bad.yaml:4: spp must be a number, not a map"},
         {"inputs:\n  noisy: {dump: in.exr, spp: 0}\nstages:\n  - probe: {input: noisy}\n",
          "bad.yaml:2: spp must be > 0 (got 0)"},
         /* a series' spp is its list of counts: a map is an error there too */
-        {"inputs:\n  s: {series: [in.exr], spp: {a: 1}}\nstages:\n  - probe: {input: s}\n",
+        {"inputs:\n  s: {series: [in.exr], spp: {a: 1}}\nstages:\n  - probe: {input: "
+         "s}\n",
          "bad.yaml:2: spp must be a number or a list of numbers"},
     };
     for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
@@ -281,8 +294,7 @@ test_runner_checks_everything_first(void **state)
            folder then, which comes after the checks */
         int stage_knows = strstr(cases[i].error, "no input or result") ||
                           strstr(cases[i].error, "scale must be");
-        if (!stage_knows)
-            assert_int_equal(access(mcp_test_path("out/bad"), F_OK), -1);
+        if (!stage_knows) assert_int_equal(access(mcp_test_path("out/bad"), F_OK), -1);
         rmdir(mcp_test_path("out/bad"));
         if (!stage_knows)
             assert_error_contains(mcp_job_check(job, table), cases[i].error);
@@ -379,21 +391,23 @@ test_settings_check_skips_the_input_files(void **state)
     assert_int_equal(mcp_job_check_settings(later, counted_table), 0);
     assert_int_equal(check_calls, 1);
 
-    const char *bad_key = write_job("bad_key.yaml", "frames: 1-3\n"
-                                                    "inputs:\n"
-                                                    "  noisy: {dump: never_####.exr}\n"
-                                                    "stages:\n"
-                                                    "  - probe: {input: noisy, scael: 2}\n");
+    const char *bad_key =
+        write_job("bad_key.yaml", "frames: 1-3\n"
+                                  "inputs:\n"
+                                  "  noisy: {dump: never_####.exr}\n"
+                                  "stages:\n"
+                                  "  - probe: {input: noisy, scael: 2}\n");
     assert_error_contains(mcp_job_check_settings(bad_key, counted_table),
                           "bad_key.yaml:5: unknown key 'scael'");
     const char *bad_token = frame_job("bad_token.yaml", "1-3", "never_%s.exr");
     assert_int_not_equal(mcp_job_check_settings(bad_token, counted_table), 0);
     assert_error_contains(-1, "bad_token.yaml:3:");
-    const char *glob = write_job("glob.yaml", "frames: 1-3\n"
-                                              "inputs:\n"
-                                              "  noisy: {replicates: \"never_####_s*.exr\"}\n"
-                                              "stages:\n"
-                                              "  - probe: {input: noisy}\n");
+    const char *glob =
+        write_job("glob.yaml", "frames: 1-3\n"
+                               "inputs:\n"
+                               "  noisy: {replicates: \"never_####_s*.exr\"}\n"
+                               "stages:\n"
+                               "  - probe: {input: noisy}\n");
     assert_error_contains(mcp_job_check(glob, counted_table), "no file matches");
     assert_int_equal(mcp_job_check_settings(glob, counted_table), 0);
 }
@@ -425,7 +439,8 @@ test_quiet_option_silences_the_job(void **state)
     fflush(stderr);
     dup2(saved, 2);
     close(saved);
-    long written = ftell(capture) >= 0 && fseek(capture, 0, SEEK_END) == 0 ? ftell(capture) : -1;
+    long written =
+        ftell(capture) >= 0 && fseek(capture, 0, SEEK_END) == 0 ? ftell(capture) : -1;
     fclose(capture);
     assert_int_equal(rc, 0);
     assert_int_equal(written, 0);
@@ -469,7 +484,8 @@ static int
 count_in_error(const char *needle)
 {
     int n = 0;
-    for (const char *p = mcp_error_message(); (p = strstr(p, needle)); p += strlen(needle))
+    for (const char *p = mcp_error_message(); (p = strstr(p, needle));
+         p += strlen(needle))
         n++;
     return n;
 }
@@ -488,8 +504,10 @@ test_wrong_types_name_the_line_once(void **state)
                  "inputs:\n  noisy:\n    %s: [pbrt]\n    dump: in.exr\n"
                  "stages:\n  - probe: {input: noisy}\n",
                  keys[k]);
-        snprintf(want, sizeof want, "bad.yaml:3: %s must be a string, not a list", keys[k]);
-        assert_error_contains(mcp_job_run_file(write_job("bad.yaml", text), table, NULL), want);
+        snprintf(want, sizeof want, "bad.yaml:3: %s must be a string, not a list",
+                 keys[k]);
+        assert_error_contains(mcp_job_run_file(write_job("bad.yaml", text), table, NULL),
+                              want);
         assert_int_equal(count_in_error("bad.yaml:"), 1);
         snprintf(text, sizeof text,
                  "inputs:\n  noisy:\n    %s: nonsense\n    dump: in.exr\n"
@@ -504,7 +522,8 @@ test_wrong_types_name_the_line_once(void **state)
 /* ---- explicit channel mapping of a dump ---- */
 
 static void
-check_mapped(const mcp_image *part, int first, const char *a, const char *b, const char *c)
+check_mapped(const mcp_image *part, int first, const char *a, const char *b,
+             const char *c)
 {
     assert_non_null(part);
     assert_int_equal(part->channels, 3);
@@ -524,8 +543,7 @@ static int
 stage_mapped(mcp_job *job, const mcp_node *settings)
 {
     const mcp_dump *d = NULL;
-    if (mcp_job_dump(job, settings, "input", &d))
-        return -1;
+    if (mcp_job_dump(job, settings, "input", &d)) return -1;
     calls++;
     assert_int_equal(d->color->width, 5);
     assert_int_equal(d->color->height, 4);
@@ -543,27 +561,29 @@ test_channel_mapping_overrides_detection(void **state)
     (void)state;
     mcp_progress_set_quiet(1);
     /* names no convention knows, and a decoy R,G,B that detection would pick */
-    const char *names[] = {"R",     "G",     "B",     "beauty.x", "beauty.y",
-                           "beauty.z", "v.0", "v.1",  "v.2",      "alb.a",
-                           "alb.b", "alb.c", "nrm.u", "nrm.v",    "nrm.w"};
+    const char *names[] = {"R",        "G",     "B",     "beauty.x", "beauty.y",
+                           "beauty.z", "v.0",   "v.1",   "v.2",      "alb.a",
+                           "alb.b",    "alb.c", "nrm.u", "nrm.v",    "nrm.w"};
     mcp_image *img = mcp_test_ramp(5, 4, 15, names);
     mcp_attrs_set_int(&img->attrs, "samplesPerPixel", 16);
     assert_int_equal(mcp_image_write(img, mcp_test_path("odd.exr"), NULL), 0);
     mcp_image_free(img);
-    static const mcp_stage mapped = {"mapped", "test stage", probe_keys, stage_mapped, NULL};
+    static const mcp_stage mapped = {"mapped", "test stage", probe_keys, stage_mapped,
+                                     NULL};
     static const mcp_stage *const mapped_table[] = {&mapped, NULL};
-    const char *job = write_job("map.yaml", "inputs:\n"
-                                            "  d:\n"
-                                            "    dump: odd.exr\n"
-                                            "    variance: of-mean\n"
-                                            "    channels:\n"
-                                            "      color: [beauty.x, beauty.y, beauty.z]\n"
-                                            "      variance: [v.0, v.1, v.2]\n"
-                                            "      albedo: [alb.a, alb.b, alb.c]\n"
-                                            "      normal: [nrm.u, nrm.v, nrm.w]\n"
-                                            "output: out/map\n"
-                                            "stages:\n"
-                                            "  - mapped: {input: d}\n");
+    const char *job =
+        write_job("map.yaml", "inputs:\n"
+                              "  d:\n"
+                              "    dump: odd.exr\n"
+                              "    variance: of-mean\n"
+                              "    channels:\n"
+                              "      color: [beauty.x, beauty.y, beauty.z]\n"
+                              "      variance: [v.0, v.1, v.2]\n"
+                              "      albedo: [alb.a, alb.b, alb.c]\n"
+                              "      normal: [nrm.u, nrm.v, nrm.w]\n"
+                              "output: out/map\n"
+                              "stages:\n"
+                              "  - mapped: {input: d}\n");
     calls = 0;
     assert_int_equal(mcp_job_run_file(job, mapped_table, NULL), 0);
     assert_int_equal(calls, 1);

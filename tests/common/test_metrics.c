@@ -503,7 +503,8 @@ test_cli(void **state)
              ref_path);
     assert_int_equal(
         mcp_test_run_mcpost(args, out_buf, sizeof out_buf, err_buf, sizeof err_buf), 1);
-    assert_non_null(strstr(err_buf, "metrics: --percentiles must be >= 0 and <= 1 (got 2)"));
+    assert_non_null(
+        strstr(err_buf, "metrics: --percentiles must be >= 0 and <= 1 (got 2)"));
     snprintf(args, sizeof args, "metrics '%s'", test_path);
     assert_int_equal(
         mcp_test_run_mcpost(args, out_buf, sizeof out_buf, err_buf, sizeof err_buf), 2);
@@ -617,8 +618,8 @@ test_job_stage(void **state)
     mcp_test_write_text(job, text);
     assert_int_not_equal(
         mcp_test_run_mcpost(args, out_buf, sizeof out_buf, err_buf, sizeof err_buf), 0);
-    assert_non_null(
-        strstr(err_buf, "job.yaml:8: metrics: percentiles must be >= 0 and <= 1 (got 7)"));
+    assert_non_null(strstr(
+        err_buf, "job.yaml:8: metrics: percentiles must be >= 0 and <= 1 (got 7)"));
     snprintf(text, sizeof text,
              "inputs:\n  t: {image: test.exr}\nstages:\n  - metrics:\n      input: t\n");
     mcp_test_write_text(job, text);

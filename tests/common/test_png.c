@@ -40,7 +40,8 @@ write_raw_png(const char *path, int w, int h, int bit_depth, int color_type,
     png_infop info = png_create_info_struct(png);
     png_init_io(png, f);
     png_set_IHDR(png, info, (png_uint_32)w, (png_uint_32)h, bit_depth, color_type,
-                 PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+                 PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT,
+                 PNG_FILTER_TYPE_DEFAULT);
     if (palette) png_set_PLTE(png, info, palette, n_palette);
     png_write_info(png, info);
     if (bit_depth == 16) png_set_swap(png); /* data holds host-order samples */
@@ -57,7 +58,8 @@ test_float_round_trip(void **state)
     (void)state;
     static const char *const rgba[] = {"R", "G", "B", "A"};
     for (int c = 1; c <= 4; c += (c == 1 ? 2 : 1)) {
-        mcp_image *img = mcp_test_random(37, 23, c, -0.2f, 1.3f, 40 + c, c == 1 ? NULL : rgba);
+        mcp_image *img =
+            mcp_test_random(37, 23, c, -0.2f, 1.3f, 40 + c, c == 1 ? NULL : rgba);
         const char *path = tmp_path("round.png");
         assert_int_equal(mcp_image_write(img, path, NULL), 0);
         mcp_image *back = NULL;
@@ -114,14 +116,23 @@ filter_picture(int w, int h, int c, unsigned seed)
             int paeth = pa <= pb && pa <= pc ? a : pb <= pc ? b : cc;
             seed = seed * 1664525u + 1013904223u;
             switch (y % 7) {
-            case 1: r[i] = (unsigned char)b; break;
-            case 2: r[i] = (unsigned char)(7 * (i / c) + 40 * (i % c)); break;
-            case 3: r[i] = 0; break;
-            case 5: r[i] = (unsigned char)((a + b) >> 1); break;
+            case 1:
+                r[i] = (unsigned char)b;
+                break;
+            case 2:
+                r[i] = (unsigned char)(7 * (i / c) + 40 * (i % c));
+                break;
+            case 3:
+                r[i] = 0;
+                break;
+            case 5:
+                r[i] = (unsigned char)((a + b) >> 1);
+                break;
             case 6: /* its first pixel is noise: a copy of the row above would tie */
                 r[i] = (unsigned char)(i < (size_t)c ? seed >> 24 : (unsigned)paeth);
                 break;
-            default: r[i] = (unsigned char)(seed >> 24);
+            default:
+                r[i] = (unsigned char)(seed >> 24);
             }
         }
     }
@@ -178,7 +189,8 @@ test_encoder_decoded_by_libpng(void **state)
 {
     (void)state;
     static const int sizes[][2] = {{1, 1}, {2, 3}, {1, 9}, {37, 23}, {301, 211}};
-    static const int formats[5] = {0, PNG_FORMAT_GRAY, 0, PNG_FORMAT_RGB, PNG_FORMAT_RGBA};
+    static const int formats[5] = {0, PNG_FORMAT_GRAY, 0, PNG_FORMAT_RGB,
+                                   PNG_FORMAT_RGBA};
     static const char *const names[4][4] = {
         {"Y"}, {0}, {"R", "G", "B"}, {"R", "G", "B", "A"}};
     for (int c = 1; c <= 4; c += c == 1 ? 2 : 1)
@@ -252,8 +264,8 @@ test_other_layouts(void **state)
     assert_int_equal(back->channels, 2);
     assert_string_equal(back->names[1], "A");
     for (int i = 0; i < 8; i++)
-        assert_true(back->data[i] == (i % 2 ? ga[i] / 255.0f
-                                            : mcp_srgb_to_linear(ga[i] / 255.0f)));
+        assert_true(back->data[i] ==
+                    (i % 2 ? ga[i] / 255.0f : mcp_srgb_to_linear(ga[i] / 255.0f)));
     mcp_image_free(back);
 }
 
@@ -267,7 +279,8 @@ test_bad_files(void **state)
     FILE *f = fopen(path, "wb");
     fputs("hello, this is no image\n", f);
     fclose(f);
-    assert_error_contains(mcp_image_read(path, NULL, &img), "text.png: not a readable PNG");
+    assert_error_contains(mcp_image_read(path, NULL, &img),
+                          "text.png: not a readable PNG");
     /* a 12000 x 12000 header (under the pixel ceiling) in a 70-byte file: refused
      * before allocation */
     unsigned char one[3] = {1, 2, 3};
@@ -293,7 +306,8 @@ test_bad_files(void **state)
     path = tmp_path("cut.png");
     assert_int_equal(mcp_image_write(big, path, NULL), 0);
     assert_int_equal(truncate(path, 200), 0);
-    assert_error_contains(mcp_image_read(path, NULL, &img), "cut.png: not a readable PNG");
+    assert_error_contains(mcp_image_read(path, NULL, &img),
+                          "cut.png: not a readable PNG");
     assert_null(img);
     /* 2 channels cannot be written */
     mcp_image *two = mcp_test_random(4, 4, 2, 0.0f, 1.0f, 3, NULL);

@@ -61,7 +61,8 @@ test_merge_replicates_closed_form(void **state)
     assert_int_equal(m->variance_source, MCP_VARSRC_REPLICATES);
     assert_true(m->variance_dof == 2);
     assert_int_equal(m->replicates, 3);
-    const float *x = mcp_image_px(m->color, 2, 3), *var = mcp_image_px(m->var_of_mean, 2, 3),
+    const float *x = mcp_image_px(m->color, 2, 3),
+                *var = mcp_image_px(m->var_of_mean, 2, 3),
                 *cov = mcp_image_px(m->cov_of_mean, 2, 3);
     /* R: mean (10 + 20 + 80) / 40 = 2.75; spread (10·1.75² + 10·0.75² + 20·1.25²) / 80 */
     assert_close(x[0], 2.75, 1e-7, 0);
@@ -145,13 +146,14 @@ test_merge_replicates_unbiased(void **state)
         for (int trial = 0; trial < trials; trial++) {
             mcp_dump *parts[8];
             for (int k = 0; k < K; k++)
-                assert_int_equal(mcp_proc_render(&scene, spp,
-                                                 mcp_proc_realization_seed(7 + 1000 * trial,
-                                                                           k + 1),
-                                                 NULL, &parts[k]),
-                                 0);
+                assert_int_equal(
+                    mcp_proc_render(&scene, spp,
+                                    mcp_proc_realization_seed(7 + 1000 * trial, k + 1),
+                                    NULL, &parts[k]),
+                    0);
             mcp_dump *m = NULL;
-            assert_int_equal(mcp_dump_merge((const mcp_dump *const *)parts, K, NULL, &m), 0);
+            assert_int_equal(mcp_dump_merge((const mcp_dump *const *)parts, K, NULL, &m),
+                             0);
             for (int i = 0; i < scene.width * scene.height * 3; i++) {
                 est += m->var_of_mean->data[i];
                 truth += truth_var->data[i] / (K * spp);
@@ -184,7 +186,8 @@ test_pool_variance(void **state)
         d->var_of_mean->data[i] *= (i % 3 + 1) * 0.5f;
     assert_int_equal(mcp_dump_pool_variance(d, shape, 2), 0);
     for (int i = 0; i < 9 * 6 * 3; i++)
-        assert_close(d->var_of_mean->data[i], shape->data[i] * (i % 3 + 1) * 0.5, 1e-6, 0);
+        assert_close(d->var_of_mean->data[i], shape->data[i] * (i % 3 + 1) * 0.5, 1e-6,
+                     0);
     assert_true(d->variance_pool == 25);
     /* the covariance: the window's correlation times the pooled deviations. With a
        constant shape s and V = k_c s, a constant covariance c0 stays c0:
@@ -192,7 +195,8 @@ test_pool_variance(void **state)
     mcp_image *flat = mcp_test_constant(9, 6, 3, 0.5f, rgb);
     for (int i = 0; i < 9 * 6 * 3; i++)
         d->var_of_mean->data[i] = 0.5f * (float)(i % 3 + 1);
-    d->cov_of_mean = mcp_test_constant(9, 6, 3, 0.125f, (const char *[]){"RG", "RB", "GB"});
+    d->cov_of_mean =
+        mcp_test_constant(9, 6, 3, 0.125f, (const char *[]){"RG", "RB", "GB"});
     assert_int_equal(mcp_dump_pool_variance(d, flat, 2), 0);
     for (int i = 0; i < 9 * 6 * 3; i++)
         assert_close(d->cov_of_mean->data[i], 0.125, 1e-6, 0);
@@ -240,8 +244,7 @@ test_pool_degrees_of_freedom(void **state)
     double spread[2];
     for (int pass = 0; pass < 2; pass++) {
         /* pass 0: raw; pass 1: pooled 7x7. Interior values only (full windows). */
-        if (pass == 1)
-            assert_int_equal(mcp_dump_pool_variance(m, NULL, 3), 0);
+        if (pass == 1) assert_int_equal(mcp_dump_pool_variance(m, NULL, 3), 0);
         double s = 0, s2 = 0;
         long n = 0;
         for (int y = 3; y < H - 3; y++)
@@ -281,7 +284,8 @@ procedural_series(const mcp_proc_scene *scene, const int *spp, int count, uint64
         mcp_dump_free(d);
     }
     mcp_series *s = NULL;
-    assert_int_equal(mcp_series_from_paths((const char *const *)paths, NULL, count, &s), 0);
+    assert_int_equal(mcp_series_from_paths((const char *const *)paths, NULL, count, &s),
+                     0);
     for (int i = 0; i < count; i++)
         free(paths[i]);
     free(paths);
@@ -371,10 +375,10 @@ test_stratified_sources(void **state)
         /* four independent 16-spp renders, merged */
         mcp_dump *parts[4], *m = NULL;
         for (int k = 0; k < 4; k++)
-            assert_int_equal(mcp_proc_render(&scene, 16,
-                                             mcp_proc_realization_seed(900 + trial, k + 1),
-                                             NULL, &parts[k]),
-                             0);
+            assert_int_equal(
+                mcp_proc_render(&scene, 16, mcp_proc_realization_seed(900 + trial, k + 1),
+                                NULL, &parts[k]),
+                0);
         assert_int_equal(mcp_dump_merge((const mcp_dump *const *)parts, 4, NULL, &m), 0);
         for (int i = 0; i < n; i++)
             rep += m->var_of_mean->data[i];
@@ -472,8 +476,8 @@ test_series_variance_auto(void **state)
         assert_int_equal(first->variance_source, cases[c].first);
         assert_int_equal(last->variance_source, cases[c].last);
         if (cases[c].last == MCP_VARSRC_INCREMENTS) { /* the same as asked directly */
-            assert_int_equal(mcp_series_increment_variance(s, 3, &s->increments, &incr, NULL),
-                             0);
+            assert_int_equal(
+                mcp_series_increment_variance(s, 3, &s->increments, &incr, NULL), 0);
             assert_true(mcp_test_max_abs_diff(incr->var_of_mean, last->var_of_mean) == 0);
         }
         double ratio = 0;
@@ -556,7 +560,7 @@ test_series_without_variance(void **state)
     for (int t = 0; t < trials; t++) {
         mcp_series *s = procedural_series(&scene, spp, 3, 500 + t, "novar");
         s->increments.pool_radius = -1; /* the raw estimate: unbiased per value */
-        for (int i = 0; i < 3; i++) { /* the files without their variance */
+        for (int i = 0; i < 3; i++) {   /* the files without their variance */
             mcp_dump *d = NULL;
             assert_int_equal(mcp_dump_read(s->paths[i], &d), 0);
             mcp_image_free(d->var_of_mean);
@@ -582,9 +586,10 @@ test_series_without_variance(void **state)
         mcp_dump_free(d);
         mcp_series_free(s);
     }
-    print_message("no variance in the files: the increments' per-sample variance over the "
-                  "truth %.3f, %.3f, %.3f\n",
-                  est[0] / trials / truth, est[1] / trials / truth, est[2] / trials / truth);
+    print_message(
+        "no variance in the files: the increments' per-sample variance over the "
+        "truth %.3f, %.3f, %.3f\n",
+        est[0] / trials / truth, est[1] / trials / truth, est[2] / trials / truth);
     /* 1-2 dof per value over 12 x 1728 values: a few percent */
     for (int i = 0; i < 3; i++)
         assert_close(est[i] / trials / truth, 1.0, 0.05, 0);

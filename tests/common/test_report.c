@@ -220,7 +220,8 @@ test_html_values_maps_verdicts(void **state)
     char *html = NULL;
     assert_int_equal(mcp_report_html(r, dir, &html), 0);
     /* the verdict comes right after the heading */
-    assert_non_null(strstr(html, "</h2>\n<p class=\"verdict good\">stop: yes, 99.9%</p>"));
+    assert_non_null(
+        strstr(html, "</h2>\n<p class=\"verdict good\">stop: yes, 99.9%</p>"));
     assert_null(strstr(html, "first 1"));
     /* a list of objects: one table, a column for every key any of them has */
     assert_non_null(strstr(html, "<tr><th>name</th><th>min</th><th>nan</th></tr>"));
@@ -230,18 +231,21 @@ test_html_values_maps_verdicts(void **state)
                                  "</li><li>"));
     assert_non_null(strstr(html, "<th>spp</th><td>1, 2</td>"));
     assert_non_null(strstr(html, "<th>empty</th><td><span class=\"dim\">none</span>"));
-    assert_non_null(strstr(html, "<tr><th>spp</th><td class=\"num\">1024</td></tr></table>"
-                                 "<div class=\"scroll\"><table class=\"data nested\"><tr><th>"
-                                 "</th><th>mse</th></tr>\n<tr><td>noisy</td><td class=\"num\">"
-                                 "0.5</td></tr>\n<tr><td>curves</td>"));
+    assert_non_null(strstr(html,
+                           "<tr><th>spp</th><td class=\"num\">1024</td></tr></table>"
+                           "<div class=\"scroll\"><table class=\"data nested\"><tr><th>"
+                           "</th><th>mse</th></tr>\n<tr><td>noisy</td><td class=\"num\">"
+                           "0.5</td></tr>\n<tr><td>curves</td>"));
     assert_null(strstr(html, "[{"));
     assert_null(strstr(html, "{&quot;"));
     /* the colour bar: gray runs from black to white; decades 10^-5 ... 1 at every 20%;
      * tau = 0.01 sits at (log10(0.01) + 5) / 5 = 60% */
     assert_non_null(strstr(html, "linear-gradient(to right,#000000 0.0%,"));
     assert_non_null(strstr(html, ",#ffffff 100.0%)"));
-    assert_non_null(strstr(html, "<span class=\"first\" style=\"left:0.00%\">10<sup>-5</sup></span>"));
-    assert_non_null(strstr(html, "<span class=\"mid\" style=\"left:60.00%\">10<sup>-2</sup></span>"));
+    assert_non_null(strstr(
+        html, "<span class=\"first\" style=\"left:0.00%\">10<sup>-5</sup></span>"));
+    assert_non_null(
+        strstr(html, "<span class=\"mid\" style=\"left:60.00%\">10<sup>-2</sup></span>"));
     assert_non_null(strstr(html, "<span class=\"last\" style=\"left:100.00%\">1</span>"));
     assert_non_null(strstr(html, "<i class=\"mark\" style=\"left:60.00%\"></i>"));
     assert_non_null(strstr(html, "&#9650; tau = 0.01"));
@@ -255,8 +259,9 @@ test_html_values_maps_verdicts(void **state)
     assert_non_null(strstr(html, "<option value=\"im1_0\" selected>noisy</option>"));
     assert_non_null(strstr(html, "<option value=\"im1_2\" selected>reference</option>"));
     assert_non_null(strstr(html, "style=\"width:640px;aspect-ratio:4/2\""));
-    assert_non_null(strstr(html, "id=\"im1_1\" class=\"px\" alt=\"map.png\" width=\"320\" "
-                                 "height=\"160\""));
+    assert_non_null(strstr(html,
+                           "id=\"im1_1\" class=\"px\" alt=\"map.png\" width=\"320\" "
+                           "height=\"160\""));
     free(html);
     mcp_report_free(r);
 }
@@ -335,16 +340,18 @@ test_plot_bars(void **state)
     for (int i = 0; i < 2; i++) {
         r = strstr(r, "<rect x=");
         assert_non_null(r);
-        assert_int_equal(sscanf(r, "<rect x=\"%lf\" y=\"%lf\" width=\"%lf\" height=\"%lf\"",
+        assert_int_equal(sscanf(r,
+                                "<rect x=\"%lf\" y=\"%lf\" width=\"%lf\" height=\"%lf\"",
                                 &bx[i], &by[i], &bw[i], &bh[i]),
                          4);
         r++;
     }
-    assert_close(bw[0], bw[1], 0, 0.011);                   /* both 0.25 wide */
-    assert_close(bx[1] - bx[0], 2 * bw[0], 0, 0.011);       /* centres 0.5 apart */
-    assert_close(bh[1], 2 * bh[0], 0, 0.011);               /* 4 against 2 */
-    assert_close(by[0] + bh[0], by[1] + bh[1], 0, 0.011);   /* one foot: y = 0 */
-    assert_int_equal(count(svg, "fill-opacity=\"0.45\" stroke="), 2 + 2); /* groups, legend */
+    assert_close(bw[0], bw[1], 0, 0.011);                 /* both 0.25 wide */
+    assert_close(bx[1] - bx[0], 2 * bw[0], 0, 0.011);     /* centres 0.5 apart */
+    assert_close(bh[1], 2 * bh[0], 0, 0.011);             /* 4 against 2 */
+    assert_close(by[0] + bh[0], by[1] + bh[1], 0, 0.011); /* one foot: y = 0 */
+    assert_int_equal(count(svg, "fill-opacity=\"0.45\" stroke="),
+                     2 + 2); /* groups, legend */
     mcp_series_style st;
     assert_int_equal(mcp_series_style_from_name("bars", &st), 0);
     assert_int_equal(st, MCP_SERIES_BARS);

@@ -50,9 +50,9 @@ static void
 test_special_values(void **state)
 {
     (void)state;
-    const float v[] = {3.0f,    -0.0f,    0.0f,     -2.5f,   INFINITY, -INFINITY,
-                       1e-42f,  -1e-42f,  3.0f,     3.0f,    FLT_MIN,  -FLT_MAX,
-                       FLT_MAX, 1.0f,     1.0000001f, 0.9999999f};
+    const float v[] = {3.0f,    -0.0f,   0.0f,       -2.5f,     INFINITY, -INFINITY,
+                       1e-42f,  -1e-42f, 3.0f,       3.0f,      FLT_MIN,  -FLT_MAX,
+                       FLT_MAX, 1.0f,    1.0000001f, 0.9999999f};
     check_against_sort(v, sizeof v / sizeof *v);
     check_against_sort(v, 1);
 }
@@ -135,7 +135,8 @@ test_errors(void **state)
     assert_error_contains(mcp__select_ranks(v, 2, &rank, 1, &out),
                           "selection: rank 2 of 2 values");
     rank = 0;
-    assert_error_contains(mcp__select_ranks(v, 0, &rank, 1, &out), "selection: no values");
+    assert_error_contains(mcp__select_ranks(v, 0, &rank, 1, &out),
+                          "selection: no values");
 }
 
 int

@@ -26,7 +26,8 @@ test_matches_snprintf(void **state)
         switch (i % 4) {
         case 0:
             assert_int_equal(mcp__strbuf_put(&b, "abcdef", (size_t)(i % 7)), 0);
-            tl += (size_t)snprintf(truth + tl, sizeof truth - tl, "%.*s", i % 7, "abcdef");
+            tl +=
+                (size_t)snprintf(truth + tl, sizeof truth - tl, "%.*s", i % 7, "abcdef");
             break;
         case 1:
             assert_int_equal(mcp__strbuf_str(&b, "|x|"), 0);

@@ -44,8 +44,7 @@ rgb(int w, int h)
 {
     static const char *const names[] = {"R", "G", "B"};
     mcp_image *img = NULL;
-    if (mcp_image_new(w, h, 3, names, &img))
-        fail_msg("%s", mcp_error_message());
+    if (mcp_image_new(w, h, 3, names, &img)) fail_msg("%s", mcp_error_message());
     return img;
 }
 
@@ -81,8 +80,7 @@ make_scene(int w, int h, double noise_rel, uint64_t seed)
         for (int x = 0; x < w; x++) {
             int cell = ((x / 9) + 2 * (y / 7)) % 4;
             double dx = x - 0.6 * w, dy = y - 0.4 * h;
-            if (dx * dx + dy * dy < 0.06 * w * h)
-                cell = 3;
+            if (dx * dx + dy * dy < 0.06 * w * h) cell = 3;
             int wall = y < h / 3;
             double light = 1.2 + 0.3 * sin(0.02 * x + 0.03 * y);
             size_t i = ((size_t)y * w + x) * 3;
@@ -144,8 +142,7 @@ static mcp_image *
 apply(const mcp_denoiser *d, const mcp_denoise_input *in)
 {
     mcp_image *out = NULL;
-    if (d->apply(d, in, &out))
-        fail_msg("%s apply: %s", d->name, mcp_error_message());
+    if (d->apply(d, in, &out)) fail_msg("%s apply: %s", d->name, mcp_error_message());
     return out;
 }
 
@@ -157,10 +154,8 @@ apply_moved(const mcp_denoiser *d, const mcp_denoise_input *in,
     mcp_image *x = axpy(in->color, a, t->color), *al = NULL, *nr = NULL;
     mcp_denoise_input moved = *in;
     moved.color = x;
-    if (t->albedo)
-        moved.albedo = al = axpy(in->albedo, a, t->albedo);
-    if (t->normal)
-        moved.normal = nr = axpy(in->normal, a, t->normal);
+    if (t->albedo) moved.albedo = al = axpy(in->albedo, a, t->albedo);
+    if (t->normal) moved.normal = nr = axpy(in->normal, a, t->normal);
     mcp_image *out = apply(d, &moved);
     mcp_image_free(x);
     mcp_image_free(al);
@@ -220,8 +215,7 @@ test_kinds_table(void **state)
         gauss |= strcmp(k[n]->name, "gauss") == 0;
         nlm |= strcmp(k[n]->name, "nlm") == 0;
         bilateral |= strcmp(k[n]->name, "bilateral") == 0;
-        if (!self_contained(k[n]))
-            continue;
+        if (!self_contained(k[n])) continue;
         /* every kind is created from its bare name, and is exact (built in) */
         char yaml[64];
         snprintf(yaml, sizeof yaml, "%s", k[n]->name);
@@ -366,7 +360,8 @@ test_input_errors(void **state)
     scene s = make_scene(12, 10, 0.1, 1);
     mcp_image *small = rgb(11, 10), *four = NULL, *out = (mcp_image *)&out;
     assert_int_equal(mcp_image_new(12, 10, 4, NULL, &four), 0);
-    FOR_EACH_BUILTIN(kind) {
+    FOR_EACH_BUILTIN(kind)
+    {
         const char *name = (*kind)->name;
         mcp_denoiser *d = mcp_test_denoiser(name);
         mcp_denoise_input in = {0};
@@ -428,7 +423,8 @@ test_nasty_values(void **state)
     mcp_image_px(s.variance, 20, 40)[0] = NAN;
     mcp_image *t0 = probe(s.color, NULL, 4);
     mcp_denoise_tangent t = {t0, NULL, NULL};
-    FOR_EACH_BUILTIN(k) {
+    FOR_EACH_BUILTIN(k)
+    {
         mcp_denoiser *d = mcp_test_denoiser((*k)->name);
         mcp_denoise_input in = input_of(&s);
         mcp_image *prim = NULL, *jt = NULL;
@@ -743,7 +739,8 @@ test_jvp_finite_differences(void **state)
      * difference then has truncation ~1e-8 and float-rounding error ~1e-7 / 1e-2, well
      * under the 1e-3 asked of the JVP (nlm's kink at dc = 0 adds a little where a
      * patch distance crosses it). */
-    FOR_EACH_BUILTIN(k) {
+    FOR_EACH_BUILTIN(k)
+    {
         char yaml[64];
         snprintf(yaml, sizeof yaml, "%s", (*k)->name);
         check_jvp_fd(yaml, &s, &t, 1e-2, 1e-3);
@@ -772,7 +769,8 @@ test_jvp_of_constant_shift(void **state)
     scene s = make_scene(40, 36, 0.2, 8);
     mcp_image *one = mcp_test_constant(40, 36, 3, 1.0f, NULL);
     mcp_denoise_tangent t = {one, NULL, NULL};
-    FOR_EACH_BUILTIN(k) {
+    FOR_EACH_BUILTIN(k)
+    {
         mcp_denoiser *d = mcp_test_denoiser((*k)->name);
         mcp_denoise_input in = input_of(&s);
         mcp_image *jt = NULL;
@@ -797,7 +795,8 @@ test_tangents_in_one_pass(void **state)
     mcp_image *t2 = probe(s.color, NULL, 3),
               *ta = mcp_test_random(45, 38, 3, -.1, .1, 4, NULL);
     mcp_denoise_tangent t[3] = {{t0, NULL, NULL}, {t1, ta, NULL}, {t2, NULL, ta}};
-    FOR_EACH_BUILTIN(k) {
+    FOR_EACH_BUILTIN(k)
+    {
         mcp_denoiser *d = mcp_test_denoiser((*k)->name);
         mcp_denoise_input in = input_of(&s);
         mcp_image *prim = NULL, *all[3] = {NULL, NULL, NULL};
@@ -834,7 +833,8 @@ test_thread_count_independence(void **state)
     mcp_image *t0 = probe(s.color, s.variance, 5);
     mcp_denoise_tangent t = {t0, s.albedo, NULL};
     int saved = omp_get_max_threads();
-    FOR_EACH_BUILTIN(k) {
+    FOR_EACH_BUILTIN(k)
+    {
         mcp_denoiser *d = mcp_test_denoiser((*k)->name);
         mcp_denoise_input in = input_of(&s);
         mcp_image *ref_p = NULL, *ref_j = NULL;
@@ -889,7 +889,8 @@ test_nlm_denoises(void **state)
     mcp_image_free(out);
 
     /* the albedo keeps edges: without features the same filter does worse */
-    mcp_denoiser *plain = mcp_test_denoiser("{name: nlm, sigma_albedo: 0, sigma_normal: 0}");
+    mcp_denoiser *plain =
+        mcp_test_denoiser("{name: nlm, sigma_albedo: 0, sigma_normal: 0}");
     out = apply(plain, &in);
     double plain_mse = mse(out, s.truth);
     print_message("  without albedo and normal: MSE %.3g\n", plain_mse);
@@ -906,7 +907,8 @@ test_nlm_denoises(void **state)
     mcp_denoiser_free(bil);
 
     /* without variance, a fixed noise level of the right size works too */
-    mcp_denoiser *novar = mcp_test_denoiser("{name: nlm, use_variance: false, sigma_color: 0.3}");
+    mcp_denoiser *novar =
+        mcp_test_denoiser("{name: nlm, use_variance: false, sigma_color: 0.3}");
     out = apply(novar, &in);
     double novar_mse = mse(out, s.truth);
     print_message("  with sigma_color instead of the variance: MSE %.3g\n", novar_mse);

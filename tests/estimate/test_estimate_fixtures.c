@@ -222,12 +222,13 @@ test_series_synthetic_agreement(void **state)
             mcp_series_from_pattern(mcp_test_path(pattern), spps, 11, &series), 0);
         mcp_image *ref = scene_reference(&scenes[k]);
         snprintf(label, sizeof label, "synthetic %d (box, K=1)", k);
-        assert_int_equal(
-            run_series(series, &mcp_test_box_denoiser, ref, 1, label, &agree, &cases, &early), 0);
+        assert_int_equal(run_series(series, &mcp_test_box_denoiser, ref, 1, label, &agree,
+                                    &cases, &early),
+                         0);
         snprintf(label, sizeof label, "synthetic %d (box, K=4)", k);
-        assert_int_equal(
-            run_series(series, &mcp_test_box_denoiser, ref, 4, label, &agree4, &cases4, &early4),
-            0);
+        assert_int_equal(run_series(series, &mcp_test_box_denoiser, ref, 4, label,
+                                    &agree4, &cases4, &early4),
+                         0);
         mcp_image_free(ref);
         mcp_series_free(series);
     }
@@ -297,7 +298,8 @@ test_stratified_series(void **state)
     (void)state;
     char ref_path[4096], pattern[4096];
     snprintf(ref_path, sizeof ref_path,
-             "%s/samples/fixtures/strat/texture/texture_reference.exr", MCP_TEST_SOURCE_DIR);
+             "%s/samples/fixtures/strat/texture/texture_reference.exr",
+             MCP_TEST_SOURCE_DIR);
     snprintf(pattern, sizeof pattern,
              "%s/samples/fixtures/strat/texture/series/texture_spp%%04d.exr",
              MCP_TEST_SOURCE_DIR);
@@ -383,10 +385,10 @@ test_cli_single_and_series(void **state)
     assert_true(cJSON_GetObjectItem(j, "cdf_at_tau")->valuedouble >= 0.0);
     int blocks = cJSON_GetObjectItem(j, "blocks")->valueint;
     cJSON_Delete(j);
-    const char *files[] = {"denoised.exr",      "sure.exr",          "sure_rel.exr",
-                           "variance.exr",      "sampling_map.exr",  "sample_counts.exr",
-                           "distribution.exr",  "estimate.json",     "report.html",
-                           "denoised.png",      "sampling_map.png",  "blocks_error.png"};
+    const char *files[] = {"denoised.exr",     "sure.exr",         "sure_rel.exr",
+                           "variance.exr",     "sampling_map.exr", "sample_counts.exr",
+                           "distribution.exr", "estimate.json",    "report.html",
+                           "denoised.png",     "sampling_map.png", "blocks_error.png"};
     for (size_t i = 0; i < sizeof files / sizeof *files; i++) {
         char p[256];
         snprintf(p, sizeof p, "cli_out/%s", files[i]);
@@ -435,7 +437,8 @@ test_cli_single_and_series(void **state)
     st = run("estimate '%s' --denoiser gauss --probes 0",
              mcp_test_path("cli_spp0064.exr"));
     assert_int_equal(st, 1);
-    assert_non_null(strstr(err, "--probes must be auto or a number in [1, 1024] (got 0)"));
+    assert_non_null(
+        strstr(err, "--probes must be auto or a number in [1, 1024] (got 0)"));
     /* the probe count is the denoiser's (docs/fidelity.md "The defaults"): 3 for the
        U-Net, whose tangents cost over half an apply, 4 for the others; the automatic
        estimate is the explicit one, to the bit */
@@ -447,14 +450,17 @@ test_cli_single_and_series(void **state)
         double cdf[2];
         for (int explicit_k = 0; explicit_k < 2; explicit_k++) {
             char probes[32] = "";
-            if (explicit_k) snprintf(probes, sizeof probes, "--probes %d", auto_probes[i].probes);
-            st = run("estimate '%s/samples/fixtures/strat/texture/series/texture_spp0032.exr' "
-                     "--denoiser %s %s --json",
-                     MCP_TEST_SOURCE_DIR, auto_probes[i].denoiser, probes);
+            if (explicit_k)
+                snprintf(probes, sizeof probes, "--probes %d", auto_probes[i].probes);
+            st = run(
+                "estimate '%s/samples/fixtures/strat/texture/series/texture_spp0032.exr' "
+                "--denoiser %s %s --json",
+                MCP_TEST_SOURCE_DIR, auto_probes[i].denoiser, probes);
             assert_int_equal(st, 0);
             cJSON *j = cJSON_Parse(out);
             assert_non_null(j);
-            assert_int_equal(cJSON_GetObjectItem(j, "probes")->valueint, auto_probes[i].probes);
+            assert_int_equal(cJSON_GetObjectItem(j, "probes")->valueint,
+                             auto_probes[i].probes);
             cdf[explicit_k] = cJSON_GetObjectItem(j, "cdf_at_tau")->valuedouble;
             cJSON_Delete(j);
         }

@@ -36,8 +36,7 @@ count_entries(const char *dir)
     int n = 0;
     struct dirent *e;
     while ((e = readdir(d)))
-        if (strcmp(e->d_name, ".") && strcmp(e->d_name, ".."))
-            n++;
+        if (strcmp(e->d_name, ".") && strcmp(e->d_name, "..")) n++;
     closedir(d);
     return n;
 }
@@ -66,8 +65,7 @@ test_apply_equals_gauss(void **state)
     mcp_denoiser *ext = external_gauss(dir, ""), *gauss = mcp_test_denoiser("gauss");
     assert_int_equal(ext->exact, 0);
     mcp_image *a = NULL, *b = NULL;
-    if (ext->apply(ext, &in, &a))
-        fail_msg("%s", mcp_error_message());
+    if (ext->apply(ext, &in, &a)) fail_msg("%s", mcp_error_message());
     assert_int_equal(gauss->apply(gauss, &in, &b), 0);
     assert_int_equal(a->channels, 3);
     assert_int_equal(a->width, 23);
@@ -95,18 +93,18 @@ test_jvp_matches_exact(void **state)
     mcp_image *t1 = mcp_test_random(20, 16, 3, -0.05f, 0.05f, 13, rgb);
     mcp_denoise_input in = {color, NULL, NULL, NULL};
     mcp_denoise_tangent t[2] = {{t0, NULL, NULL}, {t1, NULL, NULL}};
-    mcp_denoiser *ext = external_gauss(dir, ", delta: 0.1"), *gauss = mcp_test_denoiser("gauss");
+    mcp_denoiser *ext = external_gauss(dir, ", delta: 0.1"),
+                 *gauss = mcp_test_denoiser("gauss");
     mcp_image *fe = NULL, *fg = NULL, *je[2] = {0}, *jg[2] = {0};
-    if (ext->jvp(ext, &in, t, 2, &fe, je))
-        fail_msg("%s", mcp_error_message());
+    if (ext->jvp(ext, &in, t, 2, &fe, je)) fail_msg("%s", mcp_error_message());
     assert_int_equal(gauss->jvp(gauss, &in, t, 2, &fg, jg), 0);
     assert_true(mcp_test_max_abs_diff(fe, fg) <= 1e-6);
     for (int k = 0; k < 2; k++)
         for (int y = 0; y < 16; y++)
             for (int x = 0; x < 20; x++)
                 for (int c = 0; c < 3; c++)
-                    assert_close(mcp_image_px(je[k], x, y)[c], mcp_image_px(jg[k], x, y)[c],
-                                 1e-3, 1e-5);
+                    assert_close(mcp_image_px(je[k], x, y)[c],
+                                 mcp_image_px(jg[k], x, y)[c], 1e-3, 1e-5);
     assert_int_equal(count_entries(dir), 0);
     for (int k = 0; k < 2; k++) {
         mcp_image_free(je[k]);
@@ -134,7 +132,8 @@ test_errors(void **state)
 
     /* a failing command: one line naming it and its status */
     snprintf(yaml, sizeof yaml,
-             "{name: external, command: \"false {color} {output}\", workdir: \"%s\"}", dir);
+             "{name: external, command: \"false {color} {output}\", workdir: \"%s\"}",
+             dir);
     mcp_denoiser *d = mcp_test_denoiser(yaml);
     assert_error_contains(d->apply(d, &in, &out), "command 'false {color} {output}'");
     assert_error_contains(-1, "exit status 1");
@@ -145,7 +144,8 @@ test_errors(void **state)
 
     /* a command that succeeds but writes nothing */
     snprintf(yaml, sizeof yaml,
-             "{name: external, command: \"true {color} {output}\", workdir: \"%s\"}", dir);
+             "{name: external, command: \"true {color} {output}\", workdir: \"%s\"}",
+             dir);
     d = mcp_test_denoiser(yaml);
     assert_error_contains(d->apply(d, &in, &out), "wrote no {output}");
     assert_int_equal(count_entries(dir), 0);
@@ -163,8 +163,7 @@ test_errors(void **state)
     /* ... and with one it runs (cp copies the albedo through) */
     mcp_image *albedo = mcp_test_random(8, 6, 3, 0.0f, 1.0f, 4, rgb);
     in.albedo = albedo;
-    if (d->apply(d, &in, &out))
-        fail_msg("%s", mcp_error_message());
+    if (d->apply(d, &in, &out)) fail_msg("%s", mcp_error_message());
     assert_true(mcp_test_max_abs_diff(out, albedo) == 0.0);
     assert_int_equal(count_entries(dir), 0);
     mcp_image_free(out);
@@ -179,7 +178,8 @@ test_errors(void **state)
         {"external", "needs settings"},
         {"{name: external, command: \"x {color}\"}", "must name {color} and {output}"},
         {"{name: external, command: \"x {color} {output}\", format: png}", "pfm or exr"},
-        {"{name: external, command: \"x {color} {output}\", delta: 0}", "delta must be > 0"},
+        {"{name: external, command: \"x {color} {output}\", delta: 0}",
+         "delta must be > 0"},
     };
     for (size_t i = 0; i < sizeof bad / sizeof *bad; i++) {
         mcp_node *node = NULL;
@@ -201,8 +201,7 @@ test_cli(void **state)
     static const char *const rgb[] = {"R", "G", "B"};
     mcp_image *color = mcp_test_random(12, 9, 3, 0.0f, 1.0f, 5, rgb);
     const char *in = mcp_test_path("cli in.exr");
-    if (mcp_image_write(color, in, NULL))
-        fail_msg("%s", mcp_error_message());
+    if (mcp_image_write(color, in, NULL)) fail_msg("%s", mcp_error_message());
     char args[8192], out[4096], err[4096];
     setenv("MCPOST", MCP_TEST_MCPOST, 1);
     snprintf(args, sizeof args,
@@ -211,8 +210,7 @@ test_cli(void **state)
              "{output}\" -o '%s'",
              in, MCP_TEST_SOURCE_DIR, mcp_test_path("cli out.exr"));
     int rc = mcp_test_run_mcpost(args, out, sizeof out, err, sizeof err);
-    if (rc != 0)
-        fail_msg("rc %d: %s", rc, err);
+    if (rc != 0) fail_msg("rc %d: %s", rc, err);
     snprintf(args, sizeof args,
              "denoise --color '%s' --denoiser external --denoiser-opt 'command=false "
              "{color} {output}' -o '%s'",

@@ -200,8 +200,8 @@ grid_blocks(int w, int h, int nx, int ny)
     b->count = nx * ny;
     b->items = calloc((size_t)b->count, sizeof *b->items);
     for (int i = 0; i < b->count; i++)
-        b->items[i] = (mcp_block){(i % nx) * (w / nx), (i / nx) * (h / ny), w / nx, h / ny,
-                                  {0}, {0}};
+        b->items[i] = (mcp_block){
+            (i % nx) * (w / nx), (i / nx) * (h / ny), w / nx, h / ny, {0}, {0}};
     return b;
 }
 
@@ -264,13 +264,15 @@ test_percentiles_match_exact_search(void **state)
     assert_int_equal(mcp_image_new(w, h, 3, RGB, &var), 0);
     uint64_t rng = 2026;
     for (int i = 0; i < w * h * 3; i++)
-        var->data[i] = i % 97 == 0 ? 0.0f
-                                   : (float)pow(10.0, 12.0 * mcp_test_rand_uniform(&rng) - 9.0);
+        var->data[i] = i % 97 == 0
+                           ? 0.0f
+                           : (float)pow(10.0, 12.0 * mcp_test_rand_uniform(&rng) - 9.0);
     mcp_error_dist *d = NULL;
     assert_int_equal(mcp_error_distribution(b, var, &d), 0);
     for (int i = 0; i < 16; i++) /* λ from 0 to 15 per block and channel */
         for (int c = 0; c < 3; c++)
-            b->items[i].sure_sum[c] = (1.0 + (i + c) % 16) * (b->items[i].var_sum[c] + 1e-6);
+            b->items[i].sure_sum[c] =
+                (1.0 + (i + c) % 16) * (b->items[i].var_sum[c] + 1e-6);
     mcp_error_dist_free(d);
     assert_int_equal(mcp_error_distribution(b, var, &d), 0);
     const double p[] = {0.0, 0.01, 0.5, 0.9, 0.99, 0.999, 0.9999};

@@ -41,12 +41,13 @@ typedef struct rnet {
 static void
 rnet_make(rnet *n, int ic, const int ch[11], uint64_t seed)
 {
-    const int ec1 = ch[0], ec2 = ch[1], ec3 = ch[2], ec4 = ch[3], ec5 = ch[4], dc4 = ch[5],
-              dc3 = ch[6], dc2a = ch[7], dc2b = ch[8], dc1a = ch[9], dc1b = ch[10];
-    const int cin[16] = {ic,       ec1, ec1,  ec2,  ec3,       ec4,  ec5, ec5 + ec3,
-                         dc4,      dc4 + ec2, dc3, dc3 + ec1, dc2a, dc2b + ic, dc1a, dc1b};
-    const int cout[16] = {ec1, ec1, ec2,  ec3,  ec4,  ec5,  ec5,  dc4,
-                          dc4, dc3, dc3,  dc2a, dc2b, dc1a, dc1b, 3};
+    const int ec1 = ch[0], ec2 = ch[1], ec3 = ch[2], ec4 = ch[3], ec5 = ch[4],
+              dc4 = ch[5], dc3 = ch[6], dc2a = ch[7], dc2b = ch[8], dc1a = ch[9],
+              dc1b = ch[10];
+    const int cin[16] = {ic,  ec1,       ec1, ec2,       ec3,  ec4,       ec5,  ec5 + ec3,
+                         dc4, dc4 + ec2, dc3, dc3 + ec1, dc2a, dc2b + ic, dc1a, dc1b};
+    const int cout[16] = {ec1, ec1, ec2, ec3,  ec4,  ec5,  ec5,  dc4,
+                          dc4, dc3, dc3, dc2a, dc2b, dc1a, dc1b, 3};
     n->ic = ic;
     uint64_t st = seed;
     for (int k = 0; k < 16; k++) {
@@ -64,7 +65,8 @@ rnet_make(rnet *n, int ic, const int ch[11], uint64_t seed)
                                          : 0.1 * mcp_test_rand_uniform(&st));
         snprintf(n->wname[k], 32, "%s.weight", names16[k]);
         snprintf(n->bname[k], 32, "%s.bias", names16[k]);
-        n->t[2 * k] = (mcp_test_tza_tensor){n->wname[k], 4, {cout[k], cin[k], 3, 3}, n->w[k]};
+        n->t[2 * k] =
+            (mcp_test_tza_tensor){n->wname[k], 4, {cout[k], cin[k], 3, 3}, n->w[k]};
         n->t[2 * k + 1] = (mcp_test_tza_tensor){n->bname[k], 1, {cout[k]}, n->b[k]};
     }
 }
@@ -93,8 +95,7 @@ ref_conv(const rnet *n, int k, const double *in, int h, int w, int relu)
                     for (int ky = 0; ky < 3; ky++)
                         for (int kx = 0; kx < 3; kx++) {
                             int yy = y + ky - 1, xx = x + kx - 1;
-                            if (yy < 0 || yy >= h || xx < 0 || xx >= w)
-                                continue;
+                            if (yy < 0 || yy >= h || xx < 0 || xx >= w) continue;
                             s += (double)n->w[k][((o * ci + i) * 3 + ky) * 3 + kx] *
                                  in[((size_t)i * h + yy) * w + xx];
                         }
@@ -127,7 +128,8 @@ ref_upcat(const double *a, int ca, const double *b, int cb, int h, int w)
     for (int k = 0; k < ca; k++)
         for (int y = 0; y < h; y++)
             for (int x = 0; x < w; x++)
-                out[((size_t)k * h + y) * w + x] = a[((size_t)k * (h / 2) + y / 2) * (w / 2) + x / 2];
+                out[((size_t)k * h + y) * w + x] =
+                    a[((size_t)k * (h / 2) + y / 2) * (w / 2) + x / 2];
     memcpy(out + (size_t)ca * h * w, b, (size_t)cb * h * w * sizeof(double));
     return out;
 }
@@ -174,7 +176,8 @@ ref_autoexposure(const mcp_image *c)
             for (int y = i * H / hk; y < (i + 1) * H / hk; y++)
                 for (int x = j * W / wk; x < (j + 1) * W / wk; x++, cnt++) {
                     const float *p = mcp_image_px(c, x, y);
-                    L += 0.212671 * clampd(p[0], 0, FLT_MAX) + 0.715160 * clampd(p[1], 0, FLT_MAX) +
+                    L += 0.212671 * clampd(p[0], 0, FLT_MAX) +
+                         0.715160 * clampd(p[1], 0, FLT_MAX) +
                          0.072169 * clampd(p[2], 0, FLT_MAX);
                 }
             if (cnt && L / cnt > 1e-8) {
@@ -189,7 +192,8 @@ ref_autoexposure(const mcp_image *c)
  * and normal parts too): returns a 3 x H x W array. */
 static double *
 ref_forward_along(const rnet *n, const mcp_image *col, const mcp_image *alb,
-                  const mcp_image *nrm, double scale, const mcp_denoise_tangent *t, double step)
+                  const mcp_image *nrm, double scale, const mcp_denoise_tangent *t,
+                  double step)
 {
     int H = col->height, W = col->width, hp = (H + 15) / 16 * 16, wp = (W + 15) / 16 * 16;
     int ic = n->ic;
@@ -216,16 +220,23 @@ ref_forward_along(const rnet *n, const mcp_image *col, const mcp_image *alb,
     int h = hp, w = wp;
     double *e0 = ref_conv(n, 0, x, h, w, 1), *e1 = ref_conv(n, 1, e0, h, w, 1);
     double *p1 = ref_pool(e1, n->cout[1], h, w);
-    double *e2 = ref_conv(n, 2, p1, h / 2, w / 2, 1), *p2 = ref_pool(e2, n->cout[2], h / 2, w / 2);
-    double *e3 = ref_conv(n, 3, p2, h / 4, w / 4, 1), *p3 = ref_pool(e3, n->cout[3], h / 4, w / 4);
-    double *e4 = ref_conv(n, 4, p3, h / 8, w / 8, 1), *p4 = ref_pool(e4, n->cout[4], h / 8, w / 8);
-    double *e5a = ref_conv(n, 5, p4, h / 16, w / 16, 1), *e5b = ref_conv(n, 6, e5a, h / 16, w / 16, 1);
+    double *e2 = ref_conv(n, 2, p1, h / 2, w / 2, 1),
+           *p2 = ref_pool(e2, n->cout[2], h / 2, w / 2);
+    double *e3 = ref_conv(n, 3, p2, h / 4, w / 4, 1),
+           *p3 = ref_pool(e3, n->cout[3], h / 4, w / 4);
+    double *e4 = ref_conv(n, 4, p3, h / 8, w / 8, 1),
+           *p4 = ref_pool(e4, n->cout[4], h / 8, w / 8);
+    double *e5a = ref_conv(n, 5, p4, h / 16, w / 16, 1),
+           *e5b = ref_conv(n, 6, e5a, h / 16, w / 16, 1);
     double *c4 = ref_upcat(e5b, n->cout[6], p3, n->cout[3], h / 8, w / 8);
-    double *d4a = ref_conv(n, 7, c4, h / 8, w / 8, 1), *d4b = ref_conv(n, 8, d4a, h / 8, w / 8, 1);
+    double *d4a = ref_conv(n, 7, c4, h / 8, w / 8, 1),
+           *d4b = ref_conv(n, 8, d4a, h / 8, w / 8, 1);
     double *c3 = ref_upcat(d4b, n->cout[8], p2, n->cout[2], h / 4, w / 4);
-    double *d3a = ref_conv(n, 9, c3, h / 4, w / 4, 1), *d3b = ref_conv(n, 10, d3a, h / 4, w / 4, 1);
+    double *d3a = ref_conv(n, 9, c3, h / 4, w / 4, 1),
+           *d3b = ref_conv(n, 10, d3a, h / 4, w / 4, 1);
     double *c2 = ref_upcat(d3b, n->cout[10], p1, n->cout[1], h / 2, w / 2);
-    double *d2a = ref_conv(n, 11, c2, h / 2, w / 2, 1), *d2b = ref_conv(n, 12, d2a, h / 2, w / 2, 1);
+    double *d2a = ref_conv(n, 11, c2, h / 2, w / 2, 1),
+           *d2b = ref_conv(n, 12, d2a, h / 2, w / 2, 1);
     double *c1 = ref_upcat(d2b, n->cout[12], x, ic, h, w);
     double *d1a = ref_conv(n, 13, c1, h, w, 1), *d1b = ref_conv(n, 14, d1a, h, w, 1);
     double *d0 = ref_conv(n, 15, d1b, h, w, 0);
@@ -234,17 +245,19 @@ ref_forward_along(const rnet *n, const mcp_image *col, const mcp_image *alb,
         for (int y = 0; y < H; y++)
             for (int px = 0; px < W; px++)
                 out[((size_t)k * H + y) * W + px] =
-                    ref_pu_inv(clampd(d0[((size_t)k * hp + y) * wp + px], 0, FLT_MAX) / ns) / scale;
-    double *all[] = {x, e0, e1, p1, e2, p2, e3, p3, e4, p4, e5a, e5b, c4, d4a, d4b,
-                     c3, d3a, d3b, c2, d2a, d2b, c1, d1a, d1b, d0};
+                    ref_pu_inv(clampd(d0[((size_t)k * hp + y) * wp + px], 0, FLT_MAX) /
+                               ns) /
+                    scale;
+    double *all[] = {x,   e0,  e1, p1,  e2,  p2, e3,  p3,  e4, p4,  e5a, e5b, c4,
+                     d4a, d4b, c3, d3a, d3b, c2, d2a, d2b, c1, d1a, d1b, d0};
     for (size_t i = 0; i < sizeof all / sizeof *all; i++)
         free(all[i]);
     return out;
 }
 
 static double *
-ref_forward(const rnet *n, const mcp_image *col, const mcp_image *alb, const mcp_image *nrm,
-            double scale)
+ref_forward(const rnet *n, const mcp_image *col, const mcp_image *alb,
+            const mcp_image *nrm, double scale)
 {
     return ref_forward_along(n, col, alb, nrm, scale, NULL, 0.0);
 }
@@ -345,7 +358,7 @@ test_forward_matches_reference(void **state)
     check_forward(9, 21, 13, 0.7);  /* padded to 32x16 */
     check_forward(9, 37, 20, -1.0); /* autoexposure */
     check_forward(6, 16, 16, 1.0);
-    check_forward(3, 5, 3, 0.0);    /* smaller than one bin */
+    check_forward(3, 5, 3, 0.0); /* smaller than one bin */
 }
 
 static void
@@ -421,7 +434,8 @@ test_half_weights(void **state)
     for (int y = 0; y < 17; y++)
         for (int x = 0; x < 24; x++)
             for (int k = 0; k < 3; k++)
-                assert_close(mcp_image_px(oh, x, y)[k], mcp_image_px(of, x, y)[k], 0.05, 1e-4);
+                assert_close(mcp_image_px(oh, x, y)[k], mcp_image_px(of, x, y)[k], 0.05,
+                             1e-4);
     mcp_image_free(oh);
     mcp_image_free(of);
     mcp_image_free(orr);
@@ -481,7 +495,8 @@ test_bad_files(void **state)
     mcp_test_tza_write(good, n.t, 2, 'f');
     b = slurp(good, &size);
     size_t table = 0;
-    for (int i = 0; i < 8; i++) table |= (size_t)b[4 + i] << (8 * i);
+    for (int i = 0; i < 8; i++)
+        table |= (size_t)b[4 + i] << (8 * i);
     unsigned char *c = calloc(size, 1);
     memcpy(c, b, 12);
     memcpy(c + 64, b + table, size - table); /* table at 64, data offsets now past it */
@@ -501,7 +516,8 @@ test_bad_files(void **state)
     memcpy(big, n.t, sizeof n.t);
     big[32] = (mcp_test_tza_tensor){"enc_conv1b.weight", 1, {1}, n.b[0]};
     mcp_test_tza_write(bad, big, 33, 'f');
-    assert_error_contains(mcp__unet_load(bad, &net), "unet_large weights are not supported");
+    assert_error_contains(mcp__unet_load(bad, &net),
+                          "unet_large weights are not supported");
     /* inconsistent channels */
     memcpy(big, n.t, sizeof n.t);
     big[22].dims[1] = 5; /* dec_conv2a.weight: 5 inputs, needs 7 + 4 */
@@ -565,8 +581,7 @@ tiny_net(rnet *n, int ic, uint64_t seed)
     const char *path = mcp_test_path("tiny_jvp.tza");
     mcp_test_tza_write(path, n->t, 32, 'f');
     mcp__unet *net = NULL;
-    if (mcp__unet_load(path, &net))
-        fail_msg("%s", mcp_error_message());
+    if (mcp__unet_load(path, &net)) fail_msg("%s", mcp_error_message());
     return net;
 }
 
@@ -586,7 +601,8 @@ check_jvp(int ic, int w, int h, double scale)
               *tn = mcp_test_random(w, h, 3, -0.5f, 0.5f, 7, NULL);
     mcp_denoise_tangent t[2] = {{tc, NULL, NULL}, {tc, ta, tn}};
     mcp_image *prim = NULL, *jt[2] = {NULL, NULL};
-    assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, scale, t, 2, &prim, jt), 0);
+    assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, scale, t, 2, &prim, jt),
+                     0);
     /* the primal of the JVP pass is the forward pass, bit for bit */
     mcp_image *fwd = NULL;
     assert_int_equal(mcp__unet_forward(net, in.col, in.alb, in.nrm, scale, &fwd), 0);
@@ -613,8 +629,9 @@ check_jvp(int ic, int w, int h, double scale)
         mcp_denoise_tangent only_features = {mcp_test_constant(w, h, 3, 0.0f, NULL),
                                              ic < 6 ? ta : NULL, tn};
         mcp_image *z = NULL;
-        assert_int_equal(
-            mcp__unet_run(net, in.col, in.alb, in.nrm, scale, &only_features, 1, NULL, &z), 0);
+        assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, scale, &only_features,
+                                       1, NULL, &z),
+                         0);
         for (size_t i = 0; i < (size_t)3 * w * h; i++)
             assert_true(z->data[i] == 0.0f);
         mcp_image_free(z);
@@ -658,15 +675,16 @@ test_jvp_batched(void **state)
     mcp_image *tc[3], *ta = mcp_test_random(w, h, 3, -1, 1, 9, NULL);
     for (int k = 0; k < 3; k++)
         tc[k] = mcp_test_random(w, h, 3, -1, 1, 40 + k, NULL);
-    mcp_denoise_tangent t[3] = {{tc[0], NULL, NULL}, {tc[1], ta, NULL}, {tc[2], NULL, ta}};
+    mcp_denoise_tangent t[3] = {
+        {tc[0], NULL, NULL}, {tc[1], ta, NULL}, {tc[2], NULL, ta}};
     const size_t bytes = (size_t)w * h * 3 * sizeof(float);
     mcp_image *all[3] = {NULL, NULL, NULL};
     assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, 0.0, t, 3, NULL, all), 0);
     const double scale = mcp__unet_autoexposure(in.col, 0);
     for (int k = 0; k < 3; k++) {
         mcp_image *one = NULL;
-        assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, scale, &t[k], 1, NULL, &one),
-                         0);
+        assert_int_equal(
+            mcp__unet_run(net, in.col, in.alb, in.nrm, scale, &t[k], 1, NULL, &one), 0);
         assert_memory_equal(all[k]->data, one->data, bytes);
         mcp_image_free(one);
     }
@@ -675,7 +693,8 @@ test_jvp_batched(void **state)
     for (int threads = 1; threads <= 3; threads += 2) {
         omp_set_num_threads(threads);
         mcp_image *again[3] = {NULL, NULL, NULL};
-        assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, 0.0, t, 3, NULL, again), 0);
+        assert_int_equal(
+            mcp__unet_run(net, in.col, in.alb, in.nrm, 0.0, t, 3, NULL, again), 0);
         for (int k = 0; k < 3; k++) {
             assert_memory_equal(all[k]->data, again[k]->data, bytes);
             mcp_image_free(again[k]);
@@ -688,10 +707,12 @@ test_jvp_batched(void **state)
     char *saved_fixed = env_save("MCPOST_UNET_FIXED");
     setenv("MCPOST_UNET_FIXED", "1", 1);
     mcp_image *avx2[3] = {NULL, NULL, NULL}, *base[3] = {NULL, NULL, NULL};
-    assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, 0.0, t, 3, NULL, avx2), 0);
+    assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, 0.0, t, 3, NULL, avx2),
+                     0);
     char *saved_flag = env_save("MCPOST_NO_AVX2");
     setenv("MCPOST_NO_AVX2", "1", 1);
-    assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, 0.0, t, 3, NULL, base), 0);
+    assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, 0.0, t, 3, NULL, base),
+                     0);
     env_restore("MCPOST_NO_AVX2", saved_flag);
     env_restore("MCPOST_UNET_FIXED", saved_fixed);
     for (int k = 0; k < 3; k++) {
@@ -725,9 +746,8 @@ test_tiles_same_bits(void **state)
         tc[k] = mcp_test_random(w, h, 3, -1, 1, 53 + k, NULL);
     mcp_denoise_tangent t[2] = {{tc[0], NULL, NULL}, {tc[1], ta, NULL}};
     mcp_image *whole = NULL, *wj[2] = {NULL, NULL};
-    assert_int_equal(mcp__unet_run_tiled(net, in.col, in.alb, in.nrm, 0.0, t, 2, 0, &whole,
-                                         wj),
-                     0);
+    assert_int_equal(
+        mcp__unet_run_tiled(net, in.col, in.alb, in.nrm, 0.0, t, 2, 0, &whole, wj), 0);
     const size_t bytes = (size_t)w * h * 3 * sizeof(float);
     int varied = 0; /* the comparison is not vacuous */
     for (size_t i = 1; i < (size_t)w * h * 3; i++)
@@ -735,9 +755,9 @@ test_tiles_same_bits(void **state)
     assert_true(varied > w * h);
     for (int tile = 48; tile <= 64; tile += 16) {
         mcp_image *tiled = NULL, *tj[2] = {NULL, NULL};
-        assert_int_equal(mcp__unet_run_tiled(net, in.col, in.alb, in.nrm, 0.0, t, 2, tile,
-                                             &tiled, tj),
-                         0);
+        assert_int_equal(
+            mcp__unet_run_tiled(net, in.col, in.alb, in.nrm, 0.0, t, 2, tile, &tiled, tj),
+            0);
         assert_memory_equal(whole->data, tiled->data, bytes);
         for (int k = 0; k < 2; k++) {
             assert_memory_equal(wj[k]->data, tj[k]->data, bytes);
@@ -769,22 +789,22 @@ test_memory_tiles(void **state)
     const int w = 1200, h = 800;
     inputs in = make_inputs(w, h, 32);
     mcp_image *whole = NULL, *auto_tiled = NULL;
-    assert_int_equal(mcp__unet_run_tiled(net, in.col, in.alb, in.nrm, 1.0, NULL, 0, 0,
-                                         &whole, NULL),
-                     0);
+    assert_int_equal(
+        mcp__unet_run_tiled(net, in.col, in.alb, in.nrm, 1.0, NULL, 0, 0, &whole, NULL),
+        0);
     /* the whole needs 600 x 1200 x 800 bytes = 549 MB; 400 MB available: tiles whose
      * crops take at most 200 MB (576 x 576 crops: tiles of 320) */
     char *saved_mb = env_save("MCPOST_MEMORY_AVAILABLE_MB");
     setenv("MCPOST_MEMORY_AVAILABLE_MB", "400", 1);
-    assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, 1.0, NULL, 0, &auto_tiled,
-                                   NULL),
-                     0);
+    assert_int_equal(
+        mcp__unet_run(net, in.col, in.alb, in.nrm, 1.0, NULL, 0, &auto_tiled, NULL), 0);
     assert_memory_equal(whole->data, auto_tiled->data, (size_t)w * h * 3 * sizeof(float));
     setenv("MCPOST_MEMORY_AVAILABLE_MB", "10", 1);
     mcp_image *out = NULL;
     assert_error_contains(
         mcp__unet_run(net, in.col, in.alb, in.nrm, 1.0, NULL, 0, &out, NULL),
-        "unet: a 1200x800 image with 0 tangent(s) does not fit even in 16x16 tiles: 10 MB "
+        "unet: a 1200x800 image with 0 tangent(s) does not fit even in 16x16 tiles: 10 "
+        "MB "
         "are available");
     assert_null(out);
     env_restore("MCPOST_MEMORY_AVAILABLE_MB", saved_mb);
@@ -819,7 +839,8 @@ test_denoiser_kind(void **state)
     assert_int_equal(mcp__unet_forward(net, in.col, in.alb, in.nrm, 0.5, &b), 0);
     assert_memory_equal(a->data, b->data, (size_t)w * h * 3 * sizeof(float));
     assert_int_equal(d->jvp(d, &at, &t, 1, &p, &j), 0);
-    assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, 0.5, &t, 1, NULL, &j2), 0);
+    assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, 0.5, &t, 1, NULL, &j2),
+                     0);
     assert_memory_equal(p->data, a->data, (size_t)w * h * 3 * sizeof(float));
     assert_memory_equal(j->data, j2->data, (size_t)w * h * 3 * sizeof(float));
     /* fixed_bits: true gives the bits of MCPOST_UNET_FIXED=1 (the direct loops), which
@@ -916,8 +937,7 @@ weights_path(void)
 {
     const char *env = getenv("MCPOST_OIDN_WEIGHTS");
     static char buf[4096];
-    if (env && *env)
-        return env;
+    if (env && *env) return env;
     snprintf(buf, sizeof buf, "%s/weights/rt_hdr_alb_nrm.tza", MCP_TEST_SOURCE_DIR);
     return buf;
 }
@@ -1027,7 +1047,8 @@ test_real_weights_load(void **state)
     assert_close(b0->data[1], -0.0011578, 1e-5, 0);
     assert_close(b0->data[2], 0.0523451, 1e-5, 0);
     size_t total = 0;
-    for (int k = 0; k < tza->count; k++) total += tza->tensors[k].count;
+    for (int k = 0; k < tza->count; k++)
+        total += tza->tensors[k].count;
     assert_int_equal(total, 919811);
     mcp__tza_free(tza);
     mcp__unet *net = NULL;
@@ -1058,17 +1079,15 @@ now_s(void)
     return ts.tv_sec + 1e-9 * ts.tv_nsec;
 }
 
-
 static void
 read_fixture(const char *scene, int spp, mcp_dump **dump, mcp_image **ref, int ri[3])
 {
     char path[4096];
     snprintf(path, sizeof path, "%s/samples/fixtures/%s/series/%s_spp%04d.exr",
              MCP_TEST_SOURCE_DIR, scene, scene, spp);
-    if (mcp_dump_read(path, dump))
-        fail_msg("%s", mcp_error_message());
-    snprintf(path, sizeof path, "%s/samples/fixtures/%s/%s_reference.exr", MCP_TEST_SOURCE_DIR,
-             scene, scene);
+    if (mcp_dump_read(path, dump)) fail_msg("%s", mcp_error_message());
+    snprintf(path, sizeof path, "%s/samples/fixtures/%s/%s_reference.exr",
+             MCP_TEST_SOURCE_DIR, scene, scene);
     if (mcp_image_read(path, NULL, ref) ||
         mcp_image_channels(*ref, (const char *[]){"R", "G", "B"}, 3, ri))
         fail_msg("%s", mcp_error_message());
@@ -1098,7 +1117,8 @@ test_real_weights_fixtures(void **state)
             read_fixture(scenes[si], spps[pi], &dump, &ref, ri);
             double t0 = now_s();
             assert_int_equal(
-                mcp__unet_forward(net, dump->color, dump->albedo, dump->normal, 0, &out), 0);
+                mcp__unet_forward(net, dump->color, dump->albedo, dump->normal, 0, &out),
+                0);
             double secs = now_s() - t0;
             double noisy = rel_mse(dump->color, ref, ri), den = rel_mse(out, ref, ri);
             print_message("%s %d spp %dx%d: relMSE noisy %.5f, unet %.5f (%.1fx lower); "
@@ -1153,8 +1173,9 @@ cornell_crop_make(uint64_t seed, cornell_crop *c)
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++)
             for (int k = 0; k < 3; k++)
-                mcp_image_px(c->probe, x, y)[k] = (float)(mcp_test_rand_normal(&st) *
-                                                          sqrt(mcp_image_px(c->var, x, y)[k]));
+                mcp_image_px(c->probe, x, y)[k] =
+                    (float)(mcp_test_rand_normal(&st) *
+                            sqrt(mcp_image_px(c->var, x, y)[k]));
 }
 
 static void
@@ -1171,8 +1192,8 @@ cornell_crop_free(cornell_crop *c)
  * relative error < 1e-3 (issue 6). Differences of the float network itself do not get
  * there: their error falls from 9e-2 at a step of 0.1 of the noise (ReLUs and max-pool
  * choices switch within the step) to 7e-3 at 1e-3, then grows again with float
- * rounding. Hence the double reference, with a step of 1e-6 of the noise. A 64x64 crop keeps the reference
- * (about 1 GMAC per pass in plain loops) quick. */
+ * rounding. Hence the double reference, with a step of 1e-6 of the noise. A 64x64 crop
+ * keeps the reference (about 1 GMAC per pass in plain loops) quick. */
 static void
 test_real_weights_jvp(void **state)
 {
@@ -1189,7 +1210,8 @@ test_real_weights_jvp(void **state)
     cornell_crop cc;
     cornell_crop_make(2024, &cc);
     const int w = cc.col->width, h = cc.col->height;
-    mcp_image *col = cc.col, *alb = cc.alb, *nrm = cc.nrm, *var = cc.var, *probe = cc.probe;
+    mcp_image *col = cc.col, *alb = cc.alb, *nrm = cc.nrm, *var = cc.var,
+              *probe = cc.probe;
     mcp_denoise_input at = {col, alb, nrm, var};
     mcp_denoise_tangent t = {probe, NULL, NULL};
     mcp_image *jt = NULL;
@@ -1208,9 +1230,10 @@ test_real_weights_jvp(void **state)
     double err = rel_err(jt, fp), jn = 0;
     for (size_t i = 0; i < (size_t)3 * w * h; i++)
         jn += fp[i] * fp[i];
-    print_message("cornell 16 spp, 64x64 crop: |Jt - FD| / |FD| = %.2e, |Jt| / |t| = %.3f; "
-                  "primal + 1 tangent %.3f s\n",
-                  err, sqrt(jn / tn), secs);
+    print_message(
+        "cornell 16 spp, 64x64 crop: |Jt - FD| / |FD| = %.2e, |Jt| / |t| = %.3f; "
+        "primal + 1 tangent %.3f s\n",
+        err, sqrt(jn / tn), secs);
     assert_true(jn > 0);
     assert_true(err < 1e-3);
     free(fp), free(fm);
@@ -1240,10 +1263,12 @@ check_kernels(const mcp__unet *net, const rnet *n, const mcp_image *col,
            *fm = ref_forward_along(n, col, alb, nrm, scale, t, -step);
     for (size_t i = 0; i < (size_t)3 * w * h; i++)
         fp[i] = (fp[i] - fm[i]) / (2 * step);
-    char *saved_kernel = env_save("MCPOST_UNET_KERNEL"), *saved_fixed = env_save("MCPOST_UNET_FIXED");
+    char *saved_kernel = env_save("MCPOST_UNET_KERNEL"),
+         *saved_fixed = env_save("MCPOST_UNET_FIXED");
     setenv("MCPOST_UNET_FIXED", "1", 1);
     mcp_image *fixed = NULL, *fixed_jt = NULL;
-    assert_int_equal(mcp__unet_run(net, col, alb, nrm, scale, t, 1, &fixed, &fixed_jt), 0);
+    assert_int_equal(mcp__unet_run(net, col, alb, nrm, scale, t, 1, &fixed, &fixed_jt),
+                     0);
     setenv("MCPOST_UNET_FIXED", "0", 1);
     static const char *const names[] = {"avx512", "avx2", "sse2", "generic"};
     int tried = 0;
@@ -1263,13 +1288,15 @@ check_kernels(const mcp__unet *net, const rnet *n, const mcp_image *col,
         for (int exact = 0; exact < 2; exact++) {
             setenv("MCPOST_UNET_EXACT_TANGENTS", exact ? "1" : "0", 1);
             mcp_image *out = NULL, *jt = NULL;
-            assert_int_equal(mcp__unet_run(net, col, alb, nrm, scale, t, 1, &out, &jt), 0);
+            assert_int_equal(mcp__unet_run(net, col, alb, nrm, scale, t, 1, &out, &jt),
+                             0);
             const double e_out = rel_err(out, ref), e_jvp = rel_err(jt, fp);
             const double d_out = rel_l2(out, fixed), d_jvp = rel_l2(jt, fixed_jt);
-            print_message("%s: kernel %s, tangents %s: relative L2 against double: output "
-                          "%.2e, JVP %.2e; against the fixed-bit loops: %.2e, %.2e\n",
-                          what, names[i], exact ? "F(2x2,3x3)" : "F(4x4,3x3)", e_out,
-                          e_jvp, d_out, d_jvp);
+            print_message(
+                "%s: kernel %s, tangents %s: relative L2 against double: output "
+                "%.2e, JVP %.2e; against the fixed-bit loops: %.2e, %.2e\n",
+                what, names[i], exact ? "F(2x2,3x3)" : "F(4x4,3x3)", e_out, e_jvp, d_out,
+                d_jvp);
             assert_true(e_out < 1e-5 && e_jvp < 1e-5);
             /* the JVP is piecewise: where a pre-activation or a pooling choice lies
              * within rounding of a tie, the two paths may take other sides (both right
@@ -1287,7 +1314,8 @@ check_kernels(const mcp__unet *net, const rnet *n, const mcp_image *col,
         setenv("MCPOST_UNET_BF16", "1", 1);
         if (!strcmp(names[i], "avx512") && mcp__unet_gemm_bf16_has()) {
             mcp_image *out = NULL, *jt = NULL, *out_float = NULL, *jt_float = NULL;
-            assert_int_equal(mcp__unet_run(net, col, alb, nrm, scale, t, 1, &out, &jt), 0);
+            assert_int_equal(mcp__unet_run(net, col, alb, nrm, scale, t, 1, &out, &jt),
+                             0);
             setenv("MCPOST_UNET_BF16", "0", 1);
             assert_int_equal(
                 mcp__unet_run(net, col, alb, nrm, scale, t, 1, &out_float, &jt_float), 0);
@@ -1306,7 +1334,7 @@ check_kernels(const mcp__unet *net, const rnet *n, const mcp_image *col,
     }
     assert_true(tried >= 1); /* generic, at least */
     print_message("%s: fixed-bit loops against double: output %.2e, JVP %.2e\n", what,
-           rel_err(fixed, ref), rel_err(fixed_jt, fp));
+                  rel_err(fixed, ref), rel_err(fixed_jt, fp));
     env_restore("MCPOST_UNET_KERNEL", saved_kernel);
     env_restore("MCPOST_UNET_FIXED", saved_fixed);
     mcp_image_free(fixed), mcp_image_free(fixed_jt);
@@ -1339,8 +1367,8 @@ test_fast_kernels(void **state)
     cornell_crop cc;
     cornell_crop_make(99, &cc);
     mcp_denoise_tangent pt = {cc.probe, NULL, NULL};
-    check_kernels(real, &rn, cc.col, cc.alb, cc.nrm, &pt, mcp__unet_autoexposure(cc.col, 0),
-                  "official weights, cornell 64x64");
+    check_kernels(real, &rn, cc.col, cc.alb, cc.nrm, &pt,
+                  mcp__unet_autoexposure(cc.col, 0), "official weights, cornell 64x64");
     cornell_crop_free(&cc);
     mcp__unet_free(real); /* rn borrows its tensors */
 }
@@ -1371,18 +1399,19 @@ test_real_weights_cli_and_job(void **state)
     (void)state;
     const char *path = weights_path();
     SKIP_WITHOUT_WEIGHTS(path);
-    const char *fixture = MCP_TEST_SOURCE_DIR "/samples/fixtures/cornell/series/cornell_spp0016.exr";
+    const char *fixture =
+        MCP_TEST_SOURCE_DIR "/samples/fixtures/cornell/series/cornell_spp0016.exr";
     mcp__unet *net = NULL;
     mcp_dump *dump = NULL;
     mcp_image *want = NULL, *got = NULL;
     assert_int_equal(mcp__unet_load(path, &net), 0);
     assert_int_equal(mcp_dump_read(fixture, &dump), 0);
-    assert_int_equal(mcp__unet_forward(net, dump->color, dump->albedo, dump->normal, 0, &want),
-                     0);
+    assert_int_equal(
+        mcp__unet_forward(net, dump->color, dump->albedo, dump->normal, 0, &want), 0);
     char args[16384], out[4096], err[4096], outfile[4200];
     snprintf(outfile, sizeof outfile, "%s", mcp_test_path("cli_unet.exr"));
-    snprintf(args, sizeof args, "denoise '%s' --denoiser unet --weights '%s' -o '%s'", fixture,
-             path, outfile);
+    snprintf(args, sizeof args, "denoise '%s' --denoiser unet --weights '%s' -o '%s'",
+             fixture, path, outfile);
     assert_int_equal(mcp_test_run_mcpost(args, out, sizeof out, err, sizeof err), 0);
     assert_int_equal(mcp_image_read(outfile, NULL, &got), 0);
     assert_true(max_diff_rgb(got, want) == 0.0);
@@ -1405,8 +1434,7 @@ test_real_weights_cli_and_job(void **state)
     mcp_test_write_text(job, text);
     snprintf(args, sizeof args, "run '%s'", job);
     int rc = mcp_test_run_mcpost(args, out, sizeof out, err, sizeof err);
-    if (rc != 0)
-        fail_msg("mcpost %s: exit %d: %s", args, rc, err);
+    if (rc != 0) fail_msg("mcpost %s: exit %d: %s", args, rc, err);
     snprintf(denoised, sizeof denoised, "%s/out/one/denoised.exr", dir);
     assert_int_equal(mcp_image_read(denoised, NULL, &got), 0);
     assert_true(max_diff_rgb(got, want) == 0.0);

@@ -31,12 +31,10 @@ LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             }
         part[i] = at;
         len[i] = next ? (size_t)(next - at) : (size_t)(end - at);
-        if (!next)
-            break;
+        if (!next) break;
         at = next + sep;
     }
-    if (!part[0] || len[0] == 0)
-        return 0;
+    if (!part[0] || len[0] == 0) return 0;
 
     mcp_dump_spec spec = mcp_dump_spec_defaults();
     spec.bad_values = (mcp_badval_policy)(part[0][0] % 2);
@@ -45,14 +43,12 @@ LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     mcp_dump_buffer *bufs[N_PARTS] = {&parts.main, &parts.variance, &parts.albedo,
                                       &parts.normal, &parts.spp_map};
     for (int i = 0; i < N_PARTS; i++)
-        if (part[i] && len[i] > 0)
-            *bufs[i] = (mcp_dump_buffer){part[i], len[i]};
+        if (part[i] && len[i] > 0) *bufs[i] = (mcp_dump_buffer){part[i], len[i]};
     mcp_dump *dump = NULL;
     int rc = mcp_dump_read_memory(&spec, &parts, &dump);
     mcp_fuzz_check_error(rc, "dump load");
     if (rc == 0) {
-        if (!dump || !dump->color)
-            __builtin_trap();
+        if (!dump || !dump->color) __builtin_trap();
     } else if (dump) {
         __builtin_trap();
     }

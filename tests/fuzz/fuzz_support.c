@@ -28,8 +28,7 @@ remove_dir(void)
             unlink(path);
         }
     }
-    if (d)
-        closedir(d);
+    if (d) closedir(d);
     rmdir(dir);
 }
 
@@ -50,12 +49,11 @@ LLVMFuzzerInitialize(int *argc, char ***argv)
 const char *
 mcp_fuzz_dir(void)
 {
-    if (dir[0])
-        return dir;
+    if (dir[0]) return dir;
     struct stat st;
     const char *base = stat("/dev/shm", &st) == 0 && S_ISDIR(st.st_mode) ? "/dev/shm"
-                       : getenv("TMPDIR")                                ? getenv("TMPDIR")
-                                                                          : "/tmp";
+                       : getenv("TMPDIR") ? getenv("TMPDIR")
+                                          : "/tmp";
     snprintf(dir, sizeof dir, "%s/mcpost-fuzz-%ld", base, (long)getpid());
     if (mkdir(dir, 0700) != 0 && stat(dir, &st) != 0) {
         fprintf(stderr, "fuzz: cannot create %s\n", dir);
@@ -69,8 +67,7 @@ const char *
 mcp_fuzz_file(int slot, const char *name, const void *data, size_t size)
 {
     static char paths[8][400];
-    if (slot < 0 || slot >= 8)
-        abort();
+    if (slot < 0 || slot >= 8) abort();
     snprintf(paths[slot], sizeof paths[slot], "%s/%s", mcp_fuzz_dir(), name);
     FILE *f = fopen(paths[slot], "wb");
     if (!f || (size && fwrite(data, 1, size, f) != size) || fclose(f) != 0) {
@@ -83,8 +80,7 @@ mcp_fuzz_file(int slot, const char *name, const void *data, size_t size)
 void
 mcp_fuzz_check_error(int rc, const char *what)
 {
-    if (rc == 0)
-        return;
+    if (rc == 0) return;
     const char *msg = mcp_error_message();
     if (rc != -1 || !msg || !msg[0] || strchr(msg, '\n')) {
         fprintf(stderr, "fuzz: %s broke the error contract: rc %d, message '%s'\n", what,

@@ -12,15 +12,13 @@ LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     int rc = mcp__tza_parse(data, size, "fuzz.tza", &tza);
     mcp_fuzz_check_error(rc, "tza parse");
     if (rc != 0) {
-        if (tza)
-            __builtin_trap();
+        if (tza) __builtin_trap();
         return 0;
     }
     mcp__unet *net = NULL;
     rc = mcp__unet_from_tza(tza, "fuzz.tza", &net);
     mcp_fuzz_check_error(rc, "unet from tza");
-    if (rc != 0 && net)
-        __builtin_trap();
+    if (rc != 0 && net) __builtin_trap();
     mcp__unet_free(net);
     mcp__tza_free(tza);
     return 0;

@@ -25,8 +25,7 @@ replay_file(const char *path)
         size += got;
         if (size == cap) {
             unsigned char *grown = realloc(buf, cap *= 2);
-            if (!grown)
-                free(buf);
+            if (!grown) free(buf);
             buf = grown;
         }
     }
@@ -58,11 +57,9 @@ replay_dir(const char *dir, int *count)
     char **names = NULL;
     size_t n = 0;
     for (struct dirent *e; (e = readdir(d));) {
-        if (e->d_name[0] == '.')
-            continue;
+        if (e->d_name[0] == '.') continue;
         char **grown = realloc(names, (n + 1) * sizeof *names);
-        if (!grown)
-            break;
+        if (!grown) break;
         names = grown;
         names[n++] = strdup(e->d_name);
     }

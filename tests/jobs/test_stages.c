@@ -79,11 +79,12 @@ test_check_with_the_builtin_table(void **state)
     assert_int_equal(mcp_job_check(demo, mcp_job_stages()), 0);
 
     const char *bad = mcp_test_path("bad.yaml");
-    mcp_test_write_text(bad, "inputs:\n"
-                             "  noisy: {dump: " CORNELL "/series/cornell_spp0064.exr}\n"
-                             "stages:\n"
-                             "  - info: {input: noisy}\n"
-                             "  - estimate: {input: noisy, denoiser: nlm, probes: many}\n");
+    mcp_test_write_text(bad,
+                        "inputs:\n"
+                        "  noisy: {dump: " CORNELL "/series/cornell_spp0064.exr}\n"
+                        "stages:\n"
+                        "  - info: {input: noisy}\n"
+                        "  - estimate: {input: noisy, denoiser: nlm, probes: many}\n");
     assert_error_contains(mcp_job_check(bad, NULL), "bad.yaml:5: probes");
     char expected[1024];
     snprintf(expected, sizeof expected, "mcpost: %s\n", mcp_error_message());
@@ -180,19 +181,20 @@ test_commands_find_mcposts_programs(void **state)
     o.quiet = 1;
     setenv("PATH", "/usr/bin:/bin", 1);
     int rc = mcp_job_run_file(job, NULL, &o);
-    if (rc)
-        fail_msg("%s", mcp_error_message());
+    if (rc) fail_msg("%s", mcp_error_message());
     cJSON *a = read_json(mcp_test_path("out/programs/adaptive/adaptive.json"));
     const cJSON *its = cJSON_GetObjectItem(a, "iterations");
     assert_int_equal(cJSON_GetArraySize(its), 2);
-    assert_int_equal((int)number(cJSON_GetArrayItem(its, 1), "total_samples"), 8 * 16 * 16);
+    assert_int_equal((int)number(cJSON_GetArrayItem(its, 1), "total_samples"),
+                     8 * 16 * 16);
     cJSON_Delete(a);
 
     /* the user's PATH first: a stand-in of the same name that fails with status 3 */
     const char *bin = mcp_test_path("fake-bin");
     char path[4400], cmd[4600];
-    snprintf(cmd, sizeof cmd, "mkdir -p '%s' && printf '#!/bin/sh\\nexit 3\\n' > "
-                              "'%s/mcpost-procedural' && chmod +x '%s/mcpost-procedural'",
+    snprintf(cmd, sizeof cmd,
+             "mkdir -p '%s' && printf '#!/bin/sh\\nexit 3\\n' > "
+             "'%s/mcpost-procedural' && chmod +x '%s/mcpost-procedural'",
              bin, bin, bin);
     assert_int_equal(system(cmd), 0);
     snprintf(path, sizeof path, "%s:/usr/bin:/bin", bin);

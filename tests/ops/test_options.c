@@ -176,7 +176,8 @@ assert_field_equal(const mcp_option *o, const void *a, const void *b)
         int nb = *(const int *)((const char *)b + o->count_offset);
         assert_int_equal(na, nb);
         for (int i = 0; i < na; i++)
-            assert_string_equal(((const char *const *)pa)[i], ((const char *const *)pb)[i]);
+            assert_string_equal(((const char *const *)pa)[i],
+                                ((const char *const *)pb)[i]);
         break;
     }
     default:
@@ -357,8 +358,8 @@ defaults_read_back(const mcp_operation *const *op)
             char text[256];
             mcp_option_format(o, d, text, sizeof text);
             double x = 0, y = 0;
-            if (o->type == MCP_OPT_NUMBER && !o->auto_word && sscanf(text, "%lf", &x) == 1 &&
-                sscanf(o->def, "%lf", &y) == 1)
+            if (o->type == MCP_OPT_NUMBER && !o->auto_word &&
+                sscanf(text, "%lf", &x) == 1 && sscanf(o->def, "%lf", &y) == 1)
                 assert_true(x == y);
             else
                 assert_string_equal(text, o->def);
@@ -537,8 +538,8 @@ test_gates_read_alike(void **state)
         int two = !strcmp(cases[i].key, "fail");
         char *argv[] = {"metrics", flag, "mse > 1", flag, (char *)cases[i].text, NULL};
         char *one[] = {"metrics", flag, (char *)cases[i].text, NULL};
-        int cli = cli_settings(op, two ? 5 : 3, two ? argv : one, &a, cli_msg,
-                               sizeof cli_msg);
+        int cli =
+            cli_settings(op, two ? 5 : 3, two ? argv : one, &a, cli_msg, sizeof cli_msg);
         assert_int_equal(cli, 0);
         oa = a.o;
         cli = mcp__gate_from_settings(&a, &oa, &ga, &bad_key, &bad_index);
@@ -612,10 +613,11 @@ test_lists_as_texts_read_alike(void **state)
 
     mcp_perceptual_settings pa, pb;
     mcp__perc_args aa, ab;
-    assert_int_equal(cli_settings(mcp_operation_perceptual(), 3,
-                                  (char *[]){"perceptual", "--kernel", "0.25,0.5,0.25", NULL},
-                                  &pa, msg, sizeof msg),
-                     0);
+    assert_int_equal(
+        cli_settings(mcp_operation_perceptual(), 3,
+                     (char *[]){"perceptual", "--kernel", "0.25,0.5,0.25", NULL}, &pa,
+                     msg, sizeof msg),
+        0);
     root = yaml("kernel: [0.25, 0.5, 0.25]\n");
     assert_int_equal(mcp__job_settings(mcp_operation_perceptual(), root, NULL, &pb), 0);
     assert_int_equal(mcp__perc_args_from_settings(&pa, &aa), 0);
@@ -636,8 +638,8 @@ test_lists_as_texts_read_alike(void **state)
     mcp__perc_args_free(&ab);
     mcp_node_free(root);
     assert_int_equal(cli_settings(mcp_operation_perceptual(), 3,
-                                  (char *[]){"perceptual", "--kernel", "0.5,0.5", NULL}, &pa,
-                                  msg + 256, 256),
+                                  (char *[]){"perceptual", "--kernel", "0.5,0.5", NULL},
+                                  &pa, msg + 256, 256),
                      0);
     assert_int_equal(mcp__perc_args_from_settings(&pa, &aa), -1);
     assert_string_equal(msg, mcp_error_message());

@@ -90,9 +90,9 @@ test_hand_column(void **state)
     run_grey(1, 3, surr, levels, 2, want);
 }
 
-/* A plain reimplementation on procedural inputs (45x45, 100x100) with the default clamp tone
- * map: a full-image buffer of the error pushed to the next rows, the 7/16 share carried
- * to the next pixel, one candidate after another, summed in the same order as the
+/* A plain reimplementation on procedural inputs (45x45, 100x100) with the default clamp
+ * tone map: a full-image buffer of the error pushed to the next rows, the 7/16 share
+ * carried to the next pixel, one candidate after another, summed in the same order as the
  * library (so that no near-tie can round differently); then the library with one and
  * two threads. */
 static void
@@ -111,7 +111,8 @@ against_plain(int m, int size)
              * to T(Q_j) - T(I') (the library's association of the same sums) */
             double q[3], s[3], bd = INFINITY, e[3];
             for (int ch = 0; ch < 3; ch++) {
-                s[ch] = mcp_tonemap_value(MCP_TONEMAP_CLAMP, mcp_image_px(c.truth, x, y)[ch]);
+                s[ch] =
+                    mcp_tonemap_value(MCP_TONEMAP_CLAMP, mcp_image_px(c.truth, x, y)[ch]);
                 q[ch] = err[((size_t)y * w + x) * 3 + ch] + ahead[ch];
             }
             for (int j = 0; j < c.m; j++) {
@@ -152,9 +153,10 @@ against_plain(int m, int size)
         perc_assert_from_candidates(r.image, r.index, perc_cands(&c), c.m);
         double ours = perc_pmse(r.image, c.truth), mean = perc_mean_pmse(&c);
         if (nt == 1)
-            print_message("error diffusion, %dx%d, M = %d, reference surrogate: pMSE %.5f "
-                          "vs mean %.5f (ratio %.3f)\n",
-                          size, size, m, ours, mean, ours / mean);
+            print_message(
+                "error diffusion, %dx%d, M = %d, reference surrogate: pMSE %.5f "
+                "vs mean %.5f (ratio %.3f)\n",
+                size, size, m, ours, mean, ours / mean);
         mcp_perc_result_free(&r);
     }
     omp_set_num_threads(threads);

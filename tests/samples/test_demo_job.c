@@ -108,8 +108,8 @@ test_demo_job(void **state)
     free(text);
     assert_non_null(json);
     const cJSON *sections = item(json, "sections");
-    static const char *const stages[] = {"info",     "convert",  "convert", "metrics",
-                                         "estimate", "info",     "estimate", "estimate",
+    static const char *const stages[] = {"info",     "convert",    "convert",  "metrics",
+                                         "estimate", "info",       "estimate", "estimate",
                                          "blend",    "perceptual", "adaptive"};
     const int n = (int)(sizeof stages / sizeof *stages);
     assert_int_equal(cJSON_GetArraySize(sections), n);
@@ -226,7 +226,8 @@ test_demo_job(void **state)
                  {10, "maps/sampling_map_0002.png", "scale"}};
     for (size_t i = 0; i < sizeof shown / sizeof *shown; i++) {
         const cJSON *im, *found = NULL;
-        cJSON_ArrayForEach(im, item(cJSON_GetArrayItem(sections, shown[i].section), "images"))
+        cJSON_ArrayForEach(im,
+                           item(cJSON_GetArrayItem(sections, shown[i].section), "images"))
         {
             const char *p = item(im, "path")->valuestring;
             size_t lp = strlen(p), ls = strlen(shown[i].suffix);
@@ -281,8 +282,9 @@ test_demo_job(void **state)
         assert_true(cJSON_GetArrayItem(row, 1)->valuedouble == 16.0 * (i + 1));
         double rel = cJSON_GetArrayItem(row, 2)->valuedouble;
         double noisy = cJSON_GetArrayItem(row, 3)->valuedouble;
-        print_message("demo: adaptive pass %d: relMSE %.4g (noisy %.4g), estimated %.4g\n",
-                      i, rel, noisy, cJSON_GetArrayItem(row, 4)->valuedouble);
+        print_message(
+            "demo: adaptive pass %d: relMSE %.4g (noisy %.4g), estimated %.4g\n", i, rel,
+            noisy, cJSON_GetArrayItem(row, 4)->valuedouble);
         assert_true(rel > 0 && rel < last && rel < noisy); /* the denoiser helps */
         last = rel;
     }

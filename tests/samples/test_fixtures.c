@@ -19,8 +19,7 @@ load(const char *fmt, const char *scene, int a, int b)
     snprintf(rel, sizeof rel, fmt, scene, scene, a, b);
     snprintf(path, sizeof path, "%s/samples/fixtures/%s", MCP_TEST_SOURCE_DIR, rel);
     mcp_dump *d = NULL;
-    if (mcp_dump_read(path, &d))
-        fail_msg("%s", mcp_error_message());
+    if (mcp_dump_read(path, &d)) fail_msg("%s", mcp_error_message());
     return d;
 }
 

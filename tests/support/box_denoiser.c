@@ -44,8 +44,7 @@ static int
 box_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
         const mcp_denoise_tangent *t, int n, mcp_image **primal, mcp_image **out)
 {
-    if (primal)
-        box_apply(self, at, primal);
+    if (primal) box_apply(self, at, primal);
     for (int k = 0; k < n; k++) {
         out[k] = mcp_test_rgb(at->color->width, at->color->height);
         mcp_test_box3(t[k].color, out[k]);

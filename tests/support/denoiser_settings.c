@@ -7,7 +7,8 @@ mcp_test_denoiser(const char *yaml)
 {
     mcp_node *node = NULL;
     mcp_denoiser *d = NULL;
-    if (mcp_yaml_parse_string(yaml, "job.yaml", &node) || mcp_denoiser_create(node, NULL, &d))
+    if (mcp_yaml_parse_string(yaml, "job.yaml", &node) ||
+        mcp_denoiser_create(node, NULL, &d))
         fail_msg("%s: %s", yaml, mcp_error_message());
     mcp_node_free(node);
     return d;

@@ -122,9 +122,9 @@ mcp_test_max_abs_diff(const mcp_image *a, const mcp_image *b)
     for (int y = 0; y < a->height; y++)
         for (int x = 0; x < a->width; x++)
             for (int c = 0; c < a->channels; c++) {
-                double d = fabs((double)mcp_image_px(a, x, y)[c] - mcp_image_px(b, x, y)[c]);
-                if (d > m || d != d)
-                    m = d != d ? INFINITY : d;
+                double d =
+                    fabs((double)mcp_image_px(a, x, y)[c] - mcp_image_px(b, x, y)[c]);
+                if (d > m || d != d) m = d != d ? INFINITY : d;
             }
     return m;
 }
@@ -151,12 +151,10 @@ mcp_test_rand_normal(uint64_t *state)
 static void
 slurp(const char *path, char *buf, size_t cap)
 {
-    if (!buf || !cap)
-        return;
+    if (!buf || !cap) return;
     buf[0] = '\0';
     FILE *f = fopen(path, "rb");
-    if (!f)
-        return;
+    if (!f) return;
     size_t n = fread(buf, 1, cap - 1, f);
     buf[n] = '\0';
     fclose(f);
@@ -174,8 +172,7 @@ mcp_test_run_mcpost(const char *args, char *out, size_t out_cap, char *err,
     int status = system(cmd);
     slurp(out_path, out, out_cap);
     slurp(err_path, err, err_cap);
-    if (status == -1 || !WIFEXITED(status))
-        return -1;
+    if (status == -1 || !WIFEXITED(status)) return -1;
     return WEXITSTATUS(status);
 }
 
@@ -183,8 +180,7 @@ void
 mcp_test_write_text(const char *path, const char *text)
 {
     FILE *f = fopen(path, "wb");
-    if (!f)
-        fail_msg("cannot write %s: %s", path, strerror(errno));
+    if (!f) fail_msg("cannot write %s: %s", path, strerror(errno));
     fputs(text, f);
     fclose(f);
 }
@@ -193,8 +189,7 @@ char *
 mcp_test_read_text(const char *path)
 {
     FILE *f = fopen(path, "rb");
-    if (!f)
-        fail_msg("cannot read %s: %s", path, strerror(errno));
+    if (!f) fail_msg("cannot read %s: %s", path, strerror(errno));
     fseek(f, 0, SEEK_END);
     long n = ftell(f);
     fseek(f, 0, SEEK_SET);
@@ -207,8 +202,8 @@ mcp_test_read_text(const char *path)
 }
 
 int
-mcp_test_run_mcpostf(char *out, size_t out_cap, char *err, size_t err_cap, const char *fmt,
-                     ...)
+mcp_test_run_mcpostf(char *out, size_t out_cap, char *err, size_t err_cap,
+                     const char *fmt, ...)
 {
     char args[8192];
     va_list ap;

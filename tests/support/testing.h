@@ -14,7 +14,8 @@
 /* |a - b| <= atol + rtol * |b|, with a message naming both values. cmocka 1.1.5 has
  * only an absolute float comparison. */
 #define assert_close(a, b, rtol, atol)                                                   \
-    mcp_test_assert_close((double)(a), (double)(b), (rtol), (atol), #a, __FILE__, __LINE__)
+    mcp_test_assert_close((double)(a), (double)(b), (rtol), (atol), #a, __FILE__,        \
+                          __LINE__)
 void mcp_test_assert_close(double a, double b, double rtol, double atol, const char *expr,
                            const char *file, int line);
 

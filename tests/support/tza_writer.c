@@ -16,19 +16,16 @@ mcp_test_float_to_half(float f)
     uint32_t x;
     memcpy(&x, &f, 4);
     uint32_t sign = (x >> 16) & 0x8000u, e = (x >> 23) & 255u, m = x & 0x7fffffu;
-    if (e == 255)
-        return (unsigned short)(sign | 0x7c00u | (m ? 0x200u : 0));
+    if (e == 255) return (unsigned short)(sign | 0x7c00u | (m ? 0x200u : 0));
     int ex = (int)e - 127 + 15;
-    if (ex >= 31)
-        return (unsigned short)(sign | 0x7c00u);
+    if (ex >= 31) return (unsigned short)(sign | 0x7c00u);
     if (ex <= 0) { /* subnormal or zero */
-        if (ex < -10)
-            return (unsigned short)sign;
+        if (ex < -10) return (unsigned short)sign;
         m |= 0x800000u;
         int shift = 14 - ex;
-        uint32_t half = m >> shift, rem = m & ((1u << shift) - 1), mid = 1u << (shift - 1);
-        if (rem > mid || (rem == mid && (half & 1u)))
-            half++;
+        uint32_t half = m >> shift, rem = m & ((1u << shift) - 1),
+                 mid = 1u << (shift - 1);
+        if (rem > mid || (rem == mid && (half & 1u))) half++;
         return (unsigned short)(sign | half);
     }
     uint32_t half = ((uint32_t)ex << 10) | (m >> 13), rem = m & 0x1fffu;

@@ -11,8 +11,7 @@ main(int argc, char **argv)
     snprintf(exr, sizeof exr, "%s/consumer.exr", dir);
     snprintf(png, sizeof png, "%s/consumer.png", dir);
     mcp_image *img = NULL, *back = NULL;
-    if (mcp_image_new(8, 4, 3, (const char *[]){"R", "G", "B"}, &img))
-        goto fail;
+    if (mcp_image_new(8, 4, 3, (const char *[]){"R", "G", "B"}, &img)) goto fail;
     img->data[5] = 0.5f;
     if (mcp_image_write(img, exr, NULL) || mcp_image_read(exr, NULL, &back) ||
         /* EXR keeps channels sorted by name: look "B" up, do not assume its place */
