@@ -278,7 +278,7 @@ unet_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
     d->uses_albedo = net->ic >= 6;
     d->uses_normal = net->ic >= 9;
     /* three probes agree with the truth as often as four with this network, a tangent
-       costing 0.55-0.6 of an apply (docs/fidelity.md "The defaults") */
+       costing 0.6-0.7 of an apply (docs/fidelity.md "The defaults") */
     d->estimate_probes = 3;
     d->apply = unet_apply;
     d->jvp = unet_jvp;
