@@ -287,31 +287,33 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
 #ifdef _OPENMP
     n_threads = omp_get_max_threads();
 #endif
-    /* bf16 products: the packed weights and one element's V as pairs of rows */
-    const int kp = (cin + 1) / 2;
-    /* in the float kernel's blocks (the AVX-512 one's, which every AVX512-BF16 CPU has)
-     */
+    /* bf16 products run in the AVX-512 float kernel's blocks (every AVX512-BF16 CPU has
+       that kernel), on the weights and one element's V as pairs of rows, kp of them */
     bf16 = bf16 && g.mr == MCP__UNET_BF16_MR && g.nr == MCP__UNET_BF16_NR;
+    const int kp = (cin + 1) / 2;
     /* per thread: V (elems x cin x ld), M (elems x mp x ld), rows for the transforms,
        and with bf16 one element's V in pairs (kp x ld) */
     const size_t per_thread = elems * ld_max * ((size_t)cin + mp) +
                               (size_t)k_->row_floats * ((size_t)chunk + 1) +
                               (bf16 ? (size_t)kp * ld_max : 0);
-    float *u = mcp_malloc(elems * plane * sizeof(float));
-    float *packed = u ? mcp_malloc(bf16 ? (size_t)elems * mp * kp * sizeof(uint32_t)
-                                        : (size_t)elems * mp * cin * sizeof(float))
-                      : NULL;
-    float *scratch =
-        packed ? mcp__unet_alloc((size_t)n_threads * per_thread * sizeof(float)) : NULL;
+    float *u = mcp_malloc(elems * plane * sizeof(float)), *packed = NULL;
+    uint32_t *packed_bf16 = NULL;
+    if (u && bf16)
+        packed_bf16 = mcp_malloc((size_t)elems * mp * kp * sizeof(uint32_t));
+    else if (u)
+        packed = mcp_malloc((size_t)elems * mp * cin * sizeof(float));
+    float *scratch = packed || packed_bf16
+                         ? mcp__unet_alloc((size_t)n_threads * per_thread * sizeof(float))
+                         : NULL;
     if (!scratch) {
-        free(u), free(packed);
+        free(u), free(packed), free(packed_bf16);
         return -1;
     }
     k_->transform_weights(weight, cin, cout, u);
     for (int e = 0; e < elems; e++)
         if (bf16)
             mcp__unet_gemm_bf16_pack(u + e * plane, cout, cin,
-                                     (uint32_t *)packed + (size_t)e * mp * kp);
+                                     packed_bf16 + (size_t)e * mp * kp);
         else
             mcp__unet_gemm_pack(&g, u + e * plane, cout, cin,
                                 packed + (size_t)e * mp * cin);
@@ -362,9 +364,8 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
                 for (int e = 0; e < elems; e++)
                     if (bf16) {
                         mcp__unet_bf16_pairs(v + e * ldv, ld, cin, ld, pairs, ld);
-                        mcp__unet_gemm_bf16_run(
-                            (const uint32_t *)packed + (size_t)e * mp * kp, cout, cin,
-                            pairs, ld, ld, m + e * ldm, ld);
+                        mcp__unet_gemm_bf16_run(packed_bf16 + (size_t)e * mp * kp, cout,
+                                                cin, pairs, ld, ld, m + e * ldm, ld);
                     } else
                         mcp__unet_gemm_run(&g, packed + (size_t)e * mp * cin, cout, cin,
                                            v + e * ldv, ld, ld, m + e * ldm, ld);
@@ -380,6 +381,6 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
                     }
             }
     }
-    free(u), free(packed), free(scratch);
+    free(u), free(packed), free(packed_bf16), free(scratch);
     return 0;
 }
