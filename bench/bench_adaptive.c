@@ -40,6 +40,7 @@
 #include "procedural.h"
 
 #include <math.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -259,6 +260,31 @@ best_error_at(const curves *c, double x)
 }
 
 #define MAX_CURVES 64
+#define MAX_CURVE_POINTS 256
+
+/* The plot's curves, kept until it is drawn: each one's points and legend. A caller
+ * writes a curve's points into x[n], y[n] and then adds it (curve_add). */
+typedef struct plot_curves {
+    int n;
+    double x[MAX_CURVES][MAX_CURVE_POINTS], y[MAX_CURVES][MAX_CURVE_POINTS];
+    char name[MAX_CURVES][96];
+    mcp_plot_series series[MAX_CURVES];
+} plot_curves;
+
+/* Adds the curve of `points` points written at pc->x[pc->n], pc->y[pc->n], its legend
+ * from fmt. */
+static void
+curve_add(plot_curves *pc, int points, int dashed, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(pc->name[pc->n], sizeof pc->name[pc->n], fmt, ap);
+    va_end(ap);
+    pc->series[pc->n] = (mcp_plot_series){pc->name[pc->n], MCP_SERIES_LINE_POINTS,
+                                          pc->x[pc->n],    pc->y[pc->n],
+                                          points,          dashed};
+    pc->n++;
+}
 #define MAX_VARIANTS (3 * MAX_LIST)
 
 int
@@ -332,11 +358,9 @@ main(int argc, char **argv)
             snprintf(vnames[v], sizeof vnames[v], "%s", mn);
     }
     /* the curves of the first seed, for the plot */
-    static double px[MAX_CURVES][256], py[MAX_CURVES][256];
+    static plot_curves plot;
     static curves rule;
-    static char names[MAX_CURVES][96];
-    mcp_plot_series series[MAX_CURVES];
-    int n_series = 0, bounded = 0;
+    int bounded = 0;
     printf("adaptive vs uniform and vs the renderer rule at %g spp (%g per pass), "
            "%dx%d procedural scene, %d seed(s)\n",
            budget, spp_it, size, size, seeds);
@@ -386,17 +410,11 @@ main(int argc, char **argv)
                     ue[i] = u->iterations[i].relmse;
                     if (fabs(us[i] - budget) < 1e-9) at_b = ue[i];
                 }
-                if (sd == 0 && smp == 0 && n_series < MAX_CURVES && nu <= 256) {
-                    snprintf(names[n_series], 96, "uniform (%s, %s)", dn, sname);
-                    memcpy(px[n_series], us, sizeof(double) * nu);
-                    memcpy(py[n_series], ue, sizeof(double) * nu);
-                    series[n_series] = (mcp_plot_series){names[n_series],
-                                                         MCP_SERIES_LINE_POINTS,
-                                                         px[n_series],
-                                                         py[n_series],
-                                                         nu,
-                                                         1};
-                    n_series++;
+                if (sd == 0 && smp == 0 && plot.n < MAX_CURVES &&
+                    nu <= MAX_CURVE_POINTS) {
+                    memcpy(plot.x[plot.n], us, sizeof(double) * nu);
+                    memcpy(plot.y[plot.n], ue, sizeof(double) * nu);
+                    curve_add(&plot, nu, 1, "uniform (%s, %s)", dn, sname);
                 }
                 /* the renderer rule at its best: its runs' curves, its error at B and
                    its own speed-up over uniform there */
@@ -407,24 +425,16 @@ main(int argc, char **argv)
                 double rule_at_b = best_error_at(&rule, budget);
                 /* the plot: the rule's best run at each of uniform's sample counts (the
                    lower envelope of its thresholds and min samples) */
-                if (sd == 0 && smp == 0 && n_series < MAX_CURVES) {
+                if (sd == 0 && smp == 0 && plot.n < MAX_CURVES) {
                     int k = 0;
-                    for (int i = 0; i < nu && k < 256; i++) {
+                    for (int i = 0; i < nu && k < MAX_CURVE_POINTS; i++) {
                         const double e = best_error_at(&rule, us[i]);
                         if (isnan(e)) continue;
-                        px[n_series][k] = us[i], py[n_series][k] = e, k++;
+                        plot.x[plot.n][k] = us[i], plot.y[plot.n][k] = e, k++;
                     }
-                    if (k > 1) {
-                        snprintf(names[n_series], 96, "renderer rule, best run (%s, %s)",
-                                 dn, sname);
-                        series[n_series] = (mcp_plot_series){names[n_series],
-                                                             MCP_SERIES_LINE_POINTS,
-                                                             px[n_series],
-                                                             py[n_series],
-                                                             k,
-                                                             0};
-                        n_series++;
-                    }
+                    if (k > 1)
+                        curve_add(&plot, k, 0, "renderer rule, best run (%s, %s)", dn,
+                                  sname);
                 }
                 if (g_verbose) {
                     fprintf(stderr, "    uniform:");
@@ -460,18 +470,13 @@ main(int argc, char **argv)
                     if (isfinite(over_rule))
                         sum_over_rule[v] += over_rule, n_over_rule[v]++;
                     if (sd == 0 && smp == 0 && mixes[v % nm] == 0 &&
-                        n_series < MAX_CURVES && r->count <= 256) {
-                        snprintf(names[n_series], 96, "%s (%s, %s)",
-                                 mcp_adaptive_map_name(map), dn, sname);
+                        plot.n < MAX_CURVES && r->count <= MAX_CURVE_POINTS) {
                         for (int i = 0; i < r->count; i++) {
-                            px[n_series][i] = r->iterations[i].mean_spp;
-                            py[n_series][i] = r->iterations[i].relmse;
+                            plot.x[plot.n][i] = r->iterations[i].mean_spp;
+                            plot.y[plot.n][i] = r->iterations[i].relmse;
                         }
-                        series[n_series] =
-                            (mcp_plot_series){names[n_series], MCP_SERIES_LINE_POINTS,
-                                              px[n_series],    py[n_series],
-                                              r->count,        0};
-                        n_series++;
+                        curve_add(&plot, r->count, 0, "%s (%s, %s)",
+                                  mcp_adaptive_map_name(map), dn, sname);
                     }
                     mcp_adaptive_result_free(r);
                 }
@@ -510,8 +515,8 @@ main(int argc, char **argv)
                       "relMSE",
                       MCP_AXIS_LOG,
                       MCP_AXIS_LOG,
-                      series,
-                      n_series,
+                      plot.series,
+                      plot.n,
                       720,
                       450};
         char *svg = NULL;
