@@ -35,6 +35,10 @@ int mcp__select_ranks(const float *v, size_t n, const size_t *ranks, int k, floa
  * ceil(p n) - 1, clamped), by selection. */
 int mcp__select_percentiles(const float *v, size_t n, const double *p, int k,
                             double *out);
+/* One channel of an image by selection: out[0] its smallest value, out[1] the value of
+ * rank p (n - 1) (rounded down; p = 0.99: the top of a false-colour scale that a few
+ * outliers would otherwise set), out[2] its largest. No NaN. */
+int mcp__image_channel_spread(const mcp_image *img, int channel, double p, float out[3]);
 
 /* Where mcpost's own files are (paths.c): the folder of the file that holds this code
  * (the shared library, or the executable it is linked into; -1 when unknown), and a

@@ -157,3 +157,18 @@ done:
     free(hist);
     return rc;
 }
+
+int
+mcp__image_channel_spread(const mcp_image *img, int channel, double p, float out[3])
+{
+    const size_t n = (size_t)img->width * img->height;
+    float *v = mcp_malloc(n * sizeof *v);
+    if (!v) return -1;
+    for (int y = 0; y < img->height; y++)
+        for (int x = 0; x < img->width; x++)
+            v[(size_t)y * img->width + x] = mcp_image_px(img, x, y)[channel];
+    const size_t ranks[3] = {0, (size_t)(p * (double)(n - 1)), n - 1};
+    int rc = mcp__select_ranks(v, n, ranks, 3, out);
+    free(v);
+    return rc;
+}

@@ -75,18 +75,9 @@ write_png(const mcp__adaptive_loop *c, const mcp_image *img, const char *fmt, in
           double *top, int *flat)
 {
     char path[4352];
-    size_t n = (size_t)img->width * img->height;
-    float *v = mcp_malloc(n * sizeof *v);
-    if (!v) return -1;
-    for (int y = 0; y < img->height; y++)
-        for (int x = 0; x < img->width; x++)
-            v[(size_t)y * img->width + x] = mcp_image_px(img, x, y)[0];
-    /* the smallest, the 99th percentile and the largest, by selection */
-    const size_t ranks[3] = {0, (size_t)(0.99 * (double)(n - 1)), n - 1};
-    float sel[3];
-    int bad = mcp__select_ranks(v, n, ranks, 3, sel);
-    free(v);
-    if (bad) return -1;
+    const size_t n = (size_t)img->width * img->height;
+    float sel[3]; /* the smallest, the 99th percentile and the largest */
+    if (mcp__image_channel_spread(img, 0, 0.99, sel)) return -1;
     double hi = sel[1];
     if (!(hi > 0)) hi = sel[2];
     if (flat) *flat = sel[0] == sel[2];

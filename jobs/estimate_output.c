@@ -126,21 +126,12 @@ blocks_error_picture(const mcp_blocks *blocks, const mcp_image *dist, unsigned c
 static int
 sampling_map_picture(const mcp_image *map, unsigned char *rgb8, double *top)
 {
-    size_t n = (size_t)map->width * map->height;
-    float *v = mcp_malloc(n * sizeof *v);
-    if (!v) return -1;
-    for (int y = 0; y < map->height; y++)
-        for (int x = 0; x < map->width; x++)
-            v[(size_t)y * map->width + x] = mcp_image_px(map, x, y)[0];
-    /* the 99th percentile and the largest by selection: a sort of a 1080p map took
-       8% of a whole gauss estimate */
-    const size_t ranks[2] = {(size_t)(0.99 * (double)(n - 1)), n - 1};
-    float sel[2];
-    int bad = mcp__select_ranks(v, n, ranks, 2, sel);
-    free(v);
-    if (bad) return -1;
-    double hi = sel[0];
-    if (!(hi > 0)) hi = sel[1] > 0 ? sel[1] : 1.0 / (double)n;
+    const size_t n = (size_t)map->width * map->height;
+    /* by selection: a sort of a 1080p map took 8% of a whole gauss estimate */
+    float sel[3];
+    if (mcp__image_channel_spread(map, 0, 0.99, sel)) return -1;
+    double hi = sel[1];
+    if (!(hi > 0)) hi = sel[2] > 0 ? sel[2] : 1.0 / (double)n;
     *top = hi * (double)n;
     return mcp_colormap_apply(map, 0, 0.0, hi, MCP_COLORMAP_INFERNO, rgb8);
 }

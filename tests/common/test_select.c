@@ -120,6 +120,21 @@ test_image_percentiles(void **state)
             assert_true(got[k] == sorted[at]);
         }
         free(sorted);
+        /* one channel's smallest, rank 0.99 (n - 1) and largest (a false-colour
+           scale's top) */
+        for (int c = 0; c < 3; c++) {
+            size_t m = (size_t)im->width * im->height, j = 0;
+            float *one = malloc(m * sizeof *one), spread[3];
+            for (int y = 0; y < im->height; y++)
+                for (int x = 0; x < im->width; x++)
+                    one[j++] = mcp_image_px(im, x, y)[c];
+            qsort(one, m, sizeof *one, cmp_float);
+            assert_int_equal(mcp__image_channel_spread(im, c, 0.99, spread), 0);
+            assert_true(spread[0] == one[0]);
+            assert_true(spread[1] == one[(size_t)(0.99 * (double)(m - 1))]);
+            assert_true(spread[2] == one[m - 1]);
+            free(one);
+        }
     }
     mcp_image_free(view);
     mcp_image_free(img);
