@@ -85,6 +85,7 @@ default_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **ou
     d->self.apply = default_apply;
     d->self.jvp = default_jvp;
     d->self.destroy = default_destroy;
+    d->self.pick = pick;
     *out = &d->self;
     return 0;
 }

@@ -62,6 +62,10 @@ struct mcp_denoiser {
     int (*jvp)(const mcp_denoiser *self, const mcp_denoise_input *at,
                const mcp_denoise_tangent *t, int n, mcp_image **primal, mcp_image **out);
     void (*destroy)(mcp_denoiser *self); /* frees state and self */
+    /* A denoiser that hands each input to another (the `default` one) names the one
+     * that runs on `in`, whose estimate_probes and sharp_variance then apply; NULL for
+     * a denoiser that runs itself. */
+    const mcp_denoiser *(*pick)(const mcp_denoiser *self, const mcp_denoise_input *in);
     void *state;
 };
 

@@ -42,12 +42,22 @@ mcp_estimate_defaults(void)
     return o;
 }
 
+/* The denoiser that runs on this dump: den itself, or the one it hands the dump to */
+static const mcp_denoiser *
+running(const mcp_dump *dump, const mcp_denoiser *den)
+{
+    if (!den->pick) return den;
+    const mcp_denoise_input in = mcp_denoise_input_of(dump);
+    return den->pick(den, &in);
+}
+
 int
-mcp_estimate_auto_probes(const mcp_denoiser *den)
+mcp_estimate_auto_probes(const mcp_dump *dump, const mcp_denoiser *den)
 {
     /* four probes with s² pooled agree with the truth as often as eight on the
        stratified fixtures (docs/fidelity.md "The defaults"), at half the JVPs */
-    return den && den->estimate_probes > 0 ? den->estimate_probes : MCP_ESTIMATE_PROBES;
+    den = running(dump, den);
+    return den->estimate_probes > 0 ? den->estimate_probes : MCP_ESTIMATE_PROBES;
 }
 
 int
@@ -59,7 +69,7 @@ mcp_estimate_auto_s2_pool(const mcp_dump *dump, const mcp_denoiser *den)
        stops early with it: docs/fidelity.md "The defaults"). */
     int few_dof = dump->variance_source == MCP_VARSRC_REPLICATES ||
                   dump->variance_source == MCP_VARSRC_INCREMENTS;
-    return den->sharp_variance && !few_dof ? 0 : 1;
+    return running(dump, den)->sharp_variance && !few_dof ? 0 : 1;
 }
 
 int
@@ -225,7 +235,7 @@ mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,
     mcp_estimate_options o = opt ? *opt : mcp_estimate_defaults();
     if (mcp_estimate_check(&o) || mcp__check_dump("estimate", dump)) return -1;
     if (!den) return mcp_error("estimate: missing denoiser");
-    if (o.sure.n_probes < 1) o.sure.n_probes = mcp_estimate_auto_probes(den);
+    if (o.sure.n_probes < 1) o.sure.n_probes = mcp_estimate_auto_probes(dump, den);
     mcp_estimate *e = mcp_calloc(1, sizeof *e);
     if (!e) return -1;
     evaluation ev;

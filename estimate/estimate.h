@@ -326,10 +326,11 @@ typedef struct mcp_estimate_options {
     int s2_pool;
 } mcp_estimate_options;
 
-/* The automatic probe count: the denoiser's own (den->estimate_probes: the U-Net 3),
- * else MCP_ESTIMATE_PROBES; docs/fidelity.md "The defaults" has the figures. */
+/* The automatic probe count: that of the denoiser that runs on the dump (den, or the
+ * one it picks for it: the `default` one's U-Net or nlm) from its estimate_probes (the
+ * U-Net 3), else MCP_ESTIMATE_PROBES; docs/fidelity.md "The defaults" has the figures. */
 #define MCP_ESTIMATE_PROBES 4
-MCP_API int mcp_estimate_auto_probes(const mcp_denoiser *den);
+MCP_API int mcp_estimate_auto_probes(const mcp_dump *dump, const mcp_denoiser *den);
 
 /* The automatic pooling radius: 1, except 0 for a denoiser with a sharp Var[F]
  * (den->sharp_variance) on a variance with many degrees of freedom (per-sample, of the

@@ -440,22 +440,30 @@ test_cli_single_and_series(void **state)
     assert_non_null(
         strstr(err, "--probes must be auto or a number in [1, 1024] (got 0)"));
     /* the probe count is the denoiser's (docs/fidelity.md "The defaults"): 3 for the
-       U-Net, whose tangents cost over half an apply, 4 for the others; the automatic
-       estimate is the explicit one, to the bit */
-    static const struct {
-        const char *denoiser;
+       U-Net, whose tangents cost over half an apply, 4 for the others; the default
+       denoiser's is that of the one it runs (the U-Net on a dump with albedo and
+       normal, nlm on one without); the automatic estimate is the explicit one, to
+       the bit */
+    char features[4200], plain[4200];
+    snprintf(features, sizeof features,
+             "%s/samples/fixtures/strat/texture/series/texture_spp0032.exr",
+             MCP_TEST_SOURCE_DIR);
+    snprintf(plain, sizeof plain, "%s", mcp_test_path("cli_spp0064.exr"));
+    const struct {
+        const char *denoiser, *dump;
         int probes;
-    } auto_probes[] = {{"gauss", 4}, {"unet", 3}};
-    for (int i = 0; i < 2; i++) {
+    } auto_probes[] = {{"gauss", features, 4},
+                       {"unet", features, 3},
+                       {"default", features, 3},
+                       {"default", plain, 4}};
+    for (int i = 0; i < 4; i++) {
         double cdf[2];
         for (int explicit_k = 0; explicit_k < 2; explicit_k++) {
             char probes[32] = "";
             if (explicit_k)
                 snprintf(probes, sizeof probes, "--probes %d", auto_probes[i].probes);
-            st = run(
-                "estimate '%s/samples/fixtures/strat/texture/series/texture_spp0032.exr' "
-                "--denoiser %s %s --json",
-                MCP_TEST_SOURCE_DIR, auto_probes[i].denoiser, probes);
+            st = run("estimate '%s' --denoiser %s %s --json", auto_probes[i].dump,
+                     auto_probes[i].denoiser, probes);
             assert_int_equal(st, 0);
             cJSON *j = cJSON_Parse(out);
             assert_non_null(j);
