@@ -7,7 +7,10 @@
 #include "hidden_internal.h"
 #include "oiio_internal.h"
 
+#include <stdio.h>
+
 #include <mcpost/image.h>
+#include <mcpost/progress.h>
 
 /* Reorders img's channel names only (order as mcp_image_colour_order gives it), for a
  * reader that has made the image but not yet placed its pixels by name (image.c). */
@@ -39,6 +42,13 @@ int mcp__select_percentiles(const float *v, size_t n, const double *p, int k,
  * rank p (n - 1) (rounded down; p = 0.99: the top of a false-colour scale that a few
  * outliers would otherwise set), out[2] its largest. No NaN. */
 int mcp__image_channel_spread(const mcp_image *img, int channel, double p, float out[3]);
+
+/* Progress (progress.c). mcp__progress_stop ends a bar where it got, without the 100%
+ * of mcp_progress_end: for a run that failed. Safe on a bar never begun (zeroed) or
+ * already ended. mcp__progress_set_output points the bars and notes at a stream, with
+ * tty saying whether to draw them as on a terminal (tests); NULL: stderr again. */
+void mcp__progress_stop(mcp_progress *p);
+void mcp__progress_set_output(FILE *stream, int tty);
 
 /* Where mcpost's own files are (paths.c): the folder of the file that holds this code
  * (the shared library, or the executable it is linked into; -1 when unknown), and a

@@ -35,6 +35,7 @@
  * run without clamping and vectorise. */
 #include <mcpost/denoiser.h>
 
+#include "../common/internal.h" /* mcp__progress_stop */
 #include "internal.h"
 
 #include <mcpost/filter.h>
@@ -743,8 +744,8 @@ run_all(const char *who, const nlm_params *p, const nlm_work *wk, const nlm_out 
         free(buf);
     }
     if (show) {
-        if (failed && !mcp_progress_quiet())
-            fputc('\n', stderr); /* no "100%" for a run that failed */
+        if (failed)
+            mcp__progress_stop(&bar); /* no "100%" for a run that failed */
         else
             mcp_progress_end(&bar);
     }

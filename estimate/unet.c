@@ -6,7 +6,8 @@
  * Convolutions are Winograd F(2x2, 3x3) products by default (unet_winograd.c); the direct
  * loops here, register-blocked over output channels and columns, OpenMP over (image, row,
  * column chunk), are the fixed-bit mode (MCPOST_UNET_FIXED=1). */
-#define _DEFAULT_SOURCE /* madvise, MADV_HUGEPAGE */
+#define _DEFAULT_SOURCE         /* madvise, MADV_HUGEPAGE */
+#include "../common/internal.h" /* mcp__progress_stop */
 #include "unet_internal.h"
 #include "internal.h"
 
@@ -1395,7 +1396,10 @@ mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_imag
     int rc = tile ? run_tiled(net, color, albedo, normal, scale_in, t, n, tile, out, jt)
                   : run_whole(net, color, albedo, normal, scale_in, t, n, out, jt);
     if (show) {
-        mcp_progress_end(&bar);
+        if (rc)
+            mcp__progress_stop(&bar); /* no "100%" for a run that failed */
+        else
+            mcp_progress_end(&bar);
         run_progress = NULL;
     }
     if (rc) {

@@ -263,8 +263,8 @@ mcp__blend_run(const mcp_series *series, const mcp_denoiser *den, const mcp_imag
     int rc = mcp_blend_series(series, den, ref, o, on_point, s, &r);
     if (rc == 0)
         mcp_progress_end(&s->prog);
-    else if (s->prog.tty && !mcp_progress_quiet())
-        fputc('\n', stderr); /* no "100%" for a run that failed */
+    else
+        mcp__progress_stop(&s->prog); /* no "100%" for a run that failed */
     if (!rc) rc = fill_section(section, r, o, denoiser_name, s);
     /* the curves are fitted to the variance: say when Variance/n does not track the
        series' own increments */

@@ -494,7 +494,10 @@ mcp__estimate_run_series(const mcp_series *series, const mcp_denoiser *den,
     mcp_progress p;
     memset(&p, 0, sizeof p);
     mcp_series_estimate *s = NULL;
-    if (mcp_estimate_series(series, den, so, ref, progress_cb, &p, &s)) return -1;
+    if (mcp_estimate_series(series, den, so, ref, progress_cb, &p, &s)) {
+        mcp__progress_stop(&p); /* where it got: no "100%" for a run that failed */
+        return -1;
+    }
     cJSON *j = series_json(s, den->name, so->est.sure.metric);
     int using_increments = s->variance_source == MCP_VARSRC_INCREMENTS;
     mcp__report_variance_ratio(s->variance_ratio, using_increments,
