@@ -110,11 +110,21 @@ compare_one(const char *test_path, const char *ref_path, const mcp_image *ref, i
         snprintf(sub, sizeof sub, "%s/%.*s", dir, (int)strlen(prefix) - 1, prefix);
         if (mcp_make_dirs(sub)) goto done;
     }
-    /* the test first, then the reference: the wipe shows them left and right */
-    if (write_render(test, dir, prefix, "test", cap_test, section) ||
-        write_render(ref, dir, prefix, "reference", cap_ref, section) ||
-        mcp_metrics_write_maps(&maps, dir, prefix, section))
-        goto done;
+    /* the test first, then the reference: the wipe shows them left and right (a bar
+       on a terminal for a megapixel: two 4K renders take 2 to 3 s) */
+    mcp_progress bar;
+    int shown = (double)ref->width * ref->height >= 1048576.0;
+    if (shown) mcp__progress_begin_on_terminal(&bar, "writing the renders", 2);
+    int failed = write_render(test, dir, prefix, "test", cap_test, section);
+    if (shown && !failed) mcp_progress_update(&bar, 1);
+    failed = failed || write_render(ref, dir, prefix, "reference", cap_ref, section);
+    if (shown) {
+        if (failed)
+            mcp__progress_stop(&bar);
+        else
+            mcp_progress_end(&bar);
+    }
+    if (failed || mcp_metrics_write_maps(&maps, dir, prefix, section)) goto done;
     *verdict = MCP__GATE_PASS;
     *gate_line = 0;
     if (gate->n) {

@@ -21,6 +21,9 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 
 /* Core reports detail through a callback; keep the last message per thread so that
  * our one-line error can carry it (the default handler prints to stderr). */
@@ -327,6 +330,61 @@ decode_chunk(exr_context_t f, const chunk_at *c, exr_decode_pipeline_t *dec,
     return exr_decoding_run(f, 0, dec);
 }
 
+/* ---- progress ---- */
+
+/* A read or write of this many bytes of pixels or more takes about a second here
+ * (docs/benchmarks.md, "EXR speed": a 4K dump of 12 float channels, 400 MB, reads in
+ * 2 to 3 s on 2 cores) and shows a bar: "reading NAME" or "writing NAME". */
+#define BAR_MIN_BYTES (128.0 * 1048576.0)
+
+typedef struct chunk_bar {
+    mcp_progress bar;
+    int shown, finished;
+} chunk_bar;
+
+static void
+chunk_bar_begin(chunk_bar *b, const char *verb, const char *path, double bytes, int n)
+{
+    memset(b, 0, sizeof *b);
+    b->shown = bytes >= BAR_MIN_BYTES && n > 1 && !mcp_progress_quiet();
+    if (!b->shown) return;
+    const char *slash = strrchr(path, '/'), *base = slash ? slash + 1 : path;
+    /* a file written under imageio.c's temporary name "<stem>.tmp-<pid>-<n><ext>" is
+       named by its own */
+    const char *tag = strstr(base, ".tmp-"), *ext = tag ? strrchr(tag, '.') : NULL;
+    char label[96];
+    if (tag && ext > tag)
+        snprintf(label, sizeof label, "%s %.*s%s", verb, (int)(tag - base), base, ext);
+    else
+        snprintf(label, sizeof label, "%s %s", verb, base);
+    mcp__progress_begin_on_terminal(&b->bar, label, n);
+}
+
+/* A chunk is done; called by every thread, the bar drawn by the one that owns it
+ * (progress.h: one thread). */
+static void
+chunk_bar_step(chunk_bar *b)
+{
+    if (!b->shown) return;
+    int n;
+#pragma omp atomic capture
+    n = ++b->finished;
+#ifdef _OPENMP
+    if (omp_get_thread_num() != 0) return;
+#endif
+    mcp_progress_update(&b->bar, n);
+}
+
+static void
+chunk_bar_end(chunk_bar *b, int failed)
+{
+    if (!b->shown) return;
+    if (failed)
+        mcp__progress_stop(&b->bar);
+    else
+        mcp_progress_end(&b->bar);
+}
+
 /* Decodes the chunks in parallel: Core decodes each chunk on its own, reading its
  * bytes through the context is safe from many threads (pread, or read_fn, which must
  * be), and the chunks fill disjoint rectangles. Each thread keeps one
@@ -337,6 +395,11 @@ read_pixels(exr_context_t f, const chunk_at *chunks, int n, exr_compression_t co
 {
     chunk_failure fail = {.idx = -1};
     int zip = comp == EXR_COMPRESSION_ZIP || comp == EXR_COMPRESSION_ZIPS;
+    double bytes = 0;
+    for (int i = 0; i < n; i++)
+        bytes += (double)chunks[i].ci.unpacked_size;
+    chunk_bar bar;
+    chunk_bar_begin(&bar, "reading", path, bytes, n);
 #pragma omp parallel if (n > 1)
     {
         exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
@@ -354,10 +417,12 @@ read_pixels(exr_context_t f, const chunk_at *chunks, int n, exr_compression_t co
                                   : decode_chunk(f, &chunks[i], &dec, &initialised,
                                                  decoder, named, routes, &what);
             if (rc != EXR_ERR_SUCCESS) note_failure(&fail, i, rc, what);
+            chunk_bar_step(&bar);
         }
         if (initialised) exr_decoding_destroy(f, &dec);
         mcp__zip_codec_free(decoder);
     }
+    chunk_bar_end(&bar, fail.idx >= 0);
     return fail.idx >= 0 ? report_failure(&fail, path) : 0;
 }
 
@@ -824,6 +889,9 @@ write_pixels(exr_context_t f, const mcp_image *img, exr_storage_t storage,
     int store_raw = zip && min_saving > 0 && n >= PROBE_EVERY &&
                     store_raw_after_probe(f, img, chunks, n, min_saving);
     chunk_failure fail = {.idx = -1};
+    chunk_bar bar;
+    chunk_bar_begin(&bar, "writing", path,
+                    (double)img->width * img->height * img->channels * sizeof(float), n);
 #pragma omp parallel if (n > 1)
     {
         exr_encode_pipeline_t enc = EXR_ENCODE_PIPELINE_INITIALIZER;
@@ -852,10 +920,12 @@ write_pixels(exr_context_t f, const mcp_image *img, exr_storage_t storage,
                 }
                 if (rc != EXR_ERR_SUCCESS) note_failure(&fail, i, rc, what);
             }
+            chunk_bar_step(&bar);
         }
         if (initialised) exr_encoding_destroy(f, &enc);
         chunk_coder_free(&coder);
     }
+    chunk_bar_end(&bar, fail.idx >= 0);
     free(chunks);
     return fail.idx >= 0 ? report_failure(&fail, path) : 0;
 }

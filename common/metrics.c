@@ -516,6 +516,46 @@ mcp_metrics_maps_free(mcp_metrics_maps *maps)
     memset(maps, 0, sizeof *maps);
 }
 
+/* The progress of one comparison, on a terminal, for an image of a megapixel or more
+ * (a 4K pair takes 5 to 10 s): a step per figure, weighted by what it costs there
+ * (HDR-FLIP: several exposures of LDR-FLIP's work). */
+enum { STEP_FUSED = 1, STEP_PMSE = 1, STEP_LDR = 3, STEP_HDR = 8, STEP_SPECTRA = 1 };
+typedef struct figures_bar {
+    mcp_progress bar;
+    int shown;
+    long done;
+} figures_bar;
+
+static void
+figures_bar_begin(figures_bar *b, const mcp_image *test, const mcp_metrics_options *opt)
+{
+    memset(b, 0, sizeof *b);
+    b->shown = (double)test->width * test->height >= 1048576.0 && !mcp_progress_quiet();
+    if (!b->shown) return;
+    const char *name = src_name(test), *slash = strrchr(name, '/');
+    char label[96];
+    snprintf(label, sizeof label, "metrics %s", slash ? slash + 1 : name);
+    long total = STEP_FUSED + STEP_PMSE + (opt->flip_ldr ? STEP_LDR : 0) +
+                 (opt->flip_hdr ? STEP_HDR : 0) + (opt->spectra ? STEP_SPECTRA : 0);
+    mcp__progress_begin_on_terminal(&b->bar, label, total);
+}
+
+static void
+figures_bar_step(figures_bar *b, long weight)
+{
+    if (b->shown) mcp_progress_update(&b->bar, b->done += weight);
+}
+
+static void
+figures_bar_end(figures_bar *b, int failed)
+{
+    if (!b->shown) return;
+    if (failed)
+        mcp__progress_stop(&b->bar);
+    else
+        mcp_progress_end(&b->bar);
+}
+
 int
 mcp_metrics_compute(const mcp_image *test, const mcp_image *ref,
                     const mcp_metrics_options *opt, mcp_metrics *out,
@@ -559,6 +599,8 @@ mcp_metrics_compute(const mcp_image *test, const mcp_image *ref,
                          MCP_METRICS_MAX_ABOVE, opt->n_above);
     /* FLIP maps kept here when the caller wants no maps but a share above a threshold */
     mcp_image *own_ldr = NULL, *own_hdr = NULL;
+    figures_bar bar;
+    figures_bar_begin(&bar, test, opt);
     if ((want_relse && mcp_image_new(w, h, 3, rgb, &relse)) ||
         (maps && mcp_image_new(w, h, 3, rgb, &sq)))
         goto done;
@@ -574,7 +616,9 @@ mcp_metrics_compute(const mcp_image *test, const mcp_image *ref,
     out->relmse = mean[1];
     out->rmse = sqrt(out->mse);
     out->psnr = psnr_of(mean[2]);
+    figures_bar_step(&bar, STEP_FUSED);
     if (pmse_checked(test, it, ref, ir, &opt->pmse, &out->pmse)) goto done;
+    figures_bar_step(&bar, STEP_PMSE);
     out->n_percentiles = opt->n_percentiles;
     memcpy(out->percentiles, opt->percentiles, sizeof opt->percentiles);
     if (opt->n_percentiles &&
@@ -587,6 +631,7 @@ mcp_metrics_compute(const mcp_image *test, const mcp_image *ref,
                                      : NULL))
             goto done;
         out->has_flip_ldr = 1;
+        figures_bar_step(&bar, STEP_LDR);
     }
     if (opt->flip_hdr) {
         if (mcp_flip_hdr(test, ref, &opt->flip, &out->flip_hdr,
@@ -596,6 +641,7 @@ mcp_metrics_compute(const mcp_image *test, const mcp_image *ref,
                          maps ? &maps->flip_hdr_exposure : NULL))
             goto done;
         out->has_flip_hdr = 1;
+        figures_bar_step(&bar, STEP_HDR);
     }
     out->n_above = opt->n_above;
     for (int k = 0; k < opt->n_above; k++) {
@@ -621,6 +667,7 @@ mcp_metrics_compute(const mcp_image *test, const mcp_image *ref,
     }
     rc = 0;
 done:
+    figures_bar_end(&bar, rc != 0);
     mcp_image_free(own_ldr);
     mcp_image_free(own_hdr);
     mcp_image_free(sq);
@@ -768,6 +815,10 @@ write_png(const mcp_image *img, int channel, double lo, double hi, mcp_colormap 
 typedef struct {
     const char *dir, *prefix;
     cJSON *section;
+    /* "writing maps" on a terminal for a megapixel or more: a step per file */
+    mcp_progress bar;
+    int bar_shown;
+    long written;
 } map_out;
 
 static int
@@ -786,7 +837,7 @@ out_path(const map_out *o, const char *name, const char *ext, char *path, size_t
  * report: lo..hi over the colour map, with log_values when the channel holds log10 of
  * what unit names (the colour bar then shows 10^lo..10^hi on a log axis). */
 static int
-emit(const map_out *o, const mcp_image *img, const char *name, int exr, int png_channel,
+emit(map_out *o, const mcp_image *img, const char *name, int exr, int png_channel,
      double lo, double hi, mcp_colormap map, int log_values, const char *caption,
      const char *unit)
 {
@@ -794,10 +845,12 @@ emit(const map_out *o, const mcp_image *img, const char *name, int exr, int png_
     if (exr && (out_path(o, name, "exr", path, sizeof path, rel, sizeof rel) ||
                 mcp_image_write(img, path, NULL)))
         return -1;
+    if (o->bar_shown && exr) mcp_progress_update(&o->bar, ++o->written);
     if (png_channel < 0) return 0;
     if (out_path(o, name, "png", path, sizeof path, rel, sizeof rel) ||
         write_png(img, png_channel, lo, hi, map, path))
         return -1;
+    if (o->bar_shown) mcp_progress_update(&o->bar, ++o->written);
     if (!o->section) return 0;
     return mcp_report_add_map(o->section, rel, caption, map,
                               log_values ? pow(10.0, lo) : lo,
@@ -807,37 +860,66 @@ emit(const map_out *o, const mcp_image *img, const char *name, int exr, int png_
                : -1;
 }
 
+static int write_all(const mcp_metrics_maps *maps, map_out *o);
+
 int
 mcp_metrics_write_maps(const mcp_metrics_maps *maps, const char *dir, const char *prefix,
                        cJSON *section)
 {
-    map_out o = {dir, prefix ? prefix : "", section};
+    map_out o = {.dir = dir, .prefix = prefix ? prefix : "", .section = section};
+    const mcp_image *any = maps->flip_ldr   ? maps->flip_ldr
+                           : maps->flip_hdr ? maps->flip_hdr
+                           : maps->relse    ? maps->relse
+                                            : maps->sq_error;
+    o.bar_shown =
+        any && (double)any->width * any->height >= 1048576.0 && !mcp_progress_quiet();
+    if (o.bar_shown) {
+        /* the files emit writes: an EXR and a PNG of each FLIP map, the EXRs of the
+           squared and relative errors, the PNG of the latter, the spectra's PNG */
+        long files =
+            2 * (!!maps->flip_ldr + !!maps->flip_hdr + !!maps->flip_hdr_exposure) +
+            !!maps->sq_error + 2 * !!maps->relse + !!maps->spectra;
+        mcp__progress_begin_on_terminal(&o.bar, "writing maps", files);
+    }
+    int rc = write_all(maps, &o);
+    if (o.bar_shown) {
+        if (rc)
+            mcp__progress_stop(&o.bar);
+        else
+            mcp_progress_end(&o.bar);
+    }
+    return rc;
+}
+
+static int
+write_all(const mcp_metrics_maps *maps, map_out *o)
+{
     char sub[4096];
     /* The prefix may name a sub-folder ("maps/"): create it with the folder. */
-    const char *slash = strrchr(o.prefix, '/');
-    int n = snprintf(sub, sizeof sub, "%s/%.*s", dir, slash ? (int)(slash - o.prefix) : 0,
-                     o.prefix);
+    const char *slash = strrchr(o->prefix, '/');
+    int n = snprintf(sub, sizeof sub, "%s/%.*s", o->dir,
+                     slash ? (int)(slash - o->prefix) : 0, o->prefix);
     if (n < 0 || (size_t)n >= sizeof sub)
-        return mcp_error("output path too long: %s/%s", dir, o.prefix);
+        return mcp_error("output path too long: %s/%s", o->dir, o->prefix);
     if (mcp_make_dirs(sub)) return -1;
     static const char flip_unit[] = "FLIP error: 0 identical, 1 most different";
-    if (maps->flip_ldr && emit(&o, maps->flip_ldr, "flip_ldr", 1, 0, 0.0, 1.0,
+    if (maps->flip_ldr && emit(o, maps->flip_ldr, "flip_ldr", 1, 0, 0.0, 1.0,
                                MCP_COLORMAP_MAGMA, 0, "LDR-FLIP per pixel", flip_unit))
         return -1;
-    if (maps->flip_hdr && emit(&o, maps->flip_hdr, "flip_hdr", 1, 0, 0.0, 1.0,
+    if (maps->flip_hdr && emit(o, maps->flip_hdr, "flip_hdr", 1, 0, 0.0, 1.0,
                                MCP_COLORMAP_MAGMA, 0, "HDR-FLIP per pixel", flip_unit))
         return -1;
     if (maps->flip_hdr_exposure &&
-        emit(&o, maps->flip_hdr_exposure, "flip_hdr_exposure", 1, 0, 0.0, 1.0,
+        emit(o, maps->flip_hdr_exposure, "flip_hdr_exposure", 1, 0, 0.0, 1.0,
              MCP_COLORMAP_VIRIDIS, 0,
              "HDR-FLIP: the exposure where each pixel's error is largest",
              "0: the start exposure, 1: the stop exposure (flip_hdr in the figures)"))
         return -1;
     if (maps->sq_error &&
-        emit(&o, maps->sq_error, "sq_error", 1, -1, 0, 0, 0, 0, NULL, NULL))
+        emit(o, maps->sq_error, "sq_error", 1, -1, 0, 0, 0, 0, NULL, NULL))
         return -1;
     if (maps->relse) {
-        if (emit(&o, maps->relse, "relse", 1, -1, 0, 0, 0, 0, NULL, NULL)) return -1;
+        if (emit(o, maps->relse, "relse", 1, -1, 0, 0, 0, 0, NULL, NULL)) return -1;
         mcp_image *lg = NULL;
         if (mcp_image_new(maps->relse->width, maps->relse->height, 1,
                           (const char *const[]){"log10_relse"}, &lg))
@@ -852,14 +934,14 @@ mcp_metrics_write_maps(const mcp_metrics_maps *maps, const char *dir, const char
                 mcp_image_px(lg, x, y)[0] = (float)(mean > 1e-30 ? log10(mean) : -30.0);
             }
         int rc = mcp_image_set_source(lg, "RelSE") ||
-                 emit(&o, lg, "relse", 0, 0, -5.0, 0.0, MCP_COLORMAP_INFERNO, 1,
+                 emit(o, lg, "relse", 0, 0, -5.0, 0.0, MCP_COLORMAP_INFERNO, 1,
                       "relative squared error per pixel, mean of the channels",
                       "(test - ref)^2 / (largest channel of test^2 + 0.01), log scale");
         mcp_image_free(lg);
         if (rc) return -1;
     }
     if (maps->spectra &&
-        emit(&o, maps->spectra, "spectra", 0, 0, 0.0, 1.0, MCP_COLORMAP_GRAY, 0,
+        emit(o, maps->spectra, "spectra", 0, 0, 0.0, 1.0, MCP_COLORMAP_GRAY, 0,
              "error power spectrum per tile, zero frequency at each tile's centre",
              "c ln(1 + power), scaled to 0..1 per picture: blue noise is dark at the "
              "centre of each tile"))

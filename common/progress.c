@@ -131,8 +131,8 @@ show(mcp_progress *p, int k, int percent)
     }
 }
 
-void
-mcp_progress_begin(mcp_progress *p, const char *label, long total)
+static void
+begin(mcp_progress *p, const char *label, long total, int terminal_only)
 {
     memset(p, 0, sizeof *p);
     snprintf(p->label, sizeof p->label, "%s", label);
@@ -145,12 +145,25 @@ mcp_progress_begin(mcp_progress *p, const char *label, long total)
 #ifdef _OPENMP
     in_parallel = omp_in_parallel();
 #endif
-    if (find(p) >= 0 || in_parallel || depth == MAX_DEPTH) return;
+    if (find(p) >= 0 || in_parallel || depth == MAX_DEPTH || (terminal_only && !p->tty))
+        return;
     active_bar *a = &active[depth++];
     a->bar = p;
     snprintf(a->label, sizeof a->label, "%s", label);
     a->percent = 0;
     if (!quiet && p->tty) show(p, depth - 1, 0);
+}
+
+void
+mcp_progress_begin(mcp_progress *p, const char *label, long total)
+{
+    begin(p, label, total, 0);
+}
+
+void
+mcp__progress_begin_on_terminal(mcp_progress *p, const char *label, long total)
+{
+    begin(p, label, total, 1);
 }
 
 void
