@@ -51,6 +51,9 @@ void mcp__progress_stop(mcp_progress *p);
 /* A bar for one image's work (a read, a write, a metric): drawn on a terminal only,
  * silent in a log, where the lines of series and frames are enough. */
 void mcp__progress_begin_on_terminal(mcp_progress *p, const char *label, long total);
+/* The bar starts again at 0 under a new label, on the same line: a round of work
+ * whose rounds are not known beforehand ("vertical-iterative, pass 3"). */
+void mcp__progress_restart(mcp_progress *p, const char *label);
 void mcp__progress_set_output(FILE *stream, int tty);
 
 /* Where mcpost's own files are (paths.c): the folder of the file that holds this code

@@ -91,14 +91,16 @@ draw_line(void)
 {
     if (depth == 0) return;
     char line[LINE_WIDTH + 1], bar[41];
+    /* nested: 20 + 18 + 5 + 3 + 28 + 5 = 79 columns (the inner label fits "vertical-
+       iterative, pass 17") */
     const active_bar *o = &active[0];
     if (depth == 1) {
         bar_text(bar, 40, o->percent);
         snprintf(line, sizeof line, "%-32.32s [%s] %3d%%", o->label, bar, o->percent);
     } else {
         const active_bar *in = &active[depth - 1];
-        bar_text(bar, 20, o->percent);
-        snprintf(line, sizeof line, "%-20.20s [%s] %3d%% | %-20.20s %3d%%", o->label, bar,
+        bar_text(bar, 16, o->percent);
+        snprintf(line, sizeof line, "%-20.20s [%s] %3d%% | %-28.28s %3d%%", o->label, bar,
                  o->percent, in->label, in->percent);
     }
     fprintf(stream(), "\r%-*s", LINE_WIDTH, line);
@@ -164,6 +166,17 @@ void
 mcp__progress_begin_on_terminal(mcp_progress *p, const char *label, long total)
 {
     begin(p, label, total, 1);
+}
+
+void
+mcp__progress_restart(mcp_progress *p, const char *label)
+{
+    snprintf(p->label, sizeof p->label, "%s", label);
+    p->done = 0;
+    int k = find(p);
+    if (k < 0) return;
+    snprintf(active[k].label, sizeof active[k].label, "%s", label);
+    show(p, k, 0);
 }
 
 void

@@ -119,8 +119,8 @@ test_nested_on_terminal(void **state)
     partial = text;
     /* the inner bar is a sub-count at the end of the outer one's line */
     line_as_drawn(partial, 0, line, sizeof line);
-    assert_string_equal(line, "estimate             [##########..........]  50% | U-Net"
-                              "                 25%");
+    assert_string_equal(line, "estimate             [########........]  50% | U-Net"
+                              "                         25%");
     mcp_progress_end(&inner);
     fflush(out);
     /* its end gives the line back to the outer bar, padded over the longer line */
@@ -206,6 +206,47 @@ test_note_during_bar(void **state)
 }
 
 static void
+test_terminal_only(void **state)
+{
+    (void)state;
+    /* one image's bar (an EXR read): nothing in a log ... */
+    capture(0);
+    mcp_progress p;
+    mcp__progress_begin_on_terminal(&p, "reading x.exr", 2);
+    mcp_progress_update(&p, 1);
+    mcp_progress_end(&p);
+    assert_string_equal(captured(), "");
+    /* ... a bar on a terminal */
+    capture(1);
+    mcp__progress_begin_on_terminal(&p, "reading x.exr", 2);
+    mcp_progress_end(&p);
+    char line[128];
+    line_as_drawn(captured(), 0, line, sizeof line);
+    assert_string_equal(line, "reading x.exr                    "
+                              "[########################################] 100%");
+}
+
+static void
+test_restart(void **state)
+{
+    (void)state;
+    capture(1);
+    mcp_progress p;
+    mcp__progress_begin_on_terminal(&p, "vertical-iterative, pass 1", 4);
+    mcp_progress_update(&p, 3);
+    mcp__progress_restart(&p, "vertical-iterative, pass 2");
+    mcp_progress_update(&p, 1);
+    fflush(out);
+    char line[128];
+    /* the same line, the new label, from 0 again */
+    line_as_drawn(text, 0, line, sizeof line);
+    assert_string_equal(line, "vertical-iterative, pass 2       "
+                              "[##########..............................]  25%");
+    mcp_progress_end(&p);
+    assert_int_equal(count_char(captured(), '\n'), 1);
+}
+
+static void
 test_quiet(void **state)
 {
     (void)state;
@@ -232,6 +273,8 @@ main(void)
         cmocka_unit_test(test_nested_in_log),
         cmocka_unit_test(test_abandoned_bar),
         cmocka_unit_test(test_note_during_bar),
+        cmocka_unit_test(test_terminal_only),
+        cmocka_unit_test(test_restart),
         cmocka_unit_test(test_quiet),
     };
     int rc = cmocka_run_group_tests_name("common/progress", tests, NULL, NULL);
