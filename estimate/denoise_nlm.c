@@ -686,14 +686,28 @@ run_strip(const nlm_params *p, const nlm_work *wk, nlm_scratch *s, int y0, int r
  * when called from inside a parallel region (several images at once would share one
  * line). The master thread draws it, as strips finish in any order. */
 static int
-show_progress(const nlm_work *wk)
+show_progress(int w, int h)
 {
     int nested = 0;
 #ifdef _OPENMP
     nested = omp_in_parallel();
 #endif
-    return (double)wk->w * wk->h >= 1048576.0 && !mcp_progress_quiet() &&
-           isatty(STDERR_FILENO) && !nested;
+    return (double)w * h >= 1048576.0 && !mcp_progress_quiet() && isatty(STDERR_FILENO) &&
+           !nested;
+}
+
+/* The bar's steps: a strip each, and the set-up before them (padding the colour, the
+ * features and every tangent: about an eighth of an estimate's time at 4K, 7 of 60 s). */
+static int
+strips_of(int h)
+{
+    return (h + STRIP_ROWS - 1) / STRIP_ROWS;
+}
+
+static long
+setup_steps(int h)
+{
+    return strips_of(h) / 8 + 1;
 }
 
 static int
@@ -706,19 +720,16 @@ thread_num(void)
 #endif
 }
 
-/* Runs every strip; outputs must be allocated packed w x h x 3. */
+/* Runs every strip; outputs must be allocated packed w x h x 3. bar: the progress
+ * begun by the caller (NULL: none), at setup_steps. */
 static int
-run_all(const char *who, const nlm_params *p, const nlm_work *wk, const nlm_out *out)
+run_all(const char *who, const nlm_params *p, const nlm_work *wk, const nlm_out *out,
+        mcp_progress *bar)
 {
-    int n_strips = (wk->h + STRIP_ROWS - 1) / STRIP_ROWS, failed = 0, finished = 0;
+    int n_strips = strips_of(wk->h), failed = 0, finished = 0;
+    long before = setup_steps(wk->h);
     size_t floats = scratch_floats(wk, p->patch_radius);
-    mcp_progress bar;
-    const int show = show_progress(wk);
-    if (show) {
-        char label[96];
-        snprintf(label, sizeof label, "%s%s", who, wk->nt ? " and its tangents" : "");
-        mcp_progress_begin(&bar, label, n_strips);
-    }
+    const int show = bar != NULL;
 #pragma omp parallel if ((size_t)wk->w * wk->h >= PARALLEL_MIN_PIXELS && n_strips > 1)
     {
         float *buf = mcp_malloc(floats * sizeof *buf);
@@ -738,16 +749,10 @@ run_all(const char *who, const nlm_params *p, const nlm_work *wk, const nlm_out 
                 int n;
 #pragma omp atomic capture
                 n = ++finished;
-                if (thread_num() == 0) mcp_progress_update(&bar, n);
+                if (thread_num() == 0) mcp_progress_update(bar, before + n);
             }
         }
         free(buf);
-    }
-    if (show) {
-        if (failed)
-            mcp__progress_stop(&bar); /* no "100%" for a run that failed */
-        else
-            mcp_progress_end(&bar);
     }
     if (failed)
         return mcp_error("%s: out of memory (%zu bytes of scratch per thread)", who,
@@ -775,16 +780,30 @@ nlm_jvp(const mcp_denoiser *self, const mcp_denoise_input *at,
     mcp_image *prim = NULL;
     float **tout = n ? mcp_calloc((size_t)n, sizeof *tout) : NULL;
     if (n && !tout) return -1;
+    mcp_progress bar;
+    const int show = show_progress(w, h);
+    if (show) {
+        char label[96];
+        snprintf(label, sizeof label, "%s%s", self->name, n ? " and its tangents" : "");
+        mcp_progress_begin(&bar, label, setup_steps(h) + strips_of(h));
+    }
     if (work_init(p, at, t, n, &wk)) goto done;
+    if (show) mcp_progress_update(&bar, setup_steps(h));
     if (primal && mcp__rgb_new(w, h, self->name, &prim)) goto done;
     for (int k = 0; k < n; k++) {
         if (mcp__rgb_new(w, h, "jvp", &out[k])) goto done;
         tout[k] = out[k]->data;
     }
     nlm_out o = {prim ? prim->data : NULL, tout};
-    if (run_all(self->name, p, &wk, &o)) goto done;
+    if (run_all(self->name, p, &wk, &o, show ? &bar : NULL)) goto done;
     rc = 0;
 done:
+    if (show) {
+        if (rc)
+            mcp__progress_stop(&bar); /* no "100%" for a run that failed */
+        else
+            mcp_progress_end(&bar);
+    }
     work_free(&wk);
     free(tout);
     if (rc) {

@@ -1,0 +1,72 @@
+#!/usr/bin/env bash
+# The commands that take seconds on large images show progress on a terminal (a
+# pseudo-terminal from script(1)) and stay silent in a log and with --quiet: metrics'
+# figures and maps, compare's renders, an estimate (the denoiser's bar nested in its
+# line) and its files, the perceptual passes, and the read and write of a 4K dump by
+# convert. The bars change nothing in the outputs. Skipped (77) without script(1).
+#   long_progress.sh BUILD_DIR
+set -euo pipefail
+build=$1
+command -v script >/dev/null || { echo "no script(1): skipped"; exit 77; }
+work=$build/test-tmp/long_progress
+rm -rf "$work" && mkdir -p "$work" && cd "$work"
+mcpost=$build/mcpost
+procedural=$build/mcpost-procedural
+"$procedural" --width 1024 --height 1024 --spp 4 --seed 5 --singles 4 -o in >/dev/null
+"$procedural" --width 1024 --height 1024 --spp 16 --seed 6 -o ref >/dev/null
+mv in_0000.exr in.exr && mv ref_0000.exr ref.exr
+on_tty() { script -qec "$1" /dev/null | tr '\r' '\n'; }
+fail=0
+expect() { # expect FILE REGEX WHAT
+    grep -Eq "$2" "$1" || { echo "FAIL: $3 (no line matching '$2' in $1)"; fail=1; }
+}
+refuse() { # refuse FILE REGEX WHAT
+    ! grep -Eq "$2" "$1" || { echo "FAIL: $3 ('$2' in $1)"; fail=1; }
+}
+
+# metrics: the figures and the maps
+on_tty "'$mcpost' metrics in.exr ref.exr -o m_tty" > metrics_tty.txt
+"$mcpost" metrics in.exr ref.exr -o m_log > /dev/null 2> metrics_log.txt
+on_tty "'$mcpost' metrics in.exr ref.exr -o m_quiet --quiet" > metrics_quiet.txt
+expect metrics_tty.txt "^metrics in\.exr +\[#{40}\] 100%" "no metrics bar on a terminal"
+expect metrics_tty.txt "^writing maps +\[#{40}\] 100%" "no bar for the maps"
+refuse metrics_log.txt "metrics in|writing maps" "a metrics bar in a log"
+refuse metrics_quiet.txt "metrics in|writing maps" "a metrics bar with --quiet"
+cmp -s m_tty/flip_hdr.exr m_log/flip_hdr.exr || { echo "FAIL: the maps differ"; fail=1; }
+
+# compare: the renders it writes for the page
+on_tty "'$mcpost' compare ref.exr in.exr -o c_tty" > compare_tty.txt
+"$mcpost" compare ref.exr in.exr -o c_log > /dev/null 2> compare_log.txt
+expect compare_tty.txt "^writing the renders +\[#{40}\] 100%" "no bar for compare's renders"
+refuse compare_log.txt "writing the" "compare's bar in a log"
+
+# estimate: its own bar with nlm's as a sub-count, then its files
+on_tty "'$mcpost' estimate in.exr --denoiser nlm -o e_tty" > estimate_tty.txt
+"$mcpost" estimate in.exr --denoiser nlm -o e_log > /dev/null 2> estimate_log.txt
+expect estimate_tty.txt "^estimate +\[[#.]{16}\] +[0-9]+% \| nlm and its tangents +[0-9]+%" \
+    "no nlm bar nested in the estimate's line"
+expect estimate_tty.txt "^estimate +\[#{40}\] 100%" "no estimate bar reaching 100%"
+expect estimate_tty.txt "^writing [0-9]+ files +\[#{40}\] 100%" "no bar for the files"
+refuse estimate_log.txt "estimate +\[|estimate:|writing|nlm" "an estimate bar in a log"
+cmp -s e_tty/sure.exr e_log/sure.exr || { echo "FAIL: the estimates differ"; fail=1; }
+
+# perceptual: vertical-iterative's passes
+on_tty "'$mcpost' perceptual in_single_000*.exr --denoiser nlm -o p_tty" > perc_tty.txt
+"$mcpost" perceptual in_single_000*.exr --denoiser nlm -o p_log > /dev/null 2> perc_log.txt
+expect perc_tty.txt "^vertical-iterative, pass 1 +\[" "no bar for the first pass"
+expect perc_tty.txt "^vertical-iterative, pass [0-9]+ +\[#{40}\] 100%" "no last pass at 100%"
+refuse perc_log.txt "pass [0-9]" "a pass bar in a log"
+cmp -s p_tty/vertical-iterative.exr p_log/vertical-iterative.exr ||
+    { echo "FAIL: the optimised images differ"; fail=1; }
+
+# convert: the read and the write of a 4K dump (400 MB of pixels)
+"$procedural" --width 3840 --height 2160 --spp 1 --seed 7 -o big >/dev/null
+on_tty "'$mcpost' convert big_0000.exr tty.exr" > convert_tty.txt
+"$mcpost" convert big_0000.exr log.exr 2> convert_log.txt
+expect convert_tty.txt "^reading big_0000\.exr +\[#{40}\] 100%" "no bar for the read"
+expect convert_tty.txt "^writing tty\.exr +\[#{40}\] 100%" "no bar for the write"
+refuse convert_log.txt "reading|writing" "a read or write bar in a log"
+cmp -s tty.exr log.exr || { echo "FAIL: the converted files differ"; fail=1; }
+
+[ "$fail" -eq 0 ] && echo PASS
+exit "$fail"
