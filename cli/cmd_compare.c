@@ -103,7 +103,10 @@ compare_one(const char *test_path, const char *ref_path, const mcp_image *ref, i
     cJSON_AddStringToObject(section, "reference", ref_path);
     cJSON_AddNumberToObject(section, "width", ref->width);
     cJSON_AddNumberToObject(section, "height", ref->height);
-    if (mcp_metrics_compute(test, ref, o, &m, &maps) || mcp_metrics_json(&m, o, section))
+    /* FLIP's weighted histograms drawn, their counts in report.json only */
+    if (mcp_metrics_compute(test, ref, o, &m, &maps) ||
+        mcp_metrics_json(&m, o, section) ||
+        mcp__metrics_flip_histograms(section, &m, base_name(test_path), NULL, NULL))
         goto done;
     if (n_tests > 1) {
         char sub[4400];

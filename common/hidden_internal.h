@@ -110,4 +110,15 @@ int mcp_flip_exposure_xmax(mcp_tonemap tm, float *xmax);
 int mcp_flip_auto_exposures(const mcp_image *ref, mcp_tonemap tm, float *start,
                             float *stop);
 
+/* ---- report.c ---- */
+
+/* When channel of img (the picture behind map, a map of mcp_report_add_map) holds one
+ * value in every pixel, marks the map so: "one_value" in its scale (10^v for a map of
+ * log10 values; 0 for their -30), times factor (the colour bar's unit), and a mark
+ * "every pixel" on its colour bar, so that the page says the value instead of showing
+ * a flat square (docs/report.md, "The maps"). 0 also when it is not flat. */
+struct cJSON;
+int mcp__report_map_one_value(struct cJSON *map, const mcp_image *img, int channel,
+                              int log10_values, double factor);
+
 #endif

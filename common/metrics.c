@@ -852,12 +852,11 @@ emit(map_out *o, const mcp_image *img, const char *name, int exr, int png_channe
         return -1;
     if (o->bar_shown) mcp_progress_update(&o->bar, ++o->written);
     if (!o->section) return 0;
-    return mcp_report_add_map(o->section, rel, caption, map,
-                              log_values ? pow(10.0, lo) : lo,
-                              log_values ? pow(10.0, hi) : hi,
-                              log_values ? MCP_AXIS_LOG : MCP_AXIS_LINEAR, unit)
-               ? 0
-               : -1;
+    cJSON *m =
+        mcp_report_add_map(o->section, rel, caption, map, log_values ? pow(10.0, lo) : lo,
+                           log_values ? pow(10.0, hi) : hi,
+                           log_values ? MCP_AXIS_LOG : MCP_AXIS_LINEAR, unit);
+    return m && !mcp__report_map_one_value(m, img, png_channel, log_values, 1.0) ? 0 : -1;
 }
 
 static int write_all(const mcp_metrics_maps *maps, map_out *o);

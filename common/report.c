@@ -185,6 +185,26 @@ mcp_report_map_add_mark(cJSON *map, double value, const char *label)
 }
 
 int
+mcp__report_map_one_value(cJSON *map, const mcp_image *img, int channel, int log10_values,
+                          double factor)
+{
+    if (!map || !img || channel < 0 || channel >= img->channels) return 0;
+    float first = img->data[channel];
+    size_t n = (size_t)img->width * img->height;
+    for (size_t i = 0; i < n; i++) {
+        float v = img->data[i * (size_t)img->channels + (size_t)channel];
+        if (!(v == first)) return 0; /* NaN too: not one value */
+    }
+    /* log10 maps hold -30 for a zero (metrics.c's relse.png) */
+    double v =
+        factor * (log10_values ? (first <= -30.0f ? 0.0 : pow(10.0, first)) : first);
+    cJSON *sc = cJSON_GetObjectItem(map, "scale");
+    if (!sc) return mcp_error("report: not a map");
+    if (!cJSON_AddNumberToObject(sc, "one_value", v)) return oom();
+    return mcp_report_map_add_mark(map, v, "every pixel");
+}
+
+int
 mcp_report_set_verdict(cJSON *section, mcp_verdict level, const char *fmt, ...)
 {
     static const char *const levels[] = {"info", "good", "bad"};

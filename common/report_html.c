@@ -681,6 +681,10 @@ render_figure(sbuf *b, const page_image *im)
         sb_printf(b, "<figure style=\"width:%dpx\">", k * im->width);
     else
         sb_str(b, "<figure>");
+    /* a map with one value in every pixel would be a flat square: the value is written
+       across it (its mark on the colour bar shows where it sits) */
+    const cJSON *one = cJSON_GetObjectItem(im->scale, "one_value");
+    if (im->data && cJSON_IsNumber(one)) sb_str(b, "<div class=\"flat\">");
     if (im->data) {
         sb_printf(b, "<img id=\"%s\" class=\"px\" alt=\"", im->id);
         sb_text(b, im->rel);
@@ -693,6 +697,11 @@ render_figure(sbuf *b, const page_image *im)
         sb_printf(b, "\" src=\"data:%s;base64,", im->mime);
         sb_base64(b, im->data, im->size);
         sb_str(b, "\">");
+        if (cJSON_IsNumber(one))
+            sb_printf(b,
+                      "<span class=\"onevalue\">one value in every pixel: %g<br>"
+                      "no map to show</span></div>",
+                      one->valuedouble);
         if (im->scale) render_colour_bar(b, im->scale);
     } else {
         sb_printf(b, "<div class=\"noimg\">%s <code>",
@@ -1036,6 +1045,9 @@ static const char css[] =
     ".plot{display:inline-block;margin:8px 12px 8px 0;max-width:100%}"
     ".plot svg{max-width:100%;height:auto}\n"
     ".noimg{padding:20px;border:1px dashed #bbb;color:#777;font-size:13px}\n"
+    ".flat{position:relative}\n"
+    ".onevalue{position:absolute;left:8%;right:8%;top:38%;padding:4px;text-align:center;"
+    "background:rgba(255,255,255,.9);border:1px solid #999;font-size:12px}\n"
     ".display{position:sticky;top:0;z-index:5;display:flex;flex-wrap:wrap;gap:6px 16px;"
     "align-items:center;padding:8px 28px;font-size:13px;background:#eceff1;"
     "border-bottom:1px solid #ccc}\n"

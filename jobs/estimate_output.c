@@ -81,9 +81,11 @@ mcp__estimate_json(const mcp_estimate *e, const char *input, const char *denoise
  * model that F(tau) comes from, s²(λ + 1) (mean of R, G, B; log10 from -5 to 0 in
  * inferno, like the metrics' RelSE map), with the block edges in white. Unlike
  * blocks.png, whose colours only tell blocks apart, its colour bar reads as a value,
- * and a single block still shows where the error is: s² varies per pixel. */
+ * and a single block still shows where the error is: s² varies per pixel. *log_error:
+ * the log10 values it shows (the caller frees them). */
 static int
-blocks_error_picture(const mcp_blocks *blocks, const mcp_image *dist, unsigned char *rgb8)
+blocks_error_picture(const mcp_blocks *blocks, const mcp_image *dist, unsigned char *rgb8,
+                     mcp_image **log_error)
 {
     int w = blocks->width, h = blocks->height, ch[6];
     int32_t *label = NULL;
@@ -115,9 +117,13 @@ blocks_error_picture(const mcp_blocks *blocks, const mcp_image *dist, unsigned c
                 (y + 1 < h && label[i] != label[i + w]))
                 memset(rgb8 + 3 * i, 255, 3);
         }
-    mcp_image_free(lg);
     free(label);
-    return rc;
+    if (rc) {
+        mcp_image_free(lg);
+        return -1;
+    }
+    *log_error = lg;
+    return 0;
 }
 
 /* The sampling map as inferno from 0 to its 99th percentile (a few pixels far above
@@ -145,7 +151,8 @@ mcp__estimate_write_single(const mcp_estimate *e, const mcp__estimate_dir *o,
                            cJSON *section, const cJSON *summary)
 {
     enum { MAX_FILES = 14 };
-    mcp_image *block_mean = NULL, *dist = NULL, *shown = NULL, *rgb_view = NULL;
+    mcp_image *block_mean = NULL, *dist = NULL, *shown = NULL, *rgb_view = NULL,
+              *log_error = NULL;
     unsigned char *blocks_rgb = NULL, *error_rgb = NULL, *map_rgb = NULL;
     char(*paths)[4352] = NULL;
     double map_top = 0;
@@ -161,7 +168,7 @@ mcp__estimate_write_single(const mcp_estimate *e, const mcp__estimate_dir *o,
                                  mcp_blocks_picture(e->blocks, blocks_rgb)))
         goto done;
     if (section && (!(error_rgb = mcp_malloc((size_t)w * h * 3)) ||
-                    blocks_error_picture(e->blocks, dist, error_rgb)))
+                    blocks_error_picture(e->blocks, dist, error_rgb, &log_error)))
         goto done;
     /* what the report shows beside the error: the denoised image (its PNG as a screen
      * shows it, the page re-exposes denoised.exr) and where the next samples go */
@@ -229,21 +236,28 @@ mcp__estimate_write_single(const mcp_estimate *e, const mcp__estimate_dir *o,
         snprintf(rel, sizeof rel, "%sblocks_error.png", o->rel);
         cJSON *map = mcp_report_add_map(section, rel, caption, MCP_COLORMAP_INFERNO, 1e-5,
                                         1.0, MCP_AXIS_LOG, unit);
-        if (!map || mcp_report_map_add_mark(map, e->tau, "tau")) goto done;
+        /* one value in every pixel (a render without variance; a uniform sampling
+           map): the page says the value instead of a flat square */
+        if (!map || mcp_report_map_add_mark(map, e->tau, "tau") ||
+            mcp__report_map_one_value(map, log_error, 0, 1, 1.0))
+            goto done;
         if (map_rgb) {
             snprintf(rel, sizeof rel, "%ssampling_map.png", o->rel);
-            if (!mcp_report_add_map(section, rel,
-                                    "the sampling map: where the next pass puts its "
-                                    "samples",
-                                    MCP_COLORMAP_INFERNO, 0.0, map_top, MCP_AXIS_LINEAR,
-                                    "sample density, times the image's mean (brightest: "
-                                    "the 99th percentile and above)"))
+            cJSON *sm = mcp_report_add_map(
+                section, rel, "the sampling map: where the next pass puts its samples",
+                MCP_COLORMAP_INFERNO, 0.0, map_top, MCP_AXIS_LINEAR,
+                "sample density, times the image's mean (brightest: the 99th percentile "
+                "and above)");
+            if (!sm || mcp__report_map_one_value(sm, e->sampling_map, 0, 0,
+                                                 (double)e->sampling_map->width *
+                                                     e->sampling_map->height))
                 goto done;
         }
     }
     rc = 0;
 done:
     free(map_rgb);
+    mcp_image_free(log_error);
     mcp_image_free(shown);
     mcp_image_free(rgb_view);
     free(error_rgb);

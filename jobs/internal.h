@@ -294,6 +294,11 @@ void mcp__gate_reset(void);
  * first when there is a gate (its colour: pass good, warning info, failure bad), then
  * relMSE as a relative error, FLIP in words and a series' MSE slope; `mcpost compare`
  * gives its sections the same line. */
+/* FLIP's weighted histograms as plots in section (a second test's bars overlapped:
+ * cmp and compare_name, else NULL), the counts kept for report.json only
+ * (stage_metrics.c; the compare page draws them too). */
+int mcp__metrics_flip_histograms(cJSON *section, const mcp_metrics *m, const char *input,
+                                 const mcp_flip_result cmp[2], const char *compare_name);
 int mcp__metrics_verdict(cJSON *section, const mcp__gate *gate, mcp__gate_verdict gv,
                          const char *gate_line);
 

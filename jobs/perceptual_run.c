@@ -216,13 +216,15 @@ write_spectrum(const mcp__perc_run *r, const mcp_image *pic, const char *name,
     if (!rgb8) return -1;
     snprintf(path, sizeof path, "%s/%s", r->out_dir, name);
     snprintf(rel, sizeof rel, "%s%s", r->rel, name);
+    cJSON *map = NULL;
     int rc =
         mcp_colormap_apply(pic, 0, 0.0, 1.0, MCP_COLORMAP_INFERNO, rgb8) ||
         mcp_write_rgb8(rgb8, pic->width, pic->height, path) ||
-        !mcp_report_add_map(r->section, rel, caption, MCP_COLORMAP_INFERNO, 0.0, 1.0,
-                            MCP_AXIS_LINEAR,
-                            "c ln(1 + power), scaled to 0..1 per picture: blue noise "
-                            "is dark at the centre of each tile");
+        !(map = mcp_report_add_map(r->section, rel, caption, MCP_COLORMAP_INFERNO, 0.0,
+                                   1.0, MCP_AXIS_LINEAR,
+                                   "c ln(1 + power), scaled to 0..1 per picture: "
+                                   "blue noise is dark at the centre of each tile")) ||
+        mcp__report_map_one_value(map, pic, 0, 0, 1.0);
     free(rgb8);
     if (!rc) cJSON_AddItemToArray(outputs, cJSON_CreateString(path));
     return rc ? -1 : 0;

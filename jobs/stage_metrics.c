@@ -70,9 +70,9 @@ add_flip_figures(cJSON *obj, const char *key, const mcp_flip_result *f)
  * centre, per megapixel; flip.h), a plot per FLIP; with a second test (compare:) its
  * bars overlap the input's, as the tool's overlapped histogram of two tests. The
  * counts stay in report.json (flip_histogram), not in the figures table. */
-static int
-flip_histograms(cJSON *section, const mcp_metrics *m, const char *input,
-                const mcp_flip_result cmp[2], const char *compare_name)
+int
+mcp__metrics_flip_histograms(cJSON *section, const mcp_metrics *m, const char *input,
+                             const mcp_flip_result cmp[2], const char *compare_name)
 {
     enum { B = MCP_FLIP_HISTOGRAM_BUCKETS };
     double x[B], y[B];
@@ -427,7 +427,8 @@ stage_metrics(mcp_job *job, const mcp_node *settings)
             if (o.flip_hdr) add_flip_figures(c, "flip_hdr", &cmp[1]);
         }
         if (percentile_plot(section, maps.relse, estimate, estimate_name) ||
-            flip_histograms(section, &m, input, cmp, compare ? pl.s.compare : NULL))
+            mcp__metrics_flip_histograms(section, &m, input, cmp,
+                                         compare ? pl.s.compare : NULL))
             goto done;
         if (want_maps) {
             char rel_t[1200], rel_r[1200], path[4096];

@@ -145,6 +145,70 @@ test_figures_and_gates(void **state)
     cJSON_Delete(doc);
 }
 
+/* A test equal to the reference: every map holds one value (0: no error, the first
+ * exposure), and the page says so on each instead of a flat square; FLIP's weighted
+ * histograms are drawn as plots (every pixel in bucket 0, whose count is weighted by
+ * its centre 0.005 and divided by the megapixels n / 2^20 (flip.h): 0.005 * 2^20),
+ * their counts kept for report.json only. */
+static void
+test_identical_maps_and_histograms(void **state)
+{
+    (void)state;
+    const char *ref = scratch("same_ref.exr"), *a = scratch("same_a.exr"),
+               *dir = scratch("same_page");
+    char path[4400];
+    write_pair(ref, a, 0.0f);
+    assert_int_equal(run("compare '%s' '%s' -o '%s' --quiet", ref, a, dir), 0);
+    snprintf(path, sizeof path, "%s/report.json", dir);
+    char *text = mcp_test_read_text(path);
+    cJSON *doc = cJSON_Parse(text);
+    free(text);
+    const cJSON *s = cJSON_GetArrayItem(cJSON_GetObjectItem(doc, "sections"), 0);
+    int maps = 0, flat = 0;
+    const cJSON *im;
+    cJSON_ArrayForEach(im, cJSON_GetObjectItem(s, "images"))
+    {
+        const cJSON *sc = cJSON_GetObjectItem(im, "scale");
+        if (!sc) continue;
+        maps++;
+        const cJSON *one = cJSON_GetObjectItem(sc, "one_value");
+        if (!cJSON_IsNumber(one))
+            fail_msg("%s: no one_value",
+                     cJSON_GetStringValue(cJSON_GetObjectItem(im, "path")));
+        assert_float_equal(one->valuedouble, 0.0, 0);
+        flat++;
+    }
+    /* LDR-FLIP, HDR-FLIP, its exposure, RelSE (24x16 is below the spectra's tile) */
+    assert_int_equal(maps, 4);
+    assert_int_equal(flat, 4);
+    const char *titles[2] = {"weighted LDR-FLIP histogram",
+                             "weighted HDR-FLIP histogram"};
+    const cJSON *plots = cJSON_GetObjectItem(s, "plots");
+    assert_int_equal(cJSON_GetArraySize(plots), 2);
+    for (int k = 0; k < 2; k++) {
+        const cJSON *pl = cJSON_GetArrayItem(plots, k);
+        assert_string_equal(cJSON_GetObjectItem(pl, "title")->valuestring, titles[k]);
+        const cJSON *se = cJSON_GetArrayItem(cJSON_GetObjectItem(pl, "series"), 0);
+        const cJSON *y = cJSON_GetObjectItem(se, "y");
+        assert_int_equal(cJSON_GetArraySize(y), 100);
+        assert_close(cJSON_GetArrayItem(y, 0)->valuedouble, 0.005 * 1048576.0, 1e-9, 0);
+        assert_float_equal(cJSON_GetArrayItem(y, 1)->valuedouble, 0.0, 0);
+    }
+    const cJSON *only = cJSON_GetObjectItem(s, "json_only");
+    int listed = 0;
+    const cJSON *k;
+    cJSON_ArrayForEach(k, only) listed |= !strcmp(k->valuestring, "flip_histogram");
+    assert_true(listed);
+    cJSON_Delete(doc);
+    snprintf(path, sizeof path, "%s/report.html", dir);
+    text = mcp_test_read_text(path);
+    int says = 0;
+    for (const char *p = text; (p = strstr(p, "one value in every pixel: 0<br>")); p++)
+        says++;
+    assert_int_equal(says, 4);
+    free(text);
+}
+
 /* base64 of the page back to bytes (the alphabet of report_html.c). */
 static unsigned char *
 unbase64(const char *s, size_t n, size_t *len)
@@ -270,6 +334,7 @@ main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_figures_and_gates),
         cmocka_unit_test(test_page_embeds_linear_values),
+        cmocka_unit_test(test_identical_maps_and_histograms),
         cmocka_unit_test(test_errors),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);

@@ -266,6 +266,75 @@ test_html_values_maps_verdicts(void **state)
     mcp_report_free(r);
 }
 
+/* A map whose picture holds one value in every pixel says the value across it, with a
+ * mark on its colour bar; a map of log10 values reports 10^v (and 0 for -30); a map
+ * with two values is left alone. */
+static void
+test_one_value_map(void **state)
+{
+    (void)state;
+    const char *dir = mcp_test_path("report_flat");
+    char cmd[4200], path[4200];
+    snprintf(cmd, sizeof cmd, "mkdir -p '%s'", dir);
+    assert_int_equal(system(cmd), 0);
+    unsigned char rgb[4 * 2 * 3] = {0};
+    snprintf(path, sizeof path, "%s/map.png", dir);
+    assert_int_equal(mcp_write_rgb8(rgb, 4, 2, path), 0);
+    mcp_image *flat = mcp_test_constant(4, 2, 2, 0.25f, NULL);
+    mcp_image *log_zero = mcp_test_constant(4, 2, 1, -30.0f, NULL);
+    mcp_image *log_tenth = mcp_test_constant(4, 2, 1, -1.0f, NULL);
+    mcp_image *ramp = mcp_test_ramp(4, 2, 1, NULL);
+    assert_non_null(flat), assert_non_null(log_zero), assert_non_null(log_tenth);
+    assert_non_null(ramp);
+    flat->data[1] = 7.0f; /* channel 1 varies; channel 0 is 0.25 everywhere */
+    mcp_report *r = NULL;
+    assert_int_equal(mcp_report_new("flat", &r), 0);
+    cJSON *s = mcp_report_section(r, "metrics", "maps");
+    cJSON *m[5];
+    for (int i = 0; i < 5; i++) {
+        m[i] = mcp_report_add_map(
+            s, "map.png", "a map", MCP_COLORMAP_MAGMA, i == 2 || i == 3 ? 1e-5 : 0.0, 1.0,
+            i == 2 || i == 3 ? MCP_AXIS_LOG : MCP_AXIS_LINEAR, NULL);
+        assert_non_null(m[i]);
+    }
+    assert_int_equal(mcp__report_map_one_value(m[0], flat, 0, 0, 1.0), 0);
+    assert_int_equal(mcp__report_map_one_value(m[1], flat, 1, 0, 1.0), 0);
+    assert_int_equal(mcp__report_map_one_value(m[2], log_zero, 0, 1, 1.0), 0);
+    assert_int_equal(mcp__report_map_one_value(m[3], log_tenth, 0, 1, 1.0), 0);
+    /* a sampling map's weights in multiples of the mean: 8 pixels of 1/8 read 1 */
+    mcp_image *weights = mcp_test_constant(4, 2, 1, 0.125f, NULL);
+    assert_int_equal(mcp__report_map_one_value(m[4], weights, 0, 0, 8.0), 0);
+    const double want[5] = {0.25, NAN, 0.0, 0.1, 1.0};
+    for (int i = 0; i < 5; i++) {
+        const cJSON *v =
+            cJSON_GetObjectItem(cJSON_GetObjectItem(m[i], "scale"), "one_value");
+        if (isnan(want[i])) {
+            assert_null(v);
+        } else {
+            assert_true(cJSON_IsNumber(v));
+            assert_close(v->valuedouble, want[i], 1e-6, 0);
+        }
+    }
+    assert_int_equal(mcp__report_map_one_value(m[1], ramp, 0, 0, 1.0), 0);
+    assert_null(cJSON_GetObjectItem(cJSON_GetObjectItem(m[1], "scale"), "one_value"));
+    char *html = NULL;
+    assert_int_equal(mcp_report_html(r, dir, &html), 0);
+    /* four maps say their value across the picture; every map keeps its colour bar */
+    assert_int_equal(count(html, "class=\"onevalue\""), 4);
+    assert_non_null(strstr(html, "one value in every pixel: 0.25<br>no map to show"));
+    assert_non_null(strstr(html, "one value in every pixel: 0.1<br>"));
+    assert_non_null(strstr(html, "one value in every pixel: 1<br>"));
+    assert_int_equal(count(html, "class=\"cbar\""), 5);
+    /* the mark: 0.25 on the linear 0..1 bar at 25%; 0.1 on the log bar 1e-5..1 at 80% */
+    assert_non_null(strstr(html, "<i class=\"mark\" style=\"left:25.00%\"></i>"));
+    assert_non_null(strstr(html, "<i class=\"mark\" style=\"left:80.00%\"></i>"));
+    assert_non_null(strstr(html, "&#9650; every pixel = 0.25"));
+    free(html);
+    mcp_report_free(r);
+    mcp_image_free(flat), mcp_image_free(log_zero), mcp_image_free(log_tenth);
+    mcp_image_free(ramp), mcp_image_free(weights);
+}
+
 static void
 test_plot_axes(void **state)
 {
@@ -366,6 +435,7 @@ main(void)
         cmocka_unit_test(test_sections_tables_plots_json),
         cmocka_unit_test(test_html_self_contained),
         cmocka_unit_test(test_html_values_maps_verdicts),
+        cmocka_unit_test(test_one_value_map),
         cmocka_unit_test(test_plot_axes),
         cmocka_unit_test(test_plot_bars),
     };
