@@ -600,8 +600,8 @@ bar_tick(sbuf *b, double t, double v, int decade)
     sb_printf(b, "<span class=\"%s\" style=\"left:%.2f%%\">", cls, 100 * t);
     if (decade && decade_exponent(v) != 0)
         sb_printf(b, "10<sup>%d</sup></span>", decade_exponent(v));
-    else
-        sb_printf(b, "%g</span>", v);
+    else /* three digits: six ran into each other under a 256-pixel map ("10.7213") */
+        sb_printf(b, "%.3g</span>", v);
 }
 
 /* A map's colour bar: the ramp of its colour map, the values at its ends and between,

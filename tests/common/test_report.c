@@ -290,6 +290,9 @@ test_one_value_map(void **state)
     mcp_report *r = NULL;
     assert_int_equal(mcp_report_new("flat", &r), 0);
     cJSON *s = mcp_report_section(r, "metrics", "maps");
+    /* a linear scale to a percentile's value: ticks of three digits */
+    assert_non_null(mcp_report_add_map(s, "map.png", "ticks", MCP_COLORMAP_MAGMA, 0.0,
+                                       14.2949, MCP_AXIS_LINEAR, NULL));
     cJSON *m[5];
     for (int i = 0; i < 5; i++) {
         m[i] = mcp_report_add_map(
@@ -324,7 +327,9 @@ test_one_value_map(void **state)
     assert_non_null(strstr(html, "one value in every pixel: 0.25<br>no map to show"));
     assert_non_null(strstr(html, "one value in every pixel: 0.1<br>"));
     assert_non_null(strstr(html, "one value in every pixel: 1<br>"));
-    assert_int_equal(count(html, "class=\"cbar\""), 5);
+    assert_int_equal(count(html, "class=\"cbar\""), 6);
+    assert_non_null(strstr(html, "style=\"left:75.00%\">10.7</span>"));
+    assert_non_null(strstr(html, "style=\"left:100.00%\">14.3</span>"));
     /* the mark: 0.25 on the linear 0..1 bar at 25%; 0.1 on the log bar 1e-5..1 at 80% */
     assert_non_null(strstr(html, "<i class=\"mark\" style=\"left:25.00%\"></i>"));
     assert_non_null(strstr(html, "<i class=\"mark\" style=\"left:80.00%\"></i>"));
