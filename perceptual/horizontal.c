@@ -157,9 +157,12 @@ mcp_perc_horizontal(const mcp_image *q, const mcp_image *surrogate,
         src[p] = (int)p;
     r.energy_initial = s.energy;
     int max_passes = opt->passes > 0 ? opt->passes : 10;
+    mcp__pass_bar bar;
+    mcp__pass_bar_begin(&bar, opt->method, w, h);
     for (int pass = 0; pass < max_passes; pass++) {
         long swaps = 0;
         for (int y = 0; y < h; y++) {
+            mcp__pass_bar_row(&bar, pass, y);
             int x0 = y % 2 ? w - 1 : 0, step = y % 2 ? -1 : 1; /* serpentine */
             for (int k = 0, x = x0; k < w; k++, x += step) {
                 size_t i = (size_t)y * w + x;
@@ -196,6 +199,7 @@ mcp_perc_horizontal(const mcp_image *q, const mcp_image *surrogate,
         r.changes += swaps;
         if (swaps == 0) break;
     }
+    mcp__pass_bar_end(&bar);
     r.energy_final = s.energy;
     if (mcp_image_new(w, h, 2, xy_names, &r.permutation)) goto done;
     for (size_t p = 0; p < n; p++) {

@@ -6,6 +6,7 @@
 #define MCP_PERCEPTUAL_INTERNAL_H
 
 #include <mcpost/perceptual.h>
+#include <mcpost/progress.h>
 
 #include <omp.h>
 #include <stddef.h>
@@ -271,5 +272,19 @@ int mcp_perc_permutation(const mcp_image *q, const mcp_perc_options *opt,
 
 /* Applies a permutation map (channels X, Y) to an image: out(p) = img(map(p)). */
 int mcp_perc_permute(const mcp_image *img, const mcp_image *map, mcp_image **out);
+
+/* ---- progress of the passes (pass_progress.c) ---- */
+
+/* A bar over the rows of each pass, the pass in its label ("power-set, pass 3"), on a
+ * terminal for a megapixel or more; begin, a row at a time (row y of pass k, from 0),
+ * end. */
+typedef struct mcp__pass_bar {
+    mcp_progress bar;
+    int shown, pass;
+    mcp_perc_method method;
+} mcp__pass_bar;
+void mcp__pass_bar_begin(mcp__pass_bar *b, mcp_perc_method method, int w, int h);
+void mcp__pass_bar_row(mcp__pass_bar *b, int pass, int y);
+void mcp__pass_bar_end(mcp__pass_bar *b);
 
 #endif

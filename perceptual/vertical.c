@@ -9,7 +9,6 @@
  * known (O(|g|) per visit) and an accepted change O(|g|) (internal.h). A pixel that
  * starts at the mean (not a candidate) always takes its best candidate; elsewhere a
  * change must beat rounding (MCP__ACCEPT_RTOL), so passes cannot cycle. */
-#include "../common/internal.h" /* progress on a terminal */
 #include "internal.h"
 
 #include <math.h>
@@ -96,20 +95,12 @@ mcp__vertical_iterate(const mcp_perc_options *opt, int w, int h, int m, const fl
     int max_passes = opt->passes > 0 ? opt->passes : 100;
     res->passes = 0;
     res->changes = 0;
-    /* on a terminal for a megapixel (a 4K set of 4 takes 5 s): a bar over the rows of
-       each pass, the pass in its label, as the passes run until nothing changes */
-    mcp_progress bar;
-    int shown = (double)w * h >= 1048576.0 && !mcp_progress_quiet();
-    if (shown) mcp__progress_begin_on_terminal(&bar, "vertical-iterative, pass 1", h);
+    mcp__pass_bar bar;
+    mcp__pass_bar_begin(&bar, opt->method, w, h);
     for (int pass = 0; pass < max_passes; pass++) {
         long changes = 0;
-        if (shown && pass > 0) {
-            char label[64];
-            snprintf(label, sizeof label, "vertical-iterative, pass %d", pass + 1);
-            mcp__progress_restart(&bar, label);
-        }
         for (int y = 0; y < h; y++) {
-            if (shown) mcp_progress_update(&bar, y);
+            mcp__pass_bar_row(&bar, pass, y);
             int x0 = y % 2 ? w - 1 : 0, dx = y % 2 ? -1 : 1; /* serpentine */
             for (int i = 0, x = x0; i < w; i++, x += dx) {
                 size_t p = (size_t)y * w + x;
@@ -130,7 +121,7 @@ mcp__vertical_iterate(const mcp_perc_options *opt, int w, int h, int m, const fl
         res->changes += changes;
         if (changes == 0) break;
     }
-    if (shown) mcp_progress_end(&bar);
+    mcp__pass_bar_end(&bar);
     res->energy_final = s.energy;
     mcp__state_free(&s);
     free(dirty);

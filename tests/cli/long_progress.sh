@@ -2,7 +2,8 @@
 # The commands that take seconds on large images show progress on a terminal (a
 # pseudo-terminal from script(1)) and stay silent in a log and with --quiet: metrics'
 # figures and maps, compare's renders, an estimate (the denoiser's bar nested in its
-# line) and its files, the perceptual passes, and the read and write of a 4K dump by
+# line) and its files, the perceptual passes (vertical-iterative's, power-set's), and
+# the read and write of a 4K dump by
 # convert. The bars change nothing in the outputs. Skipped (77) without script(1).
 #   long_progress.sh BUILD_DIR
 set -euo pipefail
@@ -58,6 +59,10 @@ expect perc_tty.txt "^vertical-iterative, pass [0-9]+ +\[#{40}\] 100%" "no last 
 refuse perc_log.txt "pass [0-9]" "a pass bar in a log"
 cmp -s p_tty/vertical-iterative.exr p_log/vertical-iterative.exr ||
     { echo "FAIL: the optimised images differ"; fail=1; }
+# ... and power-set's search, the method named in the label
+on_tty "'$mcpost' perceptual in_single_000*.exr --denoiser nlm -m power-set -o ps" > ps_tty.txt
+expect ps_tty.txt "^power-set, pass 1 +\[" "no bar for power-set's first pass"
+refuse ps_tty.txt "vertical-iterative" "power-set's passes named vertical-iterative"
 
 # convert: the read and the write of a 4K dump (400 MB of pixels)
 "$procedural" --width 3840 --height 2160 --spp 1 --seed 7 -o big >/dev/null
