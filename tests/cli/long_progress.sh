@@ -3,8 +3,8 @@
 # pseudo-terminal from script(1)) and stay silent in a log and with --quiet: metrics'
 # figures and maps, compare's renders, an estimate (the denoiser's bar nested in its
 # line) and its files, the perceptual passes (vertical-iterative's, power-set's), and
-# the read and write of a 4K dump by
-# convert. The bars change nothing in the outputs. Skipped (77) without script(1).
+# the read and write of a 4K dump by convert. The bars change nothing in the outputs.
+# Skipped (77) without script(1).
 #   long_progress.sh BUILD_DIR
 set -euo pipefail
 build=$1
