@@ -243,6 +243,35 @@ test_every_bad_input_class(void **state)
             if (strcmp(before->attrs.items[a].name, "channels") != 0)
                 assert_non_null(mcp_attrs_find(&den->attrs, before->attrs.items[a].name));
         mcp_image_free(den);
+        /* so does convert, as an image and as a dump in another convention: a
+           renderer's string, a camera's double and the sample count, value for value */
+        mcp_image *tagged = NULL;
+        assert_int_equal(mcp_image_read(good, NULL, &tagged), 0);
+        assert_int_equal(mcp_attrs_set_string(&tagged->attrs, "renderer", "Cycles 3.4"),
+                         0);
+        assert_int_equal(mcp_attrs_set_double(&tagged->attrs, "camera.fov", 39.6), 0);
+        char tagged_path[4200];
+        snprintf(tagged_path, sizeof tagged_path, "%s", mcp_test_path("tagged.exr"));
+        assert_int_equal(mcp_image_write(tagged, tagged_path, NULL), 0);
+        mcp_image_free(tagged);
+        const char *how[2] = {"", " --dump mcpost"};
+        for (int k = 0; k < 2; k++) {
+            mcp_image *conv = NULL;
+            assert_int_equal(run("convert '%s' '%s'%s", tagged_path,
+                                 mcp_test_path("conv_attrs.exr"), how[k]),
+                             0);
+            assert_int_equal(mcp_image_read(mcp_test_path("conv_attrs.exr"), NULL, &conv),
+                             0);
+            const mcp_attr *r = mcp_attrs_find(&conv->attrs, "renderer"),
+                           *fov = mcp_attrs_find(&conv->attrs, "camera.fov"),
+                           *spp = mcp_attrs_find(&conv->attrs, "samplesPerPixel");
+            assert_non_null(r), assert_non_null(fov), assert_non_null(spp);
+            assert_string_equal(r->s, "Cycles 3.4");
+            assert_float_equal(fov->f, 39.6, 0);
+            assert_int_equal(spp->i,
+                             mcp_attrs_find(&before->attrs, "samplesPerPixel")->i);
+            mcp_image_free(conv);
+        }
         mcp_image_free(before);
         mcp_image_free(after);
     }
