@@ -116,6 +116,11 @@ int mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int
  * few operations per value in the cache instead of a pass over the whole batch. The
  * bits are read 8 bytes at a time: their block has 8 bytes to spare. */
 void mcp__unet_mask_row(float *row, int n, const unsigned char *bits, size_t at);
+/* A transform's row of outputs into its activation: non-temporal stores where the CPU
+ * has AVX-512 (the activation is far larger than the caches, and a plain store reads
+ * each line before it fills it), else memcpy; the convolution fences them before its
+ * barrier. */
+void mcp__unet_store_row(float *dst, const float *src, int n);
 /* A Winograd convolution F(m x m, 3x3): its tile, its transforms (unet_winograd.c
  * and unet_winograd4.c), and the driver that runs them over an image in tasks of
  * about chunk tiles with the matrix products of unet_gemm.c (unet_winograd.c). */

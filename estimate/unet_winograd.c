@@ -45,8 +45,12 @@ static inline uint64_t
 bits_at(const unsigned char *bits, size_t b)
 {
     uint64_t word = 0;
-    for (int i = 0; i < 8; i++) /* byte order-independent; one load after -O2 */
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+    memcpy(&word, bits + b / 8, sizeof word); /* one load */
+#else
+    for (int i = 0; i < 8; i++)
         word |= (uint64_t)bits[b / 8 + (size_t)i] << (8 * i);
+#endif
     return word >> (b % 8);
 }
 
@@ -75,7 +79,34 @@ mask_row_avx512(float *restrict row, int n, const unsigned char *restrict bits, 
     }
     if (x < n) mask_row_generic(row + x, n - x, bits, at + (size_t)x);
 }
+
+/* Stores n floats to dst with non-temporal stores where whole 64-byte lines are
+ * written: an activation is far larger than the caches, and a plain store first reads
+ * the line it fills. */
+__attribute__((target("avx512f"))) static void
+store_row_avx512(float *restrict dst, const float *restrict src, int n)
+{
+    int x = 0;
+    for (; x < n && ((uintptr_t)(dst + x) & 63); x++)
+        dst[x] = src[x];
+    for (; x + 16 <= n; x += 16)
+        _mm512_stream_ps(dst + x, _mm512_loadu_ps(src + x));
+    for (; x < n; x++)
+        dst[x] = src[x];
+}
 #endif
+
+void
+mcp__unet_store_row(float *dst, const float *src, int n)
+{
+#if defined(__GNUC__) && defined(__x86_64__)
+    if (__builtin_cpu_supports("avx512f")) {
+        store_row_avx512(dst, src, n);
+        return;
+    }
+#endif
+    memcpy(dst, src, (size_t)n * sizeof(float));
+}
 
 void
 mcp__unet_mask_row(float *row, int n, const unsigned char *bits, size_t at)
@@ -296,7 +327,7 @@ transform_output(const float *m, size_t ld, int ty, int tx0, int nt, int h, int 
             }
         } else if (bits)
             mcp__unet_mask_row(y, xn, bits, bit0 + at);
-        memcpy(dst + at, y, (size_t)xn * sizeof(float));
+        mcp__unet_store_row(dst + at, y, xn);
     }
 }
 
@@ -312,6 +343,25 @@ mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cou
 {
     return mcp__unet_winograd_conv(&f2x2, weight, bias, cin, cout, a, ca, a_up, b, n, h,
                                    w, relu, mask_bits, 0, out);
+}
+
+/* The mask's bits of one plane (from bit plane0) for the tiles [t0, t0 + nt) of a
+ * task: a line at each piece of pixel row. */
+#define MASK_AHEAD 4
+static void
+prefetch_mask(const unsigned char *bits, size_t plane0, size_t t0, int nt, int tw,
+              int tile_m, int w, int h)
+{
+    for (int j = 0; j < nt;) {
+        const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
+        const int len = tw - tx < nt - j ? tw - tx : nt - j;
+        for (int a = 0; a < tile_m && tile_m * ty + a < h; a++) {
+            const size_t b = plane0 + (size_t)(tile_m * ty + a) * w + (size_t)tile_m * tx;
+            __builtin_prefetch(bits + b / 8);
+            __builtin_prefetch(bits + (b + (size_t)tile_m * len) / 8);
+        }
+        j += len;
+    }
 }
 
 /* A Winograd convolution of either size (unet_internal.h). */
@@ -429,7 +479,13 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
                     } else
                         mcp__unet_gemm_run(&g, packed + (size_t)e * mp * cin, cout, cin,
                                            v + e * se, sc, ld, m + e * se, sc);
-                for (int o = 0; o < cout; o++)
+                for (int o = 0; o < cout; o++) {
+                    /* a replayed mask: its bits for a plane a few ahead, whose rows
+                     * lie a plane apart (a cache miss each, which no hardware
+                     * prefetcher foresees) */
+                    if (mask_bits && o + MASK_AHEAD < cout)
+                        prefetch_mask(mask_bits, (size_t)(o + MASK_AHEAD) * hw, t0, nt,
+                                      tw, tile_m, w, h);
                     for (int j = 0; j < nt;) {
                         const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
                         const int len = tw - tx < nt - j ? tw - tx : nt - j;
@@ -440,7 +496,11 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
                                              out + ((size_t)k * cout + o) * hw, rows);
                         j += len;
                     }
+                }
             }
+#if defined(__GNUC__) && defined(__x86_64__)
+        _mm_sfence(); /* the non-temporal stores, before the barrier (store_row) */
+#endif
     }
     free(u), free(packed), free(packed_bf16), free(scratch);
     return 0;

@@ -252,7 +252,7 @@ transform_output4(const float *m, size_t ld, int ty, int tx0, int nt, int h, int
                 line[x] = mask[x] > 0.0f ? line[x] : 0.0f;
         } else if (bits)
             mcp__unet_mask_row(line, xn, bits, bit0 + at);
-        memcpy(dst + at, line, (size_t)xn * sizeof(float));
+        mcp__unet_store_row(dst + at, line, xn);
     }
 }
 
