@@ -1,59 +1,14 @@
-/* hidden_internal.h: functions of common/ that other library files and the tests call
- * but that libmcpost.so does not export (hidden visibility; not installed). They were
- * public once; the exported list is docs/library.md's "Exported symbols". */
-#ifndef MCP_COMMON_HIDDEN_INTERNAL_H
-#define MCP_COMMON_HIDDEN_INTERNAL_H
+/* internal.h: functions of common/metrics/ that other library files and the tests
+ * call but that libmcpost.so does not export (hidden visibility; not installed). They
+ * were public once; the exported list is docs/library.md's "Exported symbols". */
+#ifndef MCP_METRICS_INTERNAL_H
+#define MCP_METRICS_INTERNAL_H
 
 #include <stddef.h>
 
-#include <mcpost/dump.h>
-#include <mcpost/filter.h>
 #include <mcpost/flip.h>
 #include <mcpost/image.h>
-#include <mcpost/plot.h>
 #include <mcpost/tonemap.h>
-#include <mcpost/wordlist.h>
-
-/* ---- image.c ---- */
-
-/* 0 when a width x height x channels image is within MCP_MAX_DIM per side, 4096
- * channels and the ceiling above; else -1 with a message naming the size and the
- * variable that raises the limit. Readers call it before they look at the data. */
-int mcp_image_check_size(int width, int height, int channels);
-
-/* ---- dump.c: the words of two dump enums, and the series' variance source ---- */
-
-extern const mcp_wordlist mcp_variance_source_words, mcp_badval_policy_words;
-const char *mcp_series_variance_name(mcp_series_variance v);
-int mcp_series_variance_from_name(const char *name, mcp_series_variance *out);
-
-/* ---- frames.c ---- */
-
-/* Whether path holds a frame token (1) or not (0), by the rules of frames.h; -1
- * (error set) when the path breaks them. series: the path is a series pattern. */
-int mcp_frame_token_check(const char *path, int series);
-
-/* Replaces the frame token of path by the frame number into buf. In a series pattern
- * the spp conversion (and any "%%") is kept for mcp_series_from_pattern; elsewhere
- * "%%" becomes '%'. A path without a token is copied. */
-int mcp_frame_expand(const char *path, int series, int frame, char *buf, size_t cap);
-
-/* ---- colormap.c ---- */
-
-/* Looks a colour map up by name ("viridis", "magma", "inferno", "turbo", "gray"). */
-extern const mcp_wordlist mcp_colormap_words;
-int mcp_colormap_from_name(const char *name, mcp_colormap *map);
-/* The name of a colour map ("viridis", ...), or NULL for an unknown value. */
-const char *mcp_colormap_name(mcp_colormap map);
-
-/* ---- plot.c ---- */
-
-/* "linear", "log", "logit"; "line", "scatter", "line+points", "bars". */
-extern const mcp_wordlist mcp_axis_scale_words, mcp_series_style_words;
-int mcp_axis_scale_from_name(const char *name, mcp_axis_scale *out);
-const char *mcp_axis_scale_name(mcp_axis_scale s);
-int mcp_series_style_from_name(const char *name, mcp_series_style *out);
-const char *mcp_series_style_name(mcp_series_style s);
 
 /* ---- metrics.c ---- */
 
@@ -61,12 +16,6 @@ const char *mcp_series_style_name(mcp_series_style s);
  * Fills the channel indices. */
 int mcp_metrics_check_pair(const mcp_image *test, const mcp_image *ref, int rgb_test[3],
                            int rgb_ref[3]);
-
-/* ---- report.c ---- */
-
-/* 0 when mode is one of mcp_report_display_words; else -1 with "unknown display 'X'
- * (known: ...)". */
-int mcp_report_display_mode_check(const char *mode);
 
 /* ---- flip.c, flip_stats.c ---- */
 
