@@ -6,6 +6,7 @@
 #include "internal.h"
 
 #include <mcpost/metrics.h>
+#include <mcpost/report.h>
 #include <mcpost/spectra.h>
 
 #include <math.h>

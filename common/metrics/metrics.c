@@ -6,6 +6,7 @@
 
 #include "fastpow.h"
 #include "internal.h"
+#include "../core/internal.h"
 #include <mcpost/filter.h>
 #include <mcpost/imageio.h>
 #include <mcpost/report.h>
