@@ -11,12 +11,12 @@ and takes from there what the module needs at run time. In site-packages that is
     mcpost.cpython-3X-<arch>.so          the module, RPATH $ORIGIN/mcpost.libs
     mcpost.libs/libmcpost.so.N           the shared library
     mcpost.libs/mcpost/*.so              its plug-ins (OpenImageIO, OpenCV), found
-                                         beside the library (common/paths.c)
+                                         beside the library (common/core/paths.c)
     mcpost.libs/share/mcpost/            its data: the U-Net's weights, found relative
                                          to the library (MCP_DATA_FROM_LIB)
     mcpost.libs/bin/                     mcpost and mcpost-procedural, which the library
                                          runs (an adaptive stage's renderer, in
-                                         run_job), found relative to it (common/shell.c)
+                                         run_job), found relative to it (common/core/shell.c)
 
 CMake is configured with the lib and data folders inside mcpost.libs, so the library
 looks for its plug-ins and data there, relative to itself, wherever the wheel is

@@ -27,7 +27,7 @@
 
 #include "bench.h"
 
-#include "../common/rng_internal.h"
+#include "../common/core/rng_internal.h"
 #endif
 
 #define W 1920
@@ -61,7 +61,7 @@ median_ms(bench_fn fn, void *ctx, int repeats, double *wall, double *cpu)
     return 0;
 }
 
-/* splitmix64 (common/rng_internal.h), 53 bits into [0, 1) */
+/* splitmix64 (common/core/rng_internal.h), 53 bits into [0, 1) */
 static double
 uniform(uint64_t *s)
 {

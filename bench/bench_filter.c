@@ -1,4 +1,5 @@
-/* bench_filter.c: timings for common/filter.c and common/colormap.c (no pass/fail).
+/* bench_filter.c: timings for common/filter/filter.c and common/filter/colormap.c (no
+ * pass/fail).
  *
  * Gaussian 5x5 and 11x11 blurs of a 1024x1024x3 random image through
  * mcp_gaussian_blur (OpenCV sepFilter2D in OpenMP strips; one thread and the default

@@ -13,7 +13,7 @@
 
 #include "bench.h"
 
-#include "../common/rng_internal.h"
+#include "../common/core/rng_internal.h"
 #endif
 
 /* CPU time of the whole process (all threads): on a machine shared with other work,

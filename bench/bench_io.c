@@ -11,7 +11,7 @@
  * writes it. Targets (issue 16): 512² RGB write <= 30 ms, read <= 20 ms; 1080p dump
  * read <= 100 ms. Each figure is the median of `repeats` runs after one warm-up.
  *
- * PNG: the report's pictures as mcp_write_rgb8 writes them (common/png_encode.c:
+ * PNG: the report's pictures as mcp_write_rgb8 writes them (common/io/png_encode.c:
  * filters chosen in parallel, libdeflate) beside libpng's writer as it was used before
  * (zlib level 3, libpng's filter search, one thread), on a 1080p colour map of a noisy
  * map and on a flat picture of a few colours.
@@ -166,7 +166,7 @@ table(const char *title, const mcp_image *img, const char *path, const setting *
 }
 
 /* The baseline: libpng writing 8-bit RGB at zlib level 3 with its default filters, as
- * common/png.c did before png_encode.c. */
+ * common/io/png.c did before png_encode.c. */
 static void
 libpng_write_rgb8(const unsigned char *rgb, int w, int h, const char *path)
 {

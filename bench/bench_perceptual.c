@@ -22,7 +22,7 @@
 
 #include "bench.h"
 
-#include "../common/rng_internal.h"
+#include "../common/core/rng_internal.h"
 #endif
 
 #define M 4

@@ -8,7 +8,7 @@
 
 #include "bench.h"
 
-#include "../common/rng_internal.h"
+#include "../common/core/rng_internal.h"
 
 #include <math.h>
 #include <stdint.h>

@@ -16,7 +16,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../common/rng_internal.h"
+#include "../common/core/rng_internal.h"
 
 typedef struct {
     int w, h, m;

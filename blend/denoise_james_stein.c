@@ -16,7 +16,7 @@
  * or --denoiser james-stein --weights W.tza. */
 #include <mcpost/blend.h>
 #include <mcpost/denoiser.h>
-#include <mcpost/job.h>
+#include <mcpost/yaml.h>
 
 #include <stdlib.h>
 #include <string.h>

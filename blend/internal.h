@@ -111,7 +111,7 @@ mcp__otf_weight(const mcp__otf *t, double v, double sure)
 double mcp__max_weight(const mcp_blend_options *o);
 
 /* What to do about a dump without variance: the recipe for a Cycles render, else
- * `otherwise` (common/dump.c, common/internal.h). */
+ * `otherwise` (common/dump/dump.c, common/dump/internal.h). */
 const char *mcp__no_variance_hint(const mcp_dump *d, const char *otherwise);
 
 /* ---- not exported by libmcpost.so (docs/library.md, "Exported symbols") ---- */

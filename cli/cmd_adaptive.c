@@ -7,7 +7,7 @@
  * samples) and adaptive.svg. The loop is the library's, shared with the `adaptive` job
  * stage (jobs/adaptive_loop.c). The flags are the adaptive table's (ops/op_adaptive.c),
  * read by cli/options.c; the job keys are the same words. -o DIR appears whole
- * (common/outdir.c): the passes run in a hidden folder beside it. */
+ * (common/io/outdir.c): the passes run in a hidden folder beside it. */
 #include "cli.h"
 
 #include <mcpost/estimate.h>

@@ -350,7 +350,7 @@ read_frame(shot *s, frame_row *r)
     struct stat st;
     mcp_frame_dir(s->dir, r->frame, dir, sizeof dir);
     if (stat(dir, &st) != 0) {
-        /* a frame's folder appears whole (common/outdir.c): until then it is hidden */
+        /* a frame's folder appears whole (common/io/outdir.c): until then it is hidden */
         int hidden = running_frame(s->dir, r->frame);
         r->status = hidden ? FRAME_UNFINISHED : FRAME_MISSING;
         if (hidden)

@@ -3,8 +3,8 @@
  * compare page") with, for each TEST, the wipe comparison of TEST and REF, the error
  * maps with their colour bars, the figures of `mcpost metrics` and the gate's verdict;
  * display controls (exposure, tone map or false colour) re-expose the renders. The
- * figures, maps and gates are metrics' own (common/metrics.h, jobs/gate.c), and each
- * section's verdict is the metrics stage's (mcp__metrics_verdict). */
+ * figures, maps and gates are metrics' own (common/metrics/metrics.h, jobs/gate.c), and
+ * each section's verdict is the metrics stage's (mcp__metrics_verdict). */
 #include "cli.h"
 
 #include <mcpost/metrics.h>

@@ -1,6 +1,6 @@
 /* cmd_merge.c: `mcpost merge` -- K renders of one frame (replicates with other seeds,
  * or passes of one render) combined into one dump whose variance of the mean rests on
- * what the renders show (common/replicates.c). The flags are the merge table's
+ * what the renders show (common/dump/replicates.c). The flags are the merge table's
  * (ops/op_merge.c), read by cli/options.c. */
 #include "cli.h"
 

@@ -1,8 +1,8 @@
 /* cmd_metrics.c: `mcpost metrics TEST REF` -- MSE, RMSE, relMSE, PSNR, pMSE, RelSE
  * percentiles, LDR-FLIP, HDR-FLIP and the blue-noise fraction of a test image against
- * a reference (common/metrics.h), as a table, JSON, and maps. The job stage is in
+ * a reference (common/metrics/metrics.h), as a table, JSON, and maps. The job stage is in
  * stage_metrics.c; the flags are the metrics table's (ops/op_metrics.c), as the job's
- * keys and Python's keywords. -o DIR appears whole (common/outdir.c): the maps go into
+ * keys and Python's keywords. -o DIR appears whole (common/io/outdir.c): the maps go into
  * a hidden folder, renamed to DIR at the end. */
 #include "cli.h"
 

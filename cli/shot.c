@@ -136,7 +136,7 @@ run_frame(const mcp_cli_shot *s, const mcp_job_options *jo, int frame)
     char message[1100];
     snprintf(message, sizeof message, "%s\n", mcp_error_message());
     /* a frame run again (--force) that failed keeps its earlier complete folder
-       (common/outdir.c): it is complete, not failed, and gets no error.txt */
+       (common/io/outdir.c): it is complete, not failed, and gets no error.txt */
     if (!mcp_frame_complete(s->output_dir, frame) && !mcp_make_dirs(dir))
         mcp_write_file_atomic(err_path, message, strlen(message));
     fprintf(stderr, "mcpost: %s", message);
@@ -160,7 +160,7 @@ mcp_cli_shot_run(const mcp_cli_shot *s, const mcp_job_options *jo, int jobs, int
 {
     int *todo, n_todo, n_failed = 0, first_failed[8];
     /* what runs of these frames killed outright left: their hidden folders
-       (.0017.tmp-PID, common/outdir.c), a complete frame's too (killed in --force) */
+       (.0017.tmp-PID, common/io/outdir.c), a complete frame's too (killed in --force) */
     for (int i = 0; i < s->n_chosen; i++) {
         char base[32];
         snprintf(base, sizeof base, "%04d", s->chosen[i]);

@@ -5,7 +5,7 @@
  * OIDN's colour-only and colour+albedo weights are not shipped: their licence allows it,
  * but they are not in this project's copy of the 1.4 release. */
 #include <mcpost/denoiser.h>
-#include <mcpost/job.h>
+#include <mcpost/yaml.h>
 #include <mcpost/progress.h>
 
 #include "internal.h"

@@ -5,7 +5,7 @@
  *
  * Settings (the table below, docs/denoisers.md): sigma [2] (px, > 0), radius
  * [auto: ceil(3 sigma)] (px, >= 0; the window is 2 radius + 1 wide). Borders replicate
- * (common/filter.h). */
+ * (common/filter/filter.h). */
 #include <mcpost/denoiser.h>
 
 #include "internal.h"

@@ -35,7 +35,7 @@
  * run without clamping and vectorise. */
 #include <mcpost/denoiser.h>
 
-#include "../common/internal.h" /* mcp__progress_stop */
+#include "../common/core/internal.h" /* mcp__progress_stop */
 #include "internal.h"
 
 #include <mcpost/filter.h>

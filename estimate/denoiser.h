@@ -11,7 +11,7 @@
 #define MCP_DENOISER_H
 
 #include <mcpost/dump.h>
-#include <mcpost/job.h>
+#include <mcpost/yaml.h>
 #include <mcpost/options.h>
 
 #ifdef __cplusplus

@@ -8,7 +8,7 @@
 #include <mcpost/denoiser.h>
 
 #include "internal.h"
-#include "../common/internal.h" /* growing strings (common/strbuf.c) */
+#include "../common/core/internal.h" /* growing strings (common/core/strbuf.c) */
 
 #include <pthread.h>
 #include <stdio.h>

@@ -7,7 +7,7 @@
  * A series: the same per member, the first spp at which F(τ) >= p for each τ, and,
  * with a reference, the truth beside it: the nearest-rank percentile of the true
  * error at p, and whether it is <= τ. */
-#include "../common/internal.h" /* progress on a terminal */
+#include "../common/core/internal.h" /* progress on a terminal */
 #include "estimate.h"
 #include "internal.h"
 

@@ -11,10 +11,10 @@
 
 /* ---- denoisers (denoisers.c, denoise_*.c; docs/mathematics.md §2.1) ---- */
 
-/* A data file of share/mcpost/ (common/paths.c): 0 and its path in buf, or -1. */
+/* A data file of share/mcpost/ (common/core/paths.c): 0 and its path in buf, or -1. */
 int mcp__find_data_file(const char *name, char *buf, size_t cap);
 /* A command under /bin/sh with mcpost's programs on the end of its PATH, and its
- * status checked into one error line (common/shell.c, common/internal.h). */
+ * status checked into one error line (common/core/shell.c, common/core/internal.h). */
 int mcp__shell(const char *command);
 int mcp__shell_check(int status, const char *what, const char *command);
 int mcp__shell_fill(const char *tmpl, int n, const char *const *names,
@@ -60,9 +60,9 @@ mcp_denoiser *mcp__denoiser_new(const char *name, size_t state_size);
 #include <stdint.h>
 #include <mcpost/estimate.h>
 
-#include "../common/rng_internal.h"
+#include "../common/core/rng_internal.h"
 
-/* A counter-based random stream (splitmix64, common/rng_internal.h) keyed by (seed,
+/* A counter-based random stream (splitmix64, common/core/rng_internal.h) keyed by (seed,
  * stream kind, probe, pixel index): the same numbers whatever the thread count
  * (probes.c). */
 typedef struct mcp__rng {
@@ -79,10 +79,11 @@ double mcp__rng_normal(mcp__rng *r);
 /* Fails naming `who` when the dump lacks colour or the variance of the mean. */
 int mcp__check_dump(const char *who, const mcp_dump *dump);
 /* What to do about a dump without variance: the recipe for a Cycles render, else
- * `otherwise` (common/dump.c, common/internal.h). */
+ * `otherwise` (common/dump/dump.c, common/dump/internal.h). */
 const char *mcp__no_variance_hint(const mcp_dump *d, const char *otherwise);
 
-/* The values of given ranks among n floats without sorting them (common/select.c). */
+/* The values of given ranks among n floats without sorting them
+ * (common/core/select.c). */
 int mcp__select_ranks(const float *v, size_t n, const size_t *ranks, int k, float *out);
 int mcp__select_percentiles(const float *v, size_t n, const double *p, int k,
                             double *out);

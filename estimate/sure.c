@@ -9,7 +9,7 @@
  * J_x ε_x + J_y ε_y in place of Jε (the last term stays ε_x,i²). MC-SURE replaces Jε by
  * (F(X + δε) - F(X)) / δ. The same evaluation gives Var[F_i] ≈ mean_k (Jε_k)_i²
  * (Firmino 2024 Alg. 2 line 5) and the scaled Σ̂_ii for block splitting. M is FLIP's
- * CSF operator (common/flip_csf.c). */
+ * CSF operator (common/metrics/flip_csf.c). */
 #define _POSIX_C_SOURCE 200809L /* clock_gettime, strcasecmp */
 #include "estimate.h"
 #include "internal.h"

@@ -6,8 +6,8 @@
  * Convolutions are Winograd F(2x2, 3x3) products by default (unet_winograd.c); the direct
  * loops here, register-blocked over output channels and columns, OpenMP over (image, row,
  * column chunk), are the fixed-bit mode (MCPOST_UNET_FIXED=1). */
-#define _DEFAULT_SOURCE         /* madvise, MADV_HUGEPAGE */
-#include "../common/internal.h" /* mcp__progress_stop */
+#define _DEFAULT_SOURCE              /* madvise, MADV_HUGEPAGE */
+#include "../common/core/internal.h" /* mcp__progress_stop */
 #include "unet_internal.h"
 #include "internal.h"
 
@@ -616,22 +616,34 @@ typedef struct pass {
     primal_trace *trace;
 } pass;
 
-/* The Winograd convolution a pass runs. */
-static int
-winograd(const pass *ps, const mcp__unet_conv *L, const float *bias, const float *a,
-         int ca, int a_up, const float *b, int n, int h, int w, int relu, float *out)
-{
-    if (ps->coarse)
-        return mcp__unet_conv_winograd4(L->weight, bias, L->cin, L->cout, a, ca, a_up, b,
-                                        n, h, w, relu, ps->bf16, out);
-    return mcp__unet_conv_winograd(L->weight, bias, L->cin, L->cout, a, ca, a_up, b, n, h,
-                                   w, relu, out);
-}
-
 static int
 layer_of(const pass *ps, const mcp__unet_conv *L)
 {
     return (int)(L - ps->net->conv);
+}
+
+static int
+is_replay(const pass *ps)
+{
+    return ps->trace && ps->trace->replay;
+}
+
+/* The Winograd convolution a pass runs: in a replay, with relu, the primal's recorded
+ * mask is applied as the outputs are written (the bias and the ReLU are the
+ * primal's). */
+static int
+winograd(const pass *ps, const mcp__unet_conv *L, const float *a, int ca, int a_up,
+         const float *b, int n, int h, int w, int relu, float *out)
+{
+    const int replay = is_replay(ps);
+    const float *bias = replay ? NULL : L->bias;
+    const unsigned char *bits = replay && relu ? ps->trace->relu[layer_of(ps, L)] : NULL;
+    relu = relu && !replay;
+    if (ps->coarse)
+        return mcp__unet_conv_winograd4(L->weight, bias, L->cin, L->cout, a, ca, a_up, b,
+                                        n, h, w, relu, bits, ps->bf16, out);
+    return mcp__unet_conv_winograd(L->weight, bias, L->cin, L->cout, a, ca, a_up, b, n, h,
+                                   w, relu, bits, out);
 }
 
 /* Records image 0's ReLU mask (out > 0) as bits, value i at bit i % 8 of byte i / 8. */
@@ -639,7 +651,8 @@ static int
 record_relu(const batch *out, unsigned char **bits)
 {
     const size_t count = (size_t)out->c * plane_size(out), whole = count / 8;
-    if (!(*bits = mcp_calloc(whole + 1, 1))) return -1;
+    /* 8 bytes to spare: the Winograd replay reads 8 at a time (unet_internal.h) */
+    if (!(*bits = mcp_calloc(whole + 1 + 8, 1))) return -1;
     unsigned char *restrict m = *bits;
     const float *restrict v = out->d;
 #pragma omp parallel for schedule(static)
@@ -702,20 +715,21 @@ replay_relu(batch *out, const unsigned char *bits)
     }
 }
 
-/* out = conv3x3(concat(a, b)), with the bias on image 0 when with_bias, and with relu
- * image 0's ReLU and its mask on the others. */
+/* out = conv3x3(concat(a, b)), with the bias on image 0 and with relu image 0's ReLU
+ * and its mask on the others; in a replay (tangents alone), without the bias, and with
+ * relu the recorded mask (Winograd: applied here; the direct loops: by trace_relu). */
 static int
 conv_plain(const pass *ps, const mcp__unet_conv *L, const batch *a, const batch *b,
-           int relu, int with_bias, batch *out)
+           int relu, batch *out)
 {
+    const int replay = is_replay(ps), with_bias = !replay;
     const int n = a->n, h = a->h, w = a->w, cb = b ? b->c : 0;
     const int cin = a->c + cb, cout = L->cout, nob = (cout + OB - 1) / OB;
     if (cin != L->cin)
         return mcp_error("unet: layer of %d input channels given %d", L->cin, cin);
     if (ps->fast) {
         if (batch_new_unset(out, n, cout, h, w)) return -1;
-        if (winograd(ps, L, with_bias ? L->bias : NULL, a->d, a->c, 0, b ? b->d : NULL, n,
-                     h, w, relu, out->d)) {
+        if (winograd(ps, L, a->d, a->c, 0, b ? b->d : NULL, n, h, w, relu, out->d)) {
             batch_free(out);
             return -1;
         }
@@ -767,7 +781,7 @@ conv_plain(const pass *ps, const mcp__unet_conv *L, const batch *a, const batch 
                           .nic = (cin + IC - 1) / IC,
                           .xc = xc,
                           .rs = rs,
-                          .relu = relu};
+                          .relu = relu && !replay};
 #pragma omp parallel num_threads(n_threads)
     {
         int thread = 0;
@@ -790,14 +804,9 @@ conv_plain(const pass *ps, const mcp__unet_conv *L, const batch *a, const batch 
     return 0;
 }
 
-static int
-is_replay(const pass *ps)
-{
-    return ps->trace && ps->trace->replay;
-}
-
-/* After a convolution with relu: the primal's pass records its mask, a replay applies
- * it (its convolution ran without bias and ReLU). out is freed on failure. */
+/* After a convolution with relu: the primal's pass records its mask, a replay of the
+ * direct loops applies it (its convolution ran without bias and ReLU; the Winograd
+ * convolutions apply it as they write). out is freed on failure. */
 static int
 trace_relu(const pass *ps, const mcp__unet_conv *L, int relu, batch *out)
 {
@@ -805,7 +814,7 @@ trace_relu(const pass *ps, const mcp__unet_conv *L, int relu, batch *out)
     if (!tr || !relu) return 0;
     const int layer = layer_of(ps, L);
     if (tr->replay) {
-        replay_relu(out, tr->relu[layer]);
+        if (!ps->fast) replay_relu(out, tr->relu[layer]); /* Winograd applied it */
         return 0;
     }
     if (record_relu(out, &tr->relu[layer])) {
@@ -838,10 +847,7 @@ static int
 conv_into(const pass *ps, const mcp__unet_conv *L, const batch *a, const batch *b,
           int relu, batch *out)
 {
-    const int replay = is_replay(ps);
-    if (conv_plain(ps, L, a, b, relu && !replay, !replay, out) ||
-        trace_relu(ps, L, relu, out))
-        return -1;
+    if (conv_plain(ps, L, a, b, relu, out) || trace_relu(ps, L, relu, out)) return -1;
     progress_step();
     return 0;
 }
@@ -975,9 +981,7 @@ conv_up_replace(const pass *ps, const mcp__unet_conv *L, batch *t, batch *skip, 
         return mcp_error("unet: layer of %d input channels given %d", L->cin, cin);
     batch out;
     if (batch_new_unset(&out, n, L->cout, h, w)) return -1;
-    const int replay = is_replay(ps);
-    if (winograd(ps, L, replay ? NULL : L->bias, t->d, t->c, 1, skip->d, n, h, w,
-                 relu && !replay, out.d)) {
+    if (winograd(ps, L, t->d, t->c, 1, skip->d, n, h, w, relu, out.d)) {
         batch_free(&out);
         return -1;
     }

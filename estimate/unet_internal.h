@@ -108,7 +108,19 @@ int mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color,
  * is [cout][cin][3][3]. */
 int mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cout,
                             const float *a, int ca, int a_up, const float *b, int n,
-                            int h, int w, int relu, float *out);
+                            int h, int w, int relu, const unsigned char *mask_bits,
+                            float *out);
+/* mask_bits (with relu 0): every output is zeroed where the recorded bit of its value
+ * (value i of the out batch's image: bit i % 8 of byte i / 8; unet.c's trace of the
+ * primal's ReLU) is 0, as it is written. Replaying a tangent's mask this way costs a
+ * few operations per value in the cache instead of a pass over the whole batch. The
+ * bits are read 8 bytes at a time: their block has 8 bytes to spare. */
+void mcp__unet_mask_row(float *row, int n, const unsigned char *bits, size_t at);
+/* A transform's row of outputs into its activation: non-temporal stores where the CPU
+ * has AVX-512 (the activation is far larger than the caches, and a plain store reads
+ * each line before it fills it), else memcpy; the convolution fences them before its
+ * barrier. */
+void mcp__unet_store_row(float *dst, const float *src, int n);
 /* A Winograd convolution F(m x m, 3x3): its tile, its transforms (unet_winograd.c
  * and unet_winograd4.c), and the driver that runs them over an image in tasks of
  * about chunk tiles with the matrix products of unet_gemm.c (unet_winograd.c). */
@@ -122,19 +134,21 @@ typedef struct mcp__unet_winograd {
                             int nt, float *rows, float *v, size_t ld);
     void (*transform_output)(const float *m, size_t ld, int ty, int tx0, int nt, int h,
                              int w, float bias, int relu, int primal, const float *p0,
-                             float *dst, float *row);
+                             const unsigned char *bits, size_t bit0, float *dst,
+                             float *row);
 } mcp__unet_winograd;
 
 int mcp__unet_winograd_conv(const mcp__unet_winograd *k, const float *weight,
                             const float *bias, int cin, int cout, const float *a, int ca,
                             int a_up, const float *b, int n, int h, int w, int relu,
-                            int bf16, float *out);
+                            const unsigned char *mask_bits, int bf16, float *out);
 
 /* The same as F(4x4, 3x3) (unet_winograd4.c): 1.78 times fewer multiply-adds, a
  * relative error ~1e-4 instead of ~1e-6; for the tangents' passes. */
 int mcp__unet_conv_winograd4(const float *weight, const float *bias, int cin, int cout,
                              const float *a, int ca, int a_up, const float *b, int n,
-                             int h, int w, int relu, int bf16, float *out);
+                             int h, int w, int relu, const unsigned char *mask_bits,
+                             int bf16, float *out);
 /* Prefetches the input rows that tiles [t0, t0 + nt) of m x m outputs read from one
  * channel (unet_winograd.c). */
 void mcp__unet_prefetch_rows(const float *src, int up, int h, int w, size_t t0, int nt,

@@ -191,8 +191,8 @@ transform_input4(const float *src, int up, int h, int w, int ty, int tx0, int nt
  * rows by 4 x 4 transposes. row holds 32 nt floats. */
 TRANSFORM_KERNEL static void
 transform_output4(const float *m, size_t ld, int ty, int tx0, int nt, int h, int w,
-                  float bias, int relu, int primal, const float *p0, float *dst,
-                  float *row)
+                  float bias, int relu, int primal, const float *p0,
+                  const unsigned char *bits, size_t bit0, float *dst, float *row)
 {
     float *restrict o = row;                      /* 16 streams of nt */
     float *restrict line = row + 16 * (size_t)nt; /* one output row, 4 nt */
@@ -250,8 +250,9 @@ transform_output4(const float *m, size_t ld, int ty, int tx0, int nt, int h, int
 #pragma omp simd
             for (int x = 0; x < xn; x++)
                 line[x] = mask[x] > 0.0f ? line[x] : 0.0f;
-        }
-        memcpy(dst + at, line, (size_t)xn * sizeof(float));
+        } else if (bits)
+            mcp__unet_mask_row(line, xn, bits, bit0 + at);
+        mcp__unet_store_row(dst + at, line, xn);
     }
 }
 
@@ -263,8 +264,9 @@ static const mcp__unet_winograd f4x4 = {
 int
 mcp__unet_conv_winograd4(const float *weight, const float *bias, int cin, int cout,
                          const float *a, int ca, int a_up, const float *b, int n, int h,
-                         int w, int relu, int bf16, float *out)
+                         int w, int relu, const unsigned char *mask_bits, int bf16,
+                         float *out)
 {
     return mcp__unet_winograd_conv(&f4x4, weight, bias, cin, cout, a, ca, a_up, b, n, h,
-                                   w, relu, bf16, out);
+                                   w, relu, mask_bits, bf16, out);
 }

@@ -3,6 +3,7 @@
  * pictures, estimate.json and report section; a series' first spp per tau (Firmino 2024
  * Table 1), its estimate.json and report section. */
 #include "internal.h"
+#include "../common/report/internal.h" /* maps of one value */
 
 #include <math.h>
 #include <stdio.h>

@@ -18,14 +18,26 @@
 #include <mcpost/progress.h>
 #include <mcpost/stages.h>
 
-#include "../common/internal.h" /* output folders that appear whole (common/outdir.c) */
+#include "../common/core/internal.h"
+#include "../common/io/internal.h" /* output folders that appear whole (common/io/outdir.c) */
 #include "../ops/internal.h"
 
 #include <cjson/cJSON.h>
 #include <stddef.h>
 #include <stdint.h>
 
-/* ---- commands (common/shell.c, declared in common/internal.h) ---- */
+/* ---- frames.c: frame tokens in paths (hidden; public once) ---- */
+
+/* Whether path holds a frame token (1) or not (0), by the rules of frames.h; -1
+ * (error set) when the path breaks them. series: the path is a series pattern. */
+int mcp_frame_token_check(const char *path, int series);
+
+/* Replaces the frame token of path by the frame number into buf. In a series pattern
+ * the spp conversion (and any "%%") is kept for mcp_series_from_pattern; elsewhere
+ * "%%" becomes '%'. A path without a token is copied. */
+int mcp_frame_expand(const char *path, int series, int frame, char *buf, size_t cap);
+
+/* ---- commands (common/core/shell.c, declared in common/core/internal.h) ---- */
 
 /* A command under /bin/sh with mcpost's programs on the end of its PATH, and its
  * status checked into one error line. */

@@ -9,6 +9,7 @@
 #define _POSIX_C_SOURCE 200809L /* WEXITSTATUS */
 
 #include "internal.h"
+#include "../common/report/internal.h" /* maps of one value */
 
 #include <mcpost/filter.h>
 

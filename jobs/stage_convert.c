@@ -81,7 +81,7 @@ stage_convert(mcp_job *job, const mcp_node *settings)
                 : ""))
         return -1;
     /* by its name in the output folder: the path is the hidden folder's until the job
-       ends (common/outdir.c) */
+       ends (common/io/outdir.c) */
     mcp_note("wrote %s into the output folder", out);
     return 0;
 }

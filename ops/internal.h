@@ -3,7 +3,7 @@
 #ifndef MCP_OPS_INTERNAL_H
 #define MCP_OPS_INTERNAL_H
 
-#include <mcpost/job.h>
+#include <mcpost/yaml.h>
 #include <mcpost/operations.h>
 
 extern const mcp_operation mcp__op_estimate;

@@ -1,5 +1,5 @@
 /* op_merge.c: the options of `merge` (render dumps of one frame combined into one;
- * common/replicates.c), for the command line (options.h). A job merges through its
+ * common/dump/replicates.c), for the command line (options.h). A job merges through its
  * replicates input, whose keys are merge: and pool: (docs/jobs.md). */
 #include "internal.h"
 

@@ -3,7 +3,7 @@
  * same values with the same messages. */
 #include "options.h"
 
-#include "../common/internal.h"
+#include "../common/core/internal.h"
 
 #include <errno.h>
 #include <stdarg.h>
@@ -428,7 +428,7 @@ mcp_option_format(const mcp_option *o, const void *settings, char *buf, size_t c
 char *
 mcp_operation_dump(const mcp_operation *op, const void *settings, unsigned where)
 {
-    mcp__strbuf b = {0}; /* common/strbuf.c */
+    mcp__strbuf b = {0}; /* common/core/strbuf.c */
     int rc = 0;
     for (const mcp_option *o = op->options; o->name && !rc; o++) {
         if (!mcp_option_takes(o, where) || o->type == MCP_OPT_INPUT ||

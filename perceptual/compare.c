@@ -3,10 +3,11 @@
  * ground truth, and the blue-noise analysis of the error). pMSE, MSE and the spectra come
  * from common/ (metrics.h, spectra.h); only a user kernel, which metrics.h does not
  * know, is scored with this module's own energy (the same formula). */
-#include "../common/internal.h" /* progress on a terminal */
+#include "../common/core/internal.h" /* progress on a terminal */
 #include "internal.h"
 
 #include <mcpost/metrics.h>
+#include <mcpost/report.h>
 #include <mcpost/spectra.h>
 
 #include <math.h>

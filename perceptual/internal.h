@@ -12,7 +12,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "../common/rng_internal.h"
+#include "../common/core/rng_internal.h"
 
 /* ---- the kernel g ---- */
 
@@ -94,7 +94,7 @@ int mcp__image_from_rgb(int w, int h, const float *rgb, mcp_image **out);
  * in [0, 1]. */
 int mcp__confidence_map(const mcp_perc_model *model, int w, int h, float **out);
 
-/* A 64-bit hash of (seed, i): splitmix64's finaliser (common/rng_internal.h; random
+/* A 64-bit hash of (seed, i): splitmix64's finaliser (common/core/rng_internal.h; random
  * streams per pixel, so results never depend on the thread count). */
 static inline uint64_t
 mcp__hash64(uint64_t seed, uint64_t i)

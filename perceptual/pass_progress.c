@@ -3,7 +3,7 @@
  * how many passes is not known beforehand, so the bar runs over the rows of each pass
  * and its label names the pass, "power-set, pass 3" (docs/conventions.md, "Progress").
  * On a terminal only, for a megapixel or more: 4 candidates of 4K take 5 s. */
-#include "../common/internal.h" /* progress on a terminal */
+#include "../common/core/internal.h" /* progress on a terminal */
 #include "internal.h"
 
 #include <stdio.h>

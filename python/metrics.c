@@ -1,8 +1,7 @@
-/* metrics.c: how far a test image is from a reference (common/metrics.h) -- mse, relmse,
- * psnr, pmse, flip (the mean and the map), flip_stats, relse_percentiles, blue_noise,
- * and metrics(),
- * every figure at once in the CLI's JSON layout. The first image is the test image,
- * the second the reference, as everywhere in mcpost. */
+/* metrics.c: how far a test image is from a reference (common/metrics/metrics.h) -- mse,
+ * relmse, psnr, pmse, flip (the mean and the map), flip_stats, relse_percentiles,
+ * blue_noise, and metrics(), every figure at once in the CLI's JSON layout. The first
+ * image is the test image, the second the reference, as everywhere in mcpost. */
 #include "internal.h"
 
 #include <mcpost/imageio.h>

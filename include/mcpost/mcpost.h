@@ -23,10 +23,11 @@
 #include <mcpost/spectra.h>
 #include <mcpost/stats.h>
 
-/* plots, reports, progress, job files */
+/* plots, reports, progress, job files (YAML node trees, jobs and stages) */
 #include <mcpost/plot.h>
 #include <mcpost/report.h>
 #include <mcpost/progress.h>
+#include <mcpost/yaml.h>
 #include <mcpost/job.h>
 
 /* the operations: estimate, blend, perceptual, their options and job stages */

@@ -64,7 +64,7 @@ def test_check_job_passes_a_good_job(tmp):
 def test_run_job_finds_mcposts_programs(tmp, monkeypatch):
     """An adaptive stage whose render command names mcpost-procedural without a path
     runs from Python with a PATH that lacks the build folder: the library finds the
-    program among mcpost's own (common/shell.c), and it spends the budget."""
+    program among mcpost's own (common/core/shell.c), and it spends the budget."""
     job = tmp / "adaptive.yaml"
     job.write_text("output: out\n"
                    "stages:\n"

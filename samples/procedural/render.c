@@ -9,7 +9,7 @@
  * the cell that the sample index names, so it needs no state either. */
 #include "internal.h"
 
-#include "../../common/rng_internal.h"
+#include "../../common/core/rng_internal.h"
 
 #include <math.h>
 #include <stdio.h>

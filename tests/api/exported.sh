@@ -3,12 +3,21 @@
 # --defined-only) must be exactly LIST (tests/api/exported.txt), so that every change
 # to the ABI is deliberate (docs/library.md, "Exported symbols"). On a difference it
 # prints the diff (- listed but not exported, + exported but not listed) and fails.
+# It also fails on any exported symbol outside mcp_*.
 # exported.sh LIBRARY LIST --update rewrites LIST instead.
 set -euo pipefail
 lib=$1 list=$2
 actual=$(nm -D --defined-only "$lib" | awk '$3 ~ /^mcp_/ {print $3}' | LC_ALL=C sort -u)
 if [ -z "$actual" ]; then
     echo "exported.sh: $lib exports no mcp_* symbol (nm missing, or the wrong file?)" >&2
+    exit 1
+fi
+# and nothing but mcp_* (cmake/exported.map): not, for one, OpenMP's names for critical
+# sections
+others=$(nm -D --defined-only "$lib" | awk '$3 !~ /^mcp_/ {print $3}' | LC_ALL=C sort -u)
+if [ -n "$others" ]; then
+    echo "exported.sh: $lib exports symbols outside mcp_*: $(echo $others)" \
+         "(cmake/exported.map keeps them local)" >&2
     exit 1
 fi
 if [ "${3:-}" = --update ]; then

@@ -298,7 +298,7 @@ test_adaptive_output_appears_whole(void **state)
     assert_int_equal(count_named(dir, ".a."), 0);
 }
 
-/* An input inside the folder that a rerun would replace (common/outdir.c's check, as
+/* An input inside the folder that a rerun would replace (common/io/outdir.c's check, as
  * metrics has it above): `CMD -o DIR/o` writes the folder; SOURCE is copied into it as
  * NAME; `BEFORE 'DIR/o/NAME' AFTER -o DIR/o` must then fail with the one line naming
  * that input, keep it, leave the old output's report.json byte for byte, and leave no

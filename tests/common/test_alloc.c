@@ -1,5 +1,5 @@
-/* test_alloc.c: running out of memory and out of disk (common/alloc.c's failure hook,
- * issue 15). A small estimate, blend and perceptual run, each made to fail at every
+/* test_alloc.c: running out of memory and out of disk (common/core/alloc.c's failure
+ * hook, issue 15). A small estimate, blend and perceptual run, each made to fail at every
  * one of its allocations in turn, must end with an error (non-zero status, one line
  * set) and no crash; the ASan build adds: no leak, whichever allocation failed. Then
  * the same runs with a file-size limit, as on a full disk. Either way no partial
@@ -14,7 +14,7 @@
 #include "testing.h"
 
 #include "../../cli/cli.h"
-#include "../../common/internal.h"
+#include "../../common/core/internal.h"
 
 #include <mcpost/error.h>
 #include <mcpost/imageio.h>

@@ -1,4 +1,4 @@
-/* test_error.c: the error line (common/error.c) -- one line whatever the names in
+/* test_error.c: the error line (common/core/error.c) -- one line whatever the names in
  * it hold, prefixes, and the allocation helpers' messages. */
 #include "testing.h"
 

@@ -1,9 +1,9 @@
-/* test_exr.c: the parallel EXR writer and reader (common/exr.c). Every compression the
+/* test_exr.c: the parallel EXR writer and reader (common/io/exr.c). Every compression the
  * writer takes round-trips bit for bit on 1, 2 and 5 threads, scanline and tiled, with
  * partial last chunks and nasty values, and the files do not depend on the thread
  * count; the raw-storage probe keeps pixels and picks raw only for data that does not
  * compress; a corrupt chunk gives the same one-line error on any thread count. Zip
- * chunks go through libdeflate (common/exr_zip.c): OpenEXR Core's own zlib decoder
+ * chunks go through libdeflate (common/io/exr_zip.c): OpenEXR Core's own zlib decoder
  * reads what it writes, and it reads what zlib wrote (a renderer's file), value for
  * value the same as Core. */
 #include "testing.h"

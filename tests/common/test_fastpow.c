@@ -1,10 +1,10 @@
-/* test_fastpow.c: the vectorisable x^y of common/fastpow.h against double pow: the
- * relative error stays below (1 + |y log2 x|) * 1.5e-7 over exponents and bases spread
- * across float's range (the powers FLIP takes: 1/3, 0.7, 1 - fd in [0, 1], and
+/* test_fastpow.c: the vectorisable x^y of common/metrics/fastpow.h against double pow:
+ * the relative error stays below (1 + |y log2 x|) * 1.5e-7 over exponents and bases
+ * spread across float's range (the powers FLIP takes: 1/3, 0.7, 1 - fd in [0, 1], and
  * others), and the edges are powf's. */
 #include "testing.h"
 
-#include "../../common/fastpow.h"
+#include "../../common/metrics/fastpow.h"
 
 #include <float.h>
 #include <math.h>

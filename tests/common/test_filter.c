@@ -1,14 +1,14 @@
-/* test_filter.c: common/filter.c and common/colormap.c -- separable and 2D filters
- * against a naive replicate-border correlation, the Gaussian kernel against its closed
- * form, tile power spectra against closed forms and Parseval, colour-map endpoints, and
- * every error path. */
+/* test_filter.c: common/filter/filter.c and common/filter/colormap.c -- separable and 2D
+ * filters against a naive replicate-border correlation, the Gaussian kernel against its
+ * closed form, tile power spectra against closed forms and Parseval, colour-map
+ * endpoints, and every error path. */
 #include "testing.h"
 
 #include <mcpost/filter.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
-#include "../../common/hidden_internal.h"
+#include "../../common/filter/internal.h"
 
 /* Filter results vs. the naive reference: both sum at most ~150 products whose
  * magnitudes add up to about 1 (kernels are scaled to sum(|k|) <= 1, pixels in [0, 1)),

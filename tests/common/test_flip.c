@@ -1,6 +1,6 @@
-/* test_flip.c: common/flip.c and common/flip_csf.c against independent truths:
- * the constants and filter taps measured from NVlabs/flip v1.6 (docs/flip.md), the
- * flat-grey value 0.169141844, and a straightforward double-precision implementation
+/* test_flip.c: common/metrics/flip.c and common/metrics/flip_csf.c against independent
+ * truths: the constants and filter taps measured from NVlabs/flip v1.6 (docs/flip.md),
+ * the flat-grey value 0.169141844, and a straightforward double-precision implementation
  * with full 2D kernels written here from the formulas (notes §1; float and double
  * differ by at most ~3.4e-5 per pixel there, so 1e-4 per pixel and 5e-5 on means). */
 #define _POSIX_C_SOURCE 200809L /* setenv */
@@ -16,7 +16,7 @@
 
 #include <mcpost/flip.h>
 #include <mcpost/imageio.h>
-#include "../../common/hidden_internal.h"
+#include "../../common/metrics/internal.h"
 
 #define PI_D 3.14159265358979323846
 

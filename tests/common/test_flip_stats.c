@@ -1,5 +1,5 @@
-/* test_flip_stats.c: FLIP's statistics (common/flip_stats.c) against closed forms on
- * synthetic error maps, and against NVIDIA's own tool (FLIP v1.6, tool/FLIP-tool.cpp)
+/* test_flip_stats.c: FLIP's statistics (common/metrics/flip_stats.c) against closed forms
+ * on synthetic error maps, and against NVIDIA's own tool (FLIP v1.6, tool/FLIP-tool.cpp)
  * built here with g++ from MCPOST_FLIP_ANCHOR (a checkout of NVlabs/flip v1.6; the
  * CMake variable of the same name, or the environment at configure time). Without
  * those sources or g++ the comparison is skipped, saying why. */
@@ -14,7 +14,7 @@
 
 #include <mcpost/flip.h>
 #include <mcpost/imageio.h>
-#include "../../common/hidden_internal.h"
+#include "../../common/metrics/internal.h"
 
 /* ---- closed forms ---- */
 

@@ -5,7 +5,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include "../../common/hidden_internal.h"
+#include "../../common/core/internal.h"
 
 static void
 test_new_is_zeroed_and_packed(void **state)

@@ -9,7 +9,6 @@
 #include <string.h>
 #include <sys/stat.h>
 #include <unistd.h>
-#include "../../common/hidden_internal.h"
 
 static const char *names6[] = {"R", "G", "B", "Variance.R", "albedo.G", "N.X"};
 
@@ -317,7 +316,7 @@ test_memory_truncated_and_foreign(void **state)
     mcp_image_free(img);
 }
 
-/* PNG goes through libpng (common/png.c), TIFF through the plug-in. */
+/* PNG goes through libpng (common/io/png.c), TIFF through the plug-in. */
 static void
 test_png_roundtrip_then_tiff_loads_plugin(void **state)
 {

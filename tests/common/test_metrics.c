@@ -1,5 +1,5 @@
-/* test_metrics.c: common/metrics.c and common/tonemap.c against closed forms on small
- * constructed images (docs/mathematics.md §5, §4). */
+/* test_metrics.c: common/metrics/metrics.c and common/filter/tonemap.c against closed
+ * forms on small constructed images (docs/mathematics.md §5, §4). */
 #include "testing.h"
 
 #include <math.h>

@@ -1,4 +1,4 @@
-/* test_png.c: common/png.c, the libpng reader, and common/png_encode.c, the writer,
+/* test_png.c: common/io/png.c, the libpng reader, and common/io/png_encode.c, the writer,
  * against values computed here: the 8-bit quantisation of written floats, 16-bit,
  * palette and grey+alpha files made with libpng itself, files that must be refused
  * before allocation, and the writer's files decoded by libpng directly. */

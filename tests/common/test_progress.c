@@ -8,7 +8,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../../common/internal.h"
+#include "../../common/core/internal.h"
 #include <mcpost/progress.h>
 
 static char *text;

@@ -11,7 +11,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include "../../common/hidden_internal.h"
+#include "../../common/dump/internal.h"
 
 /* The procedural scene at 24x24 without fireflies, with the independent sampler or the
  * jittered one (4x4 strata per pass of 16 samples): what the series tests render. */

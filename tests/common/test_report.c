@@ -1,5 +1,5 @@
-/* test_report.c: common/report.c (JSON sections, tables, plots, the self-contained
- * HTML page) and common/plot.c (SVG plots with linear, log and logit axes). */
+/* test_report.c: common/report/report.c (JSON sections, tables, plots, the self-contained
+ * HTML page) and common/report/plot.c (SVG plots with linear, log and logit axes). */
 #include "testing.h"
 
 #include <math.h>
@@ -10,7 +10,7 @@
 #include <mcpost/imageio.h>
 #include <mcpost/plot.h>
 #include <mcpost/report.h>
-#include "../../common/hidden_internal.h"
+#include "../../common/report/internal.h"
 
 static int
 count(const char *hay, const char *needle)

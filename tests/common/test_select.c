@@ -1,5 +1,5 @@
-/* test_select.c: common/select.c (order statistics by radix select) against qsort, on
- * values chosen to stress the key mapping and the bins: negatives, both zeros,
+/* test_select.c: common/core/select.c (order statistics by radix select) against qsort,
+ * on values chosen to stress the key mapping and the bins: negatives, both zeros,
  * infinities, denormals, ties, every value in one bin, and random sets. */
 #include "testing.h"
 
@@ -8,7 +8,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../../common/internal.h"
+#include "../../common/core/internal.h"
 #include <mcpost/metrics.h>
 
 static int

@@ -1,4 +1,4 @@
-/* test_spectra.c: common/spectra.c on errors whose spectra are known: white noise
+/* test_spectra.c: common/metrics/spectra.c on errors whose spectra are known: white noise
  * (flat: the low fraction is the share of bins below the cutoff), a pure low
  * frequency (all energy low), the Nyquist checkerboard (none low), and
  * differentiated white noise (blue: less than white). */

@@ -1,11 +1,11 @@
-/* test_strbuf.c: common/strbuf.c, the growing string behind reports, plots, CSV
+/* test_strbuf.c: common/core/strbuf.c, the growing string behind reports, plots, CSV
  * tables, shell lines and settings dumps. Its text is checked byte for byte against
  * the same text made with snprintf into a fixed buffer (the truth), across many
  * growths; a failed allocation must stick (later appends do nothing, take gives NULL
  * and frees) and a file read whole must come back byte for byte. */
 #include "testing.h"
 
-#include "../../common/internal.h"
+#include "../../common/core/internal.h"
 
 #include <mcpost/error.h>
 
@@ -76,7 +76,7 @@ test_take_empty(void **state)
     free(s);
 }
 
-/* The n-th allocation fails (common/alloc.c's hook): that call and every later one
+/* The n-th allocation fails (common/core/alloc.c's hook): that call and every later one
  * return -1, the text stays as it was, take frees it and gives NULL. */
 static void
 test_failure_sticks(void **state)

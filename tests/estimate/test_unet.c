@@ -1454,6 +1454,36 @@ test_real_weights_cli_and_job(void **state)
     mcp__unet_free(net);
 }
 
+/* The replayed ReLU mask as the Winograd convolutions apply it (mcp__unet_mask_row),
+ * against a value-by-value reading of the bits, at every bit offset within a word and
+ * lengths across the 16-value blocks and the 56-bit words. */
+static void
+test_mask_row(void **state)
+{
+    (void)state;
+    enum { BITS = 1024 };
+    unsigned char bits[BITS / 8 + 8];
+    uint64_t s = 12345;
+    for (size_t i = 0; i < sizeof bits; i++) {
+        s = s * 6364136223846793005ULL + 1442695040888963407ULL;
+        bits[i] = (unsigned char)(s >> 56);
+    }
+    float row[200], want[200];
+    for (size_t at = 0; at < 70; at++)
+        for (int n = 0; n <= 200; n += n < 40 ? 1 : 13) {
+            for (int x = 0; x < n; x++) {
+                row[x] = 1.0f + (float)x;
+                const size_t b = at + (size_t)x;
+                want[x] = bits[b / 8] >> (b % 8) & 1u ? row[x] : 0.0f;
+            }
+            mcp__unet_mask_row(row, n, bits, at);
+            for (int x = 0; x < n; x++)
+                if (row[x] != want[x])
+                    fail_msg("mask_row at %zu, n %d: value %d is %g, expected %g", at, n,
+                             x, row[x], want[x]);
+        }
+}
+
 int
 main(void)
 {
@@ -1465,6 +1495,7 @@ main(void)
         cmocka_unit_test(test_bad_files),
         cmocka_unit_test(test_jvp_finite_differences),
         cmocka_unit_test(test_jvp_batched),
+        cmocka_unit_test(test_mask_row),
         cmocka_unit_test(test_tiles_same_bits),
         cmocka_unit_test(test_memory_tiles),
         cmocka_unit_test(test_denoiser_kind),

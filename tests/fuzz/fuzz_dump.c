@@ -1,4 +1,4 @@
-/* fuzz_dump.c: the dump loader (common/dump.c): channel detection, conventions,
+/* fuzz_dump.c: the dump loader (common/dump/dump.c): channel detection, conventions,
  * variance conversion, bad-value checks, and the separate files a dump can come in.
  *
  * The input is up to five files separated by the line "MCPPART\n": the main file,

@@ -1,4 +1,4 @@
-/* fuzz_exr.c: the OpenEXR reader (common/exr.c, on OpenEXR Core) through
+/* fuzz_exr.c: the OpenEXR reader (common/io/exr.c, on OpenEXR Core) through
  * mcp_image_read_memory, and through mcp_image_read on the same bytes as a file: both
  * must fail, or give the same image. The input is the whole file. */
 #include "fuzz.h"

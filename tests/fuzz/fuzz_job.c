@@ -1,4 +1,4 @@
-/* fuzz_job.c: the job-file path -- the YAML parser (common/yaml.c, on libyaml) and
+/* fuzz_job.c: the job-file path -- the YAML parser (common/yaml/yaml.c, on libyaml) and
  * the job's validation (mcp_job_check with the library's stage table, the one
  * `mcpost run` uses: inputs, stage names and keys, series patterns, replicate globs).
  * The input is the job file.

@@ -1,4 +1,4 @@
-/* fuzz_pfm.c: the PFM reader (common/pfm.c) through mcp_image_read_memory, and
+/* fuzz_pfm.c: the PFM reader (common/io/pfm.c) through mcp_image_read_memory, and
  * through mcp_image_read on the same bytes as a file: both must fail, or give the same
  * image. The input is the whole file. */
 #include "fuzz.h"

@@ -17,7 +17,7 @@
 static char out[CAP], err[CAP];
 static char dir[4096]; /* the procedural files */
 
-/* Uncompressed: common/exr.c's ZIP writer corrupts some smooth images (the procedural
+/* Uncompressed: common/io/exr.c's ZIP writer corrupts some smooth images (the procedural
  * truth among them; reported), which is not what these tests are about. */
 static void
 write_or_fail(const mcp_image *img, const char *path)

@@ -1,7 +1,7 @@
 /* testing.c: shared test helpers (see testing.h). */
 #include "testing.h"
 
-#include "../../common/rng_internal.h"
+#include "../../common/core/rng_internal.h"
 
 #include <stdarg.h>
 

@@ -39,7 +39,7 @@ mcp_image *mcp_test_random(int w, int h, int c, float lo, float hi, uint64_t see
 /* Largest absolute difference between two same-shaped images. */
 double mcp_test_max_abs_diff(const mcp_image *a, const mcp_image *b);
 
-/* splitmix64 (common/rng_internal.h): a small seeded generator for test data. */
+/* splitmix64 (common/core/rng_internal.h): a small seeded generator for test data. */
 uint64_t mcp_test_rand_u64(uint64_t *state);
 double mcp_test_rand_uniform(uint64_t *state);
 double mcp_test_rand_normal(uint64_t *state);

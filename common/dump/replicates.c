@@ -5,6 +5,7 @@
  * estimate enough degrees of freedom (mcp_dump_pool_variance). The derivations are
  * in docs "Variance sources". */
 #include "internal.h"
+#include "../core/internal.h"
 
 #include <mcpost/dump.h>
 

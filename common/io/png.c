@@ -9,6 +9,7 @@
  * error lives outside the setjmp frame's locals (volatile or in the context struct). */
 #define _POSIX_C_SOURCE 200809L /* fileno */
 #include "internal.h"
+#include "../core/internal.h"
 
 #include <png.h>
 #include <setjmp.h>

@@ -4,6 +4,7 @@
 #include <mcpost/dump.h>
 
 #include "internal.h"
+#include "../io/internal.h"
 #include <mcpost/imageio.h>
 
 #include <ctype.h>

@@ -293,7 +293,7 @@ clear_one(const char *path, const struct stat *st, int type, struct FTW *ftw)
 {
     (void)st;
     if (type != FTW_F) return 0;
-    /* mcp__atomic_open's names: "<stem>.tmp-<pid>-<n><ext>" (common/imageio.c) */
+    /* mcp__atomic_open's names: "<stem>.tmp-<pid>-<n><ext>" (common/io/imageio.c) */
     const char *tag = strstr(path + ftw->base, ".tmp-");
     if (!tag) return 0;
     char *end = NULL;

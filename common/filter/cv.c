@@ -2,7 +2,7 @@
  * first use. Linking OpenCV (and the X11, BLAS, TBB and Fortran libraries Debian's
  * build pulls in) made every process spend ~10 ms relocating them at start, which was
  * most of `mcpost --version`, while only filtering, tile DFTs and colour maps need it. */
-#include "internal.h"
+#include "../core/internal.h"
 #include "cv_shim.h"
 
 #include <dlfcn.h>

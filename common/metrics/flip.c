@@ -10,7 +10,7 @@
  * in): a fused multiply-add would change the float rounding FLIP's numbers depend on. */
 #include <mcpost/flip.h>
 #include "fastpow.h"
-#include "hidden_internal.h"
+#include "internal.h"
 
 #include <float.h>
 #include <math.h>

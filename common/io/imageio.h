@@ -85,7 +85,7 @@ typedef struct mcp_write_options {
 
 /* The zip level and raw-storage threshold EXR files are written with unless the
  * options say otherwise (docs/benchmarks.md, "EXR speed", has the measurements). Level 1:
- * with libdeflate (common/exr_zip.c) it is the fastest level on every file measured
+ * with libdeflate (common/io/exr_zip.c) it is the fastest level on every file measured
  * (renders, dumps, an estimate's maps, a perceptual result: 3-28% less time than 4) and
  * within 0.7% of level 4's size, the blocky maps included (zlib's levels 1-3 had made
  * those twice as large as its 4, which is why 4 was the default until December 2026).

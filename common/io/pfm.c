@@ -3,6 +3,7 @@
  * means little-endian. Colour files ("PF") hold R,G,B; grey files ("Pf") hold Y. */
 #define _POSIX_C_SOURCE 200809L /* fmemopen */
 #include "internal.h"
+#include "../core/internal.h"
 
 #include <ctype.h>
 #include <math.h>

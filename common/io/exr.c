@@ -11,6 +11,7 @@
  * works around; docs/benchmarks.md ("EXR speed") has the measurements. */
 #define _POSIX_C_SOURCE 200809L
 #include "internal.h"
+#include "../core/internal.h"
 #include "exr_zip.h"
 
 #include <openexr.h>

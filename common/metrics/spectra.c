@@ -8,7 +8,7 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
-#include "hidden_internal.h"
+#include "internal.h"
 
 mcp_spectra_options
 mcp_spectra_defaults(void)

@@ -15,7 +15,7 @@
 
 #include <stdlib.h>
 #include <string.h>
-#include "hidden_internal.h"
+#include "internal.h"
 
 #define PARALLEL_MIN_FLOATS 65536
 

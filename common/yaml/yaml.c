@@ -1,10 +1,10 @@
-/* yaml.c: job files as a tree of nodes that remember their line (see job.h).
+/* yaml.c: job files as a tree of nodes that remember their line (see yaml.h).
  *
  * libyaml's event API builds the tree; JSON is YAML, so it parses too. Anchors and
  * aliases are refused (a job file has no use for them and they make line numbers
  * ambiguous). */
 #define _POSIX_C_SOURCE 200809L
-#include <mcpost/job.h>
+#include <mcpost/yaml.h>
 
 #include <yaml.h>
 

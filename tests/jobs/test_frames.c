@@ -1,5 +1,5 @@
 /* test_frames.c: frame sets ("1-240:2") and frame tokens ("####", "%04d") in paths
- * (common/frames.c), against sets and paths written out by hand. */
+ * (jobs/frames.c), against sets and paths written out by hand. */
 #include "testing.h"
 
 #include <mcpost/error.h>
@@ -11,7 +11,7 @@
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
-#include "../../common/hidden_internal.h"
+#include "../../jobs/internal.h"
 
 static void
 assert_set(const char *text, const int *want, int n_want)
@@ -185,7 +185,7 @@ test_a_frame_is_complete_when_its_report_json_exists(void **state)
 }
 
 /* A frame killed outright leaves "<stem>.tmp-<pid>-<n><ext>" files (the atomic
- * writes of common/imageio.c); the next run of the frame removes those of processes
+ * writes of common/io/imageio.c); the next run of the frame removes those of processes
  * that are gone, at any depth, and keeps a live process's and every other file. */
 static void
 test_stale_temporaries_are_cleared(void **state)

@@ -14,6 +14,8 @@
 #include <mcpost/tonemap.h>
 
 #include "internal.h"
+#include "../core/internal.h"
+#include "../filter/internal.h"
 
 #include <math.h>
 #include <stdarg.h>
@@ -22,7 +24,6 @@
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
-#include "hidden_internal.h"
 
 #ifndef MCP_VERSION
 #define MCP_VERSION "?"

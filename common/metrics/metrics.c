@@ -6,6 +6,8 @@
 
 #include "fastpow.h"
 #include "internal.h"
+#include "../core/internal.h"
+#include "../report/internal.h" /* maps of one value */
 #include <mcpost/filter.h>
 #include <mcpost/imageio.h>
 #include <mcpost/report.h>

@@ -1,7 +1,9 @@
 /* imageio.c: format dispatch, the lazily loaded OpenImageIO plug-in, sRGB coding,
  * and atomic output files (see imageio.h). */
 #define _GNU_SOURCE /* dladdr */
+#include "oiio_internal.h"
 #include "internal.h"
+#include "../core/internal.h"
 
 #include <dlfcn.h>
 #include <errno.h>

@@ -9,6 +9,8 @@
 #include <mcpost/stages.h> /* the built-in table, for stages == NULL (jobs/) */
 
 #include "internal.h"
+#include "../common/dump/internal.h"
+#include "../common/report/internal.h"
 
 #include <errno.h>
 #include <libgen.h>
@@ -1040,7 +1042,7 @@ write_report(mcp_job *job)
     return rc;
 }
 
-/* The output folder appears whole (common/outdir.c; docs/conventions.md, "Output
+/* The output folder appears whole (common/io/outdir.c; docs/conventions.md, "Output
  * folders"): the stages write into a hidden folder beside it, named by its real path
  * (no "jobs/../../out" in messages and reports), which becomes job->output_dir. A
  * frame's folder in a shot's output (beside frames.json) is mcpost's by its place:

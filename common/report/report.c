@@ -9,7 +9,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include "hidden_internal.h"
+#include "internal.h"
+#include "../filter/internal.h"
 
 struct mcp_report {
     cJSON *root;

@@ -232,7 +232,7 @@ MCP_API int mcp_series_from_paths(const char *const *paths, const double *spps, 
 MCP_API int mcp_series_load(const mcp_series *s, int i, mcp_dump **out);
 MCP_API void mcp_series_free(mcp_series *s);
 
-/* ---- variance from replicates (common/replicates.c; docs "Variance sources") ---- */
+/* ---- variance from replicates (replicates.c; docs "Variance sources") ---- */
 
 typedef enum {
     MCP_MERGE_REPLICATES = 0, /* the parts are independent renders of the frame (other

@@ -5,6 +5,7 @@
 #include <mcpost/plot.h>
 
 #include "internal.h"
+#include "../core/internal.h"
 
 #include <math.h>
 #include <stdarg.h>
@@ -71,7 +72,7 @@ mcp_logistic(double z)
     return 1.0 / (1.0 + exp(-z));
 }
 
-/* ---- a growing text buffer (common/strbuf.c; a failure sticks in b->failed) ---- */
+/* ---- a growing text buffer (core/strbuf.c; a failure sticks in b->failed) ---- */
 
 typedef mcp__strbuf sbuf;
 

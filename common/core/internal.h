@@ -1,0 +1,112 @@
+/* internal.h: the helpers of common/core/ that the library's other files and the tests
+ * call but that libmcpost.so does not export (hidden visibility; not installed). */
+#ifndef MCP_CORE_INTERNAL_H
+#define MCP_CORE_INTERNAL_H
+
+#include <stddef.h>
+#include <stdio.h>
+
+#include <mcpost/image.h>
+#include <mcpost/progress.h>
+
+/* 0 when a width x height x channels image is within MCP_MAX_DIM per side, 4096
+ * channels and the ceiling above; else -1 with a message naming the size and the
+ * variable that raises the limit. Readers call it before they look at the data
+ * (image.c; public once). */
+int mcp_image_check_size(int width, int height, int channels);
+
+/* Reorders img's channel names only (order as mcp_image_colour_order gives it), for a
+ * reader that has made the image but not yet placed its pixels by name (image.c). */
+int mcp__image_permute_names(mcp_image *img, const int *order);
+
+/* Fault injection, for tests only (alloc.c): allocation number n (0-based) through
+ * mcp_malloc, mcp_calloc, mcp_realloc and mcp_strdup from now on fails as if memory
+ * were out, the others succeed; n < 0 turns it off. mcp__alloc_count() is how many
+ * allocations were counted since (a run that finishes with count <= n met no
+ * failure). */
+void mcp__alloc_fail_after(long n);
+long mcp__alloc_count(void);
+
+/* Window sums over 3 channels (stats.c): a summed-area table of (width + 1) x
+ * (height + 1) x 3 doubles (malloc'd), and the sum over the (2r + 1)² window around
+ * (x, y) clipped at the borders, with its pixel count. */
+double *mcp__window_table(const mcp_image *img);
+void mcp__window_sum(const double *table, int w, int h, int x, int y, int r,
+                     double out[3], int *count);
+
+/* The values of ranks[0..k) (0-based, each < n) among v[0..n), as a sort would place
+ * them, without sorting (select.c: a two-pass radix select). v must hold no NaN. */
+int mcp__select_ranks(const float *v, size_t n, const size_t *ranks, int k, float *out);
+/* out[j] = the nearest-rank p[j]-percentile of v[0..n) (the value of rank
+ * ceil(p n) - 1, clamped), by selection. */
+int mcp__select_percentiles(const float *v, size_t n, const double *p, int k,
+                            double *out);
+/* One channel of an image by selection: out[0] its smallest value, out[1] the value of
+ * rank p (n - 1) (rounded down; p = 0.99: the top of a false-colour scale that a few
+ * outliers would otherwise set), out[2] its largest. No NaN. */
+int mcp__image_channel_spread(const mcp_image *img, int channel, double p, float out[3]);
+
+/* Progress (progress.c). mcp__progress_stop ends a bar where it got, without the 100%
+ * of mcp_progress_end: for a run that failed. Safe on a bar never begun (zeroed) or
+ * already ended. mcp__progress_set_output points the bars and notes at a stream, with
+ * tty saying whether to draw them as on a terminal (tests); NULL: stderr again. */
+void mcp__progress_stop(mcp_progress *p);
+/* A bar for one image's work (a read, a write, a metric): drawn on a terminal only,
+ * silent in a log, where the lines of series and frames are enough. */
+void mcp__progress_begin_on_terminal(mcp_progress *p, const char *label, long total);
+/* The bar starts again at 0 under a new label, on the same line: a round of work
+ * whose rounds are not known beforehand ("vertical-iterative, pass 3"). */
+void mcp__progress_restart(mcp_progress *p, const char *label);
+void mcp__progress_set_output(FILE *stream, int tty);
+
+/* Where mcpost's own files are (paths.c): the folder of the file that holds this code
+ * (the shared library, or the executable it is linked into; -1 when unknown), and a
+ * data file of share/mcpost/ found relative to it, else in the build tree, else in the
+ * configured install folder (-1 and buf "" when none has it). */
+int mcp__code_dir(char *buf, size_t cap);
+int mcp__find_data_file(const char *name, char *buf, size_t cap);
+/* dlopens the plug-in `file` (mcpost_oiio.so, mcpost_cv.so) from $MCPOST_PLUGIN_DIR,
+ * beside the library (<libdir>/mcpost/), the build tree or the install folder, in that
+ * order; NULL with the reason in err when none loads. */
+void *mcp__plugin_open(const char *file, char *err, size_t cap);
+
+/* Runs a command line with /bin/sh as system() does, with mcpost's programs folder
+ * (the one holding the mcpost executable: beside the code, its bin/, the build tree or
+ * the install folder) at the end of the child's PATH, so that mcpost-procedural and
+ * friends are found by name while the user's PATH still wins (shell.c). Returns
+ * system()'s status. */
+int mcp__shell(const char *command);
+/* When status (from mcp__shell) is not a clean exit 0, sets the error "WHAT 'COMMAND'
+ * ..." -- could not start, killed by signal N, not found (exit 127, with where it was
+ * looked for), or failed with its exit status -- and returns -1. */
+int mcp__shell_check(int status, const char *what, const char *command);
+/* A command line from a template (an adaptive loop's render:, an external denoiser's
+ * command): each names[i] ("{output}") in tmpl becomes values[i], single-quoted for
+ * /bin/sh when bit i of quoted is set (paths); other text is kept. *out is malloc'd. */
+int mcp__shell_fill(const char *tmpl, int n, const char *const *names,
+                    const char *const *values, unsigned quoted, char **out);
+
+/* Growing strings (strbuf.c): a NUL-terminated text s[0..len) in cap bytes, zeroed to
+ * start ({0}). A failed allocation sets failed, and every later call then does nothing
+ * and returns -1 (NULL), so a builder checks once at the end. reserve makes room for
+ * extra more bytes and the NUL and returns where they go (the caller writes them,
+ * adds to len and terminates); take hands over s (an empty string when nothing was
+ * added; NULL after a failure, the buffer freed) and leaves the buffer zeroed;
+ * read_file appends the rest of f (-1 on a read error, what was read kept). */
+#include <stdarg.h>
+#include <stdio.h>
+#include <mcpost/error.h>
+typedef struct mcp__strbuf {
+    char *s;
+    size_t len, cap;
+    int failed;
+} mcp__strbuf;
+char *mcp__strbuf_reserve(mcp__strbuf *b, size_t extra);
+int mcp__strbuf_put(mcp__strbuf *b, const char *s, size_t n);
+int mcp__strbuf_str(mcp__strbuf *b, const char *s);
+int mcp__strbuf_printf(mcp__strbuf *b, const char *fmt, ...) MCP_PRINTF(2, 3);
+int mcp__strbuf_vprintf(mcp__strbuf *b, const char *fmt, va_list ap);
+char *mcp__strbuf_take(mcp__strbuf *b);
+void mcp__strbuf_free(mcp__strbuf *b);
+int mcp__strbuf_read_file(mcp__strbuf *b, FILE *f);
+#endif

@@ -1,0 +1,81 @@
+/* internal.h: the helpers of common/io/ -- the format back ends behind imageio.h,
+ * output folders that appear whole -- that the library's other files and the tests
+ * call (hidden visibility; not installed). */
+#ifndef MCP_IO_INTERNAL_H
+#define MCP_IO_INTERNAL_H
+
+#include <stddef.h>
+
+#include <cjson/cJSON.h>
+#include <mcpost/imageio.h>
+
+/* Output folders that appear whole (outdir.c; docs/conventions.md, "Output folders"):
+ * begin makes the hidden temporary folder o->tmp beside dir (first removing what killed
+ * runs left there) and refuses a dir that exists and is neither empty nor an mcpost
+ * output; the command writes into o->tmp; commit renames it onto dir (swapping with an
+ * old one, then removing that); abort removes it (safe after commit, and twice).
+ * fix_paths rewrites strings that start with o->tmp to start with dir. */
+typedef struct mcp__outdir {
+    char final[4096], tmp[4200];
+    int active;
+} mcp__outdir;
+int mcp__outdir_begin(mcp__outdir *o, const char *dir);
+/* The same for a dir that is mcpost's by its place, whatever it holds (a frame's folder
+ * in a shot's output, beside frames.json: an unfinished one of an older version, or one
+ * whose report.json was removed to run it again): it is replaced, never refused. */
+int mcp__outdir_begin_owned(mcp__outdir *o, const char *dir);
+/* -1 with "INPUT: is inside the output folder DIR, which this run replaces whole" when
+ * the file input (or the folder of a pattern that names no file) lies in o->final (an
+ * earlier output): the commit would remove it. */
+int mcp__outdir_check_input(const mcp__outdir *o, const char *input);
+/* The same for each of inputs[0..n) that is not NULL; the first inside fails. */
+int mcp__outdir_check_inputs(const mcp__outdir *o, const char *const *inputs, int n);
+/* Removes parent/.BASE.tmp-PID and .BASE.old-PID whose process is gone (what a SIGKILL
+ * left; begin does it for its own dir), saying so for each. */
+void mcp__outdir_clear_stale(const char *parent, const char *base);
+int mcp__outdir_commit(mcp__outdir *o);
+void mcp__outdir_abort(mcp__outdir *o);
+int mcp__outdir_fix_paths(const mcp__outdir *o, cJSON *json);
+/* A function the handler of SIGINT, SIGTERM and SIGHUP calls after removing the
+ * temporary files in flight (imageio.c); it must be async-signal-safe. */
+void mcp__signal_cleanup_hook(void (*hook)(void));
+
+/* Format back ends behind mcp_image_read / mcp_image_write (imageio.c). The writers
+ * write exactly `path` (imageio.c passes a temporary name and renames). */
+/* 0 when path exists and is no folder; else -1 and "PATH: cannot open: ..." or "PATH: is
+ * a directory, not an image" (imageio.c) */
+int mcp__check_readable(const char *path);
+int mcp__exr_read(const char *path, mcp_image **out);
+/* 1 when the first bytes (size of them) are OpenEXR's magic number. */
+int mcp__exr_magic(const void *data, size_t size);
+/* The same from a buffer (name labels it in messages); the dump loader uses it too. */
+int mcp__exr_read_memory(const void *data, size_t size, const char *name,
+                         mcp_image **out);
+int mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *opt);
+/* Reading an EXR's channels straight to where a caller wants them (the dump loader: no
+ * whole image to copy the parts out of). Once the header is read and checked, the
+ * router gets it as `header` (the channel names in the file's order, the attributes
+ * and the source, with 1x1 pixels that are not read) and the data window's size, and
+ * fills routes[c] for each channel c it wants: the value at pixel (x, y) goes to
+ * base[y * row_stride + x * pixel_stride] (in floats); a channel left with base NULL
+ * is skipped. It returns 0, or -1 with the error set, which the read returns. */
+typedef struct mcp__exr_route {
+    float *base;
+    ptrdiff_t pixel_stride, row_stride;
+} mcp__exr_route;
+typedef int (*mcp__exr_router)(const mcp_image *header, int width, int height, void *ctx,
+                               mcp__exr_route *routes);
+int mcp__exr_read_routed(const char *path, mcp__exr_router router, void *ctx);
+int mcp__exr_read_memory_routed(const void *data, size_t size, const char *name,
+                                mcp__exr_router router, void *ctx);
+int mcp__pfm_read(const char *path, mcp_image **out);
+int mcp__pfm_read_memory(const void *data, size_t size, const char *name,
+                         mcp_image **out);
+int mcp__pfm_write(const mcp_image *img, const char *path);
+int mcp__png_read(const char *path, const mcp_read_options *opt, mcp_image **out);
+int mcp__png_write(const mcp_image *img, const char *path, const mcp_write_options *opt);
+/* 8-bit samples, c = 1, 3 or 4 channels interleaved, written as they are */
+int mcp__png_write_bytes(const unsigned char *bytes, int w, int h, int c,
+                         const char *path);
+
+#endif
