@@ -183,8 +183,8 @@ void mcp__unet_gemm_run(const mcp__unet_gemm *g, const float *packed, int m, int
                         const float *b, size_t ldb, int n, float *c, size_t ldc);
 
 /* OIDN's PU transfer function (normalised: x = PU(y)/PU(65504)) and its inverse. */
-/* The tangents' products in bfloat16 (unet_gemm.c): whether they were asked for
- * (MCPOST_UNET_BF16=1) and the CPU has AVX512-BF16; B as pairs of rows rounded to bf16
+/* The tangents' products in bfloat16 (unet_gemm.c): whether the CPU has AVX512-BF16
+ * and they were not turned off (MCPOST_UNET_BF16=0); B as pairs of rows rounded to bf16
  * (out[p][j] = row 2p | row 2p + 1 << 16, a zero row past kn); A packed in blocks of
  * MCP__UNET_BF16_MR rows; C = A B for n a multiple of MCP__UNET_BF16_NR columns. */
 #define MCP__UNET_BF16_MR 8

@@ -30,10 +30,15 @@
 #include <omp.h>
 #endif
 
-/* The transforms are additions only, so wider vectors give the same bits: AVX2
- * where the CPU has it (picked at load time). */
+/* The transforms are additions and scalings only, so wider vectors give the same
+ * bits: AVX-512 or AVX2 where the CPU has it (picked at load time), provided no
+ * multiply-add is contracted into an FMA (gcc's default in ISO C; clang's is to
+ * contract, and AVX-512F has FMA). */
+#ifdef __clang__
+#pragma clang fp contract(off)
+#endif
 #if defined(__GNUC__) && defined(__x86_64__)
-#define TRANSFORM_KERNEL __attribute__((target_clones("avx2", "default")))
+#define TRANSFORM_KERNEL __attribute__((target_clones("avx512f", "avx2", "default")))
 #else
 #define TRANSFORM_KERNEL
 #endif
@@ -391,14 +396,14 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
     n_threads = omp_get_max_threads();
 #endif
     /* bf16 products run in the AVX-512 float kernel's blocks (every AVX512-BF16 CPU has
-       that kernel), on the weights and one element's V as pairs of rows, kp of them */
+       that kernel), on the weights and V's channels as pairs of rows, kp of them */
     bf16 = bf16 && g.mr == MCP__UNET_BF16_MR && g.nr == MCP__UNET_BF16_NR;
     const int kp = (cin + 1) / 2;
     /* per thread: V (cin x elems x ld), M (mp x elems x ld), rows for the transforms,
-       and with bf16 one element's V in pairs (kp x ld) */
+       and with bf16 V in pairs of channels (kp x elems x ld) */
     const size_t per_thread = elems * ld_max * ((size_t)cin + mp) +
                               (size_t)k_->row_floats * ((size_t)chunk + 1) +
-                              (bf16 ? (size_t)kp * ld_max : 0);
+                              (bf16 ? (size_t)kp * elems * ld_max : 0);
     float *u = mcp_malloc(elems * plane * sizeof(float)), *packed = NULL;
     uint32_t *packed_bf16 = NULL;
     if (u && bf16)
@@ -470,13 +475,20 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
                     for (int e = 0; e < elems; e++)
                         memset(v + e * se + (size_t)i * sc + nt, 0,
                                (size_t)(ld - nt) * sizeof(float));
+                    /* bf16: a pair of channels' blocks into one block of pairs while
+                     * they are in the cache, [p][e][j] as V's [i][e][j] */
+                    if (bf16 && (i % 2 == 1 || i == cin - 1)) {
+                        const int i0 = i & ~1;
+                        mcp__unet_bf16_pairs(v + (size_t)i0 * sc, sc, i - i0 + 1, (int)sc,
+                                             pairs + (size_t)(i0 / 2) * sc, sc);
+                    }
                 }
                 for (int e = 0; e < elems; e++)
-                    if (bf16) {
-                        mcp__unet_bf16_pairs(v + e * se, sc, cin, ld, pairs, ld);
+                    if (bf16)
                         mcp__unet_gemm_bf16_run(packed_bf16 + (size_t)e * mp * kp, cout,
-                                                cin, pairs, ld, ld, m + e * se, sc);
-                    } else
+                                                cin, pairs + e * se, sc, ld, m + e * se,
+                                                sc);
+                    else
                         mcp__unet_gemm_run(&g, packed + (size_t)e * mp * cin, cout, cin,
                                            v + e * se, sc, ld, m + e * se, sc);
                 for (int o = 0; o < cout; o++) {

@@ -36,8 +36,13 @@
 #include <omp.h>
 #endif
 
+/* Each clone must give the same bits: no multiply-add contracted into an FMA (gcc's
+ * default in ISO C; clang's is to contract, and AVX-512F has FMA) */
+#ifdef __clang__
+#pragma clang fp contract(off)
+#endif
 #if defined(__GNUC__) && defined(__x86_64__)
-#define TRANSFORM_KERNEL __attribute__((target_clones("avx2", "default")))
+#define TRANSFORM_KERNEL __attribute__((target_clones("avx512f", "avx2", "default")))
 #else
 #define TRANSFORM_KERNEL
 #endif

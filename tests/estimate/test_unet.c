@@ -601,8 +601,12 @@ check_jvp(int ic, int w, int h, double scale)
               *tn = mcp_test_random(w, h, 3, -0.5f, 0.5f, 7, NULL);
     mcp_denoise_tangent t[2] = {{tc, NULL, NULL}, {tc, ta, tn}};
     mcp_image *prim = NULL, *jt[2] = {NULL, NULL};
+    /* the float tangents (bf16's bound is check_kernels') */
+    char *saved_bf16 = env_save("MCPOST_UNET_BF16");
+    setenv("MCPOST_UNET_BF16", "0", 1);
     assert_int_equal(mcp__unet_run(net, in.col, in.alb, in.nrm, scale, t, 2, &prim, jt),
                      0);
+    env_restore("MCPOST_UNET_BF16", saved_bf16);
     /* the primal of the JVP pass is the forward pass, bit for bit */
     mcp_image *fwd = NULL;
     assert_int_equal(mcp__unet_forward(net, in.col, in.alb, in.nrm, scale, &fwd), 0);
@@ -1215,9 +1219,12 @@ test_real_weights_jvp(void **state)
     mcp_denoise_input at = {col, alb, nrm, var};
     mcp_denoise_tangent t = {probe, NULL, NULL};
     mcp_image *jt = NULL;
+    char *saved_bf16 = env_save("MCPOST_UNET_BF16"); /* the float tangents */
+    setenv("MCPOST_UNET_BF16", "0", 1);
     double t0 = now_s();
     assert_int_equal(d->jvp(d, &at, &t, 1, NULL, &jt), 0);
     double secs = now_s() - t0;
+    env_restore("MCPOST_UNET_BF16", saved_bf16);
     /* the exposure is the primal's, held constant (unet_internal.h) */
     const double scale = mcp__unet_autoexposure(col, 0), step = 1e-6;
     double *fp = ref_forward_along(&n, col, alb, nrm, scale, &t, step),
@@ -1264,7 +1271,10 @@ check_kernels(const mcp__unet *net, const rnet *n, const mcp_image *col,
     for (size_t i = 0; i < (size_t)3 * w * h; i++)
         fp[i] = (fp[i] - fm[i]) / (2 * step);
     char *saved_kernel = env_save("MCPOST_UNET_KERNEL"),
-         *saved_fixed = env_save("MCPOST_UNET_FIXED");
+         *saved_fixed = env_save("MCPOST_UNET_FIXED"),
+         *saved_bf16 = env_save("MCPOST_UNET_BF16");
+    /* the float tangents first (bf16, the default where the CPU has it, below) */
+    setenv("MCPOST_UNET_BF16", "0", 1);
     setenv("MCPOST_UNET_FIXED", "1", 1);
     mcp_image *fixed = NULL, *fixed_jt = NULL;
     assert_int_equal(mcp__unet_run(net, col, alb, nrm, scale, t, 1, &fixed, &fixed_jt),
@@ -1308,9 +1318,10 @@ check_kernels(const mcp__unet *net, const rnet *n, const mcp_image *col,
         }
         unsetenv("MCPOST_UNET_EXACT_TANGENTS");
         assert_true(rel_l2(jt_mode[0], jt_mode[1]) > 0.0);
-        /* the opt-in bfloat16 tangents (MCPOST_UNET_BF16=1, on AVX512-BF16 CPUs, with
-           the AVX-512 kernel): the primal's bits unchanged, the JVP within the stated
-           10% (docs/denoisers.md), and not the float path's bits (it did run) */
+        /* the bfloat16 tangents (the default on AVX512-BF16 CPUs, with the AVX-512
+           kernel; MCPOST_UNET_BF16=0 turns them off): the primal's bits unchanged, the
+           JVP within the stated 10% (docs/denoisers.md), and not the float path's bits
+           (it did run) */
         setenv("MCPOST_UNET_BF16", "1", 1);
         if (!strcmp(names[i], "avx512") && mcp__unet_gemm_bf16_has()) {
             mcp_image *out = NULL, *jt = NULL, *out_float = NULL, *jt_float = NULL;
@@ -1328,7 +1339,7 @@ check_kernels(const mcp__unet *net, const rnet *n, const mcp_image *col,
             mcp_image_free(out), mcp_image_free(jt);
             mcp_image_free(out_float), mcp_image_free(jt_float);
         }
-        unsetenv("MCPOST_UNET_BF16");
+        setenv("MCPOST_UNET_BF16", "0", 1);
         mcp_image_free(jt_mode[0]), mcp_image_free(jt_mode[1]);
         tried++;
     }
@@ -1337,6 +1348,7 @@ check_kernels(const mcp__unet *net, const rnet *n, const mcp_image *col,
                   rel_err(fixed, ref), rel_err(fixed_jt, fp));
     env_restore("MCPOST_UNET_KERNEL", saved_kernel);
     env_restore("MCPOST_UNET_FIXED", saved_fixed);
+    env_restore("MCPOST_UNET_BF16", saved_bf16);
     mcp_image_free(fixed), mcp_image_free(fixed_jt);
     free(ref), free(fp), free(fm);
 }
