@@ -1,12 +1,11 @@
-/* progress.c: progress bars and plain progress lines on stderr (see progress.h).
+/* progress.c: progress bars on stderr (see progress.h).
  *
  * Bars nest: work that shows a bar (a job's stage, a series, the frames) may call work
  * that shows its own (a U-Net apply, an EXR read). The bars begun and not yet ended
  * form a stack; only the outermost owns a line. On a terminal an inner bar is drawn as
  * a sub-count at the end of the outer one's line ("estimate [###...] 40% | U-Net 23%"),
- * and when it ends the line is the outer bar's again; in a log an inner bar prints
- * nothing, so that the log holds the outer bar's quarter lines only (docs/conventions.md,
- * "Progress"). */
+ * and when it ends the line is the outer bar's again. A log (stderr not a terminal)
+ * gets no progress at all, only the notes (docs/conventions.md, "Progress"). */
 #define _POSIX_C_SOURCE 200809L
 #include <mcpost/progress.h>
 
@@ -117,20 +116,15 @@ end_line(void)
     line_open = 0;
 }
 
-/* Shows bar k of the stack at its new percent: a terminal redraws its line, a log
- * prints a line for the outermost bar only. */
+/* Shows bar k of the stack at its new percent: a terminal redraws its line; a log
+ * stays silent. */
 static void
 show(mcp_progress *p, int k, int percent)
 {
     active[k].percent = percent;
     p->last_shown = percent;
     if (quiet) return;
-    if (p->tty) {
-        draw_line();
-    } else if (k == 0) {
-        fprintf(stream(), "%s: %d%%\n", p->label, percent);
-        fflush(stream());
-    }
+    if (p->tty) draw_line();
 }
 
 static void
@@ -186,10 +180,7 @@ mcp_progress_update(mcp_progress *p, long done)
     int k = find(p);
     if (k < 0) return;
     int percent = (int)(100 * (done < p->total ? done : p->total) / p->total);
-    /* a terminal redraws each percent; a log gets a line per quarter */
-    int step = p->tty ? 1 : 25;
-    if (percent / step > p->last_shown / step || (p->last_shown < 0 && percent >= step))
-        show(p, k, percent);
+    if (percent > p->last_shown) show(p, k, percent); /* a redraw per percent */
 }
 
 /* Takes bar k and every bar above it off the stack; the outermost ends its terminal

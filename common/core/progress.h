@@ -1,5 +1,5 @@
-/* progress.h: progress of long-running work on stderr -- a bar on a terminal, a few
- * plain lines otherwise, nothing when quiet. Call from one thread (the caller of a
+/* progress.h: progress of long-running work on stderr -- a bar on a terminal; nothing
+ * in a log (stderr not a terminal) or when quiet. Call from one thread (the caller of a
  * parallel loop), e.g. once per finished row block. */
 #ifndef MCP_PROGRESS_H
 #define MCP_PROGRESS_H
