@@ -104,6 +104,7 @@ typedef struct mcp__strbuf {
 char *mcp__strbuf_reserve(mcp__strbuf *b, size_t extra);
 int mcp__strbuf_put(mcp__strbuf *b, const char *s, size_t n);
 int mcp__strbuf_str(mcp__strbuf *b, const char *s);
+int mcp__strbuf_markup_text(mcp__strbuf *b, const char *t); /* & < > " escaped */
 int mcp__strbuf_printf(mcp__strbuf *b, const char *fmt, ...) MCP_PRINTF(2, 3);
 int mcp__strbuf_vprintf(mcp__strbuf *b, const char *fmt, va_list ap);
 char *mcp__strbuf_take(mcp__strbuf *b);

@@ -49,6 +49,21 @@ mcp__strbuf_str(mcp__strbuf *b, const char *s)
     return mcp__strbuf_put(b, s, strlen(s));
 }
 
+/* Text for XML and HTML: & < > " as entities (the SVG plots and the report page). */
+int
+mcp__strbuf_markup_text(mcp__strbuf *b, const char *t)
+{
+    for (; t && *t; t++) {
+        const char *entity = *t == '&'   ? "&amp;"
+                             : *t == '<' ? "&lt;"
+                             : *t == '>' ? "&gt;"
+                             : *t == '"' ? "&quot;"
+                                         : NULL;
+        if (entity ? mcp__strbuf_str(b, entity) : mcp__strbuf_put(b, t, 1)) return -1;
+    }
+    return 0;
+}
+
 int
 mcp__strbuf_vprintf(mcp__strbuf *b, const char *fmt, va_list ap)
 {

@@ -8,7 +8,6 @@
 #include "../core/internal.h"
 
 #include <math.h>
-#include <stdarg.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -75,39 +74,6 @@ mcp_logistic(double z)
 /* ---- a growing text buffer (core/strbuf.c; a failure sticks in b->failed) ---- */
 
 typedef mcp__strbuf sbuf;
-
-static void MCP_PRINTF(2, 3) sb_printf(sbuf *b, const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    mcp__strbuf_vprintf(b, fmt, ap);
-    va_end(ap);
-}
-
-/* XML-escaped text. */
-static void
-sb_text(sbuf *b, const char *t)
-{
-    for (; t && *t; t++) {
-        switch (*t) {
-        case '&':
-            sb_printf(b, "&amp;");
-            break;
-        case '<':
-            sb_printf(b, "&lt;");
-            break;
-        case '>':
-            sb_printf(b, "&gt;");
-            break;
-        case '"':
-            sb_printf(b, "&quot;");
-            break;
-        default:
-            sb_printf(b, "%c", *t);
-            break;
-        }
-    }
-}
 
 /* ---- axes ---- */
 
@@ -315,63 +281,68 @@ mcp_plot_svg(const mcp_plot *p, char **svg)
     set_range(&ax, xlo, xhi);
 
     sbuf b = {0};
-    sb_printf(
+    mcp__strbuf_printf(
         &b,
         "<svg xmlns=\"http://www.w3.org/2000/svg\" viewBox=\"0 0 %d %d\" width=\"%d\" "
         "height=\"%d\" font-family=\"Helvetica, Arial, sans-serif\" font-size=\"12\">\n",
         W, H, W, H);
-    sb_printf(&b, "<title>");
-    sb_text(&b, title);
-    sb_printf(&b, "</title>\n<rect width=\"%d\" height=\"%d\" fill=\"white\"/>\n", W, H);
+    mcp__strbuf_printf(&b, "<title>");
+    mcp__strbuf_markup_text(&b, title);
+    mcp__strbuf_printf(
+        &b, "</title>\n<rect width=\"%d\" height=\"%d\" fill=\"white\"/>\n", W, H);
     if (p->title) {
-        sb_printf(&b,
-                  "<text x=\"%.1f\" y=\"20\" text-anchor=\"middle\" font-size=\"14\" "
-                  "font-weight=\"bold\">",
-                  (left + W - right) / 2);
-        sb_text(&b, p->title);
-        sb_printf(&b, "</text>\n");
+        mcp__strbuf_printf(
+            &b,
+            "<text x=\"%.1f\" y=\"20\" text-anchor=\"middle\" font-size=\"14\" "
+            "font-weight=\"bold\">",
+            (left + W - right) / 2);
+        mcp__strbuf_markup_text(&b, p->title);
+        mcp__strbuf_printf(&b, "</text>\n");
     }
     /* Grid and tick labels. */
     nt = ticks(&ax, t);
     for (int i = 0; i < nt; i++) {
         double x = to_px(&ax, t[i].value);
-        sb_printf(
+        mcp__strbuf_printf(
             &b, "<line x1=\"%.2f\" y1=\"%.2f\" x2=\"%.2f\" y2=\"%.2f\" stroke=\"%s\"/>\n",
             x, ay.a1, x, ay.a0, t[i].major ? "#d0d0d0" : "#eeeeee");
         if (!t[i].major) continue;
         tick_label(&ax, t[i].value, label, sizeof label);
-        sb_printf(&b, "<text x=\"%.2f\" y=\"%.2f\" text-anchor=\"middle\">%s</text>\n", x,
-                  ay.a0 + 16, label);
+        mcp__strbuf_printf(
+            &b, "<text x=\"%.2f\" y=\"%.2f\" text-anchor=\"middle\">%s</text>\n", x,
+            ay.a0 + 16, label);
     }
     nt = ticks(&ay, t);
     for (int i = 0; i < nt; i++) {
         double y = to_px(&ay, t[i].value);
-        sb_printf(
+        mcp__strbuf_printf(
             &b, "<line x1=\"%.2f\" y1=\"%.2f\" x2=\"%.2f\" y2=\"%.2f\" stroke=\"%s\"/>\n",
             ax.a0, y, ax.a1, y, t[i].major ? "#d0d0d0" : "#eeeeee");
         if (!t[i].major) continue;
         tick_label(&ay, t[i].value, label, sizeof label);
-        sb_printf(&b, "<text x=\"%.2f\" y=\"%.2f\" text-anchor=\"end\">%s</text>\n",
-                  ax.a0 - 6, y + 4, label);
+        mcp__strbuf_printf(&b,
+                           "<text x=\"%.2f\" y=\"%.2f\" text-anchor=\"end\">%s</text>\n",
+                           ax.a0 - 6, y + 4, label);
     }
-    sb_printf(&b,
-              "<rect x=\"%.2f\" y=\"%.2f\" width=\"%.2f\" height=\"%.2f\" fill=\"none\" "
-              "stroke=\"#333\"/>\n",
-              ax.a0, ay.a1, ax.a1 - ax.a0, ay.a0 - ay.a1);
+    mcp__strbuf_printf(
+        &b,
+        "<rect x=\"%.2f\" y=\"%.2f\" width=\"%.2f\" height=\"%.2f\" fill=\"none\" "
+        "stroke=\"#333\"/>\n",
+        ax.a0, ay.a1, ax.a1 - ax.a0, ay.a0 - ay.a1);
     /* Axis labels. */
     if (p->x_label) {
-        sb_printf(&b, "<text x=\"%.2f\" y=\"%d\" text-anchor=\"middle\">",
-                  (ax.a0 + ax.a1) / 2, H - 10);
-        sb_text(&b, p->x_label);
-        sb_printf(&b, "</text>\n");
+        mcp__strbuf_printf(&b, "<text x=\"%.2f\" y=\"%d\" text-anchor=\"middle\">",
+                           (ax.a0 + ax.a1) / 2, H - 10);
+        mcp__strbuf_markup_text(&b, p->x_label);
+        mcp__strbuf_printf(&b, "</text>\n");
     }
     if (p->y_label) {
-        sb_printf(&b,
-                  "<text transform=\"translate(16 %.2f) rotate(-90)\" "
-                  "text-anchor=\"middle\">",
-                  (ay.a0 + ay.a1) / 2);
-        sb_text(&b, p->y_label);
-        sb_printf(&b, "</text>\n");
+        mcp__strbuf_printf(&b,
+                           "<text transform=\"translate(16 %.2f) rotate(-90)\" "
+                           "text-anchor=\"middle\">",
+                           (ay.a0 + ay.a1) / 2);
+        mcp__strbuf_markup_text(&b, p->y_label);
+        mcp__strbuf_printf(&b, "</text>\n");
     }
     /* Series, clipped to the frame. Several plots share one HTML page and so one id
      * namespace: name the clip path by a hash of its geometry (plots with equal
@@ -385,56 +356,57 @@ mcp_plot_svg(const mcp_plot *p, char **svg)
             hsh = (hsh ^ g[i]) * 1099511628211ull;
         snprintf(clip_id, sizeof clip_id, "mcpclip%016llx", (unsigned long long)hsh);
     }
-    sb_printf(&b,
-              "<clipPath id=\"%s\"><rect x=\"%.2f\" y=\"%.2f\" width=\"%.2f\" "
-              "height=\"%.2f\"/></clipPath>\n<g clip-path=\"url(#%s)\">\n",
-              clip_id, ax.a0, ay.a1, ax.a1 - ax.a0, ay.a0 - ay.a1, clip_id);
+    mcp__strbuf_printf(&b,
+                       "<clipPath id=\"%s\"><rect x=\"%.2f\" y=\"%.2f\" width=\"%.2f\" "
+                       "height=\"%.2f\"/></clipPath>\n<g clip-path=\"url(#%s)\">\n",
+                       clip_id, ax.a0, ay.a1, ax.a1 - ax.a0, ay.a0 - ay.a1, clip_id);
     for (int s = 0; s < p->n_series; s++) {
         const mcp_plot_series *ps = &p->series[s];
         const char *colour = palette[s % 10];
         if (ps->style == MCP_SERIES_BARS) {
             double half = 0.5 * bar_width(ps);
             double foot = p->y_scale == MCP_AXIS_LINEAR ? to_px(&ay, 0.0) : ay.a0;
-            sb_printf(&b,
-                      "<g fill=\"%s\" fill-opacity=\"0.45\" stroke=\"%s\" "
-                      "stroke-width=\"0.6\">\n",
-                      colour, colour);
+            mcp__strbuf_printf(&b,
+                               "<g fill=\"%s\" fill-opacity=\"0.45\" stroke=\"%s\" "
+                               "stroke-width=\"0.6\">\n",
+                               colour, colour);
             for (int i = 0; i < ps->n; i++) {
                 if (!valid(p->x_scale, ps->x[i]) || !valid(p->y_scale, ps->y[i]) ||
                     (p->y_scale == MCP_AXIS_LINEAR && ps->y[i] == 0))
                     continue;
                 double x0 = to_px(&ax, ps->x[i] - half), x1 = to_px(&ax, ps->x[i] + half);
                 double y = to_px(&ay, ps->y[i]);
-                sb_printf(
+                mcp__strbuf_printf(
                     &b, "<rect x=\"%.2f\" y=\"%.2f\" width=\"%.2f\" height=\"%.2f\"/>\n",
                     x0, y < foot ? y : foot, x1 - x0, fabs(foot - y));
             }
-            sb_printf(&b, "</g>\n");
+            mcp__strbuf_printf(&b, "</g>\n");
             continue;
         }
         if (ps->style != MCP_SERIES_SCATTER) {
-            sb_printf(&b, "<path fill=\"none\" stroke=\"%s\" stroke-width=\"1.8\"%s d=\"",
-                      colour, ps->dashed ? " stroke-dasharray=\"6 4\"" : "");
+            mcp__strbuf_printf(
+                &b, "<path fill=\"none\" stroke=\"%s\" stroke-width=\"1.8\"%s d=\"",
+                colour, ps->dashed ? " stroke-dasharray=\"6 4\"" : "");
             int pen = 0;
             for (int i = 0; i < ps->n; i++) {
                 if (!valid(p->x_scale, ps->x[i]) || !valid(p->y_scale, ps->y[i])) {
                     pen = 0;
                     continue;
                 }
-                sb_printf(&b, "%c%.2f %.2f ", pen ? 'L' : 'M', to_px(&ax, ps->x[i]),
-                          to_px(&ay, ps->y[i]));
+                mcp__strbuf_printf(&b, "%c%.2f %.2f ", pen ? 'L' : 'M',
+                                   to_px(&ax, ps->x[i]), to_px(&ay, ps->y[i]));
                 pen = 1;
             }
-            sb_printf(&b, "\"/>\n");
+            mcp__strbuf_printf(&b, "\"/>\n");
         }
         if (ps->style != MCP_SERIES_LINE)
             for (int i = 0; i < ps->n; i++)
                 if (valid(p->x_scale, ps->x[i]) && valid(p->y_scale, ps->y[i]))
-                    sb_printf(&b,
-                              "<circle cx=\"%.2f\" cy=\"%.2f\" r=\"3\" fill=\"%s\"/>\n",
-                              to_px(&ax, ps->x[i]), to_px(&ay, ps->y[i]), colour);
+                    mcp__strbuf_printf(
+                        &b, "<circle cx=\"%.2f\" cy=\"%.2f\" r=\"3\" fill=\"%s\"/>\n",
+                        to_px(&ax, ps->x[i]), to_px(&ay, ps->y[i]), colour);
     }
-    sb_printf(&b, "</g>\n");
+    mcp__strbuf_printf(&b, "</g>\n");
     /* Legend, inside the frame. */
     int named = 0;
     size_t longest = 0;
@@ -479,7 +451,7 @@ mcp_plot_svg(const mcp_plot *p, char **svg)
         for (int c = 1; c < 4; c++)
             if (hidden[c] < hidden[best]) best = c;
         double lx = cx[best], ly = cy[best];
-        sb_printf(
+        mcp__strbuf_printf(
             &b,
             "<rect x=\"%.2f\" y=\"%.2f\" width=\"%.2f\" height=\"%.0f\" fill=\"white\" "
             "fill-opacity=\"0.85\" stroke=\"#bbb\"/>\n",
@@ -491,25 +463,28 @@ mcp_plot_svg(const mcp_plot *p, char **svg)
             double y = ly + 14 + 16 * row++;
             const char *colour = palette[s % 10];
             if (ps->style == MCP_SERIES_BARS)
-                sb_printf(&b,
-                          "<rect x=\"%.2f\" y=\"%.2f\" width=\"12\" height=\"9\" "
-                          "fill=\"%s\" fill-opacity=\"0.45\" stroke=\"%s\"/>\n",
-                          lx + 10, y - 9, colour, colour);
+                mcp__strbuf_printf(
+                    &b,
+                    "<rect x=\"%.2f\" y=\"%.2f\" width=\"12\" height=\"9\" "
+                    "fill=\"%s\" fill-opacity=\"0.45\" stroke=\"%s\"/>\n",
+                    lx + 10, y - 9, colour, colour);
             else if (ps->style != MCP_SERIES_SCATTER)
-                sb_printf(&b,
-                          "<line x1=\"%.2f\" y1=\"%.2f\" x2=\"%.2f\" y2=\"%.2f\" "
-                          "stroke=\"%s\" stroke-width=\"1.8\"%s/>\n",
-                          lx + 6, y - 4, lx + 26, y - 4, colour,
-                          ps->dashed ? " stroke-dasharray=\"6 4\"" : "");
+                mcp__strbuf_printf(
+                    &b,
+                    "<line x1=\"%.2f\" y1=\"%.2f\" x2=\"%.2f\" y2=\"%.2f\" "
+                    "stroke=\"%s\" stroke-width=\"1.8\"%s/>\n",
+                    lx + 6, y - 4, lx + 26, y - 4, colour,
+                    ps->dashed ? " stroke-dasharray=\"6 4\"" : "");
             if (ps->style != MCP_SERIES_LINE && ps->style != MCP_SERIES_BARS)
-                sb_printf(&b, "<circle cx=\"%.2f\" cy=\"%.2f\" r=\"3\" fill=\"%s\"/>\n",
-                          lx + 16, y - 4, colour);
-            sb_printf(&b, "<text x=\"%.2f\" y=\"%.2f\">", lx + 32, y);
-            sb_text(&b, ps->name);
-            sb_printf(&b, "</text>\n");
+                mcp__strbuf_printf(
+                    &b, "<circle cx=\"%.2f\" cy=\"%.2f\" r=\"3\" fill=\"%s\"/>\n",
+                    lx + 16, y - 4, colour);
+            mcp__strbuf_printf(&b, "<text x=\"%.2f\" y=\"%.2f\">", lx + 32, y);
+            mcp__strbuf_markup_text(&b, ps->name);
+            mcp__strbuf_printf(&b, "</text>\n");
         }
     }
-    sb_printf(&b, "</svg>\n");
+    mcp__strbuf_printf(&b, "</svg>\n");
     if (b.failed) {
         free(b.s);
         return mcp_error("plot '%s': out of memory", title);

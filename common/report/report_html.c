@@ -18,7 +18,6 @@
 #include "../filter/internal.h"
 
 #include <math.h>
-#include <stdarg.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -61,39 +60,6 @@ sb_str(sbuf *b, const char *s)
     mcp__strbuf_str(b, s);
 }
 
-static void MCP_PRINTF(2, 3) sb_printf(sbuf *b, const char *fmt, ...)
-{
-    va_list ap;
-    va_start(ap, fmt);
-    mcp__strbuf_vprintf(b, fmt, ap);
-    va_end(ap);
-}
-
-/* HTML-escaped text. */
-static void
-sb_text(sbuf *b, const char *t)
-{
-    for (; t && *t; t++) {
-        switch (*t) {
-        case '&':
-            sb_str(b, "&amp;");
-            break;
-        case '<':
-            sb_str(b, "&lt;");
-            break;
-        case '>':
-            sb_str(b, "&gt;");
-            break;
-        case '"':
-            sb_str(b, "&quot;");
-            break;
-        default:
-            sb_put(b, t, 1);
-            break;
-        }
-    }
-}
-
 static void
 sb_base64(sbuf *b, const unsigned char *d, size_t n)
 {
@@ -126,9 +92,9 @@ static void
 sb_number(sbuf *b, double d)
 {
     if (d == floor(d) && fabs(d) < 1e15)
-        sb_printf(b, "%.0f", d);
+        mcp__strbuf_printf(b, "%.0f", d);
     else
-        sb_printf(b, "%.6g", d);
+        mcp__strbuf_printf(b, "%.6g", d);
 }
 
 static void
@@ -137,7 +103,7 @@ sb_scalar(sbuf *b, const cJSON *v)
     if (cJSON_IsNumber(v))
         sb_number(b, v->valuedouble);
     else if (cJSON_IsString(v))
-        sb_text(b, v->valuestring);
+        mcp__strbuf_markup_text(b, v->valuestring);
     else if (cJSON_IsBool(v))
         sb_str(b, cJSON_IsTrue(v) ? "yes" : "no");
     else
@@ -187,7 +153,7 @@ render_object_list(sbuf *b, const cJSON *a, int depth)
     cJSON_ArrayForEach(c, cols)
     {
         sb_str(b, "<th>");
-        sb_text(b, c->valuestring);
+        mcp__strbuf_markup_text(b, c->valuestring);
         sb_str(b, "</th>");
     }
     sb_str(b, "</tr>\n");
@@ -301,7 +267,7 @@ render_object(sbuf *b, const cJSON *o, int depth)
     {
         if (records && is_record(m)) continue;
         sb_str(b, "<tr><th>");
-        sb_text(b, m->string);
+        mcp__strbuf_markup_text(b, m->string);
         sb_str(b, cJSON_IsNumber(m) ? "</th><td class=\"num\">" : "</th><td>");
         render_value(b, m, depth + 1);
         sb_str(b, "</td></tr>");
@@ -316,7 +282,7 @@ render_value(sbuf *b, const cJSON *v, int depth)
     if (depth > MAX_DEPTH && !is_scalar(v)) {
         char *t = cJSON_PrintUnformatted(v);
         sb_str(b, "<code>");
-        sb_text(b, t ? t : "");
+        mcp__strbuf_markup_text(b, t ? t : "");
         sb_str(b, "</code>");
         free(t);
     } else if (cJSON_IsArray(v)) {
@@ -352,8 +318,8 @@ render_verdict(sbuf *b, const cJSON *section)
     const char *text = json_string(v, "text"), *level = json_string(v, "level");
     if (!text) return;
     if (!level || (strcmp(level, "good") && strcmp(level, "bad"))) level = "info";
-    sb_printf(b, "<p class=\"verdict %s\">", level);
-    sb_text(b, text);
+    mcp__strbuf_printf(b, "<p class=\"verdict %s\">", level);
+    mcp__strbuf_markup_text(b, text);
     sb_str(b, "</p>\n");
 }
 
@@ -368,7 +334,7 @@ render_figures(sbuf *b, const cJSON *section)
         if (!m->string || is_reserved(section, m->string)) continue;
         if (n++ == 0) sb_str(b, "<table class=\"figures\">\n");
         sb_str(b, "<tr><th>");
-        sb_text(b, m->string);
+        mcp__strbuf_markup_text(b, m->string);
         sb_str(b, cJSON_IsNumber(m) ? "</th><td class=\"num\">" : "</th><td>");
         render_value(b, m, 1);
         sb_str(b, "</td></tr>\n");
@@ -399,7 +365,7 @@ render_tables(sbuf *b, const cJSON *section)
         sb_str(b, "<div class=\"scroll\"><table class=\"data\">\n");
         if (title && *title) {
             sb_str(b, "<caption>");
-            sb_text(b, title);
+            mcp__strbuf_markup_text(b, title);
             sb_str(b, "</caption>\n");
         }
         sb_str(b, "<tr>");
@@ -418,9 +384,9 @@ render_tables(sbuf *b, const cJSON *section)
                 sb_str(b, cJSON_IsNumber(c) ? "<td class=\"num\">" : "<td>");
                 if (is_page_link(c)) { /* another report beside this one */
                     sb_str(b, "<a href=\"");
-                    sb_text(b, c->valuestring);
+                    mcp__strbuf_markup_text(b, c->valuestring);
                     sb_str(b, "\">");
-                    sb_text(b, c->valuestring);
+                    mcp__strbuf_markup_text(b, c->valuestring);
                     sb_str(b, "</a>");
                 } else {
                     render_value(b, c, 1);
@@ -598,11 +564,11 @@ static void
 bar_tick(sbuf *b, double t, double v, int decade)
 {
     const char *cls = t < 0.01 ? "first" : t > 0.99 ? "last" : "mid";
-    sb_printf(b, "<span class=\"%s\" style=\"left:%.2f%%\">", cls, 100 * t);
+    mcp__strbuf_printf(b, "<span class=\"%s\" style=\"left:%.2f%%\">", cls, 100 * t);
     if (decade && decade_exponent(v) != 0)
-        sb_printf(b, "10<sup>%d</sup></span>", decade_exponent(v));
+        mcp__strbuf_printf(b, "10<sup>%d</sup></span>", decade_exponent(v));
     else /* three digits: six ran into each other under a 256-pixel map ("10.7213") */
-        sb_printf(b, "%.3g</span>", v);
+        mcp__strbuf_printf(b, "%.3g</span>", v);
 }
 
 /* A map's colour bar: the ramp of its colour map, the values at its ends and between,
@@ -635,8 +601,8 @@ render_colour_bar(sbuf *b, const cJSON *scale)
            "<div class=\"cbar\"><div class=\"ramp\" style=\"background:linear-gradient("
            "to right");
     for (int i = 0; i < RAMP_STOPS; i++)
-        sb_printf(b, ",#%02x%02x%02x %.1f%%", rgb[3 * i], rgb[3 * i + 1], rgb[3 * i + 2],
-                  100.0 * i / (RAMP_STOPS - 1));
+        mcp__strbuf_printf(b, ",#%02x%02x%02x %.1f%%", rgb[3 * i], rgb[3 * i + 1],
+                           rgb[3 * i + 2], 100.0 * i / (RAMP_STOPS - 1));
     sb_str(b, ")\">");
     const cJSON *m;
     cJSON_ArrayForEach(m, cJSON_GetObjectItem(scale, "marks"))
@@ -644,7 +610,8 @@ render_colour_bar(sbuf *b, const cJSON *scale)
         const cJSON *v = cJSON_GetObjectItem(m, "value");
         double t = cJSON_IsNumber(v) ? bar_position(scale, v->valuedouble) : NAN;
         if (!isnan(t))
-            sb_printf(b, "<i class=\"mark\" style=\"left:%.2f%%\"></i>", 100 * t);
+            mcp__strbuf_printf(b, "<i class=\"mark\" style=\"left:%.2f%%\"></i>",
+                               100 * t);
     }
     sb_str(b, "</div><div class=\"ticks\">");
     if (axis && !strcmp(axis, "log")) { /* every decade, at most 7 labels */
@@ -663,12 +630,12 @@ render_colour_bar(sbuf *b, const cJSON *scale)
         const cJSON *v = cJSON_GetObjectItem(m, "value");
         if (!cJSON_IsNumber(v) || isnan(bar_position(scale, v->valuedouble))) continue;
         sb_str(b, "<div class=\"marklabel\">&#9650; ");
-        sb_text(b, json_string(m, "label"));
-        sb_printf(b, " = %g</div>", v->valuedouble);
+        mcp__strbuf_markup_text(b, json_string(m, "label"));
+        mcp__strbuf_printf(b, " = %g</div>", v->valuedouble);
     }
     if (unit && *unit) {
         sb_str(b, "<div class=\"unit\">");
-        sb_text(b, unit);
+        mcp__strbuf_markup_text(b, unit);
         sb_str(b, "</div>");
     }
     sb_str(b, "</div>");
@@ -679,7 +646,7 @@ render_figure(sbuf *b, const page_image *im)
 {
     int k = upscale(im, GRID_PX);
     if (im->data && im->width > 0) /* caption and colour bar as wide as the picture */
-        sb_printf(b, "<figure style=\"width:%dpx\">", k * im->width);
+        mcp__strbuf_printf(b, "<figure style=\"width:%dpx\">", k * im->width);
     else
         sb_str(b, "<figure>");
     /* a map with one value in every pixel would be a flat square: the value is written
@@ -687,36 +654,38 @@ render_figure(sbuf *b, const page_image *im)
     const cJSON *one = cJSON_GetObjectItem(im->scale, "one_value");
     if (im->data && cJSON_IsNumber(one)) sb_str(b, "<div class=\"flat\">");
     if (im->data) {
-        sb_printf(b, "<img id=\"%s\" class=\"px\" alt=\"", im->id);
-        sb_text(b, im->rel);
+        mcp__strbuf_printf(b, "<img id=\"%s\" class=\"px\" alt=\"", im->id);
+        mcp__strbuf_markup_text(b, im->rel);
         if (im->width > 0)
-            sb_printf(b, "\" width=\"%d\" height=\"%d", k * im->width, k * im->height);
+            mcp__strbuf_printf(b, "\" width=\"%d\" height=\"%d", k * im->width,
+                               k * im->height);
         if (im->rgbe) { /* the linear values, for the display controls */
-            sb_printf(b, "\" data-hdr=\"%d,%d,", im->width, im->height);
+            mcp__strbuf_printf(b, "\" data-hdr=\"%d,%d,", im->width, im->height);
             sb_base64(b, im->rgbe, 4 * (size_t)im->width * im->height);
         }
-        sb_printf(b, "\" src=\"data:%s;base64,", im->mime);
+        mcp__strbuf_printf(b, "\" src=\"data:%s;base64,", im->mime);
         sb_base64(b, im->data, im->size);
         sb_str(b, "\">");
         if (cJSON_IsNumber(one))
-            sb_printf(b,
-                      "<span class=\"onevalue\">one value in every pixel: %g<br>"
-                      "no map to show</span></div>",
-                      one->valuedouble);
+            mcp__strbuf_printf(b,
+                               "<span class=\"onevalue\">one value in every pixel: %g<br>"
+                               "no map to show</span></div>",
+                               one->valuedouble);
         if (im->scale) render_colour_bar(b, im->scale);
     } else {
-        sb_printf(b, "<div class=\"noimg\">%s <code>",
-                  im->mime ? "missing or too large to embed:"
-                           : "not viewable in a browser:");
-        sb_text(b, im->rel);
+        mcp__strbuf_printf(b, "<div class=\"noimg\">%s <code>",
+                           im->mime ? "missing or too large to embed:"
+                                    : "not viewable in a browser:");
+        mcp__strbuf_markup_text(b, im->rel);
         sb_str(b, "</code></div>");
     }
     sb_str(b, "<figcaption>");
-    sb_text(b, im->caption && *im->caption ? im->caption : im->rel);
+    mcp__strbuf_markup_text(b, im->caption && *im->caption ? im->caption : im->rel);
     if (im->rgbe) sb_str(b, " <span title=\"the display controls apply\">&#9788;</span>");
     if (im->data && im->width > 0) {
-        sb_printf(b, " <span class=\"dim\">%d&times;%d px", im->width, im->height);
-        if (k > 1) sb_printf(b, ", shown %d&times;", k);
+        mcp__strbuf_printf(b, " <span class=\"dim\">%d&times;%d px", im->width,
+                           im->height);
+        if (k > 1) mcp__strbuf_printf(b, ", shown %d&times;", k);
         sb_str(b, "</span>");
     }
     sb_str(b, "</figcaption></figure>\n");
@@ -727,9 +696,9 @@ render_options(sbuf *b, const page_image *ims, int n, const int *members, int ch
 {
     for (int i = 0; i < n; i++) {
         const page_image *im = &ims[members[i]];
-        sb_printf(b, "<option value=\"%s\"%s>", im->id,
-                  members[i] == chosen ? " selected" : "");
-        sb_text(b, im->caption && *im->caption ? im->caption : im->rel);
+        mcp__strbuf_printf(b, "<option value=\"%s\"%s>", im->id,
+                           members[i] == chosen ? " selected" : "");
+        mcp__strbuf_markup_text(b, im->caption && *im->caption ? im->caption : im->rel);
         sb_str(b, "</option>");
     }
 }
@@ -760,7 +729,7 @@ render_compare(sbuf *b, const page_image *ims, const int *members, int n)
     sb_str(b,
            "</select> zoom <select class=\"cmp-z\"><option>1</option><option>2</option>"
            "<option>4</option><option>8</option></select></div>\n");
-    sb_printf(
+    mcp__strbuf_printf(
         b,
         "<div class=\"cmp-view\" style=\"width:%dpx;aspect-ratio:%d/%d\">"
         "<div class=\"cmp-in\"><img class=\"px cmp-b\" alt=\"right\"></div>"
@@ -769,11 +738,12 @@ render_compare(sbuf *b, const page_image *ims, const int *members, int n)
         "<input class=\"cmp-pos\" type=\"range\" min=\"0\" max=\"100\" step=\"0.5\" "
         "value=\"50\" style=\"width:%dpx\" aria-label=\"split\">\n",
         w, im->width, im->height, w);
-    sb_printf(b,
-              "<p class=\"hint\">%d&times;%d px shown %d&times;: drag across the picture "
-              "(or the slider) to move the split between left and right; with zoom "
-              "both are magnified at the pointer.</p></div>\n",
-              im->width, im->height, k);
+    mcp__strbuf_printf(
+        b,
+        "<p class=\"hint\">%d&times;%d px shown %d&times;: drag across the picture "
+        "(or the slider) to move the split between left and right; with zoom "
+        "both are magnified at the pointer.</p></div>\n",
+        im->width, im->height, k);
 }
 
 static void
@@ -899,7 +869,7 @@ render_plots(sbuf *b, const cJSON *section)
             b->failed = 1; /* not a plot that cannot be drawn: no page */
         } else {
             sb_str(b, "<div class=\"noimg\">");
-            sb_text(b, mcp_error_message());
+            mcp__strbuf_markup_text(b, mcp_error_message());
             sb_str(b, "</div>");
             mcp_error_clear();
         }
@@ -958,19 +928,21 @@ render_display_bar(sbuf *b, const cJSON *root)
         b->failed = 1;
         return;
     }
-    sb_printf(b, "<div class=\"display\" data-lo=\"%g\" data-hi=\"%g\" data-ramp=\"",
-              FALSE_LO, FALSE_HI);
+    mcp__strbuf_printf(
+        b, "<div class=\"display\" data-lo=\"%g\" data-hi=\"%g\" data-ramp=\"", FALSE_LO,
+        FALSE_HI);
     for (int i = 0; i < 256 * 3; i++)
-        sb_printf(b, "%s%d", i ? "," : "", rgb[i]);
-    sb_printf(b,
-              "\"><b>renders</b><label>exposure <input class=\"dsp-exp\" type=\"range\" "
-              "min=\"-10\" max=\"10\" step=\"0.25\" value=\"%g\" aria-label=\"exposure\">"
-              "</label><output class=\"dsp-ev\">%+.2f EV</output><label>display "
-              "<select class=\"dsp-mode\">",
-              ev, ev);
+        mcp__strbuf_printf(b, "%s%d", i ? "," : "", rgb[i]);
+    mcp__strbuf_printf(
+        b,
+        "\"><b>renders</b><label>exposure <input class=\"dsp-exp\" type=\"range\" "
+        "min=\"-10\" max=\"10\" step=\"0.25\" value=\"%g\" aria-label=\"exposure\">"
+        "</label><output class=\"dsp-ev\">%+.2f EV</output><label>display "
+        "<select class=\"dsp-mode\">",
+        ev, ev);
     for (size_t i = 0; i < sizeof modes / sizeof *modes; i++)
-        sb_printf(b, "<option value=\"%s\"%s>%s</option>", modes[i][0],
-                  strcmp(mode, modes[i][0]) ? "" : " selected", modes[i][1]);
+        mcp__strbuf_printf(b, "<option value=\"%s\"%s>%s</option>", modes[i][0],
+                           strcmp(mode, modes[i][0]) ? "" : " selected", modes[i][1]);
     sb_str(b, "</select></label><span class=\"dim\">for the renders marked &#9788;</span>"
               "<div class=\"dsp-legend\" hidden>");
     cJSON *scale = cJSON_CreateObject();
@@ -1131,21 +1103,23 @@ mcp_report_html(mcp_report *r, const char *dir, char **html)
     sb_str(&b, "<!doctype html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\n"
                "<meta name=\"viewport\" content=\"width=device-width,initial-scale=1\">\n"
                "<title>");
-    sb_text(&b, t);
-    sb_printf(&b, "</title>\n<style>\n%s</style>\n</head><body>\n<header><h1>", css);
-    sb_text(&b, t);
-    sb_printf(&b,
-              "</h1><p>mcpost %s &middot; %d section%s &middot; every figure is also in "
-              "report.json &middot; docs/report.md explains the page</p></header>\n",
-              MCP_VERSION, n_sections, n_sections == 1 ? "" : "s");
+    mcp__strbuf_markup_text(&b, t);
+    mcp__strbuf_printf(&b, "</title>\n<style>\n%s</style>\n</head><body>\n<header><h1>",
+                       css);
+    mcp__strbuf_markup_text(&b, t);
+    mcp__strbuf_printf(
+        &b,
+        "</h1><p>mcpost %s &middot; %d section%s &middot; every figure is also in "
+        "report.json &middot; docs/report.md explains the page</p></header>\n",
+        MCP_VERSION, n_sections, n_sections == 1 ? "" : "s");
     if (n_sections > 1) {
         int i = 0;
         sb_str(&b, "<nav>");
         cJSON_ArrayForEach(s, sections)
         {
             const char *st = json_string(s, "title");
-            sb_printf(&b, "<a href=\"#s%d\">", i++);
-            sb_text(&b, st ? st : "section");
+            mcp__strbuf_printf(&b, "<a href=\"#s%d\">", i++);
+            mcp__strbuf_markup_text(&b, st ? st : "section");
             sb_str(&b, "</a>");
         }
         sb_str(&b, "</nav>\n");
@@ -1155,11 +1129,11 @@ mcp_report_html(mcp_report *r, const char *dir, char **html)
     cJSON_ArrayForEach(s, sections)
     {
         const char *st = json_string(s, "title"), *sg = json_string(s, "stage");
-        sb_printf(&b, "<section id=\"s%d\"><h2>", i);
-        sb_text(&b, st ? st : "");
+        mcp__strbuf_printf(&b, "<section id=\"s%d\"><h2>", i);
+        mcp__strbuf_markup_text(&b, st ? st : "");
         if (sg) {
             sb_str(&b, "<small>");
-            sb_text(&b, sg);
+            mcp__strbuf_markup_text(&b, sg);
             sb_str(&b, "</small>");
         }
         sb_str(&b, "</h2>\n");
@@ -1171,7 +1145,7 @@ mcp_report_html(mcp_report *r, const char *dir, char **html)
         sb_str(&b, "</section>\n");
         i++;
     }
-    sb_printf(&b, "<script>\n%s</script>\n</body></html>\n", script);
+    mcp__strbuf_printf(&b, "<script>\n%s</script>\n</body></html>\n", script);
     if (b.failed) {
         free(b.s);
         return mcp_error("out of memory for the report");

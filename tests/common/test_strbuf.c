@@ -133,14 +133,26 @@ test_read_file(void **state)
     free(data);
 }
 
+/* Markup text: the four characters XML and HTML reserve in text and attributes as
+ * entities, everything else as it is, NULL as nothing. */
+static void
+test_markup_text(void **state)
+{
+    (void)state;
+    mcp__strbuf b = {0};
+    assert_int_equal(mcp__strbuf_markup_text(&b, "a<b & \"c\"> 'd'"), 0);
+    assert_int_equal(mcp__strbuf_markup_text(&b, NULL), 0);
+    assert_string_equal(b.s, "a&lt;b &amp; &quot;c&quot;&gt; 'd'");
+    mcp__strbuf_free(&b);
+}
+
 int
 main(void)
 {
     const struct CMUnitTest tests[] = {
-        cmocka_unit_test(test_matches_snprintf),
-        cmocka_unit_test(test_take_empty),
-        cmocka_unit_test(test_failure_sticks),
-        cmocka_unit_test(test_read_file),
+        cmocka_unit_test(test_matches_snprintf), cmocka_unit_test(test_take_empty),
+        cmocka_unit_test(test_failure_sticks),   cmocka_unit_test(test_read_file),
+        cmocka_unit_test(test_markup_text),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
