@@ -667,51 +667,19 @@ record_relu(const batch *out, unsigned char **bits)
     return 0;
 }
 
-#if defined(__GNUC__) && defined(__x86_64__)
-#include <immintrin.h>
-/* 16 values per masked move, the mask read as two bytes (x86-64 is little-endian:
- * value 16 j + i is bit i), for blocks [j0, j1) of 16; a byte-wise loop took 7% of a
- * run with tangents. The caller's parallel loop calls it (an OpenMP region inside a
- * target function would be outlined without the target, which clang refuses). */
-__attribute__((target("avx512f"))) static void
-replay_relu_avx512(float *restrict v, const unsigned char *restrict bits, size_t j0,
-                   size_t j1)
-{
-    for (size_t j = j0; j < j1; j++) {
-        unsigned short m;
-        memcpy(&m, bits + 2 * j, sizeof m);
-        _mm512_storeu_ps(v + 16 * j, _mm512_maskz_mov_ps(m, _mm512_loadu_ps(v + 16 * j)));
-    }
-}
-#define HAVE_REPLAY_AVX512 1
-#endif
-
-/* Zeroes every image of out where the recorded mask is 0. */
+/* Zeroes every image of out where the recorded mask is 0 (the direct loops' replay;
+ * the Winograd convolutions apply it as they write), with the Winograd's row masker
+ * over pieces of 64k values. */
 static void
 replay_relu(batch *out, const unsigned char *bits)
 {
-    const size_t count = (size_t)out->c * plane_size(out), whole = count / 8;
+    const size_t count = (size_t)out->c * plane_size(out), per = 65536;
     for (int k = 0; k < out->n; k++) {
-        float *restrict v = out->d + (size_t)k * count;
-#ifdef HAVE_REPLAY_AVX512
-        if (__builtin_cpu_supports("avx512f")) {
-            const size_t blocks = count / 16, per = 4096; /* 64k values a task */
+        float *v = out->d + (size_t)k * count;
 #pragma omp parallel for schedule(static)
-            for (size_t j0 = 0; j0 < blocks; j0 += per)
-                replay_relu_avx512(v, bits, j0, j0 + per < blocks ? j0 + per : blocks);
-            for (size_t i = blocks * 16; i < count; i++)
-                v[i] = bits[i / 8] >> (i % 8) & 1u ? v[i] : 0.0f;
-            continue;
-        }
-#endif
-#pragma omp parallel for schedule(static)
-        for (size_t j = 0; j < whole; j++) {
-            const unsigned byte = bits[j];
-            for (int b = 0; b < 8; b++)
-                v[8 * j + b] = byte >> b & 1u ? v[8 * j + b] : 0.0f;
-        }
-        for (size_t i = 8 * whole; i < count; i++)
-            v[i] = bits[whole] >> (i % 8) & 1u ? v[i] : 0.0f;
+        for (size_t j0 = 0; j0 < count; j0 += per)
+            mcp__unet_mask_row(v + j0, (int)(count - j0 < per ? count - j0 : per), bits,
+                               j0);
     }
 }
 
