@@ -117,7 +117,7 @@ compare_one(const char *test_path, const char *ref_path, const mcp_image *ref, i
        on a terminal for a megapixel: two 4K renders take 2 to 3 s) */
     mcp_progress bar;
     int shown = (double)ref->width * ref->height >= 1048576.0;
-    if (shown) mcp__progress_begin_on_terminal(&bar, "writing the renders", 2);
+    if (shown) mcp_progress_begin(&bar, "writing the renders", 2);
     int failed = write_render(test, dir, prefix, "test", cap_test, section);
     if (shown && !failed) mcp_progress_update(&bar, 1);
     failed = failed || write_render(ref, dir, prefix, "reference", cap_ref, section);

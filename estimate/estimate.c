@@ -258,7 +258,7 @@ mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,
     if ((double)dump->color->width * dump->color->height >= 1048576.0 &&
         !mcp_progress_quiet()) {
         bar = &bar_store;
-        mcp__progress_begin_on_terminal(bar, "estimate", ESTIMATE_STEPS);
+        mcp_progress_begin(bar, "estimate", ESTIMATE_STEPS);
     }
     double t0 = mcp__now_ms();
     if (evaluate(dump, den, &o, &ev, bar)) {

@@ -118,7 +118,7 @@ mcp_perc_compare(const mcp_image *const *cands, int m, const mcp_image *surrogat
     /* on a terminal for a quarter megapixel or more (every method on 4 candidates of
        1080p takes 8 s): a step per method */
     shown = (double)cands[0]->width * cands[0]->height >= 262144.0;
-    if (shown) mcp__progress_begin_on_terminal(&bar, "every method", MCP_PERC_N_METHODS);
+    if (shown) mcp_progress_begin(&bar, "every method", MCP_PERC_N_METHODS);
     for (int k = 0; k < MCP_PERC_N_METHODS; k++) {
         if (shown && k) mcp_progress_update(&bar, k);
         mcp_perc_options o = opt->base;

@@ -17,7 +17,7 @@ mcp__pass_bar_begin(mcp__pass_bar *b, mcp_perc_method method, int w, int h)
     if (!b->shown) return;
     char label[64];
     snprintf(label, sizeof label, "%s, pass 1", mcp_perc_method_name(method));
-    mcp__progress_begin_on_terminal(&b->bar, label, h);
+    mcp_progress_begin(&b->bar, label, h);
 }
 
 void

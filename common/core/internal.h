@@ -51,9 +51,6 @@ int mcp__image_channel_spread(const mcp_image *img, int channel, double p, float
  * already ended. mcp__progress_set_output points the bars and notes at a stream, with
  * tty saying whether to draw them as on a terminal (tests); NULL: stderr again. */
 void mcp__progress_stop(mcp_progress *p);
-/* A bar for one image's work (a read, a write, a metric): drawn on a terminal only,
- * silent in a log, where the lines of series and frames are enough. */
-void mcp__progress_begin_on_terminal(mcp_progress *p, const char *label, long total);
 /* The bar starts again at 0 under a new label, on the same line: a round of work
  * whose rounds are not known beforehand ("vertical-iterative, pass 3"). */
 void mcp__progress_restart(mcp_progress *p, const char *label);

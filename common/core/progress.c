@@ -116,50 +116,36 @@ end_line(void)
     line_open = 0;
 }
 
-/* Shows bar k of the stack at its new percent: a terminal redraws its line; a log
- * stays silent. */
+/* Shows bar k of the stack at its new percent: its terminal line is redrawn (a bar in
+ * a log is never on the stack). */
 static void
 show(mcp_progress *p, int k, int percent)
 {
     active[k].percent = percent;
     p->last_shown = percent;
-    if (quiet) return;
-    if (p->tty) draw_line();
+    if (!quiet) draw_line();
 }
 
-static void
-begin(mcp_progress *p, const char *label, long total, int terminal_only)
+void
+mcp_progress_begin(mcp_progress *p, const char *label, long total)
 {
     memset(p, 0, sizeof *p);
     snprintf(p->label, sizeof p->label, "%s", label);
     p->total = total > 0 ? total : 1;
     p->tty = forced_stream ? forced_tty : isatty(STDERR_FILENO);
     p->last_shown = -1;
-    /* a bar reused without its end, or begun inside a parallel region (one thread
-       owns the stack), stays silent */
+    /* a bar in a log (it would draw nothing), reused without its end, or begun inside
+       a parallel region (one thread owns the stack), stays silent */
     int in_parallel = 0;
 #ifdef _OPENMP
     in_parallel = omp_in_parallel();
 #endif
-    if (find(p) >= 0 || in_parallel || depth == MAX_DEPTH || (terminal_only && !p->tty))
-        return;
+    if (!p->tty || find(p) >= 0 || in_parallel || depth == MAX_DEPTH) return;
     active_bar *a = &active[depth++];
     a->bar = p;
     snprintf(a->label, sizeof a->label, "%s", label);
     a->percent = 0;
-    if (!quiet && p->tty) show(p, depth - 1, 0);
-}
-
-void
-mcp_progress_begin(mcp_progress *p, const char *label, long total)
-{
-    begin(p, label, total, 0);
-}
-
-void
-mcp__progress_begin_on_terminal(mcp_progress *p, const char *label, long total)
-{
-    begin(p, label, total, 1);
+    if (!quiet) show(p, depth - 1, 0);
 }
 
 void

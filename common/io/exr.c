@@ -358,7 +358,7 @@ chunk_bar_begin(chunk_bar *b, const char *verb, const char *path, double bytes, 
         snprintf(label, sizeof label, "%s %.*s%s", verb, (int)(tag - base), base, ext);
     else
         snprintf(label, sizeof label, "%s %s", verb, base);
-    mcp__progress_begin_on_terminal(&b->bar, label, n);
+    mcp_progress_begin(&b->bar, label, n);
 }
 
 /* A chunk is done; called by every thread, the bar drawn by the one that owns it

@@ -517,7 +517,7 @@ mcp_write_files(const mcp_file_write *files, int n)
     if (shown) {
         char label[96];
         snprintf(label, sizeof label, "writing %d files", n);
-        mcp__progress_begin_on_terminal(&bar, label, n);
+        mcp_progress_begin(&bar, label, n);
     }
 #pragma omp parallel for schedule(dynamic, 1) if (n > 1) reduction(+ : failed)
     for (int i = 0; i < n; i++) {

@@ -539,7 +539,7 @@ figures_bar_begin(figures_bar *b, const mcp_image *test, const mcp_metrics_optio
     snprintf(label, sizeof label, "metrics %s", slash ? slash + 1 : name);
     long total = STEP_FUSED + STEP_PMSE + (opt->flip_ldr ? STEP_LDR : 0) +
                  (opt->flip_hdr ? STEP_HDR : 0) + (opt->spectra ? STEP_SPECTRA : 0);
-    mcp__progress_begin_on_terminal(&b->bar, label, total);
+    mcp_progress_begin(&b->bar, label, total);
 }
 
 static void
@@ -880,7 +880,7 @@ mcp_metrics_write_maps(const mcp_metrics_maps *maps, const char *dir, const char
         long files =
             2 * (!!maps->flip_ldr + !!maps->flip_hdr + !!maps->flip_hdr_exposure) +
             !!maps->sq_error + 2 * !!maps->relse + !!maps->spectra;
-        mcp__progress_begin_on_terminal(&o.bar, "writing maps", files);
+        mcp_progress_begin(&o.bar, "writing maps", files);
     }
     int rc = write_all(maps, &o);
     if (o.bar_shown) {

@@ -213,13 +213,13 @@ test_terminal_only(void **state)
     /* one image's bar (an EXR read): nothing in a log ... */
     capture(0);
     mcp_progress p;
-    mcp__progress_begin_on_terminal(&p, "reading x.exr", 2);
+    mcp_progress_begin(&p, "reading x.exr", 2);
     mcp_progress_update(&p, 1);
     mcp_progress_end(&p);
     assert_string_equal(captured(), "");
     /* ... a bar on a terminal */
     capture(1);
-    mcp__progress_begin_on_terminal(&p, "reading x.exr", 2);
+    mcp_progress_begin(&p, "reading x.exr", 2);
     mcp_progress_end(&p);
     char line[128];
     line_as_drawn(captured(), 0, line, sizeof line);
@@ -233,7 +233,7 @@ test_restart(void **state)
     (void)state;
     capture(1);
     mcp_progress p;
-    mcp__progress_begin_on_terminal(&p, "vertical-iterative, pass 1", 4);
+    mcp_progress_begin(&p, "vertical-iterative, pass 1", 4);
     mcp_progress_update(&p, 3);
     mcp__progress_restart(&p, "vertical-iterative, pass 2");
     mcp_progress_update(&p, 1);
