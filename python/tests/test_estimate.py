@@ -51,9 +51,10 @@ def test_the_maps_match_the_cli_files(both):
         np.testing.assert_array_equal(got[key], want, err_msg=key)
     assert got["sample_counts"].sum(dtype=np.float64) == 16384
     dist, names, _ = mcpost.read_image(out / "distribution.exr")
-    for key in ("lambda", "s2"):
-        np.testing.assert_array_equal(
-            got[key], dist[..., [names.index(f"{key}.{c}") for c in "RGB"]], err_msg=key)
+    assert names == ["lambda.R", "lambda.G", "lambda.B"]
+    np.testing.assert_array_equal(got["lambda"], dist)
+    # the distribution's s² is Var[F]^r: the file is variance_rel.exr
+    np.testing.assert_array_equal(got["s2"], rgb(out / "variance_rel.exr"))
     labels = got["block_labels"]
     assert labels.shape == (128, 128) and labels.max() == got["blocks"] - 1
 
