@@ -6,7 +6,7 @@
  * Convolutions are Winograd F(2x2, 3x3) products by default (unet_winograd.c); the direct
  * loops here, register-blocked over output channels and columns, OpenMP over (image, row,
  * column chunk), are the fixed-bit mode (MCPOST_UNET_FIXED=1). */
-#define _DEFAULT_SOURCE              /* madvise, MADV_HUGEPAGE */
+#define _DEFAULT_SOURCE              /* isatty */
 #include "../common/core/internal.h" /* mcp__progress_stop */
 #include "unet_internal.h"
 #include "internal.h"
@@ -19,7 +19,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/mman.h>
 #include <unistd.h>
 #ifdef _OPENMP
 #include <omp.h>
@@ -226,109 +225,12 @@ plane(const batch *b, int k, int i)
     return b->d + ((size_t)k * b->c + i) * plane_size(b);
 }
 
-/* Memory for activations and scratch. Large blocks are aligned to 2 MB and marked for
- * transparent huge pages where the system offers them on request: the first touch of
- * a fresh block then faults once per 2 MB instead of once per 4 kB page, which
- * otherwise costs as much as the convolutions on some virtual machines. */
-#define HUGE_PAGE ((size_t)2 << 20)
-
-void *
-mcp__unet_alloc(size_t bytes)
-{
-    if (bytes < 2 * HUGE_PAGE) return mcp_malloc(bytes);
-    void *p = NULL;
-    const size_t rounded = (bytes + HUGE_PAGE - 1) / HUGE_PAGE * HUGE_PAGE;
-    if (!(p = aligned_alloc(HUGE_PAGE, rounded))) {
-        mcp_error("out of memory (%zu bytes)", bytes);
-        return NULL;
-    }
-#ifdef MADV_HUGEPAGE
-    (void)madvise(p, rounded, MADV_HUGEPAGE); /* a hint: without it, 4 kB pages */
-#endif
-    return p;
-}
-
-/* Blocks freed during one run of the network, kept for its next layers. Every layer
- * writes a fresh output, and the kernel clears each fresh page on its first touch: at
- * 1080p with four tangents that clearing took a quarter of the run (`perf record` on
- * `mcpost estimate`: clear_page_erms 25%). The cache belongs to the calling thread
- * (the network's layers are called from one thread; OpenMP's workers never allocate
- * batches), and it is emptied when the run ends (block_cache_drain), so nothing is
- * held between calls. A request takes the smallest cached block that holds it; a full
- * cache frees its smallest block. When none holds it, a plain apply empties the cache
- * first (its blocks would only raise the peak), while a run with tangents keeps them:
- * each tangent's pass repeats the primal's requests, so they all find their blocks.
- * Replaying the requests of a 1080p run with 4 tangents: 1.17 GB of fresh blocks
- * (one pass's worth) at a peak of 1.16 GB held, against 9.75 GB fresh at 0.77 GB
- * without the cache; one apply: 1.17 GB fresh at 0.82 GB, against 1.95 GB at 0.75. */
-#define CACHE_SLOTS 6
-
-typedef struct cached_block {
-    void *p;
-    size_t cap;
-} cached_block;
-
-static _Thread_local cached_block block_cache[CACHE_SLOTS];
-static _Thread_local int block_cache_keeps; /* 1: tangents follow the primal */
-
-static void block_cache_drain(void);
-
-static void *
-block_take(size_t bytes, size_t *cap)
-{
-    int best = -1;
-    for (int i = 0; i < CACHE_SLOTS; i++)
-        if (block_cache[i].p && block_cache[i].cap >= bytes &&
-            (best < 0 || block_cache[i].cap < block_cache[best].cap))
-            best = i;
-    if (best >= 0) {
-        void *p = block_cache[best].p;
-        *cap = block_cache[best].cap;
-        block_cache[best] = (cached_block){0};
-        return p;
-    }
-    /* none holds it: in a plain apply, the cached blocks would only raise the peak */
-    if (!block_cache_keeps) block_cache_drain();
-    *cap =
-        bytes < 2 * HUGE_PAGE ? bytes : (bytes + HUGE_PAGE - 1) / HUGE_PAGE * HUGE_PAGE;
-    return mcp__unet_alloc(bytes);
-}
-
-static void
-block_give(void *p, size_t cap)
-{
-    if (!p) return;
-    int slot = -1;
-    for (int i = 0; i < CACHE_SLOTS && slot < 0; i++)
-        if (!block_cache[i].p) slot = i;
-    if (slot < 0) { /* full: the smallest of the cache's blocks and this one goes */
-        slot = 0;
-        for (int i = 1; i < CACHE_SLOTS; i++)
-            if (block_cache[i].cap < block_cache[slot].cap) slot = i;
-        if (block_cache[slot].cap >= cap) {
-            free(p);
-            return;
-        }
-        free(block_cache[slot].p);
-    }
-    block_cache[slot] = (cached_block){p, cap};
-}
-
-static void
-block_cache_drain(void)
-{
-    for (int i = 0; i < CACHE_SLOTS; i++) {
-        free(block_cache[i].p);
-        block_cache[i] = (cached_block){0};
-    }
-}
-
 /* A batch whose every value the caller writes (no zeroing pass over fresh memory). */
 static int
 batch_new_unset(batch *b, int n, int c, int h, int w)
 {
     *b = (batch){n, c, h, w, NULL, 0};
-    b->d = block_take((size_t)n * c * h * w * sizeof(float), &b->cap);
+    b->d = mcp__unet_block_take((size_t)n * c * h * w * sizeof(float), &b->cap);
     return b->d ? 0 : -1;
 }
 
@@ -344,7 +246,7 @@ batch_new(batch *b, int n, int c, int h, int w)
 static void
 batch_free(batch *b)
 {
-    block_give(b->d, b->cap);
+    mcp__unet_block_give(b->d, b->cap);
     b->d = NULL;
 }
 
@@ -581,7 +483,7 @@ mcp__unet_fast(const mcp__unet *net)
  * A tangent passes through each layer's linearisation at the primal, which needs only
  * the primal's ReLU masks and max-pool choices, not its activations. The primal runs
  * first and records them (a bit per activation, a byte per pooled value: about 30
- * bytes per pixel, against ~550 for the activations); each tangent then runs alone
+ * bytes per pixel, against ~385 for the activations); each tangent then runs alone
  * through the network, replaying them. The peak memory of apply + K tangents is then
  * that of one apply, where a batch of 1 + K images held K + 1 times as much (4.85 GB
  * at 1080p with 4 tangents). Each tangent's operations are the same as in a batch, in
@@ -697,6 +599,7 @@ conv_plain(const pass *ps, const mcp__unet_conv *L, const batch *a, const batch 
         return mcp_error("unet: layer of %d input channels given %d", L->cin, cin);
     if (ps->fast) {
         if (batch_new_unset(out, n, cout, h, w)) return -1;
+        if (mcp__unet_plan_dry()) return 0;
         if (winograd(ps, L, a->d, a->c, 0, b ? b->d : NULL, n, h, w, relu, out->d)) {
             batch_free(out);
             return -1;
@@ -815,7 +718,9 @@ static int
 conv_into(const pass *ps, const mcp__unet_conv *L, const batch *a, const batch *b,
           int relu, batch *out)
 {
-    if (conv_plain(ps, L, a, b, relu, out) || trace_relu(ps, L, relu, out)) return -1;
+    if (conv_plain(ps, L, a, b, relu, out)) return -1;
+    if (mcp__unet_plan_dry()) return 0;
+    if (trace_relu(ps, L, relu, out)) return -1;
     progress_step();
     return 0;
 }
@@ -853,6 +758,7 @@ maxpool_into(const pass *ps, const batch *in, batch *out)
         picks = tr->pick[tr->pools++];
     }
     if (batch_new_unset(out, in->n, in->c, h2, w2)) return -1;
+    if (mcp__unet_plan_dry()) return 0;
 #pragma omp parallel for collapse(2) schedule(static)
     for (int i = 0; i < in->c; i++)
         for (int y = 0; y < h2; y++)
@@ -949,12 +855,14 @@ conv_up_replace(const pass *ps, const mcp__unet_conv *L, batch *t, batch *skip, 
         return mcp_error("unet: layer of %d input channels given %d", L->cin, cin);
     batch out;
     if (batch_new_unset(&out, n, L->cout, h, w)) return -1;
-    if (winograd(ps, L, t->d, t->c, 1, skip->d, n, h, w, relu, out.d)) {
-        batch_free(&out);
-        return -1;
+    if (!mcp__unet_plan_dry()) {
+        if (winograd(ps, L, t->d, t->c, 1, skip->d, n, h, w, relu, out.d)) {
+            batch_free(&out);
+            return -1;
+        }
+        if (trace_relu(ps, L, relu, &out)) return -1;
+        progress_step();
     }
-    if (trace_relu(ps, L, relu, &out)) return -1;
-    progress_step();
     batch_free(t);
     batch_free(skip);
     *t = out;
@@ -1141,9 +1049,10 @@ postprocess(const batch *y0, const batch *t, int k, int W, int H, float s_out,
     return 0;
 }
 
-/* Bytes per padded pixel and batch image at the network's peak (full resolution at
- * dec_conv1a: 73 channels in, 64 out, with what the lower levels hold; measured ~550),
- * with a margin: beyond what is available, the image is run in tiles. */
+/* Bytes per padded pixel and batch image at the network's peak, with a margin: the
+ * memory plan's arena (a 64- and a 32-channel output at full resolution, ~385), the
+ * outputs and the primal's trace (~440 in all), and the Winograd products' scratch.
+ * Beyond what is available, the image is run in tiles. */
 #define PEAK_BYTES_PER_PIXEL 600.0
 
 /* The memory the system can give without swapping, in bytes (MemAvailable; the tests
@@ -1182,6 +1091,20 @@ batch_bytes(int w, int h, int n_images)
     return PEAK_BYTES_PER_PIXEL * ((w + 15) / 16 * 16) * ((h + 15) / 16 * 16) * n_images;
 }
 
+/* The memory plan of one pass over a W x H image (unet_memory.c): the pass walked dry,
+ * with the input batch preprocess() makes. Its output outlives the pass (the primal's
+ * is read by every tangent's postprocess), so it stays out of the plan, and its
+ * placeholder is dropped, not given back. */
+static int
+plan_pass(const mcp__unet *net, int W, int H)
+{
+    batch x, y;
+    mcp__unet_plan_record();
+    int rc = batch_new_unset(&x, 1, net->ic, (H + 15) / 16 * 16, (W + 15) / 16 * 16) ||
+             network(net, &x, &y, NULL);
+    return mcp__unet_plan_finish() || rc ? -1 : 0;
+}
+
 /* The whole image in one pass: the inputs are checked and the scale is set. */
 static int
 run_whole(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
@@ -1191,14 +1114,18 @@ run_whole(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
     const float s_in = (float)scale_in, s_out = 1.0f / s_in;
     const int W = color->width, H = color->height;
     primal_trace trace = {0}, *tr = n ? &trace : NULL;
-    block_cache_keeps = n > 0;
+    mcp__unet_blocks_keep(n > 0);
     batch x, y0 = {0}, y;
-    /* the primal, recording what the tangents need; then each tangent alone */
-    int rc = preprocess(net, color, albedo, normal, s_in, 1, NULL, 0, &x) ||
-             network(net, &x, &y0, tr);
+    /* the memory plan of a pass, from a dry one (the direct loops are not planned);
+     * then the primal, recording what the tangents need, and each tangent alone */
+    int rc = mcp__unet_fast(net) && plan_pass(net, W, H);
+    if (!rc) mcp__unet_plan_pass();
+    rc = rc || preprocess(net, color, albedo, normal, s_in, 1, NULL, 0, &x) ||
+         network(net, &x, &y0, tr);
     if (!rc && out) rc = postprocess(&y0, NULL, 0, W, H, s_out, out);
     if (tr) trace.replay = 1;
     for (int k = 0; k < n && !rc; k++) {
+        mcp__unet_plan_pass();
         rc = preprocess(net, color, albedo, normal, s_in, 0, t + k, 1, &x) ||
              network(net, &x, &y, tr);
         if (!rc) {
@@ -1208,7 +1135,8 @@ run_whole(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
     }
     batch_free(&y0);
     trace_free(&trace);
-    block_cache_drain();
+    mcp__unet_plan_release();
+    mcp__unet_blocks_drain();
     return rc ? -1 : 0;
 }
 

@@ -158,9 +158,29 @@ void mcp__unet_prefetch_rows(const float *src, int up, int h, int w, size_t t0, 
  * fixed_bits setting, or MCPOST_UNET_FIXED set to anything but 0). */
 int mcp__unet_fast(const mcp__unet *net);
 
-/* malloc for activations and scratch (unet.c): large blocks on huge pages where the
- * system allows; free() releases. NULL (with the error set) when out of memory. */
+/* ---- the activations' memory (unet_memory.c) ----
+ * malloc for activations and scratch: large blocks on huge pages where the system
+ * allows; free() releases. NULL (with the error set) when out of memory. */
 void *mcp__unet_alloc(size_t bytes);
+/* A block of at least bytes for a batch (*cap: what it holds), and its return: from
+ * the pass's plan where it has one, else from the calling thread's cache of freed
+ * blocks. In a dry pass the address is a placeholder that must not be touched. */
+void *mcp__unet_block_take(size_t bytes, size_t *cap);
+void mcp__unet_block_give(void *p, size_t cap);
+/* keep 1: the cache keeps what it is given (tangents follow); drain empties it. */
+void mcp__unet_blocks_keep(int keep);
+void mcp__unet_blocks_drain(void);
+/* The plan: record starts a dry pass (the layers allocate but compute nothing while
+ * mcp__unet_plan_dry() is 1); finish places what it recorded in one arena; pass starts
+ * each real pass (the primal's and each tangent's), which must repeat the dry one;
+ * release frees the arena. mcp__unet_plan_arena: the arena and its size (NULL and 0
+ * without a plan). */
+void mcp__unet_plan_record(void);
+int mcp__unet_plan_dry(void);
+int mcp__unet_plan_finish(void);
+void mcp__unet_plan_pass(void);
+void mcp__unet_plan_release(void);
+const void *mcp__unet_plan_arena(size_t *bytes);
 
 /* The Winograd products' kernel (unet_gemm.c): C = A B in blocks of mr rows x nr
  * columns, picked for the CPU (or by MCPOST_UNET_KERNEL). */
