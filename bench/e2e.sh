@@ -90,7 +90,7 @@ time_runs "estimate 1080p dump, nlm" - \
 "$MCPOST" estimate hd_test.exr --denoiser nlm -o "$WORK/est_nlm" 2>/dev/null |
     sed -n 's/^time (ms): */  its steps (ms): /p'
 echo "(target for nlm: the whole command <= 1.2x its 'denoise+jvp' step)"
-# the default estimate with the U-Net (4 probes: one apply and 4 tangents) against one
+# the default estimate with the U-Net (3 probes: one apply and 3 tangents) against one
 # apply, the cost docs/fidelity.md "The defaults" reports
 time_runs "denoise 1080p dump, unet (one apply)" - \
     "$MCPOST" denoise hd_test.exr --denoiser unet -o "$WORK/den_unet.exr"
