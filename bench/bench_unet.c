@@ -335,7 +335,7 @@ main(int argc, char **argv)
         printf("unet at %dx%d, %d thread(s), median of %d, %s\n", width, height, threads,
                repeats,
                fixed ? "fixed-bit mode (MCPOST_UNET_FIXED=1: direct loops)"
-                     : "default mode (Winograd: F(2x2,3x3), tangents F(4x4,3x3))");
+                     : "default mode (Winograd F(4x4,3x3))");
         print_header();
         for (int c = 0; c < N_CALLS; c++) {
             const int n = call_tangents[c];

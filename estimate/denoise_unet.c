@@ -9,14 +9,13 @@
  * memory available, else the largest tiles that fit; or a multiple of 16: tiles of that
  * size; tiles give the same bits as the whole image), fixed_bits (false [default]:
  * Winograd convolutions; true: the direct loops, the same bits on every x86-64, as
- * MCPOST_UNET_FIXED=1 does for a whole process), exact_tangents (false [default]: the
- * tangents' convolutions as Winograd F(4x4, 3x3), 1.78 times fewer multiply-adds, JVP
- * within 2e-6 of the double reference; true: F(2x2, 3x3) as the primal's, 0.8e-6;
- * unet_winograd4.c). The primal runs first and each tangent after it alone (unet.c,
- * the primal's trace). The autoexposure scale is
- * computed on the primal colour and held constant in the JVP (unet_internal.h).
- * Weights for colour + albedo + normal need both features; colour + albedo weights
- * need the albedo.
+ * MCPOST_UNET_FIXED=1 does for a whole process; the Winograd convolutions are F(4x4,
+ * 3x3), unet_winograd4.c), exact_tangents (false [default]: the tangents'
+ * convolutions as the primal's, JVP within 2e-6 of the double reference; true:
+ * F(2x2, 3x3), 1.78 times more multiply-adds, 1e-6). The primal runs first and each
+ * tangent after it alone (unet.c, the primal's trace). The autoexposure scale is computed
+ * on the primal colour and held constant in the JVP (unet_internal.h). Weights for colour
+ * + albedo + normal need both features; colour + albedo weights need the albedo.
  *
  * Loaded weights are shared within the process (shared_load below): reading and
  * checking a .tza costs more than everything else a job's check does, and a job
@@ -166,10 +165,10 @@ static const mcp_option unet_options[] = {
      .type = MCP_OPT_FLAG,
      .offset = offsetof(unet_settings, exact_tangents),
      .def = "false",
-     .doc = "true: the JVP's convolutions as the primal's, Winograd F(2x2, 3x3); false: "
-            "the tangents' convolutions as Winograd F(4x4, 3x3), 1.78x fewer "
-            "multiply-adds (JVP within 2.1e-6 of the double reference against 0.8e-6; "
-            "MCPOST_UNET_EXACT_TANGENTS=1 for a process)"},
+     .doc = "true: the JVP's convolutions as Winograd F(2x2, 3x3), in float; false: as "
+            "the primal's, Winograd F(4x4, 3x3), 1.78x fewer multiply-adds, in bfloat16 "
+            "where the CPU has it (JVP within 2.3e-6 of the double reference in float "
+            "against 1.0e-6; MCPOST_UNET_EXACT_TANGENTS=1 for a process)"},
     {.name = "max_memory_mb",
      .type = MCP_OPT_INT,
      .offset = offsetof(unet_settings, max_memory_mb),
@@ -291,8 +290,8 @@ const mcp_denoiser_kind mcp__denoiser_unet = {
     "OIDN's RT U-Net with .tza weights (1.4 float32 or 2.x float16, base or small), "
     "exact JVP (weights [$" WEIGHTS_ENV "], input_scale [auto] or a number, tile [0: as "
     "memory allows] or a multiple of 16, fixed_bits [false]: the direct loops, the same "
-    "bits on every x86-64, exact_tangents [false]: the JVP's convolutions as the "
-    "primal's, Winograd F(2x2,3x3), instead of F(4x4,3x3), max_memory_mb [2048]: the "
+    "bits on every x86-64, exact_tangents [false]: the JVP's convolutions on Winograd "
+    "F(2x2,3x3) in float instead of the primal's F(4x4,3x3), max_memory_mb [2048]: the "
     "network's working memory at most, in tiles beyond)",
     mcp__unet_keys,
     unet_create,

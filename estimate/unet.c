@@ -3,9 +3,10 @@
  * clamps), the 16 3x3 convolutions with ReLU, 2x2 max pools, nearest 2x upsampling and
  * skip concats, then the inverse transfer function. Whole image as one tile, padded to
  * 16. Activations are planar (CHW) float32; each is freed as soon as it is consumed.
- * Convolutions are Winograd F(2x2, 3x3) products by default (unet_winograd.c); the direct
- * loops here, register-blocked over output channels and columns, OpenMP over (image, row,
- * column chunk), are the fixed-bit mode (MCPOST_UNET_FIXED=1). */
+ * Convolutions are Winograd F(4x4, 3x3) products by default (unet_winograd4.c; the
+ * exact tangents' F(2x2, 3x3): unet_winograd.c); the direct loops here,
+ * register-blocked over output channels and columns, OpenMP over (image, row, column
+ * chunk), are the fixed-bit mode (MCPOST_UNET_FIXED=1). */
 #define _DEFAULT_SOURCE              /* isatty */
 #include "../common/core/internal.h" /* mcp__progress_stop */
 #include "unet_internal.h"
@@ -463,7 +464,7 @@ conv_task(const conv_layer *l, int k, int y, int c, float *rows)
     }
 }
 
-/* Tangents on F(2x2, 3x3), as the primal: net->exact_tangents, or
+/* Tangents on F(2x2, 3x3), not F(4x4, 3x3): net->exact_tangents, or
  * MCPOST_UNET_EXACT_TANGENTS set to anything but 0. */
 static int
 exact_tangents(const mcp__unet *net)
@@ -513,8 +514,8 @@ trace_free(primal_trace *tr)
 typedef struct pass {
     const mcp__unet *net;
     int fast;   /* Winograd products */
-    int coarse; /* F(4x4, 3x3): a tangents' pass, unless exact_tangents */
-    int bf16;   /* with coarse: products in bfloat16 where the CPU has them */
+    int coarse; /* F(4x4, 3x3): the primal's, and the tangents' unless exact_tangents */
+    int bf16;   /* a tangents' pass on coarse: products in bfloat16 where the CPU can */
     primal_trace *trace;
 } pass;
 
@@ -881,8 +882,11 @@ network(const mcp__unet *net, batch *x, batch *t, primal_trace *tr)
     *t = (batch){0};
     if (tr) tr->pools = 0;
     const int fast = mcp__unet_fast(net);
-    const int coarse = fast && tr && tr->replay && !exact_tangents(net);
-    const pass ps_ = {net, fast, coarse, coarse && mcp__unet_gemm_bf16_has(), tr},
+    /* F(4x4, 3x3) for the primal, and for the tangents unless exact_tangents */
+    const int replay = tr && tr->replay, exact = replay && exact_tangents(net);
+    const int coarse = fast && !exact;
+    const pass ps_ = {net, fast, coarse, coarse && replay && mcp__unet_gemm_bf16_has(),
+                      tr},
                *ps = &ps_;
     int rc =
         conv_into(ps, &c[E0], x, NULL, 1, t) || conv_replace(ps, &c[E1], t, NULL, 1) ||
@@ -1070,7 +1074,7 @@ postprocess(const batch *y0, const batch *t, int k, int W, int H, float s_out,
  * memory plan's arena (a 64- and a 32-channel output at full resolution, ~385), the
  * outputs and the primal's trace (~440 in all), and the Winograd products' scratch.
  * Beyond what is available, the image is run in tiles. */
-#define PEAK_BYTES_PER_PIXEL 600.0
+#define PEAK_BYTES_PER_PIXEL 480.0
 
 /* The memory the system can give without swapping, in bytes (MemAvailable; the tests
  * set MCPOST_MEMORY_AVAILABLE_MB); 0 where it cannot tell. */
@@ -1174,21 +1178,23 @@ paste(const mcp_image *src, int ox, int oy, int x0, int y0, int w, int h, mcp_im
  * what a pixel's value depends on, rounding included: the receptive field of the 3x3
  * convolutions and 2x2 pooling over five levels has a radius of ~110 pixels, and a
  * Winograd tile's outputs each depend on all 4 x 4 of its inputs (a radius of 2 per
- * convolution instead of 1), ~190 in all. The tangents' F(4x4, 3x3) tiles (4 x 4
- * outputs from 6 x 6 inputs: a radius of 4 per convolution) need crops on multiples of
- * 64 and ~330 pixels (16 convolutions' radii at their levels' scales, 4 (5 + 3 x 2 +
- * 3 x 4 + 3 x 8) + 4 x 2 x 16, and the pools'). A tile's pixels then see what they see
- * in the whole image, and the result is the same bits (the tests compare). */
+ * convolution instead of 1), ~190 in all. The F(4x4, 3x3) tiles of the default
+ * Winograd passes (4 x 4 outputs from 6 x 6 inputs: a radius of 4 per convolution)
+ * need crops on multiples of 64 and ~330 pixels (16 convolutions' radii at their levels'
+ * scales, 4 (5 + 3 x 2 + 3 x 4 + 3 x 8) + 4 x 2 x 16, and the pools'). A tile's pixels
+ * then see what they see in the whole image, and the result is the same bits (the tests
+ * compare). */
 #define TILE_OVERLAP 192
 #define TILE_ALIGN 32
 #define TILE_OVERLAP_COARSE 352
 #define TILE_ALIGN_COARSE 64
 
-/* The overlap and alignment of a run's tiles: wider where tangents run on F(4x4, 3x3). */
+/* The overlap and alignment of a run's tiles: wider where the Winograd products run on
+ * F(4x4, 3x3) (every pass but exact tangents'), narrower for the direct loops. */
 static void
-tile_margins(const mcp__unet *net, int n, int *overlap, int *align)
+tile_margins(const mcp__unet *net, int *overlap, int *align)
 {
-    const int coarse = n > 0 && mcp__unet_fast(net) && !exact_tangents(net);
+    const int coarse = mcp__unet_fast(net);
     *overlap = coarse ? TILE_OVERLAP_COARSE : TILE_OVERLAP;
     *align = coarse ? TILE_ALIGN_COARSE : TILE_ALIGN;
 }
@@ -1200,7 +1206,7 @@ run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
 {
     const int W = color->width, H = color->height;
     int overlap, align;
-    tile_margins(net, n, &overlap, &align);
+    tile_margins(net, &overlap, &align);
     int rc = 0;
     if (out) rc = mcp__rgb_new(W, H, "unet", out);
     for (int k = 0; k < n && !rc; k++)
@@ -1279,7 +1285,7 @@ mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_imag
          * available (the results and the inputs take the rest) */
         const double limit = have > 0 && have / 2 < bound ? have / 2 : bound;
         int overlap, align;
-        tile_margins(net, n, &overlap, &align);
+        tile_margins(net, &overlap, &align);
         const int margin = 2 * overlap + align; /* a crop's largest extension */
         for (tile = (W > H ? W : H) / 16 * 16; tile >= 16; tile -= 16)
             if (batch_bytes(tile + margin, tile + margin, 1) <= limit) break;

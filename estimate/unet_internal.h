@@ -54,7 +54,7 @@ typedef struct mcp__unet {
     int ic;             /* input channels: 3 colour, 6 + albedo, 9 + albedo + normal */
     int v2;             /* 1 for float16 (OIDN 2.x) files: autoexposure bins by ceil */
     int fixed_bits;     /* 1: the direct loops (a setting, not read from the file) */
-    int exact_tangents; /* 1: tangents on F(2x2, 3x3) as the primal, not F(4x4, 3x3) */
+    int exact_tangents; /* 1: tangents on F(2x2, 3x3) in float, not F(4x4, 3x3) */
     int max_memory_mb;  /* the network's working memory at most (0: the default) */
     mcp__unet_conv conv[MCP__UNET_NCONV]; /* enc_conv0 ... dec_conv0 in order */
 } mcp__unet;

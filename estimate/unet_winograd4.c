@@ -1,19 +1,18 @@
 /* unet_winograd4.c: the U-Net's 3x3 convolutions as Winograd F(4x4, 3x3) (Lavin &
- * Gray 2016), for the tangents' passes: each 4x4 block of outputs from its 6x6 block
- * of inputs with 36 multiplies per input channel instead of 144, so 1.78 times fewer
- * multiply-adds than F(2x2, 3x3) (unet_winograd.c) and 4 times fewer than the direct
- * loops, and 2.25 transformed values per output instead of 4, so that the transforms
- * move less memory too.
+ * Gray 2016), the default for every pass but exact tangents': each 4x4 block of outputs
+ * from its 6x6 block of inputs with 36 multiplies per input channel instead of 144,
+ * so 1.78 times fewer multiply-adds than F(2x2, 3x3) (unet_winograd.c) and 4 times fewer
+ * than the direct loops, and 2.25 transformed values per output instead of 4, so that the
+ * transforms move less memory too.
  *
  * Its transforms have coefficients up to 8 (interpolation at 0, +-1, +-2 and infinity),
  * so a value's rounding grows with them: the JVP through the whole network differs
  * from central differences of the double reference by 1.2e-6 (official weights) to
  * 2.1e-6 (a random network) in relative L2, against 0.5-0.8e-6 on F(2x2, 3x3)
- * (tests/estimate/test_unet.c, test_fast_kernels, measures both against 1e-5). The
- * primal, which the user sees, stays on F(2x2, 3x3), bit for bit what it was; the
- * tangents feed s^2, the variance of the denoised image and SURE's divergence, which
- * need ~10%. The denoiser's exact_tangents setting (or MCPOST_UNET_EXACT_TANGENTS=1)
- * keeps the tangents on F(2x2, 3x3).
+ * (tests/estimate/test_unet.c, test_fast_kernels, measures both against 1e-5), and
+ * the output by about 1e-6 from F(2x2, 3x3)'s (docs/denoisers.md): the primal runs on it
+ * too since December 2026 (a 1080p apply 1.5x faster). The denoiser's exact_tangents
+ * setting (or MCPOST_UNET_EXACT_TANGENTS=1) keeps the tangents on F(2x2, 3x3).
  *
  * Per 4x4 tile and input channel: V = B^T d B; per element e of 36: M_e = U_e V_e with
  * U = G g G^T (per layer and call, in double); Y = A^T M A, with

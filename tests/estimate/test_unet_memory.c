@@ -73,6 +73,20 @@ replay(const sequence *q, void **ptr, size_t *cap)
     }
 }
 
+/* The plan of q from a dry pass; returns the arena's size. */
+static size_t
+plan_of(const sequence *q, void **ptr, size_t *cap)
+{
+    size_t arena_bytes;
+    mcp__unet_plan_record();
+    assert_int_equal(mcp__unet_plan_dry(), 1);
+    replay(q, ptr, cap);
+    assert_int_equal(mcp__unet_plan_finish(), 0);
+    assert_int_equal(mcp__unet_plan_dry(), 0);
+    mcp__unet_plan_arena(&arena_bytes);
+    return arena_bytes;
+}
+
 static int
 in_arena(const void *p, const char *arena, size_t bytes)
 {
@@ -127,11 +141,7 @@ test_random_plans(void **state)
                 given[q.ev[i].block] = 1;
                 total += (q.bytes[q.ev[i].block] + 2 * MB - 1) / (2 * MB) * (2 * MB);
             }
-        mcp__unet_plan_record();
-        assert_int_equal(mcp__unet_plan_dry(), 1);
-        replay(&q, ptr, cap);
-        assert_int_equal(mcp__unet_plan_finish(), 0);
-        assert_int_equal(mcp__unet_plan_dry(), 0);
+        plan_of(&q, ptr, cap);
         const char *arena = mcp__unet_plan_arena(&arena_bytes);
         for (int pass = 0; pass < 2; pass++) { /* as the primal's and a tangent's */
             mcp__unet_plan_pass();
@@ -174,13 +184,8 @@ test_network_shape(void **state)
     memcpy(q.ev, ev, sizeof ev);
     void *ptr[MAX_BLOCKS];
     size_t cap[MAX_BLOCKS];
-    mcp__unet_plan_record();
-    replay(&q, ptr, cap);
-    assert_int_equal(mcp__unet_plan_finish(), 0);
     /* the most alive at once: 9 + 8 + 16 + 64 channels (blocks 0, 3, 5 and 6) */
-    size_t arena_bytes;
-    mcp__unet_plan_arena(&arena_bytes);
-    assert_int_equal(arena_bytes, 97 * c1);
+    assert_int_equal(plan_of(&q, ptr, cap), 97 * c1);
     mcp__unet_plan_pass();
     replay(&q, ptr, cap);
     check_no_overlap(&q, ptr, cap);
@@ -206,12 +211,7 @@ test_diverging_pass(void **state)
     r.ev[4] = (event){0, 0};
     void *ptr[MAX_BLOCKS];
     size_t cap[MAX_BLOCKS];
-    mcp__unet_plan_record();
-    replay(&q, ptr, cap);
-    assert_int_equal(mcp__unet_plan_finish(), 0);
-    size_t arena_bytes;
-    mcp__unet_plan_arena(&arena_bytes);
-    assert_int_equal(arena_bytes, 8 * MB); /* block 2 on block 0 */
+    assert_int_equal(plan_of(&q, ptr, cap), 8 * MB); /* block 2 on block 0 */
     mcp__unet_plan_pass();
     replay(&r, ptr, cap);
     check_no_overlap(&r, ptr, cap);
