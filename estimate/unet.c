@@ -975,6 +975,13 @@ clamp_slope(float v, float lo, float hi)
     return v >= lo && v <= hi ? 1.0f : 0.0f;
 }
 
+/* The network's input for n images of W x H: the padding to 16 is the network's. */
+static int
+input_batch_new(const mcp__unet *net, int W, int H, int n, batch *x)
+{
+    return batch_new_unset(x, n, net->ic, (H + 15) / 16 * 16, (W + 15) / 16 * 16);
+}
+
 /* The input batch: with primal, image 0 the pre-processed colour | albedo | normal
  * (docs/oidn-network.md §3.2, §3.4) and image 1 + k its tangent along t[k]; without,
  * image k the tangent alone. Padding is 0 in every image. */
@@ -984,7 +991,7 @@ preprocess(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo
            int n, batch *x)
 {
     const int H = color->height, W = color->width, ic = net->ic, o = primal ? 1 : 0;
-    if (batch_new_unset(x, o + n, ic, (H + 15) / 16 * 16, (W + 15) / 16 * 16)) return -1;
+    if (input_batch_new(net, W, H, o + n, x)) return -1;
     const float ns = norm_scale();
     const int wp = x->w, hp = x->h;
     /* zeros where nothing is written below: the padding, and a tangent's albedo and
@@ -1113,16 +1120,15 @@ batch_bytes(int w, int h, int n_images)
 }
 
 /* The memory plan of one pass over a W x H image (unet_memory.c): the pass walked dry,
- * with the input batch preprocess() makes. Its output outlives the pass (the primal's
- * is read by every tangent's postprocess), so it stays out of the plan, and its
- * placeholder is dropped, not given back. */
+ * with the input batch of one image, as preprocess() makes it. Its output outlives the
+ * pass (the primal's is read by every tangent's postprocess), so it stays out of the
+ * plan, and its placeholder is dropped, not given back. */
 static int
 plan_pass(const mcp__unet *net, int W, int H)
 {
     batch x, y;
     mcp__unet_plan_record();
-    int rc = batch_new_unset(&x, 1, net->ic, (H + 15) / 16 * 16, (W + 15) / 16 * 16) ||
-             network(net, &x, &y, NULL);
+    int rc = input_batch_new(net, W, H, 1, &x) || network(net, &x, &y, NULL);
     return mcp__unet_plan_finish() || rc ? -1 : 0;
 }
 
