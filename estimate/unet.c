@@ -211,7 +211,9 @@ mcp__unet_load(const char *path, mcp__unet **out)
 typedef struct batch {
     int n, c, h, w;
     float *d;   /* image k, channel i: d + ((size_t)k * c + i) * h * w */
-    size_t cap; /* bytes the block holds (it may be larger than n c h w floats) */
+    size_t cap; /* bytes the block holds (it may be larger than n c h w values) */
+    int half;   /* bfloat16 values (uint16_t) instead of floats: a tangents' pass with
+                   bf16 products stores all but its input and output so */
 } batch;
 
 static size_t
@@ -226,13 +228,28 @@ plane(const batch *b, int k, int i)
     return b->d + ((size_t)k * b->c + i) * plane_size(b);
 }
 
-/* A batch whose every value the caller writes (no zeroing pass over fresh memory). */
+static uint16_t *
+plane16(const batch *b, int k, int i)
+{
+    return (uint16_t *)b->d + ((size_t)k * b->c + i) * plane_size(b);
+}
+
+/* A batch of floats, or (half) bfloat16 values, whose every value the caller writes
+ * (no zeroing pass over fresh memory). */
+static int
+batch_new_as(batch *b, int n, int c, int h, int w, int half)
+{
+    *b = (batch){n, c, h, w, NULL, 0, half};
+    const size_t bytes =
+        (size_t)n * c * h * w * (half ? sizeof(uint16_t) : sizeof(float));
+    b->d = mcp__unet_block_take(bytes, &b->cap);
+    return b->d ? 0 : -1;
+}
+
 static int
 batch_new_unset(batch *b, int n, int c, int h, int w)
 {
-    *b = (batch){n, c, h, w, NULL, 0};
-    b->d = mcp__unet_block_take((size_t)n * c * h * w * sizeof(float), &b->cap);
-    return b->d ? 0 : -1;
+    return batch_new_as(b, n, c, h, w, 0);
 }
 
 /* A batch of zeros. */
@@ -535,18 +552,34 @@ is_replay(const pass *ps)
  * mask is applied as the outputs are written (the bias and the ReLU are the
  * primal's). */
 static int
-winograd(const pass *ps, const mcp__unet_conv *L, const float *a, int ca, int a_up,
-         const float *b, int n, int h, int w, int relu, float *out)
+winograd(const pass *ps, const mcp__unet_conv *L, const batch *a, int a_up,
+         const batch *b, int n, int h, int w, int relu, batch *out)
 {
     const int replay = is_replay(ps);
     const float *bias = replay ? NULL : L->bias;
     const unsigned char *bits = replay && relu ? ps->trace->relu[layer_of(ps, L)] : NULL;
     relu = relu && !replay;
+    const unsigned half = (a->half ? MCP__UNET_HALF_A : 0u) |
+                          (b && b->half ? MCP__UNET_HALF_B : 0u) |
+                          (out->half ? MCP__UNET_HALF_OUT : 0u);
     if (ps->coarse)
-        return mcp__unet_conv_winograd4(L->weight, bias, L->cin, L->cout, a, ca, a_up, b,
-                                        n, h, w, relu, bits, ps->bf16, out);
-    return mcp__unet_conv_winograd(L->weight, bias, L->cin, L->cout, a, ca, a_up, b, n, h,
-                                   w, relu, bits, out);
+        return mcp__unet_conv_winograd4(L->weight, bias, L->cin, L->cout, a->d, a->c,
+                                        a_up, b ? b->d : NULL, n, h, w, relu, bits,
+                                        ps->bf16, half, out->d);
+    if (half) return mcp_error("unet: bfloat16 activations need F(4x4, 3x3)");
+    return mcp__unet_conv_winograd(L->weight, bias, L->cin, L->cout, a->d, a->c, a_up,
+                                   b ? b->d : NULL, n, h, w, relu, bits, out->d);
+}
+
+/* Whether a layer's output is stored in bfloat16: in a tangents' pass with bf16
+ * products, every layer's but the last (postprocess reads it as floats). The
+ * products round their inputs to bf16 anyway, so this adds one rounding of each
+ * activation (2^-9 relative), which the JVP's bound for bf16 covers
+ * (tests/estimate/test_unet.c), and halves the bytes the transforms read and write. */
+static int
+half_out(const pass *ps, const mcp__unet_conv *L)
+{
+    return ps->bf16 && layer_of(ps, L) != MCP__UNET_NCONV - 1;
 }
 
 /* Records image 0's ReLU mask (out > 0) as bits, value i at bit i % 8 of byte i / 8. */
@@ -599,9 +632,9 @@ conv_plain(const pass *ps, const mcp__unet_conv *L, const batch *a, const batch 
     if (cin != L->cin)
         return mcp_error("unet: layer of %d input channels given %d", L->cin, cin);
     if (ps->fast) {
-        if (batch_new_unset(out, n, cout, h, w)) return -1;
+        if (batch_new_as(out, n, cout, h, w, half_out(ps, L))) return -1;
         if (mcp__unet_plan_dry()) return 0;
-        if (winograd(ps, L, a->d, a->c, 0, b ? b->d : NULL, n, h, w, relu, out->d)) {
+        if (winograd(ps, L, a, 0, b, n, h, w, relu, out)) {
             batch_free(out);
             return -1;
         }
@@ -758,19 +791,28 @@ maxpool_into(const pass *ps, const batch *in, batch *out)
             return -1;
         picks = tr->pick[tr->pools++];
     }
-    if (batch_new_unset(out, in->n, in->c, h2, w2)) return -1;
+    if (batch_new_as(out, in->n, in->c, h2, w2, in->half)) return -1;
     if (mcp__unet_plan_dry()) return 0;
+    if (in->half && !replay) return mcp_error("unet: a primal in bfloat16");
 #pragma omp parallel for collapse(2) schedule(static)
     for (int i = 0; i < in->c; i++)
         for (int y = 0; y < h2; y++)
             for (int x0 = 0; x0 < w2; x0 += RUN) {
                 const int xn = w2 - x0 < RUN ? w2 - x0 : RUN;
-                const float *restrict top = plane(in, 0, i) + (size_t)2 * y * w + 2 * x0;
-                const float *restrict bottom = top + w;
-                float *restrict dst0 = plane(out, 0, i) + (size_t)y * w2 + x0;
                 unsigned char buf[RUN];
                 unsigned char *restrict pick =
                     picks ? picks + ((size_t)i * h2 + y) * w2 + x0 : buf;
+                if (replay && in->half) { /* the same for bfloat16 values */
+                    for (int t = 0; t < in->n; t++) {
+                        const uint16_t *restrict src =
+                            plane16(in, t, i) + (size_t)2 * y * w + 2 * x0;
+                        uint16_t *restrict dst = plane16(out, t, i) + (size_t)y * w2 + x0;
+                        for (int x = 0; x < xn; x++)
+                            dst[x] =
+                                src[(pick[x] >> 1) * (size_t)w + 2 * x + (pick[x] & 1)];
+                    }
+                    continue;
+                }
                 if (replay) { /* every image is a tangent */
                     for (int t = 0; t < in->n; t++) {
                         const float *restrict src =
@@ -782,6 +824,9 @@ maxpool_into(const pass *ps, const batch *in, batch *out)
                     }
                     continue;
                 }
+                const float *restrict top = plane(in, 0, i) + (size_t)2 * y * w + 2 * x0;
+                const float *restrict bottom = top + w;
+                float *restrict dst0 = plane(out, 0, i) + (size_t)y * w2 + x0;
 #pragma omp simd
                 for (int x = 0; x < xn; x++) {
                     const float a = top[2 * x], b = top[2 * x + 1], c = bottom[2 * x],
@@ -855,9 +900,9 @@ conv_up_replace(const pass *ps, const mcp__unet_conv *L, batch *t, batch *skip, 
     if (cin != L->cin || 2 * t->h != h || 2 * t->w != w)
         return mcp_error("unet: layer of %d input channels given %d", L->cin, cin);
     batch out;
-    if (batch_new_unset(&out, n, L->cout, h, w)) return -1;
+    if (batch_new_as(&out, n, L->cout, h, w, half_out(ps, L))) return -1;
     if (!mcp__unet_plan_dry()) {
-        if (winograd(ps, L, t->d, t->c, 1, skip->d, n, h, w, relu, out.d)) {
+        if (winograd(ps, L, t, 1, skip, n, h, w, relu, &out)) {
             batch_free(&out);
             return -1;
         }

@@ -10,6 +10,7 @@
 
 #include <stddef.h>
 #include <stdint.h>
+#include <string.h>
 
 /* ---- .tza archive (tza.c; docs/oidn-network.md §2) ---- */
 
@@ -121,6 +122,19 @@ void mcp__unet_mask_row(float *row, int n, const unsigned char *bits, size_t at)
  * each line before it fills it), else memcpy; the convolution fences them before its
  * barrier. */
 void mcp__unet_store_row(float *dst, const float *src, int n);
+/* bfloat16, the upper half of a float's bits: a tangents' pass with bf16 products
+ * stores its activations so (unet.c), which halves the bytes the transforms move. From
+ * float rounded to nearest, ties to even, in integer operations, so that every CPU
+ * path gives the same bits (the values are finite). */
+static inline uint16_t
+mcp__unet_to_bf16(float f)
+{
+    uint32_t u;
+    memcpy(&u, &f, sizeof u);
+    return (uint16_t)((u + 0x7fffu + (u >> 16 & 1u)) >> 16);
+}
+/* mcp__unet_store_row for a row of bfloat16 values, rounded as above. */
+void mcp__unet_store_row16(uint16_t *dst, const float *src, int n);
 /* A Winograd convolution F(m x m, 3x3): its tile, its transforms (unet_winograd.c
  * and unet_winograd4.c), and the driver that runs them over an image in tasks of
  * about chunk tiles with the matrix products of unet_gemm.c (unet_winograd.c). */
@@ -130,29 +144,37 @@ typedef struct mcp__unet_winograd {
     int chunk;      /* tiles per task, about */
     int row_floats; /* the transforms' row scratch: row_floats x (tiles + 1) floats */
     void (*transform_weights)(const float *weight, int cin, int cout, float *u);
-    void (*transform_input)(const float *src, int up, int h, int w, int ty, int tx0,
-                            int nt, float *rows, float *v, size_t ld);
+    /* src: floats, or with src16 bfloat16 values (F(4x4, 3x3) only) */
+    void (*transform_input)(const void *src, int src16, int up, int h, int w, int ty,
+                            int tx0, int nt, float *rows, float *v, size_t ld);
+    /* dst: floats, or with dst16 bfloat16 values rounded to nearest even (F(4x4,
+     * 3x3) only) */
     void (*transform_output)(const float *m, size_t ld, int ty, int tx0, int nt, int h,
                              int w, float bias, int relu, int primal, const float *p0,
-                             const unsigned char *bits, size_t bit0, float *dst,
+                             const unsigned char *bits, size_t bit0, void *dst, int dst16,
                              float *row);
 } mcp__unet_winograd;
 
+/* Which of a convolution's activations hold bfloat16 values instead of floats (a
+ * tangents' pass with bf16 products: unet.c): its inputs a and b, its output. */
+enum { MCP__UNET_HALF_A = 1, MCP__UNET_HALF_B = 2, MCP__UNET_HALF_OUT = 4 };
+
 int mcp__unet_winograd_conv(const mcp__unet_winograd *k, const float *weight,
-                            const float *bias, int cin, int cout, const float *a, int ca,
-                            int a_up, const float *b, int n, int h, int w, int relu,
-                            const unsigned char *mask_bits, int bf16, float *out);
+                            const float *bias, int cin, int cout, const void *a, int ca,
+                            int a_up, const void *b, int n, int h, int w, int relu,
+                            const unsigned char *mask_bits, int bf16, unsigned half,
+                            void *out);
 
 /* The same as F(4x4, 3x3) (unet_winograd4.c): 1.78 times fewer multiply-adds, a
  * relative error ~1e-4 instead of ~1e-6; for the tangents' passes. */
 int mcp__unet_conv_winograd4(const float *weight, const float *bias, int cin, int cout,
-                             const float *a, int ca, int a_up, const float *b, int n,
-                             int h, int w, int relu, const unsigned char *mask_bits,
-                             int bf16, float *out);
+                             const void *a, int ca, int a_up, const void *b, int n, int h,
+                             int w, int relu, const unsigned char *mask_bits, int bf16,
+                             unsigned half, void *out);
 /* Prefetches the input rows that tiles [t0, t0 + nt) of m x m outputs read from one
- * channel (unet_winograd.c). */
-void mcp__unet_prefetch_rows(const float *src, int up, int h, int w, size_t t0, int nt,
-                             int tw, int m);
+ * channel of elem-byte values (unet_winograd.c). */
+void mcp__unet_prefetch_rows(const void *src, size_t elem, int up, int h, int w,
+                             size_t t0, int nt, int tw, int m);
 /* 1 when the convolutions run as Winograd products (the default), 0 for the direct
  * loops whose bits are the same on every x86-64 (net->fixed_bits, the denoiser's
  * fixed_bits setting, or MCPOST_UNET_FIXED set to anything but 0). */

@@ -99,7 +99,48 @@ store_row_avx512(float *restrict dst, const float *restrict src, int n)
     for (; x < n; x++)
         dst[x] = src[x];
 }
+
+/* The same for bfloat16 values rounded to nearest even, 32 per 64-byte line. */
+__attribute__((target("avx512f"))) static void
+store_row16_avx512(uint16_t *restrict dst, const float *restrict src, int n)
+{
+    int x = 0;
+    for (; x < n && ((uintptr_t)(dst + x) & 63); x++)
+        dst[x] = mcp__unet_to_bf16(src[x]);
+    const __m512i round = _mm512_set1_epi32(0x7fff), one = _mm512_set1_epi32(1);
+    for (; x + 32 <= n; x += 32) {
+        __m512i u0 = _mm512_castps_si512(_mm512_loadu_ps(src + x)),
+                u1 = _mm512_castps_si512(_mm512_loadu_ps(src + x + 16));
+        u0 = _mm512_srli_epi32(
+            _mm512_add_epi32(_mm512_add_epi32(u0, round),
+                             _mm512_and_si512(_mm512_srli_epi32(u0, 16), one)),
+            16);
+        u1 = _mm512_srli_epi32(
+            _mm512_add_epi32(_mm512_add_epi32(u1, round),
+                             _mm512_and_si512(_mm512_srli_epi32(u1, 16), one)),
+            16);
+        const __m512i both =
+            _mm512_inserti64x4(_mm512_castsi256_si512(_mm512_cvtepi32_epi16(u0)),
+                               _mm512_cvtepi32_epi16(u1), 1);
+        _mm512_stream_si512((void *)(dst + x), both);
+    }
+    for (; x < n; x++)
+        dst[x] = mcp__unet_to_bf16(src[x]);
+}
 #endif
+
+void
+mcp__unet_store_row16(uint16_t *dst, const float *src, int n)
+{
+#if defined(__GNUC__) && defined(__x86_64__)
+    if (__builtin_cpu_supports("avx512f")) {
+        store_row16_avx512(dst, src, n);
+        return;
+    }
+#endif
+    for (int x = 0; x < n; x++)
+        dst[x] = mcp__unet_to_bf16(src[x]);
+}
 
 void
 mcp__unet_store_row(float *dst, const float *src, int n)
@@ -223,8 +264,8 @@ load_row_up(const float *src, int h, int w, int y, int tx0, int nt, float *restr
  * outputs each) of one channel read, one cache line at a time: the rows of a task are
  * short runs in planes far apart, too short for the hardware prefetcher to find. */
 void
-mcp__unet_prefetch_rows(const float *src, int up, int h, int w, size_t t0, int nt, int tw,
-                        int m)
+mcp__unet_prefetch_rows(const void *src, size_t elem, int up, int h, int w, size_t t0,
+                        int nt, int tw, int m)
 {
     const int ty0 = (int)(t0 / tw), ty1 = (int)((t0 + nt - 1) / tw);
     int x0 = ty0 == ty1 ? m * (int)(t0 % tw) - 1 : 0;
@@ -232,10 +273,11 @@ mcp__unet_prefetch_rows(const float *src, int up, int h, int w, size_t t0, int n
     int y0 = m * ty0 - 1, y1 = m * ty1 + m;
     if (up) /* the source's own rows and columns */
         h /= 2, w /= 2, x0 /= 2, x1 /= 2, y0 /= 2, y1 /= 2;
+    const int line = (int)(64 / elem); /* values per cache line */
     for (int y = y0 > 0 ? y0 : 0; y <= y1 && y < h; y++) {
-        const float *r = src + (size_t)y * w;
-        for (int x = x0 > 0 ? x0 : 0; x <= x1 && x < w; x += 16)
-            __builtin_prefetch(r + x);
+        const char *r = (const char *)src + (size_t)y * w * elem;
+        for (int x = x0 > 0 ? x0 : 0; x <= x1 && x < w; x += line)
+            __builtin_prefetch(r + (size_t)x * elem);
     }
 }
 
@@ -244,9 +286,11 @@ mcp__unet_prefetch_rows(const float *src, int up, int h, int w, size_t t0, int n
  * B with B^T = [1 0 -1 0; 0 1 1 0; 0 -1 1 0; 0 1 0 -1]: first B^T down the rows (whole
  * rows at a time), then B across each tile. rows holds 8 (nt + 1) floats. */
 TRANSFORM_KERNEL static void
-transform_input(const float *src, int up, int h, int w, int ty, int tx0, int nt,
-                float *rows, float *v, size_t ld)
+transform_input(const void *src_, int src16, int up, int h, int w, int ty, int tx0,
+                int nt, float *rows, float *v, size_t ld)
 {
+    (void)src16; /* floats only: F(2x2, 3x3) runs no bf16 pass */
+    const float *src = src_;
     const size_t n = (size_t)nt + 1;
     float *e[4], *o[4];
     for (int r = 0; r < 4; r++) {
@@ -293,8 +337,11 @@ transform_input(const float *src, int up, int h, int w, int ty, int tx0, int nt,
 TRANSFORM_KERNEL static void
 transform_output(const float *m, size_t ld, int ty, int tx0, int nt, int h, int w,
                  float bias, int relu, int primal, const float *p0,
-                 const unsigned char *bits, size_t bit0, float *dst, float *row)
+                 const unsigned char *bits, size_t bit0, void *dst_, int dst16,
+                 float *row)
 {
+    (void)dst16; /* floats only, as the input */
+    float *dst = dst_;
     float *restrict y0 = row, *restrict y1 = row + 2 * nt;
     const float *restrict m0 = m, *restrict m1 = m + 4 * ld, *restrict m2 = m + 8 * ld,
                           *restrict m3 = m + 12 * ld;
@@ -347,7 +394,7 @@ mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cou
                         int w, int relu, const unsigned char *mask_bits, float *out)
 {
     return mcp__unet_winograd_conv(&f2x2, weight, bias, cin, cout, a, ca, a_up, b, n, h,
-                                   w, relu, mask_bits, 0, out);
+                                   w, relu, mask_bits, 0, 0, out);
 }
 
 /* The mask's bits of one plane (from bit plane0) for the tiles [t0, t0 + nt) of a
@@ -372,10 +419,17 @@ prefetch_mask(const unsigned char *bits, size_t plane0, size_t t0, int nt, int t
 /* A Winograd convolution of either size (unet_internal.h). */
 int
 mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
-                        const float *bias, int cin, int cout, const float *a, int ca,
-                        int a_up, const float *b, int n, int h, int w, int relu,
-                        const unsigned char *mask_bits, int bf16, float *out)
+                        const float *bias, int cin, int cout, const void *a_, int ca,
+                        int a_up, const void *b_, int n, int h, int w, int relu,
+                        const unsigned char *mask_bits, int bf16, unsigned half,
+                        void *out_)
 {
+    /* the activations as bytes: bfloat16 values (half) take 2, floats 4 */
+    const int a16 = !!(half & MCP__UNET_HALF_A), b16 = !!(half & MCP__UNET_HALF_B),
+              out16 = !!(half & MCP__UNET_HALF_OUT);
+    const size_t ea = a16 ? 2 : 4, eb = b16 ? 2 : 4, eo = out16 ? 2 : 4;
+    const char *a = a_, *b = b_;
+    char *out = out_;
     const int tile_m = k_->m, elems = k_->elems;
     mcp__unet_gemm g;
     mcp__unet_gemm_choose(&g);
@@ -454,19 +508,20 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
                  * products +1 to +4% with their rows elems x ld apart). */
                 const size_t se = (size_t)ld, sc = (size_t)elems * ld;
                 for (int i = 0; i < cin; i++) {
-                    const int up = i < ca && a_up;
-                    const float *src = i < ca ? a + ((size_t)k * ca + i) * a_hw
-                                              : b + ((size_t)k * cb + (i - ca)) * hw;
+                    const int up = i < ca && a_up, src16 = i < ca ? a16 : b16;
+                    const void *src = i < ca ? a + ((size_t)k * ca + i) * a_hw * ea
+                                             : b + ((size_t)k * cb + (i - ca)) * hw * eb;
                     if (i + 1 < cin) /* the next channel's rows, while this one runs */
                         mcp__unet_prefetch_rows(
-                            i + 1 < ca ? a + ((size_t)k * ca + i + 1) * a_hw
-                                       : b + ((size_t)k * cb + (i + 1 - ca)) * hw,
-                            i + 1 < ca && a_up, h, w, t0, nt, tw, tile_m);
+                            i + 1 < ca ? a + ((size_t)k * ca + i + 1) * a_hw * ea
+                                       : b + ((size_t)k * cb + (i + 1 - ca)) * hw * eb,
+                            i + 1 < ca ? ea : eb, i + 1 < ca && a_up, h, w, t0, nt, tw,
+                            tile_m);
                     /* the chunk's pieces of tile rows */
                     for (int j = 0; j < nt;) {
                         const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
                         const int len = tw - tx < nt - j ? tw - tx : nt - j;
-                        k_->transform_input(src, up, h, w, ty, tx, len, rows,
+                        k_->transform_input(src, src16, up, h, w, ty, tx, len, rows,
                                             v + (size_t)i * sc + j, se);
                         j += len;
                     }
@@ -501,11 +556,12 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
                     for (int j = 0; j < nt;) {
                         const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
                         const int len = tw - tx < nt - j ? tw - tx : nt - j;
-                        k_->transform_output(m + (size_t)o * sc + j, se, ty, tx, len, h,
-                                             w, k == 0 && bias ? bias[o] : 0.0f, relu,
-                                             k == 0, out + (size_t)o * hw, mask_bits,
-                                             (size_t)o * hw,
-                                             out + ((size_t)k * cout + o) * hw, rows);
+                        k_->transform_output(
+                            m + (size_t)o * sc + j, se, ty, tx, len, h, w,
+                            k == 0 && bias ? bias[o] : 0.0f, relu, k == 0,
+                            out16 ? NULL : (const float *)out + (size_t)o * hw, mask_bits,
+                            (size_t)o * hw, out + ((size_t)k * cout + o) * hw * eo, out16,
+                            rows);
                         j += len;
                     }
                 }

@@ -26,9 +26,11 @@
 #include "unet_internal.h"
 #include "internal.h"
 
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 #if defined(__x86_64__)
+#include <emmintrin.h>
 #include <xmmintrin.h>
 #endif
 #ifdef _OPENMP
@@ -78,12 +80,24 @@ transform_weights(const float *weight, int cin, int cout, float *u)
         }
 }
 
+/* bfloat16, the upper half of a float's bits (unet_internal.h): to float exactly. */
+static inline float
+from_bf16(uint16_t b)
+{
+    const uint32_t u = (uint32_t)b << 16;
+    float f;
+    memcpy(&f, &u, sizeof f);
+    return f;
+}
+
 /* Input row y of one channel for tiles [tx0, tx0 + nt), split by column phase:
  * ph[q][j] = column 4 (tx0 + j) - 1 + q for j <= nt, so that tile tx0 + j's six
  * columns are ph[0..3][j], ph[0][j + 1], ph[1][j + 1]; zeros outside the image. With
- * up, the source is at half resolution and read upsampled (nearest, 2x). */
+ * up, the source is at half resolution and read upsampled (nearest, 2x). src holds
+ * floats, or with src16 bfloat16 values. */
 static inline __attribute__((always_inline)) void
-load_row4(const float *src, int up, int h, int w, int y, int tx0, int nt, float *ph[4])
+load_row4(const void *src, int src16, int up, int h, int w, int y, int tx0, int nt,
+          float *ph[4])
 {
     const int n = nt + 1;
     if (y < 0 || y >= h) {
@@ -92,7 +106,10 @@ load_row4(const float *src, int up, int h, int w, int y, int tx0, int nt, float 
         return;
     }
     const int x0 = 4 * tx0 - 1;
-    const float *r = up ? src + (size_t)(y / 2) * (w / 2) : src + (size_t)y * w;
+    const size_t row = up ? (size_t)(y / 2) * (w / 2) : (size_t)y * w;
+    const float *r = src16 ? NULL : (const float *)src + row;
+    const uint16_t *r16 = src16 ? (const uint16_t *)src + row : NULL;
+#define VALUE(x) (src16 ? from_bf16(r16[x]) : r[x])
     /* j in [lo, hi): all four columns inside the image */
     const int lo = x0 < 0 ? 1 : 0;
     int hi = w - 4 - x0 >= 0 ? (w - 4 - x0) / 4 + 1 : 0;
@@ -101,9 +118,21 @@ load_row4(const float *src, int up, int h, int w, int y, int tx0, int nt, float 
     if (!up) {
 #if defined(__x86_64__)
         for (; j + 4 <= hi; j += 4) { /* 4 x 4 transposes */
-            const float *s = r + x0 + 4 * j;
-            __m128 c0 = _mm_loadu_ps(s), c1 = _mm_loadu_ps(s + 4),
-                   c2 = _mm_loadu_ps(s + 8), c3 = _mm_loadu_ps(s + 12);
+            __m128 c0, c1, c2, c3;
+            if (src16) { /* a bf16 value in a float's upper half is that float */
+                const uint16_t *s = r16 + x0 + 4 * j;
+                const __m128i zero = _mm_setzero_si128(),
+                              lo8 = _mm_loadu_si128((const __m128i *)s),
+                              hi8 = _mm_loadu_si128((const __m128i *)(s + 8));
+                c0 = _mm_castsi128_ps(_mm_unpacklo_epi16(zero, lo8));
+                c1 = _mm_castsi128_ps(_mm_unpackhi_epi16(zero, lo8));
+                c2 = _mm_castsi128_ps(_mm_unpacklo_epi16(zero, hi8));
+                c3 = _mm_castsi128_ps(_mm_unpackhi_epi16(zero, hi8));
+            } else {
+                const float *s = r + x0 + 4 * j;
+                c0 = _mm_loadu_ps(s), c1 = _mm_loadu_ps(s + 4);
+                c2 = _mm_loadu_ps(s + 8), c3 = _mm_loadu_ps(s + 12);
+            }
             _MM_TRANSPOSE4_PS(c0, c1, c2, c3);
             _mm_storeu_ps(ph[0] + j, c0), _mm_storeu_ps(ph[1] + j, c1);
             _mm_storeu_ps(ph[2] + j, c2), _mm_storeu_ps(ph[3] + j, c3);
@@ -111,19 +140,29 @@ load_row4(const float *src, int up, int h, int w, int y, int tx0, int nt, float 
 #endif
         for (; j < hi; j++)
             for (int q = 0; q < 4; q++)
-                ph[q][j] = r[x0 + 4 * j + q];
+                ph[q][j] = VALUE(x0 + 4 * j + q);
     } else {
         /* columns 4 k - 1 .. 4 k + 2 (k = tx0 + j) read source columns 2 k - 1, 2 k,
          * 2 k, 2 k + 1 */
         float *restrict p0 = ph[0], *restrict p1 = ph[1], *restrict p2 = ph[2],
                         *restrict p3 = ph[3];
-        const float *restrict rs = r + 2 * tx0;
+        if (src16) {
+            const uint16_t *restrict rs = r16 + 2 * tx0;
 #pragma omp simd
-        for (int i = lo; i < hi; i++) {
-            p0[i] = rs[2 * i - 1];
-            p1[i] = rs[2 * i];
-            p2[i] = rs[2 * i];
-            p3[i] = rs[2 * i + 1];
+            for (int i = lo; i < hi; i++) {
+                p0[i] = from_bf16(rs[2 * i - 1]);
+                p1[i] = p2[i] = from_bf16(rs[2 * i]);
+                p3[i] = from_bf16(rs[2 * i + 1]);
+            }
+        } else {
+            const float *restrict rs = r + 2 * tx0;
+#pragma omp simd
+            for (int i = lo; i < hi; i++) {
+                p0[i] = rs[2 * i - 1];
+                p1[i] = rs[2 * i];
+                p2[i] = rs[2 * i];
+                p3[i] = rs[2 * i + 1];
+            }
         }
         j = hi > lo ? hi : lo;
     }
@@ -133,23 +172,24 @@ load_row4(const float *src, int up, int h, int w, int y, int tx0, int nt, float 
         for (int e = edges[side][0]; e < edges[side][1]; e++)
             for (int q = 0; q < 4; q++) {
                 const int x = x0 + 4 * e + q;
-                ph[q][e] = x >= 0 && x < w ? r[up ? x / 2 : x] : 0.0f;
+                ph[q][e] = x >= 0 && x < w ? VALUE(up ? x / 2 : x) : 0.0f;
             }
+#undef VALUE
 }
 
 /* V for tiles [tx0, tx0 + nt) of tile row ty, one channel: v[e * ld + j], e = 6 a + b,
  * from input rows 4 ty - 1 .. 4 ty + 4: first B^T down the rows (whole phase arrays at
  * a time), then B across each tile. rows holds 24 (nt + 1) floats. */
 TRANSFORM_KERNEL static void
-transform_input4(const float *src, int up, int h, int w, int ty, int tx0, int nt,
-                 float *rows, float *v, size_t ld)
+transform_input4(const void *src, int src16, int up, int h, int w, int ty, int tx0,
+                 int nt, float *rows, float *v, size_t ld)
 {
     const size_t n = (size_t)nt + 1;
     float *ph[ALPHA][4];
     for (int r = 0; r < ALPHA; r++) {
         for (int q = 0; q < 4; q++)
             ph[r][q] = rows + (size_t)(4 * r + q) * n;
-        load_row4(src, up, h, w, 4 * ty - 1 + r, tx0, nt, ph[r]);
+        load_row4(src, src16, up, h, w, 4 * ty - 1 + r, tx0, nt, ph[r]);
     }
     /* rows of B^T d, in place, phase by phase */
     for (int q = 0; q < 4; q++) {
@@ -196,7 +236,8 @@ transform_input4(const float *src, int up, int h, int w, int ty, int tx0, int nt
 TRANSFORM_KERNEL static void
 transform_output4(const float *m, size_t ld, int ty, int tx0, int nt, int h, int w,
                   float bias, int relu, int primal, const float *p0,
-                  const unsigned char *bits, size_t bit0, float *dst, float *row)
+                  const unsigned char *bits, size_t bit0, void *dst, int dst16,
+                  float *row)
 {
     float *restrict o = row;                      /* 16 streams of nt */
     float *restrict line = row + 16 * (size_t)nt; /* one output row, 4 nt */
@@ -245,18 +286,22 @@ transform_output4(const float *m, size_t ld, int ty, int tx0, int nt, int h, int
             line[4 * j + 2] = q2[j], line[4 * j + 3] = q3[j];
         }
         const size_t at = (size_t)(4 * ty + a) * w + x0;
-        const float *restrict mask = p0 + at;
         if (relu && primal) {
 #pragma omp simd
             for (int x = 0; x < xn; x++)
                 line[x] = line[x] > 0.0f ? line[x] : 0.0f;
         } else if (relu) {
+            const float *restrict mask = p0 + at;
 #pragma omp simd
             for (int x = 0; x < xn; x++)
                 line[x] = mask[x] > 0.0f ? line[x] : 0.0f;
         } else if (bits)
             mcp__unet_mask_row(line, xn, bits, bit0 + at);
-        mcp__unet_store_row(dst + at, line, xn);
+        if (dst16) {
+            mcp__unet_store_row16((uint16_t *)dst + at, line, xn);
+        } else {
+            mcp__unet_store_row((float *)dst + at, line, xn);
+        }
     }
 }
 
@@ -267,10 +312,10 @@ static const mcp__unet_winograd f4x4 = {
 
 int
 mcp__unet_conv_winograd4(const float *weight, const float *bias, int cin, int cout,
-                         const float *a, int ca, int a_up, const float *b, int n, int h,
+                         const void *a, int ca, int a_up, const void *b, int n, int h,
                          int w, int relu, const unsigned char *mask_bits, int bf16,
-                         float *out)
+                         unsigned half, void *out)
 {
     return mcp__unet_winograd_conv(&f4x4, weight, bias, cin, cout, a, ca, a_up, b, n, h,
-                                   w, relu, mask_bits, bf16, out);
+                                   w, relu, mask_bits, bf16, half, out);
 }
