@@ -1529,6 +1529,57 @@ test_mask_row(void **state)
         }
 }
 
+/* The bfloat16 activations of a tangents' pass (mcp__unet_store_row16) against the
+ * rounding worked out in double: the nearer of the two bf16 values (8 significant
+ * bits) around each float, the even one on a tie; at every alignment of the
+ * destination (the AVX-512 path stores whole 64-byte lines) and lengths across the
+ * 32-value blocks. The values include exact ties, ties whose rounding carries into
+ * the exponent, and small and large magnitudes. */
+static uint16_t
+bf16_reference(float f)
+{
+    uint32_t u;
+    memcpy(&u, &f, sizeof u);
+    const uint32_t lo = u & 0xffff0000u, hi = lo + 0x10000u; /* |f| between, in bits */
+    float flo, fhi;
+    memcpy(&flo, &lo, sizeof flo);
+    memcpy(&fhi, &hi, sizeof fhi);
+    const double dlo = fabs((double)f - flo), dhi = fabs((double)fhi - f);
+    if (dlo < dhi) return (uint16_t)(lo >> 16);
+    if (dhi < dlo) return (uint16_t)(hi >> 16);
+    return (uint16_t)((lo >> 16 & 1u) ? hi >> 16 : lo >> 16);
+}
+
+static void
+test_store_row16(void **state)
+{
+    (void)state;
+    enum { N = 300 };
+    float src[N];
+    uint64_t s = 777;
+    for (int i = 0; i < N; i++) {
+        s = s * 6364136223846793005ULL + 1442695040888963407ULL;
+        uint32_t u = (uint32_t)(s >> 32);
+        if (i % 5 == 0) u = (u & 0xffff0000u) | 0x8000u;     /* a tie */
+        if (i % 7 == 0) u = (u & 0x807f0000u) | 0x3f7f8000u; /* a tie that carries */
+        if (i % 7) /* an exponent from 2^-63 to 2^62: finite, normal */
+            u = (u & 0x807fffffu) | (uint32_t)(64 + (s >> 8) % 126) << 23;
+        memcpy(&src[i], &u, sizeof u);
+    }
+    uint16_t buf[N + 64] __attribute__((aligned(64)));
+    for (int off = 0; off < 40; off++)
+        for (int n = 0; n <= N - off; n += n < 70 ? 1 : 37) {
+            mcp__unet_store_row16(buf + off, src + off, n);
+            for (int x = 0; x < n; x++)
+                if (buf[off + x] != bf16_reference(src[off + x]))
+                    fail_msg(
+                        "store_row16 at %d, n %d: value %d (%a) gives %04x, expected "
+                        "%04x",
+                        off, n, x, (double)src[off + x], buf[off + x],
+                        bf16_reference(src[off + x]));
+        }
+}
+
 int
 main(void)
 {
@@ -1541,6 +1592,7 @@ main(void)
         cmocka_unit_test(test_jvp_finite_differences),
         cmocka_unit_test(test_jvp_batched),
         cmocka_unit_test(test_mask_row),
+        cmocka_unit_test(test_store_row16),
         cmocka_unit_test(test_tiles_same_bits),
         cmocka_unit_test(test_memory_tiles),
         cmocka_unit_test(test_denoiser_kind),
