@@ -532,7 +532,8 @@ typedef struct pass {
     const mcp__unet *net;
     int fast;   /* Winograd products */
     int coarse; /* F(4x4, 3x3): the primal's, and the tangents' unless exact_tangents */
-    int bf16;   /* a tangents' pass on coarse: products in bfloat16 where the CPU can */
+    int bf16;   /* a tangents' pass on coarse: products in bfloat16 where the CPU can,
+                   and its activations stored so (half_out) */
     primal_trace *trace;
 } pass;
 
@@ -791,9 +792,9 @@ maxpool_into(const pass *ps, const batch *in, batch *out)
             return -1;
         picks = tr->pick[tr->pools++];
     }
+    if (in->half && !replay) return mcp_error("unet: a primal in bfloat16");
     if (batch_new_as(out, in->n, in->c, h2, w2, in->half)) return -1;
     if (mcp__unet_plan_dry()) return 0;
-    if (in->half && !replay) return mcp_error("unet: a primal in bfloat16");
 #pragma omp parallel for collapse(2) schedule(static)
     for (int i = 0; i < in->c; i++)
         for (int y = 0; y < h2; y++)
