@@ -549,6 +549,14 @@ is_replay(const pass *ps)
     return ps->trace && ps->trace->replay;
 }
 
+/* Zeroed bits for count values: 8 bytes to spare, as the Winograd replay reads 8 at a
+ * time (unet_internal.h). */
+static unsigned char *
+relu_bits_new(size_t count)
+{
+    return mcp_calloc(count / 8 + 1 + 8, 1);
+}
+
 /* The Winograd convolution a pass runs: in a replay, with relu, the primal's recorded
  * mask is applied as the outputs are written (the bias and the ReLU are the
  * primal's). */
@@ -563,13 +571,20 @@ winograd(const pass *ps, const mcp__unet_conv *L, const batch *a, int a_up,
     const unsigned half = (a->half ? MCP__UNET_HALF_A : 0u) |
                           (b && b->half ? MCP__UNET_HALF_B : 0u) |
                           (out->half ? MCP__UNET_HALF_OUT : 0u);
+    /* the primal's pass with a trace records its ReLU mask as it writes the rows */
+    unsigned char *record = NULL;
+    if (ps->trace && !replay && relu) {
+        const size_t count = (size_t)out->c * plane_size(out);
+        if (!(record = relu_bits_new(count))) return -1;
+        ps->trace->relu[layer_of(ps, L)] = record;
+    }
     if (ps->coarse)
         return mcp__unet_conv_winograd4(L->weight, bias, L->cin, L->cout, a->d, a->c,
                                         a_up, b ? b->d : NULL, n, h, w, relu, bits,
-                                        ps->bf16, half, out->d);
+                                        record, ps->bf16, half, out->d);
     if (half) return mcp_error("unet: bfloat16 activations need F(4x4, 3x3)");
     return mcp__unet_conv_winograd(L->weight, bias, L->cin, L->cout, a->d, a->c, a_up,
-                                   b ? b->d : NULL, n, h, w, relu, bits, out->d);
+                                   b ? b->d : NULL, n, h, w, relu, bits, record, out->d);
 }
 
 /* Whether a layer's output is stored in bfloat16: in a tangents' pass with bf16
@@ -588,8 +603,7 @@ static int
 record_relu(const batch *out, unsigned char **bits)
 {
     const size_t count = (size_t)out->c * plane_size(out), whole = count / 8;
-    /* 8 bytes to spare: the Winograd replay reads 8 at a time (unet_internal.h) */
-    if (!(*bits = mcp_calloc(whole + 1 + 8, 1))) return -1;
+    if (!(*bits = relu_bits_new(count))) return -1;
     unsigned char *restrict m = *bits;
     const float *restrict v = out->d;
 #pragma omp parallel for schedule(static)
@@ -712,15 +726,16 @@ conv_plain(const pass *ps, const mcp__unet_conv *L, const batch *a, const batch 
 
 /* After a convolution with relu: the primal's pass records its mask, a replay of the
  * direct loops applies it (its convolution ran without bias and ReLU; the Winograd
- * convolutions apply it as they write). out is freed on failure. */
+ * convolutions record it and apply it as they write). out is freed on failure. */
 static int
 trace_relu(const pass *ps, const mcp__unet_conv *L, int relu, batch *out)
 {
     primal_trace *tr = ps->trace;
     if (!tr || !relu) return 0;
     const int layer = layer_of(ps, L);
+    if (ps->fast) return 0; /* the Winograd products applied it, or recorded it */
     if (tr->replay) {
-        if (!ps->fast) replay_relu(out, tr->relu[layer]); /* Winograd applied it */
+        replay_relu(out, tr->relu[layer]);
         return 0;
     }
     if (record_relu(out, &tr->relu[layer])) {

@@ -110,13 +110,18 @@ int mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color,
 int mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cout,
                             const float *a, int ca, int a_up, const float *b, int n,
                             int h, int w, int relu, const unsigned char *mask_bits,
-                            float *out);
+                            unsigned char *record_bits, float *out);
 /* mask_bits (with relu 0): every output is zeroed where the recorded bit of its value
  * (value i of the out batch's image: bit i % 8 of byte i / 8; unet.c's trace of the
  * primal's ReLU) is 0, as it is written. Replaying a tangent's mask this way costs a
  * few operations per value in the cache instead of a pass over the whole batch. The
  * bits are read 8 bytes at a time: their block has 8 bytes to spare. */
 void mcp__unet_mask_row(float *row, int n, const unsigned char *bits, size_t at);
+/* The converse, for the primal's trace: bits [at, at + n) (zeros before) set where row
+ * > 0, as the rows are written, instead of a pass over the finished activation. Bytes
+ * that the row covers only in part are or-ed atomically: two tasks' rows may meet
+ * inside a byte. */
+void mcp__unet_record_row(unsigned char *bits, size_t at, const float *row, int n);
 /* A transform's row of outputs into its activation: non-temporal stores where the CPU
  * has AVX-512 (the activation is far larger than the caches, and a plain store reads
  * each line before it fills it), else memcpy; the convolution fences them before its
@@ -149,10 +154,12 @@ typedef struct mcp__unet_winograd {
                             int tx0, int nt, float *rows, float *v, size_t ld);
     /* dst: floats, or with dst16 bfloat16 values rounded to nearest even (F(4x4,
      * 3x3) only) */
+    /* record (the primal with relu): the ReLU mask's bits are set there as the rows
+     * are written (mcp__unet_record_row) */
     void (*transform_output)(const float *m, size_t ld, int ty, int tx0, int nt, int h,
                              int w, float bias, int relu, int primal, const float *p0,
-                             const unsigned char *bits, size_t bit0, void *dst, int dst16,
-                             float *row);
+                             const unsigned char *bits, unsigned char *record,
+                             size_t bit0, void *dst, int dst16, float *row);
 } mcp__unet_winograd;
 
 /* Which of a convolution's activations hold bfloat16 values instead of floats (a
@@ -162,15 +169,16 @@ enum { MCP__UNET_HALF_A = 1, MCP__UNET_HALF_B = 2, MCP__UNET_HALF_OUT = 4 };
 int mcp__unet_winograd_conv(const mcp__unet_winograd *k, const float *weight,
                             const float *bias, int cin, int cout, const void *a, int ca,
                             int a_up, const void *b, int n, int h, int w, int relu,
-                            const unsigned char *mask_bits, int bf16, unsigned half,
-                            void *out);
+                            const unsigned char *mask_bits, unsigned char *record_bits,
+                            int bf16, unsigned half, void *out);
 
 /* The same as F(4x4, 3x3) (unet_winograd4.c): 1.78 times fewer multiply-adds, a
  * relative error ~1e-4 instead of ~1e-6; for the tangents' passes. */
 int mcp__unet_conv_winograd4(const float *weight, const float *bias, int cin, int cout,
                              const void *a, int ca, int a_up, const void *b, int n, int h,
-                             int w, int relu, const unsigned char *mask_bits, int bf16,
-                             unsigned half, void *out);
+                             int w, int relu, const unsigned char *mask_bits,
+                             unsigned char *record_bits, int bf16, unsigned half,
+                             void *out);
 /* Prefetches the input rows that tiles [t0, t0 + nt) of m x m outputs read from one
  * channel of elem-byte values (unet_winograd.c). */
 void mcp__unet_prefetch_rows(const void *src, size_t elem, int up, int h, int w,

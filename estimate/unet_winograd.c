@@ -154,6 +154,35 @@ mcp__unet_store_row(float *dst, const float *src, int n)
     memcpy(dst, src, (size_t)n * sizeof(float));
 }
 
+/* One byte's bits [b0, b0 + k) from row[0 .. k) (> 0), or-ed into it atomically. */
+static void
+record_part(unsigned char *byte, int b0, const float *row, int k)
+{
+    unsigned v = 0;
+    for (int i = 0; i < k; i++)
+        v |= (unsigned)(row[i] > 0.0f) << (b0 + i);
+    if (v) __atomic_fetch_or(byte, (unsigned char)v, __ATOMIC_RELAXED);
+}
+
+void
+mcp__unet_record_row(unsigned char *bits, size_t at, const float *row, int n)
+{
+    int x = 0;
+    if (at % 8) { /* a byte shared with the row before it */
+        const int k = 8 - (int)(at % 8) < n ? 8 - (int)(at % 8) : n;
+        record_part(bits + at / 8, (int)(at % 8), row, k);
+        x = k;
+    }
+    unsigned char *restrict m = bits + (at + (size_t)x) / 8;
+    for (; x + 8 <= n; x += 8, m++) { /* whole bytes: this row's alone */
+        unsigned v = 0;
+        for (int b = 0; b < 8; b++)
+            v |= (unsigned)(row[x + b] > 0.0f) << b;
+        *m = (unsigned char)v;
+    }
+    if (x < n) record_part(m, 0, row + x, n - x); /* one shared with the next */
+}
+
 void
 mcp__unet_mask_row(float *row, int n, const unsigned char *bits, size_t at)
 {
@@ -337,8 +366,8 @@ transform_input(const void *src_, int src16, int up, int h, int w, int ty, int t
 TRANSFORM_KERNEL static void
 transform_output(const float *m, size_t ld, int ty, int tx0, int nt, int h, int w,
                  float bias, int relu, int primal, const float *p0,
-                 const unsigned char *bits, size_t bit0, void *dst_, int dst16,
-                 float *row)
+                 const unsigned char *bits, unsigned char *record, size_t bit0,
+                 void *dst_, int dst16, float *row)
 {
     (void)dst16; /* floats only, as the input */
     float *dst = dst_;
@@ -379,6 +408,7 @@ transform_output(const float *m, size_t ld, int ty, int tx0, int nt, int h, int 
             }
         } else if (bits)
             mcp__unet_mask_row(y, xn, bits, bit0 + at);
+        if (record) mcp__unet_record_row(record, bit0 + at, y, xn);
         mcp__unet_store_row(dst + at, y, xn);
     }
 }
@@ -391,10 +421,11 @@ static const mcp__unet_winograd f2x2 = {
 int
 mcp__unet_conv_winograd(const float *weight, const float *bias, int cin, int cout,
                         const float *a, int ca, int a_up, const float *b, int n, int h,
-                        int w, int relu, const unsigned char *mask_bits, float *out)
+                        int w, int relu, const unsigned char *mask_bits,
+                        unsigned char *record_bits, float *out)
 {
     return mcp__unet_winograd_conv(&f2x2, weight, bias, cin, cout, a, ca, a_up, b, n, h,
-                                   w, relu, mask_bits, 0, 0, out);
+                                   w, relu, mask_bits, record_bits, 0, 0, out);
 }
 
 /* The mask's bits of one plane (from bit plane0) for the tiles [t0, t0 + nt) of a
@@ -421,8 +452,8 @@ int
 mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
                         const float *bias, int cin, int cout, const void *a_, int ca,
                         int a_up, const void *b_, int n, int h, int w, int relu,
-                        const unsigned char *mask_bits, int bf16, unsigned half,
-                        void *out_)
+                        const unsigned char *mask_bits, unsigned char *record_bits,
+                        int bf16, unsigned half, void *out_)
 {
     /* the activations as bytes: bfloat16 values (half) take 2, floats 4 */
     const int a16 = !!(half & MCP__UNET_HALF_A), b16 = !!(half & MCP__UNET_HALF_B),
@@ -560,8 +591,8 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
                             m + (size_t)o * sc + j, se, ty, tx, len, h, w,
                             k == 0 && bias ? bias[o] : 0.0f, relu, k == 0,
                             out16 ? NULL : (const float *)out + (size_t)o * hw, mask_bits,
-                            (size_t)o * hw, out + ((size_t)k * cout + o) * hw * eo, out16,
-                            rows);
+                            k == 0 ? record_bits : NULL, (size_t)o * hw,
+                            out + ((size_t)k * cout + o) * hw * eo, out16, rows);
                         j += len;
                     }
                 }

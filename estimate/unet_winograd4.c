@@ -236,8 +236,8 @@ transform_input4(const void *src, int src16, int up, int h, int w, int ty, int t
 TRANSFORM_KERNEL static void
 transform_output4(const float *m, size_t ld, int ty, int tx0, int nt, int h, int w,
                   float bias, int relu, int primal, const float *p0,
-                  const unsigned char *bits, size_t bit0, void *dst, int dst16,
-                  float *row)
+                  const unsigned char *bits, unsigned char *record, size_t bit0,
+                  void *dst, int dst16, float *row)
 {
     float *restrict o = row;                      /* 16 streams of nt */
     float *restrict line = row + 16 * (size_t)nt; /* one output row, 4 nt */
@@ -297,6 +297,7 @@ transform_output4(const float *m, size_t ld, int ty, int tx0, int nt, int h, int
                 line[x] = mask[x] > 0.0f ? line[x] : 0.0f;
         } else if (bits)
             mcp__unet_mask_row(line, xn, bits, bit0 + at);
+        if (record) mcp__unet_record_row(record, bit0 + at, line, xn);
         if (dst16) {
             mcp__unet_store_row16((uint16_t *)dst + at, line, xn);
         } else {
@@ -313,9 +314,9 @@ static const mcp__unet_winograd f4x4 = {
 int
 mcp__unet_conv_winograd4(const float *weight, const float *bias, int cin, int cout,
                          const void *a, int ca, int a_up, const void *b, int n, int h,
-                         int w, int relu, const unsigned char *mask_bits, int bf16,
-                         unsigned half, void *out)
+                         int w, int relu, const unsigned char *mask_bits,
+                         unsigned char *record_bits, int bf16, unsigned half, void *out)
 {
     return mcp__unet_winograd_conv(&f4x4, weight, bias, cin, cout, a, ca, a_up, b, n, h,
-                                   w, relu, mask_bits, bf16, half, out);
+                                   w, relu, mask_bits, record_bits, bf16, half, out);
 }

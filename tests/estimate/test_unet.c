@@ -1580,6 +1580,56 @@ test_store_row16(void **state)
         }
 }
 
+/* The primal's ReLU mask recorded as the Winograd convolutions write their rows
+ * (mcp__unet_record_row), against a value-by-value setting of the bits: two rows that
+ * meet inside a byte, at every offset within a word and lengths across whole bytes,
+ * with the bits outside them left alone; then a row cut into pieces of 4 values (the
+ * tiles' width) written by many threads in a scrambled order, whose shared bytes must
+ * be or-ed, not overwritten. */
+static void
+test_record_row(void **state)
+{
+    (void)state;
+    enum { N = 200, BYTES = 64 };
+    float row[2 * N];
+    uint64_t s = 99;
+    for (int i = 0; i < 2 * N; i++) {
+        s = s * 6364136223846793005ULL + 1442695040888963407ULL;
+        row[i] = (s >> 62) ? (float)(s >> 40) - 8e6f : -1.0f; /* some zero and below */
+        if (i % 11 == 0) row[i] = 0.0f;
+    }
+    for (size_t at = 0; at < 20; at++)
+        for (int n = 0; n <= 60; n += n < 20 ? 1 : 7) {
+            const int m = 13;
+            unsigned char bits[BYTES + 8] = {0}, want[BYTES + 8] = {0};
+            mcp__unet_record_row(bits, at, row, n);
+            mcp__unet_record_row(bits, at + (size_t)n, row + n, m);
+            for (int x = 0; x < n + m; x++)
+                if (row[x] > 0.0f)
+                    want[(at + (size_t)x) / 8] |=
+                        (unsigned char)(1u << ((at + (size_t)x) % 8));
+            if (memcmp(bits, want, sizeof bits))
+                fail_msg("record_row at %zu, n %d: the bits differ", at, n);
+        }
+    enum { W = 4096, PIECES = W / 4 };
+    static float big[W];
+    static unsigned char got[W / 8 + 8], expect[W / 8 + 8];
+    for (int x = 0; x < W; x++) {
+        big[x] = (x * 7919 % 13) < 6 ? 1.0f : -1.0f;
+        if (big[x] > 0.0f) expect[x / 8] |= (unsigned char)(1u << (x % 8));
+    }
+    for (int round = 0; round < 20; round++) {
+        memset(got, 0, sizeof got);
+#pragma omp parallel for schedule(dynamic, 1)
+        for (int p = 0; p < PIECES; p++) {
+            const int q =
+                (int)(((size_t)p * 617 + (size_t)round) % PIECES); /* scrambled */
+            mcp__unet_record_row(got, 4 * (size_t)q, big + 4 * q, 4);
+        }
+        assert_memory_equal(got, expect, sizeof got);
+    }
+}
+
 int
 main(void)
 {
@@ -1593,6 +1643,7 @@ main(void)
         cmocka_unit_test(test_jvp_batched),
         cmocka_unit_test(test_mask_row),
         cmocka_unit_test(test_store_row16),
+        cmocka_unit_test(test_record_row),
         cmocka_unit_test(test_tiles_same_bits),
         cmocka_unit_test(test_memory_tiles),
         cmocka_unit_test(test_denoiser_kind),
