@@ -297,3 +297,13 @@ const mcp_denoiser_kind mcp__denoiser_unet = {
     unet_create,
     &mcp__op_unet,
 };
+
+const mcp__unet *
+mcp__unet_of(const mcp_denoiser *d, double *input_scale, int *tile)
+{
+    if (!d || d->destroy != unet_destroy) return NULL;
+    const unet_state *s = d->state;
+    *input_scale = s->input_scale;
+    *tile = s->tile;
+    return &s->net;
+}
