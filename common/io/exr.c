@@ -1220,9 +1220,10 @@ mcp__exr_writer_rows(mcp__exr_writer *wr, const mcp_image *rows, int y0)
     for (int i = 0; i < n; i++) {
         sub[i] = wr->chunks[wr->next_chunk + i];
         if (sub[i].y0 + sub[i].ci.height > y1) {
+            const int rows_in_chunk = sub[i].ci.height;
             free(sub);
             return mcp_error("%s: rows %d..%d end inside a chunk of %d rows", wr->path,
-                             y0, y1, sub[i].ci.height);
+                             y0, y1, rows_in_chunk);
         }
         sub[i].y0 -= y0; /* rows' row 0 is row y0 */
     }
