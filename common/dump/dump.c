@@ -1137,7 +1137,8 @@ mcp__dump_rows_read(mcp__dump_rows *r, int y0, int y1, mcp_image **parts)
        policy zero replaces in every read */
     const int first_pass = y0 == r->checked;
     for (int p = 0; p < ROW_PARTS; p++) {
-        if (!parts[p]) continue;
+        /* after the first pass, policy fail knows there are none */
+        if (!parts[p] || (!first_pass && r->policy == MCP_BADVAL_FAIL)) continue;
         bad_tally scratch[3] = {{0}};
         scan_values(parts[p], 0, r->policy, y0, first_pass ? r->tally[p] : scratch);
     }
