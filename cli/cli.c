@@ -38,16 +38,26 @@ mcp_cli_print_json(cJSON *json)
 }
 
 int
+mcp_cli_dump_spec(const char *path, const char *spp, const char *convention,
+                  const char *variance, mcp_dump_spec *spec)
+{
+    *spec = mcp_dump_spec_defaults();
+    spec->path = path;
+    if ((spp && mcp__parse_double("--spp", spp, &spec->spp)) ||
+        (convention && mcp_convention_from_name(convention, &spec->convention)) ||
+        (variance && mcp_variance_kind_from_name(variance, &spec->variance)))
+        return -1;
+    if (spp && spec->spp <= 0) return mcp_error("--spp must be > 0 (got %s)", spp);
+    return 0;
+}
+
+int
 mcp_cli_read_dump(const char *path, const char *spp, const char *convention,
                   const char *variance, mcp_dump **out)
 {
-    mcp_dump_spec spec = mcp_dump_spec_defaults();
-    spec.path = path;
-    if ((spp && mcp__parse_double("--spp", spp, &spec.spp)) ||
-        (convention && mcp_convention_from_name(convention, &spec.convention)) ||
-        (variance && mcp_variance_kind_from_name(variance, &spec.variance)))
-        return -1;
-    if (spp && spec.spp <= 0) return mcp_error("--spp must be > 0 (got %s)", spp);
+    mcp_dump_spec spec;
+    *out = NULL;
+    if (mcp_cli_dump_spec(path, spp, convention, variance, &spec)) return -1;
     return mcp_dump_load(&spec, out);
 }
 

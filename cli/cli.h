@@ -40,6 +40,10 @@ int mcp_cli_output_is_not_input(const char *cmd, const char *out,
 /* Prints JSON on stdout (pretty) and frees it. */
 void mcp_cli_print_json(cJSON *json);
 
+/* The spec of a render dump in a file, with the common flags (--spp, --convention,
+ * --variance); any may be NULL. */
+int mcp_cli_dump_spec(const char *path, const char *spp, const char *convention,
+                      const char *variance, mcp_dump_spec *spec);
 /* Reads a render dump from a file, with the common flags (--spp, --convention,
  * --variance); any may be NULL. */
 int mcp_cli_read_dump(const char *path, const char *spp, const char *convention,

@@ -140,6 +140,23 @@ done:
     return rc;
 }
 
+/* A dump too large to hold whole beside the U-Net is denoised in bands of rows, read
+ * and written as they go (docs/denoisers.md, "Images larger than memory"): *status 0
+ * when it was; else it stays and the whole run follows. */
+static int
+streamed(const mcp_denoiser *den, const inputs *in, const char *tangent, const char *out,
+         int *status)
+{
+    mcp_dump_spec spec;
+    int done = 0;
+    if (!in->dump || tangent || in->no_albedo || in->no_normal) return 0;
+    if (mcp_cli_dump_spec(in->dump, in->spp, in->convention, in->variance_kind, &spec) ||
+        mcp__denoise_dump_streamed(den, &spec, out, &done))
+        return -1;
+    if (done) *status = 0;
+    return 0;
+}
+
 static int
 cmd_denoise(int argc, char **argv)
 {
@@ -214,8 +231,10 @@ cmd_denoise(int argc, char **argv)
         mcp_cli_denoiser_flags_free(&df);
         return mcp_cli_fail();
     }
-    if (!mcp_cli_denoiser_create(&df, &den) && !load_input(&in, &dump) &&
-        !run(den, dump, &in, out, tangent, tangent_out))
+    if (!mcp_cli_denoiser_create(&df, &den) &&
+        !streamed(den, &in, tangent, out, &status) &&
+        (status == 0 ||
+         (!load_input(&in, &dump) && !run(den, dump, &in, out, tangent, tangent_out))))
         status = 0;
     else
         mcp_cli_fail();

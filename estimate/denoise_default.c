@@ -100,3 +100,10 @@ const mcp_denoiser_kind mcp__denoiser_default = {
     default_create,
     NULL, /* no settings */
 };
+
+const mcp_denoiser *
+mcp__default_unet(const mcp_denoiser *d)
+{
+    return d && d->destroy == default_destroy ? ((const default_denoiser *)d)->unet
+                                              : NULL;
+}

@@ -176,7 +176,8 @@ static const mcp_option unet_options[] = {
      .meta = "MB",
      .doc =
          "the network's working memory at most: beyond it the image runs in tiles with "
-         "the same bits; 0: $MCPOST_UNET_MAX_MEMORY_MB, else 2048",
+         "the same bits (mcpost denoise: the whole process's, reading and writing a dump "
+         "too large for it in bands of rows); 0: $MCPOST_UNET_MAX_MEMORY_MB, else 2048",
      .lo = 0,
      .bounds = MCP_OPT_LO},
     {0}};
@@ -297,3 +298,13 @@ const mcp_denoiser_kind mcp__denoiser_unet = {
     unet_create,
     &mcp__op_unet,
 };
+
+const mcp__unet *
+mcp__unet_of(const mcp_denoiser *d, double *input_scale, int *tile)
+{
+    if (!d || d->destroy != unet_destroy) return NULL;
+    const unet_state *s = d->state;
+    *input_scale = s->input_scale;
+    *tile = s->tile;
+    return &s->net;
+}

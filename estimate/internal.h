@@ -47,6 +47,10 @@ int mcp__denoise_check_input(const char *who, const mcp_denoise_input *in);
 int mcp__denoise_check_tangents(const char *who, const mcp_denoise_input *at,
                                 const mcp_denoise_tangent *t, int n);
 
+/* The `unet` inside a `default` denoiser (denoise_default.c): what it runs on inputs
+ * with albedo and normal; NULL for any other denoiser, or when no weights were found. */
+const mcp_denoiser *mcp__default_unet(const mcp_denoiser *d);
+
 /* A new zero-filled packed image with channels R, G, B labelled `source`. */
 int mcp__rgb_new(int width, int height, const char *source, mcp_image **out);
 

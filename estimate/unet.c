@@ -980,37 +980,97 @@ sanitize(float v, float lo, float hi)
     return v < lo ? lo : v > hi ? hi : v;
 }
 
+/* The luminance OIDN's autoexposure sums for one pixel (docs/oidn-network.md §3.3). */
+static double
+exposure_luminance(const float *p)
+{
+    return 0.212671 * sanitize(p[0], 0.0f, FLT_MAX) +
+           0.715160 * sanitize(p[1], 0.0f, FLT_MAX) +
+           0.072169 * sanitize(p[2], 0.0f, FLT_MAX);
+}
+
+/* The bins are rows [i H / hk, (i + 1) H / hk) x columns [j W / wk, (j + 1) W / wk);
+ * each bin's sum takes its pixels row by row, left to right, so rows fed in order in
+ * any bands give the same sums, and the bins' logarithms are added row of bins by row
+ * of bins, left to right, as a whole image's are. */
+static int
+exposure_bin_y(const mcp__unet_exposure *e, int i)
+{
+    return (int)((int64_t)i * e->H / e->hk);
+}
+
+static int
+exposure_bin_x(const mcp__unet_exposure *e, int j)
+{
+    return (int)((int64_t)j * e->W / e->wk);
+}
+
+int
+mcp__unet_exposure_begin(mcp__unet_exposure *e, int W, int H, int v2)
+{
+    memset(e, 0, sizeof *e);
+    e->W = W;
+    e->H = H;
+    e->hk = v2 ? (H + 15) / 16 : (H + 8) / 16;
+    e->wk = v2 ? (W + 15) / 16 : (W + 8) / 16;
+    e->hk = e->hk < 1 ? 1 : e->hk;
+    e->wk = e->wk < 1 ? 1 : e->wk;
+    e->sums = mcp_calloc((size_t)e->wk, sizeof *e->sums);
+    return e->sums ? 0 : -1;
+}
+
+/* Closes the rows of bins that end at or before row e->row. */
+static void
+exposure_flush(mcp__unet_exposure *e)
+{
+    while (e->bin_row < e->hk && exposure_bin_y(e, e->bin_row + 1) <= e->row) {
+        const int y0 = exposure_bin_y(e, e->bin_row),
+                  y1 = exposure_bin_y(e, e->bin_row + 1);
+        for (int j = 0; j < e->wk; j++) {
+            const int n = (y1 - y0) * (exposure_bin_x(e, j + 1) - exposure_bin_x(e, j));
+            const double L = n > 0 ? e->sums[j] / n : 0.0;
+            if (L > 1e-8) {
+                e->log_sum += log2(L);
+                e->kept++;
+            }
+            e->sums[j] = 0.0;
+        }
+        e->bin_row++;
+    }
+}
+
+void
+mcp__unet_exposure_rows(mcp__unet_exposure *e, const mcp_image *rows)
+{
+    for (int y = 0; y < rows->height && e->row < e->H; y++) {
+        for (int j = 0; j < e->wk; j++) {
+            const int x0 = exposure_bin_x(e, j), x1 = exposure_bin_x(e, j + 1);
+            double sum = e->sums[j];
+            for (int x = x0; x < x1; x++)
+                sum += exposure_luminance(mcp_image_px(rows, x, y));
+            e->sums[j] = sum;
+        }
+        e->row++;
+        exposure_flush(e);
+    }
+}
+
+double
+mcp__unet_exposure_end(mcp__unet_exposure *e)
+{
+    exposure_flush(e);
+    free(e->sums);
+    e->sums = NULL;
+    return e->kept ? 0.18 / exp2(e->log_sum / e->kept) : 1.0;
+}
+
 double
 mcp__unet_autoexposure(const mcp_image *color, int v2)
 {
-    const int H = color->height, W = color->width;
-    int hk = v2 ? (H + 15) / 16 : (H + 8) / 16, wk = v2 ? (W + 15) / 16 : (W + 8) / 16;
-    hk = hk < 1 ? 1 : hk;
-    wk = wk < 1 ? 1 : wk;
-    double log_sum = 0.0;
-    int kept = 0;
-    for (int i = 0; i < hk; i++) {
-        const int y0 = (int)((int64_t)i * H / hk), y1 = (int)((int64_t)(i + 1) * H / hk);
-        for (int j = 0; j < wk; j++) {
-            const int x0 = (int)((int64_t)j * W / wk),
-                      x1 = (int)((int64_t)(j + 1) * W / wk);
-            double sum = 0.0;
-            for (int y = y0; y < y1; y++)
-                for (int x = x0; x < x1; x++) {
-                    const float *p = mcp_image_px(color, x, y);
-                    sum += 0.212671 * sanitize(p[0], 0.0f, FLT_MAX) +
-                           0.715160 * sanitize(p[1], 0.0f, FLT_MAX) +
-                           0.072169 * sanitize(p[2], 0.0f, FLT_MAX);
-                }
-            const int n = (y1 - y0) * (x1 - x0);
-            const double L = n > 0 ? sum / n : 0.0;
-            if (L > 1e-8) {
-                log_sum += log2(L);
-                kept++;
-            }
-        }
-    }
-    return kept ? 0.18 / exp2(log_sum / kept) : 1.0;
+    mcp__unet_exposure e;
+    if (mcp__unet_exposure_begin(&e, color->width, color->height, v2)) return -1.0;
+    mcp__unet_exposure_rows(&e, color);
+    return mcp__unet_exposure_end(&e);
 }
 
 /* The features the weights read must be given: they are not optional for them. */
@@ -1146,8 +1206,8 @@ postprocess(const batch *y0, const batch *t, int k, int W, int H, float s_out,
 
 /* The memory the system can give without swapping, in bytes (MemAvailable; the tests
  * set MCPOST_MEMORY_AVAILABLE_MB); 0 where it cannot tell. */
-static double
-memory_available(void)
+double
+mcp__unet_memory_available(void)
 {
     const char *forced = getenv("MCPOST_MEMORY_AVAILABLE_MB");
     if (forced && *forced) return atof(forced) * 1048576.0;
@@ -1163,8 +1223,8 @@ memory_available(void)
 
 /* The network's working memory at most, in bytes: net->max_memory_mb, else
  * MCPOST_UNET_MAX_MEMORY_MB, else MCP__UNET_MAX_MEMORY_MB. */
-static double
-memory_bound(const mcp__unet *net)
+double
+mcp__unet_memory_bound(const mcp__unet *net)
 {
     const char *env = getenv("MCPOST_UNET_MAX_MEMORY_MB");
     const double mb = net->max_memory_mb > 0         ? net->max_memory_mb
@@ -1174,8 +1234,8 @@ memory_bound(const mcp__unet *net)
 }
 
 /* The bytes a batch of n_images needs for a w x h image (padded to 16). */
-static double
-batch_bytes(int w, int h, int n_images)
+double
+mcp__unet_batch_bytes(int w, int h, int n_images)
 {
     return PEAK_BYTES_PER_PIXEL * ((w + 15) / 16 * 16) * ((h + 15) / 16 * 16) * n_images;
 }
@@ -1258,8 +1318,8 @@ paste(const mcp_image *src, int ox, int oy, int x0, int y0, int w, int h, mcp_im
 
 /* The overlap and alignment of a run's tiles: wider where the Winograd products run on
  * F(4x4, 3x3) (every pass but exact tangents'), narrower for the direct loops. */
-static void
-tile_margins(const mcp__unet *net, int *overlap, int *align)
+void
+mcp__unet_tile_margins(const mcp__unet *net, int *overlap, int *align)
 {
     const int coarse = mcp__unet_fast(net);
     *overlap = coarse ? TILE_OVERLAP_COARSE : TILE_OVERLAP;
@@ -1269,11 +1329,11 @@ tile_margins(const mcp__unet *net, int *overlap, int *align)
 static int
 run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
           const mcp_image *normal, double scale_in, const mcp_denoise_tangent *t, int n,
-          int tile, mcp_image **out, mcp_image **jt)
+          int tile_w, int tile_h, mcp_image **out, mcp_image **jt)
 {
     const int W = color->width, H = color->height;
     int overlap, align;
-    tile_margins(net, &overlap, &align);
+    mcp__unet_tile_margins(net, &overlap, &align);
     int rc = 0;
     if (out) rc = mcp__rgb_new(W, H, "unet", out);
     for (int k = 0; k < n && !rc; k++)
@@ -1282,12 +1342,12 @@ run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
     mcp_image **views = mcp_calloc((size_t)3 * (n + 1), sizeof *views);
     mcp_image **res = mcp_calloc((size_t)n + 1, sizeof *res);
     if (!views || !res || (n && !tt)) rc = -1;
-    for (int ty = 0; ty < H && !rc; ty += tile)
-        for (int tx = 0; tx < W && !rc; tx += tile) {
+    for (int ty = 0; ty < H && !rc; ty += tile_h)
+        for (int tx = 0; tx < W && !rc; tx += tile_w) {
             const int x0 = tx > overlap ? (tx - overlap) / align * align : 0;
             const int y0 = ty > overlap ? (ty - overlap) / align * align : 0;
-            const int x1 = tx + tile + overlap < W ? tx + tile + overlap : W;
-            const int y1 = ty + tile + overlap < H ? ty + tile + overlap : H;
+            const int x1 = tx + tile_w + overlap < W ? tx + tile_w + overlap : W;
+            const int y1 = ty + tile_h + overlap < H ? ty + tile_h + overlap : H;
             /* views of the crop: the inputs (k = 0), then each tangent's parts */
             for (int k = 0; k <= n && !rc; k++) {
                 const mcp_image *src[3] = {k ? t[k - 1].color : color,
@@ -1304,8 +1364,8 @@ run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
             if (!rc)
                 rc = run_whole(net, views[0], views[1], views[2], scale_in, tt, n,
                                out ? &res[0] : NULL, res + 1);
-            const int w = tx + tile < W ? tile : W - tx,
-                      h = ty + tile < H ? tile : H - ty;
+            const int w = tx + tile_w < W ? tile_w : W - tx,
+                      h = ty + tile_h < H ? tile_h : H - ty;
             if (!rc && out) paste(res[0], x0, y0, tx, ty, w, h, *out);
             for (int k = 0; k < n && !rc; k++)
                 paste(res[1 + k], x0, y0, tx, ty, w, h, jt[k]);
@@ -1320,6 +1380,50 @@ run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
         }
     free(tt), free(views), free(res);
     return rc;
+}
+
+int
+mcp__unet_auto_tile(const mcp__unet *net, int W, int H, double limit)
+{
+    if (mcp__unet_batch_bytes(W, H, 1) <= limit) return W > H ? W : H;
+    int overlap, align;
+    mcp__unet_tile_margins(net, &overlap, &align);
+    const int margin = 2 * overlap + align; /* a crop's largest extension */
+    int tile;
+    for (tile = (W > H ? W : H) / 16 * 16; tile >= 16; tile -= 16)
+        if (mcp__unet_batch_bytes(tile + margin, tile + margin, 1) <= limit) break;
+    return tile < 16 ? 0 : tile;
+}
+
+int
+mcp__unet_run_crop(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
+                   const mcp_image *normal, double scale_in, int tile_w, mcp_image **out)
+{
+    *out = NULL;
+    if (!color || color->channels < 3) return mcp_error("unet: colour needs 3 channels");
+    if (check_aux(net, "albedo", color, albedo, net->ic >= 6) ||
+        check_aux(net, "normal", color, normal, net->ic >= 9))
+        return -1;
+    if (tile_w < 16 || tile_w % 16)
+        return mcp_error("unet: a band's tiles must be a multiple of 16 wide (got %d)",
+                         tile_w);
+    if (!(scale_in > 0 && scale_in < 1e30))
+        return mcp_error("unet: bad input scale %g", scale_in);
+    const int H = color->height;
+    int rc = run_tiled(net, color, albedo, normal, scale_in, NULL, 0, tile_w,
+                       H > 16 ? (H + 15) / 16 * 16 : 16, out, NULL);
+    if (rc) {
+        mcp_image_free(*out);
+        *out = NULL;
+    }
+    return rc;
+}
+
+void
+mcp__unet_progress_attach(mcp_progress *bar)
+{
+    run_progress = bar;
+    run_steps = 0;
 }
 
 int
@@ -1344,18 +1448,14 @@ mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_imag
     const int W = color->width, H = color->height;
     /* The tangents run one at a time after the primal (its trace, above), so the
      * network holds one image's activations whatever n is. */
-    const double bound = memory_bound(net);
-    const double have = tile == 0 ? memory_available() : 0; /* asked only when needed */
+    const double bound = mcp__unet_memory_bound(net);
+    const double have = tile == 0 ? mcp__unet_memory_available() : 0; /* when needed */
     const int short_of_memory = have > 0 && have < bound;
-    if (tile == 0 && batch_bytes(W, H, 1) > (short_of_memory ? have : bound)) {
+    if (tile == 0 && mcp__unet_batch_bytes(W, H, 1) > (short_of_memory ? have : bound)) {
         /* the largest tile whose crop fits in the bound, and in half of what is
          * available (the results and the inputs take the rest) */
         const double limit = have > 0 && have / 2 < bound ? have / 2 : bound;
-        int overlap, align;
-        tile_margins(net, &overlap, &align);
-        const int margin = 2 * overlap + align; /* a crop's largest extension */
-        for (tile = (W > H ? W : H) / 16 * 16; tile >= 16; tile -= 16)
-            if (batch_bytes(tile + margin, tile + margin, 1) <= limit) break;
+        tile = mcp__unet_auto_tile(net, W, H, limit);
         if (tile < 16)
             return short_of_memory
                        ? mcp_error("unet: a %dx%d image with %d tangent(s) does not fit "
@@ -1383,8 +1483,9 @@ mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_imag
         run_progress = &bar;
         run_steps = 0;
     }
-    int rc = tile ? run_tiled(net, color, albedo, normal, scale_in, t, n, tile, out, jt)
-                  : run_whole(net, color, albedo, normal, scale_in, t, n, out, jt);
+    int rc =
+        tile ? run_tiled(net, color, albedo, normal, scale_in, t, n, tile, tile, out, jt)
+             : run_whole(net, color, albedo, normal, scale_in, t, n, out, jt);
     if (show) {
         if (rc)
             mcp__progress_stop(&bar); /* no "100%" for a run that failed */

@@ -7,6 +7,7 @@
 
 #include <mcpost/denoiser.h>
 #include <mcpost/image.h>
+#include <mcpost/progress.h>
 
 #include <stddef.h>
 #include <stdint.h>
@@ -69,6 +70,20 @@ void mcp__unet_free(mcp__unet *net);
 
 /* OIDN's autoexposure scale of an RGB image (docs/oidn-network.md §3.3; v2: 2.x bins). */
 double mcp__unet_autoexposure(const mcp_image *color, int v2);
+/* The same over a W x H image fed in bands of rows, top to bottom (a streamed denoise's
+ * pre-pass, unet_bands.c): the same sums in the same order, so the same value as
+ * mcp__unet_autoexposure on the whole image, whatever the bands. rows: the next
+ * rows->height rows, columns 0 .. W - 1, colour in channels 0..2. end frees. */
+typedef struct mcp__unet_exposure {
+    int W, H, hk, wk;
+    int row, bin_row; /* the next row fed; the first row of bins not yet closed */
+    double *sums;     /* the open row of bins' sums */
+    double log_sum;
+    int kept;
+} mcp__unet_exposure;
+int mcp__unet_exposure_begin(mcp__unet_exposure *e, int W, int H, int v2);
+void mcp__unet_exposure_rows(mcp__unet_exposure *e, const mcp_image *rows);
+double mcp__unet_exposure_end(mcp__unet_exposure *e);
 
 /* HDR denoise of colour (3 channels) with albedo and normal as the net needs them
  * (NULL when the net does not read them). input_scale <= 0: autoexposure. The whole
@@ -99,6 +114,70 @@ int mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color,
                         const mcp_image *albedo, const mcp_image *normal,
                         double input_scale, const mcp_denoise_tangent *t, int n, int tile,
                         mcp_image **out, mcp_image **jt);
+
+/* ---- what a streamed denoise by bands needs of the run (unet.c; unet_bands.c) ---- */
+
+/* The network's working memory at most, in bytes (max_memory_mb, else
+ * MCPOST_UNET_MAX_MEMORY_MB, else MCP__UNET_MAX_MEMORY_MB); what the system can give
+ * without swapping (MemAvailable, or MCPOST_MEMORY_AVAILABLE_MB; 0: unknown); the bytes
+ * the network takes at its peak for n_images of w x h (padded to 16). */
+double mcp__unet_memory_bound(const mcp__unet *net);
+double mcp__unet_memory_available(void);
+double mcp__unet_batch_bytes(int w, int h, int n_images);
+/* The overlap and alignment of tiles that give the whole image's bits (352 and 64 on
+ * Winograd F(4x4, 3x3), 192 and 32 for the direct loops). */
+void mcp__unet_tile_margins(const mcp__unet *net, int *overlap, int *align);
+/* The side of the square tiles mcp__unet_run_tiled picks for a W x H image whose
+ * network would not fit within limit bytes (0: none fits); W x H when it fits. */
+int mcp__unet_auto_tile(const mcp__unet *net, int W, int H, double limit);
+/* The primal alone on a crop, in tiles tile_w wide and as tall as the crop, at the
+ * input scale scale_in (> 0): a band's run. Its pixels see what they see in the image
+ * the crop was cut from where the crop extends them by the tiles' overlap and starts
+ * on the tiles' alignment (unet_bands.c). *out is a new RGB image of the crop's size. */
+int mcp__unet_run_crop(const mcp__unet *net, const mcp_image *color,
+                       const mcp_image *albedo, const mcp_image *normal, double scale_in,
+                       int tile_w, mcp_image **out);
+/* The progress bar the runs of this thread step (a convolution of a tile a step), from
+ * step 0; NULL: none. */
+void mcp__unet_progress_attach(mcp_progress *bar);
+
+/* ---- the U-Net over an image read and written in bands of rows (unet_bands.c) ---- */
+
+/* The network of a `unet` denoiser (denoise_unet.c), its input_scale (<= 0: auto) and
+ * tile settings; NULL for any other denoiser. */
+const mcp__unet *mcp__unet_of(const mcp_denoiser *d, double *input_scale, int *tile);
+
+/* band_rows output rows a band (a multiple of 64; 0: the whole image at once, as
+ * mcp__unet_run_tiled runs it), in tiles tile_w wide; bytes: the peak the plan counts
+ * (images, network and the process), within budget (the memory bound, or what is
+ * available when less). */
+typedef struct mcp__unet_bands {
+    int band_rows, tile_w;
+    double bytes, budget;
+} mcp__unet_bands;
+/* Where a band's rows come from and go: read gives new images of rows [y0, y1) of the
+ * colour and, where the input has them, albedo and normal (NULL otherwise), each
+ * checked as a whole read would check it; every row is read once, top to bottom,
+ * before any is read again (the pre-pass), and a reader may report what that pass
+ * found at its last row. write takes rows [y0, y0 + rows->height) of the result, in
+ * increasing y. Both return 0, or -1 with the error set. */
+typedef struct mcp__unet_band_io {
+    void *ctx;
+    int (*read)(void *ctx, int y0, int y1, mcp_image **color, mcp_image **albedo,
+                mcp_image **normal);
+    int (*write)(void *ctx, const mcp_image *rows, int y0);
+} mcp__unet_band_io;
+/* The plan for a W x H image whose inputs and output take whole_bytes when held whole:
+ * band_rows 0 when they fit beside the network, else the bands and tiles that compute
+ * the fewest pixels within the budget (tile > 0: tiles that wide). MCPOST_UNET_BAND_ROWS
+ * forces bands of that many rows (rounded up to 64), or with "whole" the whole image
+ * (the tests' ways to compare the two). -1 when not even bands of 64 rows fit. */
+int mcp__unet_bands_plan(const mcp__unet *net, int W, int H, double whole_bytes, int tile,
+                         mcp__unet_bands *plan);
+/* Runs a plan with band_rows > 0: the pre-pass (every row read once: the checks, and the
+ * autoexposure when input_scale <= 0), then each band read, run and written. */
+int mcp__unet_bands_run(const mcp__unet *net, double input_scale, int W, int H,
+                        const mcp__unet_bands *plan, const mcp__unet_band_io *io);
 
 /* One 3x3 convolution (padding 1) of n images as Winograd F(2x2, 3x3)
  * (unet_winograd.c): the input of image k is channels 0 .. ca - 1 at a + (k * ca + i)

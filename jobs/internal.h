@@ -314,4 +314,14 @@ int mcp__metrics_flip_histograms(cJSON *section, const mcp_metrics *m, const cha
 int mcp__metrics_verdict(cJSON *section, const mcp__gate *gate, mcp__gate_verdict gv,
                          const char *gate_line);
 
+/* ---- estimate/denoise_stream.c: `mcpost denoise` of a dump larger than memory ---- */
+
+/* Denoises the EXR dump of spec into out_path (EXR) in bands of rows when den is the
+ * U-Net (or the default denoiser running it) and the dump read whole would not fit
+ * beside the network within its memory bound (docs/denoisers.md, "Images larger than
+ * memory"): the same pixels and header as the whole run. *done 0 (and 0 returned):
+ * nothing was done, run it whole; else 0 or -1 with the error set. */
+int mcp__denoise_dump_streamed(const mcp_denoiser *den, const mcp_dump_spec *spec,
+                               const char *out_path, int *done);
+
 #endif

@@ -465,12 +465,21 @@ count_bad(const float *v, size_t n, int is_variance)
     return bad;
 }
 
-/* NaN/Inf (and, for variance, negative values): fail naming the first, or zero them. */
-static int
-check_values(mcp_image *img, const char *part, int is_variance, mcp_badval_policy policy,
-             long *replaced)
+/* The bad values of one channel found so far: how many, and the first (in rows
+ * read top to bottom, pixel coordinates in the whole image). */
+typedef struct bad_tally {
+    long bad;
+    int fx, fy;
+    float first;
+} bad_tally;
+
+/* Tallies img's NaN/Inf (and, for variance, negative values) per channel into
+ * tally[c], img's row 0 being row y_off of the whole image, and zeroes them under
+ * policy zero. */
+static void
+scan_values(mcp_image *img, int is_variance, mcp_badval_policy policy, int y_off,
+            bad_tally *tally)
 {
-    if (!img) return 0;
     /* bad values are rare: a parallel count over every value first, and the serial
        pass that finds the first and replaces them only when there are some */
     long any_bad = 0;
@@ -487,27 +496,50 @@ check_values(mcp_image *img, const char *part, int is_variance, mcp_badval_polic
         for (int x = 0; x < img->width; x++)
             any_bad += count_bad(mcp_image_px(img, x, y), (size_t)nc, is_variance);
     }
-    if (!any_bad) return 0;
+    if (!any_bad) return;
     for (int c = 0; c < img->channels; c++) {
-        long bad = 0;
-        int fx = -1, fy = -1;
-        float first = 0;
+        bad_tally *t = &tally[c];
         for (int y = 0; y < img->height; y++)
             for (int x = 0; x < img->width; x++) {
                 float *v = &mcp_image_px(img, x, y)[c];
                 if (isfinite(*v) && !(is_variance && *v < 0)) continue;
-                if (!bad++) fx = x, fy = y, first = *v;
+                if (!t->bad++) t->fx = x, t->fy = y + y_off, t->first = *v;
                 if (policy == MCP_BADVAL_ZERO) *v = 0;
             }
-        if (bad && policy == MCP_BADVAL_FAIL)
+    }
+}
+
+/* Under policy fail, the error naming the first channel (in img's order) with bad
+ * values; else the count of those replaced, added to *replaced. */
+static int
+report_values(const mcp_image *img, const char *part, int is_variance,
+              mcp_badval_policy policy, const bad_tally *tally, long *replaced)
+{
+    for (int c = 0; c < img->channels; c++) {
+        const bad_tally *t = &tally[c];
+        if (t->bad && policy == MCP_BADVAL_FAIL)
             return mcp_error("%s: %s channel '%s' has %ld %s value%s (first %g at pixel "
                              "%d,%d; set bad_values: zero to replace them)",
-                             img->source, part, img->names[c], bad,
-                             is_variance && isfinite(first) ? "negative" : "NaN/Inf",
-                             bad == 1 ? "" : "s", first, fx, fy);
-        *replaced += bad;
+                             img->source, part, img->names[c], t->bad,
+                             is_variance && isfinite(t->first) ? "negative" : "NaN/Inf",
+                             t->bad == 1 ? "" : "s", t->first, t->fx, t->fy);
+        *replaced += t->bad;
     }
     return 0;
+}
+
+/* NaN/Inf (and, for variance, negative values): fail naming the first, or zero them. */
+static int
+check_values(mcp_image *img, const char *part, int is_variance, mcp_badval_policy policy,
+             long *replaced)
+{
+    if (!img) return 0;
+    bad_tally *tally = mcp_calloc((size_t)img->channels, sizeof *tally);
+    if (!tally) return -1;
+    scan_values(img, is_variance, policy, 0, tally);
+    int rc = report_values(img, part, is_variance, policy, tally, replaced);
+    free(tally);
+    return rc;
 }
 
 static int
@@ -968,6 +1000,166 @@ double
 mcp_dump_spp_at(const mcp_dump *d, int x, int y)
 {
     return d->spp_map ? (double)mcp_image_px(d->spp_map, x, y)[0] : d->spp;
+}
+
+/* ---- reading an EXR dump's colour, albedo and normal rows at a time ---- */
+
+/* The parts a streamed denoise reads (docs/denoisers.md, "Images larger than
+ * memory"): colour, albedo, normal, by the layout a whole read finds, named as a whole
+ * read names them, with their values checked as it checks them (the first pass over
+ * the rows tallies; the last row of it reports). */
+enum { ROW_COLOR, ROW_ALBEDO, ROW_NORMAL, ROW_PARTS };
+
+struct mcp__dump_rows {
+    mcp__exr_rows *exr;
+    const mcp_image *header;
+    mcp_dump *d; /* source, attributes, convention */
+    mcp_badval_policy policy;
+    int width, height;
+    int idx[ROW_PARTS][3]; /* the parts' channels in the file; -1: no such part */
+    int checked;           /* rows [0, checked) tallied */
+    bad_tally tally[ROW_PARTS][3];
+};
+
+void
+mcp__dump_rows_close(mcp__dump_rows *r)
+{
+    if (!r) return;
+    mcp__exr_rows_close(r->exr);
+    mcp_dump_free(r->d);
+    free(r);
+}
+
+int
+mcp__dump_rows_open(const mcp_dump_spec *spec, mcp__dump_rows **out)
+{
+    *out = NULL;
+    /* a dump whose parts come from other files, or from a Mitsuba XYZ mean, is read
+       whole */
+    if (!spec->path || spec->variance_path || spec->albedo_path || spec->normal_path ||
+        spec->spp_map_path || mcp_format_from_path(spec->path) != MCP_FORMAT_EXR)
+        return 0;
+    mcp__dump_rows *r = mcp_calloc(1, sizeof *r);
+    if (!r || !(r->d = mcp_calloc(1, sizeof *r->d))) {
+        free(r);
+        return -1;
+    }
+    r->policy = spec->bad_values;
+    layout L;
+    if (mcp__exr_rows_open(spec->path, &r->exr)) {
+        mcp__dump_rows_close(r);
+        return -1;
+    }
+    r->header = mcp__exr_rows_header(r->exr, &r->width, &r->height);
+    if (dump_layout(r->header, spec, r->d, &L)) {
+        mcp__dump_rows_close(r);
+        return -1;
+    }
+    const name3 *names[ROW_PARTS] = {&L.color, L.has_albedo ? &L.albedo : NULL,
+                                     L.has_normal ? &L.normal : NULL};
+    int clash = L.color_from_xyz;
+    for (int p = 0; p < ROW_PARTS; p++) {
+        for (int k = 0; k < 3; k++)
+            r->idx[p][k] = -1;
+        if (!names[p]) continue;
+        const char *n[3] = {names[p]->c[0], names[p]->c[1], names[p]->c[2]};
+        if (mcp_image_channels(r->header, n, 3, r->idx[p])) {
+            mcp__dump_rows_close(r);
+            return -1;
+        }
+        for (int q = 0; q < p; q++) /* two parts from one channel: read whole */
+            for (int k = 0; k < 3; k++)
+                for (int j = 0; j < 3; j++)
+                    clash |= r->idx[p][k] == r->idx[q][j];
+    }
+    if (clash) {
+        mcp__dump_rows_close(r);
+        return 0;
+    }
+    *out = r;
+    return 0;
+}
+
+void
+mcp__dump_rows_size(const mcp__dump_rows *r, int *width, int *height, int *has_albedo,
+                    int *has_normal)
+{
+    *width = r->width;
+    *height = r->height;
+    *has_albedo = r->idx[ROW_ALBEDO][0] >= 0;
+    *has_normal = r->idx[ROW_NORMAL][0] >= 0;
+}
+
+const mcp_dump *
+mcp__dump_rows_dump(const mcp__dump_rows *r)
+{
+    return r->d;
+}
+
+double
+mcp__dump_rows_whole_bytes(const mcp__dump_rows *r)
+{
+    return (double)r->width * r->height * sizeof(float) * r->header->channels;
+}
+
+int
+mcp__dump_rows_read(mcp__dump_rows *r, int y0, int y1, mcp_image **parts)
+{
+    static const char *const rgb[3] = {"R", "G", "B"}, *const xyz[3] = {"X", "Y", "Z"};
+    static const char *const part_words[ROW_PARTS] = {"colour", "albedo", "normal"};
+    for (int p = 0; p < ROW_PARTS; p++)
+        parts[p] = NULL;
+    int a0, a1, rc = -1;
+    mcp__exr_rows_span(r->exr, y0, y1, &a0, &a1);
+    mcp__exr_route *routes = mcp_calloc((size_t)r->header->channels, sizeof *routes);
+    if (!routes) return -1;
+    for (int p = 0; p < ROW_PARTS; p++) {
+        if (r->idx[p][0] < 0) continue;
+        if (mcp_image_new(r->width, a1 - a0, 3, p == ROW_NORMAL ? xyz : rgb, &parts[p]) ||
+            mcp_image_set_source(parts[p], r->d->source))
+            goto done;
+        for (int k = 0; k < 3; k++)
+            routes[r->idx[p][k]] = (mcp__exr_route){
+                parts[p]->data + k, parts[p]->pixel_stride, parts[p]->row_stride};
+    }
+    if (mcp__exr_rows_read(r->exr, y0, y1, a0, routes)) goto done;
+    /* the chunks' rows around [y0, y1) go: the rows move up (bands on multiples of 64
+       need none with zip's 16 or piz's 32 rows a chunk) */
+    for (int p = 0; p < ROW_PARTS; p++) {
+        mcp_image *img = parts[p];
+        if (!img) continue;
+        if (y0 > a0)
+            memmove(img->data, img->data + (ptrdiff_t)(y0 - a0) * img->row_stride,
+                    (size_t)(y1 - y0) * (size_t)img->row_stride * sizeof(float));
+        img->height = y1 - y0;
+    }
+    /* the first pass over the rows tallies, as a whole read checks the whole parts;
+       policy zero replaces in every read */
+    const int first_pass = y0 == r->checked;
+    for (int p = 0; p < ROW_PARTS; p++) {
+        /* after the first pass, policy fail knows there are none */
+        if (!parts[p] || (!first_pass && r->policy == MCP_BADVAL_FAIL)) continue;
+        bad_tally scratch[3] = {{0}};
+        scan_values(parts[p], 0, r->policy, y0, first_pass ? r->tally[p] : scratch);
+    }
+    if (first_pass) r->checked = y1;
+    if (first_pass && r->checked == r->height) {
+        long replaced = 0;
+        for (int p = 0; p < ROW_PARTS; p++)
+            if (parts[p] && report_values(parts[p], part_words[p], 0, r->policy,
+                                          r->tally[p], &replaced))
+                goto done;
+        r->d->n_bad_values = replaced;
+    }
+    rc = 0;
+done:
+    free(routes);
+    if (rc)
+        for (int p = 0; p < ROW_PARTS; p++) {
+            mcp_image_free(parts[p]);
+            parts[p] = NULL;
+        }
+    return rc;
 }
 
 /* ---- writing ---- */

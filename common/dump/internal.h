@@ -33,4 +33,26 @@ int mcp__series_increments_with(const mcp_series *s, int i, const mcp_dump *memb
  * recipe for a Cycles render (convention blender), else `otherwise` (dump.c). */
 const char *mcp__no_variance_hint(const mcp_dump *d, const char *otherwise);
 
+/* ---- dump.c: an EXR dump's colour, albedo and normal, rows at a time ---- */
+
+/* For a streamed denoise (docs/denoisers.md, "Images larger than memory"). open reads
+ * the header and finds the parts as mcp_dump_load would; *out stays NULL (and 0 is
+ * returned) for a dump that must be read whole: not an EXR, parts in other files, a
+ * colour from Mitsuba's XYZ, two parts on one channel. read gives new images of rows
+ * [y0, y1): parts[0] the colour (R,G,B), parts[1] the albedo (R,G,B) and parts[2] the
+ * normal (X,Y,Z), NULL for a part the dump lacks; the values are checked as
+ * mcp_dump_load checks them (bad_values): the first pass over the rows, top to bottom,
+ * tallies them, and its last read fails naming the first bad value, the same line as
+ * mcp_dump_load's; policy zero replaces them in every read. The variance and sample
+ * counts are not read. dump: the source, attributes and convention. whole_bytes: what
+ * reading every channel whole takes. */
+typedef struct mcp__dump_rows mcp__dump_rows;
+int mcp__dump_rows_open(const mcp_dump_spec *spec, mcp__dump_rows **out);
+void mcp__dump_rows_size(const mcp__dump_rows *r, int *width, int *height,
+                         int *has_albedo, int *has_normal);
+const mcp_dump *mcp__dump_rows_dump(const mcp__dump_rows *r);
+double mcp__dump_rows_whole_bytes(const mcp__dump_rows *r);
+int mcp__dump_rows_read(mcp__dump_rows *r, int y0, int y1, mcp_image **parts);
+void mcp__dump_rows_close(mcp__dump_rows *r);
+
 #endif

@@ -392,7 +392,8 @@ chunk_bar_end(chunk_bar *b, int failed)
  * pipeline for all its chunks, as Core intends (update instead of initialise). */
 static int
 read_pixels(exr_context_t f, const chunk_at *chunks, int n, exr_compression_t comp,
-            const mcp_image *named, const mcp__exr_route *routes, const char *path)
+            const mcp_image *named, const mcp__exr_route *routes, const char *path,
+            int show_bar)
 {
     chunk_failure fail = {.idx = -1};
     int zip = comp == EXR_COMPRESSION_ZIP || comp == EXR_COMPRESSION_ZIPS;
@@ -400,7 +401,7 @@ read_pixels(exr_context_t f, const chunk_at *chunks, int n, exr_compression_t co
     for (int i = 0; i < n; i++)
         bytes += (double)chunks[i].ci.unpacked_size;
     chunk_bar bar;
-    chunk_bar_begin(&bar, "reading", path, bytes, n);
+    chunk_bar_begin(&bar, "reading", path, show_bar ? bytes : 0, n);
 #pragma omp parallel if (n > 1)
     {
         exr_decode_pipeline_t dec = EXR_DECODE_PIPELINE_INITIALIZER;
@@ -450,27 +451,39 @@ reorder_names(mcp_image *img)
     return rc;
 }
 
-/* Reads part 0 of an opened context f; file_bytes is the size of what it reads, name
- * names it in messages and becomes the image's source. Closes f. Without a router the
- * whole image goes to *out; with one, the header (channel names, attributes, 1x1
- * unread pixels) goes to the router, which says where each channel's values go. */
-static int
-read_context(exr_context_t f, unsigned long long file_bytes, const char *name,
-             mcp__exr_router router, void *ctx, mcp_image **out)
+/* Part 0's header as read_context and the row reader need it: the chunks listed and
+ * checked against the file, and an image with the channel names (in the file's order
+ * unless whole), the attributes and the source: w x h pixels, not read yet, when
+ * whole, else 1 x 1. */
+typedef struct exr_part {
+    exr_compression_t comp;
+    int w, h, n_chunks;
+    chunk_at *chunks;
+    mcp_image *img;
+} exr_part;
+
+static void
+part_free(exr_part *p)
 {
-    const char *path = name;
-    int rc = -1, n_chunks = 0;
-    mcp_image *img = NULL;
-    mcp__exr_route *routes = NULL;
+    free(p->chunks);
+    mcp_image_free(p->img);
+    memset(p, 0, sizeof *p);
+}
+
+static int
+read_part_header(exr_context_t f, unsigned long long file_bytes, const char *path,
+                 int whole, exr_part *p)
+{
+    int rc = -1;
     const char **names = NULL;
-    chunk_at *chunks = NULL;
     exr_storage_t storage;
     exr_attr_box2i_t dw;
-    exr_compression_t comp;
     const exr_attr_chlist_t *chans = NULL;
     exr_result_t r;
+    memset(p, 0, sizeof *p);
     if ((r = exr_get_storage(f, 0, &storage)) || (r = exr_get_data_window(f, 0, &dw)) ||
-        (r = exr_get_compression(f, 0, &comp)) || (r = exr_get_channels(f, 0, &chans))) {
+        (r = exr_get_compression(f, 0, &p->comp)) ||
+        (r = exr_get_channels(f, 0, &chans))) {
         exr_fail(path, "bad header", r);
         goto done;
     }
@@ -478,10 +491,10 @@ read_context(exr_context_t f, unsigned long long file_bytes, const char *name,
         mcp_error("%s: deep EXR images are not supported", path);
         goto done;
     }
-    if (comp == EXR_COMPRESSION_DWAA || comp == EXR_COMPRESSION_DWAB) {
+    if (p->comp == EXR_COMPRESSION_DWAA || p->comp == EXR_COMPRESSION_DWAB) {
         mcp_error("%s: %s compression cannot be read by the OpenEXR Core library; "
                   "re-save it with zip or piz compression",
-                  path, compression_name(comp));
+                  path, compression_name(p->comp));
         goto done;
     }
     long long w = (long long)dw.max.x - dw.min.x + 1,
@@ -491,13 +504,15 @@ read_context(exr_context_t f, unsigned long long file_bytes, const char *name,
                   chans->num_channels);
         goto done;
     }
+    p->w = (int)w;
+    p->h = (int)h;
     /* the ceiling first (cheap), then what the file can hold, then the allocation */
-    if (mcp_image_check_size((int)w, (int)h, chans->num_channels)) {
+    if (mcp_image_check_size(p->w, p->h, chans->num_channels)) {
         mcp_error_prefix("%s: ", path);
         goto done;
     }
-    if (check_file_holds(f, storage, comp, &dw, (int)w, (int)h, file_bytes, path, &chunks,
-                         &n_chunks))
+    if (check_file_holds(f, storage, p->comp, &dw, p->w, p->h, file_bytes, path,
+                         &p->chunks, &p->n_chunks))
         goto done;
     names = mcp_calloc((size_t)chans->num_channels, sizeof *names);
     if (!names) goto done;
@@ -511,35 +526,53 @@ read_context(exr_context_t f, unsigned long long file_bytes, const char *name,
         names[c] = e->name.str;
     }
     /* the header's attributes before the pixels, so that a router sees them */
-    if (mcp_image_new(router ? 1 : (int)w, router ? 1 : (int)h, chans->num_channels,
-                      names, &img) ||
-        mcp_image_set_source(img, path) || read_attributes(f, &img->attrs))
+    if (mcp_image_new(whole ? p->w : 1, whole ? p->h : 1, chans->num_channels, names,
+                      &p->img) ||
+        mcp_image_set_source(p->img, path) || read_attributes(f, &p->img->attrs))
         goto done;
     /* EXR lists channels alphabetically (B, G, R): a whole image comes back with its
        colour first (docs/conventions.md, "Channel order"). Only the names move: the
        pixels are placed by name below. A router places channels itself, by name. */
-    if (!router && reorder_names(img)) goto done;
+    if (whole && reorder_names(p->img)) goto done;
     if ((dw.min.x || dw.min.y) &&
-        (mcp_attrs_set_int(&img->attrs, "dataWindowX", dw.min.x) ||
-         mcp_attrs_set_int(&img->attrs, "dataWindowY", dw.min.y)))
+        (mcp_attrs_set_int(&p->img->attrs, "dataWindowX", dw.min.x) ||
+         mcp_attrs_set_int(&p->img->attrs, "dataWindowY", dw.min.y)))
         goto done;
+    rc = 0;
+done:
+    free(names);
+    if (rc) part_free(p);
+    return rc;
+}
+
+/* Reads part 0 of an opened context f; file_bytes is the size of what it reads, name
+ * names it in messages and becomes the image's source. Closes f. Without a router the
+ * whole image goes to *out; with one, the header (channel names, attributes, 1x1
+ * unread pixels) goes to the router, which says where each channel's values go. */
+static int
+read_context(exr_context_t f, unsigned long long file_bytes, const char *name,
+             mcp__exr_router router, void *ctx, mcp_image **out)
+{
+    const char *path = name;
+    int rc = -1;
+    exr_part p;
+    mcp__exr_route *routes = NULL;
+    if (read_part_header(f, file_bytes, path, !router, &p)) goto done;
     if (router) {
-        if (!(routes = mcp_calloc((size_t)chans->num_channels, sizeof *routes)) ||
-            router(img, (int)w, (int)h, ctx, routes))
+        if (!(routes = mcp_calloc((size_t)p.img->channels, sizeof *routes)) ||
+            router(p.img, p.w, p.h, ctx, routes))
             goto done;
-    } else if (route_to_image(img, &routes))
+    } else if (route_to_image(p.img, &routes))
         goto done;
-    if (read_pixels(f, chunks, n_chunks, comp, img, routes, path)) goto done;
+    if (read_pixels(f, p.chunks, p.n_chunks, p.comp, p.img, routes, path, 1)) goto done;
     if (!router) {
-        *out = img;
-        img = NULL;
+        *out = p.img;
+        p.img = NULL;
     }
     rc = 0;
 done:
     free(routes);
-    free(chunks);
-    free(names);
-    mcp_image_free(img);
+    part_free(&p);
     exr_finish(&f);
     return rc;
 }
@@ -570,6 +603,98 @@ int
 mcp__exr_read_routed(const char *path, mcp__exr_router router, void *ctx)
 {
     return read_file(path, router, ctx, NULL);
+}
+
+/* ---- reading rows [y0, y1) at a time (a streamed denoise: docs/denoisers.md) ---- */
+
+struct mcp__exr_rows {
+    exr_context_t f;
+    exr_part part; /* the header, 1 x 1, channels in the file's order */
+};
+
+int
+mcp__exr_rows_open(const char *path, mcp__exr_rows **out)
+{
+    *out = NULL;
+    exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
+    init.error_handler_fn = exr_capture_error;
+    exr_last_message[0] = '\0';
+    struct stat st;
+    if (mcp__check_readable(path)) return -1;
+    if (stat(path, &st) || st.st_size < 0)
+        return mcp_error("%s: cannot stat: %s", path, strerror(errno));
+    mcp__exr_rows *r = mcp_calloc(1, sizeof *r);
+    if (!r) return -1;
+    exr_result_t e = exr_start_read(&r->f, path, &init);
+    if (e != EXR_ERR_SUCCESS) {
+        free(r);
+        return exr_fail(path, "cannot read as OpenEXR", e);
+    }
+    /* the same checks as a whole read: the chunks must lie in the file before any
+       row is allocated */
+    if (read_part_header(r->f, (unsigned long long)st.st_size, path, 0, &r->part)) {
+        mcp__exr_rows_close(r);
+        return -1;
+    }
+    *out = r;
+    return 0;
+}
+
+const mcp_image *
+mcp__exr_rows_header(const mcp__exr_rows *r, int *width, int *height)
+{
+    *width = r->part.w;
+    *height = r->part.h;
+    return r->part.img;
+}
+
+/* Whether chunk c holds any of rows [y0, y1). */
+static int
+chunk_meets(const chunk_at *c, int y0, int y1)
+{
+    return c->y0 < y1 && c->y0 + c->ci.height > y0;
+}
+
+void
+mcp__exr_rows_span(const mcp__exr_rows *r, int y0, int y1, int *a0, int *a1)
+{
+    *a0 = y0;
+    *a1 = y1;
+    for (int i = 0; i < r->part.n_chunks; i++) {
+        const chunk_at *c = &r->part.chunks[i];
+        if (!chunk_meets(c, y0, y1)) continue;
+        if (c->y0 < *a0) *a0 = c->y0;
+        if (c->y0 + c->ci.height > *a1) *a1 = c->y0 + c->ci.height;
+    }
+}
+
+int
+mcp__exr_rows_read(mcp__exr_rows *r, int y0, int y1, int a0, const mcp__exr_route *routes)
+{
+    const exr_part *p = &r->part;
+    if (y0 < 0 || y1 > p->h || y0 >= y1)
+        return mcp_error("%s: rows %d..%d are not in the image's %d", p->img->source, y0,
+                         y1, p->h);
+    chunk_at *sub = mcp_calloc((size_t)p->n_chunks, sizeof *sub);
+    if (!sub) return -1;
+    int n = 0;
+    for (int i = 0; i < p->n_chunks; i++)
+        if (chunk_meets(&p->chunks[i], y0, y1)) {
+            sub[n] = p->chunks[i];
+            sub[n++].y0 -= a0; /* the routes' row 0 is row a0 */
+        }
+    int rc = read_pixels(r->f, sub, n, p->comp, p->img, routes, p->img->source, 0);
+    free(sub);
+    return rc;
+}
+
+void
+mcp__exr_rows_close(mcp__exr_rows *r)
+{
+    if (!r) return;
+    part_free(&r->part);
+    if (r->f) exr_finish(&r->f);
+    free(r);
 }
 
 /* ---- reading from memory ---- */
@@ -875,15 +1000,10 @@ store_raw_after_probe(exr_context_t f, const mcp_image *img, const chunk_at *chu
  * after the other while the other threads compress the next ones, so at most one
  * chunk per thread is held in memory. */
 static int
-write_pixels(exr_context_t f, const mcp_image *img, exr_storage_t storage,
-             exr_compression_t comp, int zip_level, double min_saving,
-             const exr_attr_box2i_t *dw, const char *path)
+write_chunks(exr_context_t f, const mcp_image *img, const chunk_at *chunks, int n,
+             exr_storage_t storage, exr_compression_t comp, int zip_level,
+             double min_saving, int show_bar, const char *path)
 {
-    chunk_at *chunks;
-    int n;
-    if (list_chunks(f, storage, dw, img->width, img->height, 1, (long long)INT32_MAX,
-                    path, &chunks, &n))
-        return -1;
     /* below PROBE_EVERY chunks the probe would cost more than it could save */
     int zip = comp == EXR_COMPRESSION_ZIP || comp == EXR_COMPRESSION_ZIPS;
     if (!zip) zip_level = 0;
@@ -891,8 +1011,10 @@ write_pixels(exr_context_t f, const mcp_image *img, exr_storage_t storage,
                     store_raw_after_probe(f, img, chunks, n, min_saving);
     chunk_failure fail = {.idx = -1};
     chunk_bar bar;
-    chunk_bar_begin(&bar, "writing", path,
-                    (double)img->width * img->height * img->channels * sizeof(float), n);
+    chunk_bar_begin(
+        &bar, "writing", path,
+        show_bar ? (double)img->width * img->height * img->channels * sizeof(float) : 0,
+        n);
 #pragma omp parallel if (n > 1)
     {
         exr_encode_pipeline_t enc = EXR_ENCODE_PIPELINE_INITIALIZER;
@@ -927,13 +1049,20 @@ write_pixels(exr_context_t f, const mcp_image *img, exr_storage_t storage,
         chunk_coder_free(&coder);
     }
     chunk_bar_end(&bar, fail.idx >= 0);
-    free(chunks);
     return fail.idx >= 0 ? report_failure(&fail, path) : 0;
 }
 
-int
-mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *opt)
+/* Creates path (exactly: the callers write a temporary name and rename it) and writes
+ * the header of a w x h image with the channels names[0 .. nc) and the attributes
+ * attrs, as opt says. The chunks, listed in file order, follow in *chunks. */
+static int
+start_write(const char *path, int w, int h, int nc, char *const *names,
+            const mcp_attrs *attrs, const mcp_write_options *opt, exr_context_t *out,
+            chunk_at **chunks, int *n_chunks, int *zip_level_out)
 {
+    *out = NULL;
+    *chunks = NULL;
+    *n_chunks = 0;
     if (opt->compression == MCP_EXR_DWAA || opt->compression == MCP_EXR_DWAB ||
         opt->compression == MCP_EXR_B44 || opt->compression == MCP_EXR_B44A)
         /* Core 3.1.5 cannot encode DWA and writes corrupt B44 (docs/libraries.md §2) */
@@ -946,6 +1075,7 @@ mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *
         return mcp_error("%s: bad zip level %d (1..9, or 0 for the default)", path,
                          opt->exr_zip_level);
     int zip_level = opt->exr_zip_level ? opt->exr_zip_level : MCP_EXR_ZIP_LEVEL_DEFAULT;
+    *zip_level_out = zip_level;
     if (!(opt->exr_min_saving < 1)) /* NaN too */
         return mcp_error("%s: bad exr_min_saving %g (below 1; 0 for the default, "
                          "negative to compress every chunk)",
@@ -962,8 +1092,8 @@ mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *
     exr_attr_box2i_t dw;
     dw.min.x = opt->exr_data_x;
     dw.min.y = opt->exr_data_y;
-    dw.max.x = opt->exr_data_x + img->width - 1;
-    dw.max.y = opt->exr_data_y + img->height - 1;
+    dw.max.x = opt->exr_data_x + w - 1;
+    dw.max.y = opt->exr_data_y + h - 1;
     exr_attr_box2i_t disp = dw;
     exr_attr_v2f_t centre;
     centre.x = centre.y = 0.0f;
@@ -981,13 +1111,13 @@ mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *
         exr_fail(path, "cannot write header", r);
         goto done;
     }
-    for (int c = 0; c < img->channels; c++) {
+    for (int c = 0; c < nc; c++) {
         for (int d = 0; d < c; d++)
-            if (strcmp(img->names[c], img->names[d]) == 0) {
-                mcp_error("%s: channel name '%s' appears twice", path, img->names[c]);
+            if (strcmp(names[c], names[d]) == 0) {
+                mcp_error("%s: channel name '%s' appears twice", path, names[c]);
                 goto done;
             }
-        r = exr_add_channel(f, part, img->names[c],
+        r = exr_add_channel(f, part, names[c],
                             opt->exr_pixel == MCP_EXR_HALF ? EXR_PIXEL_HALF
                                                            : EXR_PIXEL_FLOAT,
                             EXR_PERCEPTUALLY_LINEAR, 1, 1);
@@ -996,7 +1126,7 @@ mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *
             goto done;
         }
     }
-    if (write_attributes(f, &img->attrs)) {
+    if (write_attributes(f, attrs)) {
         mcp_error_prefix("%s: ", path);
         goto done;
     }
@@ -1004,13 +1134,122 @@ mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *
         exr_fail(path, "cannot write header", r);
         goto done;
     }
-    rc = write_pixels(f, img, opt->exr_tiled ? EXR_STORAGE_TILED : EXR_STORAGE_SCANLINE,
-                      compression_of[opt->compression], zip_level,
-                      opt->exr_min_saving ? opt->exr_min_saving
-                                          : MCP_EXR_MIN_SAVING_DEFAULT,
-                      &dw, path);
+    rc = list_chunks(f, opt->exr_tiled ? EXR_STORAGE_TILED : EXR_STORAGE_SCANLINE, &dw, w,
+                     h, 1, (long long)INT32_MAX, path, chunks, n_chunks);
 done:
-    r = exr_finish(&f);
+    if (rc)
+        exr_finish(&f);
+    else
+        *out = f;
+    return rc;
+}
+
+static double
+min_saving_of(const mcp_write_options *opt)
+{
+    return opt->exr_min_saving ? opt->exr_min_saving : MCP_EXR_MIN_SAVING_DEFAULT;
+}
+
+int
+mcp__exr_write(const mcp_image *img, const char *path, const mcp_write_options *opt)
+{
+    exr_context_t f;
+    chunk_at *chunks;
+    int n, zip_level;
+    if (start_write(path, img->width, img->height, img->channels, img->names, &img->attrs,
+                    opt, &f, &chunks, &n, &zip_level))
+        return -1;
+    int rc = write_chunks(
+        f, img, chunks, n, opt->exr_tiled ? EXR_STORAGE_TILED : EXR_STORAGE_SCANLINE,
+        compression_of[opt->compression], zip_level, min_saving_of(opt), 1, path);
+    free(chunks);
+    exr_result_t r = exr_finish(&f);
     if (!rc && r != EXR_ERR_SUCCESS) rc = exr_fail(path, "cannot finish writing", r);
+    return rc;
+}
+
+/* ---- writing rows [y0, y1) at a time, top to bottom (a streamed denoise) ---- */
+
+struct mcp__exr_writer {
+    exr_context_t f;
+    char *path;
+    mcp_write_options opt;
+    chunk_at *chunks;
+    int n_chunks, next_chunk, next_row, width, height, zip_level;
+};
+
+int
+mcp__exr_writer_open(const char *path, int width, int height, int nc, char *const *names,
+                     const mcp_attrs *attrs, const mcp_write_options *opt,
+                     mcp__exr_writer **out)
+{
+    *out = NULL;
+    mcp__exr_writer *wr = mcp_calloc(1, sizeof *wr);
+    if (!wr || !(wr->path = mcp_strdup(path))) {
+        free(wr);
+        return -1;
+    }
+    wr->opt = *opt;
+    wr->width = width;
+    wr->height = height;
+    if (start_write(path, width, height, nc, names, attrs, opt, &wr->f, &wr->chunks,
+                    &wr->n_chunks, &wr->zip_level)) {
+        free(wr->path);
+        free(wr);
+        return -1;
+    }
+    *out = wr;
+    return 0;
+}
+
+int
+mcp__exr_writer_rows(mcp__exr_writer *wr, const mcp_image *rows, int y0)
+{
+    const int y1 = y0 + rows->height;
+    if (y0 != wr->next_row || y1 > wr->height || rows->width != wr->width)
+        return mcp_error("%s: rows %d..%d (%d wide) do not follow row %d of %dx%d",
+                         wr->path, y0, y1, rows->width, wr->next_row, wr->width,
+                         wr->height);
+    /* the chunks that start before y1, which must end by then */
+    int i1 = wr->next_chunk;
+    while (i1 < wr->n_chunks && wr->chunks[i1].y0 < y1)
+        i1++;
+    const int n = i1 - wr->next_chunk;
+    chunk_at *sub = mcp_calloc((size_t)(n > 0 ? n : 1), sizeof *sub);
+    if (!sub) return -1;
+    for (int i = 0; i < n; i++) {
+        sub[i] = wr->chunks[wr->next_chunk + i];
+        if (sub[i].y0 + sub[i].ci.height > y1) {
+            const int rows_in_chunk = sub[i].ci.height;
+            free(sub);
+            return mcp_error("%s: rows %d..%d end inside a chunk of %d rows", wr->path,
+                             y0, y1, rows_in_chunk);
+        }
+        sub[i].y0 -= y0; /* rows' row 0 is row y0 */
+    }
+    const mcp_write_options *opt = &wr->opt;
+    int rc = write_chunks(
+        wr->f, rows, sub, n, opt->exr_tiled ? EXR_STORAGE_TILED : EXR_STORAGE_SCANLINE,
+        compression_of[opt->compression], wr->zip_level, min_saving_of(opt), 0, wr->path);
+    free(sub);
+    if (!rc) {
+        wr->next_chunk = i1;
+        wr->next_row = y1;
+    }
+    return rc;
+}
+
+int
+mcp__exr_writer_close(mcp__exr_writer *wr)
+{
+    if (!wr) return 0;
+    int rc = 0;
+    if (wr->next_row < wr->height)
+        rc = mcp_error("%s: %d of %d rows written", wr->path, wr->next_row, wr->height);
+    exr_result_t r = exr_finish(&wr->f);
+    if (!rc && r != EXR_ERR_SUCCESS) rc = exr_fail(wr->path, "cannot finish writing", r);
+    free(wr->chunks);
+    free(wr->path);
+    free(wr);
     return rc;
 }

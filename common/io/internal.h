@@ -68,6 +68,31 @@ typedef int (*mcp__exr_router)(const mcp_image *header, int width, int height, v
 int mcp__exr_read_routed(const char *path, mcp__exr_router router, void *ctx);
 int mcp__exr_read_memory_routed(const void *data, size_t size, const char *name,
                                 mcp__exr_router router, void *ctx);
+/* Reading an EXR rows [y0, y1) at a time (a streamed denoise, docs/denoisers.md): open
+ * reads the header and checks, as a whole read does, that the chunks lie in the file;
+ * header gives it (channel names in the file's order, attributes, source; 1 x 1) and
+ * the data window's size; span widens [y0, y1) to the rows of the chunks that hold
+ * them, [*a0, *a1), which read decodes: the value at pixel (x, y) goes to
+ * routes[c].base[(y - a0) * row_stride + x * pixel_stride] for y in [*a0, *a1). */
+typedef struct mcp__exr_rows mcp__exr_rows;
+int mcp__exr_rows_open(const char *path, mcp__exr_rows **out);
+const mcp_image *mcp__exr_rows_header(const mcp__exr_rows *r, int *width, int *height);
+void mcp__exr_rows_span(const mcp__exr_rows *r, int y0, int y1, int *a0, int *a1);
+int mcp__exr_rows_read(mcp__exr_rows *r, int y0, int y1, int a0,
+                       const mcp__exr_route *routes);
+void mcp__exr_rows_close(mcp__exr_rows *r);
+/* Writing an EXR rows at a time, top to bottom, with what mcp__exr_write writes (the
+ * pixels; zip chunks that do not shrink are stored raw, decided for each call's rows):
+ * open creates path exactly (the caller writes a temporary name and renames it, as
+ * mcp_image_write does) with the header; rows takes the next rows->height rows, whose
+ * channels are found by name, and must end on a chunk's last row or the image's; close
+ * finishes the file, -1 when it fails or rows are missing. */
+typedef struct mcp__exr_writer mcp__exr_writer;
+int mcp__exr_writer_open(const char *path, int width, int height, int nc,
+                         char *const *names, const mcp_attrs *attrs,
+                         const mcp_write_options *opt, mcp__exr_writer **out);
+int mcp__exr_writer_rows(mcp__exr_writer *wr, const mcp_image *rows, int y0);
+int mcp__exr_writer_close(mcp__exr_writer *wr);
 int mcp__pfm_read(const char *path, mcp_image **out);
 int mcp__pfm_read_memory(const void *data, size_t size, const char *name,
                          mcp_image **out);

@@ -5,8 +5,10 @@
  * compress; a corrupt chunk gives the same one-line error on any thread count. Zip
  * chunks go through libdeflate (common/io/exr_zip.c): OpenEXR Core's own zlib decoder
  * reads what it writes, and it reads what zlib wrote (a renderer's file), value for
- * value the same as Core. */
+ * value the same as Core. The row reader and writer of a streamed denoise give the
+ * bits of a whole read and of a whole write, band by band, and refuse what they must. */
 #include "testing.h"
+#include "../../common/io/internal.h"
 
 #include <mcpost/imageio.h>
 #include <openexr.h>
@@ -17,6 +19,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 static const char *names5[] = {"R", "G", "B", "Variance.R", "albedo.G"};
 static const int thread_counts[] = {1, 2, 5};
@@ -351,6 +354,101 @@ test_zip_streams_agree_with_core(void **state)
     mcp_image_free(nasty);
 }
 
+/* Rows at a time (common/io/exr.c, the streamed denoise's reader and writer): any band
+ * of rows read from a file is the whole read's rows, bit for bit, scanline and tiled,
+ * for every compression; a file written band by band (bands on multiples of 64 rows and
+ * a short last one) reads back as the image; a band that ends inside a chunk is
+ * refused in one line, and a truncated file is refused before any row is read. */
+static void
+test_rows_at_a_time(void **state)
+{
+    (void)state;
+    mcp_image *img = nasty_image(61, 200, 11);
+    const char *path = mcp_test_path("rows.exr"), *out = mcp_test_path("rows_out.exr");
+    const mcp_exr_compression comps[] = {MCP_EXR_NONE, MCP_EXR_ZIP, MCP_EXR_PIZ,
+                                         MCP_EXR_ZIPS, MCP_EXR_RLE};
+    for (size_t k = 0; k < sizeof comps / sizeof *comps; k++)
+        for (int tiled = 0; tiled < 2; tiled++) {
+            mcp_write_options o = mcp_write_defaults();
+            o.compression = comps[k];
+            o.exr_tiled = tiled;
+            o.exr_tile_size = 32;
+            mcp_image *whole = NULL;
+            assert_int_equal(mcp_image_write(img, path, &o), 0);
+            assert_int_equal(mcp_image_read(path, NULL, &whole), 0);
+            mcp__exr_rows *r = NULL;
+            assert_int_equal(mcp__exr_rows_open(path, &r), 0);
+            int w, h;
+            const mcp_image *header = mcp__exr_rows_header(r, &w, &h);
+            assert_int_equal(w, 61);
+            assert_int_equal(h, 200);
+            const int bands[][2] = {{0, 1},    {0, 37},    {37, 100},
+                                    {99, 200}, {150, 151}, {0, 200}};
+            for (size_t b = 0; b < sizeof bands / sizeof *bands; b++) {
+                const int y0 = bands[b][0], y1 = bands[b][1];
+                int a0, a1;
+                mcp__exr_rows_span(r, y0, y1, &a0, &a1);
+                assert_true(a0 <= y0 && a1 >= y1 && a1 <= h);
+                mcp_image *rows = NULL;
+                assert_int_equal(mcp_image_new(w, a1 - a0, header->channels,
+                                               (const char *const *)header->names, &rows),
+                                 0);
+                mcp__exr_route routes[5];
+                for (int c = 0; c < header->channels; c++)
+                    routes[c] = (mcp__exr_route){rows->data + c, rows->pixel_stride,
+                                                 rows->row_stride};
+                assert_int_equal(mcp__exr_rows_read(r, y0, y1, a0, routes), 0);
+                mcp_image *want = NULL, *got = NULL;
+                assert_int_equal(mcp_image_crop_view(whole, 0, y0, w, y1 - y0, &want), 0);
+                assert_int_equal(mcp_image_crop_view(rows, 0, y0 - a0, w, y1 - y0, &got),
+                                 0);
+                assert_same_bits(want, got);
+                mcp_image_free(want), mcp_image_free(got), mcp_image_free(rows);
+            }
+            mcp__exr_rows_close(r);
+            /* written band by band: the image, whatever chunks were stored raw */
+            mcp__exr_writer *wr = NULL;
+            assert_int_equal(mcp__exr_writer_open(out, w, h, img->channels, img->names,
+                                                  &img->attrs, &o, &wr),
+                             0);
+            for (int y0 = 0; y0 < h; y0 += 64) {
+                mcp_image *band = NULL;
+                const int n = y0 + 64 < h ? 64 : h - y0;
+                assert_int_equal(mcp_image_crop_view(img, 0, y0, w, n, &band), 0);
+                assert_int_equal(mcp__exr_writer_rows(wr, band, y0), 0);
+                mcp_image_free(band);
+            }
+            assert_int_equal(mcp__exr_writer_close(wr), 0);
+            mcp_image *back = NULL;
+            assert_int_equal(mcp_image_read(out, NULL, &back), 0);
+            assert_same_bits(img, back);
+            mcp_image_free(back);
+            mcp_image_free(whole);
+        }
+    /* a band that ends inside a zip chunk of 16 rows; a file left unfinished */
+    mcp_write_options o = mcp_write_defaults();
+    mcp__exr_writer *wr = NULL;
+    assert_int_equal(mcp__exr_writer_open(out, 61, 200, img->channels, img->names,
+                                          &img->attrs, &o, &wr),
+                     0);
+    mcp_image *band = NULL;
+    assert_int_equal(mcp_image_crop_view(img, 0, 0, 61, 10, &band), 0);
+    assert_int_equal(mcp__exr_writer_rows(wr, band, 0), -1);
+    assert_non_null(strstr(mcp_error_message(), "end inside a chunk of 16 rows"));
+    assert_int_equal(mcp__exr_writer_close(wr), -1);
+    assert_non_null(strstr(mcp_error_message(), "0 of 200 rows written"));
+    mcp_image_free(band);
+    /* truncated: the chunk table points past the end */
+    assert_int_equal(mcp_image_write(img, path, &o), 0);
+    assert_int_equal(truncate(path, file_size(path) / 2), 0);
+    mcp__exr_rows *r = NULL;
+    assert_int_equal(mcp__exr_rows_open(path, &r), -1);
+    assert_null(r);
+    assert_non_null(strstr(mcp_error_message(), "rows.exr: "));
+    assert_null(strchr(mcp_error_message(), '\n'));
+    mcp_image_free(img);
+}
+
 int
 main(void)
 {
@@ -360,6 +458,7 @@ main(void)
         cmocka_unit_test(test_probe_stores_raw_only_what_does_not_compress),
         cmocka_unit_test(test_corrupt_chunk_same_error_any_thread_count),
         cmocka_unit_test(test_zip_streams_agree_with_core),
+        cmocka_unit_test(test_rows_at_a_time),
     };
     return cmocka_run_group_tests_name("common/exr", tests, NULL, NULL);
 }

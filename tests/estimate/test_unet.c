@@ -376,6 +376,41 @@ test_autoexposure(void **state)
     free_inputs(&in);
 }
 
+/* The autoexposure of an image fed in bands of rows (a streamed denoise's pre-pass,
+ * estimate/unet_bands.c) is the whole image's, bit for bit, whatever the bands: bands
+ * of 1, 7, 16 and 64 rows, and of uneven heights, for both bin rules; the whole image's
+ * matches the plain transcription above. */
+static void
+test_autoexposure_in_bands(void **state)
+{
+    (void)state;
+    inputs in = make_inputs(301, 211, 5);
+    assert_close(mcp__unet_autoexposure(in.col, 0), ref_autoexposure(in.col), 1e-12, 0);
+    const int steps[] = {1, 7, 16, 64, 0};
+    for (int v2 = 0; v2 < 2; v2++) {
+        const double whole = mcp__unet_autoexposure(in.col, v2);
+        for (size_t k = 0; k < sizeof steps / sizeof *steps; k++) {
+            mcp__unet_exposure e;
+            assert_int_equal(
+                mcp__unet_exposure_begin(&e, in.col->width, in.col->height, v2), 0);
+            for (int y0 = 0, i = 0; y0 < in.col->height; i++) {
+                /* step 0: uneven bands of 1 + (37 i mod 50) rows */
+                int rows = steps[k] ? steps[k] : 1 + (37 * i) % 50;
+                if (y0 + rows > in.col->height) rows = in.col->height - y0;
+                mcp_image *band = NULL;
+                assert_int_equal(
+                    mcp_image_crop_view(in.col, 0, y0, in.col->width, rows, &band), 0);
+                mcp__unet_exposure_rows(&e, band);
+                mcp_image_free(band);
+                y0 += rows;
+            }
+            const double banded = mcp__unet_exposure_end(&e);
+            assert_true(memcmp(&banded, &whole, sizeof whole) == 0);
+        }
+    }
+    free_inputs(&in);
+}
+
 static void
 test_transfer_function(void **state)
 {
@@ -1636,6 +1671,7 @@ main(void)
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_transfer_function),
         cmocka_unit_test(test_autoexposure),
+        cmocka_unit_test(test_autoexposure_in_bands),
         cmocka_unit_test(test_forward_matches_reference),
         cmocka_unit_test(test_half_weights),
         cmocka_unit_test(test_bad_files),

@@ -1,0 +1,130 @@
+/* denoise_stream.c: `mcpost denoise DUMP` with the U-Net on a dump too large to hold
+ * whole beside the network (issue 31: 8K within 2 GB; docs/denoisers.md, "Images
+ * larger than memory"): the dump's colour, albedo and normal are read in bands of rows
+ * (common/dump's mcp__dump_rows), each band denoised (unet_bands.c) and written at once
+ * into the output EXR (common/io's mcp__exr_writer), under a temporary name renamed
+ * when every row is written and removed on failure, as mcp_image_write does. The file
+ * holds the pixels and header attributes the whole run writes. */
+#include "internal.h"
+#include "unet_internal.h"
+#include "../common/dump/internal.h"
+#include "../common/io/internal.h"
+#include "../jobs/internal.h"
+
+#include <mcpost/imageio.h>
+
+#include <stdio.h>
+#include <stdlib.h>
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
+
+typedef struct {
+    mcp__dump_rows *in;
+    mcp__exr_writer *out;
+} stream_io;
+
+static int
+read_rows(void *ctx, int y0, int y1, mcp_image **color, mcp_image **albedo,
+          mcp_image **normal)
+{
+    const stream_io *io = ctx;
+    mcp_image *parts[3];
+    if (mcp__dump_rows_read(io->in, y0, y1, parts)) return -1;
+    *color = parts[0];
+    *albedo = parts[1];
+    *normal = parts[2];
+    return 0;
+}
+
+static int
+write_rows(void *ctx, const mcp_image *rows, int y0)
+{
+    const stream_io *io = ctx;
+    return mcp__exr_writer_rows(io->out, rows, y0);
+}
+
+/* The output's header: the dump's attributes and the denoiser's name, as the whole run
+ * writes them (cli/cmd_denoise.c). */
+static int
+open_output(const mcp__dump_rows *in, const char *denoiser, const char *path, int W,
+            int H, mcp__exr_writer **out)
+{
+    static const char *const rgb[3] = {"R", "G", "B"};
+    mcp_attrs attrs = {0};
+    const mcp_write_options opt = mcp_write_defaults();
+    int rc = mcp_attrs_copy(&mcp__dump_rows_dump(in)->attrs, &attrs) ||
+             mcp_attrs_set_string(&attrs, "mcpost.denoiser", denoiser) ||
+             mcp__exr_writer_open(path, W, H, 3, (char *const *)rgb, &attrs, &opt, out);
+    mcp_attrs_clear(&attrs);
+    return rc ? -1 : 0;
+}
+
+/* The command line keeps freed memory in the heap for reuse (cli/main.c): right for
+ * frames of one size, but a band's blocks (its images, the network's arena for each
+ * tile's crop) change size from band to band and tile to tile, and kept they fragment
+ * the heap: 2400x1600 in bands of 256 rows held 3.2 GB instead of 1.3. Blocks of 32 MB
+ * and more are mapped and unmapped instead, for the rest of the process. */
+static void
+unmap_freed_blocks(void)
+{
+#ifdef __GLIBC__
+    mallopt(M_MMAP_THRESHOLD, 32 << 20);
+#endif
+}
+
+int
+mcp__denoise_dump_streamed(const mcp_denoiser *den, const mcp_dump_spec *spec,
+                           const char *out_path, int *done)
+{
+    *done = 0;
+    double input_scale = 0;
+    int tile = 0;
+    const mcp_denoiser *unet = mcp__default_unet(den);
+    const mcp__unet *net = mcp__unet_of(unet ? unet : den, &input_scale, &tile);
+    if (!net || mcp_format_from_path(out_path) != MCP_FORMAT_EXR) return 0;
+    mcp__dump_rows *in = NULL;
+    /* what cannot be opened here is read whole, which says what is wrong with it */
+    if (mcp__dump_rows_open(spec, &in) || !in) {
+        mcp_error_clear();
+        return 0;
+    }
+    int W, H, has_albedo, has_normal;
+    mcp__dump_rows_size(in, &W, &H, &has_albedo, &has_normal);
+    mcp__unet_bands plan;
+    /* a default denoiser without the features runs nlm, whole */
+    if ((net->ic >= 6 && !has_albedo) || (net->ic >= 9 && !has_normal) ||
+        mcp__unet_bands_plan(net, W, H,
+                             mcp__dump_rows_whole_bytes(in) + 12.0 * W * (double)H, tile,
+                             &plan) ||
+        !plan.band_rows) {
+        /* a plan that fails is the whole run's to report, in its own words */
+        mcp_error_clear();
+        mcp__dump_rows_close(in);
+        return 0;
+    }
+    *done = 1;
+    unmap_freed_blocks();
+    mcp_atomic_file af;
+    stream_io io = {in, NULL};
+    int rc = mcp_atomic_begin(&af, out_path);
+    if (!rc) {
+        rc = open_output(in, den->name, af.tmp_path, W, H, &io.out);
+        if (!rc) {
+            const mcp__unet_band_io band_io = {&io, read_rows, write_rows};
+            rc = mcp__unet_bands_run(net, input_scale, W, H, &plan, &band_io);
+            /* closed even after a failure, before the temporary is removed; the
+               failure's message stays */
+            char why[1024];
+            snprintf(why, sizeof why, "%s", rc ? mcp_error_message() : "");
+            if (mcp__exr_writer_close(io.out) && !rc) rc = -1;
+            if (*why) mcp_error("%s", why);
+        }
+        if (rc)
+            mcp_atomic_abort(&af);
+        else
+            rc = mcp_atomic_commit(&af);
+    }
+    mcp__dump_rows_close(in);
+    return rc ? -1 : 0;
+}
