@@ -52,3 +52,30 @@ def rgb(path):
     """The R, G, B channels of a file, by name, as float32 H x W x 3."""
     pixels, names, _ = mcpost.read_image(path)
     return np.ascontiguousarray(pixels[..., [names.index(c) for c in "RGB"]])
+
+
+def strat_replicates(tmp, scene, blocks):
+    """The stratified fixture `scene` (samples/fixtures/strat) as 8 independent renders
+    merged as replicates: each render the merge of its first `blocks` 32-spp blocks
+    (render 0 carrying its per-sample variance, whose blocks pool exactly; the others
+    means only, passes of one render too), or its first block alone; albedo and normal
+    from the scene's features. Returns the merged dump's path and the dump."""
+    strat = os.path.join(SOURCE, "samples", "fixtures", "strat", scene)
+    feat, names, _ = mcpost.read_image(os.path.join(strat, f"{scene}_features.exr"))
+    albedo = feat[..., [names.index(c) for c in ("Albedo.R", "Albedo.G", "Albedo.B")]]
+    normal = feat[..., [names.index(c) for c in ("N.X", "N.Y", "N.Z")]]
+    paths = []
+    for r in range(8):
+        files = [os.path.join(strat, "blocks", f"{scene}_r{r}_b{b:02d}.exr")
+                 for b in range(blocks)]
+        render = (dict(mcpost.read_dump(files[0])) if blocks == 1 else
+                  dict(mcpost.merge(files, variance="pooled" if r == 0 else "replicates")))
+        render["albedo"], render["normal"] = albedo, normal
+        paths.append(str(tmp / f"r{r}.exr"))
+        mcpost.write_dump(paths[-1], render)
+    dump = dict(mcpost.merge(paths, variance="replicates"))
+    assert dump["variance_source"] == "replicates" and dump["variance_dof"] == 7
+    dump["albedo"], dump["normal"] = albedo, normal
+    path = str(tmp / "merged.exr")
+    mcpost.write_dump(path, dump)
+    return path, dump

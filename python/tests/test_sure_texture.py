@@ -12,7 +12,7 @@ import numpy as np
 import mcpost
 import pytest
 
-from conftest import SOURCE
+from conftest import SOURCE, strat_replicates
 
 STRAT = os.path.join(SOURCE, "samples", "fixtures", "strat", "texture")
 
@@ -26,25 +26,7 @@ def block_ratios(sure, true, size=16):
 
 @pytest.fixture(scope="module")
 def merged(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("sure_texture")
-    feat, names, _ = mcpost.read_image(os.path.join(STRAT, "texture_features.exr"))
-    albedo = feat[..., [names.index(c) for c in ("Albedo.R", "Albedo.G", "Albedo.B")]]
-    normal = feat[..., [names.index(c) for c in ("N.X", "N.Y", "N.Z")]]
-    paths = []
-    for r in range(8):
-        blocks = [os.path.join(STRAT, "blocks", f"texture_r{r}_b{b:02d}.exr") for b in range(4)]
-        # render 0 carries its per-sample variance (its blocks pool exactly); the others
-        # are means only, whose blocks are passes of one render too
-        render = dict(mcpost.merge(blocks, variance="pooled" if r == 0 else "replicates"))
-        render["albedo"], render["normal"] = albedo, normal
-        paths.append(str(tmp / f"r{r}.exr"))
-        mcpost.write_dump(paths[-1], render)
-    dump = dict(mcpost.merge(paths, variance="replicates"))
-    assert dump["variance_source"] == "replicates" and dump["variance_dof"] == 7
-    dump["albedo"], dump["normal"] = albedo, normal
-    path = str(tmp / "merged.exr")
-    mcpost.write_dump(path, dump)
-    return path
+    return strat_replicates(tmp_path_factory.mktemp("sure_texture"), "texture", 4)[0]
 
 
 @pytest.mark.parametrize("denoiser", ["nlm", "unet"])

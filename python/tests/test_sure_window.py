@@ -19,7 +19,7 @@ import numpy as np
 import mcpost
 import pytest
 
-from conftest import SOURCE
+from conftest import SOURCE, strat_replicates
 
 WINDOW = os.path.join(SOURCE, "samples", "fixtures", "strat", "window")
 REFERENCE_SPP = 16384
@@ -28,21 +28,10 @@ REFERENCE_SPP = 16384
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("sure_window")
-    feat, names, _ = mcpost.read_image(os.path.join(WINDOW, "window_features.exr"))
-    albedo = feat[..., [names.index(c) for c in ("Albedo.R", "Albedo.G", "Albedo.B")]]
-    normal = feat[..., [names.index(c) for c in ("N.X", "N.Y", "N.Z")]]
+    merged, dump = strat_replicates(tmp, "window", 1)
+    assert dump["spp"] == 256
+    albedo, normal = dump["albedo"], dump["normal"]
     ref = mcpost.read_image(os.path.join(WINDOW, "window_reference.exr"))[0][..., :3]
-    paths = []
-    for r in range(8):
-        render = dict(mcpost.read_dump(os.path.join(WINDOW, "blocks", f"window_r{r}_b00.exr")))
-        render["albedo"], render["normal"] = albedo, normal
-        paths.append(str(tmp / f"r{r}.exr"))
-        mcpost.write_dump(paths[-1], render)
-    dump = dict(mcpost.merge(paths, variance="replicates"))
-    assert dump["variance_source"] == "replicates" and dump["spp"] == 256
-    dump["albedo"], dump["normal"] = albedo, normal
-    merged = str(tmp / "merged.exr")
-    mcpost.write_dump(merged, dump)
     variance = np.clip(np.asarray(dump["variance"], dtype=np.float64), 0, None)
     # Gaussian noise of that variance around the reference, fixed seeds
     rng = np.random.default_rng(1)

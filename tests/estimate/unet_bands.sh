@@ -12,17 +12,11 @@
 #   unet_bands.sh BUILD_DIR
 set -euo pipefail
 build=$1
+. "$(dirname "$0")/same_pixels.sh"
 mcpost=$build/mcpost
 work=$build/test-tmp/unet_bands
 rm -rf "$work" && mkdir -p "$work" && cd "$work"
 
-same_pixels() { # same_pixels A.exr B.exr: the same float bits in R, G, B
-    "$mcpost" convert "$1" "${1%.exr}.pfm" >/dev/null
-    "$mcpost" convert "$2" "${2%.exr}.pfm" >/dev/null
-    cmp "${1%.exr}.pfm" "${2%.exr}.pfm" ||
-        { echo "FAIL: $1 and $2 differ"; exit 1; }
-    echo "same bits: $1 $2"
-}
 
 "$build/mcpost-procedural" --width 256 --height 1152 --spp 2 --seed 5 -o s >/dev/null
 MCPOST_UNET_BAND_ROWS=whole "$mcpost" denoise s_0000.exr --denoiser unet -o whole.exr --quiet

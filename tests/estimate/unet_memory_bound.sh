@@ -16,6 +16,7 @@
 #   unet_memory_bound.sh BUILD_DIR
 set -euo pipefail
 build=$1
+. "$(dirname "$0")/same_pixels.sh"
 mcpost=$build/mcpost
 work=$build/test-tmp/unet_memory_bound
 rm -rf "$work" && mkdir -p "$work" && cd "$work"
@@ -32,13 +33,6 @@ run_limited() { # run_limited LIMIT_MB NAME ARGS...: the exit status of a limite
     set -e
     echo "$name under ulimit -v $limit_kb kB: exit $rc $(cat "$name.err")"
     return $rc
-}
-same_pixels() { # same_pixels A.exr B.exr: the same float bits in R, G, B
-    "$mcpost" convert "$1" "${1%.exr}.pfm" >/dev/null
-    "$mcpost" convert "$2" "${2%.exr}.pfm" >/dev/null
-    cmp "${1%.exr}.pfm" "${2%.exr}.pfm" ||
-        { echo "FAIL: $1 and $2 differ"; exit 1; }
-    echo "same bits: $1 $2"
 }
 MCPOST_UNET_BAND_ROWS=whole run_limited 1200 tiled --denoiser-opt max_memory_mb=900 ||
     { cat tiled.err; echo "FAIL: the bounded run failed"; exit 1; }
