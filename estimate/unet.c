@@ -1326,6 +1326,13 @@ mcp__unet_tile_margins(const mcp__unet *net, int *overlap, int *align)
     *align = coarse ? TILE_ALIGN_COARSE : TILE_ALIGN;
 }
 
+void
+mcp__unet_crop_of(int a0, int a1, int n, int overlap, int align, int *c0, int *c1)
+{
+    *c0 = a0 > overlap ? (a0 - overlap) / align * align : 0;
+    *c1 = a1 + overlap < n ? a1 + overlap : n;
+}
+
 static int
 run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
           const mcp_image *normal, double scale_in, const mcp_denoise_tangent *t, int n,
@@ -1344,10 +1351,11 @@ run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
     if (!views || !res || (n && !tt)) rc = -1;
     for (int ty = 0; ty < H && !rc; ty += tile_h)
         for (int tx = 0; tx < W && !rc; tx += tile_w) {
-            const int x0 = tx > overlap ? (tx - overlap) / align * align : 0;
-            const int y0 = ty > overlap ? (ty - overlap) / align * align : 0;
-            const int x1 = tx + tile_w + overlap < W ? tx + tile_w + overlap : W;
-            const int y1 = ty + tile_h + overlap < H ? ty + tile_h + overlap : H;
+            const int w = tx + tile_w < W ? tile_w : W - tx,
+                      h = ty + tile_h < H ? tile_h : H - ty;
+            int x0, x1, y0, y1;
+            mcp__unet_crop_of(tx, tx + w, W, overlap, align, &x0, &x1);
+            mcp__unet_crop_of(ty, ty + h, H, overlap, align, &y0, &y1);
             /* views of the crop: the inputs (k = 0), then each tangent's parts */
             for (int k = 0; k <= n && !rc; k++) {
                 const mcp_image *src[3] = {k ? t[k - 1].color : color,
@@ -1364,8 +1372,6 @@ run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
             if (!rc)
                 rc = run_whole(net, views[0], views[1], views[2], scale_in, tt, n,
                                out ? &res[0] : NULL, res + 1);
-            const int w = tx + tile_w < W ? tile_w : W - tx,
-                      h = ty + tile_h < H ? tile_h : H - ty;
             if (!rc && out) paste(res[0], x0, y0, tx, ty, w, h, *out);
             for (int k = 0; k < n && !rc; k++)
                 paste(res[1 + k], x0, y0, tx, ty, w, h, jt[k]);
@@ -1380,6 +1386,13 @@ run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_image *albedo,
         }
     free(tt), free(views), free(res);
     return rc;
+}
+
+double
+mcp__unet_tile_limit(const mcp__unet *net, double have)
+{
+    const double bound = mcp__unet_memory_bound(net);
+    return have > 0 && have / 2 < bound ? have / 2 : bound;
 }
 
 int
@@ -1419,11 +1432,27 @@ mcp__unet_run_crop(const mcp__unet *net, const mcp_image *color, const mcp_image
     return rc;
 }
 
-void
-mcp__unet_progress_attach(mcp_progress *bar)
+int
+mcp__unet_progress_begin(mcp_progress *bar, const char *label, long steps, int W, int H)
 {
+    if ((double)W * H < 1048576.0 || mcp_progress_quiet() || !isatty(STDERR_FILENO) ||
+        run_progress)
+        return 0;
+    mcp_progress_begin(bar, label, steps);
     run_progress = bar;
     run_steps = 0;
+    return 1;
+}
+
+void
+mcp__unet_progress_finish(mcp_progress *bar, int shown, int failed)
+{
+    if (!shown) return;
+    if (failed)
+        mcp__progress_stop(bar); /* no "100%" for a run that failed */
+    else
+        mcp_progress_end(bar);
+    run_progress = NULL;
 }
 
 int
@@ -1454,8 +1483,7 @@ mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_imag
     if (tile == 0 && mcp__unet_batch_bytes(W, H, 1) > (short_of_memory ? have : bound)) {
         /* the largest tile whose crop fits in the bound, and in half of what is
          * available (the results and the inputs take the rest) */
-        const double limit = have > 0 && have / 2 < bound ? have / 2 : bound;
-        tile = mcp__unet_auto_tile(net, W, H, limit);
+        tile = mcp__unet_auto_tile(net, W, H, mcp__unet_tile_limit(net, have));
         if (tile < 16)
             return short_of_memory
                        ? mcp_error("unet: a %dx%d image with %d tangent(s) does not fit "
@@ -1474,25 +1502,14 @@ mcp__unet_run_tiled(const mcp__unet *net, const mcp_image *color, const mcp_imag
     if (!(scale_in > 0 && scale_in < 1e30))
         return mcp_error("unet: bad input scale %g", scale_in);
     mcp_progress bar;
-    const int show = (double)W * H >= 1048576.0 && !mcp_progress_quiet() &&
-                     isatty(STDERR_FILENO) && !run_progress;
-    if (show) {
-        const int tiles = tile ? ((W + tile - 1) / tile) * ((H + tile - 1) / tile) : 1;
-        mcp_progress_begin(&bar, n ? "U-Net and its tangents" : "U-Net",
-                           (long)MCP__UNET_NCONV * (1 + n) * tiles);
-        run_progress = &bar;
-        run_steps = 0;
-    }
+    const int tiles = tile ? ((W + tile - 1) / tile) * ((H + tile - 1) / tile) : 1;
+    const int shown =
+        mcp__unet_progress_begin(&bar, n ? "U-Net and its tangents" : "U-Net",
+                                 (long)MCP__UNET_NCONV * (1 + n) * tiles, W, H);
     int rc =
         tile ? run_tiled(net, color, albedo, normal, scale_in, t, n, tile, tile, out, jt)
              : run_whole(net, color, albedo, normal, scale_in, t, n, out, jt);
-    if (show) {
-        if (rc)
-            mcp__progress_stop(&bar); /* no "100%" for a run that failed */
-        else
-            mcp_progress_end(&bar);
-        run_progress = NULL;
-    }
+    mcp__unet_progress_finish(&bar, shown, rc);
     if (rc) {
         if (out) {
             mcp_image_free(*out);

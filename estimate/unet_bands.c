@@ -16,7 +16,6 @@
  * the memory bound (max_memory_mb, 2048 MB by default), which here bounds the whole
  * process, images included. */
 #include "unet_internal.h"
-#include "../common/core/internal.h" /* mcp__progress_stop */
 #include "internal.h"
 
 #include <mcpost/progress.h>
@@ -25,7 +24,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 
 /* What a band holds besides the network, per pixel of its crop: colour, albedo and
  * normal as read (36 bytes) and the crop's result (12). The reader's buffers cover
@@ -37,14 +35,6 @@
  * resident between two bands of the 8K run, docs/denoisers.md). */
 #define BAND_FIXED_BYTES (128.0 * 1048576.0)
 
-/* rows [y0, y1) of the output need input rows [*c0, *c1) */
-static void
-crop_of(int y0, int y1, int H, int overlap, int align, int *c0, int *c1)
-{
-    *c0 = y0 > overlap ? (y0 - overlap) / align * align : 0;
-    *c1 = y1 + overlap < H ? y1 + overlap : H;
-}
-
 /* The sum and the largest of the crops' extents when [0, n) is cut into runs of step
  * (run_tiled's geometry in x; the bands' in y). */
 static void
@@ -54,7 +44,7 @@ crops_of(int n, int step, int overlap, int align, double *sum, int *largest)
     *largest = 0;
     for (int a = 0; a < n; a += step) {
         int c0, c1;
-        crop_of(a, a + step < n ? a + step : n, n, overlap, align, &c0, &c1);
+        mcp__unet_crop_of(a, a + step < n ? a + step : n, n, overlap, align, &c0, &c1);
         *sum += c1 - c0;
         if (c1 - c0 > *largest) *largest = c1 - c0;
     }
@@ -91,21 +81,19 @@ mcp__unet_bands_plan(const mcp__unet *net, int W, int H, double whole_bytes, int
     plan->budget = budget;
     const int forced = forced_band_rows();
     if (forced < 0) return 0;
+    int overlap, align;
+    mcp__unet_tile_margins(net, &overlap, &align);
     /* the whole image as before: its images, and its network whole or in the tiles
        mcp__unet_run_tiled picks */
-    const double limit = have > 0 && have / 2 < bound ? have / 2 : bound;
-    int whole_tile = tile ? tile : mcp__unet_auto_tile(net, W, H, limit);
+    int whole_tile =
+        tile ? tile : mcp__unet_auto_tile(net, W, H, mcp__unet_tile_limit(net, have));
     if (!forced && whole_tile > 0) {
-        int overlap, align;
-        mcp__unet_tile_margins(net, &overlap, &align);
         const int m = whole_tile >= W && whole_tile >= H ? 0 : 2 * overlap + align;
         const int cw = whole_tile + m < W ? whole_tile + m : W,
                   ch = whole_tile + m < H ? whole_tile + m : H;
         plan->bytes = BAND_FIXED_BYTES + whole_bytes + mcp__unet_batch_bytes(cw, ch, 1);
         if (plan->bytes <= budget) return 0;
     }
-    int overlap, align;
-    mcp__unet_tile_margins(net, &overlap, &align);
     double best = HUGE_VAL, least = HUGE_VAL;
     mcp__unet_bands smallest = {0};
     const int rows_hi = forced ? forced : (H + 63) / 64 * 64;
@@ -186,21 +174,17 @@ mcp__unet_bands_run(const mcp__unet *net, double input_scale, int W, int H,
     if (prepass(net, W, H, crop_h, io, !(input_scale > 0), &scale)) return -1;
     if (!(scale > 0 && scale < 1e30)) return mcp_error("unet: bad input scale %g", scale);
     mcp_progress bar;
-    const int show =
-        (double)W * H >= 1048576.0 && !mcp_progress_quiet() && isatty(STDERR_FILENO);
-    if (show) {
-        const long bands = (H + rows - 1) / rows,
-                   tiles = (W + plan->tile_w - 1) / plan->tile_w;
-        char label[64];
-        snprintf(label, sizeof label, "U-Net in %ld bands", bands);
-        mcp_progress_begin(&bar, label, (long)MCP__UNET_NCONV * bands * tiles);
-        mcp__unet_progress_attach(&bar);
-    }
+    const long bands = (H + rows - 1) / rows,
+               tiles = (W + plan->tile_w - 1) / plan->tile_w;
+    char label[64];
+    snprintf(label, sizeof label, "U-Net in %ld bands", bands);
+    const int shown = mcp__unet_progress_begin(
+        &bar, label, (long)MCP__UNET_NCONV * bands * tiles, W, H);
     int rc = 0;
     for (int y0 = 0; y0 < H && !rc; y0 += rows) {
         const int y1 = y0 + rows < H ? y0 + rows : H;
         int c0, c1;
-        crop_of(y0, y1, H, overlap, align, &c0, &c1);
+        mcp__unet_crop_of(y0, y1, H, overlap, align, &c0, &c1);
         mcp_image *c = NULL, *a = NULL, *n = NULL, *res = NULL, *keep = NULL;
         rc = io->read(io->ctx, c0, c1, &c, &a, &n) ||
              mcp__unet_run_crop(net, c, net->ic >= 6 ? a : NULL, net->ic >= 9 ? n : NULL,
@@ -212,12 +196,6 @@ mcp__unet_bands_run(const mcp__unet *net, double input_scale, int W, int H,
         mcp_image_free(keep);
         mcp_image_free(res);
     }
-    if (show) {
-        mcp__unet_progress_attach(NULL);
-        if (rc)
-            mcp__progress_stop(&bar);
-        else
-            mcp_progress_end(&bar);
-    }
+    mcp__unet_progress_finish(&bar, shown, rc);
     return rc;
 }

@@ -127,6 +127,13 @@ double mcp__unet_batch_bytes(int w, int h, int n_images);
 /* The overlap and alignment of tiles that give the whole image's bits (352 and 64 on
  * Winograd F(4x4, 3x3), 192 and 32 for the direct loops). */
 void mcp__unet_tile_margins(const mcp__unet *net, int *overlap, int *align);
+/* The input rows (or columns) [*c0, *c1) that outputs [a0, a1) of an image n long read
+ * with those margins: the crop of a tile, or of a band. */
+void mcp__unet_crop_of(int a0, int a1, int n, int overlap, int align, int *c0, int *c1);
+/* The bytes the whole-image run's network may take, given what is available (0:
+ * unknown): the bound, or half of what is available where that is less (the results
+ * and the inputs take the rest). */
+double mcp__unet_tile_limit(const mcp__unet *net, double have);
 /* The side of the square tiles mcp__unet_run_tiled picks for a W x H image whose
  * network would not fit within limit bytes (0: none fits); W x H when it fits. */
 int mcp__unet_auto_tile(const mcp__unet *net, int W, int H, double limit);
@@ -137,9 +144,13 @@ int mcp__unet_auto_tile(const mcp__unet *net, int W, int H, double limit);
 int mcp__unet_run_crop(const mcp__unet *net, const mcp_image *color,
                        const mcp_image *albedo, const mcp_image *normal, double scale_in,
                        int tile_w, mcp_image **out);
-/* The progress bar the runs of this thread step (a convolution of a tile a step), from
- * step 0; NULL: none. */
-void mcp__unet_progress_attach(mcp_progress *bar);
+/* A progress bar of steps (a convolution of a tile a step) that the runs of this thread
+ * step, begun where it shows: an image of a megapixel or more, on a terminal, not
+ * quiet, no bar already running; 1 when it was. finish ends it (stops it where it got,
+ * after a failure) when it was shown. */
+int mcp__unet_progress_begin(mcp_progress *bar, const char *label, long steps, int W,
+                             int H);
+void mcp__unet_progress_finish(mcp_progress *bar, int shown, int failed);
 
 /* ---- the U-Net over an image read and written in bands of rows (unet_bands.c) ---- */
 
