@@ -261,10 +261,49 @@ mcp__unet_gemm_bf16_has(void)
 #endif
 }
 
+#if defined(__GNUC__) && defined(__x86_64__)
+/* The rows' bits as bf16_bits rounds them, 16 at a time, the low half cleared: the
+ * pairs are then (r1 & 0xffff0000) | r0 >> 16. Only a CPU with AVX512-BF16 runs the
+ * bf16 products, and every such CPU has AVX-512F; compiled for the baseline, the
+ * generic loop below took 4-6% of an estimate's CPU. */
+__attribute__((target("avx512f"))) static inline __m512i
+bf16_rounded_avx512(const float *src, __mmask16 keep)
+{
+    const __m512i u = _mm512_castps_si512(_mm512_maskz_loadu_ps(keep, src));
+    const __m512i odd = _mm512_and_si512(_mm512_srli_epi32(u, 16), _mm512_set1_epi32(1));
+    return _mm512_add_epi32(_mm512_add_epi32(u, _mm512_set1_epi32(0x7FFF)), odd);
+}
+
+__attribute__((target("avx512f"))) static void
+bf16_pairs_avx512(const float *r0, const float *r1, int ncols, uint32_t *o)
+{
+    const __m512i high = _mm512_set1_epi32((int)0xFFFF0000u);
+    for (int j = 0; j < ncols; j += 16) {
+        const __mmask16 keep =
+            ncols - j >= 16 ? (__mmask16)0xFFFF : (__mmask16)((1u << (ncols - j)) - 1);
+        __m512i pair = _mm512_srli_epi32(bf16_rounded_avx512(r0 + j, keep), 16);
+        if (r1)
+            pair = _mm512_or_si512(
+                pair, _mm512_and_si512(bf16_rounded_avx512(r1 + j, keep), high));
+        _mm512_mask_storeu_epi32(o + j, keep, pair);
+    }
+}
+#endif
+
 void
 mcp__unet_bf16_pairs(const float *v, size_t ldv, int kn, int ncols, uint32_t *out,
                      size_t ldo)
 {
+#if defined(__GNUC__) && defined(__x86_64__)
+    if (__builtin_cpu_supports("avx512f")) {
+        for (int p = 0; p < (kn + 1) / 2; p++) {
+            const float *r0 = v + (size_t)(2 * p) * ldv;
+            bf16_pairs_avx512(r0, 2 * p + 1 < kn ? r0 + ldv : NULL, ncols,
+                              out + (size_t)p * ldo);
+        }
+        return;
+    }
+#endif
     for (int p = 0; p < (kn + 1) / 2; p++) {
         const float *restrict r0 = v + (size_t)(2 * p) * ldv;
         const float *restrict r1 = 2 * p + 1 < kn ? r0 + ldv : NULL;

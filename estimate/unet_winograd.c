@@ -484,9 +484,11 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
        that kernel), on the weights and V's channels as pairs of rows, kp of them */
     bf16 = bf16 && g.mr == MCP__UNET_BF16_MR && g.nr == MCP__UNET_BF16_NR;
     const int kp = (cin + 1) / 2;
-    /* per thread: V (cin x elems x ld), M (mp x elems x ld), rows for the transforms,
-       and with bf16 V in pairs of channels (kp x elems x ld) */
-    const size_t per_thread = elems * ld_max * ((size_t)cin + mp) +
+    /* per thread: V (cin x elems x ld; with bf16, 2 channels' at a time), M (mp x elems
+       x ld), rows for the transforms, and with bf16 V in pairs of channels (kp x elems x
+       ld) */
+    const size_t v_channels = bf16 ? 2 : (size_t)cin;
+    const size_t per_thread = elems * ld_max * (v_channels + mp) +
                               (size_t)k_->row_floats * ((size_t)chunk + 1) +
                               (bf16 ? (size_t)kp * elems * ld_max : 0);
     float *u = mcp_malloc(elems * plane * sizeof(float)), *packed = NULL;
@@ -517,7 +519,7 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
         thread = omp_get_thread_num();
 #endif
         float *v = scratch + (size_t)thread * per_thread;
-        float *m = v + elems * ld_max * (size_t)cin;
+        float *m = v + elems * ld_max * v_channels;
         float *rows = m + elems * ld_max * (size_t)mp;
         uint32_t *pairs =
             (uint32_t *)(rows + (size_t)k_->row_floats * ((size_t)chunk + 1));
@@ -539,6 +541,9 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
                  * products +1 to +4% with their rows elems x ld apart). */
                 const size_t se = (size_t)ld, sc = (size_t)elems * ld;
                 for (int i = 0; i < cin; i++) {
+                    /* with bf16 products, V holds a pair of channels at a time (in
+                       the L1 cache), which the pairs take at once */
+                    float *vi = v + (size_t)(bf16 ? i & 1 : i) * sc;
                     const int up = i < ca && a_up, src16 = i < ca ? a16 : b16;
                     const void *src = i < ca ? a + ((size_t)k * ca + i) * a_hw * ea
                                              : b + ((size_t)k * cb + (i - ca)) * hw * eb;
@@ -553,19 +558,18 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
                         const int ty = (int)((t0 + j) / tw), tx = (int)((t0 + j) % tw);
                         const int len = tw - tx < nt - j ? tw - tx : nt - j;
                         k_->transform_input(src, src16, up, h, w, ty, tx, len, rows,
-                                            v + (size_t)i * sc + j, se);
+                                            vi + j, se);
                         j += len;
                     }
                     /* the padding columns: zeros, so that the padded outputs are
                      * finite (they are not stored) */
                     for (int e = 0; e < elems; e++)
-                        memset(v + e * se + (size_t)i * sc + nt, 0,
-                               (size_t)(ld - nt) * sizeof(float));
+                        memset(vi + e * se + nt, 0, (size_t)(ld - nt) * sizeof(float));
                     /* bf16: a pair of channels' blocks into one block of pairs while
                      * they are in the cache, [p][e][j] as V's [i][e][j] */
                     if (bf16 && (i % 2 == 1 || i == cin - 1)) {
                         const int i0 = i & ~1;
-                        mcp__unet_bf16_pairs(v + (size_t)i0 * sc, sc, i - i0 + 1, (int)sc,
+                        mcp__unet_bf16_pairs(v, sc, i - i0 + 1, (int)sc,
                                              pairs + (size_t)(i0 / 2) * sc, sc);
                     }
                 }

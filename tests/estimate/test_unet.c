@@ -1615,6 +1615,47 @@ test_store_row16(void **state)
         }
 }
 
+/* The bf16 pairs that the tangents' products read (mcp__unet_bf16_pairs: out[p][j] =
+ * row 2p | row 2p + 1 << 16, rounded as bf16_reference), for an odd and an even number
+ * of rows (the last pair then has a zero half) and row lengths across the AVX-512
+ * path's 16 values, with the columns past ncols left alone. */
+static void
+test_bf16_pairs(void **state)
+{
+    (void)state;
+    enum { ROWS = 5, LD = 80 };
+    float v[ROWS * LD];
+    uint64_t s = 4242;
+    for (int i = 0; i < ROWS * LD; i++) {
+        s = s * 6364136223846793005ULL + 1442695040888963407ULL;
+        uint32_t u = (uint32_t)(s >> 32);
+        if (i % 3 == 0) u = (u & 0xffff0000u) | 0x8000u; /* a tie */
+        u = (u & 0x807fffffu) | (uint32_t)(64 + (s >> 8) % 126) << 23;
+        memcpy(&v[i], &u, sizeof u);
+    }
+    uint32_t out[3 * LD];
+    for (int kn = 4; kn <= ROWS; kn++)
+        for (int ncols = 0; ncols <= 70; ncols++) {
+            for (int i = 0; i < 3 * LD; i++)
+                out[i] = 0xdeadbeefu;
+            mcp__unet_bf16_pairs(v, LD, kn, ncols, out, LD);
+            for (int p = 0; p < 3; p++)
+                for (int j = 0; j < LD; j++) {
+                    uint32_t want = 0xdeadbeefu;
+                    if (p < (kn + 1) / 2 && j < ncols)
+                        want =
+                            bf16_reference(v[2 * p * LD + j]) |
+                            (2 * p + 1 < kn
+                                 ? (uint32_t)bf16_reference(v[(2 * p + 1) * LD + j]) << 16
+                                 : 0u);
+                    if (out[p * LD + j] != want)
+                        fail_msg("bf16_pairs, %d rows, %d columns: pair %d, column %d "
+                                 "is %08x, expected %08x",
+                                 kn, ncols, p, j, out[p * LD + j], want);
+                }
+        }
+}
+
 /* The primal's ReLU mask recorded as the Winograd convolutions write their rows
  * (mcp__unet_record_row), against a value-by-value setting of the bits: two rows that
  * meet inside a byte, at every offset within a word and lengths across whole bytes,
@@ -1679,6 +1720,7 @@ main(void)
         cmocka_unit_test(test_jvp_batched),
         cmocka_unit_test(test_mask_row),
         cmocka_unit_test(test_store_row16),
+        cmocka_unit_test(test_bf16_pairs),
         cmocka_unit_test(test_record_row),
         cmocka_unit_test(test_tiles_same_bits),
         cmocka_unit_test(test_memory_tiles),
