@@ -164,6 +164,24 @@ record_part(unsigned char *byte, int b0, const float *row, int k)
     if (v) __atomic_fetch_or(byte, (unsigned char)v, __ATOMIC_RELAXED);
 }
 
+#if defined(__GNUC__) && defined(__x86_64__)
+/* Whole bytes of bits, 16 values at a time: a compare's mask is the two bytes as they
+ * lie in memory (lane i is bit i % 8 of byte i / 8). Returns the values done. Built
+ * for the baseline, the byte loop below took a quarter of the primal products' time. */
+__attribute__((target("avx512f"))) static int
+record_bytes_avx512(unsigned char *m, const float *row, int n)
+{
+    const __m512 zero = _mm512_setzero_ps();
+    int x = 0;
+    for (; x + 16 <= n; x += 16) {
+        const uint16_t v =
+            (uint16_t)_mm512_cmp_ps_mask(_mm512_loadu_ps(row + x), zero, _CMP_GT_OQ);
+        memcpy(m + x / 8, &v, sizeof v);
+    }
+    return x;
+}
+#endif
+
 void
 mcp__unet_record_row(unsigned char *bits, size_t at, const float *row, int n)
 {
@@ -174,6 +192,12 @@ mcp__unet_record_row(unsigned char *bits, size_t at, const float *row, int n)
         x = k;
     }
     unsigned char *restrict m = bits + (at + (size_t)x) / 8;
+#if defined(__GNUC__) && defined(__x86_64__)
+    if (x < n && __builtin_cpu_supports("avx512f")) {
+        const int done = record_bytes_avx512(m, row + x, n - x);
+        x += done, m += done / 8;
+    }
+#endif
     for (; x + 8 <= n; x += 8, m++) { /* whole bytes: this row's alone */
         unsigned v = 0;
         for (int b = 0; b < 8; b++)
