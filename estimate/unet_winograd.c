@@ -586,8 +586,8 @@ mcp__unet_winograd_conv(const mcp__unet_winograd *k_, const float *weight,
                         j += len;
                     }
                     /* the padding columns: zeros, so that the padded outputs are
-                     * finite (they are not stored) */
-                    for (int e = 0; e < elems; e++)
+                     * finite (they are not stored); none but in the last task */
+                    for (int e = 0; e < elems && nt < ld; e++)
                         memset(vi + e * se + nt, 0, (size_t)(ld - nt) * sizeof(float));
                     /* bf16: a pair of channels' blocks into one block of pairs while
                      * they are in the cache, [p][e][j] as V's [i][e][j] */
