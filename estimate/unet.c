@@ -817,34 +817,25 @@ pool_pick(const float *restrict top, size_t w, int xn, unsigned char *restrict p
 
 /* The same run for an image that takes the primal's choices: the four candidates
  * loaded and one selected (this vectorises; the gather of the chosen one did not, and
- * built for the baseline took 3% of an estimate). Floats, or bfloat16 values. */
-POOL_KERNEL static void
-pool_take(const float *restrict top, size_t w, const unsigned char *restrict pick, int xn,
-          float *restrict dst)
-{
-    const float *restrict bottom = top + w;
-#pragma omp simd
-    for (int x = 0; x < xn; x++) {
-        const unsigned char k = pick[x];
-        const float a = top[2 * x], b = top[2 * x + 1], c = bottom[2 * x],
-                    d = bottom[2 * x + 1];
-        dst[x] = k == 0 ? a : k == 1 ? b : k == 2 ? c : d;
+ * built for the baseline took 3% of an estimate). Floats (pool_take), or bfloat16
+ * values (pool_take16). */
+#define POOL_TAKE(name, type)                                                            \
+    POOL_KERNEL static void name(const type *restrict top, size_t w,                     \
+                                 const unsigned char *restrict pick, int xn,             \
+                                 type *restrict dst)                                     \
+    {                                                                                    \
+        const type *restrict bottom = top + w;                                           \
+        _Pragma("omp simd") for (int x = 0; x < xn; x++)                                 \
+        {                                                                                \
+            const unsigned char k = pick[x];                                             \
+            const type a = top[2 * x], b = top[2 * x + 1], c = bottom[2 * x],            \
+                       d = bottom[2 * x + 1];                                            \
+            dst[x] = k == 0 ? a : k == 1 ? b : k == 2 ? c : d;                           \
+        }                                                                                \
     }
-}
-
-POOL_KERNEL static void
-pool_take16(const uint16_t *restrict top, size_t w, const unsigned char *restrict pick,
-            int xn, uint16_t *restrict dst)
-{
-    const uint16_t *restrict bottom = top + w;
-#pragma omp simd
-    for (int x = 0; x < xn; x++) {
-        const unsigned char k = pick[x];
-        const uint16_t a = top[2 * x], b = top[2 * x + 1], c = bottom[2 * x],
-                       d = bottom[2 * x + 1];
-        dst[x] = k == 0 ? a : k == 1 ? b : k == 2 ? c : d;
-    }
-}
+POOL_TAKE(pool_take, float)
+POOL_TAKE(pool_take16, uint16_t)
+#undef POOL_TAKE
 
 /* 2x2 max pool of every image at image 0's arg-max (the first maximum in scan order,
  * as PyTorch picks it). Per output row, the primal's choice (0 .. 3: top left, top
