@@ -827,10 +827,10 @@ pool_pick(const float *restrict top, size_t w, int xn, unsigned char *restrict p
         const type *restrict bottom = top + w;                                           \
         _Pragma("omp simd") for (int x = 0; x < xn; x++)                                 \
         {                                                                                \
-            const unsigned char k = pick[x];                                             \
-            const type a = top[2 * x], b = top[2 * x + 1], c = bottom[2 * x],            \
-                       d = bottom[2 * x + 1];                                            \
-            dst[x] = k == 0 ? a : k == 1 ? b : k == 2 ? c : d;                           \
+            const int k = pick[x];                                                       \
+            const type t = k & 1 ? top[2 * x + 1] : top[2 * x],                          \
+                       u = k & 1 ? bottom[2 * x + 1] : bottom[2 * x];                    \
+            dst[x] = k & 2 ? u : t;                                                      \
         }                                                                                \
     }
 POOL_TAKE(pool_take, float)
