@@ -79,6 +79,10 @@ void mcp__rng_init(mcp__rng *r, uint64_t seed, uint64_t stream, uint64_t k,
                    uint64_t index);
 uint64_t mcp__rng_u64(mcp__rng *r);
 double mcp__rng_normal(mcp__rng *r);
+/* Box-Muller's own ln u for u in (0, 1] and sin, cos of 2 pi u for u in [0, 1)
+ * (probes.c), exposed for their test. */
+float mcp__log_unit(float u);
+void mcp__sincos_turn(float u, float *s, float *c);
 
 /* Fails naming `who` when the dump lacks colour or the variance of the mean. */
 int mcp__check_dump(const char *who, const mcp_dump *dump);

@@ -20,6 +20,9 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 
 #define MAX_DIM 9 /* colour + albedo + normal */
 
@@ -43,6 +46,76 @@ mcp__rng_u64(mcp__rng *r)
     return mcp__splitmix64_next(&r->state);
 }
 
+/* Box-Muller in float (probes are stored in float anyway) with its own logarithm,
+ * sine and cosine: libm's are calls that no loop vectorises, and they were a fifth of
+ * a gauss estimate's CPU (three normals per pixel and probe). On the arguments that
+ * Box-Muller gives them they are within a few float roundings of the true functions
+ * (tests/estimate/test_probes.c measures it against libm's double ones), which keeps
+ * N(0, 1) to float precision; as plain arithmetic, not contracted into multiply-adds
+ * (gcc's default in ISO C; clang's pragma below), they give the same bits in the
+ * row loop's vector clones as in mcp__rng_normal. */
+#ifdef __clang__
+#pragma clang fp contract(off)
+#endif
+
+/* ln u for u in (0, 1]: u = m 2^e with m in [sqrt(1/2), sqrt(2)), ln m = 2 atanh(s),
+ * s = (m - 1) / (m + 1), |s| <= 0.172, as its series to s^9 (the next term is 2e-9 of
+ * it); e ln 2 in two parts, the first exact for the |e| <= 25 that u has. */
+static inline __attribute__((always_inline)) float
+log_unit(float u)
+{
+    uint32_t b;
+    memcpy(&b, &u, sizeof b);
+    int e = (int)(b >> 23) - 127;
+    const uint32_t mb = (b & 0x7fffffu) | 0x3f800000u;
+    float m;
+    memcpy(&m, &mb, sizeof m);
+    const int big = m > 1.41421356f;
+    m = big ? 0.5f * m : m;
+    e += big;
+    const float f = m - 1.0f, s = f / (2.0f + f), z = s * s;
+    const float series =
+        1.0f + z * (1.0f / 3 + z * (1.0f / 5 + z * (1.0f / 7 + z * (1.0f / 9))));
+    const float ef = (float)e;
+    return ef * 6.93145752e-1f + (ef * 1.42860677e-6f + 2.0f * s * series);
+}
+
+/* sin and cos of 2 pi u for u in [0, 1) with 24 bits: 4 u = q + r exactly (q the
+ * nearest integer, |r| <= 1/2), a = r pi / 2, their Taylor series on |a| <= pi / 4
+ * to a^9 and a^10 (the next terms are below 2e-9), then the quadrant q. */
+static inline __attribute__((always_inline)) void
+sincos_turn(float u, float *sin_out, float *cos_out)
+{
+    const float t = 4.0f * u;
+    const int q = (int)(t + 0.5f);
+    const float a = (t - (float)q) * 1.57079637f, a2 = a * a;
+    const float s =
+        a +
+        a * a2 *
+            (-1.0f / 6 + a2 * (1.0f / 120 + a2 * (-1.0f / 5040 + a2 * (1.0f / 362880))));
+    const float c =
+        1.0f + a2 * (-0.5f + a2 * (1.0f / 24 +
+                                   a2 * (-1.0f / 720 +
+                                         a2 * (1.0f / 40320 + a2 * (-1.0f / 3628800)))));
+    const int k = q & 3;
+    *sin_out = k == 0 ? s : k == 1 ? c : k == 2 ? -s : -c;
+    *cos_out = k == 0 ? c : k == 1 ? -s : k == 2 ? -c : s;
+}
+
+/* Two normals from one 64-bit draw: both uniforms from it, u1 in (0, 1] so that the
+ * logarithm is finite. */
+static inline __attribute__((always_inline)) void
+box_muller(uint64_t bits, float *z0, float *z1)
+{
+    const float u1 = (float)(int32_t)((bits >> 40) + 1) * 0x1.0p-24f;
+    const float u2 = (float)(int32_t)((bits >> 16) & 0xffffff) * 0x1.0p-24f;
+    const float rad = sqrtf(-2.0f * log_unit(u1));
+    float s, c;
+    sincos_turn(u2, &s, &c);
+    *z0 = rad * c;
+    *z1 = rad * s;
+}
+
 double
 mcp__rng_normal(mcp__rng *r)
 {
@@ -50,16 +123,47 @@ mcp__rng_normal(mcp__rng *r)
         r->has_spare = 0;
         return r->spare;
     }
-    /* Box-Muller in float (probes are stored in float anyway, and float logf, sinf,
-     * cosf cost a third of the double ones); both uniforms from one draw, u1 in
-     * (0, 1] so the log is finite */
-    uint64_t bits = mcp__rng_u64(r);
-    float u1 = (float)((bits >> 40) + 1) * 0x1.0p-24f;
-    float u2 = (float)((bits >> 16) & 0xffffff) * 0x1.0p-24f;
-    float rad = sqrtf(-2.0f * logf(u1)), th = 6.2831853f * u2;
-    r->spare = rad * sinf(th);
+    float z0, z1;
+    box_muller(mcp__rng_u64(r), &z0, &z1);
+    r->spare = z1;
     r->has_spare = 1;
-    return rad * cosf(th);
+    return z0;
+}
+
+float
+mcp__log_unit(float u)
+{
+    return log_unit(u);
+}
+
+void
+mcp__sincos_turn(float u, float *s, float *c)
+{
+    sincos_turn(u, s, c);
+}
+
+#if defined(__GNUC__) && defined(__x86_64__)
+#define NORMALS_KERNEL __attribute__((target_clones("avx512f", "avx2", "default")))
+#else
+#define NORMALS_KERNEL
+#endif
+
+/* The three normals that mcp__rng_normal draws first from each of the streams (seed,
+ * stream, k, index0 + x) for x in [0, n), into z[3 x + c]: a row of a diagonal probe
+ * at once, in vectors. */
+NORMALS_KERNEL static void
+normals_row(uint64_t seed, uint64_t stream, uint64_t k, uint64_t index0, int n, float *z)
+{
+    const uint64_t s0 = mcp__mix64(mcp__mix64(seed + MCP__SPLITMIX64_GAMMA) ^
+                                   (stream * 0xd1b54a32d192ed03ULL + k));
+#pragma omp simd
+    for (int x = 0; x < n; x++) {
+        uint64_t state = mcp__mix64(s0 ^ (index0 + (uint64_t)x));
+        float a, b, c, unused;
+        box_muller(mcp__splitmix64_next(&state), &a, &b);
+        box_muller(mcp__splitmix64_next(&state), &c, &unused);
+        z[3 * x] = a, z[3 * x + 1] = b, z[3 * x + 2] = c;
+    }
 }
 
 /* ---- small symmetric matrices (row-major n x n, n <= MAX_DIM) ---- */
@@ -339,8 +443,34 @@ mcp_probe_gaussian(const mcp_dump *dump, const mcp_feature_covariance *features,
         return -1;
     }
     int joint = plan.n_features > 0, cov = dump->cov_of_mean != NULL;
+    float *rows = NULL; /* the diagonal's normals, 3 w per thread */
+#ifdef _OPENMP
+    const int threads = omp_get_max_threads();
+#else
+    const int threads = 1;
+#endif
+    if (!joint && !cov && !(rows = mcp_malloc((size_t)threads * 3 * w * sizeof(float)))) {
+        mcp_probe_clear(out);
+        return -1;
+    }
 #pragma omp parallel for schedule(static)
     for (int y = 0; y < h; y++) {
+        if (rows) { /* the common case: per value sigma z, the row's normals at once */
+#ifdef _OPENMP
+            float *z = rows + (size_t)omp_get_thread_num() * 3 * w;
+#else
+            float *z = rows;
+#endif
+            normals_row(seed, STREAM_GAUSS, (uint64_t)k, (uint64_t)y * w, w, z);
+            for (int x = 0; x < w; x++) {
+                const float *var = mcp_image_px(dump->var_of_mean, x, y);
+                float *e = mcp_image_px(out->color, x, y);
+                for (int c = 0; c < 3; c++)
+                    e[c] = (float)(sqrt(var[c] > 0.0f ? (double)var[c] : 0.0) *
+                                   (double)z[3 * x + c]);
+            }
+            continue;
+        }
         for (int x = 0; x < w; x++) {
             mcp__rng r;
             mcp__rng_init(&r, seed, STREAM_GAUSS, (uint64_t)k, (uint64_t)y * w + x);
@@ -356,7 +486,7 @@ mcp_probe_gaussian(const mcp_dump *dump, const mcp_feature_covariance *features,
                         o[c] = (float)v[off + c];
                     off += 3;
                 }
-            } else if (cov) {
+            } else { /* the colour's covariance */
                 double c3[9], f[9], z[3];
                 color_cov(dump, x, y, c3);
                 psd_factor(c3, 3, f);
@@ -365,16 +495,12 @@ mcp_probe_gaussian(const mcp_dump *dump, const mcp_feature_covariance *features,
                 for (int c = 0; c < 3; c++)
                     v[c] =
                         f[c * 3 + 0] * z[0] + f[c * 3 + 1] * z[1] + f[c * 3 + 2] * z[2];
-            } else {
-                const float *var = mcp_image_px(dump->var_of_mean, x, y);
-                for (int c = 0; c < 3; c++)
-                    v[c] =
-                        sqrt(var[c] > 0.0f ? (double)var[c] : 0.0) * mcp__rng_normal(&r);
             }
             for (int c = 0; c < 3; c++)
                 e[c] = (float)v[c];
         }
     }
+    free(rows);
     return 0;
 }
 

@@ -22,6 +22,7 @@
 
 #include <mcpost/estimate.h>
 #include <mcpost/flip.h>
+#include "../../estimate/internal.h"
 
 #define W 32
 #define H 24
@@ -625,6 +626,59 @@ test_probes_do_not_depend_on_threads(void **state)
 #endif
 }
 
+/* Box-Muller's own ln u, sin 2 pi u and cos 2 pi u (probes.c) against libm's double
+ * functions at every argument the draws give them that a stride of 61 hits (2^24 / 61:
+ * 275 thousand, the smallest u and u = 1 among them): ln within 2e-7 relative (a few
+ * float roundings; 1e-7 near u = 1, where ln u is small, measured absolutely), sin and
+ * cos within 3e-7 absolute. Then a diagonal probe (whose rows are drawn in vectors)
+ * against the same streams drawn one normal at a time (mcp__rng_normal): the same bits.
+ */
+static void
+test_box_muller_functions(void **state)
+{
+    (void)state;
+    double worst_log = 0, worst_trig = 0;
+    for (uint32_t k = 0; k < (1u << 24); k += 61) {
+        const float u1 = (float)(k + 1) * 0x1.0p-24f, u2 = (float)k * 0x1.0p-24f;
+        const double want = log((double)u1), got = mcp__log_unit(u1);
+        const double err = fabs(got - want) / (fabs(want) > 0.5 ? fabs(want) : 0.5);
+        worst_log = err > worst_log ? err : worst_log;
+        float sn, cs;
+        mcp__sincos_turn(u2, &sn, &cs);
+        const double th = 2 * 3.14159265358979323846 * (double)u2;
+        const double e2 = fmax(fabs(sn - sin(th)), fabs(cs - cos(th)));
+        worst_trig = e2 > worst_trig ? e2 : worst_trig;
+    }
+    const float one = 1.0f, tiny = 0x1.0p-24f;
+    assert_true(mcp__log_unit(one) == 0.0f);
+    assert_close(mcp__log_unit(tiny), log((double)tiny), 2e-7 * 16.7, 0);
+    if (worst_log > 2e-7 || worst_trig > 3e-7)
+        fail_msg("ln worst %.3g (relative), sin/cos worst %.3g", worst_log, worst_trig);
+
+    uint64_t rng = 8;
+    mcp_dump *d = realization(&rng, 1);
+    mcp_image_free(d->cov_of_mean);
+    d->cov_of_mean = NULL;
+    mcp_probe p;
+    assert_int_equal(mcp_probe_gaussian(d, NULL, 77, 2, &p), 0);
+    const int w = p.color->width;
+    for (int y = 0; y < p.color->height; y++)
+        for (int x = 0; x < w; x++) {
+            mcp__rng r;
+            mcp__rng_init(&r, 77, 1 /* STREAM_GAUSS */, 2, (uint64_t)y * w + x);
+            const float *var = mcp_image_px(d->var_of_mean, x, y);
+            for (int c = 0; c < 3; c++) {
+                const float want = (float)(sqrt(var[c] > 0.0f ? (double)var[c] : 0.0) *
+                                           mcp__rng_normal(&r));
+                if (mcp_image_px(p.color, x, y)[c] != want)
+                    fail_msg("probe at %d,%d channel %d: %a, one at a time %a", x, y, c,
+                             (double)mcp_image_px(p.color, x, y)[c], (double)want);
+            }
+        }
+    mcp_probe_clear(&p);
+    mcp_dump_free(d);
+}
+
 /* ---- the built-in bilateral denoiser (non-linear), when it exists ---- */
 
 static void
@@ -731,6 +785,7 @@ main(void)
         cmocka_unit_test(test_probe_covariance),
         cmocka_unit_test(test_probe_clamps_negative_eigenvalues),
         cmocka_unit_test(test_probes_do_not_depend_on_threads),
+        cmocka_unit_test(test_box_muller_functions),
         cmocka_unit_test(test_unbiased_bilateral),
         cmocka_unit_test(test_errors),
     };
