@@ -97,9 +97,12 @@ sincos_turn(float u, float *sin_out, float *cos_out)
         1.0f + a2 * (-0.5f + a2 * (1.0f / 24 +
                                    a2 * (-1.0f / 720 +
                                          a2 * (1.0f / 40320 + a2 * (-1.0f / 3628800)))));
-    const int k = q & 3;
-    *sin_out = k == 0 ? s : k == 1 ? c : k == 2 ? -s : -c;
-    *cos_out = k == 0 ? c : k == 1 ? -s : k == 2 ? -c : s;
+    /* quadrant k: (sin, cos) = (s, c), (c, -s), (-s, -c), (-c, s); as selects, which
+       every compiler vectorises (a chain of them became a switch) */
+    const int k = q & 3, swap = k & 1;
+    const float ss = swap ? c : s, cc = swap ? s : c;
+    *sin_out = k & 2 ? -ss : ss;
+    *cos_out = (k + 1) & 2 ? -cc : cc;
 }
 
 /* Two normals from one 64-bit draw: both uniforms from it, u1 in (0, 1] so that the
