@@ -30,12 +30,19 @@ enum { STREAM_GAUSS = 1, STREAM_RADEMACHER = 2 };
 
 /* ---- random numbers ---- */
 
+/* The streams of (seed, stream, k) share this key; a pixel's stream starts at
+ * mcp__mix64(key ^ index). */
+static uint64_t
+streams_key(uint64_t seed, uint64_t stream, uint64_t k)
+{
+    return mcp__mix64(mcp__mix64(seed + MCP__SPLITMIX64_GAMMA) ^
+                      (stream * 0xd1b54a32d192ed03ULL + k));
+}
+
 void
 mcp__rng_init(mcp__rng *r, uint64_t seed, uint64_t stream, uint64_t k, uint64_t index)
 {
-    uint64_t s = mcp__mix64(seed + MCP__SPLITMIX64_GAMMA);
-    s = mcp__mix64(s ^ (stream * 0xd1b54a32d192ed03ULL + k));
-    r->state = mcp__mix64(s ^ index);
+    r->state = mcp__mix64(streams_key(seed, stream, k) ^ index);
     r->spare = 0.0;
     r->has_spare = 0;
 }
@@ -50,7 +57,7 @@ mcp__rng_u64(mcp__rng *r)
  * sine and cosine: libm's are calls that no loop vectorises, and they were a fifth of
  * a gauss estimate's CPU (three normals per pixel and probe). On the arguments that
  * Box-Muller gives them they are within a few float roundings of the true functions
- * (tests/estimate/test_probes.c measures it against libm's double ones), which keeps
+ * (tests/estimate/test_sure.c measures it against libm's double ones), which keeps
  * N(0, 1) to float precision; as plain arithmetic, not contracted into multiply-adds
  * (gcc's default in ISO C; clang's pragma below), they give the same bits in the
  * row loop's vector clones as in mcp__rng_normal. */
@@ -157,11 +164,10 @@ mcp__sincos_turn(float u, float *s, float *c)
 NORMALS_KERNEL static void
 normals_row(uint64_t seed, uint64_t stream, uint64_t k, uint64_t index0, int n, float *z)
 {
-    const uint64_t s0 = mcp__mix64(mcp__mix64(seed + MCP__SPLITMIX64_GAMMA) ^
-                                   (stream * 0xd1b54a32d192ed03ULL + k));
+    const uint64_t key = streams_key(seed, stream, k);
 #pragma omp simd
     for (int x = 0; x < n; x++) {
-        uint64_t state = mcp__mix64(s0 ^ (index0 + (uint64_t)x));
+        uint64_t state = mcp__mix64(key ^ (index0 + (uint64_t)x));
         float a, b, c, unused;
         box_muller(mcp__splitmix64_next(&state), &a, &b);
         box_muller(mcp__splitmix64_next(&state), &c, &unused);
