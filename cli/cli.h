@@ -25,6 +25,10 @@ typedef struct mcp_command {
 /* cli/commands.c: every subcommand, in --help order (NULL-terminated). */
 extern const mcp_command *const mcp_commands[];
 
+/* cli/heap.c: at the start of a subcommand, glibc's heap kept for reuse and backed by
+ * transparent huge pages; the latter executes mcpost again, with argv, once. */
+void mcp_cli_tune_heap(char **argv);
+
 /* Prints "mcpost: <current error>" and returns the failure exit status (1). */
 int mcp_cli_fail(void);
 /* Prints a usage error "mcpost CMD: <msg>; see mcpost CMD --help" and returns 2. */

@@ -3,24 +3,6 @@
 
 #include <stdio.h>
 #include <string.h>
-#ifdef __GLIBC__
-#include <malloc.h>
-#endif
-
-/* The pipelines allocate and free frame-sized images over and over (a blend step
- * makes four 25 MB images at 1080p). By default glibc maps each one fresh and
- * unmaps it on free, so that every step pays tens of thousands of page faults
- * (bench_blend: 47 ms a step instead of 34). A command-line run keeps what it freed
- * for reuse instead; the memory returns to the system when the process ends.
- * bench_blend sets the same two options to time a step as mcpost runs it. */
-static void
-keep_freed_memory(void)
-{
-#ifdef __GLIBC__
-    mallopt(M_MMAP_THRESHOLD, 1 << 30);
-    mallopt(M_TRIM_THRESHOLD, 0x7fffffff);
-#endif
-}
 
 static void
 print_help(void)
@@ -61,7 +43,6 @@ take_quiet(int argc, char **argv)
 int
 main(int argc, char **argv)
 {
-    keep_freed_memory();
     if (argc < 2) {
         print_help();
         return 2;
@@ -76,6 +57,7 @@ main(int argc, char **argv)
     }
     for (const mcp_command *const *c = mcp_commands; *c; c++)
         if (strcmp((*c)->name, argv[1]) == 0) {
+            mcp_cli_tune_heap(argv);
             if (!(*c)->parses_quiet) argc = take_quiet(argc, argv);
             return (*c)->run(argc - 1, argv + 1);
         }
