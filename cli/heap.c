@@ -32,7 +32,7 @@
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
 #define MCP_CLI_SANITIZED 1
 #elif defined(__has_feature)
-#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer) || \
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer) ||               \
     __has_feature(memory_sanitizer)
 #define MCP_CLI_SANITIZED 1
 #endif
@@ -101,7 +101,8 @@ reexec_with_huge_pages(char **argv)
         sprintf(tunables, "%s:" TUNABLE "=1", user);
     else
         strcpy(tunables, TUNABLE "=1");
-    if (setenv(SAVED_TUNABLES, saved, 1) == 0 && setenv("GLIBC_TUNABLES", tunables, 1) == 0)
+    if (setenv(SAVED_TUNABLES, saved, 1) == 0 &&
+        setenv("GLIBC_TUNABLES", tunables, 1) == 0)
         execv("/proc/self/exe", argv);
     /* not executed (no /proc, say): carry on in this process as it is */
     restore_tunables();
