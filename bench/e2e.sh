@@ -85,6 +85,9 @@ time_runs "estimate 1080p dump, gauss" 0.6 \
     "$MCPOST" estimate hd_test.exr --denoiser gauss -o "$WORK/est_gauss"
 "$MCPOST" estimate hd_test.exr --denoiser gauss -o "$WORK/est_gauss" 2>/dev/null |
     sed -n 's/^time (ms): */  its steps (ms): /p'
+# the same with the heap on 4 kB pages (one process: docs/conventions.md "Memory")
+MCPOST_HUGE_PAGES=0 time_runs "  the same, MCPOST_HUGE_PAGES=0" - \
+    "$MCPOST" estimate hd_test.exr --denoiser gauss -o "$WORK/est_gauss"
 time_runs "estimate 1080p dump, nlm" - \
     "$MCPOST" estimate hd_test.exr --denoiser nlm -o "$WORK/est_nlm"
 "$MCPOST" estimate hd_test.exr --denoiser nlm -o "$WORK/est_nlm" 2>/dev/null |
