@@ -269,13 +269,18 @@ mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,
     double t1 = mcp__now_ms();
     int rc = -1;
     {
-        const mcp_image **eps = (const mcp_image **)mcp_calloc((size_t)ev.k, sizeof *eps);
+        /* the maps take F(X) and the Gaussian probes' images, which nothing reads after
+           them (the sampling map reads the JVPs only for relse-perceptual, whose maps
+           take none, and the Rademacher JVPs, which are not offered) */
+        mcp_image **eps = mcp_calloc((size_t)ev.k, sizeof *eps);
         if (!eps) goto done;
         for (int j = 0; j < ev.k; j++)
             eps[j] = ev.probes[j].color;
-        int bad = mcp_error_maps_from_probes(
-            dump, ev.f, eps, (const mcp_image *const *)ev.jv, ev.k, &o.sure, &e->maps);
-        free((void *)eps);
+        int bad = mcp__error_maps_from_own_probes(dump, &ev.f, eps, ev.jv, ev.k, &o.sure,
+                                                  &e->maps);
+        for (int j = 0; j < ev.k; j++)
+            ev.probes[j].color = eps[j];
+        free(eps);
         if (bad) goto done;
     }
     step(bar, 2 + JVP_STEPS);

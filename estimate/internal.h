@@ -107,6 +107,15 @@ int mcp__jvp(const mcp_denoiser *den, const mcp_denoise_input *at,
              const mcp_denoise_tangent *t, int n, int fd, double delta,
              mcp_image **primal, mcp_image **out);
 
+/* mcp_error_maps_from_probes for a caller that is done with its evaluation: takes
+ * *denoised for the maps' denoised image and may take probes[j] and jvps[j] (k of
+ * each; their slots are then NULL) for five of the maps, instead of copying and
+ * allocating; the caller frees what is left. The same values (sure.c). */
+#define MCP_SURE_MAX_OWN 16 /* more probes than this: copied, as the public call does */
+int mcp__error_maps_from_own_probes(const mcp_dump *dump, mcp_image **denoised,
+                                    mcp_image **probes, mcp_image **jvps, int k,
+                                    const mcp_sure_options *opt, mcp_error_maps *out);
+
 /* Per-value variance maps from n jvp images: mean_k (J v_k)² (through the CSF operator
  * for relse-perceptual), and divided by the denominator (1 channel) (variance.c). */
 int mcp__variance_from_jvps(const mcp_image *const *jv, int n, mcp_error_metric metric,

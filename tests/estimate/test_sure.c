@@ -310,6 +310,72 @@ test_formula_is_alg2(void **state)
     mcp_dump_free(d);
 }
 
+/* The estimate hands its evaluation to the maps (mcp__error_maps_from_own_probes):
+ * the same values, bit for bit, as the copying call, with F(X) and five of the
+ * probes' and JVPs' images taken for the maps (slots NULL), none for
+ * relse-perceptual, and none beyond those five. */
+static void
+test_maps_in_the_probes_images(void **state)
+{
+    (void)state;
+    uint64_t rng = 23;
+    mcp_dump *d = realization(&rng, 1);
+    const int ks[] = {1, 2, 3, 4};
+    const mcp_error_metric metrics[] = {MCP_METRIC_RELSE, MCP_METRIC_SE,
+                                        MCP_METRIC_RELSE_PERCEPTUAL};
+    for (size_t mi = 0; mi < sizeof metrics / sizeof *metrics; mi++)
+        for (size_t ki = 0; ki < sizeof ks / sizeof *ks; ki++) {
+            const int k = ks[ki];
+            mcp_sure_options o = mcp_sure_defaults();
+            o.metric = metrics[mi];
+            mcp_image *f = mcp_test_rgb(W, H), *probes[4], *jvps[4];
+            mcp_test_box3(d->color, f);
+            for (int j = 0; j < k; j++) {
+                mcp_probe p;
+                assert_int_equal(mcp_probe_gaussian(d, NULL, 9, j, &p), 0);
+                probes[j] = p.color;
+                jvps[j] = mcp_test_rgb(W, H);
+                mcp_test_box3(probes[j], jvps[j]);
+            }
+            mcp_error_maps copied, owned;
+            assert_int_equal(mcp_error_maps_from_probes(
+                                 d, f, (const mcp_image *const *)probes,
+                                 (const mcp_image *const *)jvps, k, &o, &copied),
+                             0);
+            assert_int_equal(
+                mcp__error_maps_from_own_probes(d, &f, probes, jvps, k, &o, &owned), 0);
+            const mcp_image *a[] = {copied.denoised,   copied.sure,    copied.sure_rel,
+                                    copied.var,        copied.var_rel, copied.sigma_rel,
+                                    copied.denominator};
+            const mcp_image *b[] = {owned.denoised,   owned.sure,    owned.sure_rel,
+                                    owned.var,        owned.var_rel, owned.sigma_rel,
+                                    owned.denominator};
+            for (int i = 0; i < 7; i++) {
+                assert_int_equal(a[i]->channels, b[i]->channels);
+                for (int c = 0; c < a[i]->channels; c++)
+                    assert_string_equal(a[i]->names[c], b[i]->names[c]);
+                assert_string_equal(a[i]->source ? a[i]->source : "",
+                                    b[i]->source ? b[i]->source : "");
+                assert_int_equal(a[i]->attrs.count, b[i]->attrs.count);
+                assert_true(mcp_test_max_abs_diff(a[i], b[i]) == 0.0);
+            }
+            int taken = 0;
+            for (int j = 0; j < k; j++)
+                taken += (probes[j] == NULL) + (jvps[j] == NULL);
+            const int perceptual = metrics[mi] == MCP_METRIC_RELSE_PERCEPTUAL;
+            assert_int_equal(taken, perceptual ? 0 : (2 * k < 5 ? 2 * k : 5));
+            assert_true(perceptual ? f != NULL : f == NULL);
+            for (int j = 0; j < k; j++) {
+                mcp_image_free(probes[j]);
+                mcp_image_free(jvps[j]);
+            }
+            mcp_image_free(f);
+            mcp_error_maps_free(&copied);
+            mcp_error_maps_free(&owned);
+        }
+    mcp_dump_free(d);
+}
+
 /* ---- unbiasedness ---- */
 
 static void
@@ -777,6 +843,7 @@ main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_formula_is_alg2),
+        cmocka_unit_test(test_maps_in_the_probes_images),
         cmocka_unit_test(test_unbiased_linear_closed_form),
         cmocka_unit_test(test_unbiased_perceptual),
         cmocka_unit_test(test_joint_sure),
