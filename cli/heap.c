@@ -17,7 +17,9 @@
  * a renderer) see the user's environment. MCPOST_HUGE_PAGES=0 turns it off (a
  * debugger follows one process more easily), as does a GLIBC_TUNABLES that already
  * names the tunable, a kernel without transparent huge pages or with them set to
- * "never", and a sanitizer's build, whose allocator is its own. */
+ * "never", a sanitizer's build, whose allocator is its own, and an LD_PRELOAD (another
+ * malloc such as jemalloc, or a tool that watches this process: valgrind's preload,
+ * heaptrack; valgrind would run the second process outside itself). */
 #include "cli.h"
 
 #include <stdio.h>
@@ -88,8 +90,8 @@ reexec_with_huge_pages(char **argv)
 {
     const char *off = getenv("MCPOST_HUGE_PAGES");
     if (off && strcmp(off, "0") == 0) return;
-    const char *user = getenv("GLIBC_TUNABLES");
-    if (user && strstr(user, TUNABLE)) return;
+    const char *user = getenv("GLIBC_TUNABLES"), *preload = getenv("LD_PRELOAD");
+    if ((user && strstr(user, TUNABLE)) || (preload && *preload)) return;
     if (!glibc_has_hugetlb_tunable() || !kernel_has_huge_pages()) return;
 
     const size_t n = user ? strlen(user) : 0;

@@ -33,6 +33,9 @@ denoise_recording plain -u GLIBC_TUNABLES -u MCPOST_HUGE_PAGES
 denoise_recording off -u GLIBC_TUNABLES MCPOST_HUGE_PAGES=0
 denoise_recording user -u MCPOST_HUGE_PAGES GLIBC_TUNABLES=glibc.malloc.check=0
 denoise_recording named -u MCPOST_HUGE_PAGES GLIBC_TUNABLES=glibc.malloc.hugetlb=0
+# a library preloaded (another malloc, a profiler): left alone. libc itself stands in
+denoise_recording preload -u MCPOST_HUGE_PAGES -u GLIBC_TUNABLES \
+    LD_PRELOAD="$(ldd "$mcpost" | awk '/libc\.so/ { print $3 }')"
 
 # heap_has_huge_pages SMAPS: the [heap] mapping was advised MADV_HUGEPAGE
 heap_has_huge_pages() {
@@ -60,12 +63,14 @@ check "MCPOST_HUGE_PAGES=0 still put the heap on huge pages" \
     bash -c '! heap_has_huge_pages off.parent'
 check "a tunable the user named (hugetlb=0) was changed" \
     bash -c '! heap_has_huge_pages named.parent'
+check "with LD_PRELOAD mcpost still put the heap on huge pages" \
+    bash -c '! heap_has_huge_pages preload.parent'
 check "the command saw mcpost's GLIBC_TUNABLES" bash -c '! grep -q GLIBC_TUNABLES plain.child'
 check "the command saw mcpost's tunable" \
     grep -qx 'GLIBC_TUNABLES=glibc.malloc.check=0' user.child
 check "mcpost's saved copy leaked to the command" \
     bash -c '! grep -q MCPOST_SAVED user.child plain.child'
-for o in off user named; do
+for o in off user named preload; do
     check "$o.exr differs from plain.exr" cmp -s plain.exr $o.exr
 done
 [ $fail -eq 0 ] && echo "ok: the heap's second process and the environment it passes on"
