@@ -234,14 +234,15 @@ is_packed_rgb(const mcp_image *img, int w, int h)
     return 1;
 }
 
-/* A map's image: one of spare[0..n) that is_packed_rgb (taken: its slot is set to
- * NULL, its attributes cleared, its source set), else a new one. plain_maps writes
- * every value of every map, so a reused image's old values never show. */
+/* A map's image: one of spare[0..n) that is usable and is_packed_rgb (taken: its slot
+ * is set to NULL, its attributes cleared, its source set), else a new one. plain_maps
+ * writes every value of every map, so a reused image's old values never show. */
 static int
-map_image(mcp_image **spare, int n, int w, int h, const char *source, mcp_image **out)
+map_image(mcp_image **spare, const unsigned char *usable, int n, int w, int h,
+          const char *source, mcp_image **out)
 {
     for (int i = 0; i < n; i++)
-        if (is_packed_rgb(spare[i], w, h)) {
+        if (usable[i] && is_packed_rgb(spare[i], w, h)) {
             mcp_image *img = spare[i];
             mcp_attrs_clear(&img->attrs);
             if (mcp_image_set_source(img, source)) return -1;
@@ -253,14 +254,15 @@ map_image(mcp_image **spare, int n, int w, int h, const char *source, mcp_image 
 }
 
 static int
-maps_alloc(int w, int h, mcp_image **spare, int n, mcp_error_maps *m)
+maps_alloc(int w, int h, mcp_image **spare, const unsigned char *usable, int n,
+           mcp_error_maps *m)
 {
     static const char *const den_name[1] = {"denominator"};
-    return map_image(spare, n, w, h, "SURE", &m->sure) ||
-           map_image(spare, n, w, h, "relative SURE", &m->sure_rel) ||
-           map_image(spare, n, w, h, "variance of the denoised image", &m->var) ||
-           map_image(spare, n, w, h, "relative variance", &m->var_rel) ||
-           map_image(spare, n, w, h, "relative input variance", &m->sigma_rel) ||
+    return map_image(spare, usable, n, w, h, "SURE", &m->sure) ||
+           map_image(spare, usable, n, w, h, "relative SURE", &m->sure_rel) ||
+           map_image(spare, usable, n, w, h, "variance of the denoised image", &m->var) ||
+           map_image(spare, usable, n, w, h, "relative variance", &m->var_rel) ||
+           map_image(spare, usable, n, w, h, "relative input variance", &m->sigma_rel) ||
            mcp__image_new(w, h, 1, den_name, "denominator", &m->denominator);
 }
 
@@ -449,11 +451,16 @@ maps_from_probes(const mcp_dump *dump, const mcp_image *denoised,
     out->metric = o.metric;
     own = own && o.metric != MCP_METRIC_RELSE_PERCEPTUAL;
     mcp_image *spare[2 * MCP_SURE_MAX_OWN] = {0};
+    unsigned char usable[2 * MCP_SURE_MAX_OWN];
+    memset(usable, 1, sizeof usable);
     int n_spare = 0;
     for (int j = 0; own && j < k && n_spare + 2 <= 2 * MCP_SURE_MAX_OWN; j++) {
         spare[n_spare++] = own_jvps[j];
         spare[n_spare++] = own_probes[j];
     }
+    for (int i = 0; i < n_spare; i++) /* an image offered twice is not spare */
+        for (int j = 0; j < i; j++)
+            if (spare[i] && spare[i] == spare[j]) usable[i] = usable[j] = 0;
     int copied = 0;
     if (own && denoised->pixel_stride == 3 &&
         denoised->row_stride == (ptrdiff_t)3 * c->width && denoised->owns_data) {
@@ -463,7 +470,7 @@ maps_from_probes(const mcp_dump *dump, const mcp_image *denoised,
         copied = 1;
     }
     if ((copied && mcp_image_copy(denoised, &out->denoised)) ||
-        maps_alloc(c->width, c->height, spare, n_spare, out) ||
+        maps_alloc(c->width, c->height, spare, usable, n_spare, out) ||
         (o.metric == MCP_METRIC_RELSE_PERCEPTUAL
              ? perceptual_maps(dump, out->denoised, probes, jvps, k, o.ppd, out)
              : (plain_maps(dump, out->denoised, probes, jvps, k,

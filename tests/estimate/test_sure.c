@@ -313,7 +313,7 @@ test_formula_is_alg2(void **state)
 /* The estimate hands its evaluation to the maps (mcp__error_maps_from_own_probes):
  * the same values, bit for bit, as the copying call, with F(X) and five of the
  * probes' and JVPs' images taken for the maps (slots NULL), none for
- * relse-perceptual, and none beyond those five. */
+ * relse-perceptual, none beyond those five, and none offered twice. */
 static void
 test_maps_in_the_probes_images(void **state)
 {
@@ -373,6 +373,31 @@ test_maps_in_the_probes_images(void **state)
             mcp_error_maps_free(&copied);
             mcp_error_maps_free(&owned);
         }
+    /* an image offered twice (as a probe and as a JVP) is not taken: the maps would
+       share it */
+    mcp_probe p0, p1;
+    assert_int_equal(mcp_probe_gaussian(d, NULL, 9, 0, &p0), 0);
+    assert_int_equal(mcp_probe_gaussian(d, NULL, 9, 1, &p1), 0);
+    mcp_image *f = mcp_test_rgb(W, H), *j1 = mcp_test_rgb(W, H);
+    mcp_test_box3(d->color, f);
+    mcp_test_box3(p1.color, j1);
+    mcp_image *probes[2] = {p0.color, p1.color}, *jvps[2] = {p0.color, j1};
+    mcp_error_maps copied, owned;
+    assert_int_equal(mcp_error_maps_from_probes(d, f, (const mcp_image *const *)probes,
+                                                (const mcp_image *const *)jvps, 2, NULL,
+                                                &copied),
+                     0);
+    assert_int_equal(
+        mcp__error_maps_from_own_probes(d, &f, probes, jvps, 2, NULL, &owned), 0);
+    assert_ptr_equal(probes[0], p0.color);
+    assert_ptr_equal(jvps[0], p0.color);
+    assert_null(probes[1]);
+    assert_null(jvps[1]);
+    assert_true(mcp_test_max_abs_diff(copied.sure, owned.sure) == 0.0);
+    assert_true(mcp_test_max_abs_diff(copied.var_rel, owned.var_rel) == 0.0);
+    mcp_image_free(p0.color);
+    mcp_error_maps_free(&copied);
+    mcp_error_maps_free(&owned);
     mcp_dump_free(d);
 }
 
