@@ -41,11 +41,11 @@
 #endif
 
 #define TUNABLE "glibc.malloc.hugetlb"
-/* What GLIBC_TUNABLES held before mcpost added the tunable ("" with a leading '-'
+/* What GLIBC_TUNABLES held before mcpost added the tunable ('+' and its value, or '-'
  * when it was unset), for the second process to put back. */
 #define SAVED_TUNABLES "MCPOST_SAVED_GLIBC_TUNABLES"
 
-#ifdef __GLIBC__
+#if defined(__GLIBC__) && !defined(MCP_CLI_SANITIZED)
 /* 1 when glibc knows the tunable (2.35 and later). */
 static int
 glibc_has_hugetlb_tunable(void)
