@@ -192,17 +192,43 @@ def _textured(name, build_color, roughness_bump=None):
     return _material(name, build)
 
 
+def _checker(scale, one, two):
+    """A _textured() colour builder: a checker of `scale` squares per unit in colours
+    `one` and `two`."""
+    def build(nodes, links, co):
+        t = nodes.new('ShaderNodeTexChecker')
+        t.inputs['Scale'].default_value = scale
+        t.inputs['Color1'].default_value = (*one, 1)
+        t.inputs['Color2'].default_value = (*two, 1)
+        links.new(co, t.inputs['Vector'])
+        return t.outputs['Color']
+    return build
+
+
+def _noise_ramp(scale, low, high):
+    """A _textured() colour builder: multi-octave noise (detail 6, roughness 0.7) at
+    `scale` through a ramp from `low` (at 0.35) to `high` (at 0.65)."""
+    def build(nodes, links, co):
+        n = nodes.new('ShaderNodeTexNoise')
+        n.inputs['Scale'].default_value = scale
+        n.inputs['Detail'].default_value = 6.0
+        n.inputs['Roughness'].default_value = 0.7
+        links.new(co, n.inputs['Vector'])
+        ramp = nodes.new('ShaderNodeValToRGB')
+        ramp.color_ramp.elements[0].position = 0.35
+        ramp.color_ramp.elements[0].color = (*low, 1)
+        ramp.color_ramp.elements[1].position = 0.65
+        ramp.color_ramp.elements[1].color = (*high, 1)
+        links.new(n.outputs['Fac'], ramp.inputs['Fac'])
+        return ramp.outputs['Color']
+    return build
+
+
 def build_texture():
     """Box whose floor, walls and objects carry high-frequency procedural
     textures (checker, brick, wave, noise): detail at the 1-3 pixel scale
     that denoisers blur. Lit by a large area light: converges steadily."""
-    def checker(nodes, links, co):
-        t = nodes.new('ShaderNodeTexChecker')
-        t.inputs['Scale'].default_value = 14.0
-        t.inputs['Color1'].default_value = (0.8, 0.78, 0.7, 1)
-        t.inputs['Color2'].default_value = (0.08, 0.1, 0.15, 1)
-        links.new(co, t.inputs['Vector'])
-        return t.outputs['Color']
+    checker = _checker(14.0, (0.8, 0.78, 0.7), (0.08, 0.1, 0.15))
 
     def brick(nodes, links, co):
         t = nodes.new('ShaderNodeTexBrick')
@@ -229,19 +255,7 @@ def build_texture():
             return ramp.outputs['Color']
         return f
 
-    def noise(nodes, links, co):
-        n = nodes.new('ShaderNodeTexNoise')
-        n.inputs['Scale'].default_value = 12.0
-        n.inputs['Detail'].default_value = 6.0
-        n.inputs['Roughness'].default_value = 0.7
-        links.new(co, n.inputs['Vector'])
-        ramp = nodes.new('ShaderNodeValToRGB')
-        ramp.color_ramp.elements[0].position = 0.35
-        ramp.color_ramp.elements[0].color = (0.05, 0.2, 0.5, 1)
-        ramp.color_ramp.elements[1].position = 0.65
-        ramp.color_ramp.elements[1].color = (0.9, 0.8, 0.3, 1)
-        links.new(n.outputs['Fac'], ramp.inputs['Fac'])
-        return ramp.outputs['Color']
+    noise = _noise_ramp(12.0, (0.05, 0.2, 0.5), (0.9, 0.8, 0.3))
 
     white = _diffuse('white', (0.7, 0.7, 0.7))
     _box(white,

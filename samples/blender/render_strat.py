@@ -29,7 +29,7 @@ replicate 0's blocks B, that the single-sample calls average to the
 samples=block_spp call.
 
 The scene builders of cornell and texture are render_dumps.py's, unchanged;
-'interior' and 'window' are built here.
+'interior', 'window' and 'lamp' are built here.
 """
 
 import argparse
@@ -152,8 +152,107 @@ def build_window():
     rdm._world(1.5, (0.45, 0.6, 0.9))
 
 
+def _two_sided(name, rgb_front, rgb_back):
+    """Diffuse, one colour on the front (normal) side, another on the back."""
+    def build(nodes, links):
+        geo = nodes.new('ShaderNodeNewGeometry')
+        front = nodes.new('ShaderNodeBsdfDiffuse')
+        front.inputs['Color'].default_value = (*rgb_front, 1.0)
+        back = nodes.new('ShaderNodeBsdfDiffuse')
+        back.inputs['Color'].default_value = (*rgb_back, 1.0)
+        mix = nodes.new('ShaderNodeMixShader')
+        links.new(geo.outputs['Backfacing'], mix.inputs['Fac'])
+        links.new(front.outputs['BSDF'], mix.inputs[1])
+        links.new(back.outputs['BSDF'], mix.inputs[2])
+        return mix.outputs['Shader']
+    return rdm._material(name, build)
+
+
+def build_lamp():
+    """A closed room at night lit only indirectly, by a floor lamp (a
+    torchiere) whose opaque shade, a cone open at the top, dark outside and
+    white inside, throws all the light of the bulb up onto the ceiling. No
+    window, no sky: the camera sees only light that came off the ceiling
+    and the shade, which makes heavy-tailed noise on the walls and floor.
+    A rug with a fine checker, a rough copper torus (roughness 0.3, in
+    focus), a diffuse ball with a bump-mapped noise texture, and mild depth
+    of field on the camera."""
+    wall = rdm._diffuse('wall', (0.75, 0.72, 0.66))
+    back = rdm._diffuse('back', (0.45, 0.55, 0.45))
+    ceiling = rdm._diffuse('ceiling', (0.8, 0.8, 0.78))
+    # room x in [-1.2, 1.2], y in [-2, 1.2], z in [0, 2.4]; thin boxes that
+    # overlap at the edges so that no ray leaks through a seam
+    e = 0.02
+    x0, x1, y0, y1, z0, z1 = -1.2, 1.2, -2.0, 1.2, 0.0, 2.4
+    _slab('floor', (x0 - e, y0 - e, z0 - e), (x1 + e, y1 + e, z0),
+          rdm._diffuse('floor', (0.4, 0.28, 0.18)))
+    _slab('ceiling', (x0 - e, y0 - e, z1), (x1 + e, y1 + e, z1 + e), ceiling)
+    _slab('back', (x0 - e, y1, z0 - e), (x1 + e, y1 + e, z1 + e), back)
+    _slab('front', (x0 - e, y0 - e, z0 - e), (x1 + e, y0, z1 + e), wall)
+    _slab('left', (x0 - e, y0 - e, z0 - e), (x0, y1 + e, z1 + e), wall)
+    _slab('right', (x1, y0 - e, z0 - e), (x1 + e, y1 + e, z1 + e), wall)
+
+    # rug: a plane (object coordinates in metres) with a checker of 1/12 m
+    checker = rdm._checker(12.0, (0.75, 0.7, 0.6), (0.35, 0.08, 0.06))
+    bpy.ops.mesh.primitive_plane_add(size=1.0, location=(-0.1, 0.05, 0.004))
+    rug = bpy.context.active_object
+    rug.name = 'rug'
+    rug.data.transform(mathutils.Matrix.Diagonal((1.8, 1.5, 1.0, 1.0)))
+    rug.data.materials.append(rdm._textured('rug', checker))
+
+    # rough copper torus standing on the rug, turned 30 degrees
+    bpy.ops.mesh.primitive_torus_add(major_radius=0.25, minor_radius=0.08,
+                                     major_segments=96, minor_segments=32,
+                                     location=(-0.35, 0.0, 0.33),
+                                     rotation=(np.pi / 2, 0, np.radians(30)))
+    torus = bpy.context.active_object
+    torus.name = 'torus'
+    bpy.ops.object.shade_smooth()
+    torus.data.materials.append(rdm._glossy('copper', (0.95, 0.64, 0.54), 0.3))
+
+    # diffuse ball with a bump-mapped noise texture
+    noise = rdm._noise_ramp(10.0, (0.15, 0.3, 0.55), (0.85, 0.8, 0.65))
+    rdm._sphere('ball', 0.3, (0.35, 0.35, 0.3), rdm._textured('ball', noise, 0.4))
+
+    # the floor lamp: base, pole, shade (cone open at the top, closed at the
+    # bottom by a disc), the bulb a small point light inside the shade
+    lx, ly = 0.7, 0.65
+    zb, zt, rb, rt = 1.55, 1.8, 0.12, 0.45     # shade: z bottom, top; radius bottom, top
+    dark = rdm._diffuse('lamp_metal', (0.05, 0.05, 0.05))
+    bpy.ops.mesh.primitive_cylinder_add(vertices=32, radius=0.16, depth=0.03,
+                                        location=(lx, ly, 0.015))
+    bpy.context.active_object.data.materials.append(dark)
+    bpy.ops.mesh.primitive_cylinder_add(vertices=16, radius=0.015, depth=zb,
+                                        location=(lx, ly, zb / 2))
+    bpy.context.active_object.data.materials.append(dark)
+    shade = _two_sided('shade', (0.05, 0.05, 0.05), (0.8, 0.77, 0.7))
+    bpy.ops.mesh.primitive_cone_add(vertices=48, radius1=rb, radius2=rt, depth=zt - zb,
+                                    end_fill_type='NOTHING',
+                                    location=(lx, ly, (zb + zt) / 2))
+    ob = bpy.context.active_object
+    ob.name = 'shade'
+    bpy.ops.object.shade_smooth()
+    ob.data.materials.append(shade)
+    bpy.ops.mesh.primitive_circle_add(vertices=48, radius=rb + 0.002, fill_type='NGON',
+                                      location=(lx, ly, zb), rotation=(np.pi, 0, 0))
+    bpy.context.active_object.data.materials.append(shade)   # normal -Z: dark below
+    bulb_d = bpy.data.lights.new('bulb', 'POINT')
+    bulb_d.energy = 80.0
+    bulb_d.shadow_soft_size = 0.04
+    bulb_d.color = (1.0, 0.85, 0.65)
+    bulb = bpy.data.objects.new('bulb', bulb_d)
+    bulb.location = (lx, ly, 1.74)     # 6 cm below the rim
+    bpy.context.scene.collection.objects.link(bulb)
+
+    cam = rdm._camera((0.0, -1.6, 1.0), (np.radians(80), 0, 0), 60.0)
+    cam.data.dof.use_dof = True
+    cam.data.dof.focus_object = torus
+    cam.data.dof.aperture_fstop = 0.4
+    rdm._world(0.0)
+
+
 SCENES = {'cornell': rdm.build_cornell, 'texture': rdm.build_texture,
-          'interior': build_interior, 'window': build_window}
+          'interior': build_interior, 'window': build_window, 'lamp': build_lamp}
 
 
 def replicate_seed(stream, r):
