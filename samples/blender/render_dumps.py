@@ -224,21 +224,28 @@ def _noise_ramp(scale, low, high):
     return build
 
 
+def _brick(scale, one, two, mortar, mortar_size):
+    """A _textured() colour builder: Blender's brick texture at `scale` (bricks
+    0.5/scale by 0.25/scale units in the vector's X-Y plane), bricks in colours
+    `one` and `two`, `mortar` lines of `mortar_size`."""
+    def build(nodes, links, co):
+        t = nodes.new('ShaderNodeTexBrick')
+        t.inputs['Scale'].default_value = scale
+        t.inputs['Color1'].default_value = (*one, 1)
+        t.inputs['Color2'].default_value = (*two, 1)
+        t.inputs['Mortar'].default_value = (*mortar, 1)
+        t.inputs['Mortar Size'].default_value = mortar_size
+        links.new(co, t.inputs['Vector'])
+        return t.outputs['Color']
+    return build
+
+
 def build_texture():
     """Box whose floor, walls and objects carry high-frequency procedural
     textures (checker, brick, wave, noise): detail at the 1-3 pixel scale
     that denoisers blur. Lit by a large area light: converges steadily."""
     checker = _checker(14.0, (0.8, 0.78, 0.7), (0.08, 0.1, 0.15))
-
-    def brick(nodes, links, co):
-        t = nodes.new('ShaderNodeTexBrick')
-        t.inputs['Scale'].default_value = 4.0
-        t.inputs['Color1'].default_value = (0.6, 0.22, 0.12, 1)
-        t.inputs['Color2'].default_value = (0.45, 0.35, 0.25, 1)
-        t.inputs['Mortar'].default_value = (0.85, 0.85, 0.8, 1)
-        t.inputs['Mortar Size'].default_value = 0.04
-        links.new(co, t.inputs['Vector'])
-        return t.outputs['Color']
+    brick = _brick(4.0, (0.6, 0.22, 0.12), (0.45, 0.35, 0.25), (0.85, 0.85, 0.8), 0.04)
 
     def stripes(rgb_a, rgb_b, scale):
         def f(nodes, links, co):

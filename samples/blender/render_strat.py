@@ -29,7 +29,7 @@ replicate 0's blocks B, that the single-sample calls average to the
 samples=block_spp call.
 
 The scene builders of cornell and texture are render_dumps.py's, unchanged;
-'interior', 'window' and 'lamp' are built here.
+'interior', 'window', 'lamp' and 'corridor' are built here.
 """
 
 import argparse
@@ -251,8 +251,92 @@ def build_lamp():
     rdm._world(0.0)
 
 
+def _wall_plane(name, x, y0, y1, z0, z1, facing, mat):
+    """A plane in the wall x = const from (y0, z0) to (y1, z1), facing +X
+    (facing = 1) or -X (-1), whose object coordinates are metres along the
+    wall (X) and up (Y)."""
+    ob = rdm._plane(name, 1.0, (x, (y0 + y1) / 2, (z0 + z1) / 2),
+                    (np.pi / 2, 0, facing * np.pi / 2), mat)
+    ob.data.transform(mathutils.Matrix.Diagonal((y1 - y0, z1 - z0, 1.0, 1.0)))
+    return ob
+
+
+def build_corridor():
+    """A long closed corridor seen in perspective, lit only by a row of four
+    small area lights recessed in square shafts in the ceiling, lined with a
+    dark baffle, so that the camera does not see the emitters (the floor
+    reflects them). A glossy floor (Principled, roughness
+    0.15) with blurry reflections of the lights and walls, brick walls whose
+    courses are a few pixels high near the camera and sub-pixel far away,
+    two doors in frames, a diffuse bench and a rough metal bin. The far end,
+    beyond the last light, is lit only indirectly: a wide range of
+    brightness along the corridor."""
+    e = 0.02
+    x0, x1, y0, y1, z0, z1 = -0.8, 0.8, -1.0, 12.5, 0.0, 2.4
+    w, d = 0.15, 0.09                 # shafts: half-width, depth above the ceiling
+    lights_y = (1.5, 4.0, 6.5, 9.0)
+    zt = z1 + d                       # top of the shafts (underside of the plenum slab)
+    white = rdm._diffuse('ceiling', (0.8, 0.8, 0.78))
+    baffle = rdm._diffuse('baffle', (0.05, 0.05, 0.05))
+    _slab('floor', (x0 - e, y0 - e, z0 - e), (x1 + e, y1 + e, z0),
+          _principled('floor', (0.3, 0.27, 0.24), 0.15))
+    _slab('left', (x0 - e, y0 - e, z0 - e), (x0, y1 + e, zt + e), white)
+    _slab('right', (x1, y0 - e, z0 - e), (x1 + e, y1 + e, zt + e), white)
+    _slab('front', (x0 - e, y0 - e, z0 - e), (x1 + e, y0, zt + e), white)
+    _slab('end', (x0 - e, y1, z0 - e), (x1 + e, y1 + e, zt + e),
+          rdm._diffuse('end', (0.5, 0.58, 0.65)))
+    _slab('plenum', (x0 - e, y0 - e, zt), (x1 + e, y1 + e, zt + e), white)
+    # ceiling: two side strips and the pieces between the shafts' openings
+    _slab('ceiling_l', (x0 - e, y0 - e, z1), (-w, y1 + e, z1 + e), white)
+    _slab('ceiling_r', (w, y0 - e, z1), (x1 + e, y1 + e, z1 + e), white)
+    edges = [y0 - e] + [v for ly in lights_y for v in (ly - w, ly + w)] + [y1 + e]
+    for k in range(0, len(edges), 2):
+        _slab('ceiling_m%d' % (k // 2), (-w, edges[k], z1), (w, edges[k + 1], z1 + e), white)
+    for i, ly in enumerate(lights_y):
+        # shaft: a square tube open at both ends from the ceiling up to the plenum
+        bpy.ops.mesh.primitive_cylinder_add(vertices=4, radius=w * np.sqrt(2), depth=d,
+                                            end_fill_type='NOTHING',
+                                            location=(0.0, ly, z1 + d / 2),
+                                            rotation=(0, 0, np.pi / 4))
+        bpy.context.active_object.data.materials.append(baffle)
+        rdm._area_light('light%d' % i, 0.25, (0.0, ly, zt - 0.01), 45.0, (1.0, 0.9, 0.75))
+
+    # brick on both side walls (object coordinates: metres along the wall, up)
+    brick = rdm._textured('brick', rdm._brick(4.0, (0.55, 0.3, 0.2), (0.45, 0.38, 0.3),
+                                              (0.8, 0.78, 0.72), 0.05), 0.3)
+    _wall_plane('brick_l', x0 + 0.002, y0, y1, z0, z1, 1, brick)
+    _wall_plane('brick_r', x1 - 0.002, y0, y1, z0, z1, -1, brick)
+
+    # doors: a panel in a frame (two jambs and a lintel) standing out of the wall
+    door = rdm._diffuse('door', (0.25, 0.4, 0.35))
+    frame = rdm._diffuse('frame', (0.85, 0.85, 0.82))
+    hw, hh, fw, fd = 0.45, 2.05, 0.07, 0.06     # half width, height; frame width, depth
+    for side, yd in ((-1, 2.6), (1, 5.6)):
+        xw = x0 if side < 0 else x1
+        xi = xw - side * fd                     # frame's inner face
+        xp = xw - side * 0.03                   # panel's inner face
+        _slab('door%d' % side, (min(xw, xp), yd - hw, z0), (max(xw, xp), yd + hw, hh), door)
+        for a, b in ((yd - hw - fw, yd - hw), (yd + hw, yd + hw + fw)):
+            _slab('jamb', (min(xw, xi), a, z0), (max(xw, xi), b, hh + fw), frame)
+        _slab('lintel', (min(xw, xi), yd - hw, hh), (max(xw, xi), yd + hw, hh + fw), frame)
+
+    # a diffuse bench against the right wall and a rough metal bin on the left
+    _slab('bench', (x1 - 0.4, 2.0, z0), (x1, 3.2, 0.45), rdm._diffuse('bench', (0.3, 0.42, 0.6)))
+    bpy.ops.mesh.primitive_cylinder_add(vertices=48, radius=0.18, depth=0.65,
+                                        location=(x0 + 0.25, 4.4, 0.325))
+    ob = bpy.context.active_object
+    ob.name = 'bin'
+    bpy.ops.object.shade_smooth()
+    ob.data.use_auto_smooth = True      # smooth side, sharp rim (30 degrees)
+    ob.data.materials.append(rdm._glossy('bin', (0.8, 0.8, 0.82), 0.35))
+
+    rdm._camera((0.0, -0.6, 1.45), (np.radians(78), 0, 0), 55.0)
+    rdm._world(0.0)
+
+
 SCENES = {'cornell': rdm.build_cornell, 'texture': rdm.build_texture,
-          'interior': build_interior, 'window': build_window, 'lamp': build_lamp}
+          'interior': build_interior, 'window': build_window, 'lamp': build_lamp,
+          'corridor': build_corridor}
 
 
 def replicate_seed(stream, r):
