@@ -280,6 +280,7 @@ unet_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
     /* three probes agree with the truth as often as four with this network, a tangent
        costing 0.6-0.7 of an apply (docs/fidelity.md "The defaults") */
     d->estimate_probes = 3;
+    d->estimate_probe_floor = 1;
     d->apply = unet_apply;
     d->jvp = unet_jvp;
     *out = d;

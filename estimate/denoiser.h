@@ -54,6 +54,10 @@ struct mcp_denoiser {
      * more tangent, and a denoiser whose tangents cost nearly an apply picks fewer where
      * they agree as often (the U-Net: docs/fidelity.md "The defaults") */
     int estimate_probes;
+    /* the estimate's automatic probe floor (probe_floor.c): the radius over whose
+     * median the probes' variance is raised, for a denoiser that adapts to the noise
+     * it sees (the U-Net: 1; docs/fidelity.md "The defaults"); 0: none */
+    int estimate_probe_floor;
     /* F(in): a new 3-channel image "R,G,B". */
     int (*apply)(const mcp_denoiser *self, const mcp_denoise_input *in, mcp_image **out);
     /* J·t_k for k < n at the point `at`, in one primal pass: out[k] receives a new
@@ -63,8 +67,8 @@ struct mcp_denoiser {
                const mcp_denoise_tangent *t, int n, mcp_image **primal, mcp_image **out);
     void (*destroy)(mcp_denoiser *self); /* frees state and self */
     /* A denoiser that hands each input to another (the `default` one) names the one
-     * that runs on `in`, whose estimate_probes and sharp_variance then apply; NULL for
-     * a denoiser that runs itself. */
+     * that runs on `in`, whose estimate_probes, estimate_probe_floor and sharp_variance
+     * then apply; NULL for a denoiser that runs itself. */
     const mcp_denoiser *(*pick)(const mcp_denoiser *self, const mcp_denoise_input *in);
     void *state;
 };

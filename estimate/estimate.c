@@ -40,6 +40,7 @@ mcp_estimate_defaults(void)
     o.sampling = mcp_sampling_defaults();
     o.budget = 0;
     o.s2_pool = -1;
+    o.probe_floor = -1;
     return o;
 }
 
@@ -71,6 +72,14 @@ mcp_estimate_auto_s2_pool(const mcp_dump *dump, const mcp_denoiser *den)
     int few_dof = dump->variance_source == MCP_VARSRC_REPLICATES ||
                   dump->variance_source == MCP_VARSRC_INCREMENTS;
     return running(dump, den)->sharp_variance && !few_dof ? 0 : 1;
+}
+
+int
+mcp_estimate_auto_probe_floor(const mcp_dump *dump, const mcp_denoiser *den)
+{
+    /* nlm and bilateral, nearly linear in the noise for fixed weights, stop later with
+       it and no earlier without it (docs/fidelity.md "The defaults") */
+    return running(dump, den)->estimate_probe_floor;
 }
 
 int
@@ -109,6 +118,13 @@ mcp_estimate_check(const mcp_estimate_options *o)
     if (o->s2_pool < -1 || o->s2_pool > 16)
         return mcp_error("estimate: s2_pool must be -1 (automatic) or 0 to 16 (got %d)",
                          o->s2_pool);
+    if (o->probe_floor < -1 || o->probe_floor > MCP__PROBE_FLOOR_MAX)
+        return mcp_error(
+            "estimate: probe_floor must be -1 (automatic) or 0 to %d (got %d)",
+            MCP__PROBE_FLOOR_MAX, o->probe_floor);
+    if (o->probe_floor > 0 && s->metric == MCP_METRIC_RELSE_PERCEPTUAL)
+        return mcp_error("estimate: probe_floor needs the metric relse or se (got "
+                         "relse-perceptual)");
     return 0;
 }
 
@@ -132,6 +148,7 @@ typedef struct evaluation {
     mcp_image **rad;   /* k Rademacher probes or NULL */
     mcp_image **jv;    /* n */
     mcp_image *f;
+    mcp_image *probe_var; /* the floored variance the probes were drawn from, or NULL */
 } evaluation;
 
 static void
@@ -147,6 +164,7 @@ evaluation_free(evaluation *ev)
     free(ev->rad);
     free(ev->jv);
     mcp_image_free(ev->f);
+    mcp_image_free(ev->probe_var);
     memset(ev, 0, sizeof *ev);
 }
 
@@ -167,6 +185,9 @@ evaluate(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_optio
          evaluation *ev, mcp_progress *bar)
 {
     memset(ev, 0, sizeof *ev);
+    /* the probes' variance, floored (probe_floor.c); the denoiser sees the dump's own */
+    mcp_dump floored = *dump;
+    mcp_image *floor_cov = NULL;
     ev->k = o->sure.n_probes;
     ev->n = ev->k * (o->variance_rademacher ? 2 : 1);
     ev->probes = mcp_calloc((size_t)ev->k, sizeof *ev->probes);
@@ -175,14 +196,21 @@ evaluate(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_optio
     if (o->variance_rademacher) ev->rad = mcp_calloc((size_t)ev->k, sizeof *ev->rad);
     int rc = -1;
     if (!ev->probes || !ev->jv || !t || (o->variance_rademacher && !ev->rad)) goto done;
+    if (o->probe_floor > 0) {
+        if (mcp__probe_variance_floor(dump, o->probe_floor, &ev->probe_var, &floor_cov))
+            goto done;
+        floored.var_of_mean = ev->probe_var;
+        if (floor_cov) floored.cov_of_mean = floor_cov;
+    }
     for (int j = 0; j < ev->k; j++) {
-        if (mcp_probe_gaussian(dump, o->sure.features, o->sure.seed, j, &ev->probes[j]))
+        if (mcp_probe_gaussian(&floored, o->sure.features, o->sure.seed, j,
+                               &ev->probes[j]))
             goto done;
         t[j].color = ev->probes[j].color;
         t[j].albedo = ev->probes[j].albedo;
         t[j].normal = ev->probes[j].normal;
         if (o->variance_rademacher) {
-            if (mcp_probe_rademacher(dump, o->sure.seed, j, &ev->rad[j])) goto done;
+            if (mcp_probe_rademacher(&floored, o->sure.seed, j, &ev->rad[j])) goto done;
             t[ev->k + j].color = ev->rad[j];
         }
     }
@@ -197,6 +225,7 @@ evaluate(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_optio
     step(bar, 1 + JVP_STEPS);
     rc = 0;
 done:
+    mcp_image_free(floor_cov);
     free(t);
     if (rc) evaluation_free(ev);
     return rc;
@@ -251,8 +280,13 @@ mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,
     if (mcp_estimate_check(&o) || mcp__check_dump("estimate", dump)) return -1;
     if (!den) return mcp_error("estimate: missing denoiser");
     if (o.sure.n_probes < 1) o.sure.n_probes = mcp_estimate_auto_probes(dump, den);
+    if (o.probe_floor < 0)
+        o.probe_floor = o.sure.metric == MCP_METRIC_RELSE_PERCEPTUAL
+                            ? 0
+                            : mcp_estimate_auto_probe_floor(dump, den);
     mcp_estimate *e = mcp_calloc(1, sizeof *e);
     if (!e) return -1;
+    e->probe_floor = o.probe_floor;
     evaluation ev;
     mcp_progress bar_store, *bar = NULL;
     if ((double)dump->color->width * dump->color->height >= 1048576.0 &&
@@ -277,7 +311,7 @@ mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,
         for (int j = 0; j < ev.k; j++)
             eps[j] = ev.probes[j].color;
         int bad = mcp__error_maps_from_own_probes(dump, &ev.f, eps, ev.jv, ev.k, &o.sure,
-                                                  &e->maps);
+                                                  ev.probe_var, &e->maps);
         for (int j = 0; j < ev.k; j++)
             ev.probes[j].color = eps[j];
         free(eps);

@@ -324,6 +324,11 @@ typedef struct mcp_estimate_options {
      * (docs "Variance sources"): -1 automatic (mcp_estimate_auto_s2_pool), 0 none
      * (the per-value s² of docs/mathematics.md §2.8), or r [-1] */
     int s2_pool;
+    /* the probes' variance raised to its median over a (2r + 1)² window where below
+     * it, so that it depends less on the noise of the pixels the denoiser sees
+     * (docs/fidelity.md "The defaults"): -1 automatic (mcp_estimate_auto_probe_floor),
+     * 0 none, or r [-1] */
+    int probe_floor;
 } mcp_estimate_options;
 
 /* The automatic probe count: that of the denoiser that runs on the dump (den, or the
@@ -336,6 +341,10 @@ MCP_API int mcp_estimate_auto_probes(const mcp_dump *dump, const mcp_denoiser *d
  * (den->sharp_variance) on a variance with many degrees of freedom (per-sample, of the
  * mean); docs/fidelity.md "The defaults" has the figures. */
 MCP_API int mcp_estimate_auto_s2_pool(const mcp_dump *dump, const mcp_denoiser *den);
+
+/* The automatic probe floor: the running denoiser's estimate_probe_floor (the U-Net 1,
+ * the others 0); docs/fidelity.md "The defaults" has the figures. */
+MCP_API int mcp_estimate_auto_probe_floor(const mcp_dump *dump, const mcp_denoiser *den);
 
 MCP_API mcp_estimate_options mcp_estimate_defaults(void);
 
@@ -367,6 +376,7 @@ typedef struct mcp_estimate {
     mcp_variance_source variance_source; /* what the dump's variance rests on */
     double variance_dof;                 /* its degrees of freedom (0: many/unknown) */
     int s2_pool;                         /* the radius s² was pooled over */
+    int probe_floor;                     /* the radius of the probes' variance floor */
     int probes;                          /* the probes it took */
 } mcp_estimate;
 

@@ -84,6 +84,13 @@ double mcp__rng_normal(mcp__rng *r);
 float mcp__log_unit(float u);
 void mcp__sincos_turn(float u, float *s, float *c);
 
+/* The variance the probes are drawn from, each value raised to the median of its
+ * (2 radius + 1)² window where below it, and the colour covariance (if cov and the dump
+ * has one) scaled to keep its correlations; radius 0 copies them (probe_floor.c). */
+#define MCP__PROBE_FLOOR_MAX 16
+int mcp__probe_variance_floor(const mcp_dump *d, int radius, mcp_image **var,
+                              mcp_image **cov);
+
 /* Fails naming `who` when the dump lacks colour or the variance of the mean. */
 int mcp__check_dump(const char *who, const mcp_dump *dump);
 /* What to do about a dump without variance: the recipe for a Cycles render, else
@@ -110,11 +117,16 @@ int mcp__jvp(const mcp_denoiser *den, const mcp_denoise_input *at,
 /* mcp_error_maps_from_probes for a caller that is done with its evaluation: takes
  * *denoised for the maps' denoised image and may take probes[j] and jvps[j] (k of
  * each; their slots are then NULL) for five of the maps, instead of copying and
- * allocating; the caller frees what is left. The same values (sure.c). */
+ * allocating; the caller frees what is left. The same values (sure.c). probe_var
+ * (NULL: the dump's variance) is the variance the probes were drawn from where it is
+ * not the dump's (the estimate's probe floor): SURE then weights each value's probe
+ * terms by the dump's variance over it, so that it stays unbiased for the dump's
+ * variance, while the variance maps, (Jε)², keep the probes' (relse and se only). */
 #define MCP_SURE_MAX_OWN 16 /* more probes than this: copied, as the public call does */
 int mcp__error_maps_from_own_probes(const mcp_dump *dump, mcp_image **denoised,
                                     mcp_image **probes, mcp_image **jvps, int k,
-                                    const mcp_sure_options *opt, mcp_error_maps *out);
+                                    const mcp_sure_options *opt,
+                                    const mcp_image *probe_var, mcp_error_maps *out);
 
 /* Per-value variance maps from n jvp images: mean_k (J v_k)² (through the CSF operator
  * for relse-perceptual), and divided by the denominator (1 channel) (variance.c). */

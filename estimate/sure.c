@@ -280,7 +280,8 @@ maxc(const float *p)
  * written after every value of the same pixel and channel has been read. */
 static void
 plain_maps(const mcp_dump *d, const mcp_image *f, const mcp_image *const *eps,
-           const mcp_image *const *jeps, int k, int relative, mcp_error_maps *m)
+           const mcp_image *const *jeps, int k, int relative, const mcp_image *probe_var,
+           mcp_error_maps *m)
 {
     int w = f->width, h = f->height;
     double inv_k = 1.0 / k;
@@ -294,6 +295,7 @@ plain_maps(const mcp_dump *d, const mcp_image *f, const mcp_image *const *eps,
             float *s = mcp_image_px(m->sure, x, y), *sr = mcp_image_px(m->sure_rel, x, y),
                   *v = mcp_image_px(m->var, x, y), *vr = mcp_image_px(m->var_rel, x, y),
                   *sg = mcp_image_px(m->sigma_rel, x, y);
+            const float *pq = probe_var ? mcp_image_px(probe_var, x, y) : NULL;
             for (int c = 0; c < 3; c++) {
                 double diff = (double)pf[c] - px[c], probe = 0.0, var = 0.0;
                 for (int j = 0; j < k; j++) {
@@ -302,6 +304,9 @@ plain_maps(const mcp_dump *d, const mcp_image *f, const mcp_image *const *eps,
                     probe += e * (2.0 * je - e);
                     var += je * je;
                 }
+                /* probes drawn from another variance q: E[e(2Je - e)] = q(2J - 1), so
+                   pv / q of it is the dump's own pv(2J - 1) */
+                if (pq && pq[c] > 0.0f) probe *= (double)pv[c] / pq[c];
                 double sure = diff * diff + probe * inv_k;
                 var *= inv_k;
                 s[c] = (float)sure;
@@ -428,8 +433,9 @@ give_back(mcp_image **spare, int own, int k, mcp_image **own_probes, mcp_image *
 static int
 maps_from_probes(const mcp_dump *dump, const mcp_image *denoised,
                  const mcp_image *const *probes, const mcp_image *const *jvps, int k,
-                 const mcp_sure_options *opt, int own, mcp_image **own_denoised,
-                 mcp_image **own_probes, mcp_image **own_jvps, mcp_error_maps *out)
+                 const mcp_sure_options *opt, const mcp_image *probe_var, int own,
+                 mcp_image **own_denoised, mcp_image **own_probes, mcp_image **own_jvps,
+                 mcp_error_maps *out)
 {
     memset(out, 0, sizeof *out);
     mcp_sure_options o = opt ? *opt : mcp_sure_defaults();
@@ -474,7 +480,7 @@ maps_from_probes(const mcp_dump *dump, const mcp_image *denoised,
         (o.metric == MCP_METRIC_RELSE_PERCEPTUAL
              ? perceptual_maps(dump, out->denoised, probes, jvps, k, o.ppd, out)
              : (plain_maps(dump, out->denoised, probes, jvps, k,
-                           o.metric == MCP_METRIC_RELSE, out),
+                           o.metric == MCP_METRIC_RELSE, probe_var, out),
                 0))) {
         give_back(spare, own, k, own_probes, own_jvps);
         mcp_error_maps_free(out);
@@ -489,27 +495,28 @@ mcp_error_maps_from_probes(const mcp_dump *dump, const mcp_image *denoised,
                            const mcp_image *const *probes, const mcp_image *const *jvps,
                            int k, const mcp_sure_options *opt, mcp_error_maps *out)
 {
-    return maps_from_probes(dump, denoised, probes, jvps, k, opt, 0, NULL, NULL, NULL,
-                            out);
+    return maps_from_probes(dump, denoised, probes, jvps, k, opt, NULL, 0, NULL, NULL,
+                            NULL, out);
 }
 
 int
 mcp__error_maps_from_own_probes(const mcp_dump *dump, mcp_image **denoised,
                                 mcp_image **probes, mcp_image **jvps, int k,
-                                const mcp_sure_options *opt, mcp_error_maps *out)
+                                const mcp_sure_options *opt, const mcp_image *probe_var,
+                                mcp_error_maps *out)
 {
     /* the images are read through copies of the pointers: the maps may take them */
     const mcp_image *eps[MCP_SURE_MAX_OWN], *jeps[MCP_SURE_MAX_OWN];
     if (k < 1 || k > MCP_SURE_MAX_OWN)
-        return mcp_error_maps_from_probes(dump, *denoised,
-                                          (const mcp_image *const *)probes,
-                                          (const mcp_image *const *)jvps, k, opt, out);
+        return maps_from_probes(dump, *denoised, (const mcp_image *const *)probes,
+                                (const mcp_image *const *)jvps, k, opt, probe_var, 0,
+                                NULL, NULL, NULL, out);
     for (int j = 0; j < k; j++) {
         eps[j] = probes[j];
         jeps[j] = jvps[j];
     }
-    return maps_from_probes(dump, *denoised, eps, jeps, k, opt, 1, denoised, probes, jvps,
-                            out);
+    return maps_from_probes(dump, *denoised, eps, jeps, k, opt, probe_var, 1, denoised,
+                            probes, jvps, out);
 }
 
 int
@@ -542,7 +549,7 @@ mcp_error_maps_compute(const mcp_dump *dump, const mcp_denoiser *den,
         if (!eps) goto done;
         for (int j = 0; j < k; j++)
             eps[j] = probes[j].color;
-        rc = mcp__error_maps_from_own_probes(dump, &f, eps, jv, k, &o, out);
+        rc = mcp__error_maps_from_own_probes(dump, &f, eps, jv, k, &o, NULL, out);
         for (int j = 0; j < k; j++) /* what the maps took is NULL now */
             probes[j].color = eps[j];
         free(eps);

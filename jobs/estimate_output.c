@@ -38,6 +38,7 @@ mcp__estimate_json(const mcp_estimate *e, const char *input, const char *denoise
                                 "stop forced to false");
     mcp__add_variance_source(j, e->variance_source, e->variance_dof);
     cJSON_AddNumberToObject(j, "s2_pool", e->s2_pool);
+    cJSON_AddNumberToObject(j, "probe_floor", e->probe_floor);
     cJSON *pct = cJSON_AddArrayToObject(j, "percentiles");
     for (int k = 0; k < e->n_percentiles; k++) {
         cJSON *item = cJSON_CreateObject();

@@ -82,6 +82,7 @@ result_dict(mcp_estimate *e, const mcp_estimate_options *o, const double *taus,
                    PyUnicode_FromString(mcp_variance_source_name(e->variance_source))) ||
         mcp_py_set(d, "variance_dof", PyFloat_FromDouble(e->variance_dof)) ||
         mcp_py_set(d, "s2_pool", PyLong_FromLong(e->s2_pool)) ||
+        mcp_py_set(d, "probe_floor", PyLong_FromLong(e->probe_floor)) ||
         mcp_py_set(d, "probes", PyLong_FromLong(e->probes)) ||
         mcp_py_set(d, "time_ms",
                    Py_BuildValue("{s:d,s:d,s:d,s:d,s:d,s:d}", "denoise_and_jvp",

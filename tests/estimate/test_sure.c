@@ -343,7 +343,8 @@ test_maps_in_the_probes_images(void **state)
                                  (const mcp_image *const *)jvps, k, &o, &copied),
                              0);
             assert_int_equal(
-                mcp__error_maps_from_own_probes(d, &f, probes, jvps, k, &o, &owned), 0);
+                mcp__error_maps_from_own_probes(d, &f, probes, jvps, k, &o, NULL, &owned),
+                0);
             const mcp_image *a[] = {copied.denoised,   copied.sure,    copied.sure_rel,
                                     copied.var,        copied.var_rel, copied.sigma_rel,
                                     copied.denominator};
@@ -388,7 +389,7 @@ test_maps_in_the_probes_images(void **state)
                                                 &copied),
                      0);
     assert_int_equal(
-        mcp__error_maps_from_own_probes(d, &f, probes, jvps, 2, NULL, &owned), 0);
+        mcp__error_maps_from_own_probes(d, &f, probes, jvps, 2, NULL, NULL, &owned), 0);
     assert_ptr_equal(probes[0], p0.color);
     assert_ptr_equal(jvps[0], p0.color);
     assert_null(probes[1]);
@@ -770,6 +771,102 @@ test_box_muller_functions(void **state)
     mcp_dump_free(d);
 }
 
+/* ---- the probes' variance floor (probe_floor.c) ---- */
+
+/* A variance of 1 + c everywhere but a lone firefly (100) at (5, 5) and a quiet pixel
+ * (0.01) at (20, 12), with a covariance of correlation 0.8 between every channel pair:
+ * with radius 1 the quiet pixel is raised to its window's median, 1 + c, the firefly
+ * keeps its own value and none of its neighbours takes any of it (a window mean would
+ * have given them 11.9 + c), every other value is unchanged, and the correlations stay
+ * 0.8. Radius 0 copies; the automatic radius is the denoiser's (1 for the U-Net). */
+static void
+test_probe_floor(void **state)
+{
+    (void)state;
+    static const char *const cov_names[] = {"RG", "RB", "GB"};
+    static const int pair[3][2] = {{0, 1}, {0, 2}, {1, 2}};
+    mcp_dump d = {0};
+    d.color = mcp_test_rgb(W, H);
+    d.var_of_mean = mcp_test_rgb(W, H);
+    assert_int_equal(mcp_image_new(W, H, 3, cov_names, &d.cov_of_mean), 0);
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            float *v = mcp_image_px(d.var_of_mean, x, y);
+            for (int c = 0; c < 3; c++)
+                v[c] = x == 5 && y == 5 ? 100.0f : x == 20 && y == 12 ? 0.01f : 1.0f + c;
+            for (int k = 0; k < 3; k++)
+                mcp_image_px(d.cov_of_mean, x, y)[k] =
+                    (float)(0.8 * sqrt((double)v[pair[k][0]] * v[pair[k][1]]));
+        }
+    mcp_image *var = NULL, *cov = NULL;
+    assert_int_equal(mcp__probe_variance_floor(&d, 1, &var, &cov), 0);
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++) {
+            const float *v = mcp_image_px(var, x, y), *cv = mcp_image_px(cov, x, y);
+            for (int c = 0; c < 3; c++) {
+                const float want = x == 5 && y == 5 ? 100.0f : 1.0f + c;
+                assert_float_equal(v[c], want, 0.0);
+            }
+            for (int k = 0; k < 3; k++) {
+                const double corr = cv[k] / sqrt((double)v[pair[k][0]] * v[pair[k][1]]);
+                assert_float_equal(corr, 0.8, 1e-6);
+            }
+        }
+    mcp_image_free(var);
+    mcp_image_free(cov);
+    /* radius 0: the dump's own values */
+    assert_int_equal(mcp__probe_variance_floor(&d, 0, &var, &cov), 0);
+    assert_memory_equal(var->data, d.var_of_mean->data, sizeof(float) * 3 * W * H);
+    mcp_image_free(var);
+    mcp_image_free(cov);
+    assert_int_not_equal(
+        mcp__probe_variance_floor(&d, MCP__PROBE_FLOOR_MAX + 1, &var, &cov), 0);
+    assert_null(var);
+    /* random values, radius 1 (its column-sorted fast path) and 2: every value the
+       larger of its own and the median of its clipped window, sorted here */
+    uint64_t rng = 99;
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++)
+            for (int c = 0; c < 3; c++)
+                mcp_image_px(d.var_of_mean, x, y)[c] =
+                    (float)exp(2.0 * mcp_test_rand_normal(&rng));
+    for (int radius = 1; radius <= 2; radius++) {
+        assert_int_equal(mcp__probe_variance_floor(&d, radius, &var, NULL), 0);
+        for (int y = 0; y < H; y++)
+            for (int x = 0; x < W; x++)
+                for (int c = 0; c < 3; c++) {
+                    float window[25];
+                    int n = 0;
+                    for (int yy = y - radius; yy <= y + radius; yy++)
+                        for (int xx = x - radius; xx <= x + radius; xx++)
+                            if (xx >= 0 && yy >= 0 && xx < W && yy < H)
+                                window[n++] = mcp_image_px(d.var_of_mean, xx, yy)[c];
+                    for (int i = 0; i < n; i++) /* selection sort */
+                        for (int j = i + 1; j < n; j++)
+                            if (window[j] < window[i]) {
+                                float t = window[i];
+                                window[i] = window[j], window[j] = t;
+                            }
+                    const float own = mcp_image_px(d.var_of_mean, x, y)[c],
+                                want = own > window[n / 2] ? own : window[n / 2];
+                    assert_float_equal(mcp_image_px(var, x, y)[c], want, 0.0);
+                }
+        mcp_image_free(var);
+    }
+    /* the automatic radius */
+    mcp_denoiser *den = NULL;
+    assert_int_equal(mcp_denoiser_create_from_args("nlm", NULL, 0, &den), 0);
+    assert_int_equal(mcp_estimate_auto_probe_floor(&d, den), 0);
+    mcp_denoiser_free(den);
+    if (mcp_denoiser_create_from_args("unet", NULL, 0, &den) == 0) {
+        assert_int_equal(mcp_estimate_auto_probe_floor(&d, den), 1);
+        mcp_denoiser_free(den);
+    }
+    mcp_image_free(d.color);
+    mcp_image_free(d.var_of_mean);
+    mcp_image_free(d.cov_of_mean);
+}
+
 /* ---- the built-in bilateral denoiser (non-linear), when it exists ---- */
 
 static void
@@ -879,6 +976,7 @@ main(void)
         cmocka_unit_test(test_probes_do_not_depend_on_threads),
         cmocka_unit_test(test_box_muller_functions),
         cmocka_unit_test(test_unbiased_bilateral),
+        cmocka_unit_test(test_probe_floor),
         cmocka_unit_test(test_errors),
     };
     return cmocka_run_group_tests_name("estimate/sure", tests, NULL, NULL);
