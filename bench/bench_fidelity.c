@@ -40,10 +40,10 @@
  *                              [--no-blend | --blend-only] [--curves]
  *
  * Scenes: any folder of --fixtures with that layout, by name. The default list is
- * cornell,texture,interior; `window` (sun and sky through a window, glossy floor, glass)
- * and `lamp` (a room lit by a shaded lamp off its ceiling; heavy-tailed noise) are held
- * out for checking tuned defaults and run only when named, e.g. --scenes window,lamp or
- * --scenes cornell,texture,interior,window,lamp.
+ * cornell,texture,interior; `window` (sun and sky through a window, glossy floor, glass),
+ * `lamp` (a room lit by a shaded lamp off its ceiling; heavy-tailed noise) and `corridor`
+ * (shielded ceiling lights, glossy floor, brick walls) are held out for checking tuned
+ * defaults and run only when named, e.g. --scenes window,lamp,corridor.
  *
  * It prints figures; it is not a timed test. Run it from the repository root (the
  * defaults are relative to it). */
