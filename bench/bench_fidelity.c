@@ -41,9 +41,10 @@
  *
  * Scenes: any folder of --fixtures with that layout, by name. The default list is
  * cornell,texture,interior; `window` (sun and sky through a window, glossy floor, glass),
- * `lamp` (a room lit by a shaded lamp off its ceiling; heavy-tailed noise) and `corridor`
- * (shielded ceiling lights, glossy floor, brick walls) are held out for checking tuned
- * defaults and run only when named, e.g. --scenes window,lamp,corridor.
+ * `lamp` (a room lit by a shaded lamp off its ceiling; heavy-tailed noise), `corridor`
+ * (shielded ceiling lights, glossy floor, brick walls) and `fog` (a room filled with fog,
+ * sun shafts through a slatted window, glass) are held out for checking tuned defaults
+ * and run only when named, e.g. --scenes window,lamp,corridor,fog.
  *
  * It prints figures; it is not a timed test. Run it from the repository root (the
  * defaults are relative to it). */
@@ -527,6 +528,17 @@ run_blend(const run_settings *rs, const mcp_series *series, const mcp_denoiser *
            oracle_sum / br->count, final,
            last[MCP_BLEND_DENOISED].mse / last[MCP_BLEND_NOISY].mse, js_near, js_worst,
            last[MCP_BLEND_JAMES_STEIN].mse / last[MCP_BLEND_NOISY].mse);
+    if (rs->curves) { /* per member: the James-Stein blend, noisy and denoised MSE */
+        printf("|  | spp: James-Stein / min, noisy / min, denoised / min:");
+        for (int i = 0; i < br->count; i++) {
+            const mcp_blend_errors *e = br->rows[i].err;
+            double lo = fmin(e[MCP_BLEND_NOISY].mse, e[MCP_BLEND_DENOISED].mse);
+            printf(" %g: %.3f, %.2f, %.2f;", br->rows[i].spp,
+                   e[MCP_BLEND_JAMES_STEIN].mse / lo, e[MCP_BLEND_NOISY].mse / lo,
+                   e[MCP_BLEND_DENOISED].mse / lo);
+        }
+        printf(" | | |\n");
+    }
     mcp_blend_series_result_free(br);
     free(oc.oracle_mse);
 }
