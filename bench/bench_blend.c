@@ -159,8 +159,8 @@ run_js(void *p)
 {
     ctx *c = p;
     mcp_image *out = NULL;
-    if (mcp_blend_james_stein(c->in.noisy, c->in.denoised, c->in.var_of_mean, 7, &out,
-                              NULL))
+    if (mcp_blend_james_stein(c->in.noisy, c->in.denoised, c->in.var_of_mean,
+                              mcp_blend_defaults().js_window, &out, NULL))
         return -1;
     mcp_image_free(out);
     return 0;
@@ -207,7 +207,7 @@ main(int argc, char **argv)
                 {"weights from a curve image", run_weights},
                 {"blend r = (I n + W d) / (I + W)", run_mix},
                 {"easy blending", run_easy},
-                {"James-Stein combiner (7x7)", run_js}};
+                {"James-Stein combiner (15x15)", run_js}};
     double wall, cpu, step_ms = NAN;
     int rc = median_ms(run_step, &c, repeats, &wall, &cpu);
     if (rc == 0)

@@ -11,8 +11,8 @@
  * derivative is left out): J t = ρ ⊙ (J_d t) + (1 − ρ) ⊙ t. SURE therefore treats
  * ρ as a constant of F, like the variance nlm reads.
  *
- * Settings: inner (the denoiser's name) [unet], window [7] (odd), and any other key,
- * which goes to the inner denoiser: {name: james-stein, inner: unet, weights: W.tza}
+ * Settings: inner (the denoiser's name) [unet], window [15: the blend's js_window] (odd),
+ * and any other key, which goes to the inner denoiser: {name: james-stein, inner: unet, weights: W.tza}
  * or --denoiser james-stein --weights W.tza. */
 #include <mcpost/blend.h>
 #include <mcpost/denoiser.h>
@@ -160,7 +160,7 @@ static int
 js_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
 {
     *out = NULL;
-    int window = 7;
+    int window = mcp_blend_defaults().js_window;
     if (settings->kind == MCP_NODE_MAP && mcp_node_opt_int(settings, "window", &window))
         return -1;
     if (window < 1 || window % 2 == 0 || window > 255)
@@ -199,7 +199,7 @@ static const char *const js_keys[] = {
 const mcp_denoiser_kind mcp__denoiser_james_stein = {
     "james-stein",
     "another denoiser (inner [unet]) followed by the James-Stein post-correction "
-    "(window [7]); the JVP holds the combiner's weights constant; other keys go to "
+    "(window [15]); the JVP holds the combiner's weights constant; other keys go to "
     "the inner denoiser",
     js_keys,
     js_create,

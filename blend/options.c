@@ -21,7 +21,7 @@ mcp_blend_defaults(void)
     o.denoiser_keeps_zeros = 0;
     o.max_weight = 0;
     o.powerlaw_offset = 100;
-    o.js_window = 7;
+    o.js_window = 15;
     o.safeguard = 1;
     o.weights = MCP_BLEND_WEIGHTS_JAMES_STEIN;
     return o;

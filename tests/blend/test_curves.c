@@ -243,7 +243,7 @@ test_options(void **state)
     mcp_blend_options o = mcp_blend_defaults();
     assert_int_equal(mcp_blend_options_check(&o), 0);
     assert_true(o.far_spp == 1e6 && o.filter_window == 11 &&
-                o.filter_sigma_scale == 100 && o.js_window == 7 &&
+                o.filter_sigma_scale == 100 && o.js_window == 15 &&
                 o.fit == MCP_CURVE_FIT_ON_THE_FLY && o.curve == MCP_CURVE_LOG);
     o.filter_window = 10;
     assert_error_contains(mcp_blend_options_check(&o), "filter_window must be odd");

@@ -183,9 +183,9 @@ test_good_denoiser_keeps_its_weight(void **state)
     }
     print_message("perfect denoiser: blend/noisy %.4f, pulled back %.2f\n",
                   guarded / noisy, pulled_sum / 8);
-    /* a pulled-back value keeps (1 - rho)^2 of its noise, rho >= 47/67 or so at
-     * chi-square_49's 99th percentile */
-    assert_true(guarded <= 0.03 * noisy);
+    /* a pulled-back value keeps (1 - rho)^2 of its noise: over the default 15 x 15
+     * window 0.0047 of it on average (test_post_correction.c, the closed form) */
+    assert_true(guarded <= 0.008 * noisy);
     mcp_image_free(mu);
 }
 
@@ -211,7 +211,7 @@ test_option(void **state)
     mcp_image *mu = texture_truth(), *n = noisy_of(mu, 1e-2, 7), *d = box3(n);
     mcp_image *v = rgb_constant(W, H, 1e-2f), *sure = rgb_constant(W, H, 1e-3f);
     mcp_image *js = NULL, *rho = NULL;
-    assert_int_equal(mcp_blend_james_stein(n, d, v, 7, &js, &rho), 0);
+    assert_int_equal(mcp_blend_james_stein(n, d, v, o.js_window, &js, &rho), 0);
     mcp_blend_input in = {n, v, 64, d, sure, NULL};
     mcp_blend_result r;
     assert_int_equal(mcp_blend_step(&in, NULL, NULL, NULL, &r), 0);

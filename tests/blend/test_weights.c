@@ -335,7 +335,7 @@ proc_series_free(proc_series *ps)
 }
 
 /* The MSE of the curve blend of point i with the given curves, with the safeguard
- * (the James-Stein cap over 7x7) or without. */
+ * (the James-Stein cap over the default window) or without. */
 static double
 curve_mse(const proc_series *ps, int i, const mcp_image *curves, int safeguard)
 {
