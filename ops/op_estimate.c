@@ -136,7 +136,7 @@ static const mcp_option estimate_options[] = {
      .meta = "R|auto",
      .def = "auto",
      .doc = "raise the probes' variance to its median over (2R+1)^2 pixels where below "
-            "it; auto: 1 for unet, else 0",
+            "it (a variance of 0 stays 0); auto: 1 for unet, else 0",
      .lo = 0,
      .hi = 16,
      .bounds = MCP_OPT_LO | MCP_OPT_HI,

@@ -773,9 +773,10 @@ test_box_muller_functions(void **state)
 
 /* ---- the probes' variance floor (probe_floor.c) ---- */
 
-/* A variance of 1 + c everywhere but a lone firefly (100) at (5, 5) and a quiet pixel
- * (0.01) at (20, 12), with a covariance of correlation 0.8 between every channel pair:
- * with radius 1 the quiet pixel is raised to its window's median, 1 + c, the firefly
+/* A variance of 1 + c everywhere but a lone firefly (100) at (5, 5), a quiet pixel
+ * (0.01) at (20, 12) and a black one (0: every sample equal) at (8, 20), with a
+ * covariance of correlation 0.8 between every channel pair: with radius 1 the quiet
+ * pixel is raised to its window's median, 1 + c, the black one keeps its 0, the firefly
  * keeps its own value and none of its neighbours takes any of it (a window mean would
  * have given them 11.9 + c), every other value is unchanged, and the correlations stay
  * 0.8. Radius 0 copies; the automatic radius is the denoiser's (1 for the U-Net). */
@@ -793,7 +794,10 @@ test_probe_floor(void **state)
         for (int x = 0; x < W; x++) {
             float *v = mcp_image_px(d.var_of_mean, x, y);
             for (int c = 0; c < 3; c++)
-                v[c] = x == 5 && y == 5 ? 100.0f : x == 20 && y == 12 ? 0.01f : 1.0f + c;
+                v[c] = x == 5 && y == 5     ? 100.0f
+                       : x == 20 && y == 12 ? 0.01f
+                       : x == 8 && y == 20  ? 0.0f
+                                            : 1.0f + c;
             for (int k = 0; k < 3; k++)
                 mcp_image_px(d.cov_of_mean, x, y)[k] =
                     (float)(0.8 * sqrt((double)v[pair[k][0]] * v[pair[k][1]]));
@@ -804,10 +808,12 @@ test_probe_floor(void **state)
         for (int x = 0; x < W; x++) {
             const float *v = mcp_image_px(var, x, y), *cv = mcp_image_px(cov, x, y);
             for (int c = 0; c < 3; c++) {
-                const float want = x == 5 && y == 5 ? 100.0f : 1.0f + c;
+                const float want = x == 5 && y == 5    ? 100.0f
+                                   : x == 8 && y == 20 ? 0.0f
+                                                       : 1.0f + c;
                 assert_float_equal(v[c], want, 0.0);
             }
-            for (int k = 0; k < 3; k++) {
+            for (int k = 0; k < 3 && !(x == 8 && y == 20); k++) {
                 const double corr = cv[k] / sqrt((double)v[pair[k][0]] * v[pair[k][1]]);
                 assert_float_equal(corr, 0.8, 1e-6);
             }
@@ -822,14 +828,17 @@ test_probe_floor(void **state)
     assert_int_not_equal(
         mcp__probe_variance_floor(&d, MCP__PROBE_FLOOR_MAX + 1, &var, &cov), 0);
     assert_null(var);
-    /* random values, radius 1 (its column-sorted fast path) and 2: every value the
-       larger of its own and the median of its clipped window, sorted here */
+    /* random values, one in ten 0, radius 1 (its column-sorted fast path) and 2: every
+       nonzero value the larger of its own and the median of its clipped window, sorted
+       here */
     uint64_t rng = 99;
     for (int y = 0; y < H; y++)
         for (int x = 0; x < W; x++)
             for (int c = 0; c < 3; c++)
                 mcp_image_px(d.var_of_mean, x, y)[c] =
-                    (float)exp(2.0 * mcp_test_rand_normal(&rng));
+                    (x * 7 + y * 3 + c) % 10 == 0
+                        ? 0.0f
+                        : (float)exp(2.0 * mcp_test_rand_normal(&rng));
     for (int radius = 1; radius <= 2; radius++) {
         assert_int_equal(mcp__probe_variance_floor(&d, radius, &var, NULL), 0);
         for (int y = 0; y < H; y++)
@@ -848,7 +857,8 @@ test_probe_floor(void **state)
                                 window[i] = window[j], window[j] = t;
                             }
                     const float own = mcp_image_px(d.var_of_mean, x, y)[c],
-                                want = own > window[n / 2] ? own : window[n / 2];
+                                want = own == 0.0f || own > window[n / 2] ? own
+                                                                          : window[n / 2];
                     assert_float_equal(mcp_image_px(var, x, y)[c], want, 0.0);
                 }
         mcp_image_free(var);
