@@ -42,9 +42,11 @@
  * Scenes: any folder of --fixtures with that layout, by name. The default list is
  * cornell,texture,interior; `window` (sun and sky through a window, glossy floor, glass),
  * `lamp` (a room lit by a shaded lamp off its ceiling; heavy-tailed noise), `corridor`
- * (shielded ceiling lights, glossy floor, brick walls) and `fog` (a room filled with fog,
- * sun shafts through a slatted window, glass) are held out for checking tuned defaults
- * and run only when named, e.g. --scenes window,lamp,corridor,fog.
+ * (shielded ceiling lights, glossy floor, brick walls), `fog` (a room filled with fog,
+ * sun shafts through a slatted window, glass) and `courtyard` (an open courtyard at dusk:
+ * a sky and a low sun, brick walls, steel bollards, a pool of water) are held out for
+ * checking tuned defaults and run only when named, e.g.
+ * --scenes window,lamp,corridor,fog,courtyard.
  *
  * It prints figures; it is not a timed test. Run it from the repository root (the
  * defaults are relative to it). */

@@ -29,7 +29,8 @@ replicate 0's blocks B, that the single-sample calls average to the
 samples=block_spp call.
 
 The scene builders of cornell and texture are render_dumps.py's, unchanged;
-'interior', 'window', 'lamp', 'corridor' and 'fog' are built here.
+'interior', 'window', 'lamp', 'corridor', 'fog' and 'courtyard' are built
+here.
 """
 
 import argparse
@@ -39,6 +40,7 @@ import sys
 import tempfile
 import time
 
+import bmesh
 import bpy
 import mathutils
 import numpy as np
@@ -418,9 +420,167 @@ def build_fog():
     rdm._camera((0.3, -2.7, 1.25), (np.radians(78), 0, np.radians(8)), 62.0)
     rdm._world(1.5, (0.5, 0.62, 0.85))
 
+
+def _sky_gradient(strength, horizon, zenith):
+    """World: a sky whose colour runs linearly from `horizon` (at and below
+    the horizon) to `zenith` (straight up) with the sine of the elevation
+    (the Z of the ray's direction, which Cycles gives the world as its
+    Generated coordinate)."""
+    w = bpy.data.worlds.get('World') or bpy.data.worlds.new('World')
+    bpy.context.scene.world = w
+    w.use_nodes = True
+    nt = w.node_tree
+    bg = nt.nodes['Background']
+    tc = nt.nodes.new('ShaderNodeTexCoord')
+    sep = nt.nodes.new('ShaderNodeSeparateXYZ')
+    ramp = nt.nodes.new('ShaderNodeValToRGB')
+    ramp.color_ramp.elements[0].position = 0.0
+    ramp.color_ramp.elements[0].color = (*horizon, 1.0)
+    ramp.color_ramp.elements[1].position = 1.0
+    ramp.color_ramp.elements[1].color = (*zenith, 1.0)
+    nt.links.new(tc.outputs['Generated'], sep.inputs['Vector'])
+    nt.links.new(sep.outputs['Z'], ramp.inputs['Fac'])
+    nt.links.new(ramp.outputs['Color'], bg.inputs['Color'])
+    bg.inputs['Strength'].default_value = strength
+    # a non-constant world gets an importance map, rebuilt at every render
+    # call: Blender's automatic choice (1024 wide) took 1.6 s a call; the
+    # gradient is smooth, so a map 64 wide does as well
+    w.cycles.sampling_method = 'MANUAL'
+    w.cycles.sample_map_resolution = 64
+
+
+def _bollard(name, r, h, xy, mat, segments=48, dome_rings=12):
+    """A bollard standing on z = 0 at xy: a cylinder of radius r under a
+    hemisphere from height h, one closed smooth-shaded mesh. (A cylinder with
+    a separate sphere on top overlapped it near the seam, and which of the
+    two a ray hit there changed from one render call to the next.)"""
+    bm = bmesh.new()
+    rings = [(r, 0.0), (r, h)]
+    for k in range(1, dome_rings):
+        a = np.pi / 2 * k / dome_rings
+        rings.append((r * np.cos(a), h + r * np.sin(a)))
+    verts = []
+    for rad, z in rings:
+        verts.append([bm.verts.new((xy[0] + rad * np.cos(2 * np.pi * j / segments),
+                                    xy[1] + rad * np.sin(2 * np.pi * j / segments), z))
+                      for j in range(segments)])
+    apex = bm.verts.new((xy[0], xy[1], h + r))
+    for lo, hi in zip(verts[:-1], verts[1:]):
+        for j in range(segments):
+            jn = (j + 1) % segments
+            bm.faces.new((lo[j], lo[jn], hi[jn], hi[j]))
+    for j in range(segments):
+        bm.faces.new((verts[-1][j], verts[-1][(j + 1) % segments], apex))
+    bm.faces.new(list(reversed(verts[0])))      # the bottom, facing down
+    me = bpy.data.meshes.new(name)
+    bm.to_mesh(me)
+    bm.free()
+    for f in me.polygons:
+        f.use_smooth = True
+    me.use_auto_smooth = True                   # smooth side and dome, sharp bottom edge
+    me.materials.append(mat)
+    ob = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+def build_courtyard():
+    """A small courtyard open to the sky at dusk, seen from slightly above
+    through its open front. Brick walls on three sides, a paved floor (a
+    checker of stone slabs); the light is a bluish gradient sky and a low,
+    warm sun that leaves all of the courtyard in shadow but the top of the
+    right wall. A wooden planter box with a bump-mapped, displaced green
+    shrub, two shiny steel bollards and a raised pool of water (sharp
+    glass surface, IOR 1.33, over a dark basin), all out of the direct sun
+    (no sun caustics through the water, no sun reflected off the steel)."""
+    # courtyard x in [x0, x1], y in [y0, y1], walls of height H and thickness
+    # t outside it on the left, back and right; open at the front (y0)
+    x0, x1, y0, y1, H, t = -2.5, 2.5, -2.0, 3.5, 3.2, 0.3
+    # the ground: one slab far beyond the walls (no ray sees the world below
+    # the horizon), paved with a checker of 1/3 m slabs, object coordinates
+    # in metres
+    paving = rdm._checker(3.0, (0.5, 0.48, 0.44), (0.36, 0.35, 0.33))
+    ground = _slab('ground', (-12.0, -16.0, -0.05), (12.0, 12.0, 0.0),
+                   rdm._textured('ground', paving))
+    ground.data.transform(mathutils.Matrix.Diagonal((*ground.scale, 1.0)))
+    ground.scale = (1.0, 1.0, 1.0)
+    wall = rdm._diffuse('wall', (0.5, 0.38, 0.3))
+    _slab('left', (x0 - t, y0, 0.0), (x0, y1 + t, H), wall)
+    _slab('right', (x1, y0, 0.0), (x1 + t, y1 + t, H), wall)
+    _slab('back', (x0 - t, y1, 0.0), (x1 + t, y1 + t, H), wall)
+    # brick on the three inner faces, 2 mm in front of them (object
+    # coordinates: metres along the wall, up)
+    brick = rdm._textured('brick', rdm._brick(3.0, (0.55, 0.3, 0.2), (0.45, 0.38, 0.3),
+                                              (0.8, 0.78, 0.72), 0.05), 0.3)
+    _wall_plane('brick_l', x0 + 0.002, y0, y1, 0.0, H, 1, brick)
+    _wall_plane('brick_r', x1 - 0.002, y0, y1, 0.0, H, -1, brick)
+    ob = rdm._plane('brick_b', 1.0, ((x0 + x1) / 2, y1 - 0.002, H / 2), (np.pi / 2, 0, 0), brick)
+    ob.data.transform(mathutils.Matrix.Diagonal((x1 - x0, H, 1.0, 1.0)))
+
+    # a wooden planter box at the front left, soil inset in its top, and a
+    # shrub: an icosphere displaced by a clouds texture, with a bump-mapped
+    # noise of two greens
+    px0, px1, py0, py1, ph = -2.3, -1.3, -0.2, 0.5, 0.55
+    _slab('planter', (px0, py0, 0.0), (px1, py1, ph), rdm._diffuse('planter', (0.42, 0.27, 0.15)))
+    _slab('soil', (px0 + 0.05, py0 + 0.05, ph - 0.05), (px1 - 0.05, py1 - 0.05, ph + 0.005),
+          rdm._diffuse('soil', (0.12, 0.08, 0.05)))
+    bpy.ops.mesh.primitive_ico_sphere_add(subdivisions=5, radius=0.4,
+                                          location=((px0 + px1) / 2, (py0 + py1) / 2, ph + 0.32))
+    shrub = bpy.context.active_object
+    shrub.name = 'shrub'
+    shrub.scale = (1.0, 0.85, 0.85)
+    tex = bpy.data.textures.new('shrub', 'CLOUDS')
+    tex.noise_scale = 0.18
+    tex.noise_depth = 2
+    mod = shrub.modifiers.new('displace', 'DISPLACE')
+    mod.texture = tex
+    mod.texture_coords = 'LOCAL'
+    mod.strength = 0.18
+    mod.mid_level = 0.5
+    bpy.ops.object.shade_smooth()
+    shrub.data.materials.append(
+        rdm._textured('shrub', rdm._noise_ramp(9.0, (0.04, 0.14, 0.03), (0.2, 0.4, 0.08)), 1.0))
+
+    # two shiny steel bollards at the front right
+    steel = rdm._glossy('steel', (0.8, 0.8, 0.82), 0.12)
+    for i, (bx, by) in enumerate(((0.9, -1.3), (1.8, -1.3))):
+        _bollard('bollard%d' % i, 0.09, 0.75, (bx, by), steel)
+
+    # a raised pool at the back right: a stone curb, a dark basin (inside the
+    # curb, reaching 1 cm into it: no face of it lies on a face of the curb)
+    # and a water surface (a plane of sharp glass, IOR 1.33) 5 cm below the
+    # rim, reaching 1 cm into the curb
+    qx0, qx1, qy0, qy1, qh, c = 0.2, 2.0, 0.5, 1.9, 0.35, 0.12
+    stone = rdm._diffuse('curb', (0.62, 0.6, 0.56))
+    _slab('curb_f', (qx0, qy0, 0.0), (qx1, qy0 + c, qh), stone)
+    _slab('curb_b', (qx0, qy1 - c, 0.0), (qx1, qy1, qh), stone)
+    _slab('curb_l', (qx0, qy0, 0.0), (qx0 + c, qy1, qh), stone)
+    _slab('curb_r', (qx1 - c, qy0, 0.0), (qx1, qy1, qh), stone)
+    _slab('basin', (qx0 + c - 0.01, qy0 + c - 0.01, 0.0), (qx1 - c + 0.01, qy1 - c + 0.01, 0.04),
+          rdm._diffuse('basin', (0.04, 0.06, 0.06)))
+    water = rdm._plane('water', 1.0, ((qx0 + qx1) / 2, (qy0 + qy1) / 2, qh - 0.05), (0, 0, 0),
+                       rdm._glass('water', 1.33))
+    water.data.transform(mathutils.Matrix.Diagonal((qx1 - qx0 - 2 * c + 0.02,
+                                                    qy1 - qy0 - 2 * c + 0.02, 1.0, 1.0)))
+
+    # a low warm sun from the back left and the sky
+    sc = bpy.context.scene
+    sun_d = bpy.data.lights.new('sun', 'SUN')
+    sun_d.energy = 5.0
+    sun_d.angle = np.radians(1.0)
+    sun_d.color = (1.0, 0.62, 0.36)
+    sun = bpy.data.objects.new('sun', sun_d)
+    el, az = np.radians(9.0), np.radians(25.0)
+    d = mathutils.Vector((np.cos(el) * np.cos(az), -np.cos(el) * np.sin(az),
+                          -np.sin(el)))    # direction of travel
+    sun.rotation_euler = (-d).to_track_quat('Z', 'Y').to_euler()
+    sc.collection.objects.link(sun)
+    rdm._camera((-0.5, -4.6, 2.7), (np.radians(73), 0, np.radians(-8)), 60.0)
+    _sky_gradient(1.5, (0.52, 0.58, 0.75), (0.2, 0.33, 0.75))
+
 SCENES = {'cornell': rdm.build_cornell, 'texture': rdm.build_texture,
           'interior': build_interior, 'window': build_window, 'lamp': build_lamp,
-          'corridor': build_corridor, 'fog': build_fog}
+          'corridor': build_corridor, 'fog': build_fog, 'courtyard': build_courtyard}
 
 
 def replicate_seed(stream, r):
