@@ -59,8 +59,9 @@ def _clear_scene():
             coll.remove(block)
 
 
-def _material(name, build):
-    """New node material; build(nodes, links) returns the BSDF socket."""
+def _material(name, build, output='Surface'):
+    """New node material; build(nodes, links) returns the shader socket
+    that goes to the output's `output` input (Surface, or Volume)."""
     mat = bpy.data.materials.new(name)
     mat.use_nodes = True
     nt = mat.node_tree
@@ -68,7 +69,7 @@ def _material(name, build):
         nt.nodes.remove(n)
     out = nt.nodes.new('ShaderNodeOutputMaterial')
     sock = build(nt.nodes, nt.links)
-    nt.links.new(sock, out.inputs['Surface'])
+    nt.links.new(sock, out.inputs[output])
     return mat
 
 

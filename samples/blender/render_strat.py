@@ -96,6 +96,27 @@ def _slab(name, lo, hi, mat):
     return ob
 
 
+def _room_with_opening(box, e, floor_mat, wall, back, opening):
+    """A closed room of thin boxes that overlap at the edges by e, so that no
+    ray leaks through a seam: box = (x0, x1, y0, y1, z0, z1) inside, the
+    floor, the ceiling and the front and right walls of `wall`, the back
+    wall of `back`, and the left wall (x = x0) around an opening
+    (wy0, wy1, wz0, wz1) in y and z. Returns the floor."""
+    x0, x1, y0, y1, z0, z1 = box
+    floor = _slab('floor', (x0 - e, y0 - e, z0 - e), (x1 + e, y1 + e, z0), floor_mat)
+    _slab('ceiling', (x0 - e, y0 - e, z1), (x1 + e, y1 + e, z1 + e), wall)
+    _slab('back', (x0 - e, y1, z0 - e), (x1 + e, y1 + e, z1 + e), back)
+    _slab('front', (x0 - e, y0 - e, z0 - e), (x1 + e, y0, z1 + e), wall)
+    _slab('right', (x1, y0 - e, z0 - e), (x1 + e, y1 + e, z1 + e), wall)
+    wy0, wy1, wz0, wz1 = opening
+    L = (x0 - e, x0)
+    _slab('left_below', (L[0], y0 - e, z0 - e), (L[1], y1 + e, wz0), wall)
+    _slab('left_above', (L[0], y0 - e, wz1), (L[1], y1 + e, z1 + e), wall)
+    _slab('left_front', (L[0], y0 - e, wz0), (L[1], wy0, wz1), wall)
+    _slab('left_back', (L[0], wy1, wz0), (L[1], y1 + e, wz1), wall)
+    return floor
+
+
 def build_window():
     """A closed room lit only through a window opening in its left wall: a
     sun lamp (5 degrees wide) and a constant blue sky (the world) outside,
@@ -109,23 +130,14 @@ def build_window():
     views of the patch and the sky add noise."""
     white = rdm._diffuse('wall', (0.75, 0.74, 0.7))
     back = rdm._diffuse('back', (0.55, 0.62, 0.7))
-    # room x in [-1, 1], y in [-2, 1], z in [0, 2]; planes overlap at the
-    # edges by e so that no ray leaks through a seam
+    # room x in [-1, 1], y in [-2, 1], z in [0, 2]; the opening in the left
+    # wall y in [wy0, wy1], z in [wz0, wz1]
     e = 0.02
     x0, x1, y0, y1, z0, z1 = -1.0, 1.0, -2.0, 1.0, 0.0, 2.0
-    floor = _principled('floor', (0.45, 0.3, 0.18), 0.3)
-    _slab('floor', (x0 - e, y0 - e, z0 - e), (x1 + e, y1 + e, z0), floor)
-    _slab('ceiling', (x0 - e, y0 - e, z1), (x1 + e, y1 + e, z1 + e), white)
-    _slab('back', (x0 - e, y1, z0 - e), (x1 + e, y1 + e, z1 + e), back)
-    _slab('front', (x0 - e, y0 - e, z0 - e), (x1 + e, y0, z1 + e), white)
-    _slab('right', (x1, y0 - e, z0 - e), (x1 + e, y1 + e, z1 + e), white)
-    # left wall with the opening y in [wy0, wy1], z in [wz0, wz1]
     wy0, wy1, wz0, wz1 = -0.6, 0.6, 0.75, 1.65
-    L = (x0 - e, x0)
-    _slab('left_below', (L[0], y0 - e, z0 - e), (L[1], y1 + e, wz0), white)
-    _slab('left_above', (L[0], y0 - e, wz1), (L[1], y1 + e, z1 + e), white)
-    _slab('left_front', (L[0], y0 - e, wz0), (L[1], wy0, wz1), white)
-    _slab('left_back', (L[0], wy1, wz0), (L[1], y1 + e, wz1), white)
+    _room_with_opening((x0, x1, y0, y1, z0, z1), e,
+                       _principled('floor', (0.45, 0.3, 0.18), 0.3), white, back,
+                       (wy0, wy1, wz0, wz1))
     # a window cross (mullions) in the opening
     frame = rdm._diffuse('frame', (0.85, 0.85, 0.82))
     ym, zm = (wy0 + wy1) / 2, (wz0 + wz1) / 2
@@ -339,17 +351,13 @@ def build_corridor():
 def _fog_volume(name, density, anisotropy):
     """A material with only a homogeneous Volume Scatter (white: no
     absorption, extinction = scattering = density per metre)."""
-    mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
-    nt = mat.node_tree
-    for n in list(nt.nodes):
-        nt.nodes.remove(n)
-    out = nt.nodes.new('ShaderNodeOutputMaterial')
-    vs = nt.nodes.new('ShaderNodeVolumeScatter')
-    vs.inputs['Color'].default_value = (1.0, 1.0, 1.0, 1.0)
-    vs.inputs['Density'].default_value = density
-    vs.inputs['Anisotropy'].default_value = anisotropy
-    nt.links.new(vs.outputs['Volume'], out.inputs['Volume'])
+    def build(nodes, links):
+        vs = nodes.new('ShaderNodeVolumeScatter')
+        vs.inputs['Color'].default_value = (1.0, 1.0, 1.0, 1.0)
+        vs.inputs['Density'].default_value = density
+        vs.inputs['Anisotropy'].default_value = anisotropy
+        return vs.outputs['Volume']
+    mat = rdm._material(name, build, output='Volume')
     mat.cycles.homogeneous_volume = True
     return mat
 
@@ -366,27 +374,18 @@ def build_fog():
     the sky and the shafts' scattered light."""
     wall = rdm._diffuse('wall', (0.75, 0.74, 0.7))
     back = rdm._diffuse('back', (0.6, 0.55, 0.5))
-    # room x in [-1.2, 1.2], y in [-3, 1.3], z in [0, 2.2]; thin boxes that
-    # overlap at the edges so that no ray leaks through a seam
+    # room x in [-1.2, 1.2], y in [-3, 1.3], z in [0, 2.2]; the opening in the
+    # left wall y in [wy0, wy1], z in [wz0, wz1]
     e = 0.02
     x0, x1, y0, y1, z0, z1 = -1.2, 1.2, -3.0, 1.3, 0.0, 2.2
+    wy0, wy1, wz0, wz1 = -0.6, 0.6, 0.8, 2.0
     # floor with a checker of 1/10 m (object coordinates in metres)
     checker = rdm._checker(10.0, (0.7, 0.68, 0.62), (0.22, 0.2, 0.2))
-    floor = _slab('floor', (x0 - e, y0 - e, z0 - e), (x1 + e, y1 + e, z0),
-                  rdm._textured('floor', checker))
+    floor = _room_with_opening((x0, x1, y0, y1, z0, z1), e,
+                               rdm._textured('floor', checker), wall, back,
+                               (wy0, wy1, wz0, wz1))
     floor.data.transform(mathutils.Matrix.Diagonal((*floor.scale, 1.0)))
     floor.scale = (1.0, 1.0, 1.0)
-    _slab('ceiling', (x0 - e, y0 - e, z1), (x1 + e, y1 + e, z1 + e), wall)
-    _slab('back', (x0 - e, y1, z0 - e), (x1 + e, y1 + e, z1 + e), back)
-    _slab('front', (x0 - e, y0 - e, z0 - e), (x1 + e, y0, z1 + e), wall)
-    _slab('right', (x1, y0 - e, z0 - e), (x1 + e, y1 + e, z1 + e), wall)
-    # left wall with the opening y in [wy0, wy1], z in [wz0, wz1]
-    wy0, wy1, wz0, wz1 = -0.6, 0.6, 0.8, 2.0
-    L = (x0 - e, x0)
-    _slab('left_below', (L[0], y0 - e, z0 - e), (L[1], y1 + e, wz0), wall)
-    _slab('left_above', (L[0], y0 - e, wz1), (L[1], y1 + e, z1 + e), wall)
-    _slab('left_front', (L[0], y0 - e, wz0), (L[1], wy0, wz1), wall)
-    _slab('left_back', (L[0], wy1, wz0), (L[1], y1 + e, wz1), wall)
     # three horizontal slats across the opening, evenly spaced, 5 cm high and
     # 10 cm deep, flush with the wall's inner face
     slat = rdm._diffuse('slat', (0.8, 0.8, 0.78))
