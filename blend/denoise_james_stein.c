@@ -12,8 +12,8 @@
  * ρ as a constant of F, like the variance nlm reads.
  *
  * Settings: inner (the denoiser's name) [unet], window [15: the blend's js_window] (odd),
- * and any other key, which goes to the inner denoiser: {name: james-stein, inner: unet, weights: W.tza}
- * or --denoiser james-stein --weights W.tza. */
+ * and any other key, which goes to the inner denoiser: {name: james-stein, inner: unet,
+ * weights: W.tza} or --denoiser james-stein --weights W.tza. */
 #include <mcpost/blend.h>
 #include <mcpost/denoiser.h>
 #include <mcpost/yaml.h>
