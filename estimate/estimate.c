@@ -75,10 +75,13 @@ mcp_estimate_auto_s2_pool(const mcp_dump *dump, const mcp_denoiser *den)
 }
 
 int
-mcp_estimate_auto_probe_floor(const mcp_dump *dump, const mcp_denoiser *den)
+mcp_estimate_auto_probe_floor(const mcp_dump *dump, const mcp_denoiser *den,
+                              mcp_error_metric metric)
 {
     /* nlm and bilateral, nearly linear in the noise for fixed weights, stop later with
-       it and no earlier without it (docs/fidelity.md "The defaults") */
+       it and no earlier without it (docs/fidelity.md "The defaults"); relse-perceptual's
+       maps take no floor (mcp_estimate_check refuses one) */
+    if (metric == MCP_METRIC_RELSE_PERCEPTUAL) return 0;
     return running(dump, den)->estimate_probe_floor;
 }
 
@@ -281,9 +284,7 @@ mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,
     if (!den) return mcp_error("estimate: missing denoiser");
     if (o.sure.n_probes < 1) o.sure.n_probes = mcp_estimate_auto_probes(dump, den);
     if (o.probe_floor < 0)
-        o.probe_floor = o.sure.metric == MCP_METRIC_RELSE_PERCEPTUAL
-                            ? 0
-                            : mcp_estimate_auto_probe_floor(dump, den);
+        o.probe_floor = mcp_estimate_auto_probe_floor(dump, den, o.sure.metric);
     mcp_estimate *e = mcp_calloc(1, sizeof *e);
     if (!e) return -1;
     e->probe_floor = o.probe_floor;

@@ -343,8 +343,10 @@ MCP_API int mcp_estimate_auto_probes(const mcp_dump *dump, const mcp_denoiser *d
 MCP_API int mcp_estimate_auto_s2_pool(const mcp_dump *dump, const mcp_denoiser *den);
 
 /* The automatic probe floor: the running denoiser's estimate_probe_floor (the U-Net 1,
- * the others 0); docs/fidelity.md "The defaults" has the figures. */
-MCP_API int mcp_estimate_auto_probe_floor(const mcp_dump *dump, const mcp_denoiser *den);
+ * the others 0), and 0 for relse-perceptual, whose maps take none; docs/fidelity.md
+ * "The defaults" has the figures. */
+MCP_API int mcp_estimate_auto_probe_floor(const mcp_dump *dump, const mcp_denoiser *den,
+                                          mcp_error_metric metric);
 
 MCP_API mcp_estimate_options mcp_estimate_defaults(void);
 

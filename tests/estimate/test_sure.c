@@ -866,10 +866,13 @@ test_probe_floor(void **state)
     /* the automatic radius */
     mcp_denoiser *den = NULL;
     assert_int_equal(mcp_denoiser_create_from_args("nlm", NULL, 0, &den), 0);
-    assert_int_equal(mcp_estimate_auto_probe_floor(&d, den), 0);
+    assert_int_equal(mcp_estimate_auto_probe_floor(&d, den, MCP_METRIC_RELSE), 0);
     mcp_denoiser_free(den);
     if (mcp_denoiser_create_from_args("unet", NULL, 0, &den) == 0) {
-        assert_int_equal(mcp_estimate_auto_probe_floor(&d, den), 1);
+        assert_int_equal(mcp_estimate_auto_probe_floor(&d, den, MCP_METRIC_RELSE), 1);
+        assert_int_equal(mcp_estimate_auto_probe_floor(&d, den, MCP_METRIC_SE), 1);
+        assert_int_equal(
+            mcp_estimate_auto_probe_floor(&d, den, MCP_METRIC_RELSE_PERCEPTUAL), 0);
         mcp_denoiser_free(den);
     }
     mcp_image_free(d.color);
