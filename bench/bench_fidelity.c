@@ -43,10 +43,12 @@
  * cornell,texture,interior; `window` (sun and sky through a window, glossy floor, glass),
  * `lamp` (a room lit by a shaded lamp off its ceiling; heavy-tailed noise), `corridor`
  * (shielded ceiling lights, glossy floor, brick walls), `fog` (a room filled with fog,
- * sun shafts through a slatted window, glass) and `courtyard` (an open courtyard at dusk:
- * a sky and a low sun, brick walls, steel bollards, a pool of water) are held out for
- * checking tuned defaults and run only when named, e.g.
- * --scenes window,lamp,corridor,fog,courtyard.
+ * sun shafts through a slatted window, glass), `courtyard` (an open courtyard at dusk:
+ * a sky and a low sun, brick walls, steel bollards, a pool of water) and `stilllife` (a
+ * still life on a table through a shallow depth of field: a checkered cloth, fruit, a
+ * glass tumbler, a metal cup, a blurred striped wall) are held out for checking tuned
+ * defaults and run only when named, e.g.
+ * --scenes window,lamp,corridor,fog,courtyard,stilllife.
  *
  * It prints figures; it is not a timed test. Run it from the repository root (the
  * defaults are relative to it). */

@@ -29,8 +29,8 @@ replicate 0's blocks B, that the single-sample calls average to the
 samples=block_spp call.
 
 The scene builders of cornell and texture are render_dumps.py's, unchanged;
-'interior', 'window', 'lamp', 'corridor', 'fog' and 'courtyard' are built
-here.
+'interior', 'window', 'lamp', 'corridor', 'fog', 'courtyard' and
+'stilllife' are built here.
 """
 
 import argparse
@@ -577,9 +577,146 @@ def build_courtyard():
     rdm._camera((-0.5, -4.6, 2.7), (np.radians(73), 0, np.radians(-8)), 60.0)
     _sky_gradient(1.5, (0.52, 0.58, 0.75), (0.2, 0.33, 0.75))
 
+
+def _lathe(name, profile, xy, z0, mat, segments=64):
+    """A closed solid of revolution about the vertical through xy: `profile`
+    is a closed outline of (radius, height) points from z0, in order; a point
+    of radius 0 is one vertex on the axis. One smooth-shaded mesh with sharp
+    edges where the outline turns by more than 30 degrees (auto smooth), its
+    normals pointing out."""
+    bm = bmesh.new()
+    rings = []
+    for rad, z in profile:
+        if rad == 0.0:
+            rings.append([bm.verts.new((xy[0], xy[1], z0 + z))])
+        else:
+            rings.append([bm.verts.new((xy[0] + rad * np.cos(2 * np.pi * j / segments),
+                                        xy[1] + rad * np.sin(2 * np.pi * j / segments),
+                                        z0 + z)) for j in range(segments)])
+    for lo, hi in zip(rings[:-1], rings[1:]):
+        for j in range(segments):
+            jn = (j + 1) % segments
+            if len(lo) == 1:
+                bm.faces.new((lo[0], hi[j], hi[jn]))
+            elif len(hi) == 1:
+                bm.faces.new((lo[j], lo[jn], hi[0]))
+            else:
+                bm.faces.new((lo[j], lo[jn], hi[jn], hi[j]))
+    bmesh.ops.recalc_face_normals(bm, faces=bm.faces)
+    me = bpy.data.meshes.new(name)
+    bm.to_mesh(me)
+    bm.free()
+    for f in me.polygons:
+        f.use_smooth = True
+    me.use_auto_smooth = True
+    me.materials.append(mat)
+    ob = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+def _stripes(scale, one, two):
+    """A _textured() colour builder: wallpaper stripes, Blender's wave texture
+    (bands along X, sine profile, no distortion: a period of pi/10/scale
+    units) through a ramp from `one` to `two`."""
+    def build(nodes, links, co):
+        w = nodes.new('ShaderNodeTexWave')
+        w.wave_type = 'BANDS'
+        w.bands_direction = 'X'
+        w.wave_profile = 'SIN'
+        w.inputs['Scale'].default_value = scale
+        w.inputs['Distortion'].default_value = 0.0
+        links.new(co, w.inputs['Vector'])
+        ramp = nodes.new('ShaderNodeValToRGB')
+        ramp.color_ramp.elements[0].color = (*one, 1)
+        ramp.color_ramp.elements[1].color = (*two, 1)
+        links.new(w.outputs['Fac'], ramp.inputs['Fac'])
+        return ramp.outputs['Color']
+    return build
+
+
+def build_stilllife():
+    """A still life on a table, seen close up through a lens with a shallow
+    depth of field (which the other fixtures lack but for lamp's mild one):
+    a checkered tablecloth, an apple (in focus), a bump-mapped orange, a
+    plum in the blurred foreground, a glass tumbler (sharp glass, IOR 1.5)
+    and a shiny metal cup behind, and a striped back wall far out of focus.
+    The denoisers' albedo and normal features are blurred where the image
+    is. Lit by a large soft area light from the left (a window) and a small
+    bright lamp at the front right that puts sharper highlights on the
+    fruit, the glass and the metal."""
+    # a table (top at z0) on a floor, a tablecloth 1 mm above its top (a
+    # plane, object coordinates in metres) with a checker of 2 cm squares,
+    # and a back wall 1.4 m behind the table with vertical stripes (a plane,
+    # object coordinates: metres along the wall, up)
+    z0 = 0.75
+    _slab('floor', (-3.0, -3.0, -0.05), (3.0, 3.0, 0.0), rdm._diffuse('floor', (0.3, 0.22, 0.15)))
+    _slab('table', (-1.0, -1.2, z0 - 0.04), (1.0, 0.4, z0),
+          rdm._diffuse('table', (0.35, 0.22, 0.12)))
+    checker = rdm._checker(50.0, (0.8, 0.78, 0.72), (0.25, 0.32, 0.5))
+    cloth = rdm._plane('cloth', 1.0, (0.0, -0.4, z0 + 0.001), (0, 0, 0),
+                       rdm._textured('cloth', checker))
+    cloth.data.transform(mathutils.Matrix.Diagonal((2.0, 1.6, 1.0, 1.0)))
+    wall = rdm._plane('wall', 1.0, (0.0, 1.8, 1.25), (np.pi / 2, 0, 0),
+                      rdm._textured('wall', _stripes(3.0, (0.55, 0.5, 0.38),
+                                                     (0.75, 0.72, 0.62))))
+    wall.data.transform(mathutils.Matrix.Diagonal((6.0, 2.5, 1.0, 1.0)))
+
+    # on the cloth (zc), from front to back: a plum (glossy), an orange
+    # (diffuse, bump-mapped noise of two oranges), an apple (glossy, squashed
+    # 10%; the focus), a glass tumbler and a metal cup. The fruit sink 2-3 mm
+    # into the cloth; the tumbler's and the cup's bases lie 0.5 mm below it,
+    # between the cloth and the table top (no face lies on another)
+    zc = z0 + 0.001
+    apple = rdm._sphere('apple', 0.045, (0.0, 0.05, zc + 0.045 * 0.9 - 0.003),
+                        _principled('apple', (0.55, 0.06, 0.04), 0.35))
+    apple.scale = (1.0, 1.0, 0.9)
+    rdm._sphere('orange', 0.042, (0.115, -0.03, zc + 0.042 - 0.003),
+                rdm._textured('orange', rdm._noise_ramp(60.0, (0.75, 0.3, 0.03),
+                                                         (0.9, 0.45, 0.05)), 0.5))
+    rdm._sphere('plum', 0.03, (0.07, -0.24, zc + 0.03 - 0.002),
+                _principled('plum', (0.18, 0.03, 0.14), 0.3))
+    # an empty glass tumbler, 11 cm high, widening from r = 3.4 to 4 cm, its
+    # wall 3 mm thick, its base 12 mm
+    _lathe('tumbler', [(0.0, 0.0), (0.034, 0.0), (0.04, 0.11), (0.037, 0.11),
+                       (0.0315, 0.012), (0.0, 0.012)], (-0.12, 0.13), zc - 0.0005,
+           rdm._glass('tumbler', 1.5))
+    # a shiny metal cup (GGX, roughness 0.15), 7.5 cm high, r = 3 to 3.6 cm,
+    # its wall 2.5 mm thick, its base 5 mm
+    _lathe('cup', [(0.0, 0.0), (0.03, 0.0), (0.036, 0.075), (0.0335, 0.075),
+                   (0.028, 0.005), (0.0, 0.005)], (0.17, 0.3), zc - 0.0005,
+           rdm._glossy('cup', (0.9, 0.88, 0.85), 0.15))
+
+    # a large soft light from the left, like a window, aimed at the apple,
+    # and a small bright lamp above at the front right (radius 6 cm: at 3 cm
+    # its caustic through the tumbler's base left fireflies on the cloth)
+    target = mathutils.Vector((0.0, 0.05, 0.8))
+    win = rdm._area_light('window', 1.0, (-1.3, 0.2, 1.5), 40.0, (0.92, 0.95, 1.0))
+    win.rotation_euler = (target - win.location).to_track_quat('-Z', 'Y').to_euler()
+    lamp_d = bpy.data.lights.new('lamp', 'POINT')
+    lamp_d.energy = 8.0
+    lamp_d.shadow_soft_size = 0.06
+    lamp_d.color = (1.0, 0.85, 0.65)
+    lamp = bpy.data.objects.new('lamp', lamp_d)
+    lamp.location = (0.6, -0.5, 1.45)
+    bpy.context.scene.collection.objects.link(lamp)
+
+    # an 85 mm lens (on Blender's 36 mm sensor) at f/1.8, 1.22 m from the
+    # apple, looking along +Y tilted 20.4 degrees down at it
+    cam = rdm._camera((0.0, -1.1, 1.2), (np.radians(90 - 20.4), 0, 0),
+                      np.degrees(2 * np.arctan(18.0 / 85.0)))
+    cam.data.lens_unit = 'MILLIMETERS'
+    cam.data.lens = 85.0
+    cam.data.dof.use_dof = True
+    cam.data.dof.focus_object = apple
+    cam.data.dof.aperture_fstop = 1.8
+    rdm._world(0.1, (0.6, 0.65, 0.75))
+
+
 SCENES = {'cornell': rdm.build_cornell, 'texture': rdm.build_texture,
           'interior': build_interior, 'window': build_window, 'lamp': build_lamp,
-          'corridor': build_corridor, 'fog': build_fog, 'courtyard': build_courtyard}
+          'corridor': build_corridor, 'fog': build_fog, 'courtyard': build_courtyard,
+          'stilllife': build_stilllife}
 
 
 def replicate_seed(stream, r):
