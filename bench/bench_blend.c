@@ -160,7 +160,7 @@ run_js(void *p)
     ctx *c = p;
     mcp_image *out = NULL;
     if (mcp_blend_james_stein(c->in.noisy, c->in.denoised, c->in.var_of_mean,
-                              mcp_blend_defaults().js_window, &out, NULL))
+                              mcp_blend_defaults().js_window, c->in.kappa, &out, NULL))
         return -1;
     mcp_image_free(out);
     return 0;
@@ -186,7 +186,7 @@ main(int argc, char **argv)
     }
     ctx c;
     memset(&c, 0, sizeof c);
-    c.in = (mcp_blend_input){noisy, var, 64, den, sure, NULL};
+    c.in = (mcp_blend_input){noisy, var, 64, den, sure, NULL, NULL};
     const mcp_image *v[1];
     double spp[1] = {64};
     if (mcp_blend_prepare(var, sure, NULL, NULL, NULL, &c.est) ||

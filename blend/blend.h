@@ -232,11 +232,22 @@ MCP_API int mcp_blend_ideal(const mcp_image *noisy, double spp, const mcp_image 
 
 /* James-Stein combiner over a window x window neighbourhood per channel (clipped at
  * the borders; p = the values inside): r = d + s (n - d),
- * s = max(0, 1 - (p - 2) mean(v) / sum (n - d)^2). rho (may be NULL) receives 1 - s,
+ * s = max(0, 1 - a_k (p - 2) mean(v) / sum (n - d)^2), a_k = min(1, 1.5 (1 - kappa[k]))
+ * with kappa the denoiser's self-influence (mcp_blend_self_influence; NULL: 0, the
+ * plain combiner; docs/blend.md "Self-influence"). rho (may be NULL) receives 1 - s,
  * the weight of d, for mcp_blend_james_stein_variance. */
 MCP_API int mcp_blend_james_stein(const mcp_image *noisy, const mcp_image *denoised,
                                   const mcp_image *var_of_mean, int window,
-                                  mcp_image **out, mcp_image **rho);
+                                  const double *kappa, mcp_image **out, mcp_image **rho);
+
+/* The denoiser's variance-weighted self-influence per channel,
+ * kappa[k] = sum v dd/dn / sum v = sum Cov(n, d) / sum v, read back from d's raw SURE
+ * (absolute units, as mcp_error_maps_compute makes it with metric se):
+ * v dd/dn = (SURE - (d - n)^2 + v) / 2, summed over the image; clamped to [0, 1]
+ * (self_influence.c). */
+MCP_API int mcp_blend_self_influence(const mcp_image *noisy, const mcp_image *denoised,
+                                     const mcp_image *var_of_mean, const mcp_image *sure,
+                                     double kappa[3]);
 
 /* The variance of the combiner's output, for a sampling map: estimate's
  * mcp_postcorrection_variance (Firmino 2023 Eq. 4) with one denoised input (alpha = 1):
@@ -268,6 +279,10 @@ typedef struct mcp_blend_input {
     /* Precomputed curves (e.g. retrospective ones); NULL: on the fly from the
      * filtered v. */
     const mcp_image *curves;
+    /* The denoiser's self-influence per channel for the James-Stein weights and the
+     * safeguard (mcp_blend_self_influence of d(I') with n(I'), v(I'), SURE(I'));
+     * NULL: 0. */
+    const double *kappa;
 } mcp_blend_input;
 
 typedef struct mcp_blend_result {
@@ -328,6 +343,9 @@ typedef struct mcp_blend_row {
     int magnitude;              /* negative SURE by magnitude (else zeroed) */
     double mean_rho;            /* mean of W / (I + W): the share of d in the blend */
     double safeguard_pulled;    /* share of values the safeguard pulled back (0: off) */
+    double self_influence;      /* the denoiser's at I', mean of R, G, B (the kappa of
+                                   mcp_blend_self_influence that weighs the James-Stein
+                                   weights) */
     mcp_blend_errors err[MCP_BLEND_N_METHODS]; /* with a reference; ideal too */
 } mcp_blend_row;
 

@@ -38,7 +38,10 @@ weights_at(const js_denoiser *js, const mcp_denoise_input *in, const mcp_image *
             "james-stein: the input has no variance (the combiner weighs the "
             "denoised image by it)");
     mcp_image *blend = NULL;
-    int rc = mcp_blend_james_stein(in->color, d, in->variance, js->window, &blend, rho);
+    /* the plain combiner: its self-influence would need the inner denoiser's
+       divergence, a JVP per evaluation (docs/blend.md "Self-influence") */
+    int rc =
+        mcp_blend_james_stein(in->color, d, in->variance, js->window, NULL, &blend, rho);
     mcp_image_free(blend);
     return rc;
 }

@@ -40,11 +40,12 @@ int mcp__blend_on_the_fly(const mcp_blend_input *in, const mcp_blend_options *o,
                           mcp_blend_estimates *e, mcp_image **weights, mcp_image **blend);
 
 /* The safeguard of one blend (safeguard.c): the James-Stein rho of (noisy, denoised,
- * var_of_mean) over window, then mcp_blend_safeguard on weights and blend in place. */
+ * var_of_mean) over window with the self-influence kappa (may be NULL), then
+ * mcp_blend_safeguard on weights and blend in place. */
 int mcp__blend_safeguard_step(const mcp_image *noisy, double spp,
                               const mcp_image *denoised, const mcp_image *var_of_mean,
-                              int window, mcp_image *weights, mcp_image *blend,
-                              double *pulled);
+                              int window, const double *kappa, mcp_image *weights,
+                              mcp_image *blend, double *pulled);
 
 /* The share of d in r = (I n + W d) / (I + W), rho = W / (I + W), and back: W = inf is
  * rho = 1, W <= 0 is rho = 0, and the other way round. */

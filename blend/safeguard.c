@@ -62,12 +62,13 @@ mcp_blend_safeguard(const mcp_image *noisy, double spp, const mcp_image *denoise
 
 int
 mcp__blend_safeguard_step(const mcp_image *noisy, double spp, const mcp_image *denoised,
-                          const mcp_image *var_of_mean, int window, mcp_image *weights,
-                          mcp_image *blend, double *pulled)
+                          const mcp_image *var_of_mean, int window, const double *kappa,
+                          mcp_image *weights, mcp_image *blend, double *pulled)
 {
     mcp_image *js = NULL, *rho = NULL;
-    int rc = mcp_blend_james_stein(noisy, denoised, var_of_mean, window, &js, &rho) ||
-             mcp_blend_safeguard(noisy, spp, denoised, rho, weights, blend, pulled);
+    int rc =
+        mcp_blend_james_stein(noisy, denoised, var_of_mean, window, kappa, &js, &rho) ||
+        mcp_blend_safeguard(noisy, spp, denoised, rho, weights, blend, pulled);
     mcp_image_free(js);
     mcp_image_free(rho);
     return rc ? -1 : 0;

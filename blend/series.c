@@ -57,6 +57,7 @@ mcp_blend_series_result_free(mcp_blend_series_result *r)
 /* A denoised image and its raw SURE, from member `from`. */
 typedef struct {
     mcp_image *denoised, *sure;
+    double kappa[3]; /* the denoiser's self-influence at `from` (self_influence.c) */
 } den_pair;
 
 typedef struct {
@@ -129,6 +130,11 @@ prepare_member(run *r, int i, const mcp_dump *dump)
         r->pairs[i].sure = maps.sure;
         maps.denoised = maps.sure = NULL;
         mcp_error_maps_free(&maps);
+        /* read at I' and kept with d(I'): in a progressive render n(I) holds n(I')'s
+           samples with weight I'/I, so Cov(n(I), d(I')) / sum v(I) is the same ratio */
+        if (mcp_blend_self_influence(dump->color, r->pairs[i].denoised, dump->var_of_mean,
+                                     r->pairs[i].sure, r->pairs[i].kappa))
+            return mcp_error_prefix("%s: ", dump->source);
         r->pair_of[i] = i;
         /* on the fly, the older pair is no longer needed */
         if (last >= 0 && r->o->blend.fit != MCP_CURVE_FIT_RETROSPECTIVE)
@@ -137,6 +143,8 @@ prepare_member(run *r, int i, const mcp_dump *dump)
         r->pair_of[i] = last;
     }
     row->denoised_spp = r->res->rows[r->pair_of[i]].spp;
+    const double *kappa = r->pairs[r->pair_of[i]].kappa;
+    row->self_influence = (kappa[0] + kappa[1] + kappa[2]) / 3;
     const mcp_blend_estimates *e = &r->est[i];
     if (mcp_blend_prepare(dump->var_of_mean, r->pairs[r->pair_of[i]].sure, &r->o->blend,
                           r->den, &r->state, &r->est[i]))
@@ -187,7 +195,8 @@ finish_member(run *r, int i, const mcp_dump *dump, const mcp_image *curves,
               *js_rho = NULL;
     int rc = -1;
     mcp_blend_input in = {dump->color,    dump->var_of_mean, dump->spp,
-                          pair->denoised, pair->sure,        curves};
+                          pair->denoised, pair->sure,        curves,
+                          pair->kappa};
     if ((curves ? mcp_blend_weights(curves, e->sure, &r->o->blend, &weights) ||
                       mcp_blend_mix(dump->color, dump->spp, pair->denoised, weights,
                                     &img[MCP_BLEND_CURVES])
@@ -196,8 +205,8 @@ finish_member(run *r, int i, const mcp_dump *dump, const mcp_image *curves,
         mcp_blend_easy(dump->color, pair->denoised, e->var_of_mean, e->sure,
                        &img[MCP_BLEND_EASY]) ||
         mcp_blend_james_stein(dump->color, pair->denoised, dump->var_of_mean,
-                              r->o->blend.js_window, &img[MCP_BLEND_JAMES_STEIN],
-                              &js_rho) ||
+                              r->o->blend.js_window, pair->kappa,
+                              &img[MCP_BLEND_JAMES_STEIN], &js_rho) ||
         (r->o->blend.safeguard &&
          mcp_blend_safeguard(dump->color, dump->spp, pair->denoised, js_rho, weights,
                              img[MCP_BLEND_CURVES], &row->safeguard_pulled)) ||

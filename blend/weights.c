@@ -330,7 +330,7 @@ mcp_blend_step(const mcp_blend_input *in, const mcp_blend_options *opt,
         /* the combiner's blend and its W (docs/blend.md "Which weights") */
         mcp_image *rho = NULL;
         rc = mcp_blend_james_stein(in->noisy, in->denoised, in->var_of_mean, o.js_window,
-                                   &out->blend, &rho) ||
+                                   in->kappa, &out->blend, &rho) ||
              mcp__blend_weights_from_rho(rho, in->spp, &out->weights);
         mcp_image_free(rho);
     } else if (in->curves) {
@@ -343,7 +343,7 @@ mcp_blend_step(const mcp_blend_input *in, const mcp_blend_options *opt,
     }
     if (!rc && !james_stein && o.safeguard) {
         rc = mcp__blend_safeguard_step(in->noisy, in->spp, in->denoised, in->var_of_mean,
-                                       o.js_window, out->weights, out->blend,
+                                       o.js_window, in->kappa, out->weights, out->blend,
                                        &out->safeguard_pulled);
     }
     if (rc) {

@@ -205,16 +205,17 @@ fill_section(cJSON *section, const mcp_blend_series_result *r,
     cJSON *table = mcp_report_add_table(
         section, "members",
         (const char *const[]){"spp", "denoised at spp", "mean v", "mean SURE", "filtered",
-                              "negative SURE", "mean W/(I+W)", "safeguard pulled back"},
-        8);
+                              "negative SURE", "mean W/(I+W)", "safeguard pulled back",
+                              "self-influence"},
+        9);
     if (!table) return -1;
     for (int i = 0; i < r->count; i++) {
         const mcp_blend_row *row = &r->rows[i];
-        if (mcp_report_table_add_row(table, "ddddssdd", row->spp, row->denoised_spp,
+        if (mcp_report_table_add_row(table, "ddddssddd", row->spp, row->denoised_spp,
                                      row->mean_var, row->mean_sure,
                                      row->filtered ? "yes" : "no",
                                      row->magnitude ? "magnitude" : "zero", row->mean_rho,
-                                     row->safeguard_pulled))
+                                     row->safeguard_pulled, row->self_influence))
             return -1;
     }
     if (r->has_reference) {

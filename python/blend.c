@@ -73,7 +73,8 @@ member_dict(member *m, int has_reference, int has_flip)
         mcp_py_set(d, "negative_sure",
                    PyUnicode_FromString(m->row.magnitude ? "magnitude" : "zero")) ||
         mcp_py_set(d, "mean_rho", PyFloat_FromDouble(m->row.mean_rho)) ||
-        mcp_py_set(d, "safeguard_pulled", PyFloat_FromDouble(m->row.safeguard_pulled)))
+        mcp_py_set(d, "safeguard_pulled", PyFloat_FromDouble(m->row.safeguard_pulled)) ||
+        mcp_py_set(d, "self_influence", PyFloat_FromDouble(m->row.self_influence)))
         goto fail;
     mcp_image *blend = m->images[m->method], *w = m->weights;
     m->images[m->method] = m->weights = NULL;

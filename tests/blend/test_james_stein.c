@@ -34,7 +34,7 @@ test_apply_and_jvp(void **state)
     mcp_image *f = NULL, *d = NULL, *want = NULL, *rho = NULL, *gt = NULL;
     assert_int_equal(js->apply(js, &in, &f), 0);
     assert_int_equal(g->apply(g, &in, &d), 0);
-    assert_int_equal(mcp_blend_james_stein(x, d, v, 5, &want, &rho), 0);
+    assert_int_equal(mcp_blend_james_stein(x, d, v, 5, NULL, &want, &rho), 0);
     assert_true(mcp_test_max_abs_diff(f, want) < 1e-6);
     /* J t = rho (G t) + (1 - rho) t, G the (linear) Gaussian blur */
     mcp_denoise_tangent tan = {.color = t};

@@ -36,7 +36,7 @@ test_closed_form(void **state)
     const double delta = 0.5, sigma2 = 0.1;
     mcp_image *n = rgb_constant(20, 20, 1.5f), *d = rgb_constant(20, 20, 1.0f);
     mcp_image *v = rgb_constant(20, 20, (float)sigma2), *r = NULL, *rho = NULL;
-    assert_int_equal(mcp_blend_james_stein(n, d, v, 7, &r, &rho), 0);
+    assert_int_equal(mcp_blend_james_stein(n, d, v, 7, NULL, &r, &rho), 0);
     double s_in = 1 - 47 * sigma2 / (49 * delta * delta);
     double s_corner = 1 - 14 * sigma2 / (16 * delta * delta);
     for (int k = 0; k < 3; k++) {
@@ -48,13 +48,13 @@ test_closed_form(void **state)
     mcp_image_free(rho);
     /* large noise: s clamps at 0, r = d; no noise: s = 1, r = n; n = d: r = d */
     mcp_image *big = rgb_constant(20, 20, 10.0f), *zero = rgb_constant(20, 20, 0);
-    assert_int_equal(mcp_blend_james_stein(n, d, big, 7, &r, NULL), 0);
+    assert_int_equal(mcp_blend_james_stein(n, d, big, 7, NULL, &r, NULL), 0);
     assert_true(r->data[0] == 1.0f && r->data[600] == 1.0f);
     mcp_image_free(r);
-    assert_int_equal(mcp_blend_james_stein(n, d, zero, 7, &r, NULL), 0);
+    assert_int_equal(mcp_blend_james_stein(n, d, zero, 7, NULL, &r, NULL), 0);
     assert_true(r->data[0] == 1.5f && r->data[600] == 1.5f);
     mcp_image_free(r);
-    assert_int_equal(mcp_blend_james_stein(d, d, v, 7, &r, NULL), 0);
+    assert_int_equal(mcp_blend_james_stein(d, d, v, 7, NULL, &r, NULL), 0);
     assert_true(r->data[0] == 1.0f);
     mcp_image_free(r);
     mcp_image_free(big);
@@ -74,7 +74,7 @@ test_matches_naive(void **state)
     mcp_image *v = mcp_test_random(w, h, 3, 0, 0.2f, 23, RGB), *r = NULL;
     const int windows[3] = {3, 5, 9};
     for (int t = 0; t < 3; t++) {
-        assert_int_equal(mcp_blend_james_stein(n, d, v, windows[t], &r, NULL), 0);
+        assert_int_equal(mcp_blend_james_stein(n, d, v, windows[t], NULL, &r, NULL), 0);
         for (int y = 0; y < h; y++)
             for (int x = 0; x < w; x++)
                 for (int k = 0; k < 3; k++)
@@ -84,11 +84,11 @@ test_matches_naive(void **state)
                                  naive_js(n, d, v, windows[t], x, y, k), 0, 5e-7);
         mcp_image_free(r);
     }
-    assert_error_contains(mcp_blend_james_stein(n, d, v, 4, &r, NULL),
+    assert_error_contains(mcp_blend_james_stein(n, d, v, 4, NULL, &r, NULL),
                           "window must be odd and >= 3 (got 4)");
     assert_null(r);
     mcp_image *small = rgb_constant(3, 3, 0);
-    assert_error_contains(mcp_blend_james_stein(n, small, v, 7, &r, NULL),
+    assert_error_contains(mcp_blend_james_stein(n, small, v, 7, NULL, &r, NULL),
                           "does not match");
     mcp_image_free(small);
     mcp_image_free(n);
@@ -137,7 +137,8 @@ test_leak_where_d_is_right(void **state)
             uint64_t st = 77 * seed + (uint64_t)t;
             for (size_t i = 0; i < (size_t)S * S * 3; i++)
                 n->data[i] = (float)(0.5 + sqrt(sigma2) * mcp_test_rand_normal(&st));
-            assert_int_equal(mcp_blend_james_stein(n, mu, v, windows[t], &out, NULL), 0);
+            assert_int_equal(
+                mcp_blend_james_stein(n, mu, v, windows[t], NULL, &out, NULL), 0);
             double e2 = 0;
             int count = 0;
             for (int y = r; y < S - r; y++)
@@ -176,7 +177,7 @@ test_variance_for_sampling_maps(void **state)
     mcp_image *v = rgb_constant(20, 20, (float)sigma2),
               *vd = rgb_constant(20, 20, (float)var_d);
     mcp_image *r = NULL, *rho = NULL, *var = NULL;
-    assert_int_equal(mcp_blend_james_stein(n, d, v, 7, &r, &rho), 0);
+    assert_int_equal(mcp_blend_james_stein(n, d, v, 7, NULL, &r, &rho), 0);
     assert_int_equal(mcp_blend_james_stein_variance(rho, vd, v, &var), 0);
     double s = 1 - 47 * sigma2 / (49 * delta * delta), p = 1 - s;
     assert_close(mcp_image_px(var, 10, 10)[1], p * p * var_d + s * s * sigma2, 1e-6, 0);

@@ -79,7 +79,7 @@ blend_mse(const mcp_image *mu, const mcp_image *n, const mcp_image *d, double si
     o.weights = MCP_BLEND_WEIGHTS_CURVES;
     o.safeguard = safeguard;
     o.filter = MCP_BLEND_FILTER_NONE;
-    mcp_blend_input in = {n, v, 64, d, sure, NULL};
+    mcp_blend_input in = {n, v, 64, d, sure, NULL, NULL};
     mcp_blend_result r;
     assert_int_equal(mcp_blend_step(&in, &o, NULL, NULL, &r), 0);
     double e = mse(r.blend, mu);
@@ -98,7 +98,7 @@ test_closed_form(void **state)
     const double spp = 16, rho_max = 47 * 0.1 / (49 * 0.25);
     mcp_image *n = rgb_constant(20, 20, 1.5f), *d = rgb_constant(20, 20, 1.0f);
     mcp_image *v = rgb_constant(20, 20, 0.1f), *js = NULL, *rho = NULL;
-    assert_int_equal(mcp_blend_james_stein(n, d, v, 7, &js, &rho), 0);
+    assert_int_equal(mcp_blend_james_stein(n, d, v, 7, NULL, &js, &rho), 0);
     /* weights: inf at (10, 10), a share of 0.1 (W = spp / 9) at (11, 10), 0 at (12, 10)
      */
     mcp_image *wt = rgb_constant(20, 20, 0), *b = rgb_constant(20, 20, 0);
@@ -211,8 +211,8 @@ test_option(void **state)
     mcp_image *mu = texture_truth(), *n = noisy_of(mu, 1e-2, 7), *d = box3(n);
     mcp_image *v = rgb_constant(W, H, 1e-2f), *sure = rgb_constant(W, H, 1e-3f);
     mcp_image *js = NULL, *rho = NULL;
-    assert_int_equal(mcp_blend_james_stein(n, d, v, o.js_window, &js, &rho), 0);
-    mcp_blend_input in = {n, v, 64, d, sure, NULL};
+    assert_int_equal(mcp_blend_james_stein(n, d, v, o.js_window, NULL, &js, &rho), 0);
+    mcp_blend_input in = {n, v, 64, d, sure, NULL, NULL};
     mcp_blend_result r;
     assert_int_equal(mcp_blend_step(&in, NULL, NULL, NULL, &r), 0);
     for (size_t i = 0; i < (size_t)W * H * 3; i++) {

@@ -156,7 +156,7 @@ test_step_matches_parts(void **state)
         o.filter = MCP_BLEND_FILTER_NONE; /* keeps the zeros where they were put */
         o.safeguard = 0; /* the parts below do not include it (test_safeguard.c) */
         o.weights = MCP_BLEND_WEIGHTS_CURVES;
-        mcp_blend_input in = {n, v, 32, d, s, NULL};
+        mcp_blend_input in = {n, v, 32, d, s, NULL, NULL};
         mcp_blend_result res;
         assert_int_equal(mcp_blend_step(&in, &o, NULL, NULL, &res), 0);
         mcp_blend_estimates e;
@@ -223,8 +223,8 @@ test_step_vector_is_scalar(void **state)
         o.negative_sure = magnitude ? MCP_NEG_SURE_MAGNITUDE : MCP_NEG_SURE_ZERO;
         o.max_weight = 100;                   /* the cap in play too */
         o.weights = MCP_BLEND_WEIGHTS_CURVES; /* the SSE pass (JS: test_safeguard.c) */
-        mcp_blend_input packed = {n, v, 32, d, s, NULL},
-                        strided = {n4, v, 32, d4, s, NULL};
+        mcp_blend_input packed = {n, v, 32, d, s, NULL, NULL},
+                        strided = {n4, v, 32, d4, s, NULL, NULL};
         mcp_blend_result a, b;
         assert_int_equal(mcp_blend_step(&packed, &o, NULL, NULL, &a), 0);
         assert_int_equal(mcp_blend_step(&strided, &o, NULL, NULL, &b), 0);
@@ -248,7 +248,7 @@ test_step_errors(void **state)
     mcp_image *n = rgb_constant(4, 4, 1), *v = rgb_constant(4, 4, 0.1f);
     mcp_image *small = rgb_constant(3, 4, 1);
     mcp_blend_result res;
-    mcp_blend_input in = {n, v, 16, n, NULL, NULL};
+    mcp_blend_input in = {n, v, 16, n, NULL, NULL, NULL};
     assert_error_contains(mcp_blend_step(&in, NULL, NULL, NULL, &res),
                           "noisy, variance, denoised and SURE images are required");
     in.sure = v;
@@ -267,17 +267,18 @@ test_step_errors(void **state)
     assert_error_contains(mcp_blend_step(&in, &o, NULL, NULL, &res),
                           "filter 'denoiser' needs a denoiser");
     /* a curve image without the a.* and b.* channels */
-    mcp_blend_input with = {n, v, 16, n, v, v};
+    mcp_blend_input with = {n, v, 16, n, v, v, NULL};
     assert_error_contains(mcp_blend_step(&with, NULL, NULL, NULL, &res),
                           "no channel 'a.R'");
     /* the state carries the rule: crossed once, crossed for good */
     mcp_blend_state st = {0, 0};
     mcp_image *big = rgb_constant(4, 4, 1.0f);
-    mcp_blend_input crossing = {n, v, 16, n, big, NULL};
+    mcp_blend_input crossing = {n, v, 16, n, big, NULL, NULL};
     assert_int_equal(mcp_blend_step(&crossing, NULL, NULL, &st, &res), 0);
     assert_true(st.filtering_stopped && st.magnitude && !res.est.filtered);
     mcp_blend_result_free(&res);
-    mcp_blend_input calm = {n, v, 32, n, v, NULL}; /* mean v = mean SURE: would filter */
+    mcp_blend_input calm = {n, v,    32,  n,
+                            v, NULL, NULL}; /* mean v = mean SURE: would filter */
     assert_int_equal(mcp_blend_step(&calm, NULL, NULL, &st, &res), 0);
     assert_true(!res.est.filtered && res.est.magnitude);
     mcp_blend_result_free(&res);
@@ -348,7 +349,7 @@ curve_mse(const proc_series *ps, int i, const mcp_image *curves, int safeguard)
     if (safeguard) {
         mcp_image *js = NULL, *rho = NULL;
         assert_int_equal(mcp_blend_james_stein(dump->color, ps->maps[i].denoised,
-                                               dump->var_of_mean, 7, &js, &rho),
+                                               dump->var_of_mean, 7, NULL, &js, &rho),
                          0);
         assert_int_equal(mcp_blend_safeguard(dump->color, ps->spp[i],
                                              ps->maps[i].denoised, rho, w, r, NULL),
