@@ -202,8 +202,8 @@ static const char *const js_keys[] = {
 const mcp_denoiser_kind mcp__denoiser_james_stein = {
     "james-stein",
     "another denoiser (inner [unet]) followed by the James-Stein post-correction "
-    "(window [15]); the JVP holds the combiner's weights constant; other keys go to "
-    "the inner denoiser",
+    "(window [15], the plain weight); the JVP holds the combiner's weights constant; "
+    "other keys go to the inner denoiser",
     js_keys,
     js_create,
     NULL, /* reads its own keys: the inner denoiser's */

@@ -7,6 +7,7 @@
 #include <mcpost/estimate.h>
 #include <mcpost/job.h>
 #include <math.h>
+#include <stdio.h>
 #include <string.h>
 
 static mcp_denoiser *
@@ -64,7 +65,8 @@ test_apply_and_jvp(void **state)
 }
 
 /* Every built-in kind's keys are accepted and passed on; a key the inner kind lacks
- * fails naming it; james-stein cannot wrap itself. */
+ * fails naming it; james-stein cannot wrap itself; its summary states the blend's
+ * default window, which it shares. */
 static void
 test_settings(void **state)
 {
@@ -73,6 +75,10 @@ test_settings(void **state)
     for (int i = 0; kinds[i]; i++)
         if (!strcmp(kinds[i]->name, "james-stein")) js = kinds[i];
     assert_non_null(js);
+    char window[32];
+    snprintf(window, sizeof window, "(window [%d]", mcp_blend_defaults().js_window);
+    if (!strstr(js->summary, window))
+        fail_msg("james-stein's summary does not say %s: %s", window, js->summary);
     for (int i = 0; kinds[i]; i++)
         for (const char *const *k = kinds[i]->keys; k && *k; k++) {
             int found = 0;
