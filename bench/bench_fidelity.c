@@ -551,8 +551,10 @@ static int
 split(char *text, char **words, int max)
 {
     int n = 0;
-    for (char *t = strtok(text, ","); t && n < max; t = strtok(NULL, ","))
+    for (char *t = strtok(text, ","); t; t = strtok(NULL, ",")) {
+        if (n == max) return -1; /* more than the tables hold: say so, drop none */
         words[n++] = t;
+    }
     return n;
 }
 
@@ -609,9 +611,13 @@ main(int argc, char **argv)
         }
     }
     if (iters < 4 || iters > MAX_ITER) iters = MAX_ITER;
-    char *scenes[8], *dens[8], *srcs[8];
-    int n_scenes = split(scenes_arg, scenes, 8), n_dens = split(dens_arg, dens, 8),
+    char *scenes[16], *dens[8], *srcs[8];
+    int n_scenes = split(scenes_arg, scenes, 16), n_dens = split(dens_arg, dens, 8),
         n_srcs = split(srcs_arg, srcs, 8);
+    if (n_scenes < 0 || n_dens < 0 || n_srcs < 0) {
+        fprintf(stderr, "bench_fidelity: at most 16 scenes, 8 denoisers and 8 sources\n");
+        return 2;
+    }
     source src_ids[8];
     for (int k = 0; k < n_srcs; k++) {
         src_ids[k] = N_SRC;
