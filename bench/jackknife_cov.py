@@ -16,7 +16,9 @@ denoiser's input is the same in all three), printed as sums over the image over 
   true      the covariance of n and d over the 8 renders
   SURE      (SURE - (d - n)^2 + v) / 2 with 4 probes (the blend's kappa)
   jackknife C above
-each as the mean over the renders and the spread (standard deviation) of one render's.
+each as the mean over the renders and the spread (standard deviation) of one render's;
+then SURE over the image, (d - n)^2 - v + 2 C with either C, against the true squared
+error of d (the 16384-spp reference's own noise left in), the mean over the renders.
 
   /usr/bin/python3 bench/jackknife_cov.py [--scene stilllife] [--denoiser nlm] [--groups 4]
 Run from the repository root, with the module built (build/python)."""
@@ -58,6 +60,8 @@ def main():
     albedo = np.ascontiguousarray(feat[..., [names.index("Albedo." + c) for c in "RGB"]])
     normal = np.ascontiguousarray(feat[..., [names.index("N." + c) for c in "XYZ"]])
     G = a.groups
+    ref = rgb(*mcpost.read_image(os.path.join(folder, f"{a.scene}_reference.exr"))[:2])
+    ref = ref.astype(np.float64)
     blocks = np.array([[rgb(*mcpost.read_image(os.path.join(
         folder, "blocks", f"{a.scene}_r{r}_b{b:02d}.exr"))[:2]).astype(np.float64)
         for b in range(G)] for r in range(RENDERS)])
@@ -83,12 +87,17 @@ def main():
                                      (d_loo - d_loo.mean(axis=0))).sum(axis=0))
     true_c = ((n - n.mean(axis=0)) * (d - d.mean(axis=0))).sum(axis=0) / (RENDERS - 1)
     sv = v.sum()
+    mse = ((d - ref) ** 2).sum(axis=(1, 2, 3)).mean()
+    resid = ((d - n) ** 2).sum(axis=(1, 2, 3)) - sv
     print(f"{a.scene}, {a.denoiser}, {RENDERS} renders of {G} blocks ({32 * G} spp): "
           "Cov(n, d) summed over the image / sum v")
     print(f"  true       {true_c.sum() / sv:.3f}")
     for name, c in (("SURE", sure_c), ("jackknife", jack_c)):
         per = np.array([x.sum() / sv for x in c])
         print(f"  {name:<10} {per.mean():.3f} (one render's spread {per.std(ddof=1):.3f})")
+    for name, c in (("SURE", sure_c), ("jackknife", jack_c)):
+        sure = resid + 2 * np.array([x.sum() for x in c])
+        print(f"  E[SURE] / MSE with the {name}'s C: {sure.mean() / mse:.3f}")
 
 
 if __name__ == "__main__":
