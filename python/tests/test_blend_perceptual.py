@@ -57,6 +57,31 @@ def test_blend_options_and_errors(tmp):
         mcpost.blend([series("cornell", 1), "missing.exr"], denoiser="gauss")
 
 
+def test_blend_self_influence_is_the_denoisers():
+    """Each member's self_influence (blend.md "Self-influence") against its truth for the
+    linear gauss denoiser: sum v K_ii / sum v, K_ii the blur's response at an impulse
+    (impulses 13 px apart, beyond the kernel's radius of 6, so that 169 blurs give every
+    pixel). The one probe's noise in it is sqrt(sum v^2 / 2) / sum v per channel."""
+    members = [series("texture", n) for n in (32, 64, 128)]
+    got = mcpost.blend(members, denoiser="gauss", flip=False)
+    h, w = rgb(members[0]).shape[:2]
+    k_ii = np.zeros((h, w))
+    for oy in range(13):
+        for ox in range(13):
+            impulse = np.zeros((h, w, 3), np.float32)
+            impulse[oy::13, ox::13, :] = 1
+            k_ii[oy::13, ox::13] = mcpost.denoise(impulse, denoiser="gauss")[oy::13, ox::13, 0]
+    # a blur of sigma 2 keeps 1 / (2 pi sigma^2) of an impulse away from the borders
+    assert abs(k_ii[h // 2, w // 2] - 1 / (8 * np.pi)) < 0.002
+    for path, m in zip(members, got["members"]):
+        v = mcpost.read_dump(path)["variance"].astype(np.float64)
+        truth = np.mean([(v[..., c] * k_ii).sum() / v[..., c].sum() for c in range(3)])
+        sd = np.sqrt(sum(((v[..., c] ** 2).sum() / 2) / v[..., c].sum() ** 2
+                         for c in range(3))) / 3
+        assert abs(m["self_influence"] - truth) < 4 * sd + 0.002, (path, m["self_influence"],
+                                                                  truth, sd)
+
+
 CANDIDATES = [single("cornell", i) for i in range(4)]
 
 
