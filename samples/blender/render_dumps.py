@@ -225,6 +225,26 @@ def _noise_ramp(scale, low, high):
     return build
 
 
+def _wave_ramp(scale, one, two, direction='X', distortion=0.0):
+    """A _textured() colour builder: stripes, Blender's wave texture (bands along
+    `direction`, sine profile; a period of pi/10/scale units without distortion)
+    through a ramp from `one` to `two`."""
+    def build(nodes, links, co):
+        w = nodes.new('ShaderNodeTexWave')
+        w.wave_type = 'BANDS'
+        w.bands_direction = direction
+        w.wave_profile = 'SIN'
+        w.inputs['Scale'].default_value = scale
+        w.inputs['Distortion'].default_value = distortion
+        links.new(co, w.inputs['Vector'])
+        ramp = nodes.new('ShaderNodeValToRGB')
+        ramp.color_ramp.elements[0].color = (*one, 1)
+        ramp.color_ramp.elements[1].color = (*two, 1)
+        links.new(w.outputs['Fac'], ramp.inputs['Fac'])
+        return ramp.outputs['Color']
+    return build
+
+
 def _brick(scale, one, two, mortar, mortar_size):
     """A _textured() colour builder: Blender's brick texture at `scale` (bricks
     0.5/scale by 0.25/scale units in the vector's X-Y plane), bricks in colours
@@ -249,19 +269,7 @@ def build_texture():
     brick = _brick(4.0, (0.6, 0.22, 0.12), (0.45, 0.35, 0.25), (0.85, 0.85, 0.8), 0.04)
 
     def stripes(rgb_a, rgb_b, scale):
-        def f(nodes, links, co):
-            w = nodes.new('ShaderNodeTexWave')
-            w.wave_type = 'BANDS'
-            w.bands_direction = 'DIAGONAL'
-            w.inputs['Scale'].default_value = scale
-            w.inputs['Distortion'].default_value = 1.5
-            links.new(co, w.inputs['Vector'])
-            ramp = nodes.new('ShaderNodeValToRGB')
-            ramp.color_ramp.elements[0].color = (*rgb_a, 1)
-            ramp.color_ramp.elements[1].color = (*rgb_b, 1)
-            links.new(w.outputs['Fac'], ramp.inputs['Fac'])
-            return ramp.outputs['Color']
-        return f
+        return _wave_ramp(scale, rgb_a, rgb_b, direction='DIAGONAL', distortion=1.5)
 
     noise = _noise_ramp(12.0, (0.05, 0.2, 0.5), (0.9, 0.8, 0.3))
 

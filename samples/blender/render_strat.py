@@ -615,26 +615,6 @@ def _lathe(name, profile, xy, z0, mat, segments=64):
     return ob
 
 
-def _stripes(scale, one, two):
-    """A _textured() colour builder: wallpaper stripes, Blender's wave texture
-    (bands along X, sine profile, no distortion: a period of pi/10/scale
-    units) through a ramp from `one` to `two`."""
-    def build(nodes, links, co):
-        w = nodes.new('ShaderNodeTexWave')
-        w.wave_type = 'BANDS'
-        w.bands_direction = 'X'
-        w.wave_profile = 'SIN'
-        w.inputs['Scale'].default_value = scale
-        w.inputs['Distortion'].default_value = 0.0
-        links.new(co, w.inputs['Vector'])
-        ramp = nodes.new('ShaderNodeValToRGB')
-        ramp.color_ramp.elements[0].color = (*one, 1)
-        ramp.color_ramp.elements[1].color = (*two, 1)
-        links.new(w.outputs['Fac'], ramp.inputs['Fac'])
-        return ramp.outputs['Color']
-    return build
-
-
 def build_stilllife():
     """A still life on a table, seen close up through a lens with a shallow
     depth of field (which the other fixtures lack but for lamp's mild one):
@@ -658,8 +638,8 @@ def build_stilllife():
                        rdm._textured('cloth', checker))
     cloth.data.transform(mathutils.Matrix.Diagonal((2.0, 1.6, 1.0, 1.0)))
     wall = rdm._plane('wall', 1.0, (0.0, 1.8, 1.25), (np.pi / 2, 0, 0),
-                      rdm._textured('wall', _stripes(3.0, (0.55, 0.5, 0.38),
-                                                     (0.75, 0.72, 0.62))))
+                      rdm._textured('wall', rdm._wave_ramp(3.0, (0.55, 0.5, 0.38),
+                                                         (0.75, 0.72, 0.62))))
     wall.data.transform(mathutils.Matrix.Diagonal((6.0, 2.5, 1.0, 1.0)))
 
     # on the cloth (zc), from front to back: a plum (glossy), an orange
