@@ -23,20 +23,13 @@ error of d (the 16384-spp reference's own noise left in), the mean over the rend
   /usr/bin/python3 bench/jackknife_cov.py [--scene stilllife] [--denoiser nlm] [--groups 4]
 Run from the repository root, with the module built (build/python)."""
 import argparse
-import os
 import sys
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, os.path.join(ROOT, "build", "python"))
-import mcpost  # noqa: E402
+from strat_fixture import block, features, mcpost, reference
 
 RENDERS = 8
-
-
-def rgb(pixels, names):
-    return np.ascontiguousarray(pixels[..., [names.index(c) for c in "RGB"]])
 
 
 def box5(img):
@@ -55,16 +48,10 @@ def main():
     if not 2 <= a.groups <= 32:
         sys.exit("jackknife_cov.py: --groups must be 2 to 32")
     mcpost.set_quiet(True)
-    folder = os.path.join(ROOT, "samples", "fixtures", "strat", a.scene)
-    feat, names, _ = mcpost.read_image(os.path.join(folder, f"{a.scene}_features.exr"))
-    albedo = np.ascontiguousarray(feat[..., [names.index("Albedo." + c) for c in "RGB"]])
-    normal = np.ascontiguousarray(feat[..., [names.index("N." + c) for c in "XYZ"]])
+    albedo, normal = features(a.scene)
     G = a.groups
-    ref = rgb(*mcpost.read_image(os.path.join(folder, f"{a.scene}_reference.exr"))[:2])
-    ref = ref.astype(np.float64)
-    blocks = np.array([[rgb(*mcpost.read_image(os.path.join(
-        folder, "blocks", f"{a.scene}_r{r}_b{b:02d}.exr"))[:2]).astype(np.float64)
-        for b in range(G)] for r in range(RENDERS)])
+    ref = reference(a.scene)
+    blocks = np.array([[block(a.scene, r, b) for b in range(G)] for r in range(RENDERS)])
     n = blocks.mean(axis=1)
     v = box5(n.var(axis=0, ddof=1))
 

@@ -20,18 +20,10 @@ spread). docs/fidelity.md, "SURE and the U-Net on window", has the figures.
                                       [--gaussian]
 Run from the repository root, with the module built (build/python)."""
 import argparse
-import os
-import sys
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, os.path.join(ROOT, "build", "python"))
-import mcpost  # noqa: E402
-
-
-def rgb(pixels, names):
-    return np.ascontiguousarray(pixels[..., [names.index(c) for c in "RGB"]])
+from strat_fixture import block, features, mcpost, reference
 
 
 def main():
@@ -42,15 +34,9 @@ def main():
     ap.add_argument("--gaussian", action="store_true")
     a = ap.parse_args()
     mcpost.set_quiet(True)
-    folder = os.path.join(ROOT, "samples", "fixtures", "strat", a.scene)
-    feat, names, _ = mcpost.read_image(os.path.join(folder, f"{a.scene}_features.exr"))
-    albedo = np.ascontiguousarray(feat[..., [names.index("Albedo." + c) for c in "RGB"]])
-    normal = np.ascontiguousarray(feat[..., [names.index("N." + c) for c in "XYZ"]])
-    ref = rgb(*mcpost.read_image(os.path.join(folder, f"{a.scene}_reference.exr"))[:2])
-    ref = ref.astype(np.float64)
-    blocks = [[rgb(*mcpost.read_image(os.path.join(
-        folder, "blocks", f"{a.scene}_r{r}_b{b:02d}.exr"))[:2]).astype(np.float64)
-        for b in range(32)] for r in range(8)]
+    albedo, normal = features(a.scene)
+    ref = reference(a.scene)
+    blocks = [[block(a.scene, r, b) for b in range(32)] for r in range(8)]
     X = np.stack([np.mean(render[g:g + a.group], axis=0)
                   for render in blocks for g in range(0, 32, a.group)])
     dev = X - X.mean(axis=0)
