@@ -35,7 +35,7 @@
  *   build/bench/bench_fidelity [--scenes a,b] [--denoisers nlm,unet,js-unet]
  *                              [--sources LIST] [--fixtures DIR] [--weights TZA]
  *                              [--iterations N] [--probes K] [--s2-pool R]
- *                              [--probe-floor R]
+ *                              [--probe-floor R] [--sure-groups G]
  *                              [--fit on_the_fly|last_two|retrospective]
  *                              [--no-blend | --blend-only] [--curves]
  *
@@ -376,6 +376,7 @@ typedef struct run_settings {
     double floor;
     const int *tau_it;
     int probe_floor; /* -2: the estimate's own (automatic) */
+    int sure_groups; /* -2: the estimate's own (automatic) */
 } run_settings;
 
 /* The stopping protocol on one sequence: τ from its truth, the estimated and true
@@ -399,6 +400,7 @@ run_estimate(const run_settings *rs, const mcp_series *series, const mcp_denoise
     mcp_series_estimate *se = NULL;
     if (rs->s2_pool != -2) eo.est.s2_pool = rs->s2_pool;
     if (rs->probe_floor != -2) eo.est.probe_floor = rs->probe_floor;
+    if (rs->sure_groups != -2) eo.est.sure_groups = rs->sure_groups;
     if (mcp_estimate_series(series, den, &eo, reference, NULL, NULL, &se))
         die("estimate series");
     for (int t = 0; t < 3; t++) {
@@ -567,7 +569,7 @@ main(int argc, char **argv)
          dens_arg[256] = "nlm,bilateral,unet";
     char srcs_arg[256] = "auto,per-sample,increments,replicates4,replicates8,oracle";
     int iters = MAX_ITER, blend = 1, estimate = 1, curves = 0, probes = 0, s2_pool = -2,
-        probe_floor = -2, safeguard = 1;
+        probe_floor = -2, sure_groups = -2, safeguard = 1;
     mcp_curve_fit fit = mcp_blend_defaults().fit;
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
@@ -590,6 +592,8 @@ main(int argc, char **argv)
             s2_pool = atoi(v), i++;
         else if (!strcmp(a, "--probe-floor") && v)
             probe_floor = atoi(v), i++;
+        else if (!strcmp(a, "--sure-groups") && v)
+            sure_groups = atoi(v), i++;
         else if (!strcmp(a, "--probes") && v)
             probes = atoi(v), i++;
         else if (!strcmp(a, "--blend-only"))
@@ -605,7 +609,7 @@ main(int argc, char **argv)
                     "usage: bench_fidelity [--scenes LIST] [--denoisers LIST] "
                     "[--sources LIST] [--fixtures DIR] [--weights TZA] "
                     "[--iterations N] [--probes K] [--s2-pool R] [--probe-floor R] "
-                    "[--fit NAME] [--no-blend | "
+                    "[--sure-groups G] [--fit NAME] [--no-blend | "
                     "--blend-only] [--curves] [--no-safeguard]\n");
             return 2;
         }
@@ -662,8 +666,8 @@ main(int argc, char **argv)
                 if (tau_it[t] < 1) tau_it[t] = 1;
             }
             mcp_series *series = write_series(&s, src, n_it, tmp, &ratio);
-            run_settings run = {p,   probes, s2_pool, curves,     safeguard,
-                                fit, floor,  tau_it,  probe_floor};
+            run_settings run = {p,   probes, s2_pool, curves,      safeguard,
+                                fit, floor,  tau_it,  probe_floor, sure_groups};
             printf("\n### %s, %s%s; reference %.0f spp, its noise floor at p %.3g",
                    s.name, source_names[src],
                    src == SRC_REP4 || src == SRC_REP8 ? " (spp: all renders together)"

@@ -41,6 +41,7 @@ mcp_estimate_defaults(void)
     o.budget = 0;
     o.s2_pool = -1;
     o.probe_floor = -1;
+    o.sure_groups = -1;
     return o;
 }
 
@@ -125,6 +126,10 @@ mcp_estimate_check(const mcp_estimate_options *o)
         return mcp_error(
             "estimate: probe_floor must be -1 (automatic) or 0 to %d (got %d)",
             MCP__PROBE_FLOOR_MAX, o->probe_floor);
+    if (o->sure_groups < -1 || o->sure_groups == 1 || o->sure_groups > MCP__GROUPS_MAX)
+        return mcp_error("estimate: sure_groups must be -1 (automatic), 0 (none) or 2 to "
+                         "%d (got %d)",
+                         MCP__GROUPS_MAX, o->sure_groups);
     if (o->probe_floor > 0 && s->metric == MCP_METRIC_RELSE_PERCEPTUAL)
         return mcp_error("estimate: probe_floor needs the metric relse or se (got "
                          "relse-perceptual)");
@@ -274,9 +279,46 @@ has_variance(const mcp_dump *d)
     return 0;
 }
 
+/* SURE with its covariance term and the variance beside it measured on the member's
+ * own groups (group_jackknife.c) instead of the probes' divergence and the dump's
+ * variance: (d - n)² - V + 2C, and over the denominator for the relative map. V and C
+ * come from the same groups, so that their errors cancel as the probes' do. */
+static void
+sure_from_groups(const mcp_dump *dump, const mcp__group_terms *g, mcp_error_maps *m)
+{
+    const int w = dump->color->width, h = dump->color->height;
+#pragma omp parallel for schedule(static)
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            const float *pf = mcp_image_px(m->denoised, x, y),
+                        *pn = mcp_image_px(dump->color, x, y),
+                        *pv = mcp_image_px(g->var, x, y),
+                        *pc = mcp_image_px(g->cov, x, y);
+            const double inv = 1.0 / mcp_image_px(m->denominator, x, y)[0];
+            float *s = mcp_image_px(m->sure, x, y), *sr = mcp_image_px(m->sure_rel, x, y);
+            for (int c = 0; c < 3; c++) {
+                const double diff = (double)pf[c] - pn[c];
+                const double sure = diff * diff - pv[c] + 2.0 * pc[c];
+                s[c] = (float)sure;
+                sr[c] = (float)(sure * inv);
+            }
+        }
+}
+
+static int compute(const mcp_dump *dump, const mcp_denoiser *den,
+                   const mcp_estimate_options *opt, const mcp__group_terms *groups,
+                   mcp_estimate **out);
+
 int
 mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,
                      const mcp_estimate_options *opt, mcp_estimate **out)
+{
+    return compute(dump, den, opt, NULL, out);
+}
+
+static int
+compute(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_options *opt,
+        const mcp__group_terms *groups, mcp_estimate **out)
 {
     *out = NULL;
     mcp_estimate_options o = opt ? *opt : mcp_estimate_defaults();
@@ -317,6 +359,10 @@ mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,
             ev.probes[j].color = eps[j];
         free(eps);
         if (bad) goto done;
+    }
+    if (groups && groups->cov && o.sure.metric != MCP_METRIC_RELSE_PERCEPTUAL) {
+        sure_from_groups(dump, groups, &e->maps);
+        e->sure_groups = groups->groups;
     }
     step(bar, 2 + JVP_STEPS);
     if (o.variance_rademacher) { /* Var from the Rademacher probes (Firmino 2023) */
@@ -604,16 +650,25 @@ mcp_estimate_series(const mcp_series *series, const mcp_denoiser *den,
     s->n_percentiles = o.est.n_percentiles;
     memcpy(s->percentiles, o.est.percentiles, sizeof o.est.percentiles);
     s->has_reference = reference != NULL;
+    const int groups =
+        o.est.sure_groups >= 0 ? o.est.sure_groups : MCP_ESTIMATE_SURE_GROUPS;
     for (int i = 0; i < series->count; i++) {
         mcp_dump *d = NULL;
         mcp_estimate *e = NULL;
         mcp_series_point *pt = &s->points[i];
-        if (mcp_series_load(series, i, &d) || mcp_estimate_compute(d, den, &o.est, &e)) {
+        mcp__group_terms g = {0};
+        if (mcp_series_load(series, i, &d) ||
+            (groups > 1 && o.est.sure.metric != MCP_METRIC_RELSE_PERCEPTUAL &&
+             mcp__series_group_terms(series, i, d, den, groups, &g)) ||
+            compute(d, den, &o.est, &g, &e)) {
             mcp_error_prefix("%s: ", series->paths[i]);
+            mcp__group_terms_clear(&g);
             mcp_dump_free(d);
             mcp_series_estimate_free(s);
             return -1;
         }
+        mcp__group_terms_clear(&g);
+        pt->sure_groups = e->sure_groups;
         pt->spp = series->spp && series->spp[i] > 0 ? series->spp[i] : mean_spp(d);
         s->variance_source = d->variance_source; /* the last member's, in the end */
         int bad = 0;

@@ -329,7 +329,17 @@ typedef struct mcp_estimate_options {
      * (docs/fidelity.md "The defaults"): -1 automatic (mcp_estimate_auto_probe_floor),
      * 0 none, or r [-1] */
     int probe_floor;
+    /* Over a series: SURE's covariance term Cov(n, d), and the variance v beside it,
+     * measured on the member's own samples by the delete-a-group jackknife over G
+     * groups of its checkpoints (docs/mathematics.md §2.10), at G denoiser applies,
+     * instead of the probes' divergence, which misreads a heavy-tailed noise: -1
+     * automatic (MCP_ESTIMATE_SURE_GROUPS), 0 none, or G from 2 to 8 [-1]. A single
+     * dump, the first member, or members that are not checkpoints of one render keep
+     * the probes' divergence. */
+    int sure_groups;
 } mcp_estimate_options;
+
+#define MCP_ESTIMATE_SURE_GROUPS 4
 
 /* The automatic probe count: that of the denoiser that runs on the dump (den, or the
  * one it picks for it: the `default` one's U-Net or nlm) from its estimate_probes (the
@@ -380,6 +390,7 @@ typedef struct mcp_estimate {
     int s2_pool;                         /* the radius s² was pooled over */
     int probe_floor;                     /* the radius of the probes' variance floor */
     int probes;                          /* the probes it took */
+    int sure_groups; /* the groups SURE's covariance came from; 0: the probes' */
 } mcp_estimate;
 
 MCP_API int mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,
@@ -409,6 +420,7 @@ typedef struct mcp_series_point {
     double true_percentile[MCP_ESTIMATE_MAX_PERCENTILES];
     double true_mean_error; /* mean true error (NAN without reference) */
     double est_mean_error;  /* mean s²(λ + 1) */
+    int sure_groups;        /* the groups SURE's covariance came from; 0: the probes' */
 } mcp_series_point;
 
 typedef struct mcp_series_estimate {

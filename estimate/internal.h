@@ -128,6 +128,22 @@ int mcp__error_maps_from_own_probes(const mcp_dump *dump, mcp_image **denoised,
                                     const mcp_sure_options *opt,
                                     const mcp_image *probe_var, mcp_error_maps *out);
 
+/* SURE's terms of series member i measured on its own samples by the delete-a-group
+ * jackknife over at most `groups` (<= MCP__GROUPS_MAX) groups of its checkpoints, at
+ * one denoiser apply per group (group_jackknife.c): cov = Cov(n, d) and var = Var[n]
+ * per value (3 channels each). Both stay NULL (and 0 is returned) where the series
+ * gives no groups: the first member, a member without a scalar sample count or a
+ * variance, checkpoints out of order, or members whose differences are noisier than
+ * their variances say (not checkpoints of one render). */
+#define MCP__GROUPS_MAX 8
+typedef struct mcp__group_terms {
+    mcp_image *cov, *var;
+    int groups; /* the groups found */
+} mcp__group_terms;
+int mcp__series_group_terms(const mcp_series *s, int i, const mcp_dump *member,
+                            const mcp_denoiser *den, int groups, mcp__group_terms *out);
+void mcp__group_terms_clear(mcp__group_terms *g);
+
 /* Per-value variance maps from n jvp images: mean_k (J v_k)² (through the CSF operator
  * for relse-perceptual), and divided by the denominator (1 channel) (variance.c). */
 int mcp__variance_from_jvps(const mcp_image *const *jv, int n, mcp_error_metric metric,

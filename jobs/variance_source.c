@@ -1,6 +1,7 @@
 /* variance_source.c: what a variance rests on, said the same way by every command
  * (estimate, blend, info): a per-sample variance / n is an assumption that the samples
- * are independent, which stratified samplers break. */
+ * are independent, which stratified samplers break. And what a series estimate's SURE
+ * rests on (docs/mathematics.md §2.10). */
 #include "internal.h"
 
 #include <stdio.h>
@@ -83,4 +84,12 @@ mcp__variance_ratio_warning(double ratio, int using_increments)
                                 "increments)"
                               : "");
     return text;
+}
+
+const char *
+mcp__sure_source_words(int groups)
+{
+    return groups > 0 ? "covariance and variance from groups of each member's own "
+                        "checkpoints, from the second member on (--sure-groups)"
+                      : "the probes' divergence (Stein's lemma; assumes Gaussian noise)";
 }

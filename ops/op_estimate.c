@@ -142,6 +142,20 @@ static const mcp_option estimate_options[] = {
      .bounds = MCP_OPT_LO | MCP_OPT_HI,
      .auto_word = "auto",
      .auto_value = -1},
+    {.name = "sure_groups",
+     .type = MCP_OPT_INT,
+     .where = MCP_OPT_CLI | MCP_OPT_JOB, /* Python's estimate takes one dump */
+     .offset = EST(sure_groups),
+     .meta = "G|auto",
+     .def = "auto",
+     .doc = "over a series: SURE's covariance term and variance from G groups of each "
+            "member's own checkpoints (G denoiser applies) instead of the probes' "
+            "divergence; 0: the probes'; auto: 4",
+     .lo = 0,
+     .hi = 8,
+     .bounds = MCP_OPT_LO | MCP_OPT_HI,
+     .auto_word = "auto",
+     .auto_value = -1},
     {.name = "exit_status",
      .type = MCP_OPT_FLAG,
      .where = MCP_OPT_CLI,

@@ -1,0 +1,214 @@
+/* group_jackknife.c: SURE's covariance term measured on a render's own samples
+ * (docs/mathematics.md §2.10).
+ *
+ * SURE's divergence term reads Cov(n_i, d_i) as v_i E[∂d_i/∂n_i] (Stein's lemma),
+ * which holds for Gaussian noise. A stratified render's noise at tens of samples is
+ * skewed and heavy-tailed, and a denoiser that keeps a pixel's rare bright samples
+ * while its slope at the typical value is small keeps more of the noise than its
+ * slope says (bench/stein_gap.py). A member of a progressive series is the sum of its
+ * increments, which are realisations of that noise: split its I samples into G groups
+ * of consecutive checkpoints (group g's sum S_g of m_g samples), leave each out,
+ *
+ *     n_(g) = (I n - S_g) / (I - m_g),   d_(g) = F(n_(g)) with the variance v I / (I -
+ * m_g),
+ *
+ * and weigh the deviations (the delete-a-group jackknife):
+ *
+ *     C_i = Σ_g w_g (n_(g),i - n_i) (d_(g),i - d̄_i),   V_i = Σ_g w_g (n_(g),i - n_i)²,
+ *     w_g = (I - m_g) / (G m_g),   d̄ = Σ_g a_g d_(g),   a_g = (I - m_g) / ((G - 1) I).
+ *
+ * E[(n_(g) - n)²] = v m_g / (I - m_g) for any noise, so E[V] = v and, for a linear
+ * F = J n, E[C] = J v, whatever the group sizes; the a_g-weighted mean of the n_(g) is
+ * n itself, so d̄ takes out only the shift that the larger variance gives every d_(g).
+ * With equal groups the weights are the textbook (G - 1) / G. SURE then reads
+ * (d - n)² - V + 2C: the render's own noise as its probes, so that V's errors and C's
+ * cancel as the probes' do. It costs G denoiser applies. */
+#include "estimate.h"
+#include "internal.h"
+
+#include "../common/dump/internal.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+void
+mcp__group_terms_clear(mcp__group_terms *g)
+{
+    mcp_image_free(g->cov);
+    mcp_image_free(g->var);
+    memset(g, 0, sizeof *g);
+}
+
+/* The last member of each of up to `groups` groups of members 0..i with sample counts
+ * spp[0] < ... < spp[i], as near equal as the checkpoints allow (b[G - 1] = i); the
+ * number of groups G found (fewer when the checkpoints are too coarse). */
+static int
+group_ends(const double *spp, int i, int groups, int *b)
+{
+    int g = 0, prev = -1;
+    for (int k = 1; k < groups; k++) {
+        double target = spp[i] * k / groups;
+        int best = -1;
+        for (int j = prev + 1; j < i; j++)
+            if (best < 0 || fabs(spp[j] - target) < fabs(spp[best] - target)) best = j;
+        if (best < 0) break;
+        b[g++] = prev = best;
+    }
+    b[g++] = i;
+    return g;
+}
+
+/* The groups' ends for member i from the series' sample counts (member indices when
+ * it has none in increasing order); the number of groups, or -1 out of memory. */
+static int
+plan_groups(const mcp_series *s, int i, int groups, int *b)
+{
+    double *spp = mcp_calloc((size_t)i + 1, sizeof *spp);
+    if (!spp) return -1;
+    int known = 1;
+    for (int j = 0; j <= i; j++) {
+        spp[j] = s->spp ? s->spp[j] : 0;
+        known = known && spp[j] > 0 && (j == 0 || spp[j] > spp[j - 1]);
+    }
+    for (int j = 0; !known && j <= i; j++)
+        spp[j] = j + 1.0;
+    const int G = group_ends(spp, i, groups, b);
+    free(spp);
+    return G;
+}
+
+/* loo[g] = the sum of group g's samples, m[g] its count, from the members at the
+ * groups' ends (member itself for the last); 1 done, 0 when the ends do not make
+ * groups (a sample count missing or out of order, another size), -1 on error. */
+static int
+group_sums(const mcp_series *s, const mcp_dump *member, const int *b, int G,
+           mcp_image **loo, double *m)
+{
+    const mcp_image *n = member->color;
+    const int w = n->width, h = n->height;
+    double before = 0.0; /* the samples up to the group's start */
+    mcp_dump *prev = NULL;
+    for (int g = 0; g < G; g++) {
+        mcp_dump *end = NULL;
+        if (g < G - 1 && mcp__series_load_file(s, b[g], &end)) {
+            mcp_dump_free(prev);
+            return -1;
+        }
+        const mcp_dump *e = end ? end : member;
+        if (e->spp_map || !(e->spp > before) || (end && !(end->spp < member->spp)) ||
+            e->color->width != w || e->color->height != h) {
+            mcp_dump_free(end);
+            mcp_dump_free(prev);
+            return 0;
+        }
+        if (mcp__image_new(w, h, 3, NULL, "left-out mean", &loo[g])) {
+            mcp_dump_free(end);
+            mcp_dump_free(prev);
+            return -1;
+        }
+        m[g] = e->spp - before;
+#pragma omp parallel for schedule(static)
+        for (int y = 0; y < h; y++)
+            for (int x = 0; x < w; x++) {
+                const float *pe = mcp_image_px(e->color, x, y);
+                const float *pp = prev ? mcp_image_px(prev->color, x, y) : NULL;
+                float *o = mcp_image_px(loo[g], x, y);
+                for (int c = 0; c < 3; c++)
+                    o[c] = (float)(e->spp * pe[c] - (pp ? before * pp[c] : 0.0));
+            }
+        before = e->spp;
+        mcp_dump_free(prev);
+        prev = end;
+    }
+    mcp_dump_free(prev);
+    return 1;
+}
+
+int
+mcp__series_group_terms(const mcp_series *s, int i, const mcp_dump *member,
+                        const mcp_denoiser *den, int groups, mcp__group_terms *out)
+{
+    memset(out, 0, sizeof *out);
+    if (i < 1 || groups < 2 || !member->var_of_mean || member->spp_map ||
+        !(member->spp > 0))
+        return 0;
+    int b[MCP__GROUPS_MAX];
+    const int G =
+        plan_groups(s, i, groups < MCP__GROUPS_MAX ? groups : MCP__GROUPS_MAX, b);
+    if (G < 2) return G < 0 ? -1 : 0;
+
+    const mcp_image *n = member->color, *v = member->var_of_mean;
+    const int w = n->width, h = n->height;
+    const double I = member->spp;
+    double m[MCP__GROUPS_MAX], wg[MCP__GROUPS_MAX], ag[MCP__GROUPS_MAX];
+    mcp_image *loo[MCP__GROUPS_MAX] = {0}, *d_loo[MCP__GROUPS_MAX] = {0}, *v_loo = NULL;
+    int rc = group_sums(s, member, b, G, loo, m);
+    if (rc <= 0) goto done;
+    rc = -1;
+    if (mcp__image_new(w, h, 3, NULL, "left-out variance", &v_loo)) goto done;
+    for (int g = 0; g < G; g++) {
+        /* n_(g) = (I n - S_g) / (I - m_g) in place of S_g, and its variance */
+        const double scale = I / (I - m[g]);
+#pragma omp parallel for schedule(static)
+        for (int y = 0; y < h; y++)
+            for (int x = 0; x < w; x++) {
+                const float *pn = mcp_image_px(n, x, y), *pv = mcp_image_px(v, x, y);
+                float *o = mcp_image_px(loo[g], x, y), *ov = mcp_image_px(v_loo, x, y);
+                for (int c = 0; c < 3; c++) {
+                    o[c] = (float)((I * pn[c] - o[c]) * (scale / I));
+                    ov[c] = (float)(pv[c] * scale);
+                }
+            }
+        mcp_denoise_input in = mcp_denoise_input_of(member);
+        in.color = loo[g];
+        in.variance = v_loo;
+        if (den->apply(den, &in, &d_loo[g])) goto done;
+        if (d_loo[g]->channels != 3 || d_loo[g]->width != w || d_loo[g]->height != h) {
+            mcp_error("the denoiser gave a %dx%d image of %d channels for %dx%d",
+                      d_loo[g]->width, d_loo[g]->height, d_loo[g]->channels, w, h);
+            goto done;
+        }
+        wg[g] = (I - m[g]) / (G * m[g]);
+        ag[g] = (I - m[g]) / ((G - 1) * I);
+    }
+    if (mcp__image_new(w, h, 3, NULL, "jackknife covariance", &out->cov) ||
+        mcp__image_new(w, h, 3, NULL, "jackknife variance", &out->var))
+        goto done;
+    double sum_v = 0.0, sum_jv = 0.0;
+#pragma omp parallel for schedule(static) reduction(+ : sum_v, sum_jv)
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            const float *pn = mcp_image_px(n, x, y), *pv = mcp_image_px(v, x, y);
+            float *oc = mcp_image_px(out->cov, x, y), *ov = mcp_image_px(out->var, x, y);
+            for (int c = 0; c < 3; c++) {
+                double dbar = 0.0, cov = 0.0, var = 0.0;
+                for (int g = 0; g < G; g++)
+                    dbar += ag[g] * mcp_image_px(d_loo[g], x, y)[c];
+                for (int g = 0; g < G; g++) {
+                    const double dn = (double)mcp_image_px(loo[g], x, y)[c] - pn[c];
+                    cov += wg[g] * dn * (mcp_image_px(d_loo[g], x, y)[c] - dbar);
+                    var += wg[g] * dn * dn;
+                }
+                oc[c] = (float)cov;
+                ov[c] = (float)var;
+                sum_v += pv[c];
+                sum_jv += var;
+            }
+        }
+    out->groups = G;
+    rc = 0;
+    /* differences far noisier than the members' variances say: not checkpoints of one
+       render (independent renders at rising counts), whose differences are no groups
+       at all (the series' own rule, mcp_variance_ratio_off) */
+    if (sum_jv > 0.0 && mcp_variance_ratio_off(sum_v / sum_jv) && sum_v < sum_jv)
+        mcp__group_terms_clear(out);
+done:
+    for (int g = 0; g < MCP__GROUPS_MAX; g++) {
+        mcp_image_free(loo[g]);
+        mcp_image_free(d_loo[g]);
+    }
+    mcp_image_free(v_loo);
+    if (rc) mcp__group_terms_clear(out);
+    return rc;
+}
