@@ -1020,6 +1020,56 @@ test_metrics_gate_job(void **state)
     cJSON_Delete(j);
 }
 
+/* A series estimate measures SURE on each member's own checkpoints from the second
+ * member on, says so (the last line, "sure" in the JSON, each member's sure_groups),
+ * and --sure-groups 0 (or the job key) keeps the probes' divergence. */
+static void
+test_estimate_series_sure_groups(void **state)
+{
+    (void)state;
+    const char *words[2] = {"from groups of each member's own checkpoints",
+                            "the probes' divergence"};
+    for (int off = 0; off < 2; off++) {
+        assert_int_equal(run("estimate --series '%s/samples/fixtures/cornell/series/"
+                             "cornell_spp%%04d.exr' --spp 16,32,64 --denoiser gauss%s",
+                             MCP_TEST_SOURCE_DIR, off ? " --sure-groups 0" : ""),
+                         0);
+        assert_non_null(strstr(out, words[off]));
+        assert_int_equal(run("estimate --series '%s/samples/fixtures/cornell/series/"
+                             "cornell_spp%%04d.exr' --spp 16,32,64 --denoiser gauss "
+                             "--json%s",
+                             MCP_TEST_SOURCE_DIR, off ? " --sure-groups 0" : ""),
+                         0);
+        cJSON *j = cJSON_Parse(out);
+        assert_non_null(j);
+        assert_non_null(strstr(cJSON_GetObjectItem(j, "sure")->valuestring, words[off]));
+        const cJSON *members = cJSON_GetObjectItem(j, "members");
+        for (int i = 0; i < 3; i++) /* 16 spp: one block; then 2 and 3 groups */
+            assert_true(cJSON_GetObjectItem(cJSON_GetArrayItem(members, i), "sure_groups")
+                            ->valuedouble == (off || i == 0 ? 0 : i + 1));
+        cJSON_Delete(j);
+    }
+    assert_int_not_equal(run("estimate --series '%s/samples/fixtures/cornell/series/"
+                             "cornell_spp%%04d.exr' --spp 16,32 --sure-groups 1",
+                             MCP_TEST_SOURCE_DIR),
+                         0);
+    assert_non_null(strstr(err, "sure_groups must be"));
+    mcp_test_write_text(mcp_test_path("groups.yaml"),
+                        "inputs:\n  progress: {series: "
+                        "['" MCP_TEST_SOURCE_DIR "/samples/fixtures/cornell/series/"
+                        "cornell_spp0016.exr', '" MCP_TEST_SOURCE_DIR
+                        "/samples/fixtures/cornell/series/cornell_spp0032.exr']}\n"
+                        "output: groups_out\n"
+                        "stages:\n  - estimate: {input: progress, denoiser: gauss, "
+                        "sure_groups: 0}\n");
+    assert_int_equal(run("run --json '%s'", mcp_test_path("groups.yaml")), 0);
+    cJSON *j = cJSON_Parse(out);
+    assert_non_null(j);
+    const cJSON *est = cJSON_GetArrayItem(cJSON_GetObjectItem(j, "sections"), 0);
+    assert_non_null(strstr(cJSON_GetObjectItem(est, "sure")->valuestring, words[1]));
+    cJSON_Delete(j);
+}
+
 int
 main(void)
 {
@@ -1037,6 +1087,7 @@ main(void)
         cmocka_unit_test(test_metrics_several_tests),
         cmocka_unit_test(test_metrics_gate_job),
         cmocka_unit_test(test_metrics_percent_job),
+        cmocka_unit_test(test_estimate_series_sure_groups),
     };
     return cmocka_run_group_tests_name("cli", tests, NULL, NULL);
 }
