@@ -78,51 +78,29 @@ plan_groups(const mcp_series *s, int i, int groups, int *b)
     return G;
 }
 
-/* loo[g] = the sum of group g's samples, m[g] its count, from the members at the
- * groups' ends (member itself for the last); 1 done, 0 when the ends do not make
- * groups (a sample count missing or out of order, another size), -1 on error. */
-static int
-group_sums(const mcp_series *s, const mcp_dump *member, const int *b, int G,
-           mcp_image **loo, double *m)
+/* Accumulates one left-out mean's terms: dn = n_(g) - n and dd = d_(g) - d_(0) (d_(0)
+ * the first group's, so that the sums stay at the scale of the noise), into
+ * acc = {Σ w dn dd, Σ w dn, Σ a dd, Σ w dn²} (4 images, 3 channels each). */
+static void
+accumulate(const mcp_image *n, const mcp_image *loo, const mcp_image *d,
+           const mcp_image *d0, double w, double a, mcp_image *const acc[4])
 {
-    const mcp_image *n = member->color;
-    const int w = n->width, h = n->height;
-    double before = 0.0; /* the samples up to the group's start */
-    mcp_dump *prev = NULL;
-    for (int g = 0; g < G; g++) {
-        mcp_dump *end = NULL;
-        if (g < G - 1 && mcp__series_load_file(s, b[g], &end)) {
-            mcp_dump_free(prev);
-            return -1;
-        }
-        const mcp_dump *e = end ? end : member;
-        if (e->spp_map || !(e->spp > before) || (end && !(end->spp < member->spp)) ||
-            e->color->width != w || e->color->height != h) {
-            mcp_dump_free(end);
-            mcp_dump_free(prev);
-            return 0;
-        }
-        if (mcp__image_new(w, h, 3, NULL, "left-out mean", &loo[g])) {
-            mcp_dump_free(end);
-            mcp_dump_free(prev);
-            return -1;
-        }
-        m[g] = e->spp - before;
 #pragma omp parallel for schedule(static)
-        for (int y = 0; y < h; y++)
-            for (int x = 0; x < w; x++) {
-                const float *pe = mcp_image_px(e->color, x, y);
-                const float *pp = prev ? mcp_image_px(prev->color, x, y) : NULL;
-                float *o = mcp_image_px(loo[g], x, y);
-                for (int c = 0; c < 3; c++)
-                    o[c] = (float)(e->spp * pe[c] - (pp ? before * pp[c] : 0.0));
+    for (int y = 0; y < n->height; y++)
+        for (int x = 0; x < n->width; x++) {
+            const float *pn = mcp_image_px(n, x, y), *pl = mcp_image_px(loo, x, y),
+                        *pd = mcp_image_px(d, x, y), *p0 = mcp_image_px(d0, x, y);
+            float *o[4];
+            for (int k = 0; k < 4; k++)
+                o[k] = mcp_image_px(acc[k], x, y);
+            for (int c = 0; c < 3; c++) {
+                const double dn = (double)pl[c] - pn[c], dd = (double)pd[c] - p0[c];
+                o[0][c] += (float)(w * dn * dd);
+                o[1][c] += (float)(w * dn);
+                o[2][c] += (float)(a * dd);
+                o[3][c] += (float)(w * dn * dn);
             }
-        before = e->spp;
-        mcp_dump_free(prev);
-        prev = end;
-    }
-    mcp_dump_free(prev);
-    return 1;
+        }
 }
 
 int
@@ -138,64 +116,79 @@ mcp__series_group_terms(const mcp_series *s, int i, const mcp_dump *member,
         plan_groups(s, i, groups < MCP__GROUPS_MAX ? groups : MCP__GROUPS_MAX, b);
     if (G < 2) return G < 0 ? -1 : 0;
 
+    /* one group at a time: its sum from the members at its ends, the member without
+       it, denoised, into the sums; the memory is a few images whatever G is */
     const mcp_image *n = member->color, *v = member->var_of_mean;
     const int w = n->width, h = n->height;
     const double I = member->spp;
-    double m[MCP__GROUPS_MAX], wg[MCP__GROUPS_MAX], ag[MCP__GROUPS_MAX];
-    mcp_image *loo[MCP__GROUPS_MAX] = {0}, *d_loo[MCP__GROUPS_MAX] = {0}, *v_loo = NULL;
-    int rc = group_sums(s, member, b, G, loo, m);
-    if (rc <= 0) goto done;
-    rc = -1;
-    if (mcp__image_new(w, h, 3, NULL, "left-out variance", &v_loo)) goto done;
+    mcp_image *loo = NULL, *v_loo = NULL, *d = NULL, *d0 = NULL, *acc[4] = {0};
+    mcp_dump *prev = NULL, *end = NULL;
+    double before = 0.0; /* the samples up to the group's start */
+    int rc = -1;
+    if (mcp__image_new(w, h, 3, NULL, "left-out mean", &loo) ||
+        mcp__image_new(w, h, 3, NULL, "left-out variance", &v_loo))
+        goto done;
+    for (int k = 0; k < 4; k++)
+        if (mcp__image_new(w, h, 3, NULL, "jackknife sums", &acc[k])) goto done;
     for (int g = 0; g < G; g++) {
-        /* n_(g) = (I n - S_g) / (I - m_g) in place of S_g, and its variance */
-        const double scale = I / (I - m[g]);
+        if (g < G - 1 && mcp__series_load_file(s, b[g], &end)) goto done;
+        const mcp_dump *e = end ? end : member;
+        if (e->spp_map || !(e->spp > before) || (end && !(end->spp < member->spp)) ||
+            e->color->width != w || e->color->height != h) {
+            rc = 0; /* the ends make no groups: the probes' divergence stands */
+            goto done;
+        }
+        /* n_(g) = (I n - S_g) / (I - m_g), S_g = I_e n_e - I_prev n_prev; its variance */
+        const double m = e->spp - before, scale = I / (I - m);
 #pragma omp parallel for schedule(static)
         for (int y = 0; y < h; y++)
             for (int x = 0; x < w; x++) {
-                const float *pn = mcp_image_px(n, x, y), *pv = mcp_image_px(v, x, y);
-                float *o = mcp_image_px(loo[g], x, y), *ov = mcp_image_px(v_loo, x, y);
+                const float *pn = mcp_image_px(n, x, y), *pv = mcp_image_px(v, x, y),
+                            *pe = mcp_image_px(e->color, x, y),
+                            *pp = prev ? mcp_image_px(prev->color, x, y) : NULL;
+                float *o = mcp_image_px(loo, x, y), *ov = mcp_image_px(v_loo, x, y);
                 for (int c = 0; c < 3; c++) {
-                    o[c] = (float)((I * pn[c] - o[c]) * (scale / I));
+                    const double sum = e->spp * pe[c] - (pp ? before * pp[c] : 0.0);
+                    o[c] = (float)((I * pn[c] - sum) / (I - m));
                     ov[c] = (float)(pv[c] * scale);
                 }
             }
+        before = e->spp;
+        mcp_dump_free(prev);
+        prev = end;
+        end = NULL;
         mcp_denoise_input in = mcp_denoise_input_of(member);
-        in.color = loo[g];
+        in.color = loo;
         in.variance = v_loo;
-        if (den->apply(den, &in, &d_loo[g])) goto done;
-        if (d_loo[g]->channels != 3 || d_loo[g]->width != w || d_loo[g]->height != h) {
+        if (den->apply(den, &in, &d)) goto done;
+        if (d->channels != 3 || d->width != w || d->height != h) {
             mcp_error("the denoiser gave a %dx%d image of %d channels for %dx%d",
-                      d_loo[g]->width, d_loo[g]->height, d_loo[g]->channels, w, h);
+                      d->width, d->height, d->channels, w, h);
             goto done;
         }
-        wg[g] = (I - m[g]) / (G * m[g]);
-        ag[g] = (I - m[g]) / ((G - 1) * I);
+        if (!d0) d0 = d;
+        accumulate(n, loo, d, d0, (I - m) / (G * m), (I - m) / ((G - 1) * I), acc);
+        if (d != d0) mcp_image_free(d);
+        d = NULL;
     }
-    if (mcp__image_new(w, h, 3, NULL, "jackknife covariance", &out->cov) ||
-        mcp__image_new(w, h, 3, NULL, "jackknife variance", &out->var))
-        goto done;
+    /* C = Σ w dn (d_(g) - d̄) = Σ w dn dd - (Σ a dd)(Σ w dn); V = Σ w dn² */
     double sum_v = 0.0, sum_jv = 0.0;
 #pragma omp parallel for schedule(static) reduction(+ : sum_v, sum_jv)
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++) {
-            const float *pn = mcp_image_px(n, x, y), *pv = mcp_image_px(v, x, y);
-            float *oc = mcp_image_px(out->cov, x, y), *ov = mcp_image_px(out->var, x, y);
+            const float *pv = mcp_image_px(v, x, y), *pb = mcp_image_px(acc[1], x, y),
+                        *pa = mcp_image_px(acc[2], x, y),
+                        *pw = mcp_image_px(acc[3], x, y);
+            float *pc = mcp_image_px(acc[0], x, y);
             for (int c = 0; c < 3; c++) {
-                double dbar = 0.0, cov = 0.0, var = 0.0;
-                for (int g = 0; g < G; g++)
-                    dbar += ag[g] * mcp_image_px(d_loo[g], x, y)[c];
-                for (int g = 0; g < G; g++) {
-                    const double dn = (double)mcp_image_px(loo[g], x, y)[c] - pn[c];
-                    cov += wg[g] * dn * (mcp_image_px(d_loo[g], x, y)[c] - dbar);
-                    var += wg[g] * dn * dn;
-                }
-                oc[c] = (float)cov;
-                ov[c] = (float)var;
+                pc[c] = (float)((double)pc[c] - (double)pa[c] * pb[c]);
                 sum_v += pv[c];
-                sum_jv += var;
+                sum_jv += pw[c];
             }
         }
+    out->cov = acc[0];
+    out->var = acc[3];
+    acc[0] = acc[3] = NULL;
     out->groups = G;
     rc = 0;
     /* differences far noisier than the members' variances say: not checkpoints of one
@@ -204,11 +197,14 @@ mcp__series_group_terms(const mcp_series *s, int i, const mcp_dump *member,
     if (sum_jv > 0.0 && mcp_variance_ratio_off(sum_v / sum_jv) && sum_v < sum_jv)
         mcp__group_terms_clear(out);
 done:
-    for (int g = 0; g < MCP__GROUPS_MAX; g++) {
-        mcp_image_free(loo[g]);
-        mcp_image_free(d_loo[g]);
-    }
+    mcp_image_free(loo);
     mcp_image_free(v_loo);
+    mcp_image_free(d);
+    mcp_image_free(d0);
+    for (int k = 0; k < 4; k++)
+        mcp_image_free(acc[k]);
+    mcp_dump_free(prev);
+    mcp_dump_free(end);
     if (rc) mcp__group_terms_clear(out);
     return rc;
 }
