@@ -334,8 +334,8 @@ typedef struct mcp_estimate_options {
      * groups of its checkpoints (docs/mathematics.md §2.10), at G denoiser applies,
      * instead of the probes' divergence, which misreads a heavy-tailed noise: -1
      * automatic (MCP_ESTIMATE_SURE_GROUPS), 0 none, or G from 2 to 8 [-1]. A single
-     * dump, the first member, or members that are not checkpoints of one render keep
-     * the probes' divergence. */
+     * dump, the first two members (fewer than 3 groups unless G is 2), or members
+     * that are not checkpoints of one render keep the probes' divergence. */
     int sure_groups;
 } mcp_estimate_options;
 

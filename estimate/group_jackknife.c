@@ -114,7 +114,9 @@ mcp__series_group_terms(const mcp_series *s, int i, const mcp_dump *member,
     int b[MCP__GROUPS_MAX];
     const int G =
         plan_groups(s, i, groups < MCP__GROUPS_MAX ? groups : MCP__GROUPS_MAX, b);
-    if (G < 2) return G < 0 ? -1 : 0;
+    /* two groups leave one degree of freedom per value, too few under heavy tails
+       (docs/fidelity.md, `bathroom`): at least three unless fewer were asked for */
+    if (G < (groups < MCP__GROUPS_MIN ? groups : MCP__GROUPS_MIN)) return G < 0 ? -1 : 0;
 
     /* one group at a time: its sum from the members at its ends, the member without
        it, denoised, into the sums; the memory is a few images whatever G is */

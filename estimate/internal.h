@@ -132,10 +132,12 @@ int mcp__error_maps_from_own_probes(const mcp_dump *dump, mcp_image **denoised,
  * jackknife over at most `groups` (<= MCP__GROUPS_MAX) groups of its checkpoints, at
  * one denoiser apply per group (group_jackknife.c): cov = Cov(n, d) and var = Var[n]
  * per value (3 channels each). Both stay NULL (and 0 is returned) where the series
- * gives no groups: the first member, a member without a scalar sample count or a
+ * gives no groups: fewer than MCP__GROUPS_MIN checkpoints (the first two members), a
+ * member without a scalar sample count or a
  * variance, checkpoints out of order, or members whose differences are noisier than
  * their variances say (not checkpoints of one render). */
 #define MCP__GROUPS_MAX 8
+#define MCP__GROUPS_MIN 3 /* fewer found than this (and than asked for): no groups */
 typedef struct mcp__group_terms {
     mcp_image *cov, *var;
     int groups; /* the groups found */

@@ -90,6 +90,6 @@ const char *
 mcp__sure_source_words(int groups)
 {
     return groups > 0 ? "covariance and variance from groups of each member's own "
-                        "checkpoints, from the second member on (--sure-groups)"
+                        "checkpoints, from the third member on (--sure-groups)"
                       : "the probes' divergence (Stein's lemma; assumes Gaussian noise)";
 }

@@ -29,8 +29,8 @@ replicate 0's blocks B, that the single-sample calls average to the
 samples=block_spp call.
 
 The scene builders of cornell and texture are render_dumps.py's, unchanged;
-'interior', 'window', 'lamp', 'corridor', 'fog', 'courtyard' and
-'stilllife' are built here.
+'interior', 'window', 'lamp', 'corridor', 'fog', 'courtyard', 'stilllife'
+and 'bathroom' are built here.
 """
 
 import argparse
@@ -448,6 +448,14 @@ def _sky_gradient(strength, horizon, zenith):
     w.cycles.sample_map_resolution = 64
 
 
+def _object(name, data, mat):
+    """An object of mesh or curve data with its one material, in the scene."""
+    data.materials.append(mat)
+    ob = bpy.data.objects.new(name, data)
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
 def _bollard(name, r, h, xy, mat, segments=48, dome_rings=12):
     """A bollard standing on z = 0 at xy: a cylinder of radius r under a
     hemisphere from height h, one closed smooth-shaded mesh. (A cylinder with
@@ -477,10 +485,7 @@ def _bollard(name, r, h, xy, mat, segments=48, dome_rings=12):
     for f in me.polygons:
         f.use_smooth = True
     me.use_auto_smooth = True                   # smooth side and dome, sharp bottom edge
-    me.materials.append(mat)
-    ob = bpy.data.objects.new(name, me)
-    bpy.context.scene.collection.objects.link(ob)
-    return ob
+    return _object(name, me, mat)
 
 
 def build_courtyard():
@@ -609,10 +614,7 @@ def _lathe(name, profile, xy, z0, mat, segments=64):
     for f in me.polygons:
         f.use_smooth = True
     me.use_auto_smooth = True
-    me.materials.append(mat)
-    ob = bpy.data.objects.new(name, me)
-    bpy.context.scene.collection.objects.link(ob)
-    return ob
+    return _object(name, me, mat)
 
 
 def build_stilllife():
@@ -693,10 +695,236 @@ def build_stilllife():
     rdm._world(0.1, (0.6, 0.65, 0.75))
 
 
+def _emission(name, rgb, strength):
+    def build(nodes, links):
+        em = nodes.new('ShaderNodeEmission')
+        em.inputs['Color'].default_value = (*rgb, 1.0)
+        em.inputs['Strength'].default_value = strength
+        return em.outputs['Emission']
+    return rdm._material(name, build)
+
+
+def _mirror(name, rgb):
+    """A perfect mirror: Glossy BSDF, sharp."""
+    def build(nodes, links):
+        b = nodes.new('ShaderNodeBsdfGlossy')
+        b.distribution = 'SHARP'
+        b.inputs['Color'].default_value = (*rgb, 1.0)
+        return b.outputs['BSDF']
+    return rdm._material(name, build)
+
+
+def _rough_glass(name, ior, roughness):
+    """Frosted glass: Glass BSDF, GGX."""
+    def build(nodes, links):
+        b = nodes.new('ShaderNodeBsdfGlass')
+        b.distribution = 'GGX'
+        b.inputs['Color'].default_value = (1.0, 1.0, 1.0, 1.0)
+        b.inputs['IOR'].default_value = ior
+        b.inputs['Roughness'].default_value = roughness
+        return b.outputs['BSDF']
+    return rdm._material(name, build)
+
+
+def _subsurface(name, rgb, scale, radius, roughness):
+    """Principled BSDF with random-walk subsurface scattering: weight
+    (Blender 3.4's 'Subsurface', which also scales the radius) `scale`,
+    per-channel radius `radius`, subsurface colour = base colour."""
+    def build(nodes, links):
+        b = nodes.new('ShaderNodeBsdfPrincipled')
+        b.subsurface_method = 'RANDOM_WALK'
+        b.inputs['Base Color'].default_value = (*rgb, 1.0)
+        b.inputs['Subsurface Color'].default_value = (*rgb, 1.0)
+        b.inputs['Subsurface'].default_value = scale
+        b.inputs['Subsurface Radius'].default_value = radius
+        b.inputs['Roughness'].default_value = roughness
+        return b.outputs['BSDF']
+    return rdm._material(name, build)
+
+
+def _tiles(name, size, grout, tile_rgb, grout_rgb, rough_tile, rough_grout):
+    """Glossy ceramic tiles: Principled BSDF whose base colour is Blender's
+    brick texture with no row offset (a square grid of `size` tiles in the
+    object coordinates, in metres) and grout lines of width `grout`; the
+    roughness runs from `rough_tile` on the tiles to `rough_grout` on the
+    grout (the texture's mortar mask)."""
+    def build(nodes, links):
+        tc = nodes.new('ShaderNodeTexCoord')
+        t = nodes.new('ShaderNodeTexBrick')
+        t.offset = 0.0
+        t.squash = 1.0
+        t.inputs['Scale'].default_value = 1.0
+        t.inputs['Brick Width'].default_value = size
+        t.inputs['Row Height'].default_value = size
+        t.inputs['Color1'].default_value = (*tile_rgb, 1)
+        t.inputs['Color2'].default_value = (*tile_rgb, 1)
+        t.inputs['Mortar'].default_value = (*grout_rgb, 1)
+        t.inputs['Mortar Size'].default_value = grout
+        t.inputs['Mortar Smooth'].default_value = 0.0
+        links.new(tc.outputs['Object'], t.inputs['Vector'])
+        rough = nodes.new('ShaderNodeMath')
+        rough.operation = 'MULTIPLY_ADD'
+        links.new(t.outputs['Fac'], rough.inputs[0])
+        rough.inputs[1].default_value = rough_grout - rough_tile
+        rough.inputs[2].default_value = rough_tile
+        b = nodes.new('ShaderNodeBsdfPrincipled')
+        links.new(t.outputs['Color'], b.inputs['Base Color'])
+        links.new(rough.outputs['Value'], b.inputs['Roughness'])
+        b.inputs['Specular'].default_value = 0.5
+        return b.outputs['BSDF']
+    return rdm._material(name, build)
+
+
+def _tube(name, corners, radius, bend, mat, steps=8):
+    """A round tube of `radius` along the polyline through `corners`, each
+    inner corner rounded by a quadratic Bezier arc that starts `bend` before
+    it and ends `bend` after it; one curve object (bevelled, caps filled,
+    smooth-shaded), so one closed surface with no overlapping parts."""
+    c = [np.asarray(p, float) for p in corners]
+    pts = [c[0]]
+    for a, p, b in zip(c[:-2], c[1:-1], c[2:]):
+        u, v = (p - a) / np.linalg.norm(p - a), (b - p) / np.linalg.norm(b - p)
+        s, e = p - bend * u, p + bend * v
+        for k in range(steps + 1):
+            t = k / steps
+            pts.append((1 - t) ** 2 * s + 2 * t * (1 - t) * p + t ** 2 * e)
+    pts.append(c[-1])
+    cu = bpy.data.curves.new(name, 'CURVE')
+    cu.dimensions = '3D'
+    cu.bevel_depth = radius
+    cu.bevel_resolution = 6
+    cu.use_fill_caps = True
+    sp = cu.splines.new('POLY')
+    sp.points.add(len(pts) - 1)
+    for q, xyz in zip(sp.points, pts):
+        q.co = (*xyz, 1.0)
+    sp.use_smooth = True
+    return _object(name, cu, mat)
+
+
+def build_bathroom():
+    """A small closed bathroom at night, lit only by one small bright LED
+    downlight recessed in a square shaft in the ceiling (dark baffle; the
+    camera does not see it) and a dim emissive strip behind a mirror that
+    stands off the back wall (a halo on the wall around it). Glossy white
+    ceramic tiles with grout lines on every wall (tiles of a few pixels),
+    a large perfect mirror over a vanity, a glossy ceramic basin, a chrome
+    gooseneck tap and a chrome towel rail (metallic, low roughness), a bar
+    of soap and an unlit wax candle with subsurface scattering, and a
+    shower corner beside a frosted (rough) glass screen. Specular-diffuse
+    paths through the mirror, the chrome and the tiles give heavy tails."""
+    e = 0.02
+    x0, x1, y0, y1, z0, z1 = -1.0, 1.0, -1.5, 1.0, 0.0, 2.4
+    w, d = 0.09, 0.05                 # the downlight's shaft: half-width, depth
+    lx, ly = -0.1, 0.05               # its centre
+    zt = z1 + d
+    white = rdm._diffuse('ceiling', (0.7, 0.7, 0.68))
+    baffle = rdm._diffuse('baffle', (0.05, 0.05, 0.05))
+    wall = rdm._diffuse('wall', (0.7, 0.7, 0.68))
+    floor = rdm._textured('floor', rdm._checker(5.0, (0.32, 0.31, 0.3), (0.2, 0.2, 0.21)))
+    fl = _slab('floor', (x0 - e, y0 - e, z0 - e), (x1 + e, y1 + e, z0), floor)
+    fl.data.transform(mathutils.Matrix.Diagonal((*fl.scale, 1.0)))
+    fl.scale = (1.0, 1.0, 1.0)
+    _slab('left', (x0 - e, y0 - e, z0 - e), (x0, y1 + e, zt + e), wall)
+    _slab('right', (x1, y0 - e, z0 - e), (x1 + e, y1 + e, zt + e), wall)
+    _slab('back', (x0 - e, y1, z0 - e), (x1 + e, y1 + e, zt + e), wall)
+    _slab('front', (x0 - e, y0 - e, z0 - e), (x1 + e, y0, zt + e), wall)
+    _slab('plenum', (x0 - e, y0 - e, zt), (x1 + e, y1 + e, zt + e), white)
+    # the ceiling around the shaft's square opening, 1 mm wider than the
+    # shaft, so that the ceiling's edges lie behind the baffle, not on it
+    o = w + 0.001
+    _slab('ceiling_l', (x0 - e, y0 - e, z1), (lx - o, y1 + e, z1 + e), white)
+    _slab('ceiling_r', (lx + o, y0 - e, z1), (x1 + e, y1 + e, z1 + e), white)
+    _slab('ceiling_f', (lx - o, y0 - e, z1), (lx + o, ly - o, z1 + e), white)
+    _slab('ceiling_b', (lx - o, ly + o, z1), (lx + o, y1 + e, z1 + e), white)
+    bpy.ops.mesh.primitive_cylinder_add(vertices=4, radius=w * np.sqrt(2), depth=d,
+                                        end_fill_type='NOTHING',
+                                        location=(lx, ly, z1 + d / 2),
+                                        rotation=(0, 0, np.pi / 4))
+    bpy.context.active_object.data.materials.append(baffle)
+    led = bpy.data.lights.new('downlight', 'AREA')
+    led.shape = 'DISK'
+    led.size = 0.14
+    led.energy = 20.0
+    led.color = (1.0, 0.92, 0.8)
+    ob = bpy.data.objects.new('downlight', led)
+    ob.location = (lx, ly, zt - 0.01)
+    bpy.context.scene.collection.objects.link(ob)
+
+    # tiles, 10 cm, 5 mm grout, on planes 2 mm in front of the four walls
+    tiles = _tiles('tiles', 0.1, 0.005, (0.75, 0.75, 0.73), (0.4, 0.39, 0.37), 0.15, 0.6)
+    _wall_plane('tiles_l', x0 + 0.002, y0, y1, z0, z1, 1, tiles)
+    _wall_plane('tiles_r', x1 - 0.002, y0, y1, z0, z1, -1, tiles)
+    ob = rdm._plane('tiles_b', 1.0, ((x0 + x1) / 2, y1 - 0.002, (z0 + z1) / 2),
+                    (np.pi / 2, 0, 0), tiles)
+    ob.data.transform(mathutils.Matrix.Diagonal((x1 - x0, z1 - z0, 1.0, 1.0)))
+    ob = rdm._plane('tiles_f', 1.0, ((x0 + x1) / 2, y0 + 0.002, (z0 + z1) / 2),
+                    (-np.pi / 2, 0, 0), tiles)
+    ob.data.transform(mathutils.Matrix.Diagonal((x1 - x0, z1 - z0, 1.0, 1.0)))
+    # a door in the front wall (seen in the mirror)
+    _slab('door', (-0.7, y0 - 0.01, z0), (0.1, y0 + 0.03, 2.0), rdm._diffuse('door', (0.45, 0.3, 0.2)))
+
+    # the vanity: a cabinet against the back wall, a counter on it
+    zc = 0.85
+    _slab('cabinet', (x0 - 0.01, 0.47, z0 - 0.01), (0.2, y1 + 0.01, zc - 0.05),
+          rdm._diffuse('cabinet', (0.25, 0.35, 0.42)))
+    _slab('counter', (x0 - 0.01, 0.45, zc - 0.05), (0.25, y1 + 0.01, zc),
+          _principled('counter', (0.7, 0.68, 0.64), 0.25))
+    # a glossy ceramic basin on the counter (base 0.5 mm below its top)
+    _lathe('basin', [(0.0, 0.0), (0.06, 0.0), (0.17, 0.12), (0.16, 0.12),
+                     (0.055, 0.012), (0.0, 0.012)], (-0.35, 0.68), zc - 0.0005,
+           _principled('basin', (0.85, 0.85, 0.84), 0.1))
+    chrome = _principled('chrome', (0.9, 0.9, 0.92), 0.1, metallic=1.0)
+    # a gooseneck tap behind the basin and a towel rail on the cabinet front
+    _tube('tap', [(-0.35, 0.92, zc - 0.01), (-0.35, 0.92, 1.15), (-0.35, 0.78, 1.15),
+                  (-0.35, 0.78, 1.05)], 0.012, 0.05, chrome)
+    _tube('rail', [(-0.75, 0.48, 0.68), (-0.75, 0.41, 0.68), (0.1, 0.41, 0.68),
+                   (0.1, 0.48, 0.68)], 0.01, 0.03, chrome)
+    # a bar of soap (a squashed ellipsoid) and an unlit candle, subsurface
+    soap = rdm._sphere('soap', 1.0, (-0.05, 0.72, zc + 0.014),
+                       _subsurface('soap', (0.85, 0.62, 0.58), 0.01, (1.0, 0.6, 0.45), 0.3))
+    soap.data.transform(mathutils.Matrix.Diagonal((0.045, 0.03, 0.016, 1.0)))
+    _lathe('candle', [(0.0, 0.0), (0.035, 0.0), (0.035, 0.12), (0.0, 0.12)],
+           (-0.78, 0.78), zc - 0.0005,
+           _subsurface('wax', (0.9, 0.82, 0.62), 0.03, (1.0, 0.55, 0.3), 0.4))
+
+    # the mirror, 2 cm thick, standing 2.3 cm off the tiles; a dim emissive
+    # strip (four bars, 4 cm inside its edge) behind it lights the tiles
+    mx0, mx1, mz0, mz1, my0, my1 = -0.85, 0.15, 1.1, 1.85, 0.955, 0.975
+    _slab('mirror', (mx0, my0, mz0), (mx1, my1, mz1), _mirror('mirror', (0.92, 0.92, 0.92)))
+    strip = _emission('strip', (1.0, 0.85, 0.65), 3.0)
+    # not sampled as a light: lit only through the gap, it would take light
+    # samples from the downlight everywhere else (trials: 24% less variance)
+    strip.cycles.sample_as_light = False
+    i, t, sy0, sy1 = 0.04, 0.01, my1 + 0.003, my1 + 0.01
+    _slab('strip_b', (mx0 + i, sy0, mz0 + i), (mx1 - i, sy1, mz0 + i + t), strip)
+    _slab('strip_t', (mx0 + i, sy0, mz1 - i - t), (mx1 - i, sy1, mz1 - i), strip)
+    _slab('strip_l', (mx0 + i, sy0, mz0 + i + t), (mx0 + i + t, sy1, mz1 - i - t), strip)
+    _slab('strip_r', (mx1 - i - t, sy0, mz0 + i + t), (mx1 - i, sy1, mz1 - i - t), strip)
+
+    # the shower corner: a raised tray, open at the front, and a frosted
+    # glass screen, 8 mm thick, from the back wall, standing 1 mm above the
+    # tray (no face lies on another)
+    sx0, sy_ = 0.32, 0.1
+    _slab('tray', (sx0, sy_, z0 - 0.01), (x1 + 0.01, y1 + 0.01, 0.05),
+          _principled('tray', (0.8, 0.8, 0.79), 0.1))
+    _slab('screen', (sx0, 0.5, 0.051), (sx0 + 0.008, y1 - 0.001, 1.9),
+          _rough_glass('frosted', 1.5, 0.4))
+
+    # fewer bounces than Blender's defaults (diffuse 4, glossy 4,
+    # transmission 12) keep a sample's cost down in this closed white room
+    sc = bpy.context.scene
+    sc.cycles.diffuse_bounces = 3
+    sc.cycles.glossy_bounces = 3
+    sc.cycles.transmission_bounces = 6
+    rdm._camera((0.05, -1.3, 1.5), (np.radians(78), 0, 0), 70.0)
+    rdm._world(0.0)
+
+
 SCENES = {'cornell': rdm.build_cornell, 'texture': rdm.build_texture,
           'interior': build_interior, 'window': build_window, 'lamp': build_lamp,
           'corridor': build_corridor, 'fog': build_fog, 'courtyard': build_courtyard,
-          'stilllife': build_stilllife}
+          'stilllife': build_stilllife, 'bathroom': build_bathroom}
 
 
 def replicate_seed(stream, r):
