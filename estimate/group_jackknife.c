@@ -9,8 +9,8 @@
  * increments, which are realisations of that noise: split its I samples into G groups
  * of consecutive checkpoints (group g's sum S_g of m_g samples), leave each out,
  *
- *     n_(g) = (I n - S_g) / (I - m_g),   d_(g) = F(n_(g)) with the variance v I / (I -
- * m_g),
+ *     n_(g) = (I n - S_g) / (I - m_g),   its variance v I / (I - m_g),
+ *     d_(g) = F(n_(g)) with that variance,
  *
  * and weigh the deviations (the delete-a-group jackknife):
  *
