@@ -98,9 +98,7 @@ print_series(const mcp_series_estimate *s)
     if (s->has_reference) printf("agreement: %d of %d\n", agree, s->n_taus);
     printf("(0: not reached within the series; * F(tau) >= p)\n");
     printf("variance: %s\n", mcp__variance_source_words(s->variance_source));
-    /* what SURE's covariance term rests on: the last member says for the series */
-    const int groups = s->count ? s->points[s->count - 1].sure_groups : 0;
-    printf("SURE: %s\n", mcp__sure_source_words(groups));
+    printf("SURE: %s\n", mcp__sure_source_words(s));
 }
 
 /* ---- the subcommand ---- */

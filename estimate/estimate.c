@@ -360,7 +360,7 @@ compute(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_option
         free(eps);
         if (bad) goto done;
     }
-    if (groups && groups->cov && o.sure.metric != MCP_METRIC_RELSE_PERCEPTUAL) {
+    if (groups && groups->cov) { /* the series takes none for relse-perceptual */
         sure_from_groups(dump, groups, &e->maps);
         e->sure_groups = groups->groups;
     }

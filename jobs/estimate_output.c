@@ -363,9 +363,7 @@ series_json(const mcp_series_estimate *s, const char *denoiser, mcp_error_metric
     }
     if (s->has_reference)
         cJSON_AddNumberToObject(j, "agreement_rate", (double)agree / s->n_taus);
-    cJSON_AddStringToObject(
-        j, "sure",
-        mcp__sure_source_words(s->count ? s->points[s->count - 1].sure_groups : 0));
+    cJSON_AddStringToObject(j, "sure", mcp__sure_source_words(s));
     cJSON *members = cJSON_AddArrayToObject(j, "members");
     for (int i = 0; i < s->count; i++) {
         const mcp_series_point *pt = &s->points[i];
@@ -533,9 +531,7 @@ mcp__estimate_run_series(const mcp_series *series, const mcp_denoiser *den,
     if (section) {
         cJSON_AddStringToObject(section, "variance_source",
                                 mcp_variance_source_name(s->variance_source));
-        cJSON_AddStringToObject(
-            section, "sure",
-            mcp__sure_source_words(s->count ? s->points[s->count - 1].sure_groups : 0));
+        cJSON_AddStringToObject(section, "sure", mcp__sure_source_words(s));
         static const char *const lines[2] = {"variance_warning", "variance_choice"};
         for (int k = 0; k < 2; k++) {
             const cJSON *w = cJSON_GetObjectItem(j, lines[k]);

@@ -73,9 +73,9 @@ int mcp__at_line(const mcp_node *settings, const char *key);
 void mcp__add_variance_source(cJSON *j, mcp_variance_source src, double dof);
 /* The source in words, for the text output. */
 const char *mcp__variance_source_words(mcp_variance_source src);
-/* What a series estimate's SURE covariance term rests on, given the groups the last
- * member took (0: the probes'), in words (variance_source.c). */
-const char *mcp__sure_source_words(int groups);
+/* What a series estimate's SURE covariance term rests on, in words: the groups its last
+ * member took, or the probes' divergence (variance_source.c). */
+const char *mcp__sure_source_words(const mcp_series_estimate *s);
 /* The one line that says Variance/n is off the increments' spread
  * (mcp_variance_ratio_off), and whether the increments are used. */
 const char *mcp__variance_ratio_warning(double ratio, int using_increments);

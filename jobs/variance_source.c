@@ -87,8 +87,10 @@ mcp__variance_ratio_warning(double ratio, int using_increments)
 }
 
 const char *
-mcp__sure_source_words(int groups)
+mcp__sure_source_words(const mcp_series_estimate *s)
 {
+    /* the last member says for the series: the earlier ones have fewer groups */
+    const int groups = s->count ? s->points[s->count - 1].sure_groups : 0;
     return groups > 0 ? "covariance and variance from groups of each member's own "
                         "checkpoints, from the third member on (--sure-groups)"
                       : "the probes' divergence (Stein's lemma; assumes Gaussian noise)";
