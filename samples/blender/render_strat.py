@@ -74,13 +74,21 @@ def build_interior():
     rdm._world(0.0)
 
 
-def _principled(name, rgb, roughness, metallic=0.0, specular=0.5):
+def _principled(name, rgb, roughness, metallic=0.0, specular=0.5, subsurface=None):
+    """Principled BSDF; with subsurface = (scale, radius), random-walk subsurface
+    scattering of weight `scale` (Blender 3.4's 'Subsurface', which also scales
+    the radius), per-channel radius `radius`, subsurface colour = base colour."""
     def build(nodes, links):
         b = nodes.new('ShaderNodeBsdfPrincipled')
         b.inputs['Base Color'].default_value = (*rgb, 1.0)
         b.inputs['Roughness'].default_value = roughness
         b.inputs['Metallic'].default_value = metallic
         b.inputs['Specular'].default_value = specular
+        if subsurface:
+            b.subsurface_method = 'RANDOM_WALK'
+            b.inputs['Subsurface Color'].default_value = (*rgb, 1.0)
+            b.inputs['Subsurface'].default_value = subsurface[0]
+            b.inputs['Subsurface Radius'].default_value = subsurface[1]
         return b.outputs['BSDF']
     return rdm._material(name, build)
 
@@ -726,22 +734,6 @@ def _rough_glass(name, ior, roughness):
     return rdm._material(name, build)
 
 
-def _subsurface(name, rgb, scale, radius, roughness):
-    """Principled BSDF with random-walk subsurface scattering: weight
-    (Blender 3.4's 'Subsurface', which also scales the radius) `scale`,
-    per-channel radius `radius`, subsurface colour = base colour."""
-    def build(nodes, links):
-        b = nodes.new('ShaderNodeBsdfPrincipled')
-        b.subsurface_method = 'RANDOM_WALK'
-        b.inputs['Base Color'].default_value = (*rgb, 1.0)
-        b.inputs['Subsurface Color'].default_value = (*rgb, 1.0)
-        b.inputs['Subsurface'].default_value = scale
-        b.inputs['Subsurface Radius'].default_value = radius
-        b.inputs['Roughness'].default_value = roughness
-        return b.outputs['BSDF']
-    return rdm._material(name, build)
-
-
 def _tiles(name, size, grout, tile_rgb, grout_rgb, rough_tile, rough_grout):
     """Glossy ceramic tiles: Principled BSDF whose base colour is Blender's
     brick texture with no row offset (a square grid of `size` tiles in the
@@ -882,11 +874,13 @@ def build_bathroom():
                    (0.1, 0.48, 0.68)], 0.01, 0.03, chrome)
     # a bar of soap (a squashed ellipsoid) and an unlit candle, subsurface
     soap = rdm._sphere('soap', 1.0, (-0.05, 0.72, zc + 0.014),
-                       _subsurface('soap', (0.85, 0.62, 0.58), 0.01, (1.0, 0.6, 0.45), 0.3))
+                       _principled('soap', (0.85, 0.62, 0.58), 0.3,
+                                   subsurface=(0.01, (1.0, 0.6, 0.45))))
     soap.data.transform(mathutils.Matrix.Diagonal((0.045, 0.03, 0.016, 1.0)))
     _lathe('candle', [(0.0, 0.0), (0.035, 0.0), (0.035, 0.12), (0.0, 0.12)],
            (-0.78, 0.78), zc - 0.0005,
-           _subsurface('wax', (0.9, 0.82, 0.62), 0.03, (1.0, 0.55, 0.3), 0.4))
+           _principled('wax', (0.9, 0.82, 0.62), 0.4,
+                       subsurface=(0.03, (1.0, 0.55, 0.3))))
 
     # the mirror, 2 cm thick, standing 2.3 cm off the tiles; a dim emissive
     # strip (four bars, 4 cm inside its edge) behind it lights the tiles
