@@ -152,6 +152,9 @@ test_demo_job(void **state)
                            "overstates the error (stratified samples); the estimates use "
                            "the increments"));
     assert_null(cJSON_GetObjectItem(strat, "variance_warning"));
+    /* and SURE from its own checkpoints (six members: groups from the third) */
+    assert_non_null(strstr(item(strat, "sure")->valuestring,
+                           "from groups of each member's own checkpoints"));
 
     /* the default denoiser: the U-Net with the weights mcpost ships, no setting */
     const cJSON *unet = cJSON_GetArrayItem(sections, 7);
