@@ -79,7 +79,10 @@ print_series(const mcp_series_estimate *s)
         const mcp_series_point *pt = &s->points[i];
         printf("%-10g", pt->spp);
         for (int j = 0; j < s->n_taus; j++) {
-            printf("  %.6f%s", pt->cdf[j], pt->stop[j] ? "*" : " ");
+            printf("  %.6f%s", pt->cdf[j],
+                   pt->stop[j]                      ? "*"
+                   : pt->held && pt->cdf[j] >= s->p ? "h"
+                                                    : " ");
             if (s->has_reference)
                 printf("  %.6f%s", pt->true_cdf[j], pt->true_stop[j] ? "*" : " ");
         }
@@ -87,7 +90,9 @@ print_series(const mcp_series_estimate *s)
     }
     printf("\n%-10s  %-12s%s\n", "tau", "stop at spp",
            s->has_reference ? "  true spp      agree" : "");
-    int agree = 0;
+    int agree = 0, held = 0;
+    for (int i = 0; i < s->count; i++)
+        held = held || s->points[i].held;
     for (int j = 0; j < s->n_taus; j++) {
         printf("%-10g  %-12g", s->taus[j], s->first_spp[j]);
         if (s->has_reference)
@@ -96,7 +101,10 @@ print_series(const mcp_series_estimate *s)
         agree += s->agree[j];
     }
     if (s->has_reference) printf("agreement: %d of %d\n", agree, s->n_taus);
-    printf("(0: not reached within the series; * F(tau) >= p)\n");
+    printf("(0: not reached within the series; * F(tau) >= p%s)\n",
+           held ? "; h: F(tau) >= p, held: no stop before the third checkpoint, whose "
+                  "SURE rests on the render's own groups"
+                : "");
     printf("variance: %s\n", mcp__variance_source_words(s->variance_source));
     printf("SURE: %s\n", mcp__sure_source_words(s));
 }

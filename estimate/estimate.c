@@ -577,6 +577,24 @@ mean_spp(const mcp_dump *d)
     return s / ((double)d->spp_map->width * d->spp_map->height);
 }
 
+/* 1 when member i of a series may not stop, whatever its F(τ): over checkpoints of one
+ * render, with the groups on, a member with fewer checkpoints than the groups need
+ * (MCP__GROUPS_MIN, or fewer when asked: the first two) has SURE only from the probes'
+ * divergence, which Stein's lemma ties to Gaussian noise; under a render's heavy-tailed
+ * noise at tens of samples it reads the covariance low and stopped early
+ * (docs/fidelity.md, "Holding the first two checkpoints"). A variance from replicates
+ * (independent renders merged) is not held: its first member already pools K renders. */
+static int
+holds_stop(int i, const mcp_dump *d, int groups, const mcp_estimate_options *o)
+{
+    /* the members that could give groups later (mcp__series_group_terms' conditions) */
+    const int checkpoint = d->var_of_mean && !d->spp_map && d->spp > 0;
+    const int first = (groups < MCP__GROUPS_MIN ? groups : MCP__GROUPS_MIN) - 1;
+    return groups > 1 && i < first && checkpoint &&
+           o->sure.metric != MCP_METRIC_RELSE_PERCEPTUAL &&
+           d->variance_source != MCP_VARSRC_REPLICATES;
+}
+
 /* Fills the truth of one member from its denoised image. */
 static int
 member_truth(const mcp_estimate *e, const mcp_image *reference,
@@ -672,10 +690,12 @@ mcp_estimate_series(const mcp_series *series, const mcp_denoiser *den,
         pt->spp = series->spp && series->spp[i] > 0 ? series->spp[i] : mean_spp(d);
         s->variance_source = d->variance_source; /* the last member's, in the end */
         int bad = 0;
+        const int hold = holds_stop(i, d, groups, &o.est);
         for (int j = 0; j < o.n_taus && !bad; j++) {
             int stop = mcp_error_should_stop(e->dist, o.taus[j], o.est.p, &pt->cdf[j]);
             bad = stop < 0;
-            pt->stop[j] = stop > 0 && !e->no_variance;
+            pt->stop[j] = stop > 0 && !e->no_variance && !hold;
+            pt->held = pt->held || (stop > 0 && !e->no_variance && hold);
         }
         memcpy(pt->est_percentile, e->percentile_tau, sizeof e->percentile_tau);
         pt->est_mean_error = mcp_error_dist_mean(e->dist);

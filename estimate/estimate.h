@@ -421,6 +421,9 @@ typedef struct mcp_series_point {
     double true_mean_error; /* mean true error (NAN without reference) */
     double est_mean_error;  /* mean s²(λ + 1) */
     int sure_groups;        /* the groups SURE's covariance came from; 0: the probes' */
+    int held; /* 1: F(τ_j) >= p for some τ_j, but a member before the third of one
+                 render's checkpoints may not stop (its SURE has no groups yet;
+                 docs/fidelity.md "Holding the first two checkpoints") */
 } mcp_series_point;
 
 typedef struct mcp_series_estimate {

@@ -1048,6 +1048,30 @@ test_estimate_series_sure_groups(void **state)
             assert_true(cJSON_GetObjectItem(cJSON_GetArrayItem(members, i), "sure_groups")
                             ->valuedouble == (off || i < 2 ? 0 : 3));
         cJSON_Delete(j);
+        /* a tau every member reaches: the first two are held (F >= p, no stop, an h in
+           the table) with the groups, and the first stops without them */
+        assert_int_equal(run("estimate --series '%s/samples/fixtures/cornell/series/"
+                             "cornell_spp%%04d.exr' --spp 16,32,64 --denoiser gauss "
+                             "--tau 100 --json%s",
+                             MCP_TEST_SOURCE_DIR, off ? " --sure-groups 0" : ""),
+                         0);
+        j = cJSON_Parse(out);
+        assert_non_null(j);
+        members = cJSON_GetObjectItem(j, "members");
+        for (int i = 0; i < 3; i++) {
+            const cJSON *m = cJSON_GetArrayItem(members, i);
+            assert_int_equal(cJSON_IsTrue(cJSON_GetObjectItem(m, "held")), !off && i < 2);
+            assert_int_equal(
+                cJSON_IsTrue(cJSON_GetArrayItem(cJSON_GetObjectItem(m, "stop"), 0)),
+                off || i == 2);
+        }
+        cJSON_Delete(j);
+        assert_int_equal(run("estimate --series '%s/samples/fixtures/cornell/series/"
+                             "cornell_spp%%04d.exr' --spp 16,32,64 --denoiser gauss "
+                             "--tau 100%s",
+                             MCP_TEST_SOURCE_DIR, off ? " --sure-groups 0" : ""),
+                         0);
+        assert_int_equal(strstr(out, "h: F(tau) >= p, held") != NULL, !off);
     }
     assert_int_not_equal(run("estimate --series '%s/samples/fixtures/cornell/series/"
                              "cornell_spp%%04d.exr' --spp 16,32 --sure-groups 1",

@@ -8,7 +8,7 @@
  *    probes' divergence) reads twice the covariance there is: the jackknife's is within
  *    a fifth of the closed form;
  *  - the series estimate takes the groups from the third member on, and none with
- *    sure_groups 0.
+ *    sure_groups 0; the members before the groups start do not stop (held).
  * Fixed seeds; each mean is checked within four of its standard errors over the
  * renders and that error is checked to be small. */
 #include "box_denoiser.h"
@@ -271,6 +271,25 @@ test_series_estimate_takes_groups(void **state)
            degree of freedom per value) */
         for (int i = 0; i < 4; i++)
             assert_int_equal(e->points[i].sure_groups, groups && i >= 2 ? i + 1 : 0);
+        mcp_series_estimate_free(e);
+    }
+    /* a τ every member reaches: with the groups the first two checkpoints are held
+       (F(τ) >= p, no stop) and the third stops; without them the first stops */
+    o.n_taus = 1;
+    o.taus[0] = 100.0;
+    for (int groups = -1; groups <= 2; groups++) {
+        if (groups == 1) continue; /* refused, below */
+        o.est.sure_groups = groups;
+        mcp_series_estimate *e = NULL;
+        assert_int_equal(
+            mcp_estimate_series(s, &mcp_test_box_denoiser, &o, NULL, NULL, NULL, &e), 0);
+        const int first = groups == 0 ? 0 : groups == 2 ? 1 : 2; /* the first stop */
+        for (int i = 0; i < 4; i++) {
+            assert_true(e->points[i].cdf[0] >= o.est.p);
+            assert_int_equal(e->points[i].stop[0], i >= first);
+            assert_int_equal(e->points[i].held, i < first);
+        }
+        assert_true(e->first_spp[0] == spp[first]);
         mcp_series_estimate_free(e);
     }
     o.est.sure_groups = 1;
