@@ -8,6 +8,7 @@
  * with a reference, the truth beside it: the nearest-rank percentile of the true
  * error at p, and whether it is <= τ. */
 #include "../common/core/internal.h" /* progress on a terminal */
+#include "../common/dump/internal.h" /* mcp__variance_is_per_sample */
 #include "estimate.h"
 #include "internal.h"
 
@@ -189,12 +190,13 @@ step(mcp_progress *bar, long done)
 }
 
 static int
-evaluate(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_options *o,
-         evaluation *ev, mcp_progress *bar)
+evaluate(const mcp_dump *dump, const mcp_dump *probed, const mcp_denoiser *den,
+         const mcp_estimate_options *o, evaluation *ev, mcp_progress *bar)
 {
     memset(ev, 0, sizeof *ev);
-    /* the probes' variance, floored (probe_floor.c); the denoiser sees the dump's own */
-    mcp_dump floored = *dump;
+    /* the probes' variance (probed's: the dump's own, or the groups'), floored
+       (probe_floor.c); the denoiser sees the dump's own */
+    mcp_dump floored = *probed;
     mcp_image *floor_cov = NULL;
     ev->k = o->sure.n_probes;
     ev->n = ev->k * (o->variance_rademacher ? 2 : 1);
@@ -205,7 +207,7 @@ evaluate(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_optio
     int rc = -1;
     if (!ev->probes || !ev->jv || !t || (o->variance_rademacher && !ev->rad)) goto done;
     if (o->probe_floor > 0) {
-        if (mcp__probe_variance_floor(dump, o->probe_floor, &ev->probe_var, &floor_cov))
+        if (mcp__probe_variance_floor(probed, o->probe_floor, &ev->probe_var, &floor_cov))
             goto done;
         floored.var_of_mean = ev->probe_var;
         if (floor_cov) floored.cov_of_mean = floor_cov;
@@ -316,6 +318,14 @@ mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,
     return compute(dump, den, opt, NULL, out);
 }
 
+int
+mcp__estimate_compute_groups(const mcp_dump *dump, const mcp_denoiser *den,
+                             const mcp_estimate_options *opt,
+                             const mcp__group_terms *groups, mcp_estimate **out)
+{
+    return compute(dump, den, opt, groups, out);
+}
+
 static int
 compute(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_options *opt,
         const mcp__group_terms *groups, mcp_estimate **out)
@@ -338,7 +348,26 @@ compute(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_option
         mcp_progress_begin(bar, "estimate", ESTIMATE_STEPS);
     }
     double t0 = mcp__now_ms();
-    if (evaluate(dump, den, &o, &ev, bar)) {
+    /* a renderer's per-sample variance overstates a stratified render's noise; from
+       the third member on the groups measure it (V), and where the two differ as far
+       as the series' own rule asks (mcp_variance_ratio_off: auto then takes the
+       increments, so this is a variance kept on purpose) the probes take V; not for
+       a denoiser whose Var[F] is pixel-sharp, which V's few degrees of freedom leave
+       noisy unpooled and pooling blurs (bilateral: docs/fidelity.md) */
+    mcp_dump probed = *dump;
+    mcp_image *probed_cov = NULL;
+    int ev_bad = 0;
+    if (groups && groups->var && !running(dump, den)->sharp_variance &&
+        mcp__variance_is_per_sample(dump->variance_source) && groups->v_over_v > 1.0 &&
+        mcp_variance_ratio_off(groups->v_over_v)) {
+        ev_bad = mcp__group_probe_variance(dump, groups, &probed_cov);
+        probed.var_of_mean = groups->var;
+        probed.cov_of_mean = probed_cov;
+        e->probes_from_groups = 1;
+    }
+    ev_bad = ev_bad || evaluate(dump, &probed, den, &o, &ev, bar);
+    mcp_image_free(probed_cov);
+    if (ev_bad) {
         if (bar) mcp__progress_stop(bar);
         free(e);
         return -1;
@@ -378,7 +407,12 @@ compute(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_option
     }
     /* s² from few probes: pooled so that its χ² spread does not fatten the tail */
     e->probes = o.sure.n_probes;
-    e->s2_pool = o.s2_pool >= 0 ? o.s2_pool : mcp_estimate_auto_s2_pool(dump, den);
+    /* probes from the groups' V: G - 1 degrees of freedom, pooled as any few-dof
+       variance is */
+    e->s2_pool = o.s2_pool >= 0 ? o.s2_pool
+                 : probed.var_of_mean != dump->var_of_mean
+                     ? 1
+                     : mcp_estimate_auto_s2_pool(dump, den);
     if (mcp_pool_window(e->maps.var_rel, NULL, e->s2_pool) ||
         mcp_pool_window(e->maps.var, NULL, e->s2_pool))
         goto done;
@@ -687,6 +721,7 @@ mcp_estimate_series(const mcp_series *series, const mcp_denoiser *den,
         }
         mcp__group_terms_clear(&g);
         pt->sure_groups = e->sure_groups;
+        pt->probes_from_groups = e->probes_from_groups;
         pt->spp = series->spp && series->spp[i] > 0 ? series->spp[i] : mean_spp(d);
         s->variance_source = d->variance_source; /* the last member's, in the end */
         int bad = 0;

@@ -390,7 +390,9 @@ typedef struct mcp_estimate {
     int s2_pool;                         /* the radius s² was pooled over */
     int probe_floor;                     /* the radius of the probes' variance floor */
     int probes;                          /* the probes it took */
-    int sure_groups; /* the groups SURE's covariance came from; 0: the probes' */
+    int sure_groups;        /* the groups SURE's covariance came from; 0: the probes' */
+    int probes_from_groups; /* 1: the probes were drawn from the groups' variance (a
+                               per-sample variance off from it: docs/estimate.md) */
 } mcp_estimate;
 
 MCP_API int mcp_estimate_compute(const mcp_dump *dump, const mcp_denoiser *den,
@@ -421,6 +423,7 @@ typedef struct mcp_series_point {
     double true_mean_error; /* mean true error (NAN without reference) */
     double est_mean_error;  /* mean s²(λ + 1) */
     int sure_groups;        /* the groups SURE's covariance came from; 0: the probes' */
+    int probes_from_groups; /* 1: its probes were drawn from the groups' variance */
     int held; /* 1: F(τ_j) >= p for some τ_j, but a member before the third of one
                  render's checkpoints may not stop (its SURE has no groups yet;
                  docs/fidelity.md "Holding the first two checkpoints") */

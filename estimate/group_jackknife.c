@@ -192,6 +192,7 @@ mcp__series_group_terms(const mcp_series *s, int i, const mcp_dump *member,
     out->var = acc[3];
     acc[0] = acc[3] = NULL;
     out->groups = G;
+    out->v_over_v = sum_jv > 0.0 ? sum_v / sum_jv : 0.0;
     rc = 0;
     /* differences far noisier than the members' variances say: not checkpoints of one
        render (independent renders at rising counts), whose differences are no groups
@@ -209,4 +210,28 @@ done:
     mcp_dump_free(end);
     if (rc) mcp__group_terms_clear(out);
     return rc;
+}
+
+int
+mcp__group_probe_variance(const mcp_dump *d, const mcp__group_terms *g, mcp_image **cov)
+{
+    *cov = NULL;
+    if (!d->cov_of_mean) return 0;
+    if (mcp_image_copy(d->cov_of_mean, cov)) return -1;
+    const mcp_image *v = d->var_of_mean;
+#pragma omp parallel for schedule(static)
+    for (int y = 0; y < v->height; y++)
+        for (int x = 0; x < v->width; x++) {
+            const float *own = mcp_image_px(v, x, y), *gv = mcp_image_px(g->var, x, y);
+            float *cv = mcp_image_px(*cov, x, y);
+            double scale[3];
+            for (int c = 0; c < 3; c++)
+                scale[c] =
+                    own[c] > 0.0f && gv[c] > 0.0f ? sqrt((double)gv[c] / own[c]) : 0.0;
+            /* RG, RB, GB: the renderer's correlations, at the groups' variances */
+            cv[0] = (float)(cv[0] * scale[0] * scale[1]);
+            cv[1] = (float)(cv[1] * scale[0] * scale[2]);
+            cv[2] = (float)(cv[2] * scale[1] * scale[2]);
+        }
+    return 0;
 }

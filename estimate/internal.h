@@ -140,11 +140,23 @@ int mcp__error_maps_from_own_probes(const mcp_dump *dump, mcp_image **denoised,
 #define MCP__GROUPS_MIN 3 /* fewer found than this (and than asked for): no groups */
 typedef struct mcp__group_terms {
     mcp_image *cov, *var;
-    int groups; /* the groups found */
+    int groups;      /* the groups found */
+    double v_over_v; /* Σ Σ̂ / Σ V: the member's own variance over the groups' */
 } mcp__group_terms;
 int mcp__series_group_terms(const mcp_series *s, int i, const mcp_dump *member,
                             const mcp_denoiser *den, int groups, mcp__group_terms *out);
 void mcp__group_terms_clear(mcp__group_terms *g);
+/* The probes' variance over a series member whose per-sample variance overstates its
+ * noise (a stratified sampler): the groups' V in its place, and the member's colour
+ * covariance, if any, scaled to it so that the channels' correlations stay (a new
+ * image in *cov, or NULL without one). */
+/* mcp_estimate_compute with a series member's group terms (estimate.c; the series
+ * estimate's step, for the tests). */
+int mcp__estimate_compute_groups(const mcp_dump *dump, const mcp_denoiser *den,
+                                 const mcp_estimate_options *opt,
+                                 const mcp__group_terms *groups, mcp_estimate **out);
+int mcp__group_probe_variance(const mcp_dump *d, const mcp__group_terms *g,
+                              mcp_image **cov);
 
 /* Per-value variance maps from n jvp images: mean_k (J v_k)² (through the CSF operator
  * for relse-perceptual), and divided by the denominator (1 channel) (variance.c). */

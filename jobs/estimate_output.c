@@ -384,6 +384,8 @@ series_json(const mcp_series_estimate *s, const char *denoiser, mcp_error_metric
         /* what SURE's covariance term came from: the member's own groups (their
            number) or the probes' divergence (0) */
         cJSON_AddNumberToObject(m, "sure_groups", pt->sure_groups);
+        /* the probes from the groups' variance: a per-sample variance off from it */
+        cJSON_AddBoolToObject(m, "probes_from_groups", pt->probes_from_groups);
         /* F(tau) >= p here for some tau, but before the third checkpoint: no stop */
         cJSON_AddBoolToObject(m, "held", pt->held);
         if (s->has_reference) {

@@ -90,8 +90,13 @@ const char *
 mcp__sure_source_words(const mcp_series_estimate *s)
 {
     /* the last member says for the series: the earlier ones have fewer groups */
-    const int groups = s->count ? s->points[s->count - 1].sure_groups : 0;
-    return groups > 0 ? "covariance and variance from groups of each member's own "
-                        "checkpoints, from the third member on (--sure-groups)"
-                      : "the probes' divergence (Stein's lemma; assumes Gaussian noise)";
+    const mcp_series_point *last = s->count ? &s->points[s->count - 1] : NULL;
+    if (!last || last->sure_groups <= 0)
+        return "the probes' divergence (Stein's lemma; assumes Gaussian noise)";
+    return last->probes_from_groups
+               ? "covariance and variance from groups of each member's own checkpoints, "
+                 "from the third member on (--sure-groups); the probes too, since "
+                 "Variance/n is off from what the groups measure"
+               : "covariance and variance from groups of each member's own checkpoints, "
+                 "from the third member on (--sure-groups)";
 }

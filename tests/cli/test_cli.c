@@ -1061,6 +1061,8 @@ test_estimate_series_sure_groups(void **state)
         for (int i = 0; i < 3; i++) {
             const cJSON *m = cJSON_GetArrayItem(members, i);
             assert_int_equal(cJSON_IsTrue(cJSON_GetObjectItem(m, "held")), !off && i < 2);
+            /* the fixture's per-sample variance is not off: the probes keep it */
+            assert_true(cJSON_IsFalse(cJSON_GetObjectItem(m, "probes_from_groups")));
             assert_int_equal(
                 cJSON_IsTrue(cJSON_GetArrayItem(cJSON_GetObjectItem(m, "stop"), 0)),
                 off || i == 2);

@@ -167,14 +167,17 @@ test_pipeline_thread_count_independent(void **state)
 
 /* ---- series against the truth ---- */
 
-/* Runs a series with the truth; counts agreements, cases, and early stops that
- * disagree (the dangerous kind: stopping before the threshold is met). */
+/* Runs a series with the truth (sure_groups as the option; -1 the default); counts
+ * agreements, cases, and early stops that disagree (the dangerous kind: stopping
+ * before the threshold is met). */
 static int
-run_series(const mcp_series *series, const mcp_denoiser *den, const mcp_image *ref,
-           int probes, const char *label, int *agree, int *cases, int *early)
+run_series_groups(const mcp_series *series, const mcp_denoiser *den, const mcp_image *ref,
+                  int probes, int sure_groups, const char *label, int *agree, int *cases,
+                  int *early)
 {
     mcp_series_estimate_options so = mcp_series_estimate_defaults();
     so.est.sure.n_probes = probes;
+    so.est.sure_groups = sure_groups;
     mcp_series_estimate *s = NULL;
     if (mcp_estimate_series(series, den, &so, ref, NULL, NULL, &s)) {
         print_message("%s: %s\n", label, mcp_error_message());
@@ -192,6 +195,13 @@ run_series(const mcp_series *series, const mcp_denoiser *den, const mcp_image *r
     }
     mcp_series_estimate_free(s);
     return 0;
+}
+
+static int
+run_series(const mcp_series *series, const mcp_denoiser *den, const mcp_image *ref,
+           int probes, const char *label, int *agree, int *cases, int *early)
+{
+    return run_series_groups(series, den, ref, probes, -1, label, agree, cases, early);
 }
 
 static void
@@ -289,9 +299,13 @@ test_fixtures_agreement(void **state)
 /* The stratified texture render (samples/fixtures/strat: Cycles, one seed, Sobol-Burley;
  * render 0 as a series of 32 to 1024 spp) with nlm: its Variance/n overstates the
  * spread of its own increments about 2x; with the variance from the increments the
- * stops agree with the truth more often than with Variance/n (docs/fidelity.md has the
- * whole protocol), and neither stops early. A fixed seed: these are regression figures
- * of a measured claim (measured: per-sample 0 of 3, all late; increments 2 of 3). */
+ * stops agree with the truth more often than with Variance/n kept and the probes
+ * drawn from it (--sure-groups 0), and with Variance/n kept but the groups on (the
+ * probes then take the groups' variance from the third member) as often as with the
+ * increments (docs/fidelity.md has the whole protocol); none stops early. A fixed
+ * seed and one probe: these are regression figures of a measured claim (measured:
+ * per-sample without the groups 2 of 3, late or never; with them 3 of 3; increments 3
+ * of 3). */
 static void
 test_stratified_series(void **state)
 {
@@ -310,10 +324,13 @@ test_stratified_series(void **state)
     assert_int_equal(mcp_series_from_pattern(pattern, spps, 6, &series), 0);
     assert_int_equal(mcp_image_read(ref_path, NULL, &ref), 0);
     assert_int_equal(mcp_denoiser_create_from_args("nlm", NULL, 0, &den), 0);
-    int agree_own = 0, agree_incr = 0, cases = 0, early = 0;
+    int agree_own = 0, agree_plain = 0, agree_incr = 0, cases = 0, early = 0;
     series->variance_from = MCP_SERIES_VARIANCE_FILE;
-    assert_int_equal(run_series(series, den, ref, 1, "texture, per-sample", &agree_own,
-                                &cases, &early),
+    assert_int_equal(run_series_groups(series, den, ref, 1, 0, "texture, per-sample",
+                                       &agree_plain, &cases, &early),
+                     0);
+    assert_int_equal(run_series(series, den, ref, 1, "texture, per-sample, groups",
+                                &agree_own, &cases, &early),
                      0);
     series->variance_from = MCP_SERIES_VARIANCE_INCREMENTS;
     assert_int_equal(run_series(series, den, ref, 1, "texture, increments", &agree_incr,
@@ -325,12 +342,14 @@ test_stratified_series(void **state)
     mcp_series_estimate *s = NULL;
     assert_int_equal(mcp_estimate_series(series, den, &so, NULL, NULL, NULL, &s), 0);
     print_message("stratified texture: Variance/n over the increments' spread %.3f; "
-                  "agreement per-sample %d, increments %d of 3, %d early\n",
-                  s->variance_ratio, agree_own, agree_incr, early);
+                  "agreement per-sample %d (with the groups %d), increments %d of 3, %d "
+                  "early\n",
+                  s->variance_ratio, agree_plain, agree_own, agree_incr, early);
     assert_int_equal(s->variance_source, MCP_VARSRC_INCREMENTS);
     assert_true(s->variance_ratio > 1.7 && s->variance_ratio < 2.3);
     assert_int_equal(early, 0);
-    assert_true(agree_incr >= 2 && agree_incr > agree_own);
+    assert_true(agree_incr >= 2 && agree_incr > agree_plain);
+    assert_true(agree_own >= 2 && agree_own > agree_plain);
     mcp_series_estimate_free(s);
     mcp_denoiser_free(den);
     mcp_image_free(ref);

@@ -8,7 +8,10 @@
  *    probes' divergence) reads twice the covariance there is: the jackknife's is within
  *    a fifth of the closed form;
  *  - the series estimate takes the groups from the third member on, and none with
- *    sure_groups 0; the members before the groups start do not stop (held).
+ *    sure_groups 0; the members before the groups start do not stop (held);
+ *  - a per-sample variance 4x the truth: the probes take the groups' V, and the
+ *    variance map is the box's true Var[F]; the increments' variance keeps its own, and
+ *    so does a per-sample one 1.1x the truth.
  * Fixed seeds; each mean is checked within four of its standard errors over the
  * renders and that error is checked to be small. */
 #include "box_denoiser.h"
@@ -51,10 +54,12 @@ sample_variance(const render *r, int c)
 }
 
 /* Checkpoints of one render at spp[0] < ... < spp[count - 1] (or, with independent,
- * a fresh render for each), written as name_K.exr; the series. */
+ * a fresh render for each), written as name_K.exr with `over` times the true variance
+ * of the mean, from `source`; the series. */
 static mcp_series *
-write_checkpoints(const render *r, const double *spp, int count, int independent,
-                  const char *name, uint64_t *rng)
+write_checkpoints_as(const render *r, const double *spp, int count, int independent,
+                     const char *name, uint64_t *rng, double over,
+                     mcp_variance_source source)
 {
     double *sum = calloc((size_t)W * H * 3, sizeof *sum);
     char **paths = calloc((size_t)count, sizeof *paths);
@@ -72,9 +77,10 @@ write_checkpoints(const render *r, const double *spp, int count, int independent
         d->var_of_mean = mcp_test_rgb(W, H);
         d->spp = spp[k];
         d->source = strdup(name);
+        d->variance_source = source;
         for (int i = 0; i < W * H * 3; i++) {
             d->color->data[i] = (float)(sum[i] / spp[k]);
-            d->var_of_mean->data[i] = (float)(sample_variance(r, i % 3) / spp[k]);
+            d->var_of_mean->data[i] = (float)(over * sample_variance(r, i % 3) / spp[k]);
         }
         char file[128];
         snprintf(file, sizeof file, "%s_%d.exr", name, k);
@@ -90,6 +96,14 @@ write_checkpoints(const render *r, const double *spp, int count, int independent
     free(paths);
     free(sum);
     return s;
+}
+
+static mcp_series *
+write_checkpoints(const render *r, const double *spp, int count, int independent,
+                  const char *name, uint64_t *rng)
+{
+    return write_checkpoints_as(r, spp, count, independent, name, rng, 1.0,
+                                MCP_VARSRC_OF_MEAN);
 }
 
 /* The last member's group terms with at most `groups` groups. */
@@ -300,6 +314,67 @@ test_series_estimate_takes_groups(void **state)
     mcp_series_free(s);
 }
 
+/* A renderer's per-sample variance that overstates the noise 4x (as a stratified
+ * sampler makes it): from the groups on, the probes take the groups' V, so that the
+ * variance map Var[F] is the box's true v/9; a variance measured on the render's own
+ * samples (the increments') keeps its own (4 v/9), and so does a per-sample one within
+ * the series' rule (1.1x). Mean over RENDERS renders of the map's interior, each with
+ * its own probes. */
+static void
+test_per_sample_variance_probes_from_groups(void **state)
+{
+    (void)state;
+    const render r = {0, {0.2, 0.5, 1.0}};
+    const double spp[4] = {8, 16, 24, 32};
+    /* overstated 4x, per-sample: V; the increments': their own; per-sample within the
+       series' rule (1.1x, not off): its own */
+    const mcp_variance_source sources[3] = {MCP_VARSRC_PER_SAMPLE, MCP_VARSRC_INCREMENTS,
+                                            MCP_VARSRC_PER_SAMPLE};
+    const double over[3] = {4.0, 4.0, 1.1}, want[3] = {1.0, 4.0, 1.1};
+    for (int k = 0; k < 3; k++) {
+        uint64_t rng = 21;
+        double ratio[RENDERS];
+        for (int t = 0; t < RENDERS; t++) {
+            mcp_series *s = write_checkpoints_as(&r, spp, 4, 0, "overstated", &rng,
+                                                 over[k], sources[k]);
+            /* the file's variance (auto would take the increments' for one this far
+               off) */
+            s->variance_from = MCP_SERIES_VARIANCE_FILE;
+            mcp_dump *d = NULL;
+            assert_int_equal(mcp_series_load(s, 3, &d), 0);
+            assert_int_equal(d->variance_source, sources[k]);
+            mcp__group_terms g = {0};
+            assert_int_equal(
+                mcp__series_group_terms(s, 3, d, &mcp_test_box_denoiser, 4, &g), 0);
+            assert_non_null(g.var);
+            mcp_estimate_options o = mcp_estimate_defaults();
+            o.s2_pool = 0;
+            o.sure.seed = (uint64_t)t; /* the probes' noise independent between renders */
+            mcp_estimate *e = NULL;
+            assert_int_equal(
+                mcp__estimate_compute_groups(d, &mcp_test_box_denoiser, &o, &g, &e), 0);
+            assert_int_equal(e->probes_from_groups, k == 0);
+            double sum = 0.0, truth = 0.0;
+            for (int y = 1; y < H - 1; y++)
+                for (int x = 1; x < W - 1; x++)
+                    for (int c = 0; c < 3; c++) {
+                        sum += mcp_image_px(e->maps.var, x, y)[c];
+                        truth += sample_variance(&r, c) / spp[3] / 9.0;
+                    }
+            ratio[t] = sum / truth;
+            mcp_estimate_free(e);
+            mcp__group_terms_clear(&g);
+            mcp_dump_free(d);
+            mcp_series_free(s);
+        }
+        double m, se;
+        mean_se(ratio, RENDERS, &m, &se);
+        print_message("%s variance, %gx the truth: Var[F] / truth %.3f (se %.3f)\n",
+                      k == 1 ? "increments'" : "per-sample", over[k], m, se);
+        assert_true(fabs(m - want[k]) < 4 * se + 0.02 * want[k] && se < 0.05 * want[k]);
+    }
+}
+
 int
 main(void)
 {
@@ -309,6 +384,7 @@ main(void)
         cmocka_unit_test(test_independent_members_give_no_groups),
         cmocka_unit_test(test_fireflies_covariance),
         cmocka_unit_test(test_series_estimate_takes_groups),
+        cmocka_unit_test(test_per_sample_variance_probes_from_groups),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
 }
