@@ -150,7 +150,8 @@ static const mcp_option estimate_options[] = {
      .def = "auto",
      .doc = "over a series: SURE's covariance term and variance from G groups of each "
             "member's own checkpoints (G denoiser applies) instead of the probes' "
-            "divergence; 0: the probes'; auto: 4",
+            "divergence, no stop before the groups start, and a per-sample variance "
+            "off from theirs replaced for the probes; 0: the probes' everywhere; auto: 4",
      .lo = 0,
      .hi = 8,
      .bounds = MCP_OPT_LO | MCP_OPT_HI,
