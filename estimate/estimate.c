@@ -409,10 +409,9 @@ compute(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_option
     e->probes = o.sure.n_probes;
     /* probes from the groups' V: G - 1 degrees of freedom, pooled as any few-dof
        variance is */
-    e->s2_pool = o.s2_pool >= 0 ? o.s2_pool
-                 : probed.var_of_mean != dump->var_of_mean
-                     ? 1
-                     : mcp_estimate_auto_s2_pool(dump, den);
+    e->s2_pool = o.s2_pool >= 0          ? o.s2_pool
+                 : e->probes_from_groups ? 1
+                                         : mcp_estimate_auto_s2_pool(dump, den);
     if (mcp_pool_window(e->maps.var_rel, NULL, e->s2_pool) ||
         mcp_pool_window(e->maps.var, NULL, e->s2_pool))
         goto done;
@@ -619,13 +618,9 @@ mean_spp(const mcp_dump *d)
  * (docs/fidelity.md, "Holding the first two checkpoints"). A variance from replicates
  * (independent renders merged) is not held: its first member already pools K renders. */
 static int
-holds_stop(int i, const mcp_dump *d, int groups, const mcp_estimate_options *o)
+holds_stop(int i, const mcp_dump *d, int groups)
 {
-    /* the members that could give groups later (mcp__series_group_terms' conditions) */
-    const int checkpoint = d->var_of_mean && !d->spp_map && d->spp > 0;
-    const int first = (groups < MCP__GROUPS_MIN ? groups : MCP__GROUPS_MIN) - 1;
-    return groups > 1 && i < first && checkpoint &&
-           o->sure.metric != MCP_METRIC_RELSE_PERCEPTUAL &&
+    return groups > 1 && i < mcp__groups_min(groups) - 1 && mcp__member_can_group(d) &&
            d->variance_source != MCP_VARSRC_REPLICATES;
 }
 
@@ -702,16 +697,17 @@ mcp_estimate_series(const mcp_series *series, const mcp_denoiser *den,
     s->n_percentiles = o.est.n_percentiles;
     memcpy(s->percentiles, o.est.percentiles, sizeof o.est.percentiles);
     s->has_reference = reference != NULL;
-    const int groups =
-        o.est.sure_groups >= 0 ? o.est.sure_groups : MCP_ESTIMATE_SURE_GROUPS;
+    /* the groups asked for; none for relse-perceptual, whose maps take none */
+    const int groups = o.est.sure.metric == MCP_METRIC_RELSE_PERCEPTUAL ? 0
+                       : o.est.sure_groups >= 0 ? o.est.sure_groups
+                                                : MCP_ESTIMATE_SURE_GROUPS;
     for (int i = 0; i < series->count; i++) {
         mcp_dump *d = NULL;
         mcp_estimate *e = NULL;
         mcp_series_point *pt = &s->points[i];
         mcp__group_terms g = {0};
         if (mcp_series_load(series, i, &d) ||
-            (groups > 1 && o.est.sure.metric != MCP_METRIC_RELSE_PERCEPTUAL &&
-             mcp__series_group_terms(series, i, d, den, groups, &g)) ||
+            (groups > 1 && mcp__series_group_terms(series, i, d, den, groups, &g)) ||
             compute(d, den, &o.est, &g, &e)) {
             mcp_error_prefix("%s: ", series->paths[i]);
             mcp__group_terms_clear(&g);
@@ -725,12 +721,13 @@ mcp_estimate_series(const mcp_series *series, const mcp_denoiser *den,
         pt->spp = series->spp && series->spp[i] > 0 ? series->spp[i] : mean_spp(d);
         s->variance_source = d->variance_source; /* the last member's, in the end */
         int bad = 0;
-        const int hold = holds_stop(i, d, groups, &o.est);
+        const int hold = holds_stop(i, d, groups);
         for (int j = 0; j < o.n_taus && !bad; j++) {
             int stop = mcp_error_should_stop(e->dist, o.taus[j], o.est.p, &pt->cdf[j]);
             bad = stop < 0;
-            pt->stop[j] = stop > 0 && !e->no_variance && !hold;
-            pt->held = pt->held || (stop > 0 && !e->no_variance && hold);
+            const int reached = stop > 0 && !e->no_variance;
+            pt->stop[j] = reached && !hold;
+            pt->held = pt->held || (reached && hold);
         }
         memcpy(pt->est_percentile, e->percentile_tau, sizeof e->percentile_tau);
         pt->est_mean_error = mcp_error_dist_mean(e->dist);

@@ -108,15 +108,13 @@ mcp__series_group_terms(const mcp_series *s, int i, const mcp_dump *member,
                         const mcp_denoiser *den, int groups, mcp__group_terms *out)
 {
     memset(out, 0, sizeof *out);
-    if (i < 1 || groups < 2 || !member->var_of_mean || member->spp_map ||
-        !(member->spp > 0))
-        return 0;
+    if (i < 1 || groups < 2 || !mcp__member_can_group(member)) return 0;
     int b[MCP__GROUPS_MAX];
     const int G =
         plan_groups(s, i, groups < MCP__GROUPS_MAX ? groups : MCP__GROUPS_MAX, b);
     /* two groups leave one degree of freedom per value, too few under heavy tails
        (docs/fidelity.md, `bathroom`): at least three unless fewer were asked for */
-    if (G < (groups < MCP__GROUPS_MIN ? groups : MCP__GROUPS_MIN)) return G < 0 ? -1 : 0;
+    if (G < mcp__groups_min(groups)) return G < 0 ? -1 : 0;
 
     /* one group at a time: its sum from the members at its ends, the member without
        it, denoised, into the sums; the memory is a few images whatever G is */
@@ -197,7 +195,7 @@ mcp__series_group_terms(const mcp_series *s, int i, const mcp_dump *member,
     /* differences far noisier than the members' variances say: not checkpoints of one
        render (independent renders at rising counts), whose differences are no groups
        at all (the series' own rule, mcp_variance_ratio_off) */
-    if (sum_jv > 0.0 && mcp_variance_ratio_off(sum_v / sum_jv) && sum_v < sum_jv)
+    if (mcp_variance_ratio_off(out->v_over_v) && out->v_over_v < 1.0)
         mcp__group_terms_clear(out);
 done:
     mcp_image_free(loo);

@@ -138,6 +138,18 @@ int mcp__error_maps_from_own_probes(const mcp_dump *dump, mcp_image **denoised,
  * their variances say (not checkpoints of one render). */
 #define MCP__GROUPS_MAX 8
 #define MCP__GROUPS_MIN 3 /* fewer found than this (and than asked for): no groups */
+/* The fewest groups a member's terms are taken from when `groups` are asked for. */
+static inline int
+mcp__groups_min(int groups)
+{
+    return groups < MCP__GROUPS_MIN ? groups : MCP__GROUPS_MIN;
+}
+/* Whether a member can give groups at all: a scalar sample count and a variance. */
+static inline int
+mcp__member_can_group(const mcp_dump *member)
+{
+    return member->var_of_mean && !member->spp_map && member->spp > 0;
+}
 typedef struct mcp__group_terms {
     mcp_image *cov, *var;
     int groups;      /* the groups found */
@@ -150,13 +162,13 @@ void mcp__group_terms_clear(mcp__group_terms *g);
  * noise (a stratified sampler): the groups' V in its place, and the member's colour
  * covariance, if any, scaled to it so that the channels' correlations stay (a new
  * image in *cov, or NULL without one). */
+int mcp__group_probe_variance(const mcp_dump *d, const mcp__group_terms *g,
+                              mcp_image **cov);
 /* mcp_estimate_compute with a series member's group terms (estimate.c; the series
  * estimate's step, for the tests). */
 int mcp__estimate_compute_groups(const mcp_dump *dump, const mcp_denoiser *den,
                                  const mcp_estimate_options *opt,
                                  const mcp__group_terms *groups, mcp_estimate **out);
-int mcp__group_probe_variance(const mcp_dump *d, const mcp__group_terms *g,
-                              mcp_image **cov);
 
 /* Per-value variance maps from n jvp images: mean_k (J v_k)² (through the CSF operator
  * for relse-perceptual), and divided by the denominator (1 channel) (variance.c). */
