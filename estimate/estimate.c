@@ -665,11 +665,37 @@ member_truth(const mcp_estimate *e, const mcp_image *reference,
     return 0;
 }
 
+/* mcp_estimate_series's progress, as a callback that never ends the series */
+typedef struct progress_only {
+    void (*progress)(int done, int total, void *ctx);
+    void *ctx;
+} progress_only;
+
+static int
+report_progress(int done, int total, void *ctx)
+{
+    const progress_only *p = ctx;
+    if (p->progress) p->progress(done, total, p->ctx);
+    return 0;
+}
+
 int
 mcp_estimate_series(const mcp_series *series, const mcp_denoiser *den,
                     const mcp_series_estimate_options *opt, const mcp_image *reference,
                     void (*progress)(int done, int total, void *ctx), void *ctx,
                     mcp_series_estimate **out)
+{
+    progress_only p = {progress, ctx};
+    return mcp_estimate_series_each(series, den, opt, reference, report_progress, &p,
+                                    out);
+}
+
+int
+mcp_estimate_series_each(const mcp_series *series, const mcp_denoiser *den,
+                         const mcp_series_estimate_options *opt,
+                         const mcp_image *reference,
+                         int (*on_member)(int done, int total, void *ctx), void *ctx,
+                         mcp_series_estimate **out)
 {
     *out = NULL;
     mcp_series_estimate_options o = opt ? *opt : mcp_series_estimate_defaults();
@@ -740,7 +766,13 @@ mcp_estimate_series(const mcp_series *series, const mcp_denoiser *den,
             mcp_series_estimate_free(s);
             return -1;
         }
-        if (progress) progress(i + 1, series->count, ctx);
+        if (on_member) mcp_error_clear(); /* what the callback says, if it fails */
+        if (on_member && on_member(i + 1, series->count, ctx)) {
+            if (!mcp_error_message()[0])
+                mcp_error("estimate: stopped after member %d", i + 1);
+            mcp_series_estimate_free(s);
+            return -1;
+        }
     }
     /* whether the renderer's Variance/n tracks the spread of the series' own
        increments (a stratified sampler makes it an overstatement) */

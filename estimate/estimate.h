@@ -467,6 +467,14 @@ MCP_API int mcp_estimate_series(const mcp_series *series, const mcp_denoiser *de
                                 const mcp_image *reference,
                                 void (*progress)(int done, int total, void *ctx),
                                 void *ctx, mcp_series_estimate **out);
+/* As mcp_estimate_series, with a callback after each member that can end the series
+ * (Python's Ctrl-C): a non-zero return fails the call with the message it set (else
+ * "estimate: stopped after member N"). on_member may be NULL. */
+MCP_API int mcp_estimate_series_each(const mcp_series *series, const mcp_denoiser *den,
+                                     const mcp_series_estimate_options *opt,
+                                     const mcp_image *reference,
+                                     int (*on_member)(int done, int total, void *ctx),
+                                     void *ctx, mcp_series_estimate **out);
 MCP_API void mcp_series_estimate_free(mcp_series_estimate *s);
 
 /* Agreement of a stopping spp with the true one (Firmino 2024 §5): equal, within one

@@ -143,35 +143,14 @@ py_blend(PyObject *self, PyObject *args, PyObject *kw)
     mcp_series_variance vsrc = st.variance_from;
     int all_images = st.all_images;
     /* the members: paths in increasing spp (the driver loads them one at a time) */
-    PyObject *fast = PySequence_Fast(list, "dumps must be a list of paths");
-    if (!fast) return NULL;
-    Py_ssize_t n = PySequence_Fast_GET_SIZE(fast);
-    PyObject **held = PyMem_Calloc((size_t)(n ? n : 1), sizeof *held);
-    const char **paths = PyMem_Calloc((size_t)(n ? n : 1), sizeof *paths);
     mcp_series *series = NULL;
     mcp_denoiser *den = NULL;
     mcp_py_image ref = {0};
     mcp_blend_series_result *r = NULL;
     sink s = {0};
     PyObject *result = NULL;
-    if (!held || !paths) {
-        PyErr_NoMemory();
-        goto done;
-    }
-    if (n < 1) {
-        PyErr_SetString(mcp_py_error, "blend: no dumps given");
-        goto done;
-    }
-    for (Py_ssize_t i = 0; i < n; i++) {
-        char what[32];
-        snprintf(what, sizeof what, "dumps[%zd]", i);
-        if (!(held[i] = mcp_py_path(PySequence_Fast_GET_ITEM(fast, i), what))) goto done;
-        paths[i] = PyBytes_AS_STRING(held[i]);
-    }
-    if (mcp_series_from_paths(paths, NULL, (int)n, &series)) {
-        mcp_py_fail();
-        goto done;
-    }
+    if (mcp_py_series_get(list, "blend", &series)) return NULL;
+    const int n = series->count;
     series->variance_from = vsrc;
     if (mcp_py_image_opt(ref_obj, "reference", 0, NULL, &ref) ||
         mcp_py_denoiser_arg(den_obj, &den))
@@ -206,16 +185,11 @@ py_blend(PyObject *self, PyObject *args, PyObject *kw)
                                "has_reference", r->has_reference ? Py_True : Py_False,
                                "weights", mcp_blend_weighting_name(b->weights));
 done:
-    sink_free(&s, (int)n);
+    sink_free(&s, n);
     mcp_blend_series_result_free(r);
     mcp_py_image_release(&ref);
     mcp_denoiser_free(den);
     mcp_series_free(series);
-    for (Py_ssize_t i = 0; held && i < n; i++)
-        Py_XDECREF(held[i]);
-    PyMem_Free(held);
-    PyMem_Free(paths);
-    Py_DECREF(fast);
     return result;
 }
 

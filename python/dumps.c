@@ -3,7 +3,10 @@
  * (K renders of one frame into one dump whose variance comes from their spread). */
 #include "internal.h"
 
+#include <mcpost/error.h>
 #include <mcpost/imageio.h>
+
+#include <limits.h>
 
 static const char *const part_keys[6] = {"color",  "variance", "covariance",
                                          "albedo", "normal",   "spp_map"};
@@ -284,6 +287,45 @@ get_dump_list(PyObject *fast, Py_ssize_t n, mcp_py_dump **parts, const mcp_dump 
         (*dumps)[i] = (*parts)[i].dump;
     }
     return 0;
+}
+
+int
+mcp_py_series_get(PyObject *list, const char *fn, mcp_series **out)
+{
+    *out = NULL;
+    PyObject *fast = PySequence_Fast(list, "dumps must be a list of paths");
+    if (!fast) return -1;
+    const Py_ssize_t n = PySequence_Fast_GET_SIZE(fast);
+    PyObject **held = PyMem_Calloc((size_t)(n ? n : 1), sizeof *held);
+    const char **paths = PyMem_Calloc((size_t)(n ? n : 1), sizeof *paths);
+    int rc = -1;
+    if (!held || !paths) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    if (n < 1) {
+        PyErr_Format(mcp_py_error, "%s: no dumps given", fn);
+        goto done;
+    }
+    for (Py_ssize_t i = 0; i < n; i++) {
+        char what[32];
+        snprintf(what, sizeof what, "dumps[%zd]", i);
+        if (!(held[i] = mcp_py_path(PySequence_Fast_GET_ITEM(fast, i), what))) goto done;
+        paths[i] = PyBytes_AS_STRING(held[i]);
+    }
+    if (n > INT_MAX || mcp_series_from_paths(paths, NULL, (int)n, out)) {
+        if (n > INT_MAX) mcp_error("%s: too many dumps", fn);
+        mcp_py_fail();
+        goto done;
+    }
+    rc = 0;
+done:
+    for (Py_ssize_t i = 0; held && i < n; i++)
+        Py_XDECREF(held[i]);
+    PyMem_Free(held);
+    PyMem_Free(paths);
+    Py_DECREF(fast);
+    return rc;
 }
 
 static void

@@ -130,6 +130,160 @@ positional(const char *fn, const char *name, PyObject *args, PyObject *own_value
     return 0;
 }
 
+/* ---- a series: the CLI's `mcpost estimate DUMP DUMP...` ---- */
+
+/* Between members: Python's Ctrl-C, looked at with the GIL (its handler only notes the
+ * signal), ends the series. */
+typedef struct series_run {
+    PyThreadState *thread;
+} series_run;
+
+static int
+on_member(int done, int total, void *ctx)
+{
+    (void)done, (void)total;
+    series_run *r = ctx;
+    PyEval_RestoreThread(r->thread);
+    const int interrupted = PyErr_CheckSignals();
+    r->thread = PyEval_SaveThread();
+    return interrupted ? mcp_error("estimate: interrupted") : 0;
+}
+
+/* spp per tau, None where the series never reaches it */
+static PyObject *
+spp_list(const double *spp, int n)
+{
+    PyObject *l = PyList_New(n);
+    for (int j = 0; l && j < n; j++) {
+        PyObject *v = spp[j] > 0 ? PyFloat_FromDouble(spp[j]) : Py_NewRef(Py_None);
+        if (!v) Py_CLEAR(l);
+        if (l) PyList_SET_ITEM(l, j, v);
+    }
+    return l;
+}
+
+static PyObject *
+bool_list(const int *b, int n)
+{
+    PyObject *l = PyList_New(n);
+    for (int j = 0; l && j < n; j++)
+        PyList_SET_ITEM(l, j, PyBool_FromLong(b[j]));
+    return l;
+}
+
+/* One member as estimate.json's member (jobs/estimate_output.c), with the single
+ * estimate's names for the percentile curve. */
+static PyObject *
+member_dict(const mcp_series_estimate *s, const mcp_series_point *pt)
+{
+    PyObject *d = PyDict_New();
+    if (!d) return NULL;
+    int bad =
+        mcp_py_set(d, "spp", PyFloat_FromDouble(pt->spp)) ||
+        mcp_py_set(d, "cdf", mcp_py_vector(pt->cdf, s->n_taus)) ||
+        mcp_py_set(d, "stop", bool_list(pt->stop, s->n_taus)) ||
+        mcp_py_set(d, "held", PyBool_FromLong(pt->held)) ||
+        mcp_py_set(d, "sure_groups", PyLong_FromLong(pt->sure_groups)) ||
+        mcp_py_set(d, "probes_from_groups", PyBool_FromLong(pt->probes_from_groups)) ||
+        mcp_py_set(d, "percentile_error",
+                   mcp_py_vector(pt->est_percentile, s->n_percentiles)) ||
+        mcp_py_set(d, "expected_mean_error", PyFloat_FromDouble(pt->est_mean_error));
+    if (!bad && s->has_reference) {
+        int true_stop[MCP_ESTIMATE_MAX_TAUS];
+        for (int j = 0; j < s->n_taus; j++)
+            true_stop[j] = pt->true_stop[j];
+        bad = mcp_py_set(d, "true_cdf", mcp_py_vector(pt->true_cdf, s->n_taus)) ||
+              mcp_py_set(d, "true_stop", bool_list(true_stop, s->n_taus)) ||
+              mcp_py_set(d, "true_percentiles",
+                         mcp_py_vector(pt->true_percentile, s->n_percentiles)) ||
+              mcp_py_set(d, "true_mean_error", PyFloat_FromDouble(pt->true_mean_error));
+    }
+    if (bad) Py_CLEAR(d);
+    return d;
+}
+
+static PyObject *
+series_dict(const mcp_series_estimate *s, const mcp_estimate_options *o,
+            const char *denoiser)
+{
+    PyObject *d = PyDict_New(), *members = PyList_New(s->count);
+    int stop = 1;
+    for (int i = 0; members && i < s->count; i++) {
+        PyObject *m = member_dict(s, &s->points[i]);
+        if (!m) Py_CLEAR(members);
+        if (members) PyList_SET_ITEM(members, i, m);
+    }
+    for (int j = 0; j < s->n_taus; j++)
+        stop = stop && s->points[s->count - 1].stop[j];
+    if (!d || !members) {
+        Py_XDECREF(d);
+        Py_XDECREF(members);
+        return NULL;
+    }
+    int bad =
+        mcp_py_set(d, "members", members) ||
+        mcp_py_set(d, "denoiser", PyUnicode_FromString(denoiser)) ||
+        mcp_py_set(d, "metric",
+                   PyUnicode_FromString(mcp_error_metric_name(o->sure.metric))) ||
+        mcp_py_set(d, "p", PyFloat_FromDouble(s->p)) ||
+        mcp_py_set(d, "taus", mcp_py_vector(s->taus, s->n_taus)) ||
+        mcp_py_set(d, "percentiles", mcp_py_vector(s->percentiles, s->n_percentiles)) ||
+        mcp_py_set(d, "first_spp", spp_list(s->first_spp, s->n_taus)) ||
+        mcp_py_set(d, "stop", PyBool_FromLong(stop)) ||
+        mcp_py_set(d, "variance_source",
+                   PyUnicode_FromString(mcp_variance_source_name(s->variance_source))) ||
+        mcp_py_set(d, "variance_ratio", PyFloat_FromDouble(s->variance_ratio)) ||
+        mcp_py_set(d, "has_reference", PyBool_FromLong(s->has_reference));
+    if (!bad && s->has_reference) {
+        int agree = 0;
+        for (int j = 0; j < s->n_taus; j++)
+            agree += s->agree[j];
+        bad = mcp_py_set(d, "true_first_spp", spp_list(s->true_first_spp, s->n_taus)) ||
+              mcp_py_set(d, "agree", bool_list(s->agree, s->n_taus)) ||
+              mcp_py_set(d, "agreement_rate",
+                         PyFloat_FromDouble((double)agree / s->n_taus));
+    }
+    if (bad) Py_CLEAR(d);
+    return d;
+}
+
+/* estimate([paths...]): every member of a progressive render (the dumps' paths in
+ * increasing spp, loaded one at a time), as `mcpost estimate DUMP...` runs them: the
+ * variance chosen per member (variance_from), SURE from the render's own groups, and
+ * with a reference the true stops beside the estimated ones. */
+static PyObject *
+estimate_series(PyObject *list, PyObject *den_obj, PyObject *ref_obj,
+                const mcp_estimate_settings *st)
+{
+    mcp_series *series = NULL;
+    mcp_denoiser *den = NULL;
+    mcp_py_image ref = {0};
+    mcp_series_estimate *s = NULL;
+    PyObject *result = NULL;
+    if (mcp_py_series_get(list, "estimate", &series)) return NULL;
+    series->spec.convention = st->convention;
+    series->spec.variance = st->variance;
+    series->variance_from = st->variance_from;
+    if (mcp_py_image_opt(ref_obj, "reference", 0, NULL, &ref) ||
+        mcp_py_denoiser_arg(den_obj, &den))
+        goto done;
+    series_run run = {PyEval_SaveThread()};
+    int rc = mcp_estimate_series_each(series, den, &st->so, ref.img, on_member, &run, &s);
+    PyEval_RestoreThread(run.thread);
+    if (PyErr_Occurred() || mcp_py_check_signals()) goto done;
+    if (rc) {
+        mcp_py_fail();
+        goto done;
+    }
+    result = series_dict(s, &st->so.est, den->name);
+done:
+    mcp_series_estimate_free(s);
+    mcp_py_image_release(&ref);
+    mcp_denoiser_free(den);
+    mcp_series_free(series);
+    return result;
+}
+
 static PyObject *
 py_estimate(PyObject *self, PyObject *args, PyObject *kw)
 {
@@ -148,6 +302,9 @@ py_estimate(PyObject *self, PyObject *args, PyObject *kw)
     Py_DECREF(keep); /* no path of the settings is used below */
     PyObject *den_obj = vals[1] ? vals[1] : Py_None,
              *ref_obj = vals[2] ? vals[2] : Py_None;
+    /* a list or tuple of paths: a progressive render */
+    if (PyList_Check(dump_obj) || PyTuple_Check(dump_obj))
+        return estimate_series(dump_obj, den_obj, ref_obj, &st);
     mcp_estimate_options o = st.so.est;
     /* one dump: F at the taus given, else at tau */
     const mcp_operation *op = mcp_operation_estimate();
@@ -226,7 +383,15 @@ PyMethodDef mcp_py_estimate_methods[] = {
      "'mean_lambda', 'mean_s2', 'expected_mean_error'), 'cdf_at_tau', 'stop', 'cdf'\n"
      "(F at each of taus), 'percentile_error' at 'percentiles', and with a reference\n"
      "'true_percentiles'. dump is a path or a dict; denoiser a name or a dict with\n"
-     "'name' and its settings."},
+     "'name' and its settings.\n\n"
+     "A list of dump paths in increasing spp is a progressive render, as `mcpost\n"
+     "estimate DUMP DUMP...` runs it: 'members' (per member 'spp', 'cdf' and 'stop'\n"
+     "per tau, 'held', 'sure_groups', 'probes_from_groups', 'percentile_error',\n"
+     "'expected_mean_error'; with a reference 'true_cdf', 'true_stop',\n"
+     "'true_percentiles', 'true_mean_error'), 'first_spp' per tau (None: never),\n"
+     "'stop' (the last member, every tau), 'variance_source', 'variance_ratio'; with a\n"
+     "reference 'true_first_spp', 'agree', 'agreement_rate'. Ctrl-C stops it after\n"
+     "the current member."},
     {"true_error", FN(py_true_error), KW,
      "true_error(denoised, reference, *, metric='relse', ppd=0) -> ndarray H x W x 3:\n"
      "the true per-value error in the metric (docs/mathematics.md section 2.9)"},

@@ -71,6 +71,10 @@ typedef struct mcp_py_dump {
 
 int mcp_py_dump_get(PyObject *obj, const char *what, mcp_py_dump *out);
 void mcp_py_dump_release(mcp_py_dump *d);
+/* A series of dump paths (a sequence of str or os.PathLike, in increasing spp) as
+ * the library loads it, one member at a time (fn names the function in errors). -1
+ * with the Python error set. */
+int mcp_py_series_get(PyObject *list, const char *fn, mcp_series **out);
 /* The dict of a dump, taking its images over (the dump is freed). */
 PyObject *mcp_py_dump_dict(mcp_dump *dump);
 /* The header attributes as a dict, and one attribute from a Python int, float or str

@@ -93,3 +93,63 @@ def test_estimate_options_and_errors():
         mcpost.estimate(d, budget=1.5, denoiser="gauss")
     with pytest.raises(TypeError, match="dump must be a dump"):
         mcpost.estimate(3, denoiser="gauss")
+
+
+# ---- a progressive render: estimate([paths...]) as `mcpost estimate DUMP DUMP...` ----
+
+STRAT = "samples/fixtures/strat/texture"
+
+
+def strat_series():
+    import glob
+    import os
+    from conftest import SOURCE
+    paths = sorted(glob.glob(os.path.join(SOURCE, STRAT, "series", "*.exr")))
+    assert len(paths) == 6  # 32 .. 1024 spp, one stratified render's checkpoints
+    return paths, os.path.join(SOURCE, STRAT, "texture_reference.exr")
+
+
+def test_a_series_matches_the_cli_and_the_truth():
+    paths, ref = strat_series()
+    got = mcpost.estimate(paths, denoiser="nlm", reference=ref, taus=[0.05, 0.02])
+    want = cli("estimate", *paths, "--denoiser", "nlm", "--ref", ref, "--taus",
+               "0.05,0.02", "--json")
+    assert got["first_spp"] == [t["first_spp"] for t in want["taus"]]
+    assert got["true_first_spp"] == [t["true_first_spp"] for t in want["taus"]]
+    assert got["variance_source"] == want["variance_source"] == "increments"
+    for g, w in zip(got["members"], want["members"]):
+        assert g["spp"] == w["spp"]
+        assert_close(g["cdf"], w["cdf"])
+        assert g["stop"] == w["stop"] and g["held"] == w["held"]
+        assert g["sure_groups"] == w["sure_groups"]
+        assert g["probes_from_groups"] == w["probes_from_groups"]
+        assert_close(g["true_cdf"], w["true_cdf"])
+    # against the truth (the 23552-spp reference): both stops agree
+    # (docs/fidelity.md's rule), and the groups measure SURE from the third member on
+    assert got["agree"] == [True, True] and got["agreement_rate"] == 1.0
+    assert [m["sure_groups"] > 0 for m in got["members"]] == [False, False] + [True] * 4
+    # Variance/n of this stratified render is twice what its increments show
+    assert 1.8 < got["variance_ratio"] < 2.2
+    assert got["stop"] == all(got["members"][-1]["stop"])
+
+
+def test_a_series_takes_the_cli_options():
+    paths, _ = strat_series()
+    # the renderer's per-sample variance kept on purpose: from the third member the
+    # probes come from the groups' variance, which it overstates (docs/fidelity.md)
+    kept = mcpost.estimate(paths, denoiser="nlm", variance_from="file", taus=[0.02])
+    assert kept["variance_source"] == "per-sample"
+    assert [m["probes_from_groups"] for m in kept["members"]] == [False] * 2 + [True] * 4
+    # no groups: the probes' divergence everywhere, and no member held
+    plain = mcpost.estimate(paths, denoiser="nlm", sure_groups=0, taus=[0.02])
+    assert all(m["sure_groups"] == 0 and not m["held"] for m in plain["members"])
+    want = cli("estimate", *paths, "--denoiser", "nlm", "--sure-groups", "0", "--taus",
+               "0.02", "--json")
+    assert_close([m["cdf"][0] for m in plain["members"]],
+                 [m["cdf"][0] for m in want["members"]])
+    with pytest.raises(mcpost.Error, match="estimate: no dumps given"):
+        mcpost.estimate([], denoiser="nlm")
+    with pytest.raises(TypeError, match=r"dumps\[1\]"):
+        mcpost.estimate([paths[0], 3], denoiser="nlm")
+    with pytest.raises(mcpost.Error, match="no_such.exr"):
+        mcpost.estimate([paths[0], "no_such.exr"], denoiser="nlm")

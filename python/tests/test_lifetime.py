@@ -82,3 +82,18 @@ def test_ctrl_c_interrupts_a_long_call():
             mcpost.estimate(d, denoiser="unet", probes=4)
     finally:
         timer.cancel()
+
+
+def test_ctrl_c_stops_a_series_after_the_current_member():
+    import glob
+    from conftest import SOURCE
+    paths = sorted(glob.glob(os.path.join(SOURCE, "samples", "fixtures", "strat",
+                                          "texture", "series", "*.exr")))
+    timer = threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGINT))
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            # six members of the U-Net, each 1 + 3 tangents + 4 groups' applies
+            mcpost.estimate(paths, denoiser="unet")
+    finally:
+        timer.cancel()

@@ -314,6 +314,57 @@ test_series_estimate_takes_groups(void **state)
     mcp_series_free(s);
 }
 
+/* mcp_estimate_series_each: the callback sees every member in turn, and a non-zero
+ * return ends the series with its message, or with one that names the member. */
+typedef struct member_calls {
+    int calls, stop_at, with_message;
+} member_calls;
+
+static int
+count_members(int done, int total, void *ctx)
+{
+    member_calls *c = ctx;
+    assert_int_equal(done, ++c->calls);
+    assert_int_equal(total, 4);
+    if (done != c->stop_at) return 0;
+    return c->with_message ? mcp_error("test: interrupted") : 1;
+}
+
+static void
+test_series_estimate_each_member(void **state)
+{
+    (void)state;
+    const render r = {0, {0.2, 0.5, 1.0}};
+    const double spp[4] = {8, 16, 24, 32};
+    uint64_t rng = 16;
+    mcp_series *s = write_checkpoints(&r, spp, 4, 0, "each", &rng);
+    mcp_series_estimate_options o = mcp_series_estimate_defaults();
+    member_calls all = {0, 0, 0};
+    mcp_series_estimate *e = NULL, *plain = NULL;
+    assert_int_equal(mcp_estimate_series_each(s, &mcp_test_box_denoiser, &o, NULL,
+                                              count_members, &all, &e),
+                     0);
+    assert_int_equal(all.calls, 4);
+    /* the same estimate as without the callback */
+    assert_int_equal(
+        mcp_estimate_series(s, &mcp_test_box_denoiser, &o, NULL, NULL, NULL, &plain), 0);
+    for (int i = 0; i < 4; i++)
+        assert_true(e->points[i].cdf[0] == plain->points[i].cdf[0]);
+    mcp_series_estimate_free(e);
+    mcp_series_estimate_free(plain);
+    for (int with_message = 0; with_message <= 1; with_message++) {
+        member_calls stop = {0, 2, with_message};
+        e = NULL;
+        assert_error_contains(mcp_estimate_series_each(s, &mcp_test_box_denoiser, &o,
+                                                       NULL, count_members, &stop, &e),
+                              with_message ? "test: interrupted"
+                                           : "estimate: stopped after member 2");
+        assert_null(e);
+        assert_int_equal(stop.calls, 2);
+    }
+    mcp_series_free(s);
+}
+
 /* A renderer's per-sample variance that overstates the noise 4x (as a stratified
  * sampler makes it): from the groups on, the probes take the groups' V, so that the
  * variance map Var[F] is the box's true v/9; a variance measured on the render's own
@@ -384,6 +435,7 @@ main(void)
         cmocka_unit_test(test_independent_members_give_no_groups),
         cmocka_unit_test(test_fireflies_covariance),
         cmocka_unit_test(test_series_estimate_takes_groups),
+        cmocka_unit_test(test_series_estimate_each_member),
         cmocka_unit_test(test_per_sample_variance_probes_from_groups),
     };
     return cmocka_run_group_tests(tests, NULL, NULL);
