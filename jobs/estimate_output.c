@@ -427,15 +427,24 @@ report_series(cJSON *section, const mcp_series_estimate *s)
     if (s->has_reference)
         cJSON_AddNumberToObject(section, "agreement_rate", (double)agree / s->n_taus);
     /* the verdict: where each tau is reached, and whether the truth agrees */
-    char text[900];
+    char text[1400];
     int len = snprintf(text, sizeof text, "stop points (F(tau) >= %.4g%%):", 100 * s->p);
-    for (int j = 0; j < s->n_taus && len < (int)sizeof text - 120; j++) {
+    for (int j = 0; j < s->n_taus && len < (int)sizeof text - 200; j++) {
         len += s->first_spp[j] > 0
                    ? snprintf(text + len, sizeof text - len, "%s tau = %g at %g spp",
                               j ? "," : "", s->taus[j], (double)s->first_spp[j])
                    : snprintf(text + len, sizeof text - len,
                               "%s tau = %g not reached by %g spp", j ? "," : "",
                               s->taus[j], (double)s->points[s->count - 1].spp);
+        /* F(τ) >= p at a member before the third checkpoint, which may not stop */
+        double held = 0;
+        for (int i = 0; i < s->count && !held; i++)
+            if (s->points[i].held && s->points[i].cdf[j] >= s->p) held = s->points[i].spp;
+        if (held > 0)
+            len += snprintf(text + len, sizeof text - len,
+                            " (F(tau) >= p at %g spp, held: no stop before the third "
+                            "checkpoint)",
+                            held);
         if (s->has_reference)
             len += s->true_first_spp[j] > 0
                        ? snprintf(text + len, sizeof text - len, " (true: %g)",

@@ -155,6 +155,12 @@ test_demo_job(void **state)
     /* and SURE from its own checkpoints (six members: groups from the third) */
     assert_non_null(strstr(item(strat, "sure")->valuestring,
                            "from groups of each member's own checkpoints"));
+    /* tau 0.1 is reached at 64 spp, the second member, which may not stop: the
+       verdict says so, and the stop is the third member's (the truth's: 64, one step
+       before, which agrees) */
+    const char *sv = item(item(strat, "verdict"), "text")->valuestring;
+    assert_non_null(strstr(sv, "tau = 0.1 at 128 spp (F(tau) >= p at 64 spp, held"));
+    assert_non_null(strstr(sv, "agree on 3 of 3"));
 
     /* the default denoiser: the U-Net with the weights mcpost ships, no setting */
     const cJSON *unet = cJSON_GetArrayItem(sections, 7);
