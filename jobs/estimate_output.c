@@ -3,6 +3,7 @@
  * pictures, estimate.json and report section; a series' first spp per tau (Firmino 2024
  * Table 1), its estimate.json and report section. */
 #include "internal.h"
+#include "../common/filter/internal.h" /* colour maps on fewer levels */
 #include "../common/report/internal.h" /* maps of one value */
 
 #include <math.h>
@@ -111,7 +112,10 @@ blocks_error_picture(const mcp_blocks *blocks, const mcp_image *dist, unsigned c
                 mean += p[ch[3 + c]] * (p[ch[c]] + 1.0) / 3.0;
             mcp_image_px(lg, x, y)[0] = (float)(mean > 1e-30 ? log10(mean) : -30.0);
         }
-    int rc = mcp_colormap_apply(lg, 0, -5.0, 0.0, MCP_COLORMAP_INFERNO, rgb8);
+    /* 255 levels and white: 256 colours, a palette PNG of a byte a pixel (png_encode.c;
+       a third of the bytes to compress) */
+    int rc =
+        mcp__colormap_apply_levels(lg, 0, -5.0, 0.0, MCP_COLORMAP_INFERNO, 255, rgb8);
 #pragma omp parallel for schedule(static) if (!rc)
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++) {

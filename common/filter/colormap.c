@@ -5,7 +5,7 @@
  * then looked up in the 256-entry table of OpenCV's cv::applyColorMap (via
  * cv_shim.cpp, which also turns OpenCV's BGR into RGB). GRAY is the level itself on
  * all three channels. */
-#include <mcpost/filter.h>
+#include "internal.h"
 
 #include "cv_shim.h"
 
@@ -28,14 +28,15 @@ static const struct {
 
 #define N_COLORMAPS ((int)(sizeof colormaps / sizeof colormaps[0]))
 
-/* The 8-bit level of v: lo -> 0, hi -> 255, rounded to nearest, clamped; NaN -> 0. */
+/* The 8-bit level of v: lo -> 0, hi -> top (scale = top / (hi - lo)), rounded to
+ * nearest, clamped; NaN -> 0. */
 static unsigned char
-level_of(double v, double lo, double scale)
+level_of(double v, double lo, double scale, int top)
 {
     double t = (v - lo) * scale;
     if (!(t > 0)) /* also NaN */
         return 0;
-    if (t >= 255) return 255;
+    if (t >= top) return (unsigned char)top;
     return (unsigned char)(t + 0.5);
 }
 
@@ -62,6 +63,13 @@ int
 mcp_colormap_apply(const mcp_image *img, int channel, double lo, double hi,
                    mcp_colormap map, unsigned char *rgb8)
 {
+    return mcp__colormap_apply_levels(img, channel, lo, hi, map, 256, rgb8);
+}
+
+int
+mcp__colormap_apply_levels(const mcp_image *img, int channel, double lo, double hi,
+                           mcp_colormap map, int levels, unsigned char *rgb8)
+{
     const char *op = "colormap";
     int which = -1;
     for (int i = 0; i < N_COLORMAPS; i++)
@@ -75,7 +83,11 @@ mcp_colormap_apply(const mcp_image *img, int channel, double lo, double hi,
     if (!isfinite(lo) || !isfinite(hi) || !(lo < hi))
         return mcp_error("%s: %s: need finite lo < hi (got lo %g, hi %g)", img->source,
                          op, lo, hi);
-    double scale = 255.0 / (hi - lo);
+    if (levels < 2 || levels > 256)
+        return mcp_error("%s: %s: levels must be in [2, 256] (got %d)", img->source, op,
+                         levels);
+    const int top = levels - 1;
+    double scale = top / (hi - lo);
     if (!isfinite(hi - lo) || !isfinite(scale))
         return mcp_error("%s: %s: range lo %g to hi %g is too narrow or too wide",
                          img->source, op, lo, hi);
@@ -95,7 +107,7 @@ mcp_colormap_apply(const mcp_image *img, int channel, double lo, double hi,
     for (int y = 0; y < h; y++) {
         unsigned char *d = rgb8 + (size_t)y * w * 3;
         for (int x = 0; x < w; x++) {
-            int l = level_of(mcp_image_px(img, x, y)[channel], lo, scale);
+            int l = level_of(mcp_image_px(img, x, y)[channel], lo, scale, top);
             memcpy(d + (size_t)x * 3, lut + 3 * l, 3);
         }
     }

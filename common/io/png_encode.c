@@ -137,6 +137,46 @@ put_chunk(FILE *f, const char type[4], const unsigned char *data, size_t n)
                : -1;
 }
 
+/* An RGB picture of at most 256 colours (a colour map's, a false-colour one) as a
+ * palette and an index a pixel, PNG's colour type 3: a third of the bytes to filter
+ * and compress, and the same pixels once decoded. The palette is in the order the
+ * colours first appear; 0 when the picture has more colours, which a photograph shows
+ * within its first pixels. */
+#define PALETTE_SLOTS 1024 /* a hash of up to 256 colours, a quarter full */
+
+static int
+palette_of(const unsigned char *rgb, size_t n, unsigned char plte[3 * 256], int *colours,
+           unsigned char *index)
+{
+    uint32_t key[PALETTE_SLOTS]; /* colour + 1; 0: empty */
+    unsigned char slot_index[PALETTE_SLOTS];
+    memset(key, 0, sizeof key);
+    int count = 0;
+    uint32_t last = 0;
+    unsigned char last_index = 0;
+    for (size_t i = 0; i < n; i++) {
+        const unsigned char *p = rgb + 3 * i;
+        const uint32_t k = ((uint32_t)p[0] << 16 | (uint32_t)p[1] << 8 | p[2]) + 1;
+        if (k != last) { /* runs of one colour skip the hash */
+            uint32_t s = (k * 2654435761u) >> 22;
+            while (key[s] && key[s] != k)
+                s = (s + 1) & (PALETTE_SLOTS - 1);
+            if (!key[s]) {
+                if (count == 256) return 0;
+                key[s] = k;
+                slot_index[s] = (unsigned char)count;
+                memcpy(plte + 3 * count, p, 3);
+                count++;
+            }
+            last = k;
+            last_index = slot_index[s];
+        }
+        index[i] = last_index;
+    }
+    *colours = count;
+    return 1;
+}
+
 int
 mcp__png_write_bytes(const unsigned char *bytes, int w, int h, int c, const char *path)
 {
@@ -145,17 +185,40 @@ mcp__png_write_bytes(const unsigned char *bytes, int w, int h, int c, const char
     if (w <= 0 || h <= 0 || c < 1 || c > 4 || (long long)w * c > (1 << 24))
         return mcp_error("%s: cannot write a %dx%d PNG of %d channels", path, w, h, c);
     size_t row_bytes = (size_t)w * (size_t)c, n = (row_bytes + 1) * (size_t)h;
+    const size_t pixels = (size_t)w * (size_t)h;
     unsigned char *filtered = mcp_malloc(n), *zeros = mcp_calloc(row_bytes, 1),
-                  *stream = NULL;
+                  *stream = NULL, *index = NULL, plte[3 * 256];
     struct libdeflate_compressor *z = NULL;
     FILE *f = NULL;
-    int rc = -1;
+    int rc = -1, colours = 0;
     if (!filtered || !zeros) goto done;
+    /* few colours: one index a pixel, unfiltered (the filters predict values, and
+       indices in order of appearance are not values: on a colour map's indices the
+       filter search made the file a quarter larger), but for a row that repeats the
+       one above, which "up" turns into zeros (a false-colour picture's blocks) */
+    if (c == 3 && (index = mcp_malloc(pixels)) &&
+        palette_of(bytes, pixels, plte, &colours, index)) {
+        n = (size_t)(w + 1) * (size_t)h;
 #pragma omp parallel for schedule(static) if (n >= 65536)
-    for (int y = 0; y < h; y++) {
-        const unsigned char *row = bytes + (size_t)y * row_bytes;
-        filter_row(row, y ? row - row_bytes : zeros, (int)row_bytes, c,
-                   filtered + (size_t)y * (row_bytes + 1));
+        for (int y = 0; y < h; y++) {
+            const unsigned char *row = index + (size_t)y * w;
+            unsigned char *o = filtered + (size_t)y * (w + 1);
+            const int repeats = y && !memcmp(row, row - w, (size_t)w);
+            o[0] = repeats ? FILTER_UP : FILTER_NONE;
+            if (repeats)
+                memset(o + 1, 0, (size_t)w);
+            else
+                memcpy(o + 1, row, (size_t)w);
+        }
+    } else {
+        if (c == 3 && !index) goto done;
+        colours = 0;
+#pragma omp parallel for schedule(static) if (n >= 65536)
+        for (int y = 0; y < h; y++) {
+            const unsigned char *row = bytes + (size_t)y * row_bytes;
+            filter_row(row, y ? row - row_bytes : zeros, (int)row_bytes, c,
+                       filtered + (size_t)y * (row_bytes + 1));
+        }
     }
     if (!(z = libdeflate_alloc_compressor(PNG_DEFLATE_LEVEL))) {
         mcp_error("%s: out of memory (PNG writer)", path);
@@ -178,10 +241,11 @@ mcp__png_write_bytes(const unsigned char *bytes, int w, int h, int c, const char
     put_u32(ihdr, (uint32_t)w);
     put_u32(ihdr + 4, (uint32_t)h);
     ihdr[8] = 8; /* bits per sample; compression, filter method and interlace are 0 */
-    ihdr[9] = colour_type[c];
+    ihdr[9] = colours ? 3 : colour_type[c];
     const unsigned char perceptual_intent = 0;
     int ok = fwrite(signature, 1, 8, f) == 8 && !put_chunk(f, "IHDR", ihdr, 13) &&
-             !put_chunk(f, "sRGB", &perceptual_intent, 1);
+             !put_chunk(f, "sRGB", &perceptual_intent, 1) &&
+             (!colours || !put_chunk(f, "PLTE", plte, 3 * (size_t)colours));
     for (size_t at = 0; ok && at < stream_bytes; at += IDAT_BYTES) {
         size_t len = stream_bytes - at < IDAT_BYTES ? stream_bytes - at : IDAT_BYTES;
         ok = !put_chunk(f, "IDAT", stream + at, len);
@@ -198,6 +262,7 @@ done:
     if (f) fclose(f);
     libdeflate_free_compressor(z);
     free(stream);
+    free(index);
     free(zeros);
     free(filtered);
     return rc;

@@ -13,6 +13,8 @@
 
 #include <mcpost/imageio.h>
 
+#include "../../common/filter/internal.h" /* colour maps on fewer levels */
+
 #define tmp_path mcp_test_path
 
 /* CRC-32 as PNG chunks carry it (ISO 3309), bit by bit: for patching a header. */
@@ -224,6 +226,76 @@ test_encoder_decoded_by_libpng(void **state)
         }
 }
 
+/* The colour type in a PNG's IHDR (byte 25 of the file). */
+static int
+colour_type_of(const char *path)
+{
+    unsigned char head[26];
+    FILE *f = fopen(path, "rb");
+    assert_non_null(f);
+    assert_int_equal(fread(head, 1, sizeof head, f), sizeof head);
+    fclose(f);
+    return head[25];
+}
+
+/* An RGB picture of at most 256 colours (a colour map's) is written as a palette and an
+ * index a pixel, and libpng decodes it to the bytes given; one more colour, and it is
+ * written as RGB. Rows that repeat the row above (a false-colour picture's blocks) and
+ * a colour map with marks on 255 levels (the estimate's error picture) too. */
+static void
+test_palette(void **state)
+{
+    (void)state;
+    const int w = 301, h = 211;
+    mcp_image *ramp = NULL;
+    assert_int_equal(mcp_image_new(w, h, 1, (const char *[]){"v"}, &ramp), 0);
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) /* every level, noisy, and a repeated band */
+            ramp->data[(size_t)y * w + x] =
+                y >= 100 && y < 140 ? 0.3f : (float)((x * 7 + y * 13) % 256) / 255.0f;
+    unsigned char *rgb = malloc((size_t)w * h * 3), *back = malloc((size_t)w * h * 3);
+    for (int marks = 0; marks <= 2; marks++) {
+        /* 0: 256 levels; 1: 255 levels and white marks; 2: 256 levels and white */
+        const int levels = marks == 1 ? 255 : 256;
+        assert_int_equal(mcp__colormap_apply_levels(ramp, 0, 0.0, 1.0,
+                                                    MCP_COLORMAP_INFERNO, levels, rgb),
+                         0);
+        if (marks)
+            for (int x = 0; x < w; x += 10)
+                memset(rgb + 3 * ((size_t)50 * w + x), 255, 3);
+        const char *path = tmp_path("palette.png");
+        assert_int_equal(mcp_write_rgb8(rgb, w, h, path), 0);
+        assert_int_equal(colour_type_of(path), marks == 2 ? 2 : 3);
+        png_image pi;
+        memset(&pi, 0, sizeof pi);
+        pi.version = PNG_IMAGE_VERSION;
+        assert_true(png_image_begin_read_from_file(&pi, path));
+        pi.format = PNG_FORMAT_RGB;
+        assert_true(png_image_finish_read(&pi, NULL, back, 0, NULL));
+        assert_memory_equal(back, rgb, (size_t)w * h * 3);
+    }
+    /* 255 levels: lo and hi on the first and the 255th of the map's 256 colours, the
+       same as the 256-level map's first and 255th */
+    unsigned char full[6], part[6];
+    mcp_image *ends = NULL;
+    assert_int_equal(mcp_image_new(2, 1, 1, (const char *[]){"v"}, &ends), 0);
+    ends->data[0] = 0.0f, ends->data[1] = 1.0f;
+    assert_int_equal(
+        mcp__colormap_apply_levels(ends, 0, 0.0, 1.0, MCP_COLORMAP_INFERNO, 255, part),
+        0);
+    ends->data[1] = 254.0f / 255.0f;
+    assert_int_equal(mcp_colormap_apply(ends, 0, 0.0, 1.0, MCP_COLORMAP_INFERNO, full),
+                     0);
+    assert_memory_equal(part, full, 6);
+    assert_error_contains(
+        mcp__colormap_apply_levels(ends, 0, 0.0, 1.0, MCP_COLORMAP_INFERNO, 1, part),
+        "levels must be in [2, 256]");
+    mcp_image_free(ends);
+    mcp_image_free(ramp);
+    free(rgb);
+    free(back);
+}
+
 static void
 test_other_layouts(void **state)
 {
@@ -324,6 +396,7 @@ main(void)
         cmocka_unit_test(test_float_round_trip),
         cmocka_unit_test(test_bytes_and_decoding),
         cmocka_unit_test(test_encoder_decoded_by_libpng),
+        cmocka_unit_test(test_palette),
         cmocka_unit_test(test_other_layouts),
         cmocka_unit_test(test_bad_files),
     };
