@@ -19,7 +19,7 @@ def rss_kib():
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") // 1024
 
 
-def calls(t, r, d):
+def calls(t, r, d, paths):
     mcpost.mse(t, r)
     mcpost.flip(t, r)
     mcpost.metrics(t, r, maps=True, flip="ldr")
@@ -27,6 +27,7 @@ def calls(t, r, d):
     mcpost.denoise(d["color"], denoiser="gauss")
     mcpost.jvp(d["color"], [t, r], denoiser="gauss")
     mcpost.estimate(d, denoiser="gauss")
+    mcpost.estimate(paths, denoiser="gauss", taus=[0.05])  # a series
     mcpost.read_dump(series("cornell", 4))
     mcpost.perceptual([t, r], surrogate=r, passes=1)
     for bad in (t[:5], t.astype(np.complex64), "missing.exr"):  # the error paths too
@@ -34,6 +35,8 @@ def calls(t, r, d):
             mcpost.mse(bad, r)
     with pytest.raises(mcpost.Error):
         mcpost.estimate({"color": t, "variance": r[:3]}, denoiser="gauss")
+    with pytest.raises(mcpost.Error):
+        mcpost.estimate(paths[:2] + ["missing.exr"], denoiser="gauss")
 
 
 def test_no_references_or_memory_leak():
@@ -42,14 +45,15 @@ def test_no_references_or_memory_leak():
     full = mcpost.read_dump(series("cornell", 4))
     d = {k: full[k][:48, :48].copy() for k in ("color", "variance", "albedo", "normal")}
     d["spp"] = 4
-    held = [t, r, d, d["color"]]
+    paths = [series("cornell", spp) for spp in (4, 8, 16)]
+    held = [t, r, d, d["color"], paths, paths[0]]
     counts = [sys.getrefcount(x) for x in held]
     for _ in range(2):  # warm up: caches, the allocator's pools
-        calls(t, r, d)
+        calls(t, r, d, paths)
     gc.collect()
     objects, before = len(gc.get_objects()), rss_kib()
     for _ in range(10):
-        calls(t, r, d)
+        calls(t, r, d, paths)
     gc.collect()
     assert [sys.getrefcount(x) for x in held] == counts
     assert len(gc.get_objects()) <= objects + 10
