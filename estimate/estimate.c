@@ -766,12 +766,14 @@ mcp_estimate_series_each(const mcp_series *series, const mcp_denoiser *den,
             mcp_series_estimate_free(s);
             return -1;
         }
-        if (on_member) mcp_error_clear(); /* what the callback says, if it fails */
-        if (on_member && on_member(i + 1, series->count, ctx)) {
-            if (!mcp_error_message()[0])
-                mcp_error("estimate: stopped after member %d", i + 1);
-            mcp_series_estimate_free(s);
-            return -1;
+        if (on_member) {
+            mcp_error_clear(); /* what the callback says, if it ends the series */
+            if (on_member(i + 1, series->count, ctx)) {
+                if (!mcp_error_message()[0])
+                    mcp_error("estimate: stopped after member %d", i + 1);
+                mcp_series_estimate_free(s);
+                return -1;
+            }
         }
     }
     /* whether the renderer's Variance/n tracks the spread of the series' own

@@ -29,11 +29,7 @@ static int
 on_point(const mcp_blend_point *p, void *ctx)
 {
     sink *s = ctx;
-    /* Ctrl-C: Python's handler only notes the signal; look at it here, with the GIL */
-    PyEval_RestoreThread(s->thread);
-    int interrupted = PyErr_CheckSignals();
-    s->thread = PyEval_SaveThread();
-    if (interrupted) return mcp_error("blend: interrupted");
+    if (mcp_py_signalled(&s->thread)) return mcp_error("blend: interrupted"); /* Ctrl-C */
     member *m = &s->members[p->index];
     memset(m, 0, sizeof *m);
     m->row = *p->row;

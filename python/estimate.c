@@ -132,21 +132,12 @@ positional(const char *fn, const char *name, PyObject *args, PyObject *own_value
 
 /* ---- a series: the CLI's `mcpost estimate DUMP DUMP...` ---- */
 
-/* Between members: Python's Ctrl-C, looked at with the GIL (its handler only notes the
- * signal), ends the series. */
-typedef struct series_run {
-    PyThreadState *thread;
-} series_run;
-
+/* Between members: Python's Ctrl-C ends the series. ctx: the released thread state. */
 static int
 on_member(int done, int total, void *ctx)
 {
     (void)done, (void)total;
-    series_run *r = ctx;
-    PyEval_RestoreThread(r->thread);
-    const int interrupted = PyErr_CheckSignals();
-    r->thread = PyEval_SaveThread();
-    return interrupted ? mcp_error("estimate: interrupted") : 0;
+    return mcp_py_signalled(ctx) ? mcp_error("estimate: interrupted") : 0;
 }
 
 /* spp per tau, None where the series never reaches it */
@@ -188,16 +179,12 @@ member_dict(const mcp_series_estimate *s, const mcp_series_point *pt)
         mcp_py_set(d, "percentile_error",
                    mcp_py_vector(pt->est_percentile, s->n_percentiles)) ||
         mcp_py_set(d, "expected_mean_error", PyFloat_FromDouble(pt->est_mean_error));
-    if (!bad && s->has_reference) {
-        int true_stop[MCP_ESTIMATE_MAX_TAUS];
-        for (int j = 0; j < s->n_taus; j++)
-            true_stop[j] = pt->true_stop[j];
+    if (!bad && s->has_reference)
         bad = mcp_py_set(d, "true_cdf", mcp_py_vector(pt->true_cdf, s->n_taus)) ||
-              mcp_py_set(d, "true_stop", bool_list(true_stop, s->n_taus)) ||
+              mcp_py_set(d, "true_stop", bool_list(pt->true_stop, s->n_taus)) ||
               mcp_py_set(d, "true_percentiles",
                          mcp_py_vector(pt->true_percentile, s->n_percentiles)) ||
               mcp_py_set(d, "true_mean_error", PyFloat_FromDouble(pt->true_mean_error));
-    }
     if (bad) Py_CLEAR(d);
     return d;
 }
@@ -267,9 +254,10 @@ estimate_series(PyObject *list, PyObject *den_obj, PyObject *ref_obj,
     if (mcp_py_image_opt(ref_obj, "reference", 0, NULL, &ref) ||
         mcp_py_denoiser_arg(den_obj, &den))
         goto done;
-    series_run run = {PyEval_SaveThread()};
-    int rc = mcp_estimate_series_each(series, den, &st->so, ref.img, on_member, &run, &s);
-    PyEval_RestoreThread(run.thread);
+    PyThreadState *thread = PyEval_SaveThread();
+    int rc =
+        mcp_estimate_series_each(series, den, &st->so, ref.img, on_member, &thread, &s);
+    PyEval_RestoreThread(thread);
     if (PyErr_Occurred() || mcp_py_check_signals()) goto done;
     if (rc) {
         mcp_py_fail();

@@ -126,6 +126,10 @@ int mcp_py_set(PyObject *d, const char *key, PyObject *value);
 /* After a call without the GIL: raises KeyboardInterrupt (or what a signal handler
  * raised) when a signal came in meanwhile; returns -1 then. */
 int mcp_py_check_signals(void);
+/* Inside a call without the GIL, between its steps (a series' members): takes the GIL
+ * back to look at the signals that came in (Python's handler only notes them), and
+ * releases it again, *thread updated. 1 when a signal raised an exception. */
+int mcp_py_signalled(PyThreadState **thread);
 
 /* The method tables of the files (module.c joins them). */
 extern PyMethodDef mcp_py_image_methods[];

@@ -89,6 +89,15 @@ mcp_py_check_signals(void)
     return PyErr_CheckSignals() ? -1 : 0;
 }
 
+int
+mcp_py_signalled(PyThreadState **thread)
+{
+    PyEval_RestoreThread(*thread);
+    const int raised = PyErr_CheckSignals() != 0;
+    *thread = PyEval_SaveThread();
+    return raised;
+}
+
 static PyObject *
 py_version(PyObject *self, PyObject *unused)
 {

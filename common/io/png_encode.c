@@ -211,8 +211,7 @@ mcp__png_write_bytes(const unsigned char *bytes, int w, int h, int c, const char
                 memcpy(o + 1, row, (size_t)w);
         }
     } else {
-        if (c == 3 && !index) goto done;
-        colours = 0;
+        if (c == 3 && !index) goto done; /* out of memory */
 #pragma omp parallel for schedule(static) if (n >= 65536)
         for (int y = 0; y < h; y++) {
             const unsigned char *row = bytes + (size_t)y * row_bytes;
