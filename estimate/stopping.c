@@ -359,6 +359,10 @@ mcp_error_should_stop(const mcp_error_dist *d, double tau, double p, double *cdf
 #define FINE_KEYS (1 << (31 - FINE_SHIFT))
 #define BIN_CHUNK 4096 /* bins per parallel task */
 #define GRID 48        /* coarse τ grid points between the bracket's ends */
+#define RUN 256        /* bins per run that may be saturated as a whole */
+/* F_i is 1.0f once a - l >= SAT_Z: fold_cdf's tails are then below 1e-9, under half
+ * of float's last step below 1 (2^-25), so 1 - Q - Q rounds to exactly 1 */
+#define SAT_Z 6.5
 
 /* The fine bin of s² >= 0 (-0 included): its float's bits without the sign, shifted. */
 static inline int
@@ -377,6 +381,9 @@ bin_half_width(int shift)
 typedef struct {
     float *s2, *l, *count; /* per bin: representative s², √λ, number of values */
     long n;
+    /* per run of RUN bins: the τ from which each of its F_i is 1.0f (run_sat), and its
+       count (run_count); set by bin_set_runs */
+    double *run_sat, *run_count;
 } bin_set;
 
 typedef struct {
@@ -391,13 +398,15 @@ bin_set_free(bin_set *b)
     free(b->s2);
     free(b->l);
     free(b->count);
+    free(b->run_sat);
+    free(b->run_count);
     memset(b, 0, sizeof *b);
 }
 
 static int
 bin_set_alloc(bin_set *b, long n)
 {
-    b->n = 0;
+    memset(b, 0, sizeof *b);
     b->s2 = mcp_malloc((size_t)(n + 1) * sizeof *b->s2);
     b->l = mcp_malloc((size_t)(n + 1) * sizeof *b->l);
     b->count = mcp_malloc((size_t)(n + 1) * sizeof *b->count);
@@ -415,7 +424,11 @@ bin_push(bin_set *b, int key, int shift, float l, uint32_t count)
 }
 
 /* Bins block i's values per channel into out (fine and coarse), with hist[3] zeroed
- * tables of FINE_KEYS counts (left zeroed). */
+ * tables of HIST_COUNTS counts (left zeroed): FINE_KEYS fine counts, then the coarse
+ * ones, which the scan uses to step over empty runs of fine keys (a block's values
+ * span tens of octaves, 1024 fine keys each, most of them empty). */
+#define MERGE (COARSE_SHIFT - FINE_SHIFT) /* fine keys per coarse one: 1 << MERGE */
+#define HIST_COUNTS (FINE_KEYS + (FINE_KEYS >> MERGE))
 static int
 bin_block(const mcp_error_dist *d, int i, uint32_t *hist[3], binned_dist *out)
 {
@@ -427,6 +440,7 @@ bin_block(const mcp_error_dist *d, int i, uint32_t *hist[3], binned_dist *out)
             for (int c = 0; c < 3; c++) {
                 int key = fine_key(v[c]);
                 hist[c][key]++;
+                hist[c][FINE_KEYS + (key >> MERGE)]++;
                 lo[c] = key < lo[c] ? key : lo[c];
                 hi[c] = key > hi[c] ? key : hi[c];
             }
@@ -437,38 +451,31 @@ bin_block(const mcp_error_dist *d, int i, uint32_t *hist[3], binned_dist *out)
     memset(out, 0, sizeof *out);
     out->top = 0.0;
     out->s2_min = INFINITY;
-    if (bin_set_alloc(&out->fine, cap) || bin_set_alloc(&out->coarse, cap)) {
-        /* leave the tables zeroed for this thread's next block, which would otherwise
-           find more bins than its capacity */
-        for (int c = 0; c < 3; c++)
-            if (hi[c] >= lo[c])
-                memset(hist[c] + lo[c], 0, (size_t)(hi[c] - lo[c] + 1) * sizeof *hist[c]);
-        return -1;
-    }
-    const int merge = COARSE_SHIFT - FINE_SHIFT;
+    const int failed = bin_set_alloc(&out->fine, cap) || bin_set_alloc(&out->coarse, cap);
     for (int c = 0; c < 3; c++) {
         float l = d->sqrt_lambda[3 * i + c];
         double r = l + TAIL_Z + 1.0;
-        uint32_t coarse_count = 0;
-        for (int key = lo[c]; key <= hi[c]; key++) {
-            uint32_t n = hist[c][key];
-            if (n) {
-                bin_push(&out->fine, key, FINE_SHIFT, l, n);
+        uint32_t *coarse = hist[c] + FINE_KEYS;
+        for (int ck = lo[c] >> MERGE; ck <= hi[c] >> MERGE; ck++) {
+            const uint32_t coarse_count = coarse[ck];
+            if (!coarse_count) continue;
+            coarse[ck] = 0;
+            for (int key = ck << MERGE; key < (ck + 1) << MERGE; key++) {
+                const uint32_t n = hist[c][key];
+                if (!n) continue;
                 hist[c][key] = 0;
+                if (failed) continue; /* the tables are left zeroed all the same */
+                bin_push(&out->fine, key, FINE_SHIFT, l, n);
                 double b0 = i2f(key << FINE_SHIFT), b1 = i2f((key + 1) << FINE_SHIFT);
                 if (b0 > 0.0) { /* the bin of 0 (and denormals) has F = 1 at every τ */
                     out->top = fmax(out->top, b1 * r * r);
                     out->s2_min = fmin(out->s2_min, b0);
                 }
             }
-            coarse_count += n;
-            if (coarse_count && (key == hi[c] || (key + 1) >> merge != key >> merge)) {
-                bin_push(&out->coarse, key >> merge, COARSE_SHIFT, l, coarse_count);
-                coarse_count = 0;
-            }
+            if (!failed) bin_push(&out->coarse, ck, COARSE_SHIFT, l, coarse_count);
         }
     }
-    return 0;
+    return failed ? -1 : 0;
 }
 
 /* Concatenates the blocks' bins in block order. */
@@ -485,6 +492,33 @@ bin_set_join(binned_dist *parts, int n, int coarse, bin_set *out)
         memcpy(out->l + out->n, b->l, (size_t)b->n * sizeof *b->l);
         memcpy(out->count + out->n, b->count, (size_t)b->n * sizeof *b->count);
         out->n += b->n;
+    }
+    return 0;
+}
+
+/* The runs' saturation points and counts. A bin's F_i is 1.0f (fold_cdf) for τ >=
+ * s² (√λ + SAT_Z)² (1 + 1e-5: a's float rounding), so a run whose every bin is past
+ * that point adds its count exactly, without an erfc: at the percentiles' τ that is
+ * most bins, as the blocks' quiet values sit far below it. The sum of whole counts is
+ * exact in double whatever the order, so the skip gives the bits of the full
+ * evaluation. */
+static int
+bin_set_runs(bin_set *b)
+{
+    const long runs = (b->n + RUN - 1) / RUN;
+    b->run_sat = mcp_malloc((size_t)(runs + 1) * sizeof *b->run_sat);
+    b->run_count = mcp_malloc((size_t)(runs + 1) * sizeof *b->run_count);
+    if (!b->run_sat || !b->run_count) return -1;
+#pragma omp parallel for schedule(static)
+    for (long r = 0; r < runs; r++) {
+        double sat = 0.0, count = 0.0;
+        for (long j = r * RUN; j < b->n && j < (r + 1) * RUN; j++) {
+            const double z = (double)b->l[j] + SAT_Z;
+            sat = fmax(sat, (double)b->s2[j] * z * z * (1.0 + 1e-5));
+            count += b->count[j];
+        }
+        b->run_sat[r] = sat;
+        b->run_count[r] = count;
     }
     return 0;
 }
@@ -511,7 +545,7 @@ binned_new(const mcp_error_dist *d, binned_dist *bd)
     {
         uint32_t *hist[3];
         for (int c = 0; c < 3; c++)
-            hist[c] = mcp_calloc(FINE_KEYS, sizeof *hist[c]);
+            hist[c] = mcp_calloc(HIST_COUNTS, sizeof *hist[c]);
         int ok = hist[0] && hist[1] && hist[2];
         failed += !ok;
 #pragma omp for schedule(dynamic, 1)
@@ -522,7 +556,8 @@ binned_new(const mcp_error_dist *d, binned_dist *bd)
     }
     if (!failed) {
         failed = bin_set_join(parts, b->count, 0, &bd->fine) ||
-                 bin_set_join(parts, b->count, 1, &bd->coarse);
+                 bin_set_join(parts, b->count, 1, &bd->coarse) ||
+                 bin_set_runs(&bd->fine) || bin_set_runs(&bd->coarse);
         for (int i = 0; i < b->count; i++) {
             bd->top = fmax(bd->top, parts[i].top);
             bd->s2_min = fmin(bd->s2_min, parts[i].s2_min);
@@ -550,20 +585,28 @@ bin_set_cdf(const bin_set *b, double n_values, int m, const double *tau, double 
     if (!chunk_sum) return -1;
 #pragma omp parallel if (n_chunks * m > 4)
     {
-        float g[BIN_CHUNK];
+        float g[RUN];
 #pragma omp for schedule(dynamic, 1) collapse(2)
         for (long q = 0; q < n_chunks; q++)
             for (int t = 0; t < m; t++) {
                 long j0 = q * BIN_CHUNK;
                 int n = (int)(b->n - j0 < BIN_CHUNK ? b->n - j0 : BIN_CHUNK);
                 double sum = 0.0;
-                if (tau[t] > 0.0) {
-                    fold_cdf(b->s2 + j0, b->l + j0, g, n, (float)sqrt(tau[t]));
-                    const float *cnt = b->count + j0;
+                for (int r0 = 0; tau[t] > 0.0 && r0 < n; r0 += RUN) {
+                    const long r = (j0 + r0) / RUN;
+                    const int rn = n - r0 < RUN ? n - r0 : RUN;
+                    if (tau[t] >= b->run_sat[r]) { /* every F_i of the run is 1 */
+                        sum += b->run_count[r];
+                        continue;
+                    }
+                    fold_cdf(b->s2 + j0 + r0, b->l + j0 + r0, g, rn, (float)sqrt(tau[t]));
+                    const float *cnt = b->count + j0 + r0;
+                    double part = 0.0;
                     /* reassociated in vector lanes: the same bits for a given build */
-#pragma omp simd reduction(+ : sum)
-                    for (int j = 0; j < n; j++)
-                        sum += (double)cnt[j] * g[j];
+#pragma omp simd reduction(+ : part)
+                    for (int j = 0; j < rn; j++)
+                        part += (double)cnt[j] * g[j];
+                    sum += part;
                 }
                 chunk_sum[q * m + t] = sum;
             }
