@@ -5,6 +5,8 @@
 #define MCP_IO_INTERNAL_H
 
 #include <stddef.h>
+#include <stdint.h>
+#include <string.h>
 
 #include <cjson/cJSON.h>
 #include <mcpost/imageio.h>
@@ -99,6 +101,25 @@ int mcp__pfm_read_memory(const void *data, size_t size, const char *name,
 int mcp__pfm_write(const mcp_image *img, const char *path);
 int mcp__png_read(const char *path, const mcp_read_options *opt, mcp_image **out);
 int mcp__png_write(const mcp_image *img, const char *path, const mcp_write_options *opt);
+/* Linear floats to 8-bit sRGB (srgb8.c): mcp__srgb8_byte(t, v) is
+ * mcp__srgb8_formula(v), (unsigned char)(mcp_linear_to_srgb(v) * 255 + 0.5) of v
+ * clamped to [0, 1] (NaN to 0), from the step edges instead of a powf. */
+#define MCP__SRGB8_KEYS 16257 /* top 16 bits of the floats in [0, 1] */
+typedef struct mcp__srgb8_table {
+    float edge[257];                      /* edge[k]: the least v of byte k */
+    unsigned char start[MCP__SRGB8_KEYS]; /* the byte at each key's first float */
+} mcp__srgb8_table;
+const mcp__srgb8_table *mcp__srgb8_table_get(void);
+unsigned char mcp__srgb8_formula(float v);
+static inline unsigned char
+mcp__srgb8_byte(const mcp__srgb8_table *t, float v)
+{
+    v = v > 0.0f ? (v < 1.0f ? v : 1.0f) : 0.0f;
+    uint32_t bits;
+    memcpy(&bits, &v, sizeof bits);
+    const int k = t->start[bits >> 16];
+    return (unsigned char)(k + (v >= t->edge[k + 1])); /* no range spans two edges */
+}
 /* 8-bit samples, c = 1, 3 or 4 channels interleaved, written as they are */
 int mcp__png_write_bytes(const unsigned char *bytes, int w, int h, int c,
                          const char *path);

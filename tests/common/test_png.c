@@ -14,6 +14,9 @@
 #include <mcpost/imageio.h>
 
 #include "../../common/filter/internal.h" /* colour maps on fewer levels */
+#include "../../common/io/internal.h"     /* sRGB bytes from the step edges */
+
+#include <math.h>
 
 #define tmp_path mcp_test_path
 
@@ -389,6 +392,32 @@ test_bad_files(void **state)
     mcp_image_free(big);
 }
 
+/* The sRGB bytes from the step edges (srgb8.c) are the formula's,
+ * (unsigned char)(mcp_linear_to_srgb(v) * 255 + 0.5) of v clamped: for every float in
+ * [2^-9, 1] (all of powf's range, 0.0031308 up; 75 million values), for every 97th
+ * below it (the formula is 12.92 v there, monotone), and at the edges of [0, 1]. */
+static void
+test_srgb_bytes_are_the_formula(void **state)
+{
+    (void)state;
+    const mcp__srgb8_table *t = mcp__srgb8_table_get();
+    const uint32_t low = 0x3b000000u /* 2^-9 */, one = 0x3f800000u;
+    long wrong = 0;
+    for (uint32_t b = 0; b <= one; b += b < low ? 97 : 1) {
+        float v;
+        memcpy(&v, &b, sizeof v);
+        wrong += mcp__srgb8_byte(t, v) != mcp__srgb8_formula(v);
+    }
+    assert_int_equal(wrong, 0);
+    const float odd[] = {-0.0f,     -1.0f, 1.0f,       1.5f,  INFINITY,
+                         -INFINITY, NAN,   0.0031308f, 1e-40f};
+    for (size_t i = 0; i < sizeof odd / sizeof *odd; i++)
+        assert_int_equal(mcp__srgb8_byte(t, odd[i]), mcp__srgb8_formula(odd[i]));
+    assert_int_equal(mcp__srgb8_byte(t, 1.0f), 255);
+    assert_int_equal(mcp__srgb8_byte(t, NAN), 0);
+    assert_int_equal(t->edge[128] > 0.2f && t->edge[128] < 0.22f, 1); /* 0.216 */
+}
+
 int
 main(void)
 {
@@ -397,6 +426,7 @@ main(void)
         cmocka_unit_test(test_bytes_and_decoding),
         cmocka_unit_test(test_encoder_decoded_by_libpng),
         cmocka_unit_test(test_palette),
+        cmocka_unit_test(test_srgb_bytes_are_the_formula),
         cmocka_unit_test(test_other_layouts),
         cmocka_unit_test(test_bad_files),
     };
