@@ -27,12 +27,30 @@ int mcp__image_permute_names(mcp_image *img, const int *order);
 void mcp__alloc_fail_after(long n);
 long mcp__alloc_count(void);
 
-/* Window sums over 3 channels (stats.c): a summed-area table of (width + 1) x
- * (height + 1) x 3 doubles (malloc'd), and the sum over the (2r + 1)² window around
- * (x, y) clipped at the borders, with its pixel count. */
-double *mcp__window_table(const mcp_image *img);
-void mcp__window_sum(const double *table, int w, int h, int x, int y, int r,
-                     double out[3], int *count);
+/* Window sums over the first 3 channels of 1 to 3 images of one size (stats.c): the
+ * sum over the (2r + 1)² window around each pixel, clipped at the borders, in double,
+ * a band of rows at a time. mcp__window_band(wb, y0, y1), for bands in order from the
+ * top, of at most wb->rows rows, gives each image's sums for rows [y0, y1)
+ * (mcp__window_at) from the values as they were before the caller wrote any band, so
+ * that it may overwrite rows [y0, y1) after each call; mcp__window_count is a window's
+ * pixel count. */
+#define MCP__WINDOW_BAND 64
+typedef struct mcp__window {
+    const mcp_image *img[3];
+    int n, r, w, h, rows;
+    double *sums[3];          /* rows x w x 3 */
+    float *halo[3], *next[3]; /* r x w x 3: the rows above the band, as they were */
+    int y0;
+} mcp__window;
+int mcp__window_begin(mcp__window *wb, const mcp_image *const *imgs, int n, int r);
+int mcp__window_band(mcp__window *wb, int y0, int y1);
+static inline const double *
+mcp__window_at(const mcp__window *wb, int i, int x, int y)
+{
+    return wb->sums[i] + ((size_t)(y - wb->y0) * wb->w + x) * 3;
+}
+int mcp__window_count(const mcp__window *wb, int x, int y);
+void mcp__window_end(mcp__window *wb);
 
 /* The values of ranks[0..k) (0-based, each < n) among v[0..n), as a sort would place
  * them, without sorting (select.c: a two-pass radix select). v must hold no NaN. */

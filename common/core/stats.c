@@ -5,6 +5,10 @@
 
 #include <math.h>
 #include <stdlib.h>
+#include <string.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 
 int
 mcp_channel_stats_compute(const mcp_image *img, int c, mcp_channel_stats *out)
@@ -59,40 +63,132 @@ mcp_channel_stats_compute(const mcp_image *img, int c, mcp_channel_stats *out)
 
 /* ---- window sums and pooling ---- */
 
-/* Window sums of a 3-channel image over (2r+1)² clipped at the borders, in double:
- * a summed-area table of (width+1) x (height+1) x 3. */
-double *
-mcp__window_table(const mcp_image *img)
+/* Window sums, a band of rows at a time (internal.h). A summed-area table did this
+ * before: (w + 1)(h + 1) x 3 doubles (50 MB at 1080p, filled by one thread), whose
+ * window sums are differences of prefix sums over most of the image. Here each row's
+ * sums are the column sums over the window's rows, added directly, then a running sum
+ * across them, so a sum's rounding is that of the values along one row, not of the
+ * image's total; a band's buffers are a few MB, its rows run in parallel, and only the
+ * r rows above a band are kept aside, as they were, for a caller that overwrites the
+ * images band by band. */
+
+static const float *
+window_row(const mcp__window *wb, int i, int y0, int yy)
 {
-    int w = img->width, h = img->height;
-    double *t = mcp_calloc((size_t)(w + 1) * (h + 1) * 3, sizeof *t);
-    if (!t) return NULL;
-    for (int y = 0; y < h; y++) {
-        double row[3] = {0, 0, 0};
-        for (int x = 0; x < w; x++) {
-            const float *v = mcp_image_px(img, x, y);
-            double *o = t + ((size_t)(y + 1) * (w + 1) + x + 1) * 3;
-            const double *up = o - (size_t)(w + 1) * 3;
-            for (int c = 0; c < 3; c++) {
-                row[c] += v[c];
-                o[c] = up[c] + row[c];
-            }
+    if (yy < y0) return wb->halo[i] + (size_t)(yy - (y0 - wb->r)) * wb->w * 3;
+    return NULL; /* the image's own row */
+}
+
+int
+mcp__window_begin(mcp__window *wb, const mcp_image *const *imgs, int n, int r)
+{
+    memset(wb, 0, sizeof *wb);
+    if (n < 1 || n > 3) return mcp_error("window sums: 1 to 3 images (got %d)", n);
+    wb->n = n;
+    wb->r = r;
+    wb->w = imgs[0]->width;
+    wb->h = imgs[0]->height;
+    wb->rows = MCP__WINDOW_BAND > r ? MCP__WINDOW_BAND : r;
+    for (int i = 0; i < n; i++) {
+        wb->img[i] = imgs[i];
+        wb->sums[i] = mcp_malloc((size_t)wb->rows * wb->w * 3 * sizeof(double));
+        wb->halo[i] = mcp_malloc(((size_t)r * wb->w * 3 + 1) * sizeof(float));
+        wb->next[i] = mcp_malloc(((size_t)r * wb->w * 3 + 1) * sizeof(float));
+        if (!wb->sums[i] || !wb->halo[i] || !wb->next[i]) {
+            mcp__window_end(wb);
+            return -1;
         }
     }
-    return t;
+    return 0;
+}
+
+int
+mcp__window_band(mcp__window *wb, int y0, int y1)
+{
+    const int w = wb->w, h = wb->h, r = wb->r;
+    if (y1 - y0 > wb->rows) return mcp_error("window sums: a band of %d rows", y1 - y0);
+    wb->y0 = y0;
+    size_t threads = 1;
+#ifdef _OPENMP
+    threads = (size_t)omp_get_max_threads();
+#endif
+    double *cols = mcp_malloc(threads * (size_t)w * 3 * sizeof *cols);
+    if (!cols) return -1;
+#pragma omp parallel for collapse(2) schedule(static)
+    for (int i = 0; i < wb->n; i++)
+        for (int y = y0; y < y1; y++) {
+            size_t t = 0;
+#ifdef _OPENMP
+            t = (size_t)omp_get_thread_num();
+#endif
+            double *col = cols + t * w * 3;
+            const mcp_image *img = wb->img[i];
+            const int a = y - r < 0 ? 0 : y - r, b = y + r + 1 > h ? h : y + r + 1;
+            for (int k = 0; k < 3 * w; k++)
+                col[k] = 0.0;
+            for (int yy = a; yy < b; yy++) {
+                const float *kept = window_row(wb, i, y0, yy);
+                for (int x = 0; x < w; x++) {
+                    const float *v =
+                        kept ? kept + 3 * (size_t)x : mcp_image_px(img, x, yy);
+                    for (int c = 0; c < 3; c++)
+                        col[3 * x + c] += v[c];
+                }
+            }
+            /* across: the running sum over columns [x - r, x + r] */
+            double run[3] = {0, 0, 0};
+            for (int x = 0; x < r && x < w; x++)
+                for (int c = 0; c < 3; c++)
+                    run[c] += col[3 * x + c];
+            double *out = wb->sums[i] + (size_t)(y - y0) * w * 3;
+            for (int x = 0; x < w; x++) {
+                for (int c = 0; c < 3; c++) {
+                    if (x + r < w) run[c] += col[3 * (x + r) + c];
+                    if (x - r - 1 >= 0) run[c] -= col[3 * (x - r - 1) + c];
+                    out[3 * x + c] = run[c];
+                }
+            }
+        }
+    free(cols);
+    /* the r rows above the next band, as they are now (before the caller writes this
+       band): from this band's rows, or the rows kept for it */
+    for (int i = 0; i < wb->n && r > 0; i++) {
+        for (int k = 0; k < r; k++) {
+            const int yy = y1 - r + k;
+            float *dst = wb->next[i] + (size_t)k * w * 3;
+            if (yy < 0) continue;
+            const float *kept = window_row(wb, i, y0, yy);
+            for (int x = 0; x < w; x++) {
+                const float *v =
+                    kept ? kept + 3 * (size_t)x : mcp_image_px(wb->img[i], x, yy);
+                dst[3 * x] = v[0], dst[3 * x + 1] = v[1], dst[3 * x + 2] = v[2];
+            }
+        }
+        float *t = wb->halo[i];
+        wb->halo[i] = wb->next[i];
+        wb->next[i] = t;
+    }
+    return 0;
+}
+
+int
+mcp__window_count(const mcp__window *wb, int x, int y)
+{
+    const int r = wb->r;
+    const int x0 = x - r < 0 ? 0 : x - r, x1 = x + r + 1 > wb->w ? wb->w : x + r + 1;
+    const int y0 = y - r < 0 ? 0 : y - r, y1 = y + r + 1 > wb->h ? wb->h : y + r + 1;
+    return (x1 - x0) * (y1 - y0);
 }
 
 void
-mcp__window_sum(const double *t, int w, int h, int x, int y, int r, double out[3],
-                int *count)
+mcp__window_end(mcp__window *wb)
 {
-    int x0 = x - r < 0 ? 0 : x - r, x1 = x + r + 1 > w ? w : x + r + 1;
-    int y0 = y - r < 0 ? 0 : y - r, y1 = y + r + 1 > h ? h : y + r + 1;
-    size_t W = (size_t)w + 1;
-    for (int c = 0; c < 3; c++)
-        out[c] = t[(y1 * W + x1) * 3 + c] - t[(y0 * W + x1) * 3 + c] -
-                 t[(y1 * W + x0) * 3 + c] + t[(y0 * W + x0) * 3 + c];
-    *count = (x1 - x0) * (y1 - y0);
+    for (int i = 0; i < 3; i++) {
+        free(wb->sums[i]);
+        free(wb->halo[i]);
+        free(wb->next[i]);
+    }
+    memset(wb, 0, sizeof *wb);
 }
 
 int
@@ -106,35 +202,37 @@ mcp_pool_window(mcp_image *values, const mcp_image *shape, int radius)
                          "channels of one size",
                          values->width, values->height, values->channels);
     if (radius == 0) return 0;
-    int w = values->width, h = values->height;
-    double *tv = mcp__window_table(values), *ts = shape ? mcp__window_table(shape) : NULL;
-    if (!tv || (shape && !ts)) {
-        free(tv);
-        free(ts);
-        return -1;
-    }
-#pragma omp parallel for schedule(static)
-    for (int y = 0; y < h; y++)
-        for (int x = 0; x < w; x++) {
-            double sv[3], ss[3];
-            int n;
-            mcp__window_sum(tv, w, h, x, y, radius, sv, &n);
-            float *v = mcp_image_px(values, x, y);
-            if (ts) {
-                mcp__window_sum(ts, w, h, x, y, radius, ss, &n);
-                const float *sh = mcp_image_px(shape, x, y);
-                for (int c = 0; c < 3; c++)
-                    v[c] = ss[c] > 0 ? (float)(sh[c] * (fmax(sv[c], 0) / ss[c]))
-                                     : (float)(fmax(sv[c], 0) / n);
-            } else {
-                /* a window sum of non-negative values from the table's differences can
-                   come out a rounding below zero beside large ones (a black region next
-                   to a firefly): a variance must not */
-                for (int c = 0; c < 3; c++)
-                    v[c] = (float)(fmax(sv[c], 0) / n);
-            }
+    const int w = values->width, h = values->height;
+    const mcp_image *imgs[2] = {values, shape};
+    mcp__window wb;
+    if (mcp__window_begin(&wb, imgs, shape ? 2 : 1, radius)) return -1;
+    for (int y0 = 0; y0 < h; y0 += wb.rows) {
+        const int y1 = y0 + wb.rows < h ? y0 + wb.rows : h;
+        if (mcp__window_band(&wb, y0, y1)) {
+            mcp__window_end(&wb);
+            return -1;
         }
-    free(tv);
-    free(ts);
+#pragma omp parallel for schedule(static)
+        for (int y = y0; y < y1; y++)
+            for (int x = 0; x < w; x++) {
+                const double *sv = mcp__window_at(&wb, 0, x, y);
+                const int n = mcp__window_count(&wb, x, y);
+                float *v = mcp_image_px(values, x, y);
+                if (shape) {
+                    const double *ss = mcp__window_at(&wb, 1, x, y);
+                    const float *sh = mcp_image_px(shape, x, y);
+                    for (int c = 0; c < 3; c++)
+                        v[c] = ss[c] > 0 ? (float)(sh[c] * (fmax(sv[c], 0) / ss[c]))
+                                         : (float)(fmax(sv[c], 0) / n);
+                } else {
+                    /* a running sum of non-negative values can come out a rounding
+                       below zero beside large ones (a black region next to a
+                       firefly): a variance must not */
+                    for (int c = 0; c < 3; c++)
+                        v[c] = (float)(fmax(sv[c], 0) / n);
+                }
+            }
+    }
+    mcp__window_end(&wb);
     return 0;
 }

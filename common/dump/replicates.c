@@ -270,53 +270,53 @@ mcp_dump_pool_variance(mcp_dump *d, const mcp_image *shape, int radius)
         return mcp_error("variance pooling: the shape is %dx%d with %d channels, the "
                          "variance %dx%d with 3",
                          shape->width, shape->height, shape->channels, w, h);
-    double *tv = mcp__window_table(d->var_of_mean);
-    double *ts = shape ? mcp__window_table(shape) : NULL;
-    double *tc = d->cov_of_mean ? mcp__window_table(d->cov_of_mean) : NULL;
-    int rc = 0;
-    if (!tv || (shape && !ts) || (d->cov_of_mean && !tc)) {
-        rc = -1;
-        goto done;
-    }
-    /* the window sums come from the tables, so values can be overwritten in place */
+    /* the window sums of a band come from the values as they were, so the band can
+       be overwritten in place */
+    const mcp_image *imgs[3] = {d->var_of_mean};
+    int n_imgs = 1, is = -1, ic = -1;
+    if (shape) imgs[is = n_imgs++] = shape;
+    if (d->cov_of_mean) imgs[ic = n_imgs++] = d->cov_of_mean;
+    mcp__window wb;
+    int rc = mcp__window_begin(&wb, imgs, n_imgs, radius);
+    for (int y0 = 0; !rc && y0 < h; y0 += wb.rows) {
+        const int y1 = y0 + wb.rows < h ? y0 + wb.rows : h;
+        if ((rc = mcp__window_band(&wb, y0, y1))) break;
 #pragma omp parallel for schedule(static)
-    for (int y = 0; y < h; y++)
-        for (int x = 0; x < w; x++) {
-            double sv[3], ss[3] = {0, 0, 0};
-            int n;
-            mcp__window_sum(tv, w, h, x, y, radius, sv, &n);
-            if (ts) mcp__window_sum(ts, w, h, x, y, radius, ss, &n);
-            /* the factor that turns the shape into the pooled level, per channel */
-            double ratio[3];
-            const float *sh = shape ? mcp_image_px(shape, x, y) : NULL;
-            for (int c = 0; c < 3; c++)
-                ratio[c] = ss[c] > 0 ? sv[c] / ss[c] : -1;
-            float *v = mcp_image_px(d->var_of_mean, x, y);
-            for (int c = 0; c < 3; c++)
-                v[c] =
-                    sh && ratio[c] >= 0 ? (float)(sh[c] * ratio[c]) : (float)(sv[c] / n);
-            if (tc) {
-                /* the covariance as a pooled correlation times the pooled standard
-                   deviations: Σ_W cov / sqrt(Σ_W V_a Σ_W V_b) is within [-1, 1]
-                   (Cauchy-Schwarz), so the matrix stays a covariance; without a
-                   shape this is the window mean */
-                double sc[3];
-                mcp__window_sum(tc, w, h, x, y, radius, sc, &n);
-                float *cv = mcp_image_px(d->cov_of_mean, x, y);
-                for (int j = 0; j < 3; j++) {
-                    int a = cov_pair[j][0], b = cov_pair[j][1];
-                    double norm = sqrt(sv[a] * sv[b]);
-                    cv[j] = norm > 0 ? (float)(sc[j] / norm * sqrt((double)v[a] * v[b]))
-                                     : 0.0f;
+        for (int y = y0; y < y1; y++)
+            for (int x = 0; x < w; x++) {
+                const double *sv = mcp__window_at(&wb, 0, x, y);
+                const double *ss = is >= 0 ? mcp__window_at(&wb, is, x, y) : NULL;
+                const int n = mcp__window_count(&wb, x, y);
+                /* the factor that turns the shape into the pooled level, per channel */
+                double ratio[3];
+                const float *sh = shape ? mcp_image_px(shape, x, y) : NULL;
+                for (int c = 0; c < 3; c++)
+                    ratio[c] = ss && ss[c] > 0 ? sv[c] / ss[c] : -1;
+                float *v = mcp_image_px(d->var_of_mean, x, y);
+                for (int c = 0; c < 3; c++)
+                    v[c] = sh && ratio[c] >= 0 ? (float)(sh[c] * ratio[c])
+                                               : (float)(sv[c] / n);
+                if (ic >= 0) {
+                    /* the covariance as a pooled correlation times the pooled standard
+                       deviations: Σ_W cov / sqrt(Σ_W V_a Σ_W V_b) is within [-1, 1]
+                       (Cauchy-Schwarz), so the matrix stays a covariance; without a
+                       shape this is the window mean */
+                    const double *sc = mcp__window_at(&wb, ic, x, y);
+                    float *cv = mcp_image_px(d->cov_of_mean, x, y);
+                    for (int j = 0; j < 3; j++) {
+                        int a = cov_pair[j][0], b = cov_pair[j][1];
+                        double norm = sqrt(sv[a] * sv[b]);
+                        cv[j] = norm > 0
+                                    ? (float)(sc[j] / norm * sqrt((double)v[a] * v[b]))
+                                    : 0.0f;
+                    }
                 }
             }
-        }
+    }
+    mcp__window_end(&wb);
+    if (rc) return -1;
     d->variance_pool = (double)(2 * radius + 1) * (2 * radius + 1);
-done:
-    free(tv);
-    free(ts);
-    free(tc);
-    return rc;
+    return 0;
 }
 
 /* ---- increments of a progressive series ---- */
