@@ -81,35 +81,54 @@ mcp__estimate_json(const mcp_estimate *e, const char *input, const char *denoise
     return j;
 }
 
+/* The λ of each block's values (Eq. 14), a value per pixel: distribution.exr. */
+static int
+lambda_image(const mcp_estimate *e, mcp_image **out)
+{
+    const mcp_blocks *b = e->blocks;
+    if (mcp_image_new(b->width, b->height, 3,
+                      (const char *const[]){"lambda.R", "lambda.G", "lambda.B"}, out))
+        return -1;
+    mcp_image *lambda = *out;
+#pragma omp parallel for schedule(dynamic, 1)
+    for (int i = 0; i < b->count; i++) {
+        const mcp_block *k = &b->items[i];
+        float l[3];
+        for (int c = 0; c < 3; c++)
+            l[c] = (float)mcp_error_dist_lambda(e->dist, i, c);
+        for (int y = k->y; y < k->y + k->h; y++)
+            for (int x = k->x; x < k->x + k->w; x++)
+                memcpy(mcp_image_px(lambda, x, y), l, sizeof l);
+    }
+    return 0;
+}
+
 /* The report's block picture: the error each pixel is expected to have under the
  * model that F(tau) comes from, s²(λ + 1) (mean of R, G, B; log10 from -5 to 0 in
  * inferno, like the metrics' RelSE map), with the block edges in white. Unlike
  * blocks.png, whose colours only tell blocks apart, its colour bar reads as a value,
- * and a single block still shows where the error is: s² varies per pixel. *log_error:
- * the log10 values it shows (the caller frees them). */
+ * and a single block still shows where the error is: s² varies per pixel. s2 is the
+ * distribution's (Var^r, variance_rel.exr), lambda lambda_image's. *log_error: the
+ * log10 values it shows (the caller frees them). */
 static int
-blocks_error_picture(const mcp_blocks *blocks, const mcp_image *dist, unsigned char *rgb8,
-                     mcp_image **log_error)
+blocks_error_picture(const mcp_blocks *blocks, const mcp_image *lambda,
+                     const mcp_image *s2, unsigned char *rgb8, mcp_image **log_error)
 {
-    int w = blocks->width, h = blocks->height, ch[6];
+    int w = blocks->width, h = blocks->height;
     int32_t *label = NULL;
     mcp_image *lg = NULL;
-    if (mcp_image_channels(
-            dist,
-            (const char *[]){"lambda.R", "lambda.G", "lambda.B", "s2.R", "s2.G", "s2.B"},
-            6, ch) ||
-        mcp_blocks_label(blocks, &label) ||
-        mcp_image_new(w, h, 1, (const char *const[]){"log10_error"}, &lg)) {
+    if (mcp_blocks_label(blocks, &label) ||
+        mcp_image_new(w, h, 1, (const char *[]){"log10_error"}, &lg)) {
         free(label);
         return -1;
     }
 #pragma omp parallel for schedule(static)
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++) {
-            const float *p = mcp_image_px(dist, x, y);
+            const float *l = mcp_image_px(lambda, x, y), *v = mcp_image_px(s2, x, y);
             double mean = 0;
             for (int c = 0; c < 3; c++)
-                mean += p[ch[3 + c]] * (p[ch[c]] + 1.0) / 3.0;
+                mean += v[c] * (l[c] + 1.0) / 3.0;
             mcp_image_px(lg, x, y)[0] = (float)(mean > 1e-30 ? log10(mean) : -30.0);
         }
     /* 255 levels and white: 256 colours, a palette PNG of a byte a pixel (png_encode.c;
@@ -130,6 +149,26 @@ blocks_error_picture(const mcp_blocks *blocks, const mcp_image *dist, unsigned c
         return -1;
     }
     *log_error = lg;
+    return 0;
+}
+
+/* The denoised image as a screen shows it: R, G, B clamped to [0, 1], sRGB-encoded
+ * bytes (the bytes a PNG of its clamp tone map holds, without that image's copies). */
+static int
+screen_picture(const mcp_image *img, unsigned char *rgb8)
+{
+    int rgb[3];
+    if (mcp_rgb_channels(img, rgb)) return -1;
+    const mcp__srgb8_table *srgb = mcp__srgb8_table_get();
+    const int w = img->width, h = img->height;
+#pragma omp parallel for schedule(static)
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            const float *p = mcp_image_px(img, x, y);
+            unsigned char *o = rgb8 + 3 * ((size_t)y * w + x);
+            for (int c = 0; c < 3; c++)
+                o[c] = mcp__srgb8_byte(srgb, p[rgb[c]]);
+        }
     return 0;
 }
 
@@ -160,31 +199,29 @@ mcp__estimate_write_single(const mcp_estimate *e, const mcp__estimate_dir *o,
                            cJSON *section, const cJSON *summary)
 {
     enum { MAX_FILES = 14 };
-    mcp_image *block_mean = NULL, *dist = NULL, *lambda = NULL, *shown = NULL,
-              *rgb_view = NULL, *log_error = NULL;
-    unsigned char *blocks_rgb = NULL, *error_rgb = NULL, *map_rgb = NULL;
+    mcp_image *block_mean = NULL, *lambda = NULL, *log_error = NULL;
+    unsigned char *blocks_rgb = NULL, *error_rgb = NULL, *map_rgb = NULL,
+                  *denoised_rgb = NULL;
     char(*paths)[4352] = NULL;
     double map_top = 0;
-    int rc = -1, n = 0, w = e->blocks->width, h = e->blocks->height, rgb[3];
+    int rc = -1, n = 0, w = e->blocks->width, h = e->blocks->height;
     if (mcp_make_dirs(o->dir) ||
         mcp_blocks_mean_image(e->blocks, e->maps.sure_rel, &block_mean) ||
-        mcp_error_dist_image(e->dist, &dist) ||
-        mcp_image_channel_view(dist, 0, 3, &lambda) ||
-        !(paths = mcp_malloc(MAX_FILES * sizeof *paths)))
+        lambda_image(e, &lambda) || !(paths = mcp_malloc(MAX_FILES * sizeof *paths)))
         goto done;
     /* one block is one colour: a flat square that shows nothing, so no blocks.png
      * (the error picture's caption says why there is one block) */
     if (e->blocks->count > 1 && (!(blocks_rgb = mcp_malloc((size_t)w * h * 3)) ||
                                  mcp_blocks_picture(e->blocks, blocks_rgb)))
         goto done;
-    if (section && (!(error_rgb = mcp_malloc((size_t)w * h * 3)) ||
-                    blocks_error_picture(e->blocks, dist, error_rgb, &log_error)))
+    if (section &&
+        (!(error_rgb = mcp_malloc((size_t)w * h * 3)) ||
+         blocks_error_picture(e->blocks, lambda, e->maps.var_rel, error_rgb, &log_error)))
         goto done;
     /* what the report shows beside the error: the denoised image (its PNG as a screen
      * shows it, the page re-exposes denoised.exr) and where the next samples go */
-    if (section && (mcp_rgb_channels(e->maps.denoised, rgb) ||
-                    mcp_image_copy_channels(e->maps.denoised, rgb, 3, &rgb_view) ||
-                    mcp_tonemap_apply(rgb_view, MCP_TONEMAP_CLAMP, &shown)))
+    if (section && (!(denoised_rgb = mcp_malloc((size_t)w * h * 3)) ||
+                    screen_picture(e->maps.denoised, denoised_rgb)))
         goto done;
     if (section && e->sampling_map &&
         (!(map_rgb = mcp_malloc((size_t)w * h * 3)) ||
@@ -196,7 +233,7 @@ mcp__estimate_write_single(const mcp_estimate *e, const mcp__estimate_dir *o,
         const unsigned char *rgb8;
     } outputs[MAX_FILES] = {
         {"blocks_error.png", NULL, error_rgb},
-        {"denoised.png", shown, NULL},
+        {"denoised.png", NULL, denoised_rgb},
         {"sampling_map.png", NULL, map_rgb},
         {"distribution.exr", lambda, NULL},
         {"denoised.exr", e->maps.denoised, NULL},
@@ -268,14 +305,12 @@ mcp__estimate_write_single(const mcp_estimate *e, const mcp__estimate_dir *o,
 done:
     free(map_rgb);
     mcp_image_free(log_error);
-    mcp_image_free(shown);
-    mcp_image_free(rgb_view);
+    free(denoised_rgb);
     free(error_rgb);
     free(blocks_rgb);
     free(paths);
     mcp_image_free(block_mean);
     mcp_image_free(lambda);
-    mcp_image_free(dist);
     return rc;
 }
 
