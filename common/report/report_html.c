@@ -49,33 +49,44 @@
 typedef mcp__strbuf sbuf;
 
 static void
-sb_put(sbuf *b, const char *s, size_t n)
-{
-    mcp__strbuf_put(b, s, n);
-}
-
-static void
 sb_str(sbuf *b, const char *s)
 {
     mcp__strbuf_str(b, s);
 }
 
+/* Base64 (RFC 4648) of n bytes, written straight into the buffer: a report embeds
+ * its pictures and HDR values this way, 17 MB of text for a 1080p estimate, which
+ * four bytes at a time through sb_put took 30 ms to build. Large inputs are encoded
+ * by threads over whole groups of 3 bytes, each its own 4 characters: the same text. */
 static void
 sb_base64(sbuf *b, const unsigned char *d, size_t n)
 {
     static const char tab[] =
         "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    char out[4];
-    for (size_t i = 0; i < n; i += 3) {
-        unsigned v = (unsigned)d[i] << 16;
-        if (i + 1 < n) v |= (unsigned)d[i + 1] << 8;
-        if (i + 2 < n) v |= d[i + 2];
-        out[0] = tab[(v >> 18) & 63];
-        out[1] = tab[(v >> 12) & 63];
-        out[2] = i + 1 < n ? tab[(v >> 6) & 63] : '=';
-        out[3] = i + 2 < n ? tab[v & 63] : '=';
-        sb_put(b, out, 4);
+    const size_t groups = n / 3, rest = n % 3, len = 4 * (groups + (rest > 0));
+    char *out = mcp__strbuf_reserve(b, len);
+    if (!out) return;
+#pragma omp parallel for schedule(static) if (groups > (1u << 20))
+    for (size_t g = 0; g < groups; g++) {
+        const unsigned char *s = d + 3 * g;
+        const unsigned v = (unsigned)s[0] << 16 | (unsigned)s[1] << 8 | s[2];
+        char *o = out + 4 * g;
+        o[0] = tab[v >> 18];
+        o[1] = tab[(v >> 12) & 63];
+        o[2] = tab[(v >> 6) & 63];
+        o[3] = tab[v & 63];
     }
+    if (rest) {
+        const unsigned char *s = d + 3 * groups;
+        const unsigned v = (unsigned)s[0] << 16 | (rest > 1 ? (unsigned)s[1] << 8 : 0);
+        char *o = out + 4 * groups;
+        o[0] = tab[v >> 18];
+        o[1] = tab[(v >> 12) & 63];
+        o[2] = rest > 1 ? tab[(v >> 6) & 63] : '=';
+        o[3] = '=';
+    }
+    b->len += len;
+    b->s[b->len] = '\0';
 }
 
 static const char *
@@ -503,6 +514,7 @@ read_rgbe(page_image *im, const char *path)
     }
     im->width = img->width;
     im->height = img->height;
+#pragma omp parallel for schedule(static)
     for (size_t i = 0; i < n; i++) {
         const float *p = mcp_image_px(img, (int)(i % img->width), (int)(i / img->width));
         float v[3], m = 0;
