@@ -12,6 +12,7 @@
  * curves. Flags, job keys and Python keywords are the table's words (--denoiser-opt is
  * the denoiser map in a job). */
 #include "cli.h"
+#include "../common/dump/internal.h" /* a dump without the parts nothing reads */
 
 #include <mcpost/estimate.h>
 
@@ -214,7 +215,12 @@ cmd_estimate(int argc, char **argv)
         spec.path = path;
         spec.convention = st.convention;
         spec.variance = st.variance;
-        if (mcp_dump_load(&spec, &dump) || mcp_estimate_compute(dump, den, eo, &e))
+        /* the features only when something reads them: the denoiser, or joint SURE */
+        const unsigned without =
+            (den->uses_albedo || eo->sure.features ? 0u : MCP__DUMP_NO_ALBEDO) |
+            (den->uses_normal || eo->sure.features ? 0u : MCP__DUMP_NO_NORMAL);
+        if (mcp__dump_load_without(&spec, without, &dump) ||
+            mcp_estimate_compute(dump, den, eo, &e))
             goto done;
         summary = mcp__estimate_json(e, path, den->name, eo);
         if (ref && mcp__estimate_add_truth(e, ref, eo, summary)) /* the truth beside it */

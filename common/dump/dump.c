@@ -788,17 +788,28 @@ dump_fill(mcp_dump *d, channel_source *src, const mcp_dump_spec *spec,
     return 0;
 }
 
+/* The parts a caller does without (mcp__dump_load_without) leave the layout: they are
+ * neither decoded nor checked. */
+static void
+drop_parts(layout *L, unsigned without)
+{
+    if (without & MCP__DUMP_NO_ALBEDO) L->has_albedo = 0;
+    if (without & MCP__DUMP_NO_NORMAL) L->has_normal = 0;
+}
+
 /* mcp_dump_from_image, with the separate parts from parts' buffers or spec's paths. */
 static int
 from_image(const mcp_image *img, const mcp_dump_spec *spec, const mcp_dump_buffers *parts,
-           mcp_dump **out)
+           unsigned without, mcp_dump **out)
 {
     *out = NULL;
     mcp_dump *d = mcp_calloc(1, sizeof *d);
     if (!d) return -1;
     layout L;
     channel_source src = {.img = img};
-    if (dump_layout(img, spec, d, &L) || dump_fill(d, &src, spec, parts, &L)) {
+    int rc = dump_layout(img, spec, d, &L);
+    drop_parts(&L, without);
+    if (rc || dump_fill(d, &src, spec, parts, &L)) {
         mcp_dump_free(d);
         return -1;
     }
@@ -811,7 +822,7 @@ mcp_dump_from_image(const mcp_image *img, const mcp_dump_spec *spec, mcp_dump **
 {
     mcp_dump_spec defaults = mcp_dump_spec_defaults();
     static const mcp_dump_buffers none;
-    return from_image(img, spec ? spec : &defaults, &none, out);
+    return from_image(img, spec ? spec : &defaults, &none, 0, out);
 }
 
 /* ---- reading an EXR's parts directly ---- */
@@ -828,6 +839,7 @@ typedef struct direct_read {
     channel_source src;
     mcp_image *header; /* a copy of the header, for dump_fill's names and attributes */
     int clash;
+    unsigned without; /* MCP__DUMP_NO_*: parts left out */
 } direct_read;
 
 /* An image of the n channels `names` of the header for part `part`, and the routes
@@ -874,6 +886,7 @@ route_parts(const mcp_image *header, int w, int h, void *ctx, mcp__exr_route *ro
     r->src.img = r->header;
     r->src.header_only = 1;
     if (dump_layout(header, r->spec, r->d, L)) return -1;
+    drop_parts(L, r->without);
     const struct {
         int part, wanted;
         const name3 *names;
@@ -905,10 +918,10 @@ route_parts(const mcp_image *header, int w, int h, void *ctx, mcp__exr_route *ro
  * (docs/benchmarks.md, "EXR speed"). 1 in *fallback when the whole image must be read
  * instead. */
 static int
-read_direct(const mcp_dump_spec *spec, const mcp_dump_buffers *parts, mcp_dump **out,
-            int *fallback)
+read_direct(const mcp_dump_spec *spec, const mcp_dump_buffers *parts, unsigned without,
+            mcp_dump **out, int *fallback)
 {
-    direct_read r = {.spec = spec, .parts = parts};
+    direct_read r = {.spec = spec, .parts = parts, .without = without};
     *fallback = 0;
     int rc = -1;
     if (!(r.d = mcp_calloc(1, sizeof *r.d))) return -1;
@@ -942,35 +955,51 @@ main_is_exr(const mcp_dump_spec *spec, const mcp_dump_buffers *parts)
     return mcp_format_from_path(spec->path) == MCP_FORMAT_EXR;
 }
 
-int
-mcp_dump_read_memory(const mcp_dump_spec *spec, const mcp_dump_buffers *parts,
-                     mcp_dump **out)
+/* mcp_dump_read_memory without the parts in `without`; their separate files, if any,
+ * are not read either. */
+static int
+read_memory(const mcp_dump_spec *spec_, const mcp_dump_buffers *parts, unsigned without,
+            mcp_dump **out)
 {
-    mcp_dump_spec defaults = mcp_dump_spec_defaults();
+    mcp_dump_spec spec = spec_ ? *spec_ : mcp_dump_spec_defaults();
     static const mcp_dump_buffers none;
+    mcp_dump_buffers kept = parts ? *parts : none;
     *out = NULL;
-    if (!spec) spec = &defaults;
-    if (!parts) parts = &none;
-    if (!spec->path && !in_memory(&parts->main))
+    if (without & MCP__DUMP_NO_ALBEDO) spec.albedo_path = NULL, kept.albedo = none.albedo;
+    if (without & MCP__DUMP_NO_NORMAL) spec.normal_path = NULL, kept.normal = none.normal;
+    if (!spec.path && !in_memory(&kept.main))
         return mcp_error("render dump: no file given");
-    if (main_is_exr(spec, parts)) {
+    if (main_is_exr(&spec, &kept)) {
         int fallback;
-        if (!in_memory(&parts->main) && mcp__check_readable(spec->path)) return -1;
-        if (read_direct(spec, parts, out, &fallback) == 0) return 0;
+        if (!in_memory(&kept.main) && mcp__check_readable(spec.path)) return -1;
+        if (read_direct(&spec, &kept, without, out, &fallback) == 0) return 0;
         if (!fallback) return -1;
     }
     mcp_image *img = NULL;
     mcp_read_options ro = mcp_read_defaults();
-    if (read_part(spec->path, &parts->main, "main", &ro, &img)) return -1;
-    int rc = from_image(img, spec, parts, out);
+    if (read_part(spec.path, &kept.main, "main", &ro, &img)) return -1;
+    int rc = from_image(img, &spec, &kept, without, out);
     mcp_image_free(img);
     return rc;
 }
 
 int
+mcp_dump_read_memory(const mcp_dump_spec *spec, const mcp_dump_buffers *parts,
+                     mcp_dump **out)
+{
+    return read_memory(spec, parts, 0, out);
+}
+
+int
 mcp_dump_load(const mcp_dump_spec *spec, mcp_dump **out)
 {
-    return mcp_dump_read_memory(spec, NULL, out);
+    return read_memory(spec, NULL, 0, out);
+}
+
+int
+mcp__dump_load_without(const mcp_dump_spec *spec, unsigned without, mcp_dump **out)
+{
+    return read_memory(spec, NULL, without, out);
 }
 
 int

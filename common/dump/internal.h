@@ -33,6 +33,14 @@ int mcp__series_increments_with(const mcp_series *s, int i, const mcp_dump *memb
  * recipe for a Cycles render (convention blender), else `otherwise` (dump.c). */
 const char *mcp__no_variance_hint(const mcp_dump *d, const char *otherwise);
 
+/* mcp_dump_load without the parts a caller will not read: with MCP__DUMP_NO_ALBEDO
+ * (MCP__DUMP_NO_NORMAL) the albedo (normal) is neither decoded, nor read from its own
+ * file, nor checked, and stays NULL. An estimate whose denoiser reads neither (gauss,
+ * bilateral) touches 50 MB less of a 1080p dump (docs/benchmarks.md, "Fewer first
+ * touches"). */
+enum { MCP__DUMP_NO_ALBEDO = 1, MCP__DUMP_NO_NORMAL = 2 };
+int mcp__dump_load_without(const mcp_dump_spec *spec, unsigned without, mcp_dump **out);
+
 /* ---- dump.c: an EXR dump's colour, albedo and normal, rows at a time ---- */
 
 /* For a streamed denoise (docs/denoisers.md, "Images larger than memory"). open reads

@@ -2,6 +2,7 @@
  * the right semantics (per-sample variance divided by n) -- and each bad-input class. */
 #include "testing.h"
 
+#include "../../common/dump/internal.h" /* a dump without its features */
 #include <mcpost/dump.h>
 #include <mcpost/imageio.h>
 #include <math.h>
@@ -229,6 +230,67 @@ test_direct_read_matches_whole_image(void **state)
             mcp_dump_free(direct);
             mcp_dump_free(d);
         }
+}
+
+/* mcp__dump_load_without: the parts left out are NULL, neither read nor checked (an
+ * Inf in the albedo fails the whole load and not the one without it), from the main
+ * EXR, from separate files and through the whole-image path; the rest is the whole
+ * load's, bit for bit. */
+static void
+test_load_without_features(void **state)
+{
+    (void)state;
+    mcp_dump *d = make_dump(37, 150, 16);
+    d->albedo->data[7] = INFINITY;
+    const char *path = mcp_test_path("without.exr");
+    assert_int_equal(mcp_dump_write(d, path, MCP_CONV_PBRT, NULL), 0);
+    mcp_dump_spec spec = mcp_dump_spec_defaults();
+    spec.path = path;
+    mcp_dump *all = NULL, *some = NULL;
+    assert_error_contains(mcp_dump_load(&spec, &all), "albedo");
+    spec.bad_values = MCP_BADVAL_ZERO;
+    assert_int_equal(mcp_dump_load(&spec, &all), 0);
+    spec.bad_values = MCP_BADVAL_FAIL;
+    const unsigned both = MCP__DUMP_NO_ALBEDO | MCP__DUMP_NO_NORMAL;
+    assert_int_equal(mcp__dump_load_without(&spec, both, &some), 0);
+    assert_null(some->albedo);
+    assert_null(some->normal);
+    assert_int_equal(some->n_bad_values, 0);
+    assert_same_image(some->color, all->color);
+    assert_same_image(some->var_of_mean, all->var_of_mean);
+    mcp_dump_free(some);
+    assert_int_equal(mcp__dump_load_without(&spec, MCP__DUMP_NO_NORMAL, &some), -1);
+    spec.bad_values = MCP_BADVAL_ZERO;
+    assert_int_equal(mcp__dump_load_without(&spec, MCP__DUMP_NO_NORMAL, &some), 0);
+    assert_same_image(some->albedo, all->albedo);
+    assert_null(some->normal);
+    mcp_dump_free(some);
+    /* the whole-image path (the direct reader hands back a channel named for two
+       parts): the colour's channels as the normal */
+    static const char *const rgb[3] = {"R", "G", "B"};
+    for (int k = 0; k < 3; k++)
+        spec.normal[k] = rgb[k];
+    mcp_dump *clash = NULL;
+    assert_int_equal(mcp_dump_load(&spec, &clash), 0);
+    assert_int_equal(mcp__dump_load_without(&spec, MCP__DUMP_NO_ALBEDO, &some), 0);
+    assert_null(some->albedo);
+    assert_non_null(clash->albedo);
+    assert_same_image(some->normal, clash->normal);
+    assert_same_image(some->color, clash->color);
+    mcp_dump_free(clash);
+    mcp_dump_free(some);
+    /* separate files are left unread: a missing one is no error */
+    mcp_dump_spec sep = mcp_dump_spec_defaults();
+    sep.path = path;
+    sep.albedo_path = mcp_test_path("no-such-albedo.exr");
+    sep.normal_path = mcp_test_path("no-such-normal.exr");
+    assert_error_contains(mcp_dump_load(&sep, &some), "no-such-albedo.exr");
+    assert_int_equal(mcp__dump_load_without(&sep, both, &some), 0);
+    assert_null(some->albedo);
+    assert_null(some->normal);
+    mcp_dump_free(some);
+    mcp_dump_free(all);
+    mcp_dump_free(d);
 }
 
 static void
@@ -483,6 +545,7 @@ main(void)
         cmocka_unit_test(test_bad_values),
         cmocka_unit_test(test_series_pattern),
         cmocka_unit_test(test_read_memory_fixture),
+        cmocka_unit_test(test_load_without_features),
     };
     return cmocka_run_group_tests_name("common/dump", tests, NULL, NULL);
 }
