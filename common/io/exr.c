@@ -843,6 +843,9 @@ typedef struct chunk_coder {
     int store_raw; /* store without trying (see store_raw_after_probe) */
     const void *out;
     uint64_t out_bytes;
+    /* zip: this thread's last chunk, packed, and its stream (see repeat_of_last) */
+    unsigned char *last, *last_stream;
+    size_t last_bytes, last_stream_bytes, last_cap, last_stream_cap;
 } chunk_coder;
 
 static void
@@ -850,6 +853,51 @@ chunk_coder_free(chunk_coder *coder)
 {
     mcp__zip_codec_free(coder->zip);
     free(coder->raw);
+    free(coder->last);
+    free(coder->last_stream);
+}
+
+/* Maps that are constant per block or region (an estimate's distribution.exr and block
+ * means, a render's black border) repeat whole chunks, and libdeflate takes 0.5 ms to
+ * compress 360 kB of one repeated value (its matches stop at 258 bytes): a chunk whose
+ * packed bytes are this thread's last chunk's takes that chunk's stream, the same bytes
+ * a compression would give. 1 when it did. */
+static int
+repeat_of_last(chunk_coder *coder, const exr_encode_pipeline_t *enc)
+{
+    if (!coder->last || coder->last_bytes != enc->packed_bytes ||
+        memcmp(coder->last, enc->packed_buffer, enc->packed_bytes))
+        return 0;
+    coder->out = coder->last_stream;
+    coder->out_bytes = coder->last_stream_bytes;
+    return 1;
+}
+
+/* Keeps a chunk and its stream for repeat_of_last; without memory it keeps none. */
+static void
+keep_last(chunk_coder *coder, const exr_encode_pipeline_t *enc, const void *stream,
+          size_t stream_bytes)
+{
+    if (coder->last_cap < enc->packed_bytes) {
+        free(coder->last);
+        coder->last_cap = enc->packed_bytes;
+        coder->last = malloc(coder->last_cap);
+    }
+    if (coder->last_stream_cap < stream_bytes) {
+        free(coder->last_stream);
+        coder->last_stream_cap = stream_bytes;
+        coder->last_stream = malloc(coder->last_stream_cap);
+    }
+    if (!coder->last || !coder->last_stream) {
+        free(coder->last), free(coder->last_stream);
+        coder->last = coder->last_stream = NULL;
+        coder->last_cap = coder->last_stream_cap = 0;
+        return;
+    }
+    memcpy(coder->last, enc->packed_buffer, enc->packed_bytes);
+    memcpy(coder->last_stream, stream, stream_bytes);
+    coder->last_bytes = enc->packed_bytes;
+    coder->last_stream_bytes = stream_bytes;
 }
 
 static exr_result_t
@@ -860,6 +908,7 @@ compress_chunk(exr_encode_pipeline_t *enc)
     coder->out_bytes = enc->packed_bytes;
     if (coder->store_raw) return EXR_ERR_SUCCESS;
     if (coder->zip) {
+        if (repeat_of_last(coder, enc)) return EXR_ERR_SUCCESS;
         const void *stream;
         long long size =
             mcp__zip_encode(coder->zip, enc->packed_buffer, enc->packed_bytes, &stream);
@@ -867,6 +916,7 @@ compress_chunk(exr_encode_pipeline_t *enc)
         if ((uint64_t)size < enc->packed_bytes) {
             coder->out = stream;
             coder->out_bytes = (uint64_t)size;
+            keep_last(coder, enc, stream, (size_t)size);
         }
         return EXR_ERR_SUCCESS;
     }

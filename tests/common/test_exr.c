@@ -354,6 +354,37 @@ test_zip_streams_agree_with_core(void **state)
     mcp_image_free(nasty);
 }
 
+/* A map constant per block repeats whole chunks, which take the last chunk's stream
+ * instead of a compression (common/io/exr.c, repeat_of_last): on every thread count the
+ * file is the 1-thread file, it reads back to the map's bits through libdeflate and
+ * through Core's zlib, and its chunks were compressed, not stored raw. Blocks of 40
+ * rows against zip's 16-row chunks and zips' 1-row chunks: repeats, and chunks that
+ * differ from the last (or the one before) in one value. */
+static void
+test_repeated_chunks(void **state)
+{
+    (void)state;
+    mcp_image *img = mcp_test_constant(53, 200, 3, 0.0f, NULL);
+    for (int y = 0; y < 200; y++)
+        for (int x = 0; x < 53; x++)
+            for (int c = 0; c < 3; c++)
+                mcp_image_px(img, x, y)[c] =
+                    (float)(y / 40 + 1) * 0.3f + (float)c + (x >= 30 ? 0.5f : 0.0f);
+    mcp_image_px(img, 7, 70)[1] = 123.0f; /* one chunk unlike its neighbours */
+    const char *path = mcp_test_path("blocks.exr");
+    for (int zips = 0; zips <= 1; zips++) {
+        mcp_write_options o = mcp_write_defaults();
+        o.compression = zips ? MCP_EXR_ZIPS : MCP_EXR_ZIP;
+        roundtrip_all_threads(img, &o, 1);
+        assert_int_equal(mcp_image_write(img, path, &o), 0);
+        mcp_image *core = read_with_core_only(path);
+        assert_same_bits(img, core);
+        mcp_image_free(core);
+        assert_true(file_size(path) < 53L * 200 * 3 * 4 / 5); /* 3.4 and 12.9 kB */
+    }
+    mcp_image_free(img);
+}
+
 /* Rows at a time (common/io/exr.c, the streamed denoise's reader and writer): any band
  * of rows read from a file is the whole read's rows, bit for bit, scanline and tiled,
  * for every compression; a file written band by band (bands on multiples of 64 rows and
@@ -458,6 +489,7 @@ main(void)
         cmocka_unit_test(test_probe_stores_raw_only_what_does_not_compress),
         cmocka_unit_test(test_corrupt_chunk_same_error_any_thread_count),
         cmocka_unit_test(test_zip_streams_agree_with_core),
+        cmocka_unit_test(test_repeated_chunks),
         cmocka_unit_test(test_rows_at_a_time),
     };
     return cmocka_run_group_tests_name("common/exr", tests, NULL, NULL);
