@@ -22,8 +22,13 @@
  * megapixel, and the direct-convolution-equivalent rate: 125406 multiply-adds per
  * pixel of the input padded to a multiple of 16, per image of the batch (the primal
  * and each tangent), per wall-clock second, and that rate over sgemm's.
+ * With the anchor, and the default mode timed, a head-to-head follows: `rounds` times
+ * our apply then oneDNN's Winograd apply, one run each in a fresh process, and the
+ * median and range of the ratio of each pair (this machine drifts between the tables'
+ * medians).
  * Usage: bench_unet [repeats (default 3)] [width (default 512)] [height (default width)]
  *                   [both | default | fixed (the modes timed; default both)]
+ *                   [rounds (of the head-to-head; default 5)]
  *        (1080p: bench_unet 3 1920 1080) */
 /* wait4: the peak memory of each child process */
 #define _DEFAULT_SOURCE
@@ -224,6 +229,45 @@ print_header(void)
 #endif
 
 #ifdef MCP_BENCH_ONEDNN
+/* One run of the anchor with --algo algo and --reps reps: its wall and CPU ms, peak
+ * MB, the title ("oneDNN 2.6.3") and the kernels it names; 0, or 1 with a line on
+ * stderr. */
+static int
+onednn_run(const char *weights, const char *algo, int reps, int width, int height,
+           double *ms, double *cpu, double *peak, char *title, size_t title_cap,
+           char *impl, size_t impl_cap)
+{
+    char w[16], h[16], r[16], out[1024];
+    snprintf(w, sizeof w, "%d", width), snprintf(h, sizeof h, "%d", height);
+    snprintf(r, sizeof r, "%d", reps);
+    char *argv[] = {(char *)MCP_BENCH_ONEDNN,
+                    (char *)weights,
+                    w,
+                    h,
+                    "--reps",
+                    r,
+                    "--layout",
+                    "oidn",
+                    "--algo",
+                    (char *)algo,
+                    NULL};
+    const int rc = run_child(MCP_BENCH_ONEDNN, argv, out, sizeof out, peak);
+    /* "oneDNN 2.6.3 apply [direct, oidn; jit:avx512_corex16]  1920x1088 2 thr
+     *  3500.0 ms  75.00 GMAC/s  7000.0 CPU ms  (runs ...)" */
+    const char *apply = strstr(out, " apply ["), *open = strchr(out, '['),
+               *close = open ? strchr(open, ']') : NULL, *thr = strstr(out, " thr ");
+    double gmac;
+    if (rc != 0 || !apply || !close || !thr ||
+        sscanf(thr + 5, "%lf ms %lf GMAC/s %lf CPU ms", ms, &gmac, cpu) != 3) {
+        fprintf(stderr, "bench_unet: the oneDNN anchor (%s, --algo %s) failed%s%s\n",
+                MCP_BENCH_ONEDNN, algo, out[0] ? ": " : "", out);
+        return 1;
+    }
+    snprintf(title, title_cap, "%.*s", (int)(apply - out), out);
+    snprintf(impl, impl_cap, "%.*s", (int)(close - open - 1), open + 1);
+    return 0;
+}
+
 /* The anchor's two runs (OIDN 1.4's direct convolutions in its layout, and oneDNN's
  * Winograd), their rows, and their times in ms[0], ms[1] (-1 when a run failed). */
 static int
@@ -233,52 +277,77 @@ onednn_rows(const char *weights, int repeats, int width, int height, int threads
     static const char *const algos[2] = {"direct", "winograd"};
     static const char *const labels[2] = {"apply, direct (as OIDN 1.4)",
                                           "apply, Winograd"};
-    char w[16], h[16], reps[16], out[1024], title[256] = "", impl[2][256] = {"", ""};
-    double row[2][3], peak[2];
-    snprintf(w, sizeof w, "%d", width), snprintf(h, sizeof h, "%d", height);
-    snprintf(reps, sizeof reps, "%d", repeats);
+    char title[256] = "", impl[2][256] = {"", ""};
+    double cpu[2], peak[2];
     int status = 0;
-    for (int a = 0; a < 2; a++) {
-        char *argv[] = {(char *)MCP_BENCH_ONEDNN,
-                        (char *)weights,
-                        w,
-                        h,
-                        "--reps",
-                        reps,
-                        "--layout",
-                        "oidn",
-                        "--algo",
-                        (char *)algos[a],
-                        NULL};
-        ms[a] = -1;
-        const int rc = run_child(MCP_BENCH_ONEDNN, argv, out, sizeof out, &peak[a]);
-        /* "oneDNN 2.6.3 apply [direct, oidn; jit:avx512_corex16]  1920x1088 2 thr
-         *  3500.0 ms  75.00 GMAC/s  7000.0 CPU ms  (runs ...)" */
-        const char *apply = strstr(out, " apply ["), *open = strchr(out, '['),
-                   *close = open ? strchr(open, ']') : NULL, *thr = strstr(out, " thr ");
-        if (rc != 0 || !apply || !close || !thr ||
-            sscanf(thr + 5, "%lf ms %lf GMAC/s %lf CPU ms", &row[a][0], &row[a][1],
-                   &row[a][2]) != 3) {
-            fprintf(stderr, "bench_unet: the oneDNN anchor (%s, --algo %s) failed%s%s\n",
-                    MCP_BENCH_ONEDNN, algos[a], out[0] ? ": " : "", out);
+    for (int a = 0; a < 2; a++)
+        if (onednn_run(weights, algos[a], repeats, width, height, &ms[a], &cpu[a],
+                       &peak[a], title, sizeof title, impl[a], sizeof impl[a])) {
+            ms[a] = -1;
             status = 1;
-            continue;
         }
-        ms[a] = row[a][0];
-        snprintf(title, sizeof title, "%.*s", (int)(apply - out), out);
-        snprintf(impl[a], sizeof impl[a], "%.*s", (int)(close - open - 1), open + 1);
-    }
     printf("%s (the anchor dnnl_unet.cpp: OIDN 1.4's RT U-Net, primal only) at %dx%d, "
            "%d thread(s), median of %d\n",
            title[0] ? title : "oneDNN", width, height, threads, repeats);
     print_header();
     for (int a = 0; a < 2; a++)
-        if (ms[a] > 0)
-            print_row(labels[a], row[a][0], row[a][2], gmac, sgemm, mp, peak[a]);
+        if (ms[a] > 0) print_row(labels[a], ms[a], cpu[a], gmac, sgemm, mp, peak[a]);
     for (int a = 0; a < 2; a++) /* oneDNN's kernels, as the anchor names them */
         if (ms[a] > 0) printf("  --algo %s --layout oidn: %s\n", algos[a], impl[a]);
     printf("\n");
     return status;
+}
+
+static int
+by_value(const void *a, const void *b)
+{
+    const double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+/* Our apply (default mode) and oneDNN's Winograd apply in turn, `rounds` times, each a
+ * fresh process timing one run after its warm-up. The tables above take each median
+ * minutes apart, and this machine's speed drifts by tens of percent in that time (a
+ * 1080p apply measured 0.95 and 1.25 s, oneDNN's Winograd 1.27 and 0.97 s, in two runs
+ * of this program on December 5): the ratio of neighbouring runs is what holds. */
+static int
+head_to_head(const char *self, const char *weights, int rounds, int width, int height)
+{
+    enum { MAX_ROUNDS = 64 };
+    char w[16], h[16], out[256], title[256], impl[256];
+    snprintf(w, sizeof w, "%d", width), snprintf(h, sizeof h, "%d", height);
+    double ours[MAX_ROUNDS], theirs[MAX_ROUNDS], ratio[MAX_ROUNDS];
+    int n = 0;
+    rounds = rounds < MAX_ROUNDS ? rounds : MAX_ROUNDS;
+    setenv("MCPOST_UNET_FIXED", "0", 1);
+    for (int r = 0; r < rounds; r++) {
+        char *args[] = {(char *)self, "--one", "-1", "1", w, h, NULL};
+        double ms, cpu, peak, dnn;
+        if (run_child("/proc/self/exe", args, out, sizeof out, &peak) != 0 ||
+            sscanf(out, "%lf %lf", &ms, &cpu) != 2 ||
+            onednn_run(weights, "winograd", 1, width, height, &dnn, &cpu, &peak, title,
+                       sizeof title, impl, sizeof impl)) {
+            fprintf(stderr, "bench_unet: head to head: round %d failed\n", r + 1);
+            unsetenv("MCPOST_UNET_FIXED");
+            return 1;
+        }
+        ours[n] = ms, theirs[n] = dnn, ratio[n] = ms / dnn, n++;
+    }
+    unsetenv("MCPOST_UNET_FIXED");
+    qsort(ours, (size_t)n, sizeof *ours, by_value);
+    qsort(theirs, (size_t)n, sizeof *theirs, by_value);
+    qsort(ratio, (size_t)n, sizeof *ratio, by_value);
+    printf(
+        "head to head at %dx%d, %d rounds of unet's apply (default mode) then oneDNN's "
+        "Winograd, one run each after its warm-up:\n",
+        width, height, n);
+    printf("  unet %.1f ms [%.1f, %.1f], oneDNN Winograd %.1f ms [%.1f, %.1f] "
+           "(medians [ranges])\n",
+           ours[n / 2], ours[0], ours[n - 1], theirs[n / 2], theirs[0], theirs[n - 1]);
+    printf("  unet's time over oneDNN's, round by round: median %.2fx [%.2f, %.2f]; "
+           "unet's rate %.2fx oneDNN Winograd's\n\n",
+           ratio[n / 2], ratio[0], ratio[n - 1], 1.0 / ratio[n / 2]);
+    return 0;
 }
 #endif
 
@@ -294,12 +363,15 @@ main(int argc, char **argv)
     int repeats = argc > 1 ? atoi(argv[1]) : 3, width = argc > 2 ? atoi(argv[2]) : 512;
     int height = argc > 3 ? atoi(argv[3]) : width;
     const char *modes = argc > 4 ? argv[4] : "both";
+    const int rounds = argc > 5 ? atoi(argv[5]) : 5;
     const int first = !strcmp(modes, "fixed") ? 1 : 0,
               last = !strcmp(modes, "default") ? 0 : 1;
     if (repeats < 1 || width < 8 || width > 8192 || height < 8 || height > 8192 ||
-        (strcmp(modes, "both") && strcmp(modes, "default") && strcmp(modes, "fixed"))) {
-        fprintf(stderr, "usage: bench_unet [repeats >= 1] [width in 8..8192] "
-                        "[height in 8..8192] [both | default | fixed]\n");
+        (strcmp(modes, "both") && strcmp(modes, "default") && strcmp(modes, "fixed")) ||
+        rounds < 1 || rounds > 64) {
+        fprintf(stderr,
+                "usage: bench_unet [repeats >= 1] [width in 8..8192] "
+                "[height in 8..8192] [both | default | fixed] [rounds in 1..64]\n");
         return 2;
     }
     const char *path = weights_path();
@@ -365,11 +437,13 @@ main(int argc, char **argv)
                    "Winograd's\n",
                    fixed ? "fixed-bit" : "default", apply_ms[fixed] / onednn_ms[0],
                    apply_ms[fixed] / onednn_ms[1]);
+    printf("\n");
+    if (first == 0) status |= head_to_head(argv[0], path, rounds, width, height);
 #else
     printf("bench_unet: no oneDNN baseline: the anchor was not built: %s "
            "(docs/benchmarks.md, U-Net)\n",
            MCP_BENCH_ONEDNN_WHY);
-    (void)apply_ms;
+    (void)apply_ms, (void)rounds;
 #endif
     return status;
 }
