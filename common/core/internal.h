@@ -40,6 +40,7 @@ typedef struct mcp__window {
     int n, r, w, h, rows;
     double *sums[3];          /* rows x w x 3 */
     float *halo[3], *next[3]; /* r x w x 3: the rows above the band, as they were */
+    double *cols;             /* per thread: a row's column sums, w x 3 */
     int y0;
 } mcp__window;
 int mcp__window_begin(mcp__window *wb, const mcp_image *const *imgs, int n, int r);

@@ -72,11 +72,17 @@ mcp_channel_stats_compute(const mcp_image *img, int c, mcp_channel_stats *out)
  * r rows above a band are kept aside, as they were, for a caller that overwrites the
  * images band by band. */
 
+/* Row yy of image i as it was before the band at y0 was written: the kept copy above
+ * the band (3 floats a pixel), else the image's own row; *stride: floats per pixel. */
 static const float *
-window_row(const mcp__window *wb, int i, int y0, int yy)
+window_row(const mcp__window *wb, int i, int y0, int yy, ptrdiff_t *stride)
 {
-    if (yy < y0) return wb->halo[i] + (size_t)(yy - (y0 - wb->r)) * wb->w * 3;
-    return NULL; /* the image's own row */
+    if (yy < y0) {
+        *stride = 3;
+        return wb->halo[i] + (size_t)(yy - (y0 - wb->r)) * wb->w * 3;
+    }
+    *stride = wb->img[i]->pixel_stride;
+    return mcp_image_px(wb->img[i], 0, yy);
 }
 
 int
@@ -89,6 +95,13 @@ mcp__window_begin(mcp__window *wb, const mcp_image *const *imgs, int n, int r)
     wb->w = imgs[0]->width;
     wb->h = imgs[0]->height;
     wb->rows = MCP__WINDOW_BAND > r ? MCP__WINDOW_BAND : r;
+    size_t threads = 1;
+#ifdef _OPENMP
+    threads = (size_t)omp_get_max_threads();
+#endif
+    /* each thread's column sums of one row */
+    if (!(wb->cols = mcp_malloc(threads * (size_t)wb->w * 3 * sizeof *wb->cols)))
+        return -1;
     for (int i = 0; i < n; i++) {
         wb->img[i] = imgs[i];
         wb->sums[i] = mcp_malloc((size_t)wb->rows * wb->w * 3 * sizeof(double));
@@ -108,12 +121,6 @@ mcp__window_band(mcp__window *wb, int y0, int y1)
     const int w = wb->w, h = wb->h, r = wb->r;
     if (y1 - y0 > wb->rows) return mcp_error("window sums: a band of %d rows", y1 - y0);
     wb->y0 = y0;
-    size_t threads = 1;
-#ifdef _OPENMP
-    threads = (size_t)omp_get_max_threads();
-#endif
-    double *cols = mcp_malloc(threads * (size_t)w * 3 * sizeof *cols);
-    if (!cols) return -1;
 #pragma omp parallel for collapse(2) schedule(static)
     for (int i = 0; i < wb->n; i++)
         for (int y = y0; y < y1; y++) {
@@ -121,19 +128,16 @@ mcp__window_band(mcp__window *wb, int y0, int y1)
 #ifdef _OPENMP
             t = (size_t)omp_get_thread_num();
 #endif
-            double *col = cols + t * w * 3;
-            const mcp_image *img = wb->img[i];
+            double *col = wb->cols + t * w * 3;
             const int a = y - r < 0 ? 0 : y - r, b = y + r + 1 > h ? h : y + r + 1;
             for (int k = 0; k < 3 * w; k++)
                 col[k] = 0.0;
             for (int yy = a; yy < b; yy++) {
-                const float *kept = window_row(wb, i, y0, yy);
-                for (int x = 0; x < w; x++) {
-                    const float *v =
-                        kept ? kept + 3 * (size_t)x : mcp_image_px(img, x, yy);
+                ptrdiff_t stride;
+                const float *row = window_row(wb, i, y0, yy, &stride);
+                for (int x = 0; x < w; x++)
                     for (int c = 0; c < 3; c++)
-                        col[3 * x + c] += v[c];
-                }
+                        col[3 * x + c] += row[x * stride + c];
             }
             /* across: the running sum over columns [x - r, x + r] */
             double run[3] = {0, 0, 0};
@@ -149,7 +153,6 @@ mcp__window_band(mcp__window *wb, int y0, int y1)
                 }
             }
         }
-    free(cols);
     /* the r rows above the next band, as they are now (before the caller writes this
        band): from this band's rows, or the rows kept for it */
     for (int i = 0; i < wb->n && r > 0; i++) {
@@ -157,12 +160,11 @@ mcp__window_band(mcp__window *wb, int y0, int y1)
             const int yy = y1 - r + k;
             float *dst = wb->next[i] + (size_t)k * w * 3;
             if (yy < 0) continue;
-            const float *kept = window_row(wb, i, y0, yy);
-            for (int x = 0; x < w; x++) {
-                const float *v =
-                    kept ? kept + 3 * (size_t)x : mcp_image_px(wb->img[i], x, yy);
-                dst[3 * x] = v[0], dst[3 * x + 1] = v[1], dst[3 * x + 2] = v[2];
-            }
+            ptrdiff_t stride;
+            const float *row = window_row(wb, i, y0, yy, &stride);
+            for (int x = 0; x < w; x++)
+                for (int c = 0; c < 3; c++)
+                    dst[3 * x + c] = row[x * stride + c];
         }
         float *t = wb->halo[i];
         wb->halo[i] = wb->next[i];
@@ -183,6 +185,7 @@ mcp__window_count(const mcp__window *wb, int x, int y)
 void
 mcp__window_end(mcp__window *wb)
 {
+    free(wb->cols);
     for (int i = 0; i < 3; i++) {
         free(wb->sums[i]);
         free(wb->halo[i]);
