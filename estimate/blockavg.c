@@ -257,9 +257,11 @@ check_pair(const mcp_image *a, const mcp_image *b)
     return 0;
 }
 
-int
-mcp_block_average(const mcp_image *sure_rel, const mcp_image *sigma_rel,
-                  const mcp_block_options *opt, mcp_blocks **out)
+/* Alg. 1, or with `one` the image (or each tile) as one block, its sums those the
+ * tree's root would have. */
+static int
+average(const mcp_image *sure_rel, const mcp_image *sigma_rel,
+        const mcp_block_options *opt, int one, mcp_blocks **out)
 {
     *out = NULL;
     mcp_block_options o = opt ? *opt : mcp_block_defaults();
@@ -282,7 +284,10 @@ mcp_block_average(const mcp_image *sure_rel, const mcp_image *sigma_rel,
             int tw = tx + tile < w ? tile : w - tx, th = ty + tile < h ? tile : h - ty;
             double sum[NQ];
             sums_rect(&s, tx, ty, tw, th, sum);
-            split(&b, tx, ty, tw, th, sum);
+            if (one)
+                emit(&b, tx, ty, tw, th, sum);
+            else
+                split(&b, tx, ty, tw, th, sum);
         }
     free(s.table);
     mcp_blocks *r = b.failed ? NULL : mcp_calloc(1, sizeof *r);
@@ -296,6 +301,20 @@ mcp_block_average(const mcp_image *sure_rel, const mcp_image *sigma_rel,
     r->items = b.items;
     *out = r;
     return 0;
+}
+
+int
+mcp_block_average(const mcp_image *sure_rel, const mcp_image *sigma_rel,
+                  const mcp_block_options *opt, mcp_blocks **out)
+{
+    return average(sure_rel, sigma_rel, opt, 0, out);
+}
+
+int
+mcp__blocks_whole(const mcp_image *sure_rel, const mcp_image *sigma_rel,
+                  const mcp_block_options *opt, mcp_blocks **out)
+{
+    return average(sure_rel, sigma_rel, opt, 1, out);
 }
 
 int

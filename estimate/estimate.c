@@ -438,13 +438,19 @@ compute(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_option
     e->variance_source = dump->variance_source;
     e->variance_dof = dump->variance_dof;
     double t2 = mcp__now_ms();
-    if (mcp_block_average(e->maps.sure_rel, e->maps.sigma_rel, &o.blocks, &e->blocks))
+    /* without variance the probes are 0, so is every s_i, and F(τ) is 1 whatever
+       the blocks' λ, while every cut of Alg. 1 passes (its Σ̂ are 0): at 1 spp the
+       tree would end in a block per pixel, at 8K 33 million of them and 18 GB. One
+       block gives the same F (not where the probes came from the groups' V) */
+    e->no_variance = !has_variance(dump);
+    if ((e->no_variance && !e->probes_from_groups ? mcp__blocks_whole
+                                                  : mcp_block_average)(
+            e->maps.sure_rel, e->maps.sigma_rel, &o.blocks, &e->blocks))
         goto done;
     double t3 = mcp__now_ms();
     if (mcp_error_distribution(e->blocks, e->maps.var_rel, &e->dist)) goto done;
     e->tau = o.tau;
     e->p = o.p;
-    e->no_variance = !has_variance(dump);
     int stop = mcp_error_should_stop(e->dist, o.tau, o.p, &e->cdf_at_tau);
     if (stop < 0) goto done;
     e->stop = stop && !e->no_variance;

@@ -91,6 +91,12 @@ void mcp__sincos_turn(float u, float *s, float *c);
 int mcp__probe_variance_floor(const mcp_dump *d, int radius, mcp_image **var,
                               mcp_image **cov);
 
+/* mcp_block_average without Alg. 1's cuts: the image (or each tile) one block. For a
+ * dump without variance, where every Σ̂ is 0, so that every cut passes wherever SURE is
+ * above 0 and the tree would end in a block per pixel (blockavg.c). */
+int mcp__blocks_whole(const mcp_image *sure_rel, const mcp_image *sigma_rel,
+                      const mcp_block_options *opt, mcp_blocks **out);
+
 /* Fails naming `who` when the dump lacks colour or the variance of the mean. */
 int mcp__check_dump(const char *who, const mcp_dump *dump);
 /* What to do about a dump without variance: the recipe for a Cycles render, else

@@ -121,6 +121,28 @@ test_pipeline_one_dump(void **state)
     assert_int_equal(mcp_estimate_compute(d, &mcp_test_box_denoiser, &o, &e), 0);
     assert_int_equal(e->no_variance, 1);
     assert_int_equal(e->stop, 0);
+    /* every s_i is 0, so F(τ) is 1 and every percentile 0 whatever the blocks; Alg. 1
+       would cut wherever SURE is above 0 (its Σ̂ are 0), so each tile is one block */
+    assert_true(e->cdf_at_tau == 1.0);
+    for (int k = 0; k < e->n_percentiles; k++)
+        assert_true(e->percentile_tau[k] == 0.0);
+    const int tiles = ((S + 31) / 32) * ((S + 31) / 32);
+    assert_int_equal(e->blocks->count, tiles);
+    mcp_blocks *tree = NULL;
+    mcp_error_dist *tree_dist = NULL;
+    assert_int_equal(
+        mcp_block_average(e->maps.sure_rel, e->maps.sigma_rel, &o.blocks, &tree), 0);
+    assert_true(tree->count > 4 * tiles);
+    assert_int_equal(mcp_error_distribution(tree, e->maps.var_rel, &tree_dist), 0);
+    assert_true(mcp_error_cdf(tree_dist, o.tau) == e->cdf_at_tau);
+    double whole = 0, cut = 0; /* the one block's sums are the cut blocks' */
+    for (int i = 0; i < e->blocks->count; i++)
+        whole += e->blocks->items[i].sure_sum[0];
+    for (int i = 0; i < tree->count; i++)
+        cut += tree->items[i].sure_sum[0];
+    assert_close(whole, cut, 1e-9, 1e-12);
+    mcp_error_dist_free(tree_dist);
+    mcp_blocks_free(tree);
     mcp_estimate_free(e);
     /* options are checked, naming the field */
     o.tau = -1;
