@@ -12,7 +12,13 @@
  * cells at a block's edges are summed directly, also in double: a test costs
  * O(perimeter) instead of O(1) and the sums are exact to double rounding. Cells are
  * summed by one thread each in a fixed order, so the results do not depend on the
- * thread count. */
+ * thread count.
+ *
+ * The estimate's variant (mcp__block_average_quiet) leaves a quiet block whole: one
+ * whose every pixel has Σ̂^r and s² at 0, found by a count of the other, loud pixels
+ * kept in the same table (an integer, exact in double sums and differences). Its values
+ * all have s = 0, so the distribution does not depend on how it is cut
+ * (docs/mathematics.md, "Quiet blocks are not cut"). */
 #include "estimate.h"
 #include "internal.h"
 
@@ -23,7 +29,10 @@
 #include <string.h>
 
 #define CELL 4
-#define NQ 6 /* SURE^r R, G, B and Σ̂^r R, G, B */
+/* SURE^r R, G, B, Σ̂^r R, G, B, and the count of loud pixels (below), an integer that
+ * double sums and differences hold exactly */
+#define NQ 7
+#define LOUD 6
 
 mcp_block_options
 mcp_block_defaults(void)
@@ -46,8 +55,9 @@ mcp_blocks_free(mcp_blocks *b)
 
 typedef struct sums {
     const mcp_image *sure, *sigma;
-    int w, h, cw, ch; /* pixels; cells (the last ones may be partial) */
-    double *table;    /* (ch + 1) x (cw + 1) x NQ: sums over cells [0, cx) x [0, cy) */
+    const mcp_image *s2; /* the model's s² (mcp__block_average_quiet), or NULL */
+    int w, h, cw, ch;    /* pixels; cells (the last ones may be partial) */
+    double *table;       /* (ch + 1) x (cw + 1) x NQ: sums over cells [0, cx) x [0, cy) */
 } sums;
 
 /* The non-finite values in cell (cx, cy) (only called where its sum is not finite). */
@@ -63,11 +73,24 @@ count_bad(const mcp_image *sure, const mcp_image *sigma, int cx, int cy)
     return bad;
 }
 
+/* 1 when pixel (x, y) has some Σ̂^r or s² other than 0 in some channel (with no s²
+ * image, every pixel is loud: Alg. 1 as the paper has it). */
+static inline int
+loud(const sums *s, int x, int y)
+{
+    if (!s->s2) return 1;
+    const float *g = mcp_image_px(s->sigma, x, y), *v = mcp_image_px(s->s2, x, y);
+    return (g[0] != 0.0f) | (g[1] != 0.0f) | (g[2] != 0.0f) | (v[0] != 0.0f) |
+           (v[1] != 0.0f) | (v[2] != 0.0f);
+}
+
 static int
-sums_build(const mcp_image *sure, const mcp_image *sigma, sums *s, long *n_bad)
+sums_build(const mcp_image *sure, const mcp_image *sigma, const mcp_image *s2, sums *s,
+           long *n_bad)
 {
     s->sure = sure;
     s->sigma = sigma;
+    s->s2 = s2;
     s->w = sure->width;
     s->h = sure->height;
     s->cw = (s->w + CELL - 1) / CELL;
@@ -77,6 +100,7 @@ sums_build(const mcp_image *sure, const mcp_image *sigma, sums *s, long *n_bad)
     if (!s->table) return -1;
     long bad = 0;
     int packed = sure->pixel_stride == 3 && sigma->pixel_stride == 3;
+    const int s2_packed = s2 && s2->pixel_stride == 3;
     /* cell sums, stored at (cy + 1, cx + 1); a NaN or Inf makes its cell sum
      * non-finite, which is how they are found */
 #pragma omp parallel for schedule(static) reduction(+ : bad)
@@ -90,6 +114,7 @@ sums_build(const mcp_image *sure, const mcp_image *sigma, sums *s, long *n_bad)
                 /* a whole cell row is 3 CELL contiguous floats: add them lane by lane
                  * (the compiler vectorises this), then fold the lanes per channel */
                 double ls[3 * CELL] = {0}, lg[3 * CELL] = {0};
+                int n_loud = 0;
                 for (int y = cy * CELL; y < y1; y++) {
                     const float *ps = mcp_image_px(sure, cx * CELL, y);
                     const float *pg = mcp_image_px(sigma, cx * CELL, y);
@@ -97,11 +122,22 @@ sums_build(const mcp_image *sure, const mcp_image *sigma, sums *s, long *n_bad)
                         ls[i] += ps[i];
                         lg[i] += pg[i];
                     }
+                    if (s2_packed) { /* loud(), on the row's packed values */
+                        const float *pv = mcp_image_px(s2, cx * CELL, y);
+                        for (int x = 0; x < CELL; x++)
+                            n_loud += (pg[3 * x] != 0.0f) | (pg[3 * x + 1] != 0.0f) |
+                                      (pg[3 * x + 2] != 0.0f) | (pv[3 * x] != 0.0f) |
+                                      (pv[3 * x + 1] != 0.0f) | (pv[3 * x + 2] != 0.0f);
+                    } else {
+                        for (int x = cx * CELL; x < x1; x++)
+                            n_loud += loud(s, x, y);
+                    }
                 }
                 for (int i = 0; i < 3 * CELL; i++) {
                     acc[i % 3] += ls[i];
                     acc[3 + i % 3] += lg[i];
                 }
+                acc[LOUD] = n_loud;
             } else {
                 for (int y = cy * CELL; y < y1; y++)
                     for (int x = cx * CELL; x < x1; x++) {
@@ -111,6 +147,7 @@ sums_build(const mcp_image *sure, const mcp_image *sigma, sums *s, long *n_bad)
                             acc[c] += ps[c];
                             acc[3 + c] += pg[c];
                         }
+                        acc[LOUD] += loud(s, x, y);
                     }
             }
             int finite = 1;
@@ -146,6 +183,7 @@ sums_direct(const sums *s, int x0, int x1, int y0, int y1, double out[NQ])
                 out[c] += ps[c];
                 out[3 + c] += pg[c];
             }
+            out[LOUD] += loud(s, x, y);
         }
 }
 
@@ -220,7 +258,8 @@ static void
 split(builder *b, int x, int y, int w, int h, const double sums[NQ])
 {
     if (b->failed) return;
-    if (w > 1 || h > 1) {
+    /* a quiet block (no pixel with a Σ̂^r or an s² other than 0) is not cut */
+    if ((w > 1 || h > 1) && sums[LOUD] > 0.0) {
         int x2 = x, y2 = y, w1 = w, h1 = h, w2 = w, h2 = h;
         if (w >= h) {
             w1 = w / 2;
@@ -257,21 +296,20 @@ check_pair(const mcp_image *a, const mcp_image *b)
     return 0;
 }
 
-/* Alg. 1, or with `one` the image (or each tile) as one block, its sums those the
- * tree's root would have. */
+/* Alg. 1, with quiet blocks left whole where s2 is given. */
 static int
-average(const mcp_image *sure_rel, const mcp_image *sigma_rel,
-        const mcp_block_options *opt, int one, mcp_blocks **out)
+average(const mcp_image *sure_rel, const mcp_image *sigma_rel, const mcp_image *s2,
+        const mcp_block_options *opt, mcp_blocks **out)
 {
     *out = NULL;
     mcp_block_options o = opt ? *opt : mcp_block_defaults();
     if (o.tile_size < 0)
         return mcp_error("block averaging: tile_size must be >= 0 (got %d)", o.tile_size);
-    if (check_pair(sure_rel, sigma_rel)) return -1;
+    if (check_pair(sure_rel, sigma_rel) || (s2 && check_pair(sure_rel, s2))) return -1;
     int w = sure_rel->width, h = sure_rel->height;
     sums s;
     long bad = 0;
-    if (sums_build(sure_rel, sigma_rel, &s, &bad)) return -1;
+    if (sums_build(sure_rel, sigma_rel, s2, &s, &bad)) return -1;
     if (bad) {
         free(s.table);
         return mcp_error("block averaging: %ld values of SURE or variance are not finite",
@@ -284,10 +322,7 @@ average(const mcp_image *sure_rel, const mcp_image *sigma_rel,
             int tw = tx + tile < w ? tile : w - tx, th = ty + tile < h ? tile : h - ty;
             double sum[NQ];
             sums_rect(&s, tx, ty, tw, th, sum);
-            if (one)
-                emit(&b, tx, ty, tw, th, sum);
-            else
-                split(&b, tx, ty, tw, th, sum);
+            split(&b, tx, ty, tw, th, sum);
         }
     free(s.table);
     mcp_blocks *r = b.failed ? NULL : mcp_calloc(1, sizeof *r);
@@ -307,14 +342,15 @@ int
 mcp_block_average(const mcp_image *sure_rel, const mcp_image *sigma_rel,
                   const mcp_block_options *opt, mcp_blocks **out)
 {
-    return average(sure_rel, sigma_rel, opt, 0, out);
+    return average(sure_rel, sigma_rel, NULL, opt, out);
 }
 
 int
-mcp__blocks_whole(const mcp_image *sure_rel, const mcp_image *sigma_rel,
-                  const mcp_block_options *opt, mcp_blocks **out)
+mcp__block_average_quiet(const mcp_image *sure_rel, const mcp_image *sigma_rel,
+                         const mcp_image *s2, const mcp_block_options *opt,
+                         mcp_blocks **out)
 {
-    return average(sure_rel, sigma_rel, opt, 1, out);
+    return average(sure_rel, sigma_rel, s2, opt, out);
 }
 
 int

@@ -438,14 +438,12 @@ compute(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_option
     e->variance_source = dump->variance_source;
     e->variance_dof = dump->variance_dof;
     double t2 = mcp__now_ms();
-    /* without variance the probes are 0, so is every s_i, and F(τ) is 1 whatever
-       the blocks' λ, while every cut of Alg. 1 passes (its Σ̂ are 0): at 1 spp the
-       tree would end in a block per pixel, at 8K 33 million of them and 18 GB. One
-       block gives the same F (not where the probes came from the groups' V) */
+    /* Alg. 1, but where neither Σ̂ nor s² is above 0 (a dump without variance, or a
+       region without any) the block stays whole: F(τ) is the same, and the tree does
+       not end in a block per pixel there */
     e->no_variance = !has_variance(dump);
-    if ((e->no_variance && !e->probes_from_groups ? mcp__blocks_whole
-                                                  : mcp_block_average)(
-            e->maps.sure_rel, e->maps.sigma_rel, &o.blocks, &e->blocks))
+    if (mcp__block_average_quiet(e->maps.sure_rel, e->maps.sigma_rel, e->maps.var_rel,
+                                 &o.blocks, &e->blocks))
         goto done;
     double t3 = mcp__now_ms();
     if (mcp_error_distribution(e->blocks, e->maps.var_rel, &e->dist)) goto done;

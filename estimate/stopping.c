@@ -107,7 +107,11 @@ rsqrt(float v)
     return y * (1.5f - h * y * y);
 }
 
-/* g[j] = F_j for n values v[j] = s_j² with sqrt(λ) l[j]; v = 0 gives 1. On x86-64
+/* g[j] = F_j for n values v[j] = s_j² with sqrt(λ) l[j]; v = 0 gives 1 (the error is
+ * 0, below every τ > 0), whatever λ: the formula alone, with s² clamped to 1e-37, would
+ * give 0 for τ < λ / 9e36, a λ that a block without variance reaches (SURE / 1e-6:
+ * docs/mathematics.md, "Quiet blocks are not cut"), and the percentile search asks
+ * about τ that small. On x86-64
  * GCC also builds an AVX2 + FMA copy, picked at load time where the CPU has it, and
  * may fuse multiply-adds here (-std=c11 turns contraction off elsewhere). */
 #if defined(__GNUC__) && defined(__x86_64__) && !defined(__clang__)
@@ -124,7 +128,8 @@ fold_cdf(const float *restrict v, const float *restrict l, float *restrict g, in
         float d = a - l[j];
         float qd = upper_tail(fabsf(d));
         float q_low = 0.5f - copysignf(0.5f - qd, d); /* Q(d) for either sign */
-        g[j] = 1.0f - q_low - upper_tail(a + l[j]);
+        const float f = 1.0f - q_low - upper_tail(a + l[j]);
+        g[j] = b > 0 ? f : 1.0f;
     }
 }
 

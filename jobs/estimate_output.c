@@ -262,7 +262,12 @@ mcp__estimate_write_single(const mcp_estimate *e, const mcp__estimate_dir *o,
         char caption[256], unit[256], rel[512];
         const cJSON *mj = cJSON_GetObjectItem(summary, "metric");
         const char *metric = cJSON_IsString(mj) ? mj->valuestring : "error";
-        if (e->blocks->count == 1)
+        if (e->blocks->count == 1 && e->no_variance)
+            snprintf(caption, sizeof caption,
+                     "expected %s per pixel; 1 block: the dump has no variance, so "
+                     "there is no error to model and Alg. 1 does not cut it",
+                     metric);
+        else if (e->blocks->count == 1)
             snprintf(caption, sizeof caption,
                      "expected %s per pixel; 1 block: Firmino 2024 Alg. 1 found no "
                      "split that passes its test, so one SURE mean covers the image",

@@ -19,6 +19,7 @@
 #endif
 
 #include <mcpost/estimate.h>
+#include "../../estimate/internal.h" /* mcp__block_average_quiet */
 
 static const char *const RGB[] = {"R", "G", "B"};
 
@@ -83,6 +84,95 @@ test_half_noisy_splits_at_boundary(void **state)
     mcp_blocks_free(b);
     mcp_image_free(sure);
     mcp_image_free(sigma);
+}
+
+/* The half-noisy case again, with the model's s² above 0 on the left half and in a
+ * strip of the right half beside it (where a denoiser's footprint reaches the noisy
+ * half), 0 on the rest. Quiet blocks stay whole; every other block is one of Alg. 1's,
+ * with the same sums; each quiet block holds whole blocks of Alg. 1 with the same SURE
+ * in all; and F(τ) and the percentiles are Alg. 1's, bit for bit, since every value of
+ * a quiet block has s = 0. */
+static void
+test_quiet_blocks_stay_whole(void **state)
+{
+    (void)state;
+    const int W = 64, H = 64, STRIP = 5;
+    mcp_image *sure = new_rgb(W, H), *sigma = new_rgb(W, H), *s2 = new_rgb(W, H);
+    fill(sigma, 0, 0, 32, H, 1.0f);
+    fill(sure, 0, 0, 32, H, 1.0f / 40.0f);
+    fill(sure, 32, 0, 32, H, 0.5f);
+    for (int y = 0; y < H; y++) /* s² falling off from the noisy half */
+        for (int x = 0; x < 32 + STRIP; x++)
+            for (int c = 0; c < 3; c++)
+                mcp_image_px(s2, x, y)[c] =
+                    x < 32 ? 0.01f * (1 + c) : 0.002f / (float)(x - 31) * (1 + c);
+    mcp_blocks *plain = NULL, *quiet = NULL;
+    assert_int_equal(mcp_block_average(sure, sigma, NULL, &plain), 0);
+    assert_int_equal(mcp__block_average_quiet(sure, sigma, s2, NULL, &quiet), 0);
+    assert_int_equal(plain->count, 1 + 32 * 64);
+    assert_true(quiet->count < 1 + STRIP * H + 64);
+    int quiet_seen = 0;
+    for (int i = 0; i < quiet->count; i++) {
+        const mcp_block *q = &quiet->items[i];
+        int is_loud = q->x < 32 + STRIP;
+        double sum[3] = {0, 0, 0};
+        int inside = 0;
+        for (int j = 0; j < plain->count; j++) {
+            const mcp_block *p = &plain->items[j];
+            if (p->x < q->x || p->y < q->y || p->x + p->w > q->x + q->w ||
+                p->y + p->h > q->y + q->h)
+                continue;
+            inside += p->w * p->h;
+            for (int c = 0; c < 3; c++)
+                sum[c] += p->sure_sum[c];
+            if (is_loud) { /* the very same block */
+                assert_true(p->x == q->x && p->y == q->y && p->w == q->w && p->h == q->h);
+                for (int c = 0; c < 3; c++)
+                    assert_true(p->sure_sum[c] == q->sure_sum[c]);
+            }
+        }
+        assert_int_equal(inside, q->w * q->h); /* a union of Alg. 1's blocks */
+        for (int c = 0; c < 3; c++)
+            assert_close(sum[c], q->sure_sum[c], 1e-12, 0);
+        if (!is_loud) {
+            quiet_seen += q->w * q->h;
+            for (int y = q->y; y < q->y + q->h; y++) /* quiet through and through */
+                for (int x = q->x; x < q->x + q->w; x++)
+                    for (int c = 0; c < 3; c++)
+                        assert_true(mcp_image_px(s2, x, y)[c] == 0.0f &&
+                                    mcp_image_px(sigma, x, y)[c] == 0.0f);
+        }
+    }
+    assert_int_equal(quiet_seen, (32 - STRIP) * H);
+    mcp_error_dist *dp = NULL, *dq = NULL;
+    assert_int_equal(mcp_error_distribution(plain, s2, &dp), 0);
+    assert_int_equal(mcp_error_distribution(quiet, s2, &dq), 0);
+    /* down to τ far below any s²: a quiet block's λ is its SURE over 1e-6 (here 9e8),
+       and its values must still count as below τ (stopping.c's fold_cdf) */
+    for (double tau = 1e-35; tau < 10; tau *= 3.7)
+        assert_true(mcp_error_cdf(dp, tau) == mcp_error_cdf(dq, tau));
+    /* (the loud values' F_i there are 0 to float rounding: 1e-8 each either way) */
+    assert_true(mcp_error_cdf(dq, 1e-35) >= (double)quiet_seen / (W * H) - 1e-6);
+    const double ps[4] = {0.5, 0.9, 0.99, 0.999};
+    double tp[4], tq[4];
+    assert_int_equal(mcp_error_percentiles(dp, ps, 4, tp), 0);
+    assert_int_equal(mcp_error_percentiles(dq, ps, 4, tq), 0);
+    for (int k = 0; k < 4; k++)
+        assert_true(tp[k] == tq[k]);
+    print_message("quiet blocks: %d blocks against Alg. 1's %d; p99.9 %.6g\n",
+                  quiet->count, plain->count, tq[3]);
+    /* without an s² image every block is loud: Alg. 1 itself */
+    mcp_blocks *again = NULL;
+    assert_int_equal(mcp__block_average_quiet(sure, sigma, NULL, NULL, &again), 0);
+    assert_int_equal(again->count, plain->count);
+    mcp_blocks_free(again);
+    mcp_error_dist_free(dp);
+    mcp_error_dist_free(dq);
+    mcp_blocks_free(plain);
+    mcp_blocks_free(quiet);
+    mcp_image_free(sure);
+    mcp_image_free(sigma);
+    mcp_image_free(s2);
 }
 
 /* ---- a naive Alg. 1: direct double sums over each candidate block ---- */
@@ -304,6 +394,7 @@ main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_half_noisy_splits_at_boundary),
+        cmocka_unit_test(test_quiet_blocks_stay_whole),
         cmocka_unit_test(test_matches_naive),
         cmocka_unit_test(test_tiles_bound_blocks),
         cmocka_unit_test(test_thread_count_independent),
