@@ -129,7 +129,8 @@ fold_cdf(const float *restrict v, const float *restrict l, float *restrict g, in
         float qd = upper_tail(fabsf(d));
         float q_low = 0.5f - copysignf(0.5f - qd, d); /* Q(d) for either sign */
         const float f = 1.0f - q_low - upper_tail(a + l[j]);
-        g[j] = b > 0 ? f : 1.0f;
+        const int32_t keep = -(int32_t)(b > 0); /* a select without a branch: 1.0f */
+        g[j] = i2f((f2i(f) & keep) | (0x3f800000 & ~keep));
     }
 }
 
