@@ -12,6 +12,7 @@
 #include "internal.h"
 
 #include <math.h>
+#include <omp.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -419,6 +420,24 @@ bin_set_alloc(bin_set *b, long n)
     return b->s2 && b->l && b->count ? 0 : -1;
 }
 
+/* Room for `more` bins after the b->n there are (*cap: what the arrays hold), growing
+ * by half again at least. */
+static int
+bin_set_reserve(bin_set *b, long *cap, long more)
+{
+    if (b->n + more <= *cap) return 0;
+    long want = *cap + *cap / 2 > b->n + more ? *cap + *cap / 2 : b->n + more + 1024;
+    float *s2 = mcp_realloc(b->s2, (size_t)want * sizeof *s2);
+    if (s2) b->s2 = s2;
+    float *l = s2 ? mcp_realloc(b->l, (size_t)want * sizeof *l) : NULL;
+    if (l) b->l = l;
+    float *count = l ? mcp_realloc(b->count, (size_t)want * sizeof *count) : NULL;
+    if (!count) return -1;
+    b->count = count;
+    *cap = want;
+    return 0;
+}
+
 static void
 bin_push(bin_set *b, int key, int shift, float l, uint32_t count)
 {
@@ -429,14 +448,30 @@ bin_push(bin_set *b, int key, int shift, float l, uint32_t count)
     b->n++;
 }
 
-/* Bins block i's values per channel into out (fine and coarse), with hist[3] zeroed
- * tables of HIST_COUNTS counts (left zeroed): FINE_KEYS fine counts, then the coarse
- * ones, which the scan uses to step over empty runs of fine keys (a block's values
+/* One thread's bins: the blocks it binned, one after the other, and what they span
+ * (bin_set_join puts them in block order). A few dozen bytes a block where each block
+ * had arrays of its own: at a block per pixel (Alg. 1 on a render whose variance is
+ * understated) those took 300 bytes a pixel. */
+typedef struct {
+    bin_set fine, coarse;
+    long fine_cap, coarse_cap;
+    double top, s2_min;
+} bin_arena;
+
+typedef struct {
+    int arena;           /* the thread whose arena holds the block's bins */
+    long fine0, coarse0; /* where they start in it */
+    int fine_n, coarse_n;
+} block_bins;
+
+/* Bins block i's values per channel into the arena (fine and coarse), with hist[3]
+ * zeroed tables of HIST_COUNTS counts (left zeroed): FINE_KEYS fine counts, then the
+ * coarse ones, which the scan uses to step over empty runs of fine keys (a block's values
  * span tens of octaves, 1024 fine keys each, most of them empty). */
 #define MERGE (COARSE_SHIFT - FINE_SHIFT) /* fine keys per coarse one: 1 << MERGE */
 #define HIST_COUNTS (FINE_KEYS + (FINE_KEYS >> MERGE))
 static int
-bin_block(const mcp_error_dist *d, int i, uint32_t *hist[3], binned_dist *out)
+bin_block(const mcp_error_dist *d, int i, uint32_t *hist[3], bin_arena *a, block_bins *at)
 {
     const mcp_block *k = &d->blocks->items[i];
     int lo[3] = {FINE_KEYS, FINE_KEYS, FINE_KEYS}, hi[3] = {-1, -1, -1};
@@ -454,10 +489,10 @@ bin_block(const mcp_error_dist *d, int i, uint32_t *hist[3], binned_dist *out)
     long cap = 0, values = (long)k->w * k->h;
     for (int c = 0; c < 3; c++)
         cap += hi[c] - lo[c] + 1 < values ? hi[c] - lo[c] + 1 : values;
-    memset(out, 0, sizeof *out);
-    out->top = 0.0;
-    out->s2_min = INFINITY;
-    const int failed = bin_set_alloc(&out->fine, cap) || bin_set_alloc(&out->coarse, cap);
+    at->fine0 = a->fine.n;
+    at->coarse0 = a->coarse.n;
+    const int failed = bin_set_reserve(&a->fine, &a->fine_cap, cap) ||
+                       bin_set_reserve(&a->coarse, &a->coarse_cap, cap);
     for (int c = 0; c < 3; c++) {
         float l = d->sqrt_lambda[3 * i + c];
         double r = l + TAIL_Z + 1.0;
@@ -471,33 +506,39 @@ bin_block(const mcp_error_dist *d, int i, uint32_t *hist[3], binned_dist *out)
                 if (!n) continue;
                 hist[c][key] = 0;
                 if (failed) continue; /* the tables are left zeroed all the same */
-                bin_push(&out->fine, key, FINE_SHIFT, l, n);
+                bin_push(&a->fine, key, FINE_SHIFT, l, n);
                 double b0 = i2f(key << FINE_SHIFT), b1 = i2f((key + 1) << FINE_SHIFT);
                 if (b0 > 0.0) { /* the bin of 0 (and denormals) has F = 1 at every τ */
-                    out->top = fmax(out->top, b1 * r * r);
-                    out->s2_min = fmin(out->s2_min, b0);
+                    a->top = fmax(a->top, b1 * r * r);
+                    a->s2_min = fmin(a->s2_min, b0);
                 }
             }
-            if (!failed) bin_push(&out->coarse, ck, COARSE_SHIFT, l, coarse_count);
+            if (!failed) bin_push(&a->coarse, ck, COARSE_SHIFT, l, coarse_count);
         }
     }
+    at->fine_n = (int)(a->fine.n - at->fine0);
+    at->coarse_n = (int)(a->coarse.n - at->coarse0);
     return failed ? -1 : 0;
 }
 
-/* Concatenates the blocks' bins in block order. */
+/* The blocks' bins in block order, from the arenas. */
 static int
-bin_set_join(binned_dist *parts, int n, int coarse, bin_set *out)
+bin_set_join(const bin_arena *arenas, const block_bins *at, int n, int coarse,
+             bin_set *out)
 {
     long total = 0;
     for (int i = 0; i < n; i++)
-        total += (coarse ? parts[i].coarse : parts[i].fine).n;
+        total += coarse ? at[i].coarse_n : at[i].fine_n;
     if (bin_set_alloc(out, total)) return -1;
     for (int i = 0; i < n; i++) {
-        const bin_set *b = coarse ? &parts[i].coarse : &parts[i].fine;
-        memcpy(out->s2 + out->n, b->s2, (size_t)b->n * sizeof *b->s2);
-        memcpy(out->l + out->n, b->l, (size_t)b->n * sizeof *b->l);
-        memcpy(out->count + out->n, b->count, (size_t)b->n * sizeof *b->count);
-        out->n += b->n;
+        const bin_set *b =
+            coarse ? &arenas[at[i].arena].coarse : &arenas[at[i].arena].fine;
+        const long from = coarse ? at[i].coarse0 : at[i].fine0;
+        const int count = coarse ? at[i].coarse_n : at[i].fine_n;
+        memcpy(out->s2 + out->n, b->s2 + from, (size_t)count * sizeof *b->s2);
+        memcpy(out->l + out->n, b->l + from, (size_t)count * sizeof *b->l);
+        memcpy(out->count + out->n, b->count + from, (size_t)count * sizeof *b->count);
+        out->n += count;
     }
     return 0;
 }
@@ -544,34 +585,49 @@ binned_new(const mcp_error_dist *d, binned_dist *bd)
     bd->n_values = (double)d->n_values;
     bd->top = 0.0;
     bd->s2_min = INFINITY;
-    binned_dist *parts = mcp_calloc((size_t)b->count + 1, sizeof *parts);
-    if (!parts) return mcp_error("out of memory (error percentiles)");
+    const int n_arenas = omp_get_max_threads();
+    bin_arena *arenas = mcp_calloc((size_t)n_arenas, sizeof *arenas);
+    block_bins *at = mcp_calloc((size_t)b->count + 1, sizeof *at);
+    if (!arenas || !at) {
+        free(arenas);
+        free(at);
+        return mcp_error("out of memory (error percentiles)");
+    }
     int failed = 0;
-#pragma omp parallel reduction(+ : failed)
+#pragma omp parallel num_threads(n_arenas) reduction(+ : failed)
     {
+        const int t = omp_get_thread_num();
+        bin_arena *a = &arenas[t];
+        a->top = 0.0;
+        a->s2_min = INFINITY;
         uint32_t *hist[3];
         for (int c = 0; c < 3; c++)
             hist[c] = mcp_calloc(HIST_COUNTS, sizeof *hist[c]);
         int ok = hist[0] && hist[1] && hist[2];
         failed += !ok;
 #pragma omp for schedule(dynamic, 1)
-        for (int i = 0; i < b->count; i++)
-            if (ok) failed += bin_block(d, i, hist, &parts[i]) != 0;
+        for (int i = 0; i < b->count; i++) {
+            at[i].arena = t;
+            if (ok) failed += bin_block(d, i, hist, a, &at[i]) != 0;
+        }
         for (int c = 0; c < 3; c++)
             free(hist[c]);
     }
     if (!failed) {
-        failed = bin_set_join(parts, b->count, 0, &bd->fine) ||
-                 bin_set_join(parts, b->count, 1, &bd->coarse) ||
+        failed = bin_set_join(arenas, at, b->count, 0, &bd->fine) ||
+                 bin_set_join(arenas, at, b->count, 1, &bd->coarse) ||
                  bin_set_runs(&bd->fine) || bin_set_runs(&bd->coarse);
-        for (int i = 0; i < b->count; i++) {
-            bd->top = fmax(bd->top, parts[i].top);
-            bd->s2_min = fmin(bd->s2_min, parts[i].s2_min);
+        for (int t = 0; t < n_arenas; t++) {
+            bd->top = fmax(bd->top, arenas[t].top);
+            bd->s2_min = fmin(bd->s2_min, arenas[t].s2_min);
         }
     }
-    for (int i = 0; i < b->count; i++)
-        binned_free(&parts[i]);
-    free(parts);
+    for (int t = 0; t < n_arenas; t++) {
+        bin_set_free(&arenas[t].fine);
+        bin_set_free(&arenas[t].coarse);
+    }
+    free(arenas);
+    free(at);
     if (failed) {
         binned_free(bd);
         return mcp_error("out of memory (error percentiles)");

@@ -252,14 +252,14 @@ test_percentiles_match_draws(void **state)
 }
 
 /* The percentiles against an exact bisection on mcp_error_cdf (every value, to 1e-6):
- * 16 blocks with their own λ, s² log-uniform over 12 decades with some zeros, so that
- * the compressed search meets many bins per block and bins of 0. */
+ * nx x ny blocks with their own λ, s² log-uniform over 12 decades with some zeros, so
+ * that the compressed search meets many bins per block and bins of 0; with a block per
+ * pixel, the bins of 15360 blocks binned by each thread into its own growing arena. */
 static void
-test_percentiles_match_exact_search(void **state)
+check_exact_search(int nx, int ny)
 {
-    (void)state;
     const int w = 160, h = 96;
-    mcp_blocks *b = grid_blocks(w, h, 4, 4);
+    mcp_blocks *b = grid_blocks(w, h, nx, ny);
     mcp_image *var = NULL;
     assert_int_equal(mcp_image_new(w, h, 3, RGB, &var), 0);
     uint64_t rng = 2026;
@@ -269,7 +269,7 @@ test_percentiles_match_exact_search(void **state)
                            : (float)pow(10.0, 12.0 * mcp_test_rand_uniform(&rng) - 9.0);
     mcp_error_dist *d = NULL;
     assert_int_equal(mcp_error_distribution(b, var, &d), 0);
-    for (int i = 0; i < 16; i++) /* λ from 0 to 15 per block and channel */
+    for (int i = 0; i < b->count; i++) /* λ from 0 to 15 per block and channel */
         for (int c = 0; c < 3; c++)
             b->items[i].sure_sum[c] =
                 (1.0 + (i + c) % 16) * (b->items[i].var_sum[c] + 1e-6);
@@ -307,6 +307,20 @@ test_percentiles_match_exact_search(void **state)
 }
 
 static void
+test_percentiles_match_exact_search(void **state)
+{
+    (void)state;
+    check_exact_search(4, 4);
+}
+
+static void
+test_percentiles_block_per_pixel(void **state)
+{
+    (void)state;
+    check_exact_search(160, 96);
+}
+
+static void
 test_errors(void **state)
 {
     (void)state;
@@ -339,6 +353,7 @@ main(void)
         cmocka_unit_test(test_distribution_parameters),
         cmocka_unit_test(test_percentiles_match_draws),
         cmocka_unit_test(test_percentiles_match_exact_search),
+        cmocka_unit_test(test_percentiles_block_per_pixel),
         cmocka_unit_test(test_errors),
     };
     return cmocka_run_group_tests_name("estimate/stopping", tests, NULL, NULL);
