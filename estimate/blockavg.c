@@ -296,10 +296,11 @@ check_pair(const mcp_image *a, const mcp_image *b)
     return 0;
 }
 
-/* Alg. 1, with quiet blocks left whole where s2 is given. */
-static int
-average(const mcp_image *sure_rel, const mcp_image *sigma_rel, const mcp_image *s2,
-        const mcp_block_options *opt, mcp_blocks **out)
+/* Alg. 1, with quiet blocks left whole where s2 is given (internal.h). */
+int
+mcp__block_average_quiet(const mcp_image *sure_rel, const mcp_image *sigma_rel,
+                         const mcp_image *s2, const mcp_block_options *opt,
+                         mcp_blocks **out)
 {
     *out = NULL;
     mcp_block_options o = opt ? *opt : mcp_block_defaults();
@@ -342,15 +343,7 @@ int
 mcp_block_average(const mcp_image *sure_rel, const mcp_image *sigma_rel,
                   const mcp_block_options *opt, mcp_blocks **out)
 {
-    return average(sure_rel, sigma_rel, NULL, opt, out);
-}
-
-int
-mcp__block_average_quiet(const mcp_image *sure_rel, const mcp_image *sigma_rel,
-                         const mcp_image *s2, const mcp_block_options *opt,
-                         mcp_blocks **out)
-{
-    return average(sure_rel, sigma_rel, s2, opt, out);
+    return mcp__block_average_quiet(sure_rel, sigma_rel, NULL, opt, out);
 }
 
 int
