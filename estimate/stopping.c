@@ -420,24 +420,6 @@ bin_set_alloc(bin_set *b, long n)
     return b->s2 && b->l && b->count ? 0 : -1;
 }
 
-/* Room for `more` bins after the b->n there are (*cap: what the arrays hold), growing
- * by half again at least. */
-static int
-bin_set_reserve(bin_set *b, long *cap, long more)
-{
-    if (b->n + more <= *cap) return 0;
-    long want = *cap + *cap / 2 > b->n + more ? *cap + *cap / 2 : b->n + more + 1024;
-    float *s2 = mcp_realloc(b->s2, (size_t)want * sizeof *s2);
-    if (s2) b->s2 = s2;
-    float *l = s2 ? mcp_realloc(b->l, (size_t)want * sizeof *l) : NULL;
-    if (l) b->l = l;
-    float *count = l ? mcp_realloc(b->count, (size_t)want * sizeof *count) : NULL;
-    if (!count) return -1;
-    b->count = count;
-    *cap = want;
-    return 0;
-}
-
 static void
 bin_push(bin_set *b, int key, int shift, float l, uint32_t count)
 {
@@ -448,21 +430,71 @@ bin_push(bin_set *b, int key, int shift, float l, uint32_t count)
     b->n++;
 }
 
-/* One thread's bins: the blocks it binned, one after the other, and what they span
- * (bin_set_join puts them in block order). A few dozen bytes a block where each block
- * had arrays of its own: at a block per pixel (Alg. 1 on a render whose variance is
- * understated) those took 300 bytes a pixel. */
+/* One thread's bins: the blocks it binned, one after the other, in chunks of
+ * CHUNK_BINS bins or of one block's (bin_set_join puts them in block order). A few
+ * dozen bytes a block where each block had arrays of its own: at a block per pixel
+ * (Alg. 1 on a render whose variance is understated) those took 300 bytes a pixel.
+ * Chunks, not one array grown as needed: a grown array is new memory each time, whose
+ * first touch is slow on some machines (docs/benchmarks.md, "Renders without variance,
+ * and 8K"), where a chunk takes memory the heap holds. */
+#define CHUNK_BINS (1L << 18)
+
 typedef struct {
-    bin_set fine, coarse;
-    long fine_cap, coarse_cap;
+    bin_set bins;
+    long cap;
+} bin_chunk;
+
+typedef struct {
+    bin_chunk *items;
+    int n, cap;
+} bin_chunks;
+
+typedef struct {
+    bin_chunks fine, coarse;
     double top, s2_min;
 } bin_arena;
 
 typedef struct {
-    int arena;           /* the thread whose arena holds the block's bins */
-    long fine0, coarse0; /* where they start in it */
+    int arena;                    /* the thread whose arena holds the block's bins */
+    int fine_chunk, coarse_chunk; /* the chunks, and where the bins start in them */
+    long fine0, coarse0;
     int fine_n, coarse_n;
 } block_bins;
+
+/* The chunk that takes `more` bins next (its index in *chunk), or NULL when out of
+ * memory. */
+static bin_set *
+chunk_room(bin_chunks *c, long more, int *chunk)
+{
+    if (c->n && c->items[c->n - 1].bins.n + more <= c->items[c->n - 1].cap) {
+        *chunk = c->n - 1;
+        return &c->items[c->n - 1].bins;
+    }
+    if (c->n == c->cap) {
+        const int cap = c->cap ? 2 * c->cap : 8;
+        bin_chunk *grown = mcp_realloc(c->items, (size_t)cap * sizeof *grown);
+        if (!grown) return NULL;
+        c->items = grown;
+        c->cap = cap;
+    }
+    bin_chunk *k = &c->items[c->n];
+    k->cap = more > CHUNK_BINS ? more : CHUNK_BINS;
+    if (bin_set_alloc(&k->bins, k->cap)) {
+        bin_set_free(&k->bins);
+        return NULL;
+    }
+    *chunk = c->n++;
+    return &k->bins;
+}
+
+static void
+chunks_free(bin_chunks *c)
+{
+    for (int i = 0; i < c->n; i++)
+        bin_set_free(&c->items[i].bins);
+    free(c->items);
+    memset(c, 0, sizeof *c);
+}
 
 /* Bins block i's values per channel into the arena (fine and coarse), with hist[3]
  * zeroed tables of HIST_COUNTS counts (left zeroed): FINE_KEYS fine counts, then the
@@ -489,10 +521,11 @@ bin_block(const mcp_error_dist *d, int i, uint32_t *hist[3], bin_arena *a, block
     long cap = 0, values = (long)k->w * k->h;
     for (int c = 0; c < 3; c++)
         cap += hi[c] - lo[c] + 1 < values ? hi[c] - lo[c] + 1 : values;
-    at->fine0 = a->fine.n;
-    at->coarse0 = a->coarse.n;
-    const int failed = bin_set_reserve(&a->fine, &a->fine_cap, cap) ||
-                       bin_set_reserve(&a->coarse, &a->coarse_cap, cap);
+    bin_set *to_fine = chunk_room(&a->fine, cap, &at->fine_chunk),
+            *to_coarse = to_fine ? chunk_room(&a->coarse, cap, &at->coarse_chunk) : NULL;
+    const int failed = !to_coarse;
+    at->fine0 = to_fine ? to_fine->n : 0;
+    at->coarse0 = to_coarse ? to_coarse->n : 0;
     for (int c = 0; c < 3; c++) {
         float l = d->sqrt_lambda[3 * i + c];
         double r = l + TAIL_Z + 1.0;
@@ -506,18 +539,18 @@ bin_block(const mcp_error_dist *d, int i, uint32_t *hist[3], bin_arena *a, block
                 if (!n) continue;
                 hist[c][key] = 0;
                 if (failed) continue; /* the tables are left zeroed all the same */
-                bin_push(&a->fine, key, FINE_SHIFT, l, n);
+                bin_push(to_fine, key, FINE_SHIFT, l, n);
                 double b0 = i2f(key << FINE_SHIFT), b1 = i2f((key + 1) << FINE_SHIFT);
                 if (b0 > 0.0) { /* the bin of 0 (and denormals) has F = 1 at every τ */
                     a->top = fmax(a->top, b1 * r * r);
                     a->s2_min = fmin(a->s2_min, b0);
                 }
             }
-            if (!failed) bin_push(&a->coarse, ck, COARSE_SHIFT, l, coarse_count);
+            if (!failed) bin_push(to_coarse, ck, COARSE_SHIFT, l, coarse_count);
         }
     }
-    at->fine_n = (int)(a->fine.n - at->fine0);
-    at->coarse_n = (int)(a->coarse.n - at->coarse0);
+    at->fine_n = failed ? 0 : (int)(to_fine->n - at->fine0);
+    at->coarse_n = failed ? 0 : (int)(to_coarse->n - at->coarse0);
     return failed ? -1 : 0;
 }
 
@@ -531,8 +564,9 @@ bin_set_join(const bin_arena *arenas, const block_bins *at, int n, int coarse,
         total += coarse ? at[i].coarse_n : at[i].fine_n;
     if (bin_set_alloc(out, total)) return -1;
     for (int i = 0; i < n; i++) {
-        const bin_set *b =
-            coarse ? &arenas[at[i].arena].coarse : &arenas[at[i].arena].fine;
+        const bin_arena *a = &arenas[at[i].arena];
+        const bin_set *b = coarse ? &a->coarse.items[at[i].coarse_chunk].bins
+                                  : &a->fine.items[at[i].fine_chunk].bins;
         const long from = coarse ? at[i].coarse0 : at[i].fine0;
         const int count = coarse ? at[i].coarse_n : at[i].fine_n;
         memcpy(out->s2 + out->n, b->s2 + from, (size_t)count * sizeof *b->s2);
@@ -623,8 +657,8 @@ binned_new(const mcp_error_dist *d, binned_dist *bd)
         }
     }
     for (int t = 0; t < n_arenas; t++) {
-        bin_set_free(&arenas[t].fine);
-        bin_set_free(&arenas[t].coarse);
+        chunks_free(&arenas[t].fine);
+        chunks_free(&arenas[t].coarse);
     }
     free(arenas);
     free(at);
