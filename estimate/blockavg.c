@@ -73,15 +73,20 @@ count_bad(const mcp_image *sure, const mcp_image *sigma, int cx, int cy)
     return bad;
 }
 
-/* 1 when pixel (x, y) has some Σ̂^r or s² other than 0 in some channel (with no s²
- * image, every pixel is loud: Alg. 1 as the paper has it). */
+/* 1 when a pixel's Σ̂^r (g) or s² (v) is other than 0 in some channel. */
+static inline int
+loud_values(const float *g, const float *v)
+{
+    return (g[0] != 0.0f) | (g[1] != 0.0f) | (g[2] != 0.0f) | (v[0] != 0.0f) |
+           (v[1] != 0.0f) | (v[2] != 0.0f);
+}
+
+/* The same for pixel (x, y); with no s² image every pixel is loud (Alg. 1 as the paper
+ * has it). */
 static inline int
 loud(const sums *s, int x, int y)
 {
-    if (!s->s2) return 1;
-    const float *g = mcp_image_px(s->sigma, x, y), *v = mcp_image_px(s->s2, x, y);
-    return (g[0] != 0.0f) | (g[1] != 0.0f) | (g[2] != 0.0f) | (v[0] != 0.0f) |
-           (v[1] != 0.0f) | (v[2] != 0.0f);
+    return !s->s2 || loud_values(mcp_image_px(s->sigma, x, y), mcp_image_px(s->s2, x, y));
 }
 
 static int
@@ -125,9 +130,7 @@ sums_build(const mcp_image *sure, const mcp_image *sigma, const mcp_image *s2, s
                     if (s2_packed) { /* loud(), on the row's packed values */
                         const float *pv = mcp_image_px(s2, cx * CELL, y);
                         for (int x = 0; x < CELL; x++)
-                            n_loud += (pg[3 * x] != 0.0f) | (pg[3 * x + 1] != 0.0f) |
-                                      (pg[3 * x + 2] != 0.0f) | (pv[3 * x] != 0.0f) |
-                                      (pv[3 * x + 1] != 0.0f) | (pv[3 * x + 2] != 0.0f);
+                            n_loud += loud_values(pg + 3 * x, pv + 3 * x);
                     } else {
                         for (int x = cx * CELL; x < x1; x++)
                             n_loud += loud(s, x, y);
