@@ -222,6 +222,10 @@ cmd_estimate(int argc, char **argv)
         if (mcp__dump_load_without(&spec, without, &dump) ||
             mcp_estimate_compute(dump, den, eo, &e))
             goto done;
+        /* nothing after the estimate reads the dump: its memory goes to the pictures
+           and files */
+        mcp_dump_free(dump);
+        dump = NULL;
         summary = mcp__estimate_json(e, path, den->name, eo);
         if (ref && mcp__estimate_add_truth(e, ref, eo, summary)) /* the truth beside it */
             goto done;
