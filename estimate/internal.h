@@ -91,6 +91,11 @@ void mcp__sincos_turn(float u, float *s, float *c);
 int mcp__probe_variance_floor(const mcp_dump *d, int radius, mcp_image **var,
                               mcp_image **cov);
 
+/* λ of each block's values, a value per pixel (3 channels, "lambda.R" ...), and with
+ * with_s2 the distribution's s² beside it: mcp_error_dist_image's 6 channels
+ * (stopping.c). distribution.exr holds λ alone (jobs/estimate_output.c). */
+int mcp__error_dist_image(const mcp_error_dist *d, int with_s2, mcp_image **out);
+
 /* mcp_block_average, except that a quiet block, one where Σ̂^r and the model's s² (s2:
  * the distribution's Var^r) are 0 in every pixel and channel, is not cut. Every value in
  * it has s = 0, so F_i = 1 whatever its block's λ: F(τ) and the percentiles are those of

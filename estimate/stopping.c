@@ -257,28 +257,38 @@ mcp_error_dist_mean(const mcp_error_dist *d)
 }
 
 int
-mcp_error_dist_image(const mcp_error_dist *d, mcp_image **out)
+mcp__error_dist_image(const mcp_error_dist *d, int with_s2, mcp_image **out)
 {
     *out = NULL;
     if (!d) return mcp_error("error distribution: missing");
     static const char *const names[6] = {"lambda.R", "lambda.G", "lambda.B",
                                          "s2.R",     "s2.G",     "s2.B"};
     const mcp_blocks *b = d->blocks;
-    if (mcp__image_new(b->width, b->height, 6, names, "error distribution", out))
+    if (mcp__image_new(b->width, b->height, with_s2 ? 6 : 3, names, "error distribution",
+                       out))
         return -1;
+    mcp_image *img = *out;
+    /* a block's pixels are its own: the blocks fill the image in any order */
+#pragma omp parallel for schedule(dynamic, 1)
     for (int i = 0; i < b->count; i++) {
         const mcp_block *k = &b->items[i];
+        float l[3];
+        for (int c = 0; c < 3; c++)
+            l[c] = (float)mcp_error_dist_lambda(d, i, c);
         for (int y = k->y; y < k->y + k->h; y++)
             for (int x = k->x; x < k->x + k->w; x++) {
-                float *o = mcp_image_px(*out, x, y);
-                const float *v = mcp_image_px(d->var_rel, x, y);
-                for (int c = 0; c < 3; c++) {
-                    o[c] = (float)mcp_error_dist_lambda(d, i, c);
-                    o[3 + c] = v[c];
-                }
+                float *o = mcp_image_px(img, x, y);
+                memcpy(o, l, sizeof l);
+                if (with_s2) memcpy(o + 3, mcp_image_px(d->var_rel, x, y), sizeof l);
             }
     }
     return 0;
+}
+
+int
+mcp_error_dist_image(const mcp_error_dist *d, mcp_image **out)
+{
+    return mcp__error_dist_image(d, 1, out);
 }
 
 double

@@ -5,6 +5,7 @@
 #include "internal.h"
 #include "../common/filter/internal.h" /* colour maps on fewer levels */
 #include "../common/report/internal.h" /* maps of one value */
+#include "../estimate/internal.h"      /* λ as an image */
 
 #include <math.h>
 #include <stdio.h>
@@ -81,35 +82,13 @@ mcp__estimate_json(const mcp_estimate *e, const char *input, const char *denoise
     return j;
 }
 
-/* The λ of each block's values (Eq. 14), a value per pixel: distribution.exr. */
-static int
-lambda_image(const mcp_estimate *e, mcp_image **out)
-{
-    const mcp_blocks *b = e->blocks;
-    if (mcp_image_new(b->width, b->height, 3,
-                      (const char *const[]){"lambda.R", "lambda.G", "lambda.B"}, out))
-        return -1;
-    mcp_image *lambda = *out;
-#pragma omp parallel for schedule(dynamic, 1)
-    for (int i = 0; i < b->count; i++) {
-        const mcp_block *k = &b->items[i];
-        float l[3];
-        for (int c = 0; c < 3; c++)
-            l[c] = (float)mcp_error_dist_lambda(e->dist, i, c);
-        for (int y = k->y; y < k->y + k->h; y++)
-            for (int x = k->x; x < k->x + k->w; x++)
-                memcpy(mcp_image_px(lambda, x, y), l, sizeof l);
-    }
-    return 0;
-}
-
 /* The report's block picture: the error each pixel is expected to have under the
  * model that F(tau) comes from, s²(λ + 1) (mean of R, G, B; log10 from -5 to 0 in
  * inferno, like the metrics' RelSE map), with the block edges in white. Unlike
  * blocks.png, whose colours only tell blocks apart, its colour bar reads as a value,
  * and a single block still shows where the error is: s² varies per pixel. s2 is the
- * distribution's (Var^r, variance_rel.exr), lambda lambda_image's. *log_error: the
- * log10 values it shows (the caller frees them). */
+ * distribution's (Var^r, variance_rel.exr), lambda mcp__error_dist_image's. *log_error:
+ * the log10 values it shows (the caller frees them). */
 static int
 blocks_error_picture(const mcp_blocks *blocks, const mcp_image *lambda,
                      const mcp_image *s2, unsigned char *rgb8, mcp_image **log_error)
@@ -207,7 +186,8 @@ mcp__estimate_write_single(const mcp_estimate *e, const mcp__estimate_dir *o,
     int rc = -1, n = 0, w = e->blocks->width, h = e->blocks->height;
     if (mcp_make_dirs(o->dir) ||
         mcp_blocks_mean_image(e->blocks, e->maps.sure_rel, &block_mean) ||
-        lambda_image(e, &lambda) || !(paths = mcp_malloc(MAX_FILES * sizeof *paths)))
+        mcp__error_dist_image(e->dist, 0, &lambda) ||
+        !(paths = mcp_malloc(MAX_FILES * sizeof *paths)))
         goto done;
     /* one block is one colour: a flat square that shows nothing, so no blocks.png
      * (the error picture's caption says why there is one block) */
