@@ -17,6 +17,8 @@
 
 #include <mcpost/estimate.h>
 
+#include "../../estimate/internal.h" /* mcp__error_dist_image */
+
 static const char *const RGB[] = {"R", "G", "B"};
 
 /* ∫_0^x of the Poisson-mixture density. */
@@ -148,6 +150,16 @@ test_distribution_parameters(void **state)
         }
     /* block 0 channel G has SURE < Var: λ = 0 */
     assert_true(mcp_image_px(img, 0, 0)[1] == 0.0f);
+    /* λ alone (distribution.exr): the same values as the first three channels */
+    mcp_image *lambda = NULL;
+    assert_int_equal(mcp__error_dist_image(d, 0, &lambda), 0);
+    assert_int_equal(lambda->channels, 3);
+    assert_string_equal(lambda->names[2], "lambda.B");
+    for (int y = 0; y < 2; y++)
+        for (int x = 0; x < 4; x++)
+            assert_memory_equal(mcp_image_px(lambda, x, y), mcp_image_px(img, x, y),
+                                3 * sizeof(float));
+    mcp_image_free(lambda);
     /* F(τ) is the mean of the per-value CDFs */
     const double taus[] = {0.01, 0.3, 2.0, 50.0};
     for (int t = 0; t < 4; t++) {
