@@ -321,49 +321,93 @@ mcp_dump_pool_variance(mcp_dump *d, const mcp_image *shape, int radius)
 
 /* ---- increments of a progressive series ---- */
 
-int
-mcp_dump_increment_variance(const mcp_dump *const *members, int count,
-                            const mcp_increment_options *opt, mcp_dump **out,
-                            double *ratio)
+/* The sums behind one member's increments variance: per value, each block's
+ * size-weighted squared deviation of its mean from the member's mean X (R, G, B) and
+ * the cross products of its colour deviations (RG, RB, GB), in double, six a pixel. A
+ * block is the samples from one member to the next, or all of the first member's.
+ * Blocks are added one at a time in the series' order, so that a series read member by
+ * member holds these sums and two members instead of every member at once, and gets
+ * the same bits as a series held whole. */
+typedef struct increment_sums {
+    const mcp_image *X;
+    double *s;
+    int blocks;
+} increment_sums;
+
+/* 1 when the member fits the increments: a scalar sample count above the one before
+ * it (prev_spp; 0 for none) and the size of the member whose variance is sought. */
+static int
+increment_member_ok(const mcp_dump *d, double prev_spp, const mcp_dump *last)
 {
-    mcp_increment_options defaults = mcp_increment_defaults();
-    if (!opt) opt = &defaults;
-    *out = NULL;
-    if (ratio) *ratio = 0;
-    if (count < 1) return mcp_error("increments: no members given");
-    for (int k = 0; k < count; k++) {
-        const mcp_dump *d = members[k];
-        if (d->spp_map || !(d->spp > 0))
-            return mcp_error("%s: increments need one sample count per member (a scalar "
-                             "spp)",
-                             d->source);
-        if (k > 0 && !(d->spp > members[k - 1]->spp))
-            return mcp_error("%s: series members must have increasing sample counts (%g "
-                             "after %g)",
-                             d->source, d->spp, members[k - 1]->spp);
-        if (d->color->width != members[0]->color->width ||
-            d->color->height != members[0]->color->height)
-            return mcp_error("%s: not the size of %s", d->source, members[0]->source);
-    }
-    int i = count - 1, first = 0;
-    double n = members[i]->spp;
-    double first_spp = opt->first_spp > 0 ? opt->first_spp : n / 64;
-    /* the first block ends at the first member with at least first_spp samples:
-       smaller blocks sit where a stratified sampler's variance does not scale as 1/n */
-    while (first < i && members[first]->spp < first_spp)
-        first++;
-    int blocks = i - first + 1;
-    if (blocks < 2)
-        return mcp_error("%s: the variance from increments needs two blocks of samples "
-                         "(members from %g spp on); this member is the first",
-                         members[i]->source, first_spp);
-    const mcp_dump *last = members[i];
+    if (d->spp_map || !(d->spp > 0))
+        return !mcp_error("%s: increments need one sample count per member (a scalar "
+                          "spp)",
+                          d->source);
+    if (prev_spp > 0 && !(d->spp > prev_spp))
+        return !mcp_error("%s: series members must have increasing sample counts (%g "
+                          "after %g)",
+                          d->source, d->spp, prev_spp);
+    if (d->color->width != last->color->width || d->color->height != last->color->height)
+        return !mcp_error("%s: not the size of %s", d->source, last->source);
+    return 1;
+}
+
+/* Where the first block starts for a member of n samples: the least count it takes. */
+static double
+increments_first_spp(const mcp_increment_options *opt, double n)
+{
+    return opt->first_spp > 0 ? opt->first_spp : n / 64;
+}
+
+static int
+increment_sums_begin(increment_sums *a, const mcp_image *X)
+{
+    a->X = X;
+    a->blocks = 0;
+    a->s = mcp_calloc((size_t)X->width * X->height * 6, sizeof *a->s);
+    return a->s ? 0 : -1;
+}
+
+/* Adds the block of samples from prev's count to cur's (all of cur's when prev is
+ * NULL); its mean from the two running means. */
+static void
+increment_sums_add(increment_sums *a, const mcp_dump *cur, const mcp_dump *prev)
+{
+    const mcp_image *X = a->X;
+    const double nb = cur->spp, np = prev ? prev->spp : 0, size = nb - np;
+#pragma omp parallel for schedule(static)
+    for (int y = 0; y < X->height; y++)
+        for (int x = 0; x < X->width; x++) {
+            const float *xm = mcp_image_px(X, x, y), *xb = mcp_image_px(cur->color, x, y);
+            const float *xp = prev ? mcp_image_px(prev->color, x, y) : NULL;
+            double dev[3];
+            for (int c = 0; c < 3; c++)
+                dev[c] = (xp ? (nb * xb[c] - np * xp[c]) / size : xb[c]) - xm[c];
+            double *s = a->s + 6 * ((size_t)y * X->width + x);
+            add_spread(size, dev, s, s + 3);
+        }
+    a->blocks++;
+}
+
+/* The member `last` with the variance of the sums' blocks, pooled per opt, into *out;
+ * frees the sums. */
+static int
+increment_sums_finish(increment_sums *a, const mcp_dump *last,
+                      const mcp_increment_options *opt, mcp_dump **out, double *ratio)
+{
+    const int blocks = a->blocks;
+    const double n = last->spp;
     const mcp_image *X = last->color;
     mcp_image *shape = NULL;
-    mcp_dump *d = mcp_calloc(1, sizeof *d);
-    if (!d) return -1;
+    mcp_dump *d = NULL;
+    if (blocks < 2) {
+        mcp_error("%s: the variance from increments needs two blocks of samples "
+                  "(members from %g spp on); this member is the first",
+                  last->source, increments_first_spp(opt, n));
+        goto fail;
+    }
     /* the member itself, with the variance replaced */
-    if (mcp_image_copy(last->color, &d->color) ||
+    if (!(d = mcp_calloc(1, sizeof *d)) || mcp_image_copy(last->color, &d->color) ||
         (last->albedo && mcp_image_copy(last->albedo, &d->albedo)) ||
         (last->normal && mcp_image_copy(last->normal, &d->normal)) ||
         !(d->source = mcp_strdup(last->source)) ||
@@ -379,28 +423,16 @@ mcp_dump_increment_variance(const mcp_dump *const *members, int count,
 #pragma omp parallel for schedule(static)
     for (int y = 0; y < X->height; y++)
         for (int x = 0; x < X->width; x++) {
-            const float *xm = mcp_image_px(X, x, y);
-            double ss[3] = {0, 0, 0}, sc[3] = {0, 0, 0};
-            for (int b = first; b <= i; b++) {
-                /* block b: the samples from member b-1's count to member b's (all of
-                   member `first` for the first block); its mean from the two running
-                   means */
-                const float *xb = mcp_image_px(members[b]->color, x, y);
-                double nb = members[b]->spp, np = b == first ? 0 : members[b - 1]->spp;
-                const float *xp =
-                    b == first ? NULL : mcp_image_px(members[b - 1]->color, x, y);
-                double size = nb - np, dev[3];
-                for (int c = 0; c < 3; c++)
-                    dev[c] = (xp ? (nb * xb[c] - np * xp[c]) / size : xb[c]) - xm[c];
-                add_spread(size, dev, ss, sc);
-            }
+            const double *s = a->s + 6 * ((size_t)y * X->width + x);
             float *v = mcp_image_px(d->var_of_mean, x, y),
                   *cv = mcp_image_px(d->cov_of_mean, x, y);
             for (int c = 0; c < 3; c++)
-                v[c] = (float)(ss[c] / ((blocks - 1) * n));
+                v[c] = (float)(s[c] / ((blocks - 1) * n));
             for (int j = 0; j < 3; j++)
-                cv[j] = (float)(sc[j] / ((blocks - 1) * n));
+                cv[j] = (float)(s[3 + j] / ((blocks - 1) * n));
         }
+    free(a->s);
+    a->s = NULL;
     if (ratio && shape) {
         double sum_shape = 0, sum_incr = 0;
         for (int y = 0; y < X->height; y++)
@@ -423,9 +455,38 @@ mcp_dump_increment_variance(const mcp_dump *const *members, int count,
     *out = d;
     return 0;
 fail:
+    free(a->s);
+    a->s = NULL;
     mcp_image_free(shape);
     mcp_dump_free(d);
     return -1;
+}
+
+int
+mcp_dump_increment_variance(const mcp_dump *const *members, int count,
+                            const mcp_increment_options *opt, mcp_dump **out,
+                            double *ratio)
+{
+    mcp_increment_options defaults = mcp_increment_defaults();
+    if (!opt) opt = &defaults;
+    *out = NULL;
+    if (ratio) *ratio = 0;
+    if (count < 1) return mcp_error("increments: no members given");
+    const mcp_dump *last = members[count - 1];
+    for (int k = 0; k < count; k++)
+        if (!increment_member_ok(members[k], k ? members[k - 1]->spp : 0, last))
+            return -1;
+    int i = count - 1, first = 0;
+    const double first_spp = increments_first_spp(opt, last->spp);
+    /* the first block ends at the first member with at least first_spp samples:
+       smaller blocks sit where a stratified sampler's variance does not scale as 1/n */
+    while (first < i && members[first]->spp < first_spp)
+        first++;
+    increment_sums a;
+    if (increment_sums_begin(&a, last->color)) return -1;
+    for (int b = first; b <= i; b++)
+        increment_sums_add(&a, members[b], b == first ? NULL : members[b - 1]);
+    return increment_sums_finish(&a, last, opt, out, ratio);
 }
 
 int
@@ -474,19 +535,52 @@ mcp__series_increments_with(const mcp_series *s, int i, const mcp_dump *member,
                             const mcp_increment_options *opt, mcp_dump **out,
                             double *ratio)
 {
+    mcp_increment_options defaults = mcp_increment_defaults();
+    if (!opt) opt = &defaults;
     *out = NULL;
-    const mcp_dump **m = mcp_calloc((size_t)i + 1, sizeof *m);
-    if (!m) return -1;
+    if (ratio) *ratio = 0;
+    if (!increment_member_ok(member, 0, member)) return -1;
+    /* the members before i one at a time, each block added as its member is read: the
+       sums and two members at once, whatever the length of the series; members below
+       the first block's count are not read where the series gives their counts, and
+       nothing reads their albedo or normal */
+    const double first_spp = increments_first_spp(opt, member->spp);
+    increment_sums a;
+    if (increment_sums_begin(&a, member->color)) return -1;
+    mcp_dump *prev = NULL;
+    double prev_spp = 0;
     int rc = 0;
     for (int k = 0; k < i && !rc; k++) {
+        if (!prev && s->spp[k] > 0 && s->spp[k] < first_spp) {
+            if (!(s->spp[k] > prev_spp))
+                rc = mcp_error("%s: series members must have increasing sample counts "
+                               "(%g after %g)",
+                               s->paths[k], s->spp[k], prev_spp);
+            prev_spp = s->spp[k];
+            continue;
+        }
+        mcp_dump_spec spec = s->spec;
+        spec.path = s->paths[k];
+        if (s->spp[k] > 0) spec.spp = s->spp[k];
         mcp_dump *d = NULL;
-        rc = mcp__series_load_file(s, k, &d);
-        m[k] = d;
+        rc = mcp__dump_load_without(&spec, MCP__DUMP_NO_ALBEDO | MCP__DUMP_NO_NORMAL,
+                                    &d) ||
+             !increment_member_ok(d, prev_spp, member);
+        if (!rc) prev_spp = d->spp;
+        if (!rc && !prev && d->spp < first_spp) { /* before the first block */
+            mcp_dump_free(d);
+            continue;
+        }
+        if (!rc) increment_sums_add(&a, d, prev);
+        mcp_dump_free(prev);
+        prev = d;
     }
-    m[i] = member; /* borrowed */
-    rc = rc || mcp_dump_increment_variance(m, i + 1, opt, out, ratio);
-    for (int k = 0; k < i; k++)
-        mcp_dump_free((mcp_dump *)m[k]);
-    free(m);
-    return rc ? -1 : 0;
+    rc = rc || !increment_member_ok(member, prev_spp, member);
+    if (!rc) increment_sums_add(&a, member, prev);
+    mcp_dump_free(prev);
+    if (rc) {
+        free(a.s);
+        return -1;
+    }
+    return increment_sums_finish(&a, member, opt, out, ratio);
 }

@@ -340,6 +340,62 @@ test_increments_independent(void **state)
     mcp_image_free(truth_var);
 }
 
+/* The series' increments, read member by member, are the bits of the increments of the
+ * members held at once (mcp_dump_increment_variance), for every member; and where the
+ * series gives the counts, members below the first block's count are not read at all:
+ * with the first member's file gone, the last member's increments are the same. */
+static void
+test_increments_streamed(void **state)
+{
+    (void)state;
+    mcp_proc_scene scene = small_scene(0);
+    enum { N = 6 };
+    const int spp[N] = {1, 2, 4, 8, 16, 128};
+    mcp_series *s = procedural_series(&scene, spp, N, 77, "stream");
+    mcp_dump *members[N];
+    for (int k = 0; k < N; k++) {
+        mcp_dump_spec spec = mcp_dump_spec_defaults();
+        spec.path = s->paths[k];
+        assert_int_equal(mcp_dump_load(&spec, &members[k]), 0);
+    }
+    mcp_increment_options opt = mcp_increment_defaults();
+    mcp_dump *whole[N] = {0};
+    for (int i = 1; i < N; i++) {
+        mcp_dump *read = NULL;
+        double r_read = -1, r_whole = -2;
+        assert_int_equal(mcp_series_increment_variance(s, i, &opt, &read, &r_read), 0);
+        assert_int_equal(mcp_dump_increment_variance((const mcp_dump *const *)members,
+                                                     i + 1, &opt, &whole[i], &r_whole),
+                         0);
+        assert_true(r_read == r_whole);
+        assert_true(read->variance_dof == whole[i]->variance_dof);
+        const size_t n = (size_t)scene.width * scene.height * 3;
+        assert_memory_equal(read->var_of_mean->data, whole[i]->var_of_mean->data,
+                            n * sizeof(float));
+        assert_memory_equal(read->cov_of_mean->data, whole[i]->cov_of_mean->data,
+                            n * sizeof(float));
+        mcp_dump_free(read);
+    }
+    /* 128 spp: the first block starts at 2 spp, so the 1-spp member is not needed */
+    assert_true(whole[N - 1]->variance_dof == N - 2);
+    const double counts[N] = {1, 2, 4, 8, 16, 128};
+    mcp_series *given = NULL;
+    assert_int_equal(
+        mcp_series_from_paths((const char *const *)s->paths, counts, N, &given), 0);
+    assert_int_equal(remove(s->paths[0]), 0);
+    mcp_dump *read = NULL;
+    assert_int_equal(mcp_series_increment_variance(given, N - 1, &opt, &read, NULL), 0);
+    assert_memory_equal(read->var_of_mean->data, whole[N - 1]->var_of_mean->data,
+                        (size_t)scene.width * scene.height * 3 * sizeof(float));
+    mcp_dump_free(read);
+    mcp_series_free(given);
+    for (int k = 0; k < N; k++) {
+        mcp_dump_free(members[k]);
+        mcp_dump_free(whole[k]);
+    }
+    mcp_series_free(s);
+}
+
 /* The same on a stratified render (the procedural renderer's jittered sampler, 4x4
  * strata per pass of 16 samples, no fireflies), against its exact variance of the
  * mean: the renderer's Variance/n overstates it, the increments between passes and
@@ -607,6 +663,7 @@ main(void)
         cmocka_unit_test(test_pool_variance),
         cmocka_unit_test(test_pool_degrees_of_freedom),
         cmocka_unit_test(test_increments_independent),
+        cmocka_unit_test(test_increments_streamed),
         cmocka_unit_test(test_stratified_sources),
         cmocka_unit_test(test_series_variance_auto),
         cmocka_unit_test(test_pool_window_beside_large_values),
