@@ -14,6 +14,8 @@
  * second pass reloads each dump and finishes it. */
 #include "blend.h"
 #include "internal.h"
+#include "../common/dump/internal.h" /* members without the parts nothing reads */
+#include "../estimate/internal.h"
 
 #include <mcpost/metrics.h>
 
@@ -86,7 +88,11 @@ static int
 load_member(const run *r, int i, mcp_dump **out)
 {
     mcp_dump *d = NULL;
-    if (mcp_series_load(r->series, i, &d)) return -1;
+    /* the features only when the denoiser or joint SURE reads them */
+    if (mcp__series_load_without(
+            r->series, i, mcp__dump_parts_unread(r->den, r->o->sure.features != NULL),
+            &d))
+        return -1;
     const char *why = !d->var_of_mean               ? "has no variance"
                       : d->spp_map || !(d->spp > 0) ? "has no scalar sample count"
                                                     : NULL;

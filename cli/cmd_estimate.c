@@ -13,6 +13,7 @@
  * the denoiser map in a job). */
 #include "cli.h"
 #include "../common/dump/internal.h" /* a dump without the parts nothing reads */
+#include "../estimate/internal.h"    /* which parts those are */
 
 #include <mcpost/estimate.h>
 
@@ -216,10 +217,8 @@ cmd_estimate(int argc, char **argv)
         spec.convention = st.convention;
         spec.variance = st.variance;
         /* the features only when something reads them: the denoiser, or joint SURE */
-        const unsigned without =
-            (den->uses_albedo || eo->sure.features ? 0u : MCP__DUMP_NO_ALBEDO) |
-            (den->uses_normal || eo->sure.features ? 0u : MCP__DUMP_NO_NORMAL);
-        if (mcp__dump_load_without(&spec, without, &dump) ||
+        if (mcp__dump_load_without(
+                &spec, mcp__dump_parts_unread(den, eo->sure.features != NULL), &dump) ||
             mcp_estimate_compute(dump, den, eo, &e))
             goto done;
         /* nothing after the estimate reads the dump: its memory goes to the pictures

@@ -326,6 +326,13 @@ sure_from_groups(const mcp_dump *dump, const mcp__group_terms *g, mcp_error_maps
         }
 }
 
+unsigned
+mcp__dump_parts_unread(const mcp_denoiser *den, int sure_features)
+{
+    return (den->uses_albedo || sure_features ? 0u : MCP__DUMP_NO_ALBEDO) |
+           (den->uses_normal || sure_features ? 0u : MCP__DUMP_NO_NORMAL);
+}
+
 static int compute(const mcp_dump *dump, const mcp_denoiser *den,
                    const mcp_estimate_options *opt, const mcp__group_terms *groups,
                    mcp_estimate **out);
@@ -756,7 +763,9 @@ mcp_estimate_series_each(const mcp_series *series, const mcp_denoiser *den,
         mcp_estimate *e = NULL;
         mcp_series_point *pt = &s->points[i];
         mcp__group_terms g = {0};
-        if (mcp_series_load(series, i, &d) ||
+        if (mcp__series_load_without(
+                series, i, mcp__dump_parts_unread(den, o.est.sure.features != NULL),
+                &d) ||
             (groups > 1 && mcp__series_group_terms(series, i, d, den, groups, &g)) ||
             compute(d, den, &o.est, &g, &e)) {
             mcp_error_prefix("%s: ", series->paths[i]);

@@ -131,7 +131,7 @@ mcp__series_group_terms(const mcp_series *s, int i, const mcp_dump *member,
     for (int k = 0; k < 4; k++)
         if (mcp__image_new(w, h, 3, NULL, "jackknife sums", &acc[k])) goto done;
     for (int g = 0; g < G; g++) {
-        if (g < G - 1 && mcp__series_load_file(s, b[g], &end)) goto done;
+        if (g < G - 1 && mcp__series_load_file(s, b[g], 0, &end)) goto done;
         const mcp_dump *e = end ? end : member;
         if (e->spp_map || !(e->spp > before) || (end && !(end->spp < member->spp)) ||
             e->color->width != w || e->color->height != h) {

@@ -91,6 +91,11 @@ void mcp__sincos_turn(float u, float *s, float *c);
 int mcp__probe_variance_floor(const mcp_dump *d, int radius, mcp_image **var,
                               mcp_image **cov);
 
+/* The parts of a dump that neither the denoiser nor joint SURE (sure_features) reads,
+ * as MCP__DUMP_NO_* flags (common/dump/internal.h): the estimate, the series estimate
+ * and the blend load their dumps without them (estimate.c). */
+unsigned mcp__dump_parts_unread(const mcp_denoiser *den, int sure_features);
+
 /* λ of each block's values, a value per pixel (3 channels, "lambda.R" ...), and with
  * with_s2 the distribution's s² beside it: mcp_error_dist_image's 6 channels
  * (stopping.c). distribution.exr holds λ alone (jobs/estimate_output.c). */

@@ -1442,7 +1442,8 @@ static int
 first_member_from_increments(const mcp_series *s, mcp_dump *first)
 {
     mcp_dump *incr = NULL;
-    if (mcp_series_increment_variance(s, 1, &s->increments, &incr, NULL)) {
+    if (mcp__series_increment_variance(s, 1, MCP__DUMP_NO_ALBEDO | MCP__DUMP_NO_NORMAL,
+                                       &s->increments, &incr, NULL)) {
         if (strstr(mcp_error_message(), "out of memory")) return -1;
         mcp_error_clear();
         return 0;
@@ -1467,18 +1468,25 @@ first_member_from_increments(const mcp_series *s, mcp_dump *first)
 int
 mcp_series_load(const mcp_series *s, int i, mcp_dump **out)
 {
+    return mcp__series_load_without(s, i, 0, out);
+}
+
+int
+mcp__series_load_without(const mcp_series *s, int i, unsigned without, mcp_dump **out)
+{
     *out = NULL;
     if (i < 0 || i >= s->count)
         return mcp_error("series member %d of %d does not exist", i, s->count);
     if (s->variance_from == MCP_SERIES_VARIANCE_INCREMENTS && i > 0) {
         /* the increments need two blocks; a member before that keeps its own */
         double ratio;
-        if (mcp_series_increment_variance(s, i, &s->increments, out, &ratio) == 0)
+        if (mcp__series_increment_variance(s, i, without, &s->increments, out, &ratio) ==
+            0)
             return 0;
         if (!strstr(mcp_error_message(), "needs two blocks")) return -1;
         mcp_error_clear();
     }
-    if (mcp__series_load_file(s, i, out)) return -1;
+    if (mcp__series_load_file(s, i, without, out)) return -1;
     /* a member without any variance (a plain Cycles render) takes its increments'
        whatever they say: there is nothing else */
     int none = !(*out)->var_of_mean;
@@ -1551,11 +1559,11 @@ mcp__no_variance_hint(const mcp_dump *d, const char *otherwise)
 }
 
 int
-mcp__series_load_file(const mcp_series *s, int i, mcp_dump **out)
+mcp__series_load_file(const mcp_series *s, int i, unsigned without, mcp_dump **out)
 {
     *out = NULL;
     mcp_dump_spec spec = s->spec;
     spec.path = s->paths[i];
     if (s->spp[i] > 0) spec.spp = s->spp[i];
-    return mcp_dump_load(&spec, out);
+    return mcp__dump_load_without(&spec, without, out);
 }

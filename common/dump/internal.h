@@ -22,8 +22,17 @@ mcp__variance_is_per_sample(mcp_variance_source s)
     return s == MCP_VARSRC_PER_SAMPLE || s == MCP_VARSRC_XYZ_MOMENTS;
 }
 
-/* A series member as its file holds it, whatever the series' variance_from (dump.c). */
-int mcp__series_load_file(const mcp_series *s, int i, mcp_dump **out);
+/* A series member as its file holds it, whatever the series' variance_from, without
+ * the parts in `without` (MCP__DUMP_NO_*, below) (dump.c). */
+int mcp__series_load_file(const mcp_series *s, int i, unsigned without, mcp_dump **out);
+/* mcp_series_load without the parts a caller will not read (MCP__DUMP_NO_*): a blend
+ * or series estimate whose denoiser reads no albedo or normal (dump.c). */
+int mcp__series_load_without(const mcp_series *s, int i, unsigned without,
+                             mcp_dump **out);
+/* mcp_series_increment_variance with member i read without those parts (replicates.c). */
+int mcp__series_increment_variance(const mcp_series *s, int i, unsigned without,
+                                   const mcp_increment_options *opt, mcp_dump **out,
+                                   double *ratio);
 /* mcp_series_increment_variance of member i with that member already read (borrowed),
  * the members before it read from their files (replicates.c). */
 int mcp__series_increments_with(const mcp_series *s, int i, const mcp_dump *member,

@@ -508,7 +508,8 @@ mcp_series_variance_ratio(const mcp_series *s, double *ratio)
        (which says nothing about the series; tests/common/test_alloc) */
     *ratio = 0;
     if (strstr(mcp_error_message(), "out of memory")) return -1;
-    int unreadable = mcp__series_load_file(s, s->count - 1, &last);
+    int unreadable = mcp__series_load_file(
+        s, s->count - 1, MCP__DUMP_NO_ALBEDO | MCP__DUMP_NO_NORMAL, &last);
     mcp_dump_free(last);
     if (unreadable) return -1;
     mcp_error_clear();
@@ -516,18 +517,26 @@ mcp_series_variance_ratio(const mcp_series *s, double *ratio)
 }
 
 int
-mcp_series_increment_variance(const mcp_series *s, int i,
-                              const mcp_increment_options *opt, mcp_dump **out,
-                              double *ratio)
+mcp__series_increment_variance(const mcp_series *s, int i, unsigned without,
+                               const mcp_increment_options *opt, mcp_dump **out,
+                               double *ratio)
 {
     *out = NULL;
     if (i < 0 || i >= s->count)
         return mcp_error("series: no member %d (it has %d)", i, s->count);
     mcp_dump *member = NULL;
-    int rc = mcp__series_load_file(s, i, &member) ||
+    int rc = mcp__series_load_file(s, i, without, &member) ||
              mcp__series_increments_with(s, i, member, opt, out, ratio);
     mcp_dump_free(member);
     return rc ? -1 : 0;
+}
+
+int
+mcp_series_increment_variance(const mcp_series *s, int i,
+                              const mcp_increment_options *opt, mcp_dump **out,
+                              double *ratio)
+{
+    return mcp__series_increment_variance(s, i, 0, opt, out, ratio);
 }
 
 int
@@ -559,12 +568,8 @@ mcp__series_increments_with(const mcp_series *s, int i, const mcp_dump *member,
             prev_spp = s->spp[k];
             continue;
         }
-        mcp_dump_spec spec = s->spec;
-        spec.path = s->paths[k];
-        if (s->spp[k] > 0) spec.spp = s->spp[k];
         mcp_dump *d = NULL;
-        rc = mcp__dump_load_without(&spec, MCP__DUMP_NO_ALBEDO | MCP__DUMP_NO_NORMAL,
-                                    &d) ||
+        rc = mcp__series_load_file(s, k, MCP__DUMP_NO_ALBEDO | MCP__DUMP_NO_NORMAL, &d) ||
              !increment_member_ok(d, prev_spp, member);
         if (!rc) prev_spp = d->spp;
         if (!rc && !prev && d->spp < first_spp) { /* before the first block */

@@ -396,6 +396,42 @@ test_increments_streamed(void **state)
     mcp_series_free(s);
 }
 
+/* A member read without its albedo and normal (a blend or series estimate whose
+ * denoiser reads neither, mcp__series_load_without) has the colour and variance of the
+ * member read whole, bit for bit, whatever the series' variance_from. */
+static void
+test_series_load_without(void **state)
+{
+    (void)state;
+    mcp_proc_scene scene = small_scene(1); /* stratified: auto takes the increments */
+    enum { N = 4 };
+    const int spp[N] = {16, 32, 48, 64};
+    mcp_series *s = procedural_series(&scene, spp, N, 41, "without");
+    const size_t n = (size_t)scene.width * scene.height * 3 * sizeof(float);
+    const mcp_series_variance from[3] = {MCP_SERIES_VARIANCE_FILE,
+                                         MCP_SERIES_VARIANCE_INCREMENTS,
+                                         MCP_SERIES_VARIANCE_AUTO};
+    for (int f = 0; f < 3; f++) {
+        s->variance_from = from[f];
+        for (int i = 0; i < N; i++) {
+            mcp_dump *whole = NULL, *part = NULL;
+            assert_int_equal(mcp_series_load(s, i, &whole), 0);
+            assert_int_equal(mcp__series_load_without(
+                                 s, i, MCP__DUMP_NO_ALBEDO | MCP__DUMP_NO_NORMAL, &part),
+                             0);
+            assert_non_null(whole->albedo);
+            assert_null(part->albedo);
+            assert_null(part->normal);
+            assert_int_equal(part->variance_source, whole->variance_source);
+            assert_memory_equal(part->color->data, whole->color->data, n);
+            assert_memory_equal(part->var_of_mean->data, whole->var_of_mean->data, n);
+            mcp_dump_free(whole);
+            mcp_dump_free(part);
+        }
+    }
+    mcp_series_free(s);
+}
+
 /* The same on a stratified render (the procedural renderer's jittered sampler, 4x4
  * strata per pass of 16 samples, no fireflies), against its exact variance of the
  * mean: the renderer's Variance/n overstates it, the increments between passes and
@@ -664,6 +700,7 @@ main(void)
         cmocka_unit_test(test_pool_degrees_of_freedom),
         cmocka_unit_test(test_increments_independent),
         cmocka_unit_test(test_increments_streamed),
+        cmocka_unit_test(test_series_load_without),
         cmocka_unit_test(test_stratified_sources),
         cmocka_unit_test(test_series_variance_auto),
         cmocka_unit_test(test_pool_window_beside_large_values),
