@@ -1,5 +1,6 @@
 /* main.c: `mcpost SUBCOMMAND ...` -- finds the subcommand in the table and runs it. */
 #include "cli.h"
+#include "../common/core/internal.h" /* the plug-ins without BLAS threads */
 
 #include <stdio.h>
 #include <string.h>
@@ -58,6 +59,7 @@ main(int argc, char **argv)
     for (const mcp_command *const *c = mcp_commands; *c; c++)
         if (strcmp((*c)->name, argv[1]) == 0) {
             mcp_cli_tune_heap(argv);
+            mcp__plugins_one_blas_thread();
             if (!(*c)->parses_quiet) argc = take_quiet(argc, argv);
             return (*c)->run(argc - 1, argv + 1);
         }

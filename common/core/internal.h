@@ -85,6 +85,9 @@ int mcp__find_data_file(const char *name, char *buf, size_t cap);
  * beside the library (<libdir>/mcpost/), the build tree or the install folder, in that
  * order; NULL with the reason in err when none loads. */
 void *mcp__plugin_open(const char *file, char *err, size_t cap);
+/* The command line's: the plug-ins then load with OpenBLAS's thread pool off (paths.c).
+ */
+void mcp__plugins_one_blas_thread(void);
 
 /* Runs a command line with /bin/sh as system() does, with mcpost's programs folder
  * (the one holding the mcpost executable: beside the code, its bin/, the build tree or

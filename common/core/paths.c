@@ -44,6 +44,34 @@ mcp__find_data_file(const char *name, char *buf, size_t cap)
     return -1;
 }
 
+static int one_blas_thread;
+
+void
+mcp__plugins_one_blas_thread(void)
+{
+    one_blas_thread = 1;
+}
+
+/* OpenCV links LAPACK, so both plug-ins load the system's BLAS, and where that is
+ * OpenBLAS (Debian's libblas.so.3 alternative once libopenblas0 is installed) it
+ * starts a thread per core as it loads, each spinning on sched_yield for about 0.1 s
+ * of CPU waiting for work. mcpost calls no BLAS through the plug-ins, and on two cores
+ * that spin took 2-3% of a 0.6 s gauss estimate (docs/benchmarks.md, "BLAS threads").
+ * OPENBLAS_NUM_THREADS=1 while the plug-in loads starts none; a value the user set
+ * is left alone, and the variable is removed again, so that the programs mcpost runs
+ * (an external denoiser, a renderer) see the user's environment. Only the command
+ * line asks for this: a program that links the library may load OpenBLAS for its own
+ * work after the plug-in, and keeps its threads. */
+static void *
+load(const char *path)
+{
+    const int set = one_blas_thread && !getenv("OPENBLAS_NUM_THREADS");
+    if (set) setenv("OPENBLAS_NUM_THREADS", "1", 1);
+    void *h = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+    if (set) unsetenv("OPENBLAS_NUM_THREADS");
+    return h;
+}
+
 /* The plug-in folders: $MCPOST_PLUGIN_DIR; beside the mcpost library that this code is
  * in (<libdir>/mcpost/, found with dladdr, so an installed tree can move); the build
  * tree; the configured install folder. */
@@ -62,7 +90,7 @@ mcp__plugin_open(const char *file, char *err, size_t cap)
         char path[4200];
         snprintf(path, sizeof path, "%s/%s", dirs[i], file);
         if (access(path, R_OK) != 0) continue;
-        void *h = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+        void *h = load(path);
         if (h) return h;
         n += (size_t)snprintf(err + n, n < cap ? cap - n : 0, "%s; ", dlerror());
     }
