@@ -3,6 +3,7 @@
  * what the renders show (common/dump/replicates.c). The flags are the merge table's
  * (ops/op_merge.c), read by cli/options.c. */
 #include "cli.h"
+#include "../common/dump/internal.h" /* the merge in bands */
 
 #include <stdio.h>
 #include <stdlib.h>
@@ -20,15 +21,6 @@ static const char examples[] =
     "  mcpost merge --variance pooled "
     "samples/fixtures/strat/texture/blocks/texture_r0_b0[0-3].exr \\\n"
     "                 -o /tmp/texture_pooled.exr\n";
-
-/* One input read with the --spp and --convention given. */
-static int
-read_part(const char *path, const mcp_dump_spec *given, mcp_dump **out)
-{
-    mcp_dump_spec spec = *given;
-    spec.path = path;
-    return mcp_dump_load(&spec, out);
-}
 
 static int
 cmd_merge(int argc, char **argv)
@@ -52,13 +44,23 @@ cmd_merge(int argc, char **argv)
                                     count))
         return mcp_cli_fail();
     mcp_dump **parts = mcp_calloc((size_t)count, sizeof *parts);
+    mcp_dump_spec *specs = mcp_calloc((size_t)count, sizeof *specs);
     mcp_dump *merged = NULL;
-    int status = 1;
-    if (!parts) return mcp_cli_fail();
-    for (int i = 0; i < count; i++)
-        if (read_part(argv[first + i], &st.spec, &parts[i])) goto done;
-    if (mcp_dump_merge((const mcp_dump *const *)parts, count, &mo, &merged) ||
-        mcp_dump_write(merged, out_path, MCP_CONV_MCPOST, &wo))
+    int status = 1, streamed = 0;
+    if (!parts || !specs) goto done;
+    for (int i = 0; i < count; i++) {
+        specs[i] = st.spec;
+        specs[i].path = argv[first + i];
+    }
+    /* EXR dumps a band of rows at a time (common/dump/merge_stream.c), the others
+       whole */
+    if (mcp__dump_merge_streamed(specs, count, &mo, out_path, &wo, &merged, &streamed))
+        goto done;
+    for (int i = 0; !streamed && i < count; i++)
+        if (mcp_dump_load(&specs[i], &parts[i])) goto done;
+    if (!streamed &&
+        (mcp_dump_merge((const mcp_dump *const *)parts, count, &mo, &merged) ||
+         mcp_dump_write(merged, out_path, MCP_CONV_MCPOST, &wo)))
         goto done;
     if (merged->spp_map)
         printf("%s: %d dumps, per-pixel sample counts", out_path, count);
@@ -75,9 +77,10 @@ cmd_merge(int argc, char **argv)
     status = 0;
 done:
     if (status) status = mcp_cli_fail();
-    for (int i = 0; i < count; i++)
+    for (int i = 0; parts && i < count; i++)
         mcp_dump_free(parts[i]);
     free(parts);
+    free(specs);
     mcp_dump_free(merged);
     return status;
 }

@@ -376,10 +376,14 @@ enum {
     N_PARTS
 };
 
+/* The checks of a dump read a band of rows at a time (mcp__dump_bands, below). */
+typedef struct band_check band_check;
+
 typedef struct channel_source {
     const mcp_image *img; /* names, attributes and source; pixels unless header_only */
     int header_only;
     mcp_image *direct[N_PARTS];
+    band_check *band; /* the parts are rows of the dump (mcp__dump_bands); NULL: whole */
 } channel_source;
 
 /* Part `part` as an image of its n channels `names` (1 or 3), from the source. */
@@ -528,12 +532,31 @@ report_values(const mcp_image *img, const char *part, int is_variance,
     return 0;
 }
 
-/* NaN/Inf (and, for variance, negative values): fail naming the first, or zero them. */
+/* A dump read in bands, top to bottom: the parts checked (colour, albedo, normal,
+ * variance, covariance) have their bad values tallied band after band, with pixel
+ * coordinates in the whole image, and reported with the last band, so that the error
+ * is the line a whole read gives (the same count, the same first value). */
+enum { CHECK_COLOR, CHECK_ALBEDO, CHECK_NORMAL, CHECK_VAR, CHECK_COV, N_CHECKS };
+
+struct band_check {
+    int y_off; /* the band's first row in the image */
+    int last;  /* the band ends the image: report */
+    bad_tally tally[N_CHECKS][3];
+};
+
+/* NaN/Inf (and, for variance, negative values): fail naming the first, or zero them.
+ * band: the part is a band of the dump's rows (which: its CHECK_*), or NULL. */
 static int
 check_values(mcp_image *img, const char *part, int is_variance, mcp_badval_policy policy,
-             long *replaced)
+             band_check *band, int which, long *replaced)
 {
     if (!img) return 0;
+    if (band) {
+        scan_values(img, is_variance, policy, band->y_off, band->tally[which]);
+        return band->last ? report_values(img, part, is_variance, policy,
+                                          band->tally[which], replaced)
+                          : 0;
+    }
     bad_tally *tally = mcp_calloc((size_t)img->channels, sizeof *tally);
     if (!tally) return -1;
     scan_values(img, is_variance, policy, 0, tally);
@@ -567,7 +590,8 @@ load_spp(mcp_dump *d, channel_source *src, const mcp_dump_spec *spec,
                 /* 0 is a pixel that a pass of an adaptive render left out */
                 if (!(n >= 0) || !isfinite(n))
                     return mcp_error("%s: sample count %g at pixel %d,%d (must be >= 0)",
-                                     d->spp_map->source, n, x, y);
+                                     d->spp_map->source, n, x,
+                                     y + (src->band ? src->band->y_off : 0));
             }
         d->spp = 0;
         return 0;
@@ -774,11 +798,16 @@ dump_fill(mcp_dump *d, channel_source *src, const mcp_dump_spec *spec,
             return -1;
     }
     if (load_spp(d, src, spec, parts, L) ||
-        check_values(d->color, "colour", 0, spec->bad_values, &d->n_bad_values) ||
-        check_values(d->albedo, "albedo", 0, spec->bad_values, &d->n_bad_values) ||
-        check_values(d->normal, "normal", 0, spec->bad_values, &d->n_bad_values) ||
-        check_values(d->var_of_mean, "variance", 1, spec->bad_values, &d->n_bad_values) ||
-        check_values(d->cov_of_mean, "covariance", 0, spec->bad_values, &d->n_bad_values))
+        check_values(d->color, "colour", 0, spec->bad_values, src->band, CHECK_COLOR,
+                     &d->n_bad_values) ||
+        check_values(d->albedo, "albedo", 0, spec->bad_values, src->band, CHECK_ALBEDO,
+                     &d->n_bad_values) ||
+        check_values(d->normal, "normal", 0, spec->bad_values, src->band, CHECK_NORMAL,
+                     &d->n_bad_values) ||
+        check_values(d->var_of_mean, "variance", 1, spec->bad_values, src->band,
+                     CHECK_VAR, &d->n_bad_values) ||
+        check_values(d->cov_of_mean, "covariance", 0, spec->bad_values, src->band,
+                     CHECK_COV, &d->n_bad_values))
         return -1;
     if (d->variance_in_file == MCP_VAR_PER_SAMPLE) to_variance_of_mean(d);
     read_variance_source(d);
@@ -1191,6 +1220,135 @@ done:
     return rc;
 }
 
+/* ---- reading a whole EXR dump, a band of rows at a time ---- */
+
+/* For a streamed merge (docs/conventions.md, "Merging renders larger than memory"):
+ * every part, laid out, converted and checked by the code a whole read runs
+ * (route_parts, dump_fill), on images of the band's rows. */
+struct mcp__dump_bands {
+    mcp_dump_spec spec;
+    mcp__exr_rows *exr;
+    const mcp_image *header;
+    int width, height;
+    int next_row;
+    band_check check;
+};
+
+void
+mcp__dump_bands_close(mcp__dump_bands *b)
+{
+    if (!b) return;
+    mcp__exr_rows_close(b->exr);
+    free(b);
+}
+
+/* The parts of rows [y0, y1) decoded into r's images (route_parts), the rows of the
+ * chunks around them dropped. *clash as route_parts sets it. */
+static int
+read_band_parts(mcp__dump_bands *b, int y0, int y1, direct_read *r, int *clash)
+{
+    int a0, a1, rc = -1;
+    mcp__exr_rows_span(b->exr, y0, y1, &a0, &a1);
+    mcp__exr_route *routes = mcp_calloc((size_t)b->header->channels, sizeof *routes);
+    if (!routes) return -1;
+    if (route_parts(b->header, b->width, a1 - a0, r, routes) ||
+        mcp__exr_rows_read(b->exr, y0, y1, a0, routes))
+        goto done;
+    for (int i = 0; i < N_PARTS; i++) {
+        mcp_image *img = r->src.direct[i];
+        if (!img) continue;
+        if (y0 > a0)
+            memmove(img->data, img->data + (ptrdiff_t)(y0 - a0) * img->row_stride,
+                    (size_t)(y1 - y0) * (size_t)img->row_stride * sizeof(float));
+        img->height = y1 - y0;
+    }
+    rc = 0;
+done:
+    *clash = r->clash;
+    free(routes);
+    return rc;
+}
+
+static void
+direct_read_clear(direct_read *r)
+{
+    for (int i = 0; i < N_PARTS; i++)
+        mcp_image_free(r->src.direct[i]);
+    mcp_image_free(r->header);
+    mcp_dump_free(r->d);
+    memset(r, 0, sizeof *r);
+}
+
+int
+mcp__dump_bands_open(const mcp_dump_spec *spec, mcp__dump_bands **out)
+{
+    *out = NULL;
+    if (!spec->path || spec->variance_path || spec->albedo_path || spec->normal_path ||
+        spec->spp_map_path || mcp_format_from_path(spec->path) != MCP_FORMAT_EXR)
+        return 0;
+    mcp__dump_bands *b = mcp_calloc(1, sizeof *b);
+    if (!b) return -1;
+    b->spec = *spec;
+    if (mcp__exr_rows_open(spec->path, &b->exr)) {
+        mcp__dump_bands_close(b);
+        return -1;
+    }
+    b->header = mcp__exr_rows_header(b->exr, &b->width, &b->height);
+    /* the layout of the first row: two parts on one channel are read whole, and what
+       is wrong with the header is said here, in a whole read's words */
+    static const mcp_dump_buffers none;
+    direct_read r = {.spec = spec, .parts = &none};
+    int clash = 0, rc = -1;
+    if ((r.d = mcp_calloc(1, sizeof *r.d)))
+        rc = read_band_parts(b, 0, b->height > 0 ? 1 : 0, &r, &clash);
+    direct_read_clear(&r);
+    if (rc || clash) {
+        if (clash) mcp_error_clear();
+        mcp__dump_bands_close(b);
+        return clash ? 0 : -1;
+    }
+    *out = b;
+    return 0;
+}
+
+void
+mcp__dump_bands_size(const mcp__dump_bands *b, int *width, int *height)
+{
+    *width = b->width;
+    *height = b->height;
+}
+
+const char *
+mcp__dump_bands_source(const mcp__dump_bands *b)
+{
+    return b->header->source;
+}
+
+int
+mcp__dump_bands_read(mcp__dump_bands *b, int y0, int y1, mcp_dump **out)
+{
+    *out = NULL;
+    if (y0 != b->next_row || y1 <= y0 || y1 > b->height)
+        return mcp_error("%s: rows %d..%d do not follow row %d of %d", b->header->source,
+                         y0, y1, b->next_row, b->height);
+    static const mcp_dump_buffers none;
+    direct_read r = {.spec = &b->spec, .parts = &none};
+    int clash = 0, rc = -1;
+    b->check.y_off = y0;
+    b->check.last = y1 == b->height;
+    r.src.band = &b->check;
+    if ((r.d = mcp_calloc(1, sizeof *r.d)) &&
+        read_band_parts(b, y0, y1, &r, &clash) == 0 &&
+        dump_fill(r.d, &r.src, &b->spec, &none, &r.L) == 0) {
+        *out = r.d;
+        r.d = NULL;
+        b->next_row = y1;
+        rc = 0;
+    }
+    direct_read_clear(&r);
+    return rc;
+}
+
 /* ---- writing ---- */
 
 /* Copies 3 channels of part (times the per-pixel sample count when per_sample, plus
@@ -1199,6 +1357,7 @@ static void
 put3(mcp_image *out, int at, const mcp_image *part, const mcp_dump *d, int per_sample,
      int add_mean_sq)
 {
+#pragma omp parallel for schedule(static) if ((long long)out->width * out->height > 65536)
     for (int y = 0; y < out->height; y++)
         for (int x = 0; x < out->width; x++) {
             const float *s = mcp_image_px(part, x, y), *m = mcp_image_px(d->color, x, y);
@@ -1210,9 +1369,9 @@ put3(mcp_image *out, int at, const mcp_image *part, const mcp_dump *d, int per_s
 }
 
 int
-mcp_dump_write(const mcp_dump *d, const char *path, mcp_convention conv,
-               const mcp_write_options *opt)
+mcp__dump_image(const mcp_dump *d, mcp_convention conv, const char *path, mcp_image **out)
 {
+    *out = NULL;
     static const char *const rgb[3] = {"R", "G", "B"}, *const xyz[3] = {"X", "Y", "Z"},
                              *const offdiag[3] = {"RG", "RB", "GB"};
     const char *L = "ViewLayer";
@@ -1302,10 +1461,22 @@ mcp_dump_write(const mcp_dump *d, const char *path, mcp_convention conv,
                                                            (int64_t)llround(d->spp)))
             goto done;
     }
-    rc = mcp_image_write(img, path, opt);
+    *out = img;
+    img = NULL;
+    rc = 0;
 done:
     mcp_image_free(img);
     return rc;
+}
+
+int
+mcp_dump_write(const mcp_dump *d, const char *path, mcp_convention conv,
+               const mcp_write_options *opt)
+{
+    mcp_image *img = NULL;
+    int rc = mcp__dump_image(d, conv, path, &img) || mcp_image_write(img, path, opt);
+    mcp_image_free(img);
+    return rc ? -1 : 0;
 }
 
 /* ---- series ---- */

@@ -4,6 +4,7 @@
 #define MCP_DUMP_INTERNAL_H
 
 #include <mcpost/dump.h>
+#include <mcpost/imageio.h> /* mcp_write_options */
 #include <mcpost/wordlist.h>
 
 /* ---- dump.c: the words of two dump enums, and the series' variance source ---- */
@@ -71,5 +72,40 @@ const mcp_dump *mcp__dump_rows_dump(const mcp__dump_rows *r);
 double mcp__dump_rows_whole_bytes(const mcp__dump_rows *r);
 int mcp__dump_rows_read(mcp__dump_rows *r, int y0, int y1, mcp_image **parts);
 void mcp__dump_rows_close(mcp__dump_rows *r);
+
+/* ---- dump.c: a whole EXR dump, a band of rows at a time ---- */
+
+/* For a streamed merge (common/dump/merge_stream.c). open reads the header and lays out
+ * the dump as mcp_dump_load would, saying in its words what is wrong with the header;
+ * *out stays NULL (and 0 is returned) for a dump that must be read whole: not an EXR,
+ * parts in other files, two parts on one channel. read gives the dump of rows [y0, y1)
+ * (every part mcp_dump_load gives, converted as it converts them: a dump whose images
+ * are y1 - y0 rows high); the bands must follow each other from row 0 down. Values are
+ * checked as mcp_dump_load checks them (bad_values): tallied band after band and
+ * reported with the last band, in the line a whole read gives; policy zero replaces
+ * them in every band. */
+typedef struct mcp__dump_bands mcp__dump_bands;
+int mcp__dump_bands_open(const mcp_dump_spec *spec, mcp__dump_bands **out);
+void mcp__dump_bands_size(const mcp__dump_bands *b, int *width, int *height);
+const char *mcp__dump_bands_source(const mcp__dump_bands *b);
+int mcp__dump_bands_read(mcp__dump_bands *b, int y0, int y1, mcp_dump **out);
+void mcp__dump_bands_close(mcp__dump_bands *b);
+
+/* mcp_dump_merge of the dumps specs[0, count) written to out_path by mcp_dump_write in
+ * the mcpost convention with wo, a band of rows at a time (merge_stream.c): the same
+ * pixels and header, in a band's memory per input. -1 on failure, said in a whole
+ * merge's words and with no output left; 0 and *done 1 when written, *last then the
+ * last band's merged dump, whose sample count, count map and variance source are the
+ * result's; 0 and *done 0 when the merge must be made whole: pooling, inputs a band
+ * reader cannot take (mcp__dump_bands_open), an output other than an untiled EXR, or
+ * MCPOST_MERGE_BAND_ROWS=whole (for tests; a multiple of 32 sets the band height). */
+int mcp__dump_merge_streamed(const mcp_dump_spec *specs, int count,
+                             const mcp_merge_options *opt, const char *out_path,
+                             const mcp_write_options *wo, mcp_dump **last, int *done);
+
+/* The image mcp_dump_write writes to path (named in errors): the dump's parts as
+ * conv's channels, with its attributes and what it says about its variance. */
+int mcp__dump_image(const mcp_dump *d, mcp_convention conv, const char *path,
+                    mcp_image **out);
 
 #endif
