@@ -40,9 +40,19 @@ cmd_convert(int argc, char **argv)
         return mcp_cli_fail();
     mcp_image *img = NULL, *picked = NULL;
     mcp_dump *dump = NULL;
-    if (mcp_operation_given(op, mcp_operation_option(op, "dump"), &st)) {
-        if (!mcp_cli_read_dump(in, st.spp, NULL, NULL, &dump) &&
-            !mcp_dump_write(dump, out, st.dump, &st.wo))
+    mcp_dump_spec spec;
+    const int as_dump = mcp_operation_given(op, mcp_operation_option(op, "dump"), &st);
+    int streamed = 0;
+    /* an EXR into an EXR a band of rows at a time (jobs/convert_stream.c), the others
+       whole */
+    if ((as_dump && mcp_cli_dump_spec(in, st.spp, NULL, NULL, &spec)) ||
+        mcp__convert_streamed(in, out, channels, n_channels, as_dump ? &spec : NULL,
+                              st.dump, &st.wo, &streamed)) {
+        /* failed */
+    } else if (streamed) {
+        status = 0;
+    } else if (as_dump) {
+        if (!mcp_dump_load(&spec, &dump) && !mcp_dump_write(dump, out, st.dump, &st.wo))
             status = 0;
     } else if (!mcp_image_read(in, NULL, &img) &&
                !mcp__convert_pick_channels(img, channels, n_channels, out, &picked) &&

@@ -2,6 +2,9 @@
  * the render-dump convention and sample count (the channel and dump descriptions are
  * the library's, shared with the `info` job stage: jobs/stage_info.c). */
 #include "cli.h"
+#include "../common/core/internal.h" /* statistics a band at a time */
+#include "../common/dump/internal.h" /* the dump a band at a time */
+#include "../common/io/internal.h"   /* the file a band at a time */
 
 #include <stdio.h>
 #include <stdlib.h>
@@ -46,6 +49,98 @@ describe_file(const char *path, const mcp_image *img, const mcp_dump_spec *spec)
     }
     add_attrs(o, &img->attrs);
     return o;
+}
+
+/* What a band of a streamed description needs: the rows' statistics of every channel,
+ * and the dump's band reader until a band fails as a dump. */
+typedef struct info_stream {
+    mcp__exr_rows *exr;
+    mcp__dump_bands *dump;
+    mcp_dump *last;          /* the last band's dump: its metadata are the file's */
+    char dump_error[1024];   /* why it is no dump, once a band says so */
+    mcp_channel_stats *rows; /* channels x height */
+    mcp_image *first;        /* the first band: the channels' names in a whole
+                                read's order, the attributes */
+    int height;
+} info_stream;
+
+static int
+info_band(void *ctx, int y0, int y1)
+{
+    info_stream *st = ctx;
+    mcp_image *img = NULL;
+    if (mcp__exr_rows_read_image(st->exr, y0, y1, &img)) return -1;
+    for (int c = 0; c < img->channels; c++)
+        mcp__channel_stats_rows(img, c, st->rows + (size_t)c * st->height + y0);
+    mcp_dump *d = NULL;
+    if (!st->dump_error[0]) {
+        if (mcp__dump_bands_from_rows(st->dump, img, y0, &d)) {
+            snprintf(st->dump_error, sizeof st->dump_error, "%s", mcp_error_message());
+            mcp_error_clear();
+        } else {
+            mcp_dump_free(st->last);
+            st->last = d;
+        }
+    }
+    if (!st->first)
+        st->first = img;
+    else
+        mcp_image_free(img);
+    return 0;
+}
+
+/* describe_file's object for an EXR read a band of rows at a time, so that a render of
+ * any size is described within a band's memory (issue 31; docs/conventions.md,
+ * "Files larger than memory"): the statistics of each row folded in order, and the dump
+ * built and checked band by band, give the whole read's figures and words. 0 and *o NULL
+ * when the file is read whole instead (another format, MCPOST_BAND_ROWS=whole). */
+static int
+describe_streamed(const char *path, const mcp_dump_spec *given, cJSON **o)
+{
+    *o = NULL;
+    const int band = mcp__stream_band_rows();
+    if (!band || mcp_format_from_path(path) != MCP_FORMAT_EXR) return 0;
+    info_stream st = {0};
+    int w, h, rc = -1;
+    mcp_dump_spec spec = *given;
+    spec.path = path;
+    char label[96];
+    snprintf(label, sizeof label, "info %s", path);
+    if (mcp__exr_rows_open(path, &st.exr)) return -1;
+    const mcp_image *header = mcp__exr_rows_header(st.exr, &w, &h);
+    st.height = h;
+    if (!(st.rows = mcp_calloc((size_t)header->channels * h, sizeof *st.rows)) ||
+        mcp__dump_bands_for_rows(&spec, h, &st.dump) ||
+        mcp__stream_bands(label, w, h, band, info_band, &st))
+        goto done;
+    cJSON *d = cJSON_CreateObject();
+    cJSON_AddStringToObject(d, "file", path);
+    cJSON_AddStringToObject(d, "format", mcp_format_name(MCP_FORMAT_EXR));
+    cJSON_AddNumberToObject(d, "width", w);
+    cJSON_AddNumberToObject(d, "height", h);
+    if (!st.dump_error[0]) {
+        mcp__info_add_dump(d, st.last);
+    } else {
+        cJSON_AddStringToObject(d, "convention",
+                                mcp_convention_name(mcp_dump_detect(st.first)));
+        cJSON_AddStringToObject(d, "dump_error", st.dump_error);
+    }
+    cJSON *channels = cJSON_AddArrayToObject(d, "channels");
+    for (int c = 0; c < st.first->channels; c++) {
+        mcp_channel_stats s;
+        mcp__channel_stats_fold(st.rows + (size_t)c * h, h, &s);
+        mcp__info_add_channel(channels, st.first->names[c], &s);
+    }
+    add_attrs(d, &st.first->attrs);
+    *o = d;
+    rc = 0;
+done:
+    mcp_image_free(st.first);
+    mcp_dump_free(st.last);
+    mcp__dump_bands_close(st.dump);
+    free(st.rows);
+    mcp__exr_rows_close(st.exr);
+    return rc;
 }
 
 /* What the variance rests on, in words: a per-sample variance is an assumption. */
@@ -147,13 +242,21 @@ cmd_info(int argc, char **argv)
     int status = 0;
     cJSON *all = cJSON_CreateArray();
     for (int i = first; i < argc; i++) {
+        cJSON *o = NULL;
         mcp_image *img = NULL;
-        if (mcp_image_read(argv[i], NULL, &img)) {
+        /* an EXR a band of rows at a time, the others whole */
+        if (describe_streamed(argv[i], &spec, &o)) {
             status = mcp_cli_fail();
             continue;
         }
-        cJSON *o = describe_file(argv[i], img, &spec);
-        mcp_image_free(img);
+        if (!o) {
+            if (mcp_image_read(argv[i], NULL, &img)) {
+                status = mcp_cli_fail();
+                continue;
+            }
+            o = describe_file(argv[i], img, &spec);
+            mcp_image_free(img);
+        }
         if (!o) {
             status = mcp_cli_fail();
             continue;

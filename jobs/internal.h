@@ -16,6 +16,7 @@
 #include <mcpost/options.h>
 #include <mcpost/perceptual.h>
 #include <mcpost/progress.h>
+#include <mcpost/stats.h>
 #include <mcpost/stages.h>
 
 #include "../common/core/internal.h"
@@ -96,20 +97,34 @@ int mcp__stage_denoiser(mcp_job *job, const mcp_node *settings, mcp_denoiser **o
 
 /* Appends statistics of every channel of img to the array, names prefixed. */
 int mcp__info_add_channels(cJSON *array, const mcp_image *img, const char *prefix);
+/* One channel's statistics, as mcp__info_add_channels adds each. */
+void mcp__info_add_channel(cJSON *array, const char *name, const mcp_channel_stats *s);
 /* What a render dump means: convention, spp, variance and its source, features. */
 void mcp__info_add_dump(cJSON *o, const mcp_dump *d);
 
 /* ---- stage_convert.c ---- */
 
+/* The channels' names of convert's settings, each value split at commas ("R,G,B" on
+ * the command line, a list in a job), malloc'd: free with mcp__free_words. */
+int mcp__convert_channel_names(const mcp_convert_settings *s, char ***names, int *count);
 /* The channels of img named in `names`, as a new image. With no names: all channels,
  * except that a PNG, JPEG, HDR or PFM output (out_path's format) of an image with
  * R, G, B by name gets those (and A, for PNG and JPEG), which is what a person
  * converting to PNG means (docs/conventions.md, "Channel order"). */
-/* The channels' names of convert's settings, each value split at commas ("R,G,B" on
- * the command line, a list in a job), malloc'd: free with mcp__free_words. */
-int mcp__convert_channel_names(const mcp_convert_settings *s, char ***names, int *count);
 int mcp__convert_pick_channels(const mcp_image *img, char **names, int count,
                                const char *out_path, mcp_image **out);
+
+/* ---- convert_stream.c ---- */
+
+/* `mcpost convert` of an EXR into an EXR a band of rows at a time: the image's channels
+ * `names` (mcp__convert_pick_channels), or with dump (its sample count and convention;
+ * path unused) the render dump rewritten in conv (mcp_dump_write's image), with wo.
+ * -1 on failure, said as the whole conversion says it, with no output left; 0 and
+ * *done 1 when written; 0 and *done 0 when it must be made whole (a file of another
+ * format, a tiled output, a dump a band reader cannot take, MCPOST_BAND_ROWS=whole). */
+int mcp__convert_streamed(const char *in, const char *out, char **names, int count,
+                          const mcp_dump_spec *dump, mcp_convention conv,
+                          const mcp_write_options *wo, int *done);
 
 /* ---- estimate_output.c: what an estimate writes ---- */
 

@@ -104,6 +104,20 @@ const mcp_stage mcp_stage_info = {"info",
                                   "convention, sample count) in the report",
                                   mcp__info_keys, stage_info, check_info};
 
+void
+mcp__info_add_channel(cJSON *array, const char *name, const mcp_channel_stats *s)
+{
+    cJSON *ch = cJSON_CreateObject();
+    cJSON_AddStringToObject(ch, "name", name);
+    cJSON_AddNumberToObject(ch, "min", s->min);
+    cJSON_AddNumberToObject(ch, "mean", s->mean);
+    cJSON_AddNumberToObject(ch, "max", s->max);
+    cJSON_AddNumberToObject(ch, "nan", (double)s->n_nan);
+    cJSON_AddNumberToObject(ch, "inf", (double)s->n_inf);
+    cJSON_AddNumberToObject(ch, "negative", (double)s->n_negative);
+    cJSON_AddItemToArray(array, ch);
+}
+
 /* Appends statistics of every channel of img to the array, names prefixed. */
 int
 mcp__info_add_channels(cJSON *array, const mcp_image *img, const char *prefix)
@@ -113,15 +127,7 @@ mcp__info_add_channels(cJSON *array, const mcp_image *img, const char *prefix)
         if (mcp_channel_stats_compute(img, c, &s)) return -1;
         char name[600];
         snprintf(name, sizeof name, "%s%s", prefix, img->names[c]);
-        cJSON *ch = cJSON_CreateObject();
-        cJSON_AddStringToObject(ch, "name", name);
-        cJSON_AddNumberToObject(ch, "min", s.min);
-        cJSON_AddNumberToObject(ch, "mean", s.mean);
-        cJSON_AddNumberToObject(ch, "max", s.max);
-        cJSON_AddNumberToObject(ch, "nan", (double)s.n_nan);
-        cJSON_AddNumberToObject(ch, "inf", (double)s.n_inf);
-        cJSON_AddNumberToObject(ch, "negative", (double)s.n_negative);
-        cJSON_AddItemToArray(array, ch);
+        mcp__info_add_channel(array, name, &s);
     }
     return 0;
 }

@@ -8,6 +8,7 @@
 
 #include <mcpost/image.h>
 #include <mcpost/progress.h>
+#include <mcpost/stats.h>
 
 /* 0 when a width x height x channels image is within MCP_MAX_DIM per side, 4096
  * channels and the ceiling above; else -1 with a message naming the size and the
@@ -26,6 +27,13 @@ int mcp__image_permute_names(mcp_image *img, const int *order);
  * failure). */
 void mcp__alloc_fail_after(long n);
 long mcp__alloc_count(void);
+
+/* mcp_channel_stats_compute in two steps, for an image read a band of rows at a time
+ * (stats.c): each row's statistics of channel c (mean holding the row's sum), then the
+ * rows folded in order, which gives the whole image's bits. */
+void mcp__channel_stats_rows(const mcp_image *img, int c, mcp_channel_stats *rows);
+void mcp__channel_stats_fold(const mcp_channel_stats *rows, int n,
+                             mcp_channel_stats *out);
 
 /* Window sums over the first 3 channels of 1 to 3 images of one size (stats.c): the
  * sum over the (2r + 1)² window around each pixel, clipped at the borders, in double,

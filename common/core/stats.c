@@ -10,17 +10,11 @@
 #include <omp.h>
 #endif
 
-int
-mcp_channel_stats_compute(const mcp_image *img, int c, mcp_channel_stats *out)
+void
+mcp__channel_stats_rows(const mcp_image *img, int c, mcp_channel_stats *rows)
 {
-    if (c < 0 || c >= img->channels)
-        return mcp_error("%s: channel index %d outside its %d channels", img->source, c,
-                         img->channels);
-    int h = img->height;
-    mcp_channel_stats *rows = mcp_calloc((size_t)h, sizeof *rows);
-    if (!rows) return -1;
 #pragma omp parallel for schedule(static)
-    for (int y = 0; y < h; y++) {
+    for (int y = 0; y < img->height; y++) {
         mcp_channel_stats s = {INFINITY, -INFINITY, 0, 0, 0, 0, 0};
         for (int x = 0; x < img->width; x++) {
             float v = mcp_image_px(img, x, y)[c];
@@ -41,8 +35,13 @@ mcp_channel_stats_compute(const mcp_image *img, int c, mcp_channel_stats *out)
         }
         rows[y] = s;
     }
+}
+
+void
+mcp__channel_stats_fold(const mcp_channel_stats *rows, int n, mcp_channel_stats *out)
+{
     mcp_channel_stats t = {INFINITY, -INFINITY, 0, 0, 0, 0, 0};
-    for (int y = 0; y < h; y++) {
+    for (int y = 0; y < n; y++) {
         t.mean += rows[y].mean;
         t.min = rows[y].min < t.min ? rows[y].min : t.min;
         t.max = rows[y].max > t.max ? rows[y].max : t.max;
@@ -51,13 +50,25 @@ mcp_channel_stats_compute(const mcp_image *img, int c, mcp_channel_stats *out)
         t.n_negative += rows[y].n_negative;
         t.n_finite += rows[y].n_finite;
     }
-    free(rows);
     if (t.n_finite) {
         t.mean /= (double)t.n_finite;
     } else {
         t.min = t.max = t.mean = 0;
     }
     *out = t;
+}
+
+int
+mcp_channel_stats_compute(const mcp_image *img, int c, mcp_channel_stats *out)
+{
+    if (c < 0 || c >= img->channels)
+        return mcp_error("%s: channel index %d outside its %d channels", img->source, c,
+                         img->channels);
+    mcp_channel_stats *rows = mcp_calloc((size_t)img->height, sizeof *rows);
+    if (!rows) return -1;
+    mcp__channel_stats_rows(img, c, rows);
+    mcp__channel_stats_fold(rows, img->height, out);
+    free(rows);
     return 0;
 }
 

@@ -1181,16 +1181,9 @@ mcp__dump_rows_read(mcp__dump_rows *r, int y0, int y1, mcp_image **parts)
                 parts[p]->data + k, parts[p]->pixel_stride, parts[p]->row_stride};
     }
     if (mcp__exr_rows_read(r->exr, y0, y1, a0, routes)) goto done;
-    /* the chunks' rows around [y0, y1) go: the rows move up (bands on multiples of 64
-       need none with zip's 16 or piz's 32 rows a chunk) */
-    for (int p = 0; p < ROW_PARTS; p++) {
-        mcp_image *img = parts[p];
-        if (!img) continue;
-        if (y0 > a0)
-            memmove(img->data, img->data + (ptrdiff_t)(y0 - a0) * img->row_stride,
-                    (size_t)(y1 - y0) * (size_t)img->row_stride * sizeof(float));
-        img->height = y1 - y0;
-    }
+    /* the chunks' rows around [y0, y1) go */
+    for (int p = 0; p < ROW_PARTS; p++)
+        if (parts[p]) mcp__exr_rows_trim(parts[p], a0, y0, y1);
     /* the first pass over the rows tallies, as a whole read checks the whole parts;
        policy zero replaces in every read */
     const int first_pass = y0 == r->checked;
@@ -1222,7 +1215,7 @@ done:
 
 /* ---- reading a whole EXR dump, a band of rows at a time ---- */
 
-/* For a streamed merge (docs/conventions.md, "Merging renders larger than memory"):
+/* For a streamed merge (docs/conventions.md, "Files larger than memory"):
  * every part, laid out, converted and checked by the code a whole read runs
  * (route_parts, dump_fill), on images of the band's rows. */
 struct mcp__dump_bands {
@@ -1254,14 +1247,8 @@ read_band_parts(mcp__dump_bands *b, int y0, int y1, direct_read *r, int *clash)
     if (route_parts(b->header, b->width, a1 - a0, r, routes) ||
         mcp__exr_rows_read(b->exr, y0, y1, a0, routes))
         goto done;
-    for (int i = 0; i < N_PARTS; i++) {
-        mcp_image *img = r->src.direct[i];
-        if (!img) continue;
-        if (y0 > a0)
-            memmove(img->data, img->data + (ptrdiff_t)(y0 - a0) * img->row_stride,
-                    (size_t)(y1 - y0) * (size_t)img->row_stride * sizeof(float));
-        img->height = y1 - y0;
-    }
+    for (int i = 0; i < N_PARTS; i++)
+        if (r->src.direct[i]) mcp__exr_rows_trim(r->src.direct[i], a0, y0, y1);
     rc = 0;
 done:
     *clash = r->clash;
@@ -1308,6 +1295,41 @@ mcp__dump_bands_open(const mcp_dump_spec *spec, mcp__dump_bands **out)
         return clash ? 0 : -1;
     }
     *out = b;
+    return 0;
+}
+
+int
+mcp__dump_bands_for_rows(const mcp_dump_spec *spec, int height, mcp__dump_bands **out)
+{
+    *out = mcp_calloc(1, sizeof **out);
+    if (!*out) return -1;
+    (*out)->spec = *spec;
+    (*out)->height = height;
+    return 0;
+}
+
+int
+mcp__dump_bands_from_rows(mcp__dump_bands *b, const mcp_image *rows, int y0,
+                          mcp_dump **out)
+{
+    *out = NULL;
+    const int y1 = y0 + rows->height;
+    if (y0 != b->next_row || y1 > b->height)
+        return mcp_error("%s: rows %d..%d do not follow row %d of %d", rows->source, y0,
+                         y1, b->next_row, b->height);
+    static const mcp_dump_buffers none;
+    mcp_dump *d = mcp_calloc(1, sizeof *d);
+    if (!d) return -1;
+    layout L;
+    channel_source src = {.img = rows, .band = &b->check};
+    b->check.y_off = y0;
+    b->check.last = y1 == b->height;
+    if (dump_layout(rows, &b->spec, d, &L) || dump_fill(d, &src, &b->spec, &none, &L)) {
+        mcp_dump_free(d);
+        return -1;
+    }
+    b->next_row = y1;
+    *out = d;
     return 0;
 }
 

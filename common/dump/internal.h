@@ -90,6 +90,14 @@ void mcp__dump_bands_size(const mcp__dump_bands *b, int *width, int *height);
 const char *mcp__dump_bands_source(const mcp__dump_bands *b);
 int mcp__dump_bands_read(mcp__dump_bands *b, int y0, int y1, mcp_dump **out);
 void mcp__dump_bands_close(mcp__dump_bands *b);
+/* The same checks for a caller that reads the rows itself (`mcpost info`, which reads
+ * every channel for its statistics): for_rows opens no file; from_rows gives the dump
+ * of rows, an image of rows [y0, y0 + rows->height) of the file as
+ * mcp__exr_rows_read_image gives them (mcp_dump_from_image's dump of those rows). */
+int mcp__dump_bands_for_rows(const mcp_dump_spec *spec, int height,
+                             mcp__dump_bands **out);
+int mcp__dump_bands_from_rows(mcp__dump_bands *b, const mcp_image *rows, int y0,
+                              mcp_dump **out);
 
 /* mcp_dump_merge of the dumps specs[0, count) written to out_path by mcp_dump_write in
  * the mcpost convention with wo, a band of rows at a time (merge_stream.c): the same
@@ -98,7 +106,7 @@ void mcp__dump_bands_close(mcp__dump_bands *b);
  * last band's merged dump, whose sample count, count map and variance source are the
  * result's; 0 and *done 0 when the merge must be made whole: pooling, inputs a band
  * reader cannot take (mcp__dump_bands_open), an output other than an untiled EXR, or
- * MCPOST_MERGE_BAND_ROWS=whole (for tests; a multiple of 32 sets the band height). */
+ * MCPOST_BAND_ROWS=whole (for tests; a multiple of 32 sets the band height). */
 int mcp__dump_merge_streamed(const mcp_dump_spec *specs, int count,
                              const mcp_merge_options *opt, const char *out_path,
                              const mcp_write_options *wo, mcp_dump **last, int *done);

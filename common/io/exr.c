@@ -689,6 +689,47 @@ mcp__exr_rows_read(mcp__exr_rows *r, int y0, int y1, int a0, const mcp__exr_rout
 }
 
 void
+mcp__exr_rows_trim(mcp_image *img, int a0, int y0, int y1)
+{
+    /* bands on multiples of 64 need no move with zip's 16 or piz's 32 rows a chunk */
+    if (y0 > a0)
+        memmove(img->data, img->data + (ptrdiff_t)(y0 - a0) * img->row_stride,
+                (size_t)(y1 - y0) * (size_t)img->row_stride * sizeof(float));
+    img->height = y1 - y0;
+}
+
+int
+mcp__exr_rows_read_image(mcp__exr_rows *r, int y0, int y1, mcp_image **out)
+{
+    *out = NULL;
+    const mcp_image *h = r->part.img;
+    int a0, a1, rc = -1;
+    mcp__exr_rows_span(r, y0, y1, &a0, &a1);
+    mcp_image *img = NULL;
+    mcp__exr_route *routes = mcp_calloc((size_t)h->channels, sizeof *routes);
+    if (!routes ||
+        mcp_image_new(r->part.w, a1 - a0, h->channels, (const char *const *)h->names,
+                      &img) ||
+        mcp_image_set_source(img, h->source) || mcp_attrs_copy(&h->attrs, &img->attrs) ||
+        reorder_names(img))
+        goto done;
+    /* the file's channel c goes where its name went */
+    for (int c = 0; c < h->channels; c++) {
+        const int at = mcp_image_channel(img, h->names[c]);
+        routes[c] = (mcp__exr_route){img->data + at, img->pixel_stride, img->row_stride};
+    }
+    if (mcp__exr_rows_read(r, y0, y1, a0, routes)) goto done;
+    mcp__exr_rows_trim(img, a0, y0, y1);
+    *out = img;
+    img = NULL;
+    rc = 0;
+done:
+    free(routes);
+    mcp_image_free(img);
+    return rc;
+}
+
+void
 mcp__exr_rows_close(mcp__exr_rows *r)
 {
     if (!r) return;

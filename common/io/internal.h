@@ -83,6 +83,12 @@ void mcp__exr_rows_span(const mcp__exr_rows *r, int y0, int y1, int *a0, int *a1
 int mcp__exr_rows_read(mcp__exr_rows *r, int y0, int y1, int a0,
                        const mcp__exr_route *routes);
 void mcp__exr_rows_close(mcp__exr_rows *r);
+/* Rows [y0, y1) as a new image of every channel, named, ordered and with the attributes
+ * and source of a whole read (mcp_image_read): for a command that streams a file. */
+int mcp__exr_rows_read_image(mcp__exr_rows *r, int y0, int y1, mcp_image **out);
+/* An image decoded from the chunks' rows [a0, ...) cut to rows [y0, y1): the rows
+ * above y0 dropped, the height set. */
+void mcp__exr_rows_trim(mcp_image *img, int a0, int y0, int y1);
 /* Writing an EXR rows at a time, top to bottom, with what mcp__exr_write writes (the
  * pixels; zip chunks that do not shrink are stored raw, decided for each call's rows):
  * open creates path exactly (the caller writes a temporary name and renames it, as
@@ -95,6 +101,33 @@ int mcp__exr_writer_open(const char *path, int width, int height, int nc,
                          const mcp_write_options *opt, mcp__exr_writer **out);
 int mcp__exr_writer_rows(mcp__exr_writer *wr, const mcp_image *rows, int y0);
 int mcp__exr_writer_close(mcp__exr_writer *wr);
+
+/* An EXR written band by band under a temporary name (stream.c): begin picks the
+ * name (failing early when the folder is not writable); rows writes the next band
+ * (rows->height rows from y0, ending on a chunk's last row or the image's), the first
+ * band's channels and attributes making the header; end with failed 0 closes the file
+ * and renames it (-1 when that fails), with failed 1 closes and removes it and keeps
+ * the error the failure set. */
+typedef struct mcp__exr_band_file {
+    mcp_atomic_file af;
+    mcp__exr_writer *wr;
+    const char *path;
+    int width, height;
+    mcp_write_options opt;
+} mcp__exr_band_file;
+int mcp__exr_band_file_begin(mcp__exr_band_file *f, const char *path, int width,
+                             int height, const mcp_write_options *opt);
+int mcp__exr_band_file_rows(mcp__exr_band_file *f, const mcp_image *rows, int y0);
+int mcp__exr_band_file_end(mcp__exr_band_file *f, int failed);
+/* The rows of a band of the commands that stream an EXR (merge, convert, info): 64, a
+ * multiple of 32 from MCPOST_BAND_ROWS (for tests), or 0 for none (MCPOST_BAND_ROWS=
+ * whole: the command reads its images whole). */
+int mcp__stream_band_rows(void);
+/* Calls band(ctx, y0, y1) for the bands of `rows` rows of an image of height rows,
+ * top to bottom, until one fails (-1); a progress bar labelled label on a terminal for
+ * a megapixel or more (stream.c). */
+int mcp__stream_bands(const char *label, int width, int height, int rows,
+                      int (*band)(void *ctx, int y0, int y1), void *ctx);
 int mcp__pfm_read(const char *path, mcp_image **out);
 int mcp__pfm_read_memory(const void *data, size_t size, const char *name,
                          mcp_image **out);

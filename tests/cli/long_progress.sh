@@ -64,14 +64,25 @@ on_tty "'$mcpost' perceptual in_single_000*.exr --denoiser nlm -m power-set -o p
 expect ps_tty.txt "^power-set, pass 1 +\[" "no bar for power-set's first pass"
 refuse ps_tty.txt "vertical-iterative" "power-set's passes named vertical-iterative"
 
-# convert: the read and the write of a 4K dump (400 MB of pixels)
+# convert: the read and the write of a 4K dump (400 MB of pixels): an EXR into an EXR
+# goes in bands of rows, one bar for the bands; into a PFM it is read and written whole
 "$procedural" --width 3840 --height 2160 --spp 1 --seed 7 -o big >/dev/null
 on_tty "'$mcpost' convert big_0000.exr tty.exr" > convert_tty.txt
 "$mcpost" convert big_0000.exr log.exr 2> convert_log.txt
-expect convert_tty.txt "^reading big_0000\.exr +\[#{40}\] 100%" "no bar for the read"
-expect convert_tty.txt "^writing tty\.exr +\[#{40}\] 100%" "no bar for the write"
-refuse convert_log.txt "reading|writing" "a read or write bar in a log"
+expect convert_tty.txt "^convert big_0000\.exr +\[#{40}\] 100%" "no bar for the bands"
+refuse convert_log.txt "convert big" "a bar in a log"
 cmp -s tty.exr log.exr || { echo "FAIL: the converted files differ"; fail=1; }
+on_tty "'$mcpost' convert big_0000.exr tty.pfm" > convert_pfm_tty.txt
+expect convert_pfm_tty.txt "^reading big_0000\.exr +\[#{40}\] 100%" "no bar for the read"
+"$mcpost" convert big_0000.exr log.pfm 2> convert_pfm_log.txt
+refuse convert_pfm_log.txt "reading|writing" "a read or write bar in a log"
+# merge and info of the 4K dump: a bar for the bands of each
+on_tty "'$mcpost' merge big_0000.exr tty.exr -o merged.exr" > merge_tty.txt
+expect merge_tty.txt "^merge merged\.exr +\[#{40}\] 100%" "no bar for merge's bands"
+on_tty "'$mcpost' info big_0000.exr" > info_tty.txt
+expect info_tty.txt "^info big_0000\.exr +\[#{40}\] 100%" "no bar for info's bands"
+"$mcpost" info big_0000.exr > info_log.txt 2>&1
+refuse info_log.txt "info big" "an info bar in a log"
 
 [ "$fail" -eq 0 ] && echo PASS
 exit "$fail"

@@ -138,35 +138,16 @@ test_mcpost_convention_per_pixel_spp_and_covariance(void **state)
     mcp_dump_free(d);
 }
 
-/* Both images hold the same channel names and the same bits. */
-static void
-assert_same_image(const mcp_image *a, const mcp_image *b)
-{
-    if (!a || !b) {
-        assert_true(a == b);
-        return;
-    }
-    assert_int_equal(a->width, b->width);
-    assert_int_equal(a->height, b->height);
-    assert_int_equal(a->channels, b->channels);
-    for (int c = 0; c < a->channels; c++)
-        assert_string_equal(a->names[c], b->names[c]);
-    for (int y = 0; y < a->height; y++)
-        for (int x = 0; x < a->width; x++)
-            assert_memory_equal(mcp_image_px(a, x, y), mcp_image_px(b, x, y),
-                                sizeof(float) * (size_t)a->channels);
-}
-
 /* Every part, bit for bit, and what the dump says of itself. */
 static void
 assert_same_dump(const mcp_dump *a, const mcp_dump *b)
 {
-    assert_same_image(a->color, b->color);
-    assert_same_image(a->var_of_mean, b->var_of_mean);
-    assert_same_image(a->cov_of_mean, b->cov_of_mean);
-    assert_same_image(a->albedo, b->albedo);
-    assert_same_image(a->normal, b->normal);
-    assert_same_image(a->spp_map, b->spp_map);
+    mcp_test_assert_same_image(a->color, b->color);
+    mcp_test_assert_same_image(a->var_of_mean, b->var_of_mean);
+    mcp_test_assert_same_image(a->cov_of_mean, b->cov_of_mean);
+    mcp_test_assert_same_image(a->albedo, b->albedo);
+    mcp_test_assert_same_image(a->normal, b->normal);
+    mcp_test_assert_same_image(a->spp_map, b->spp_map);
     assert_true(a->spp == b->spp);
     assert_int_equal(a->convention, b->convention);
     assert_int_equal(a->variance_in_file, b->variance_in_file);
@@ -224,7 +205,7 @@ test_direct_read_matches_whole_image(void **state)
             /* Mitsuba's second moment carries the colour's NaN into the variance too */
             assert_true(variant == 1 ? direct->n_bad_values >= 2
                                      : direct->n_bad_values == 0);
-            if (variant == 2) assert_same_image(direct->albedo, direct->color);
+            if (variant == 2) mcp_test_assert_same_image(direct->albedo, direct->color);
             mcp_image_free(raw);
             mcp_dump_free(whole);
             mcp_dump_free(direct);
@@ -256,13 +237,13 @@ test_load_without_features(void **state)
     assert_null(some->albedo);
     assert_null(some->normal);
     assert_int_equal(some->n_bad_values, 0);
-    assert_same_image(some->color, all->color);
-    assert_same_image(some->var_of_mean, all->var_of_mean);
+    mcp_test_assert_same_image(some->color, all->color);
+    mcp_test_assert_same_image(some->var_of_mean, all->var_of_mean);
     mcp_dump_free(some);
     assert_int_equal(mcp__dump_load_without(&spec, MCP__DUMP_NO_NORMAL, &some), -1);
     spec.bad_values = MCP_BADVAL_ZERO;
     assert_int_equal(mcp__dump_load_without(&spec, MCP__DUMP_NO_NORMAL, &some), 0);
-    assert_same_image(some->albedo, all->albedo);
+    mcp_test_assert_same_image(some->albedo, all->albedo);
     assert_null(some->normal);
     mcp_dump_free(some);
     /* the whole-image path (the direct reader hands back a channel named for two
@@ -275,8 +256,8 @@ test_load_without_features(void **state)
     assert_int_equal(mcp__dump_load_without(&spec, MCP__DUMP_NO_ALBEDO, &some), 0);
     assert_null(some->albedo);
     assert_non_null(clash->albedo);
-    assert_same_image(some->normal, clash->normal);
-    assert_same_image(some->color, clash->color);
+    mcp_test_assert_same_image(some->normal, clash->normal);
+    mcp_test_assert_same_image(some->color, clash->color);
     mcp_dump_free(clash);
     mcp_dump_free(some);
     /* separate files are left unread: a missing one is no error */
@@ -458,7 +439,7 @@ test_read_memory_fixture(void **state)
     /* without a path the buffer is named by its part */
     assert_int_equal(mcp_dump_read_memory(NULL, &parts, &from_memory), 0);
     assert_string_equal(from_memory->source, "main (in memory)");
-    assert_same_image(from_file->color, from_memory->color);
+    mcp_test_assert_same_image(from_file->color, from_memory->color);
     mcp_dump_free(from_memory);
 
     /* every separate part, in both formats, from files and from memory */

@@ -5,6 +5,7 @@
  * moments and half floats, over bands that do not divide the height; the same one-line
  * errors for bad values, a negative sample count, unequal sizes and a missing file,
  * with no output left; and the merges it leaves to the whole path. */
+#include "streamed.h"
 #include "testing.h"
 
 #include <mcpost/dump.h>
@@ -77,38 +78,6 @@ render_counts(int k)
     return d;
 }
 
-/* Both images hold the same channels, attributes and float bits. */
-static void
-assert_same_files(const char *a_path, const char *b_path)
-{
-    mcp_image *a = NULL, *b = NULL;
-    assert_int_equal(mcp_image_read(a_path, NULL, &a), 0);
-    assert_int_equal(mcp_image_read(b_path, NULL, &b), 0);
-    assert_int_equal(a->width, b->width);
-    assert_int_equal(a->height, b->height);
-    assert_int_equal(a->channels, b->channels);
-    for (int c = 0; c < a->channels; c++)
-        assert_string_equal(a->names[c], b->names[c]);
-    for (int y = 0; y < a->height; y++)
-        for (int x = 0; x < a->width; x++)
-            assert_memory_equal(mcp_image_px(a, x, y), mcp_image_px(b, x, y),
-                                (size_t)a->channels * sizeof(float));
-    assert_int_equal(a->attrs.count, b->attrs.count);
-    for (int i = 0; i < a->attrs.count; i++) {
-        const mcp_attr *p = &a->attrs.items[i], *q = &b->attrs.items[i];
-        assert_string_equal(p->name, q->name);
-        assert_int_equal(p->type, q->type);
-        if (p->type == MCP_ATTR_STRING)
-            assert_string_equal(p->s, q->s);
-        else if (p->type == MCP_ATTR_INT)
-            assert_true(p->i == q->i);
-        else
-            assert_memory_equal(&p->f, &q->f, sizeof p->f);
-    }
-    mcp_image_free(a);
-    mcp_image_free(b);
-}
-
 typedef struct merge_case {
     int count;
     const char *const *paths;
@@ -127,8 +96,9 @@ merge_case_of(int count, const char *const *paths)
 
 /* The streamed merge into out; its return, *done as it says. */
 static int
-merge_streamed(const merge_case *c, const char *out, int *done)
+merge_streamed(const void *ctx, const char *out, int *done)
 {
+    const merge_case *c = ctx;
     mcp_dump_spec specs[8];
     for (int k = 0; k < c->count; k++) {
         specs[k] = c->spec;
@@ -143,8 +113,9 @@ merge_streamed(const merge_case *c, const char *out, int *done)
 
 /* The whole merge into out, as `mcpost merge` made it before. */
 static int
-merge_whole(const merge_case *c, const char *out)
+merge_whole(const void *ctx, const char *out)
 {
+    const merge_case *c = ctx;
     mcp_dump *parts[8] = {0}, *m = NULL;
     int rc = 0;
     for (int k = 0; k < c->count && !rc; k++) {
@@ -161,28 +132,6 @@ merge_whole(const merge_case *c, const char *out)
 }
 
 static void
-assert_streamed_is_whole(const merge_case *c, const char *name)
-{
-    char streamed[4096], whole[4096], file[128];
-    snprintf(file, sizeof file, "%s_streamed.exr", name);
-    snprintf(streamed, sizeof streamed, "%s", mcp_test_path(file));
-    snprintf(file, sizeof file, "%s_whole.exr", name);
-    snprintf(whole, sizeof whole, "%s", mcp_test_path(file));
-    int done = 0;
-    assert_int_equal(merge_streamed(c, streamed, &done), 0);
-    assert_int_equal(done, 1);
-    assert_int_equal(merge_whole(c, whole), 0);
-    assert_same_files(streamed, whole);
-}
-
-static int
-setup(void **state)
-{
-    (void)state;
-    return setenv("MCPOST_MERGE_BAND_ROWS", "32", 1);
-}
-
-static void
 test_replicates_and_passes(void **state)
 {
     (void)state;
@@ -190,16 +139,16 @@ test_replicates_and_passes(void **state)
     for (int k = 0; k < 3; k++) /* pbrt: per-sample variance, albedo, normal */
         paths[k] = write_input(render(4, k), "rep", k, MCP_CONV_PBRT);
     merge_case c = merge_case_of(3, paths);
-    assert_streamed_is_whole(&c, "rep");
+    mcp_test_assert_streamed_is_whole(merge_streamed, merge_whole, &c, "rep");
     c.opt.variance = MCP_MERGE_POOLED;
-    assert_streamed_is_whole(&c, "pooled");
+    mcp_test_assert_streamed_is_whole(merge_streamed, merge_whole, &c, "pooled");
     c.wo.exr_pixel = MCP_EXR_HALF;
-    assert_streamed_is_whole(&c, "pooled_half");
+    mcp_test_assert_streamed_is_whole(merge_streamed, merge_whole, &c, "pooled_half");
     /* tiles of 48 rows: a band's rows start inside a tile */
     for (int k = 0; k < 3; k++)
         paths[k] = write_input_tiled(render(4, k), "tiled", k, MCP_CONV_PBRT, 48);
     c = merge_case_of(3, paths);
-    assert_streamed_is_whole(&c, "tiled");
+    mcp_test_assert_streamed_is_whole(merge_streamed, merge_whole, &c, "tiled");
 }
 
 static void
@@ -210,7 +159,7 @@ test_counts_covariance_moments(void **state)
     for (int k = 0; k < 3; k++) /* mcpost: a SampleCount channel */
         paths[k] = write_input(render_counts(k), "counts", k, MCP_CONV_MCPOST);
     merge_case c = merge_case_of(3, paths);
-    assert_streamed_is_whole(&c, "counts");
+    mcp_test_assert_streamed_is_whole(merge_streamed, merge_whole, &c, "counts");
     /* merged replicates hold a covariance and say where their variance came from */
     const char *twice[2];
     for (int k = 0; k < 2; k++) {
@@ -224,30 +173,13 @@ test_counts_covariance_moments(void **state)
         twice[k] = write_input(m, "cov", k, MCP_CONV_MCPOST);
     }
     c = merge_case_of(2, twice);
-    assert_streamed_is_whole(&c, "cov");
+    mcp_test_assert_streamed_is_whole(merge_streamed, merge_whole, &c, "cov");
     /* Mitsuba 3's moments (m2_*): no sample count in the file, so one is given */
     for (int k = 0; k < 2; k++)
         paths[k] = write_input(render(8, 20 + k), "mitsuba", k, MCP_CONV_MITSUBA);
     c = merge_case_of(2, paths);
     c.spec.spp = 8;
-    assert_streamed_is_whole(&c, "mitsuba");
-}
-
-/* The streamed merge fails with the whole merge's line, and leaves no output. */
-static void
-assert_same_failure(const merge_case *c, const char *name)
-{
-    char out[4096], file[128], whole_error[2048];
-    snprintf(file, sizeof file, "%s_whole.exr", name);
-    assert_int_equal(merge_whole(c, mcp_test_path(file)), -1);
-    snprintf(whole_error, sizeof whole_error, "%s", mcp_error_message());
-    snprintf(file, sizeof file, "%s_streamed.exr", name);
-    snprintf(out, sizeof out, "%s", mcp_test_path(file));
-    int done = 0;
-    assert_int_equal(merge_streamed(c, out, &done), -1);
-    assert_string_equal(mcp_error_message(), whole_error);
-    assert_int_not_equal(access(out, F_OK), 0);
-    print_message("both: %s\n", whole_error);
+    mcp_test_assert_streamed_is_whole(merge_streamed, merge_whole, &c, "mitsuba");
 }
 
 static void
@@ -265,9 +197,9 @@ test_same_errors(void **state)
         paths[k] = write_input(d, "bad", k, MCP_CONV_PBRT);
     }
     merge_case c = merge_case_of(3, paths);
-    assert_same_failure(&c, "bad");
+    mcp_test_assert_same_failure(merge_streamed, merge_whole, &c, "bad");
     c.spec.bad_values = MCP_BADVAL_ZERO; /* replaced, in every band */
-    assert_streamed_is_whole(&c, "bad_zero");
+    mcp_test_assert_streamed_is_whole(merge_streamed, merge_whole, &c, "bad_zero");
     /* a negative sample count in the last band */
     for (int k = 0; k < 2; k++) {
         mcp_dump *d = render_counts(k);
@@ -275,7 +207,7 @@ test_same_errors(void **state)
         paths[k] = write_input(d, "negative", k, MCP_CONV_MCPOST);
     }
     c = merge_case_of(2, paths);
-    assert_same_failure(&c, "negative");
+    mcp_test_assert_same_failure(merge_streamed, merge_whole, &c, "negative");
     /* unequal sizes */
     mcp_proc_scene s = scene();
     s.height = H - 10;
@@ -284,14 +216,14 @@ test_same_errors(void **state)
     paths[0] = write_input(render(4, 40), "sizes", 0, MCP_CONV_PBRT);
     paths[1] = write_input(d, "sizes", 1, MCP_CONV_PBRT);
     c = merge_case_of(2, paths);
-    assert_same_failure(&c, "sizes");
+    mcp_test_assert_same_failure(merge_streamed, merge_whole, &c, "sizes");
     /* a missing input */
     paths[1] = mcp_test_path("no_such_dump.exr");
-    assert_same_failure(&c, "missing");
+    mcp_test_assert_same_failure(merge_streamed, merge_whole, &c, "missing");
 }
 
 /* What the streamed merge leaves to the whole one: pooling, inputs in another format,
- * an output in another format, and MCPOST_MERGE_BAND_ROWS=whole. */
+ * an output in another format, and MCPOST_BAND_ROWS=whole. */
 static void
 test_left_whole(void **state)
 {
@@ -326,12 +258,12 @@ test_left_whole(void **state)
     assert_int_equal(merge_streamed(&c, out, &done), 0);
     assert_int_equal(done, 0);
     assert_int_not_equal(access(out, F_OK), 0);
-    setenv("MCPOST_MERGE_BAND_ROWS", "whole", 1);
+    setenv("MCPOST_BAND_ROWS", "whole", 1);
     c = merge_case_of(2, paths);
     done = 1;
     assert_int_equal(merge_streamed(&c, out, &done), 0);
     assert_int_equal(done, 0);
-    setenv("MCPOST_MERGE_BAND_ROWS", "32", 1);
+    setenv("MCPOST_BAND_ROWS", "32", 1);
 }
 
 int
@@ -343,5 +275,5 @@ main(void)
         cmocka_unit_test(test_same_errors),
         cmocka_unit_test(test_left_whole),
     };
-    return cmocka_run_group_tests(tests, setup, NULL);
+    return cmocka_run_group_tests(tests, mcp_test_bands_of_32, NULL);
 }

@@ -3,6 +3,8 @@
 
 #include "../../common/core/rng_internal.h"
 
+#include <mcpost/imageio.h>
+
 #include <stdarg.h>
 
 #include <errno.h>
@@ -211,4 +213,45 @@ mcp_test_run_mcpostf(char *out, size_t out_cap, char *err, size_t err_cap,
     vsnprintf(args, sizeof args, fmt, ap);
     va_end(ap);
     return mcp_test_run_mcpost(args, out, out_cap, err, err_cap);
+}
+
+void
+mcp_test_assert_same_image(const mcp_image *a, const mcp_image *b)
+{
+    if (!a || !b) {
+        assert_true(a == b);
+        return;
+    }
+    assert_int_equal(a->width, b->width);
+    assert_int_equal(a->height, b->height);
+    assert_int_equal(a->channels, b->channels);
+    for (int c = 0; c < a->channels; c++)
+        assert_string_equal(a->names[c], b->names[c]);
+    for (int y = 0; y < a->height; y++)
+        for (int x = 0; x < a->width; x++)
+            assert_memory_equal(mcp_image_px(a, x, y), mcp_image_px(b, x, y),
+                                (size_t)a->channels * sizeof(float));
+}
+
+void
+mcp_test_assert_same_image_files(const char *a_path, const char *b_path)
+{
+    mcp_image *a = NULL, *b = NULL;
+    assert_int_equal(mcp_image_read(a_path, NULL, &a), 0);
+    assert_int_equal(mcp_image_read(b_path, NULL, &b), 0);
+    mcp_test_assert_same_image(a, b);
+    assert_int_equal(a->attrs.count, b->attrs.count);
+    for (int i = 0; i < a->attrs.count; i++) {
+        const mcp_attr *p = &a->attrs.items[i], *q = &b->attrs.items[i];
+        assert_string_equal(p->name, q->name);
+        assert_int_equal(p->type, q->type);
+        if (p->type == MCP_ATTR_STRING)
+            assert_string_equal(p->s, q->s);
+        else if (p->type == MCP_ATTR_INT)
+            assert_true(p->i == q->i);
+        else
+            assert_memory_equal(&p->f, &q->f, sizeof p->f);
+    }
+    mcp_image_free(a);
+    mcp_image_free(b);
 }

@@ -39,6 +39,14 @@ mcp_image *mcp_test_random(int w, int h, int c, float lo, float hi, uint64_t see
 /* Largest absolute difference between two same-shaped images. */
 double mcp_test_max_abs_diff(const mcp_image *a, const mcp_image *b);
 
+/* Asserts that two images (or both NULL) hold the same channel names and float bits. */
+void mcp_test_assert_same_image(const mcp_image *a, const mcp_image *b);
+
+/* Asserts that two image files hold the same channels (names, order), attributes
+ * (names, types, values) and float bits in every value: a streamed command's output
+ * against its whole one's (the files' bytes may differ in which zip chunks are raw). */
+void mcp_test_assert_same_image_files(const char *a_path, const char *b_path);
+
 /* splitmix64 (common/core/rng_internal.h): a small seeded generator for test data. */
 uint64_t mcp_test_rand_u64(uint64_t *state);
 double mcp_test_rand_uniform(uint64_t *state);
