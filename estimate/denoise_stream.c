@@ -120,10 +120,12 @@ mcp__denoise_dump_streamed(const mcp_denoiser *den, const mcp_dump_spec *spec,
             if (mcp__exr_writer_close(io.out) && !rc) rc = -1;
             if (*why) mcp_error("%s", why);
         }
-        if (rc)
+        if (rc) {
+            mcp__name_output_in_error(af.tmp_path, out_path);
             mcp_atomic_abort(&af);
-        else
+        } else {
             rc = mcp_atomic_commit(&af);
+        }
     }
     mcp__dump_rows_close(in);
     return rc ? -1 : 0;

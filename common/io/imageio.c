@@ -397,9 +397,8 @@ mcp_image_read(const char *path, const mcp_read_options *opt, mcp_image **out)
     }
 }
 
-/* The current error names the real output, not the temporary file written. */
-static void
-name_output_in_error(const char *tmp_path, const char *path)
+void
+mcp__name_output_in_error(const char *tmp_path, const char *path)
 {
     char msg[1024];
     snprintf(msg, sizeof msg, "%s", mcp_error_message());
@@ -467,7 +466,7 @@ mcp_image_write(const mcp_image *img, const char *path, const mcp_write_options 
     }
     mcp_image_free(ordered);
     if (rc) {
-        name_output_in_error(af.tmp_path, path);
+        mcp__name_output_in_error(af.tmp_path, path);
         mcp_atomic_abort(&af);
         return -1;
     }
@@ -481,7 +480,7 @@ mcp_write_rgb8(const unsigned char *rgb8, int width, int height, const char *pat
         mcp_atomic_file af;
         if (mcp_atomic_begin(&af, path)) return -1;
         if (mcp__png_write_bytes(rgb8, width, height, 3, af.tmp_path)) {
-            name_output_in_error(af.tmp_path, path);
+            mcp__name_output_in_error(af.tmp_path, path);
             mcp_atomic_abort(&af);
             return -1;
         }

@@ -102,6 +102,10 @@ int mcp__exr_writer_open(const char *path, int width, int height, int nc,
 int mcp__exr_writer_rows(mcp__exr_writer *wr, const mcp_image *rows, int y0);
 int mcp__exr_writer_close(mcp__exr_writer *wr);
 
+/* The current error names the real output path, not the temporary file tmp_path
+ * written for it (imageio.c). */
+void mcp__name_output_in_error(const char *tmp_path, const char *path);
+
 /* An EXR written band by band under a temporary name (stream.c): begin picks the
  * name (failing early when the folder is not writable); rows writes the next band
  * (rows->height rows from y0, ending on a chunk's last row or the image's), the first

@@ -58,6 +58,7 @@ mcp__exr_band_file_end(mcp__exr_band_file *f, int failed)
     f->wr = NULL;
     if (*why) mcp_error("%s", why);
     if (rc) {
+        mcp__name_output_in_error(f->af.tmp_path, f->path);
         mcp_atomic_abort(&f->af);
         return -1;
     }

@@ -4,8 +4,9 @@
  * mcp_dump_write): the same channels, attributes and float bits for every channel, a
  * pick of channels in half floats, a tiled input, and a dump in each convention, over
  * bands that do not divide the height; the same one-line errors (a channel the file
- * lacks, a bad value in a dump, a count map in a convention without one) with no
- * output left; and what it leaves to the whole conversion. */
+ * lacks, a compression that cannot be written, a bad value in a dump, a count map in a
+ * convention without one) with no output left; and what it leaves to the whole
+ * conversion. */
 #include "streamed.h"
 #include "testing.h"
 
@@ -118,7 +119,12 @@ test_images(void **state)
     c.wo.exr_pixel = MCP_EXR_HALF;
     c.wo.compression = MCP_EXR_PIZ;
     mcp_test_assert_streamed_is_whole(convert_streamed, convert_whole, &c, "picked");
-    c = case_of(render_to("tiled.exr", MCP_CONV_PBRT, 40, 0, 0));
+    c.names = NULL;
+    c.count = 0;
+    c.wo.compression = MCP_EXR_DWAA; /* refused, naming the output, not its temporary */
+    mcp_test_assert_same_failure(convert_streamed, convert_whole, &c, "dwaa");
+    /* tiles of 24 pixels: two columns of them, and bands that start inside a tile */
+    c = case_of(render_to("tiled.exr", MCP_CONV_PBRT, 24, 0, 0));
     mcp_test_assert_streamed_is_whole(convert_streamed, convert_whole, &c, "tiled");
     char *missing[2] = {"R", "Depth.Z"};
     c.names = missing;
