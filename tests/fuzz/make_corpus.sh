@@ -10,7 +10,7 @@ mcpost=$build/mcpost
 procedural=$build/mcpost-procedural
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
-mkdir -p corpus/{pfm,exr,dump,job,tza} regressions/{pfm,exr,dump,job,tza}
+mkdir -p corpus/{pfm,exr,dump,job,tza,bands} regressions/{pfm,exr,dump,job,tza,bands}
 
 # ---- images and dumps: a 4x3 procedural render, written every way we read ----
 "$procedural" --width 4 --height 3 --spp 4 -o "$tmp/d" >/dev/null
@@ -40,6 +40,29 @@ cp "$d" corpus/dump/pbrt.exr
     cat corpus/exr/rgb_none.exr; printf 'MCPPART\n'; cat "$tmp/var.pfm"
     printf 'MCPPART\nMCPPART\nMCPPART\n'; cat corpus/pfm/grey.pfm
 } >corpus/dump/separate_spp_map.bin
+
+# ---- bands: a 6x37 dump (three zip chunks, two piz ones, tiles of 4) and the small
+# files, each after the byte that picks the band height and the bad-value policy
+# (fuzz_bands.c: 1 + (byte >> 1) % 64 rows; bit 0 the policy) ----
+"$procedural" --width 6 --height 37 --spp 4 -o "$tmp/b" >/dev/null
+b=$tmp/b_0000.exr
+"$mcpost" convert "$b" "$tmp/b_piz.exr" --compression piz --quiet
+"$mcpost" convert "$b" "$tmp/b_tiled.exr" --tiled 4 --quiet
+"$mcpost" convert "$b" "$tmp/b_mitsuba.exr" --dump mitsuba --quiet
+"$mcpost" convert "$b" "$tmp/b_mcpost.exr" --dump mcpost --quiet
+prefixed() { # prefixed BYTE FILE OUT
+    { printf "\\$(printf %03o "$1")"; cat "$2"; } >"$3"
+}
+prefixed 8 "$b" corpus/bands/pbrt_zip.bin
+prefixed 13 "$tmp/b_piz.exr" corpus/bands/pbrt_piz.bin
+prefixed 10 "$tmp/b_tiled.exr" corpus/bands/pbrt_tiled.bin
+prefixed 4 "$tmp/b_mitsuba.exr" corpus/bands/mitsuba.bin
+prefixed 31 "$tmp/b_mcpost.exr" corpus/bands/mcpost.bin
+prefixed 2 corpus/dump/blender.exr corpus/bands/blender_small.bin
+prefixed 3 corpus/exr/rgb_half.exr corpus/bands/rgb_half.bin
+prefixed 8 regressions/exr/data_window_30000.exr regressions/bands/data_window_30000.bin
+prefixed 9 regressions/dump/newline_in_channel_name.exr \
+    regressions/bands/newline_in_channel_name.bin
 
 # ---- jobs: the samples' jobs, renamed onto the files fuzz_job makes ----
 for j in ../../samples/jobs/*.yaml; do

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # run.sh BUILD_DIR [SECONDS] [TARGET...]: runs the libFuzzer targets of a
 # MCPOST_FUZZ=ON build (clang) for SECONDS each [60], every target when none is named
-# (pfm exr dump job tza). Starts from the committed seed corpus and the regression
+# (pfm exr dump job tza bands). Starts from the committed seed corpus and the regression
 # inputs; what a run adds to the corpus stays in BUILD_DIR/fuzz/corpus/<target>.
 # Exits non-zero on the first finding (a crash, a sanitizer report, a leak, a timeout
 # over 10 s, an allocation over 2 GiB), whose input is left in
@@ -19,7 +19,7 @@ build=$(cd "${1:?usage: run.sh BUILD_DIR [SECONDS] [TARGET...]}" && pwd)
 seconds=${2:-60}
 shift $(($# > 1 ? 2 : 1))
 targets=("$@")
-[ ${#targets[@]} -gt 0 ] || targets=(pfm exr dump job tza)
+[ ${#targets[@]} -gt 0 ] || targets=(pfm exr dump job tza bands)
 runs=${MCPOST_FUZZ_RUNS:--1}
 max_len=${MCPOST_FUZZ_MAX_LEN:-65536}
 
