@@ -138,16 +138,7 @@ screen_picture(const mcp_image *img, unsigned char *rgb8)
 {
     int rgb[3];
     if (mcp_rgb_channels(img, rgb)) return -1;
-    const mcp__srgb8_table *srgb = mcp__srgb8_table_get();
-    const int w = img->width, h = img->height;
-#pragma omp parallel for schedule(static)
-    for (int y = 0; y < h; y++)
-        for (int x = 0; x < w; x++) {
-            const float *p = mcp_image_px(img, x, y);
-            unsigned char *o = rgb8 + 3 * ((size_t)y * w + x);
-            for (int c = 0; c < 3; c++)
-                o[c] = mcp__srgb8_byte(srgb, p[rgb[c]]);
-        }
+    mcp__srgb8_bytes(img, rgb, 3, 1, rgb8);
     return 0;
 }
 

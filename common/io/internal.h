@@ -157,6 +157,12 @@ mcp__srgb8_byte(const mcp__srgb8_table *t, float v)
     const int k = t->start[bits >> 16];
     return (unsigned char)(k + (v >= t->edge[k + 1])); /* no range spans two edges */
 }
+/* The bytes of an 8-bit picture of img (srgb8.c): byte k of each pixel from channel
+ * channels[k] of n (1, 3 or 4), clamped to [0, 1] (NaN to 0), sRGB-encoded when srgb
+ * (a fourth channel, alpha, stays linear), else scaled; the PNG writer's and the
+ * estimate's screen picture. */
+void mcp__srgb8_bytes(const mcp_image *img, const int *channels, int n, int srgb,
+                      unsigned char *out);
 /* 8-bit samples, c = 1, 3 or 4 channels interleaved, written as they are */
 int mcp__png_write_bytes(const unsigned char *bytes, int w, int h, int c,
                          const char *path);

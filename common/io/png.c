@@ -149,20 +149,8 @@ mcp__png_write(const mcp_image *img, const char *path, const mcp_write_options *
                          path, c);
     unsigned char *bytes = mcp_malloc((size_t)w * h * c);
     if (!bytes) return -1;
-    const mcp__srgb8_table *srgb = mcp__srgb8_table_get();
-#pragma omp parallel for schedule(static) if ((size_t)w * h >= 65536)
-    for (int y = 0; y < h; y++)
-        for (int x = 0; x < w; x++)
-            for (int k = 0; k < c; k++) {
-                float v = mcp_image_px(img, x, y)[k];
-                unsigned char *o = &bytes[((size_t)y * w + x) * c + k];
-                if (opt->srgb_encode && !(c == 4 && k == 3)) { /* alpha stays linear */
-                    *o = mcp__srgb8_byte(srgb, v);
-                    continue;
-                }
-                v = v > 0.0f ? (v < 1.0f ? v : 1.0f) : 0.0f; /* NaN to 0 */
-                *o = (unsigned char)(v * 255.0f + 0.5f);
-            }
+    const int in_order[4] = {0, 1, 2, 3};
+    mcp__srgb8_bytes(img, in_order, c, opt->srgb_encode, bytes);
     int rc = mcp__png_write_bytes(bytes, w, h, c, path);
     free(bytes);
     return rc;

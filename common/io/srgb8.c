@@ -62,3 +62,26 @@ mcp__srgb8_table_get(void)
     pthread_once(&table_once, build_table);
     return &table;
 }
+
+void
+mcp__srgb8_bytes(const mcp_image *img, const int *channels, int n, int srgb,
+                 unsigned char *out)
+{
+    const mcp__srgb8_table *t = mcp__srgb8_table_get();
+    const int w = img->width, h = img->height;
+#pragma omp parallel for schedule(static) if ((size_t)w * h >= 65536)
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            const float *p = mcp_image_px(img, x, y);
+            unsigned char *o = out + ((size_t)y * w + x) * n;
+            for (int k = 0; k < n; k++) {
+                float v = p[channels[k]];
+                if (srgb && !(n == 4 && k == 3)) { /* alpha stays linear */
+                    o[k] = mcp__srgb8_byte(t, v);
+                    continue;
+                }
+                v = v > 0.0f ? (v < 1.0f ? v : 1.0f) : 0.0f; /* NaN to 0 */
+                o[k] = (unsigned char)(v * 255.0f + 0.5f);
+            }
+        }
+}
