@@ -104,9 +104,10 @@ int mcp__dump_bands_from_rows(mcp__dump_bands *b, const mcp_image *rows, int y0,
  * pixels and header, in a band's memory per input. -1 on failure, said in a whole
  * merge's words and with no output left; 0 and *done 1 when written, *last then the
  * last band's merged dump, whose sample count, count map and variance source are the
- * result's; 0 and *done 0 when the merge must be made whole: pooling, inputs a band
- * reader cannot take (mcp__dump_bands_open), an output other than an untiled EXR, or
- * MCPOST_BAND_ROWS=whole (for tests; a multiple of 32 sets the band height). */
+ * result's; 0 and *done 0 when the merge must be made whole: inputs a band reader
+ * cannot take (mcp__dump_bands_open), an output other than an untiled EXR, or
+ * MCPOST_BAND_ROWS=whole (for tests; a multiple of 32 sets the band height). With
+ * pooling each band is merged from its rows and the pool radius's rows on each side. */
 int mcp__dump_merge_streamed(const mcp_dump_spec *specs, int count,
                              const mcp_merge_options *opt, const char *out_path,
                              const mcp_write_options *wo, mcp_dump **last, int *done);

@@ -3,9 +3,10 @@
 # (docs/conventions.md, "Files larger than memory"): under an address-space limit
 # (ulimit -v) that the whole command does not fit in, each gives what the whole command
 # gives. Three 2-spp dumps of 2400x1600 (12 channels each, 88 MB of zip): in bands
-# each command runs within 150 MB of address space (merge 66 MB resident, where the
-# whole merge held 1.0 GB); whole, merge needs more than 900 MB, convert more than 400
-# and info more than 200. The limit here is 200 MB. The truth is each command run whole
+# each command runs within 150 MB of address space (merge 89 MB resident, where the
+# whole merge held 1.0 GB; with --pool 2, whose bands read the rows around them, 108
+# MB); whole, merge needs more than 900 MB, convert more than 400 and info more than
+# 200. The limit here is 200 MB. The truth is each command run whole
 # (MCPOST_BAND_ROWS=whole) without a limit: files compared value for value, every
 # channel, rewritten without compression (EXR files of the same pixels may differ in
 # which zip chunks are stored raw), and info's JSON and text compared as they are.
@@ -47,6 +48,9 @@ whole_fails() { # whole_fails NAME COMMAND ARGS...: the whole command does not f
 MCPOST_BAND_ROWS=whole "$mcpost" merge "${inputs[@]}" -o merge_whole.exr --quiet
 limited merge merge "${inputs[@]}" -o merge.exr || { echo "FAIL: merge"; exit 1; }
 same_values merge.exr merge_whole.exr
+MCPOST_BAND_ROWS=whole "$mcpost" merge "${inputs[@]}" -o pool_whole.exr --pool 2 --quiet
+limited pool merge "${inputs[@]}" -o pool.exr --pool 2 || { echo "FAIL: merge --pool"; exit 1; }
+same_values pool.exr pool_whole.exr
 whole_fails merge_limited merge "${inputs[@]}" -o merge_limited.exr
 [ ! -e merge_limited.exr ] || { echo "FAIL: a failed merge left its output"; exit 1; }
 

@@ -2,7 +2,8 @@
  * time, against the whole merge it replaces (mcp_dump_load, mcp_dump_merge,
  * mcp_dump_write): the same channels, attributes and float bits in every value, for
  * replicates and pooled passes, per-pixel sample counts, covariances, Mitsuba 3's
- * moments and half floats, over bands that do not divide the height; the same one-line
+ * moments and half floats, the variance pooled over windows that reach into other
+ * bands (radius 1 to 40), over bands that do not divide the height; the same one-line
  * errors for bad values, a negative sample count, unequal sizes and a missing file,
  * with no output left; and the merges it leaves to the whole path. */
 #include "streamed.h"
@@ -140,8 +141,18 @@ test_replicates_and_passes(void **state)
         paths[k] = write_input(render(4, k), "rep", k, MCP_CONV_PBRT);
     merge_case c = merge_case_of(3, paths);
     mcp_test_assert_streamed_is_whole(merge_streamed, merge_whole, &c, "rep");
+    /* pooled over windows that reach into the bands above and below: radius 1, and 40,
+       more than a band of 32 rows */
+    c.opt.pool_radius = 1;
+    mcp_test_assert_streamed_is_whole(merge_streamed, merge_whole, &c, "rep_pool1");
+    c.opt.pool_radius = 40;
+    mcp_test_assert_streamed_is_whole(merge_streamed, merge_whole, &c, "rep_pool40");
+    c.opt.pool_radius = 0;
     c.opt.variance = MCP_MERGE_POOLED;
     mcp_test_assert_streamed_is_whole(merge_streamed, merge_whole, &c, "pooled");
+    c.opt.pool_radius = 2;
+    mcp_test_assert_streamed_is_whole(merge_streamed, merge_whole, &c, "pooled_pool2");
+    c.opt.pool_radius = 0;
     c.wo.exr_pixel = MCP_EXR_HALF;
     mcp_test_assert_streamed_is_whole(merge_streamed, merge_whole, &c, "pooled_half");
     /* tiles of 48 rows: a band's rows start inside a tile */
@@ -160,6 +171,8 @@ test_counts_covariance_moments(void **state)
         paths[k] = write_input(render_counts(k), "counts", k, MCP_CONV_MCPOST);
     merge_case c = merge_case_of(3, paths);
     mcp_test_assert_streamed_is_whole(merge_streamed, merge_whole, &c, "counts");
+    c.opt.pool_radius = 2;
+    mcp_test_assert_streamed_is_whole(merge_streamed, merge_whole, &c, "counts_pool2");
     /* merged replicates hold a covariance and say where their variance came from */
     const char *twice[2];
     for (int k = 0; k < 2; k++) {
@@ -174,6 +187,8 @@ test_counts_covariance_moments(void **state)
     }
     c = merge_case_of(2, twice);
     mcp_test_assert_streamed_is_whole(merge_streamed, merge_whole, &c, "cov");
+    c.opt.pool_radius = 3; /* the covariance pooled beside the variance */
+    mcp_test_assert_streamed_is_whole(merge_streamed, merge_whole, &c, "cov_pool3");
     /* Mitsuba 3's moments (m2_*): no sample count in the file, so one is given */
     for (int k = 0; k < 2; k++)
         paths[k] = write_input(render(8, 20 + k), "mitsuba", k, MCP_CONV_MITSUBA);
@@ -222,8 +237,8 @@ test_same_errors(void **state)
     mcp_test_assert_same_failure(merge_streamed, merge_whole, &c, "missing");
 }
 
-/* What the streamed merge leaves to the whole one: pooling, inputs in another format,
- * an output in another format, and MCPOST_BAND_ROWS=whole. */
+/* What the streamed merge leaves to the whole one: inputs in another format, an output
+ * in another format, and MCPOST_BAND_ROWS=whole. */
 static void
 test_left_whole(void **state)
 {
@@ -234,11 +249,6 @@ test_left_whole(void **state)
     merge_case c = merge_case_of(2, paths);
     int done = 1;
     const char *out = mcp_test_path("left_out.exr");
-    c.opt.pool_radius = 1;
-    assert_int_equal(merge_streamed(&c, out, &done), 0);
-    assert_int_equal(done, 0);
-    c.opt.pool_radius = 0;
-    done = 1;
     assert_int_equal(merge_streamed(&c, mcp_test_path("left_out.pfm"), &done), 0);
     assert_int_equal(done, 0);
     mcp_image *pfm = NULL;
