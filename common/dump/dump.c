@@ -1215,9 +1215,11 @@ done:
 
 /* ---- reading a whole EXR dump, a band of rows at a time ---- */
 
-/* For a streamed merge (docs/conventions.md, "Files larger than memory"):
- * every part, laid out, converted and checked by the code a whole read runs
- * (route_parts, dump_fill), on images of the band's rows. */
+/* For the commands that stream a dump (merge, convert --dump, info: docs/
+ * conventions.md, "Files larger than memory"): every part, laid out, converted and
+ * checked by the code a whole read runs (route_parts, dump_fill), on images of the
+ * band's rows; the bands follow each other once, top to bottom. (The U-Net's streamed
+ * denoise reads overlapping bands of three parts instead: mcp__dump_rows, above.) */
 struct mcp__dump_bands {
     mcp_dump_spec spec;
     mcp__exr_rows *exr;
