@@ -15,15 +15,22 @@ mcp_test_bands_of_32(void **state)
     return setenv("MCPOST_BAND_ROWS", "32", 1);
 }
 
+/* <scratch folder>/<name><suffix>.exr into path. */
+static void
+scratch_exr(const char *name, const char *suffix, char path[4096])
+{
+    char file[192];
+    snprintf(file, sizeof file, "%s%s.exr", name, suffix);
+    snprintf(path, 4096, "%s", mcp_test_path(file));
+}
+
 void
 mcp_test_assert_streamed_is_whole(mcp_test_streamed_fn streamed, mcp_test_whole_fn whole,
                                   const void *ctx, const char *name)
 {
-    char streamed_path[4096], whole_path[4096], file[160];
-    snprintf(file, sizeof file, "%s_streamed.exr", name);
-    snprintf(streamed_path, sizeof streamed_path, "%s", mcp_test_path(file));
-    snprintf(file, sizeof file, "%s_whole.exr", name);
-    snprintf(whole_path, sizeof whole_path, "%s", mcp_test_path(file));
+    char streamed_path[4096], whole_path[4096];
+    scratch_exr(name, "_streamed", streamed_path);
+    scratch_exr(name, "_whole", whole_path);
     int done = 0;
     assert_int_equal(streamed(ctx, streamed_path, &done), 0);
     assert_int_equal(done, 1);
@@ -35,9 +42,8 @@ void
 mcp_test_assert_same_failure(mcp_test_streamed_fn streamed, mcp_test_whole_fn whole,
                              const void *ctx, const char *name)
 {
-    char out[4096], file[160], whole_error[2048];
-    snprintf(file, sizeof file, "%s_failed.exr", name);
-    snprintf(out, sizeof out, "%s", mcp_test_path(file));
+    char out[4096], whole_error[2048];
+    scratch_exr(name, "_failed", out);
     assert_int_equal(whole(ctx, out), -1);
     assert_int_not_equal(access(out, F_OK), 0);
     snprintf(whole_error, sizeof whole_error, "%s", mcp_error_message());
