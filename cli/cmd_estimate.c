@@ -221,10 +221,12 @@ cmd_estimate(int argc, char **argv)
                 &spec, mcp__dump_parts_unread(den, eo->sure.features != NULL), &dump) ||
             mcp_estimate_compute(dump, den, eo, &e))
             goto done;
-        /* nothing after the estimate reads the dump: its memory goes to the pictures
-           and files */
+        /* nothing after the estimate reads the dump, nor Σ̂^r, which only cut the
+           blocks: their memory goes to the pictures and files */
         mcp_dump_free(dump);
         dump = NULL;
+        mcp_image_free(e->maps.sigma_rel);
+        e->maps.sigma_rel = NULL;
         summary = mcp__estimate_json(e, path, den->name, eo);
         if (ref && mcp__estimate_add_truth(e, ref, eo, summary)) /* the truth beside it */
             goto done;
