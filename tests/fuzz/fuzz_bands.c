@@ -93,7 +93,8 @@ image_in_bands(const char *path, const mcp_dump_spec *spec, int rows)
         mcp_image_free(band);
     }
     mcp_fuzz_check_error(rc_b, "read in bands");
-    if (!rc_b && (rc_wd == 0) != (rc_bd == 0)) finding("the dump from rows", rc_wd, rc_bd);
+    if (!rc_b && (rc_wd == 0) != (rc_bd == 0))
+        finding("the dump from rows", rc_wd, rc_bd);
     mcp__dump_bands_close(from_rows);
     mcp__exr_rows_close(r);
     mcp_dump_free(whole_dump);
