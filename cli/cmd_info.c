@@ -51,17 +51,17 @@ describe_file(const char *path, const mcp_image *img, const mcp_dump_spec *spec)
     return o;
 }
 
-/* What a band of a streamed description needs: the rows' statistics of every channel,
- * and the dump's band reader until a band fails as a dump. */
+/* What a band of a streamed description needs: every channel's statistics so far, and
+ * the dump's band reader until a band fails as a dump. */
 typedef struct info_stream {
     mcp__exr_rows *exr;
     mcp__dump_bands *dump;
-    mcp_dump *last;          /* the last band's dump: its metadata are the file's */
-    char dump_error[1024];   /* why it is no dump, once a band says so */
-    mcp_channel_stats *rows; /* channels x height */
-    mcp_image *first;        /* the first band: the channels' names in a whole
-                                read's order, the attributes */
-    int height;
+    mcp_dump *last;            /* the last band's dump: its metadata are the file's */
+    char dump_error[1024];     /* why it is no dump, once a band says so */
+    mcp_channel_stats *totals; /* each channel's, over the bands so far */
+    mcp_channel_stats *rows;   /* a band's rows' */
+    mcp_image *first;          /* the first band: the channels' names in a whole
+                                  read's order, the attributes */
 } info_stream;
 
 static int
@@ -70,8 +70,10 @@ info_band(void *ctx, int y0, int y1)
     info_stream *st = ctx;
     mcp_image *img = NULL;
     if (mcp__exr_rows_read_image(st->exr, y0, y1, &img)) return -1;
-    for (int c = 0; c < img->channels; c++)
-        mcp__channel_stats_rows(img, c, st->rows + (size_t)c * st->height + y0);
+    for (int c = 0; c < img->channels; c++) {
+        mcp__channel_stats_rows(img, c, st->rows);
+        mcp__channel_stats_add(&st->totals[c], st->rows, y1 - y0);
+    }
     mcp_dump *d = NULL;
     if (!st->dump_error[0]) {
         if (mcp__dump_bands_from_rows(st->dump, img, y0, &d)) {
@@ -91,7 +93,7 @@ info_band(void *ctx, int y0, int y1)
 
 /* describe_file's object for an EXR read a band of rows at a time, so that a render of
  * any size is described within a band's memory (issue 31; docs/conventions.md,
- * "Files larger than memory"): the statistics of each row folded in order, and the dump
+ * "Files larger than memory"): the statistics of each row added in order, and the dump
  * built and checked band by band, give the whole read's figures and words. 0 and *o NULL
  * when the file is read whole instead (another format, MCPOST_BAND_ROWS=whole). */
 static int
@@ -108,11 +110,13 @@ describe_streamed(const char *path, const mcp_dump_spec *given, cJSON **o)
     snprintf(label, sizeof label, "info %s", path);
     if (mcp__exr_rows_open(path, &st.exr)) return -1;
     const mcp_image *header = mcp__exr_rows_header(st.exr, &w, &h);
-    st.height = h;
-    if (!(st.rows = mcp_calloc((size_t)header->channels * h, sizeof *st.rows)) ||
-        mcp__dump_bands_for_rows(&spec, h, &st.dump) ||
-        mcp__stream_bands(label, w, h, band, info_band, &st))
+    if (!(st.totals = mcp_calloc((size_t)header->channels, sizeof *st.totals)) ||
+        !(st.rows = mcp_calloc((size_t)band, sizeof *st.rows)) ||
+        mcp__dump_bands_for_rows(&spec, h, &st.dump))
         goto done;
+    for (int c = 0; c < header->channels; c++)
+        mcp__channel_stats_start(&st.totals[c]);
+    if (mcp__stream_bands(label, w, h, band, info_band, &st)) goto done;
     cJSON *d = cJSON_CreateObject();
     cJSON_AddStringToObject(d, "file", path);
     cJSON_AddStringToObject(d, "format", mcp_format_name(MCP_FORMAT_EXR));
@@ -127,9 +131,8 @@ describe_streamed(const char *path, const mcp_dump_spec *given, cJSON **o)
     }
     cJSON *channels = cJSON_AddArrayToObject(d, "channels");
     for (int c = 0; c < st.first->channels; c++) {
-        mcp_channel_stats s;
-        mcp__channel_stats_fold(st.rows + (size_t)c * h, h, &s);
-        mcp__info_add_channel(channels, st.first->names[c], &s);
+        mcp__channel_stats_finish(&st.totals[c]);
+        mcp__info_add_channel(channels, st.first->names[c], &st.totals[c]);
     }
     add_attrs(d, &st.first->attrs);
     *o = d;
@@ -139,6 +142,7 @@ done:
     mcp_dump_free(st.last);
     mcp__dump_bands_close(st.dump);
     free(st.rows);
+    free(st.totals);
     mcp__exr_rows_close(st.exr);
     return rc;
 }

@@ -28,12 +28,14 @@ int mcp__image_permute_names(mcp_image *img, const int *order);
 void mcp__alloc_fail_after(long n);
 long mcp__alloc_count(void);
 
-/* mcp_channel_stats_compute in two steps, for an image read a band of rows at a time
- * (stats.c): each row's statistics of channel c (mean holding the row's sum), then the
- * rows folded in order, which gives the whole image's bits. */
+/* mcp_channel_stats_compute in steps, for an image read a band of rows at a time
+ * (stats.c): each row's statistics of channel c (mean holding the row's sum); a total
+ * started, then the rows added to it in order, band after band; the mean made of the
+ * sum at the end. The rows added in image order give the whole image's bits. */
 void mcp__channel_stats_rows(const mcp_image *img, int c, mcp_channel_stats *rows);
-void mcp__channel_stats_fold(const mcp_channel_stats *rows, int n,
-                             mcp_channel_stats *out);
+void mcp__channel_stats_start(mcp_channel_stats *t);
+void mcp__channel_stats_add(mcp_channel_stats *t, const mcp_channel_stats *rows, int n);
+void mcp__channel_stats_finish(mcp_channel_stats *t);
 
 /* Window sums over the first 3 channels of 1 to 3 images of one size (stats.c): the
  * sum over the (2r + 1)² window around each pixel, clipped at the borders, in double,

@@ -38,24 +38,32 @@ mcp__channel_stats_rows(const mcp_image *img, int c, mcp_channel_stats *rows)
 }
 
 void
-mcp__channel_stats_fold(const mcp_channel_stats *rows, int n, mcp_channel_stats *out)
+mcp__channel_stats_start(mcp_channel_stats *t)
 {
-    mcp_channel_stats t = {INFINITY, -INFINITY, 0, 0, 0, 0, 0};
+    *t = (mcp_channel_stats){INFINITY, -INFINITY, 0, 0, 0, 0, 0};
+}
+
+void
+mcp__channel_stats_add(mcp_channel_stats *t, const mcp_channel_stats *rows, int n)
+{
     for (int y = 0; y < n; y++) {
-        t.mean += rows[y].mean;
-        t.min = rows[y].min < t.min ? rows[y].min : t.min;
-        t.max = rows[y].max > t.max ? rows[y].max : t.max;
-        t.n_nan += rows[y].n_nan;
-        t.n_inf += rows[y].n_inf;
-        t.n_negative += rows[y].n_negative;
-        t.n_finite += rows[y].n_finite;
+        t->mean += rows[y].mean;
+        t->min = rows[y].min < t->min ? rows[y].min : t->min;
+        t->max = rows[y].max > t->max ? rows[y].max : t->max;
+        t->n_nan += rows[y].n_nan;
+        t->n_inf += rows[y].n_inf;
+        t->n_negative += rows[y].n_negative;
+        t->n_finite += rows[y].n_finite;
     }
-    if (t.n_finite) {
-        t.mean /= (double)t.n_finite;
-    } else {
-        t.min = t.max = t.mean = 0;
-    }
-    *out = t;
+}
+
+void
+mcp__channel_stats_finish(mcp_channel_stats *t)
+{
+    if (t->n_finite)
+        t->mean /= (double)t->n_finite;
+    else
+        t->min = t->max = t->mean = 0;
 }
 
 int
@@ -67,7 +75,9 @@ mcp_channel_stats_compute(const mcp_image *img, int c, mcp_channel_stats *out)
     mcp_channel_stats *rows = mcp_calloc((size_t)img->height, sizeof *rows);
     if (!rows) return -1;
     mcp__channel_stats_rows(img, c, rows);
-    mcp__channel_stats_fold(rows, img->height, out);
+    mcp__channel_stats_start(out);
+    mcp__channel_stats_add(out, rows, img->height);
+    mcp__channel_stats_finish(out);
     free(rows);
     return 0;
 }
