@@ -83,8 +83,21 @@ link_python() { # lets `python3 -c "import mcpost"` find build/python: a .pth fi
     echo "setup: python3 finds the mcpost module in build/python ($site/mcpost-build.pth)" >&2
 }
 
-run_tests() { # run_tests DIR
+run_tests() { # run_tests DIR: a passing run leaves no scratch files in DIR/test-tmp
+    # but the build of NVIDIA's FLIP tool (docs/testing.md), rebuilt only when older
     ctest --test-dir "$1" --output-on-failure -j "$JOBS"
+    find "$1/test-tmp" -mindepth 1 -maxdepth 1 ! -name common_test_flip_stats \
+        -exec rm -rf {} + 2>/dev/null || true
+}
+
+say_free_disk() { # the tests write up to 1 GB at a time (build/test-tmp), the five
+    # builds take about 1.5 GB, and a disk that fills fails tests at random ("No space
+    # left on device"): say how much there is
+    local free_kb
+    free_kb=$(df -Pk . | awk 'NR == 2 { print $4 }')
+    echo "setup: $((free_kb / 1024 / 1024)) GB free on the disk of $PWD" >&2
+    [ "$free_kb" -ge $((3 * 1024 * 1024)) ] ||
+        echo "setup: warning: the tests need about 3 GB free; expect 'No space left'" >&2
 }
 
 case "${1:-}" in
@@ -113,6 +126,7 @@ demo)
     fi
     ;;
 test)
+    say_free_disk
     install_packages
     # a one-node Slurm for tests/cli/slurm_frames.sh (frame jobs on a cluster)
     install_packages slurm-wlm munge

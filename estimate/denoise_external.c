@@ -18,7 +18,6 @@
 
 #include <mcpost/imageio.h>
 
-#include <dirent.h>
 #include <math.h>
 #include <stddef.h>
 #include <stdio.h>
@@ -97,25 +96,6 @@ substitute(const char *tmpl, const char *const paths[4], char **out)
     return mcp__shell_fill(tmpl, 4, names, paths, 0xF, out);
 }
 
-/* Removes every file in dir and then dir (best effort; the command may have left
- * files of its own there). */
-static void
-remove_dir(const char *dir)
-{
-    DIR *d = opendir(dir);
-    if (d) {
-        struct dirent *e;
-        char path[PATH_CAP];
-        while ((e = readdir(d))) {
-            if (strcmp(e->d_name, ".") == 0 || strcmp(e->d_name, "..") == 0) continue;
-            snprintf(path, sizeof path, "%s/%s", dir, e->d_name);
-            unlink(path);
-        }
-        closedir(d);
-    }
-    rmdir(dir);
-}
-
 /* The 3 channels of the command's output: R,G,B, or all of them when exactly 3. */
 static int
 read_output(const external_state *s, const char *path, const mcp_image *color,
@@ -165,12 +145,9 @@ run_external(const external_state *s, const mcp_denoise_input *in, mcp_image **o
     const char *base = s->workdir;
     if (!base || !*base) base = getenv("TMPDIR");
     if (!base || !*base) base = "/tmp";
-    char dir[PATH_CAP];
-    if ((size_t)snprintf(dir, sizeof dir, "%s/mcpost-external-XXXXXX", base) >=
-        sizeof dir - 32)
-        return mcp_error("external: workdir '%s': path too long", base);
-    if (!mkdtemp(dir))
-        return mcp_error("external: cannot make a temporary folder in '%s'", base);
+    char dir[PATH_CAP - 32];
+    if (mcp__scratch_dir_begin(base, "mcpost-external-", dir, sizeof dir))
+        return mcp_error_prefix("external: workdir: ");
     static const char *const stems[4] = {"color", "albedo", "normal", "output"};
     char paths[4][PATH_CAP];
     for (int i = 0; i < 4; i++)
@@ -193,7 +170,7 @@ run_external(const external_state *s, const mcp_denoise_input *in, mcp_image **o
     rc = read_output(s, paths[3], in->color, out);
 done:
     free(line);
-    remove_dir(dir);
+    mcp__scratch_dir_end(dir);
     return rc;
 }
 

@@ -17,6 +17,11 @@ int mcp__find_data_file(const char *name, char *buf, size_t cap);
  * status checked into one error line (common/core/shell.c, common/core/internal.h). */
 int mcp__shell(const char *command);
 int mcp__shell_check(int status, const char *what, const char *command);
+/* A scratch folder PARENT/PREFIXxxxxxx, removed by end or, if the process is stopped
+ * by SIGINT, SIGTERM or SIGHUP first, by the signal handler (common/io/outdir.c,
+ * common/io/internal.h). */
+int mcp__scratch_dir_begin(const char *parent, const char *prefix, char *dir, size_t cap);
+void mcp__scratch_dir_end(const char *dir);
 int mcp__shell_fill(const char *tmpl, int n, const char *const *names,
                     const char *const *values, unsigned quoted, char **out);
 

@@ -38,6 +38,11 @@ void mcp__outdir_clear_stale(const char *parent, const char *base);
 int mcp__outdir_commit(mcp__outdir *o);
 void mcp__outdir_abort(mcp__outdir *o);
 int mcp__outdir_fix_paths(const mcp__outdir *o, cJSON *json);
+/* A scratch folder that no command outputs (an external denoiser's files): made by
+ * mkdtemp as PARENT/PREFIXxxxxxx into dir, and removed by end, or by the handler of
+ * SIGINT, SIGTERM and SIGHUP if the process is stopped first (outdir.c). */
+int mcp__scratch_dir_begin(const char *parent, const char *prefix, char *dir, size_t cap);
+void mcp__scratch_dir_end(const char *dir);
 /* A function the handler of SIGINT, SIGTERM and SIGHUP calls after removing the
  * temporary files in flight (imageio.c); it must be async-signal-safe. */
 void mcp__signal_cleanup_hook(void (*hook)(void));

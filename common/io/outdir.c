@@ -24,6 +24,7 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <ftw.h>
+#include <pthread.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -79,10 +80,56 @@ remove_tree_at(int parent, const char *name, int depth)
 static char in_flight[4096];
 static volatile sig_atomic_t have_in_flight;
 
+/* Scratch folders in flight (an external denoiser's files, estimate/
+ * denoise_external.c): the handler removes them too. A slot is claimed under the lock
+ * and its path written before `used` says so; the handler only reads. */
+#define MAX_SCRATCH 8
+static char scratch[MAX_SCRATCH][4096];
+static volatile sig_atomic_t scratch_used[MAX_SCRATCH];
+static pthread_mutex_t scratch_lock = PTHREAD_MUTEX_INITIALIZER;
+
 static void
 on_signal(void)
 {
     if (have_in_flight) remove_tree_at(AT_FDCWD, in_flight, 0);
+    for (int i = 0; i < MAX_SCRATCH; i++)
+        if (scratch_used[i]) remove_tree_at(AT_FDCWD, scratch[i], 0);
+}
+
+int
+mcp__scratch_dir_begin(const char *parent, const char *prefix, char *dir, size_t cap)
+{
+    if ((size_t)snprintf(dir, cap, "%s/%sXXXXXX", parent, prefix) >= cap ||
+        strlen(dir) >= sizeof scratch[0])
+        return mcp_error("%s: path too long for a temporary folder", parent);
+    if (!mkdtemp(dir))
+        return mcp_error("%s: cannot make a temporary folder: %s", parent,
+                         strerror(errno));
+    pthread_mutex_lock(&scratch_lock);
+    int slot = -1;
+    for (int i = 0; i < MAX_SCRATCH && slot < 0; i++)
+        if (!scratch_used[i]) slot = i;
+    if (slot >= 0) {
+        snprintf(scratch[slot], sizeof scratch[slot], "%s", dir);
+        scratch_used[slot] = 1;
+    }
+    pthread_mutex_unlock(&scratch_lock);
+    /* more than MAX_SCRATCH at once: still removed at the end, but not on a signal */
+    mcp__signal_cleanup_hook(on_signal);
+    return 0;
+}
+
+void
+mcp__scratch_dir_end(const char *dir)
+{
+    pthread_mutex_lock(&scratch_lock);
+    for (int i = 0; i < MAX_SCRATCH; i++)
+        if (scratch_used[i] && strcmp(scratch[i], dir) == 0) {
+            scratch_used[i] = 0;
+            break;
+        }
+    pthread_mutex_unlock(&scratch_lock);
+    remove_tree(dir);
 }
 
 /* ---- leftovers of killed runs ---- */

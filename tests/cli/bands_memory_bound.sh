@@ -14,8 +14,8 @@
 set -euo pipefail
 build=$1
 mcpost=$build/mcpost
-work=$build/test-tmp/bands_memory_bound
-rm -rf "$work" && mkdir -p "$work" && cd "$work"
+source "$(dirname "$0")/../support/work_dir.sh"
+begin_work_dir "$build" bands_memory_bound
 for s in 1 2 3; do
     "$build/mcpost-procedural" --width 2400 --height 1600 --spp 2 --seed $s -o r$s >/dev/null
 done
@@ -35,6 +35,7 @@ same_values() { # same_values A.exr B.exr: every channel's float bits
     "$mcpost" convert "$2" "${2%.exr}_raw.exr" --compression none --quiet
     cmp "${1%.exr}_raw.exr" "${2%.exr}_raw.exr" || { echo "FAIL: $1 and $2 differ"; exit 1; }
     echo "the same values in every channel: $1 $2"
+    rm -f "${1%.exr}_raw.exr" "${2%.exr}_raw.exr" "$2" # the disk is shared (work_dir.sh)
 }
 whole_fails() { # whole_fails NAME COMMAND ARGS...: the whole command does not fit
     local rc=0 name=$1
@@ -51,6 +52,7 @@ same_values merge.exr merge_whole.exr
 MCPOST_BAND_ROWS=whole "$mcpost" merge "${inputs[@]}" -o pool_whole.exr --pool 2 --quiet
 limited pool merge "${inputs[@]}" -o pool.exr --pool 2 || { echo "FAIL: merge --pool"; exit 1; }
 same_values pool.exr pool_whole.exr
+rm -f pool.exr
 whole_fails merge_limited merge "${inputs[@]}" -o merge_limited.exr
 [ ! -e merge_limited.exr ] || { echo "FAIL: a failed merge left its output"; exit 1; }
 
@@ -62,6 +64,7 @@ for args in "" "--channels N.X,Variance.G,R --half" "--dump mitsuba"; do
     # shellcheck disable=SC2086
     limited "$tag" convert r1_0000.exr "$tag.exr" $args || { echo "FAIL: $tag"; exit 1; }
     same_values "$tag.exr" "${tag}_whole.exr"
+    rm -f "$tag.exr"
 done
 whole_fails convert_limited convert r1_0000.exr convert_limited.exr
 

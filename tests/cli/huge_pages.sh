@@ -9,8 +9,8 @@
 #   huge_pages.sh BUILD_DIR
 set -euo pipefail
 build=$1
-work=$build/test-tmp/huge_pages
-rm -rf "$work" && mkdir -p "$work" && cd "$work"
+source "$(dirname "$0")/../support/work_dir.sh"
+begin_work_dir "$build" huge_pages
 mcpost=$build/mcpost
 "$build/mcpost-procedural" --width 64 --height 48 --spp 4 --seed 3 -o in >/dev/null
 fail=0

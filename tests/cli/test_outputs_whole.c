@@ -99,8 +99,8 @@ start_until_pidfile(const char *args, const char *pidfile, pid_t *shell)
 }
 
 /* Starts `estimate -o DIR/est` with an external denoiser that records its shell's pid
- * and sleeps: the output folder is begun and the run is mid-way. Returns mcpost's pid;
- * *shell the denoiser's. */
+ * and sleeps: the output folder is begun and the run is mid-way. The denoiser's files
+ * go in DIR/mcpost-external-*. Returns mcpost's pid; *shell the denoiser's. */
 static pid_t
 start_slow_estimate(const char *dir, pid_t *shell)
 {
@@ -109,8 +109,8 @@ start_slow_estimate(const char *dir, pid_t *shell)
     snprintf(args, sizeof args,
              "estimate " CORNELL "/series/cornell_spp0064.exr --quiet -o '%s/est' "
              "--denoiser external --denoiser-command 'echo $$ > %s; exec sleep 60 # "
-             "{color} {output}'",
-             dir, pidfile);
+             "{color} {output}' --denoiser-opt 'workdir=%s'",
+             dir, pidfile, dir);
     return start_until_pidfile(args, pidfile, shell);
 }
 
@@ -160,11 +160,14 @@ test_terminated_estimate_cleans_up(void **state)
     char est[4200];
     snprintf(est, sizeof est, "%s/est", dir);
     pid_t shell, pid = start_slow_estimate(dir, &shell);
-    kill(pid, SIGTERM); /* the handler removes the temporary folder */
+    assert_int_equal(count_named(dir, "mcpost-external-"), 1);
+    kill(pid, SIGTERM); /* the handler removes the temporary folders */
     wait_gone(pid);
     kill(shell, SIGKILL);
     assert_false(exists(est));
     assert_int_equal(count_named(dir, ".est."), 0);
+    /* and the denoiser's scratch folder */
+    assert_int_equal(count_named(dir, "mcpost-external-"), 0);
 }
 
 static void
@@ -395,9 +398,10 @@ write_slow_frame_job(const char *dir)
         "      input: noisy\n"
         "      denoiser:\n"
         "        name: external\n"
+        "        workdir: %s\n"
         "        command: 'if [ -e %s/fail ]; then exit 3; elif [ -e %s/go ]; then cp "
         "{color} {output}; else echo $$ > %s/denoiser.pid; exec sleep 60; fi'\n",
-        dir, dir, dir);
+        dir, dir, dir, dir);
     mcp_test_write_text(job, text);
     for (int f = 1; f <= 2; f++) {
         char cmd[8400];

@@ -6,8 +6,8 @@
 set -euo pipefail
 build=$1
 command -v script >/dev/null || { echo "no script(1): skipped"; exit 77; }
-work=$build/test-tmp/unet_progress
-rm -rf "$work" && mkdir -p "$work" && cd "$work"
+source "$(dirname "$0")/../support/work_dir.sh"
+begin_work_dir "$build" unet_progress
 "$build/mcpost-procedural" --width 1024 --height 1024 --spp 4 --seed 5 -o in >/dev/null
 mv in_0000.exr in.exr
 script -qec "'$build/mcpost' denoise in.exr --denoiser unet -o tty.exr" /dev/null \

@@ -14,8 +14,8 @@ set -euo pipefail
 build=$1
 . "$(dirname "$0")/same_pixels.sh"
 mcpost=$build/mcpost
-work=$build/test-tmp/unet_bands
-rm -rf "$work" && mkdir -p "$work" && cd "$work"
+source "$(dirname "$0")/../support/work_dir.sh"
+begin_work_dir "$build" unet_bands
 
 
 "$build/mcpost-procedural" --width 256 --height 1152 --spp 2 --seed 5 -o s >/dev/null

@@ -18,8 +18,8 @@ set -euo pipefail
 build=$1
 . "$(dirname "$0")/same_pixels.sh"
 mcpost=$build/mcpost
-work=$build/test-tmp/unet_memory_bound
-rm -rf "$work" && mkdir -p "$work" && cd "$work"
+source "$(dirname "$0")/../support/work_dir.sh"
+begin_work_dir "$build" unet_memory_bound
 "$build/mcpost-procedural" --width 2400 --height 1600 --spp 4 --seed 3 -o in >/dev/null
 mv in_0000.exr in.exr
 MCPOST_UNET_BAND_ROWS=whole "$mcpost" denoise in.exr --denoiser unet -o whole.exr --quiet
