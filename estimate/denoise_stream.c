@@ -2,8 +2,8 @@
  * whole beside the network (issue 31: 8K within 2 GB; docs/denoisers.md, "Images
  * larger than memory"): the dump's colour, albedo and normal are read in bands of rows
  * (common/dump's mcp__dump_rows), each band denoised (unet_bands.c) and written at once
- * into the output EXR (common/io's mcp__exr_writer), under a temporary name renamed
- * when every row is written and removed on failure, as mcp_image_write does. The file
+ * into the output EXR (common/io's mcp__exr_band_file: under a temporary name renamed
+ * when every row is written and removed on failure, as mcp_image_write does). The file
  * holds the pixels and header attributes the whole run writes. */
 #include "internal.h"
 #include "unet_internal.h"
@@ -13,7 +13,6 @@
 
 #include <mcpost/imageio.h>
 
-#include <stdio.h>
 #include <stdlib.h>
 #ifdef __GLIBC__
 #include <malloc.h>
@@ -21,7 +20,7 @@
 
 typedef struct {
     mcp__dump_rows *in;
-    mcp__exr_writer *out;
+    mcp__exr_band_file out;
 } stream_io;
 
 static int
@@ -40,24 +39,8 @@ read_rows(void *ctx, int y0, int y1, mcp_image **color, mcp_image **albedo,
 static int
 write_rows(void *ctx, const mcp_image *rows, int y0)
 {
-    const stream_io *io = ctx;
-    return mcp__exr_writer_rows(io->out, rows, y0);
-}
-
-/* The output's header: the dump's attributes and the denoiser's name, as the whole run
- * writes them (cli/cmd_denoise.c). */
-static int
-open_output(const mcp__dump_rows *in, const char *denoiser, const char *path, int W,
-            int H, mcp__exr_writer **out)
-{
-    static const char *const rgb[3] = {"R", "G", "B"};
-    mcp_attrs attrs = {0};
-    const mcp_write_options opt = mcp_write_defaults();
-    int rc = mcp_attrs_copy(&mcp__dump_rows_dump(in)->attrs, &attrs) ||
-             mcp_attrs_set_string(&attrs, "mcpost.denoiser", denoiser) ||
-             mcp__exr_writer_open(path, W, H, 3, (char *const *)rgb, &attrs, &opt, out);
-    mcp_attrs_clear(&attrs);
-    return rc ? -1 : 0;
+    stream_io *io = ctx;
+    return mcp__exr_band_file_rows(&io->out, rows, y0);
 }
 
 /* The command line keeps freed memory in the heap for reuse (cli/main.c): right for
@@ -105,28 +88,21 @@ mcp__denoise_dump_streamed(const mcp_denoiser *den, const mcp_dump_spec *spec,
     }
     *done = 1;
     unmap_freed_blocks();
-    mcp_atomic_file af;
-    stream_io io = {in, NULL};
-    int rc = mcp_atomic_begin(&af, out_path);
+    /* the output's header: the dump's attributes and the denoiser's name, as the whole
+       run writes them (cli/cmd_denoise.c) */
+    mcp_attrs attrs = {0};
+    const mcp_write_options opt = mcp_write_defaults();
+    stream_io io = {.in = in};
+    int rc = mcp_attrs_copy(&mcp__dump_rows_dump(in)->attrs, &attrs) ||
+             mcp_attrs_set_string(&attrs, "mcpost.denoiser", den->name) ||
+             mcp__exr_band_file_begin(&io.out, out_path, W, H, &opt);
     if (!rc) {
-        rc = open_output(in, den->name, af.tmp_path, W, H, &io.out);
-        if (!rc) {
-            const mcp__unet_band_io band_io = {&io, read_rows, write_rows};
-            rc = mcp__unet_bands_run(net, input_scale, W, H, &plan, &band_io);
-            /* closed even after a failure, before the temporary is removed; the
-               failure's message stays */
-            char why[1024];
-            snprintf(why, sizeof why, "%s", rc ? mcp_error_message() : "");
-            if (mcp__exr_writer_close(io.out) && !rc) rc = -1;
-            if (*why) mcp_error("%s", why);
-        }
-        if (rc) {
-            mcp__name_output_in_error(af.tmp_path, out_path);
-            mcp_atomic_abort(&af);
-        } else {
-            rc = mcp_atomic_commit(&af);
-        }
+        io.out.attrs = &attrs;
+        const mcp__unet_band_io band_io = {&io, read_rows, write_rows};
+        rc = mcp__exr_band_file_end(
+            &io.out, mcp__unet_bands_run(net, input_scale, W, H, &plan, &band_io) != 0);
     }
+    mcp_attrs_clear(&attrs);
     mcp__dump_rows_close(in);
     return rc ? -1 : 0;
 }

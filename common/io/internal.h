@@ -114,15 +114,16 @@ void mcp__name_output_in_error(const char *tmp_path, const char *path);
 /* An EXR written band by band under a temporary name (stream.c): begin picks the
  * name (failing early when the folder is not writable); rows writes the next band
  * (rows->height rows from y0, ending on a chunk's last row or the image's), the first
- * band's channels and attributes making the header; end with failed 0 closes the file
- * and renames it (-1 when that fails), with failed 1 closes and removes it and keeps
- * the error the failure set. */
+ * band's channels and attributes making the header, or `attrs` when the caller sets it
+ * after begin; end with failed 0 closes the file and renames it (-1 when that fails),
+ * with failed 1 closes and removes it and keeps the error the failure set. */
 typedef struct mcp__exr_band_file {
     mcp_atomic_file af;
     mcp__exr_writer *wr;
     const char *path;
     int width, height;
     mcp_write_options opt;
+    const mcp_attrs *attrs;
 } mcp__exr_band_file;
 int mcp__exr_band_file_begin(mcp__exr_band_file *f, const char *path, int width,
                              int height, const mcp_write_options *opt);

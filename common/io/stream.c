@@ -39,9 +39,9 @@ mcp__exr_band_file_begin(mcp__exr_band_file *f, const char *path, int width, int
 int
 mcp__exr_band_file_rows(mcp__exr_band_file *f, const mcp_image *rows, int y0)
 {
-    if (!f->wr &&
-        mcp__exr_writer_open(f->af.tmp_path, f->width, f->height, rows->channels,
-                             rows->names, &rows->attrs, &f->opt, &f->wr))
+    if (!f->wr && mcp__exr_writer_open(
+                      f->af.tmp_path, f->width, f->height, rows->channels, rows->names,
+                      f->attrs ? f->attrs : &rows->attrs, &f->opt, &f->wr))
         return -1;
     return mcp__exr_writer_rows(f->wr, rows, y0);
 }
