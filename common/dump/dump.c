@@ -1514,6 +1514,7 @@ mcp_series_free(mcp_series *s)
         free(s->paths[i]);
     free(s->paths);
     free(s->spp);
+    mcp__series_colours_free(s->colours);
     free(s);
 }
 
@@ -1527,7 +1528,7 @@ series_new(int count, mcp_series **out)
     s->count = count;
     s->paths = mcp_calloc((size_t)count, sizeof *s->paths);
     s->spp = mcp_calloc((size_t)count, sizeof *s->spp);
-    if (!s->paths || !s->spp) {
+    if (!s->paths || !s->spp || mcp__series_colours_new(count, &s->colours)) {
         mcp_series_free(s);
         return -1;
     }

@@ -220,6 +220,9 @@ typedef struct mcp_series {
     /* Where mcp_series_load takes a member's variance from [auto] */
     mcp_series_variance variance_from;
     mcp_increment_options increments;
+    /* private: the members' colours kept for the increments (series_colours.c); set
+       paths and spec before reading any member */
+    struct mcp__series_colours *colours;
 } mcp_series;
 
 /* A series from a printf-style pattern with one integer conversion (e.g.

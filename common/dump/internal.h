@@ -39,6 +39,16 @@ int mcp__series_increment_variance(const mcp_series *s, int i, unsigned without,
 int mcp__series_increments_with(const mcp_series *s, int i, const mcp_dump *member,
                                 const mcp_increment_options *opt, mcp_dump **out,
                                 double *ratio);
+/* The members' colours as the increments read them (series_colours.c): colour is
+ * member i read without albedo, normal and variance, kept for the next call up to a
+ * budget (512 MB; _budget sets another, for tests); each colour is given back with
+ * release, which frees what was not kept. */
+typedef struct mcp__series_colours mcp__series_colours;
+int mcp__series_colours_new(int count, mcp__series_colours **out);
+void mcp__series_colours_free(mcp__series_colours *c);
+void mcp__series_colours_budget(const mcp_series *s, size_t bytes);
+int mcp__series_colour(const mcp_series *s, int i, const mcp_dump **out);
+void mcp__series_colour_release(const mcp_series *s, const mcp_dump *d);
 /* What to do about a dump without variance, for the end of its one-line error: the
  * recipe for a Cycles render (convention blender), else `otherwise` (dump.c). */
 const char *mcp__no_variance_hint(const mcp_dump *d, const char *otherwise);

@@ -550,13 +550,14 @@ mcp__series_increments_with(const mcp_series *s, int i, const mcp_dump *member,
     if (ratio) *ratio = 0;
     if (!increment_member_ok(member, 0, member)) return -1;
     /* the members before i one at a time, each block added as its member is read: the
-       sums and two members at once, whatever the length of the series; members below
-       the first block's count are not read where the series gives their counts, and
-       nothing reads their albedo or normal */
+       sums and two members' colours at once, whatever the length of the series, and
+       the colours kept for the next member up to a budget (series_colours.c); members
+       below the first block's count are not read where the series gives their counts,
+       and nothing reads their albedo, normal or variance */
     const double first_spp = increments_first_spp(opt, member->spp);
     increment_sums a;
     if (increment_sums_begin(&a, member->color)) return -1;
-    mcp_dump *prev = NULL;
+    const mcp_dump *prev = NULL;
     double prev_spp = 0;
     int rc = 0;
     for (int k = 0; k < i && !rc; k++) {
@@ -568,21 +569,20 @@ mcp__series_increments_with(const mcp_series *s, int i, const mcp_dump *member,
             prev_spp = s->spp[k];
             continue;
         }
-        mcp_dump *d = NULL;
-        rc = mcp__series_load_file(s, k, MCP__DUMP_NO_ALBEDO | MCP__DUMP_NO_NORMAL, &d) ||
-             !increment_member_ok(d, prev_spp, member);
+        const mcp_dump *d = NULL;
+        rc = mcp__series_colour(s, k, &d) || !increment_member_ok(d, prev_spp, member);
         if (!rc) prev_spp = d->spp;
         if (!rc && !prev && d->spp < first_spp) { /* before the first block */
-            mcp_dump_free(d);
+            mcp__series_colour_release(s, d);
             continue;
         }
         if (!rc) increment_sums_add(&a, d, prev);
-        mcp_dump_free(prev);
+        mcp__series_colour_release(s, prev);
         prev = d;
     }
     rc = rc || !increment_member_ok(member, prev_spp, member);
     if (!rc) increment_sums_add(&a, member, prev);
-    mcp_dump_free(prev);
+    mcp__series_colour_release(s, prev);
     if (rc) {
         free(a.s);
         return -1;

@@ -396,6 +396,56 @@ test_increments_streamed(void **state)
     mcp_series_free(s);
 }
 
+/* The members' colours are kept for the next member's increments (series_colours.c):
+ * read again they are the same bits, and a kept member is not read from its file
+ * again. With the files of the two members before the last overwritten, the last
+ * member's increments are the same where all colours were kept and where a budget of
+ * two colours kept those two (the lower ones were dropped first); with no budget the
+ * files are read again, and the overwritten one fails. */
+static void
+test_increments_kept(void **state)
+{
+    (void)state;
+    mcp_proc_scene scene = small_scene(0);
+    enum { N = 6 };
+    const int spp[N] = {1, 2, 4, 8, 16, 32};
+    mcp_series *all = procedural_series(&scene, spp, N, 31, "kept");
+    mcp_series *two = NULL, *none = NULL;
+    assert_int_equal(
+        mcp_series_from_paths((const char *const *)all->paths, NULL, N, &two), 0);
+    assert_int_equal(
+        mcp_series_from_paths((const char *const *)all->paths, NULL, N, &none), 0);
+    const size_t colour = (size_t)scene.width * scene.height * 3 * sizeof(float);
+    mcp__series_colours_budget(two, 2 * colour);
+    mcp__series_colours_budget(none, 0);
+    mcp_increment_options opt = mcp_increment_defaults();
+    mcp_dump *truth = NULL, *d = NULL;
+    assert_int_equal(mcp_series_increment_variance(all, N - 1, &opt, &truth, NULL), 0);
+    mcp_series *each[3] = {all, two, none};
+    for (int j = 0; j < 3; j++) {
+        assert_int_equal(mcp_series_increment_variance(each[j], N - 1, &opt, &d, NULL),
+                         0);
+        assert_memory_equal(d->var_of_mean->data, truth->var_of_mean->data, colour);
+        assert_memory_equal(d->cov_of_mean->data, truth->cov_of_mean->data, colour);
+        mcp_dump_free(d);
+    }
+    for (int k = N - 3; k < N - 1; k++)
+        mcp_test_write_text(all->paths[k], "not an EXR");
+    for (int j = 0; j < 2; j++) {
+        if (mcp_series_increment_variance(each[j], N - 1, &opt, &d, NULL))
+            fail_msg("%d: %s", j, mcp_error_message());
+        assert_memory_equal(d->var_of_mean->data, truth->var_of_mean->data, colour);
+        mcp_dump_free(d);
+    }
+    assert_error_contains(mcp_series_increment_variance(none, N - 1, &opt, &d, NULL),
+                          "kept_0008.exr");
+    assert_null(d);
+    mcp_dump_free(truth);
+    mcp_series_free(none);
+    mcp_series_free(two);
+    mcp_series_free(all);
+}
+
 /* A member read without its albedo and normal (a blend or series estimate whose
  * denoiser reads neither, mcp__series_load_without) has the colour and variance of the
  * member read whole, bit for bit, whatever the series' variance_from. */
@@ -702,6 +752,7 @@ main(void)
         cmocka_unit_test(test_increments_streamed),
         cmocka_unit_test(test_series_load_without),
         cmocka_unit_test(test_stratified_sources),
+        cmocka_unit_test(test_increments_kept),
         cmocka_unit_test(test_series_variance_auto),
         cmocka_unit_test(test_pool_window_beside_large_values),
         cmocka_unit_test(test_series_without_variance),
