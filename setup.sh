@@ -90,9 +90,10 @@ run_tests() { # run_tests DIR: a passing run leaves no scratch files in DIR/test
         -exec rm -rf {} + 2>/dev/null || true
 }
 
-say_free_disk() { # the tests write up to 1 GB at a time (build/test-tmp), the five
-    # builds take about 1.5 GB, and a disk that fills fails tests at random ("No space
-    # left on device"): say how much there is
+say_free_disk() { # a whole `./setup.sh test` peaks at 1.9 GB in the checkout (the
+    # five builds, and up to 1 GB of test files at a time in build/test-tmp), and a
+    # disk that fills fails tests at random ("No space left on device"): say how much
+    # there is
     local free_kb
     free_kb=$(df -Pk . | awk 'NR == 2 { print $4 }')
     echo "setup: $((free_kb / 1024 / 1024)) GB free on the disk of $PWD" >&2
