@@ -89,6 +89,17 @@ double mcp__rng_normal(mcp__rng *r);
 float mcp__log_unit(float u);
 void mcp__sincos_turn(float u, float *s, float *c);
 
+/* The rows of probe k from row0 on, of an image as wide as the dump: `dump` holds the
+ * image's rows row0 .. row0 + its height (a band of a dump read in bands), and the
+ * probe is those rows of the whole image's probe, bit for bit (the stream is keyed by
+ * the pixel's index in the image). mcp_probe_gaussian and mcp_probe_rademacher are
+ * row0 = 0 (probes.c). */
+int mcp__probe_gaussian_rows(const mcp_dump *dump, int row0,
+                             const mcp_feature_covariance *features, uint64_t seed, int k,
+                             mcp_probe *out);
+int mcp__probe_rademacher_rows(const mcp_dump *dump, int row0, uint64_t seed, int k,
+                               mcp_image **out);
+
 /* The variance the probes are drawn from, each value raised to the median of its
  * (2 radius + 1)² window where below it, and the colour covariance (if cov and the dump
  * has one) scaled to keep its correlations; radius 0 copies them (probe_floor.c). */

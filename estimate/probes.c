@@ -439,10 +439,19 @@ int
 mcp_probe_gaussian(const mcp_dump *dump, const mcp_feature_covariance *features,
                    uint64_t seed, int k, mcp_probe *out)
 {
+    return mcp__probe_gaussian_rows(dump, 0, features, seed, k, out);
+}
+
+int
+mcp__probe_gaussian_rows(const mcp_dump *dump, int row0,
+                         const mcp_feature_covariance *features, uint64_t seed, int k,
+                         mcp_probe *out)
+{
     memset(out, 0, sizeof *out);
     joint_plan plan;
     if (check_dump("probe", dump) || plan_joint(dump, features, &plan)) return -1;
     if (k < 0) return mcp_error("probe: index must be >= 0 (got %d)", k);
+    if (row0 < 0) return mcp_error("probe: first row must be >= 0 (got %d)", row0);
     int w = dump->color->width, h = dump->color->height;
     const char *xyz[3] = {"X", "Y", "Z"};
     if (mcp__image_new(w, h, 3, NULL, "probe", &out->color) ||
@@ -470,7 +479,7 @@ mcp_probe_gaussian(const mcp_dump *dump, const mcp_feature_covariance *features,
 #else
             float *z = rows;
 #endif
-            normals_row(seed, STREAM_GAUSS, (uint64_t)k, (uint64_t)y * w, w, z);
+            normals_row(seed, STREAM_GAUSS, (uint64_t)k, ((uint64_t)row0 + y) * w, w, z);
             for (int x = 0; x < w; x++) {
                 const float *var = mcp_image_px(dump->var_of_mean, x, y);
                 float *e = mcp_image_px(out->color, x, y);
@@ -482,7 +491,8 @@ mcp_probe_gaussian(const mcp_dump *dump, const mcp_feature_covariance *features,
         }
         for (int x = 0; x < w; x++) {
             mcp__rng r;
-            mcp__rng_init(&r, seed, STREAM_GAUSS, (uint64_t)k, (uint64_t)y * w + x);
+            mcp__rng_init(&r, seed, STREAM_GAUSS, (uint64_t)k,
+                          ((uint64_t)row0 + y) * w + x);
             float *e = mcp_image_px(out->color, x, y);
             double v[MAX_DIM];
             if (joint) {
@@ -516,9 +526,17 @@ mcp_probe_gaussian(const mcp_dump *dump, const mcp_feature_covariance *features,
 int
 mcp_probe_rademacher(const mcp_dump *dump, uint64_t seed, int k, mcp_image **out)
 {
+    return mcp__probe_rademacher_rows(dump, 0, seed, k, out);
+}
+
+int
+mcp__probe_rademacher_rows(const mcp_dump *dump, int row0, uint64_t seed, int k,
+                           mcp_image **out)
+{
     *out = NULL;
     if (check_dump("probe", dump)) return -1;
     if (k < 0) return mcp_error("probe: index must be >= 0 (got %d)", k);
+    if (row0 < 0) return mcp_error("probe: first row must be >= 0 (got %d)", row0);
     int w = dump->color->width, h = dump->color->height;
     if (mcp__image_new(w, h, 3, NULL, "rademacher probe", out)) return -1;
     int cov = dump->cov_of_mean != NULL;
@@ -526,7 +544,8 @@ mcp_probe_rademacher(const mcp_dump *dump, uint64_t seed, int k, mcp_image **out
     for (int y = 0; y < h; y++) {
         for (int x = 0; x < w; x++) {
             mcp__rng r;
-            mcp__rng_init(&r, seed, STREAM_RADEMACHER, (uint64_t)k, (uint64_t)y * w + x);
+            mcp__rng_init(&r, seed, STREAM_RADEMACHER, (uint64_t)k,
+                          ((uint64_t)row0 + y) * w + x);
             uint64_t bits = mcp__rng_u64(&r);
             double s[3];
             for (int c = 0; c < 3; c++)

@@ -718,6 +718,71 @@ test_probes_do_not_depend_on_threads(void **state)
 #endif
 }
 
+/* The rows of a band of a dump (views of its images, rows y0 .. y1). */
+static mcp_dump
+band_of(const mcp_dump *d, int y0, int y1)
+{
+    mcp_dump b = *d;
+    const int w = d->color->width;
+    b.color = b.var_of_mean = b.cov_of_mean = NULL;
+    assert_int_equal(mcp_image_crop_view(d->color, 0, y0, w, y1 - y0, &b.color), 0);
+    assert_int_equal(
+        mcp_image_crop_view(d->var_of_mean, 0, y0, w, y1 - y0, &b.var_of_mean), 0);
+    if (d->cov_of_mean)
+        assert_int_equal(
+            mcp_image_crop_view(d->cov_of_mean, 0, y0, w, y1 - y0, &b.cov_of_mean), 0);
+    return b;
+}
+
+/* Whether rows y0 .. of whole equal band's, bit for bit. */
+static void
+assert_rows_equal(const mcp_image *whole, const mcp_image *band, int y0)
+{
+    for (int y = 0; y < band->height; y++)
+        assert_memory_equal(mcp_image_px(whole, 0, y0 + y), mcp_image_px(band, 0, y),
+                            (size_t)band->width * 3 * sizeof(float));
+}
+
+/* A probe drawn for a band of rows (a dump read in bands) is those rows of the whole
+ * image's probe, bit for bit: Gaussian with the colour covariance (a draw per pixel)
+ * and without it (rows of normals drawn in vectors), and Rademacher with and without
+ * it; bands at the top, inside and at the bottom. */
+static void
+test_probe_rows_are_the_whole_probes(void **state)
+{
+    (void)state;
+    static const int bands[3][2] = {{0, 5}, {7, 19}, {H - 3, H}};
+    for (int with_cov = 0; with_cov < 2; with_cov++) {
+        uint64_t rng = 21;
+        mcp_dump *d = realization(&rng, with_cov);
+        for (int k = 0; k < 3; k++) {
+            mcp_probe whole;
+            mcp_image *rad = NULL;
+            assert_int_equal(mcp_probe_gaussian(d, NULL, 17, k, &whole), 0);
+            assert_int_equal(mcp_probe_rademacher(d, 17, k, &rad), 0);
+            for (int b = 0; b < 3; b++) {
+                const int y0 = bands[b][0], y1 = bands[b][1];
+                mcp_dump band = band_of(d, y0, y1);
+                mcp_probe p;
+                mcp_image *r = NULL;
+                assert_int_equal(mcp__probe_gaussian_rows(&band, y0, NULL, 17, k, &p), 0);
+                assert_int_equal(mcp__probe_rademacher_rows(&band, y0, 17, k, &r), 0);
+                assert_int_equal(p.color->height, y1 - y0);
+                assert_rows_equal(whole.color, p.color, y0);
+                assert_rows_equal(rad, r, y0);
+                mcp_probe_clear(&p);
+                mcp_image_free(r);
+                mcp_image_free(band.color);
+                mcp_image_free(band.var_of_mean);
+                mcp_image_free(band.cov_of_mean);
+            }
+            mcp_probe_clear(&whole);
+            mcp_image_free(rad);
+        }
+        mcp_dump_free(d);
+    }
+}
+
 /* Box-Muller's own ln u, sin 2 pi u and cos 2 pi u (probes.c) against libm's double
  * functions at every argument the draws give them that a stride of 61 hits (2^24 / 61:
  * 275 thousand, the smallest u and u = 1 among them): ln within 2e-7 relative (a few
@@ -987,6 +1052,7 @@ main(void)
         cmocka_unit_test(test_probe_covariance),
         cmocka_unit_test(test_probe_clamps_negative_eigenvalues),
         cmocka_unit_test(test_probes_do_not_depend_on_threads),
+        cmocka_unit_test(test_probe_rows_are_the_whole_probes),
         cmocka_unit_test(test_box_muller_functions),
         cmocka_unit_test(test_unbiased_bilateral),
         cmocka_unit_test(test_probe_floor),
