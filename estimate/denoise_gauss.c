@@ -173,6 +173,9 @@ gauss_create(const mcp_node *settings, const char *base_dir, mcp_denoiser **out)
     }
     d->apply = gauss_apply;
     d->jvp = gauss_jvp;
+    /* a pixel's value reads `radius` rows either side (at least one: any reach at all
+       lets the estimate go in bands) */
+    d->band_halo = radius > 0 ? radius : 1;
     *out = d;
     return 0;
 }

@@ -840,6 +840,11 @@ create_with(const mcp_operation *op, const mcp_node *settings, mcp_denoiser **ou
     d->uses_albedo = p.sigma_albedo > 0;
     d->uses_normal = p.sigma_normal > 0;
     d->sharp_variance = p.patch_radius == 0;
+    /* a pixel reads patches around the pixels of its window, and the variance there
+       prefiltered (pad_variance) */
+    d->band_halo =
+        p.radius + p.patch_radius +
+        (p.use_variance && p.variance_blur > 0 ? (int)ceil(3 * p.variance_blur) : 0) + 1;
     d->apply = nlm_apply;
     d->jvp = nlm_jvp;
     *out = d;

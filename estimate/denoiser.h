@@ -58,6 +58,11 @@ struct mcp_denoiser {
      * median the probes' variance is raised, for a denoiser that adapts to the noise
      * it sees (the U-Net: 1; docs/fidelity.md "The defaults"); 0: none */
     int estimate_probe_floor;
+    /* how many rows above and below a pixel F and J read (its reach): a band of rows
+       evaluated with this many rows around it gives the band's rows as the whole image
+       does, so a large estimate goes in bands (estimate_bands.c); 0: unknown or
+       unbounded, the estimate evaluates the image whole */
+    int band_halo;
     /* F(in): a new 3-channel image "R,G,B". */
     int (*apply)(const mcp_denoiser *self, const mcp_denoise_input *in, mcp_image **out);
     /* J·t_k for k < n at the point `at`, in one primal pass: out[k] receives a new

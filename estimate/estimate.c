@@ -208,6 +208,13 @@ step(mcp_progress *bar, long done)
     if (bar) mcp_progress_update(bar, done);
 }
 
+/* The bands' share of the JVP steps (mcp__error_maps_in_bands). */
+static void
+band_step(void *bar, double done)
+{
+    step(bar, 1 + (long)(JVP_STEPS * done));
+}
+
 static int
 evaluate(const mcp_dump *dump, const mcp_dump *probed, const mcp_denoiser *den,
          const mcp_estimate_options *o, evaluation *ev, mcp_progress *bar)
@@ -391,7 +398,18 @@ compute(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_option
         probed.cov_of_mean = probed_cov;
         e->probes_from_groups = 1;
     }
-    ev_bad = ev_bad || evaluate(dump, &probed, den, &o, &ev, bar);
+    /* a large image with a denoiser of bounded reach: the evaluation and the maps a
+       band of rows at a time (estimate_bands.c), the same values */
+    const int band_rows =
+        groups || ev_bad ? 0 : mcp__estimate_band_rows(dump, running(dump, den), &o);
+    memset(&ev, 0, sizeof ev);
+    if (band_rows) {
+        step(bar, 1);
+        ev_bad = mcp__error_maps_in_bands(dump, running(dump, den), &o, band_rows,
+                                          band_step, bar, &e->maps);
+    } else {
+        ev_bad = ev_bad || evaluate(dump, &probed, den, &o, &ev, bar);
+    }
     mcp_image_free(probed_cov);
     if (ev_bad) {
         if (bar) mcp__progress_stop(bar);
@@ -400,7 +418,7 @@ compute(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_option
     }
     double t1 = mcp__now_ms();
     int rc = -1;
-    {
+    if (!band_rows) {
         /* the maps take F(X) and the Gaussian probes' images, which nothing reads after
            them (the sampling map reads the JVPs only for relse-perceptual, whose maps
            take none, and the Rademacher JVPs, which are not offered) */

@@ -150,6 +150,29 @@ int mcp__jvp(const mcp_denoiser *den, const mcp_denoise_input *at,
              const mcp_denoise_tangent *t, int n, int fd, double delta,
              mcp_image **primal, mcp_image **out);
 
+/* The error maps made band by band (estimate_bands.c): begin allocates every map of
+ * a w x h image (but the denoised image) for metric se or relse; rows writes rows
+ * [y0, y0 + rows' height) of them from that band's dump rows, F, probes and JVPs (all
+ * of the band's height), the values the whole image's maps have there (sure.c). */
+int mcp__error_maps_begin(int w, int h, mcp_error_metric metric, mcp_error_maps *m);
+int mcp__error_maps_rows(const mcp_dump *rows, const mcp_image *f,
+                         const mcp_image *const *eps, const mcp_image *const *jeps, int k,
+                         int y0, mcp_error_maps *m);
+
+/* The rows of a band for the estimate's evaluation in bands, or 0 to evaluate the
+ * image whole: bands where the whole evaluation's probes and JVPs would pass 1 GB
+ * and the bands are exact (a denoiser with a band_halo, the metric se or relse,
+ * Gaussian probes of the dump's own variance); MCPOST_ESTIMATE_BAND_ROWS=N forces N,
+ * =whole none (for tests). The maps (and their F(X)) made so, the same values as
+ * mcp__error_maps_from_own_probes after a whole evaluation; progress(ctx, fraction)
+ * after each band (estimate_bands.c). */
+int mcp__estimate_band_rows(const mcp_dump *dump, const mcp_denoiser *den,
+                            const mcp_estimate_options *o);
+int mcp__error_maps_in_bands(const mcp_dump *dump, const mcp_denoiser *den,
+                             const mcp_estimate_options *o, int band_rows,
+                             void (*progress)(void *ctx, double done), void *ctx,
+                             mcp_error_maps *out);
+
 /* mcp_error_maps_from_probes for a caller that is done with its evaluation: takes
  * *denoised for the maps' denoised image and may take probes[j] and jvps[j] (k of
  * each; their slots are then NULL) for five of the maps, instead of copying and
