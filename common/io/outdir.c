@@ -14,7 +14,10 @@
  * is renamed away first), then the old one is removed. Only a folder that mcpost made
  * (it holds report.json, metrics.json or adaptive.json), an empty one, or one that is
  * mcpost's by its place (a frame's folder in a shot's output) is replaced; any other is
- * refused, so that `-o ~/renders` cannot delete someone's files. */
+ * refused, so that `-o ~/renders` cannot delete someone's files.
+ *
+ * The signal handler also removes the scratch folders in flight that no command outputs
+ * (an external denoiser's files: mcp__scratch_dir_begin / _end). */
 #define _GNU_SOURCE /* renameat2, nftw's FTW_DEPTH */
 #include "internal.h"
 
