@@ -400,13 +400,13 @@ compute(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_option
     }
     /* a large image with a denoiser of bounded reach: the evaluation and the maps a
        band of rows at a time (estimate_bands.c), the same values */
-    const int band_rows =
-        groups || ev_bad ? 0 : mcp__estimate_band_rows(dump, running(dump, den), &o);
+    const mcp_denoiser *runs = running(dump, den);
+    const int band_rows = groups || ev_bad ? 0 : mcp__estimate_band_rows(dump, runs, &o);
     memset(&ev, 0, sizeof ev);
     if (band_rows) {
         step(bar, 1);
-        ev_bad = mcp__error_maps_in_bands(dump, running(dump, den), &o, band_rows,
-                                          band_step, bar, &e->maps);
+        ev_bad =
+            mcp__error_maps_in_bands(dump, runs, &o, band_rows, band_step, bar, &e->maps);
     } else {
         ev_bad = ev_bad || evaluate(dump, &probed, den, &o, &ev, bar);
     }

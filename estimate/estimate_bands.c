@@ -14,6 +14,7 @@
  * denoiser that states its halo, Gaussian probes of the dump's own variance (no probe
  * floor, no joint features, no Rademacher probes, no groups). */
 #include "internal.h"
+#include "../common/dump/internal.h" /* the dump's rows as views */
 
 #include <stdlib.h>
 #include <string.h>
@@ -43,52 +44,6 @@ mcp__estimate_band_rows(const mcp_dump *dump, const mcp_denoiser *den,
     if (2.0 * k * 12.0 * W * (double)H <= WHOLE_BYTES) return 0;
     const int rows = (int)(BAND_BYTES / per_row) - 2 * halo;
     return rows >= 16 && rows < H ? rows : 0;
-}
-
-/* A view of rows [y0, y1) of an image, or NULL for none. */
-static int
-rows_view(const mcp_image *img, int y0, int y1, mcp_image **out)
-{
-    *out = NULL;
-    return img ? mcp_image_crop_view(img, 0, y0, img->width, y1 - y0, out) : 0;
-}
-
-/* The same with the image's header attributes, which a denoiser passes on to F (the
- * whole evaluation's F carries the dump's colour's). */
-static int
-part_rows(const mcp_image *img, int y0, int y1, mcp_image **out)
-{
-    return rows_view(img, y0, y1, out) ||
-                   (img && mcp_attrs_copy(&img->attrs, &(*out)->attrs))
-               ? -1
-               : 0;
-}
-
-/* The dump's rows [y0, y1) as views; free with band_free. */
-static int
-band_of(const mcp_dump *d, int y0, int y1, mcp_dump *b)
-{
-    *b = *d;
-    b->color = b->var_of_mean = b->cov_of_mean = b->albedo = b->normal = b->spp_map =
-        NULL;
-    return part_rows(d->color, y0, y1, &b->color) ||
-                   part_rows(d->var_of_mean, y0, y1, &b->var_of_mean) ||
-                   part_rows(d->cov_of_mean, y0, y1, &b->cov_of_mean) ||
-                   part_rows(d->albedo, y0, y1, &b->albedo) ||
-                   part_rows(d->normal, y0, y1, &b->normal) ||
-                   part_rows(d->spp_map, y0, y1, &b->spp_map)
-               ? -1
-               : 0;
-}
-
-static void
-band_free(mcp_dump *b)
-{
-    mcp_image *imgs[] = {b->color,  b->var_of_mean, b->cov_of_mean,
-                         b->albedo, b->normal,      b->spp_map};
-    for (size_t i = 0; i < sizeof imgs / sizeof *imgs; i++)
-        mcp_image_free(imgs[i]);
-    memset(b, 0, sizeof *b);
 }
 
 /* F(X) whole, its header (names, source, attributes) from the first band's. */
@@ -128,8 +83,9 @@ band(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_options *
     mcp_image **eps_rows = mcp_calloc((size_t)k, sizeof *eps_rows);
     mcp_image **jv_rows = mcp_calloc((size_t)k, sizeof *jv_rows), *f_rows = NULL;
     int rc = -1;
-    if (!probes || !t || !jv || !eps_rows || !jv_rows || band_of(dump, c0, c1, &crop) ||
-        band_of(dump, y0, y1, &rows))
+    if (!probes || !t || !jv || !eps_rows || !jv_rows ||
+        mcp__dump_rows_view(dump, c0, c1, &crop) ||
+        mcp__dump_rows_view(dump, y0, y1, &rows))
         goto done;
     for (int j = 0; j < k; j++) {
         if (mcp__probe_gaussian_rows(&crop, c0, NULL, o->sure.seed, j, &probes[j]))
@@ -145,10 +101,10 @@ band(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_options *
     if (!m->denoised &&
         denoised_begin(f, dump->color->width, dump->color->height, &m->denoised))
         goto done;
-    if (rows_view(f, y0 - c0, y1 - c0, &f_rows)) goto done;
+    if (mcp__rows_view(f, y0 - c0, y1 - c0, &f_rows)) goto done;
     for (int j = 0; j < k; j++)
-        if (rows_view(probes[j].color, y0 - c0, y1 - c0, &eps_rows[j]) ||
-            rows_view(jv[j], y0 - c0, y1 - c0, &jv_rows[j]))
+        if (mcp__rows_view(probes[j].color, y0 - c0, y1 - c0, &eps_rows[j]) ||
+            mcp__rows_view(jv[j], y0 - c0, y1 - c0, &jv_rows[j]))
             goto done;
     copy_rows(f, y0 - c0, m->denoised, y0, y1);
     rc = mcp__error_maps_rows(&rows, f_rows, (const mcp_image *const *)eps_rows,
@@ -167,8 +123,8 @@ done:
     free(jv_rows);
     mcp_image_free(f);
     mcp_image_free(f_rows);
-    band_free(&crop);
-    band_free(&rows);
+    mcp__dump_rows_view_free(&crop);
+    mcp__dump_rows_view_free(&rows);
     return rc;
 }
 

@@ -144,6 +144,9 @@ int mcp__select_percentiles(const float *v, size_t n, const double *p, int k,
 int mcp__image_new(int width, int height, int n, const char *const *names,
                    const char *source, mcp_image **out);
 
+/* A view of rows [y0, y1) of img, or NULL (and 0) for no image (sure.c). */
+int mcp__rows_view(const mcp_image *img, int y0, int y1, mcp_image **out);
+
 /* J t_k by the denoiser's jvp, or by finite differences (step delta) when fd is set or
  * the denoiser has no jvp (sure.c). */
 int mcp__jvp(const mcp_denoiser *den, const mcp_denoise_input *at,

@@ -332,9 +332,8 @@ mcp__error_maps_begin(int w, int h, mcp_error_metric metric, mcp_error_maps *m)
     return 0;
 }
 
-/* A view of rows [y0, y1) of a map, or NULL for none. */
-static int
-rows_of(const mcp_image *img, int y0, int y1, mcp_image **out)
+int
+mcp__rows_view(const mcp_image *img, int y0, int y1, mcp_image **out)
 {
     *out = NULL;
     return img ? mcp_image_crop_view(img, 0, y0, img->width, y1 - y0, out) : 0;
@@ -347,11 +346,12 @@ mcp__error_maps_rows(const mcp_dump *rows, const mcp_image *f,
 {
     const int y1 = y0 + rows->color->height;
     mcp_error_maps v = {.metric = m->metric};
-    int rc = rows_of(m->sure, y0, y1, &v.sure) ||
-             rows_of(m->sure_rel, y0, y1, &v.sure_rel) ||
-             rows_of(m->var, y0, y1, &v.var) || rows_of(m->var_rel, y0, y1, &v.var_rel) ||
-             rows_of(m->sigma_rel, y0, y1, &v.sigma_rel) ||
-             rows_of(m->denominator, y0, y1, &v.denominator);
+    int rc = mcp__rows_view(m->sure, y0, y1, &v.sure) ||
+             mcp__rows_view(m->sure_rel, y0, y1, &v.sure_rel) ||
+             mcp__rows_view(m->var, y0, y1, &v.var) ||
+             mcp__rows_view(m->var_rel, y0, y1, &v.var_rel) ||
+             mcp__rows_view(m->sigma_rel, y0, y1, &v.sigma_rel) ||
+             mcp__rows_view(m->denominator, y0, y1, &v.denominator);
     if (!rc) plain_maps(rows, f, eps, jeps, k, m->metric == MCP_METRIC_RELSE, NULL, &v);
     mcp_error_maps_free(&v);
     return rc ? -1 : 0;

@@ -126,13 +126,6 @@ mcp__unet_bands_plan(const mcp__unet *net, int W, int H, double whole_bytes, int
     return 0;
 }
 
-/* A view of rows [y0, y1) of img. */
-static int
-rows_view(const mcp_image *img, int y0, int y1, mcp_image **out)
-{
-    return mcp_image_crop_view(img, 0, y0, img->width, y1 - y0, out);
-}
-
 /* The pre-pass: every row read once, top to bottom, in bands of `rows`: the reader
  * checks the values as a whole read would, and the colour goes to the autoexposure. */
 static int
@@ -191,8 +184,8 @@ mcp__unet_bands_run(const mcp__unet *net, double input_scale, int W, int H,
                                 scale, plan->tile_w, &res);
         /* the inputs go before the result is written: the writer's buffers come on top */
         mcp_image_free(c), mcp_image_free(a), mcp_image_free(n);
-        rc =
-            rc || rows_view(res, y0 - c0, y1 - c0, &keep) || io->write(io->ctx, keep, y0);
+        rc = rc || mcp__rows_view(res, y0 - c0, y1 - c0, &keep) ||
+             io->write(io->ctx, keep, y0);
         mcp_image_free(keep);
         mcp_image_free(res);
     }

@@ -1373,6 +1373,39 @@ mcp__dump_bands_read(mcp__dump_bands *b, int y0, int y1, mcp_dump **out)
     return rc;
 }
 
+/* ---- a dump's rows as views ---- */
+
+int
+mcp__dump_rows_view(const mcp_dump *d, int y0, int y1, mcp_dump *out)
+{
+    *out = *d;
+    mcp_image *const src[] = {d->color,  d->var_of_mean, d->cov_of_mean,
+                              d->albedo, d->normal,      d->spp_map};
+    mcp_image **dst[] = {&out->color,  &out->var_of_mean, &out->cov_of_mean,
+                         &out->albedo, &out->normal,      &out->spp_map};
+    for (size_t p = 0; p < sizeof dst / sizeof *dst; p++)
+        *dst[p] = NULL;
+    for (size_t p = 0; p < sizeof dst / sizeof *dst; p++) {
+        const mcp_image *img = src[p];
+        if (img && (mcp_image_crop_view(img, 0, y0, img->width, y1 - y0, dst[p]) ||
+                    mcp_attrs_copy(&img->attrs, &(*dst[p])->attrs))) {
+            mcp__dump_rows_view_free(out);
+            return -1;
+        }
+    }
+    return 0;
+}
+
+void
+mcp__dump_rows_view_free(mcp_dump *view)
+{
+    mcp_image *parts[] = {view->color,  view->var_of_mean, view->cov_of_mean,
+                          view->albedo, view->normal,      view->spp_map};
+    for (size_t p = 0; p < sizeof parts / sizeof *parts; p++)
+        mcp_image_free(parts[p]);
+    memset(view, 0, sizeof *view);
+}
+
 /* ---- writing ---- */
 
 /* Copies 3 channels of part (times the per-pixel sample count when per_sample, plus

@@ -49,6 +49,11 @@ void mcp__series_colours_free(mcp__series_colours *c);
 void mcp__series_colours_budget(const mcp_series *s, size_t bytes);
 int mcp__series_colour(const mcp_series *s, int i, const mcp_dump **out);
 void mcp__series_colour_release(const mcp_series *s, const mcp_dump *d);
+/* Rows [y0, y1) of d as a dump of views (dump.c): each part a view of its rows with
+ * that part's header attributes, the rest (counts, convention, the dump's attributes
+ * and source) d's, borrowed. Free the views with _free, never with mcp_dump_free. */
+int mcp__dump_rows_view(const mcp_dump *d, int y0, int y1, mcp_dump *out);
+void mcp__dump_rows_view_free(mcp_dump *view);
 /* What to do about a dump without variance, for the end of its one-line error: the
  * recipe for a Cycles render (convention blender), else `otherwise` (dump.c). */
 const char *mcp__no_variance_hint(const mcp_dump *d, const char *otherwise);

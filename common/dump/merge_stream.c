@@ -125,29 +125,6 @@ hold_rows(merge_stream *m, int y0, int y1, int height)
     return 0;
 }
 
-/* The rows [y0, y0 + rows) of d as views (the parts only: what mcp__dump_image reads
- * besides them is d's). */
-static int
-rows_of(const mcp_dump *d, int y0, int rows, mcp_dump *out)
-{
-    *out = *d;
-    for (int p = 0; p < N_ROW_PARTS; p++)
-        *part_of(out, p) = NULL;
-    for (int p = 0; p < N_ROW_PARTS; p++) {
-        const mcp_image *img = *part_of((mcp_dump *)d, p);
-        if (img && mcp_image_crop_view(img, 0, y0, img->width, rows, part_of(out, p)))
-            return -1;
-    }
-    return 0;
-}
-
-static void
-rows_free(mcp_dump *view)
-{
-    for (int p = 0; p < N_ROW_PARTS; p++)
-        mcp_image_free(*part_of(view, p));
-}
-
 /* What a band of the merge needs beside the inputs. */
 typedef struct band_ctx {
     merge_stream *m;
@@ -174,11 +151,12 @@ merge_band(void *ctx, int y0, int y1)
     for (int k = 0; k < m->count; k++)
         parts[k] = m->held[k].d;
     rc = mcp_dump_merge((const mcp_dump *const *)parts, m->count, c->opt, c->last) ||
-         !(have_band = !rows_of(*c->last, y0 - m->held[0].lo, y1 - y0, &band)) ||
+         !(have_band = !mcp__dump_rows_view(*c->last, y0 - m->held[0].lo,
+                                            y1 - m->held[0].lo, &band)) ||
          mcp__dump_image(&band, MCP_CONV_MCPOST, c->out_path, &img) ||
          mcp__exr_band_file_rows(&m->out, img, y0);
 done:
-    if (have_band) rows_free(&band);
+    if (have_band) mcp__dump_rows_view_free(&band);
     if (parts != held) free(parts);
     mcp_image_free(img);
     return rc ? -1 : 0;
