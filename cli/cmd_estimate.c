@@ -169,6 +169,7 @@ cmd_estimate(int argc, char **argv)
     cJSON *summary = NULL, *section = NULL;
     mcp__estimate_dir od;
     mcp__outdir whole = {0}; /* -o DIR appears whole, or not at all */
+    mcp__estimate_files files = {0};
     memset(&od, 0, sizeof od);
     if (mcp_estimate_check(eo) || mcp_cli_denoiser_create(&df, &den) ||
         (ref_path && mcp_image_read(ref_path, NULL, &ref)))
@@ -217,9 +218,21 @@ cmd_estimate(int argc, char **argv)
         spec.convention = st.convention;
         spec.variance = st.variance;
         /* the features only when something reads them: the denoiser, or joint SURE */
-        if (mcp__dump_load_without(
-                &spec, mcp__dump_parts_unread(den, eo->sure.features != NULL), &dump) ||
-            mcp_estimate_compute(dump, den, eo, &e))
+        const unsigned without = mcp__dump_parts_unread(den, eo->sure.features != NULL);
+        /* a large dump, read and estimated a band at a time, F(X), SURE and Var[F]
+           written as their bands are made (jobs/estimate_stream.c); not with a
+           reference, whose truth reads F(X) whole */
+        int streamed = 0;
+        if (!ref) {
+            files.dir = outdir ? &od : NULL;
+            files.want_picture = section != NULL;
+            const mcp__estimate_sink sink = {mcp__estimate_files_rows, &files};
+            int bad = mcp__estimate_streamed(&spec, without, den, eo,
+                                             outdir ? &sink : NULL, &e, &streamed);
+            if (mcp__estimate_files_end(&files, bad) || bad) goto done;
+        }
+        if (!streamed && (mcp__dump_load_without(&spec, without, &dump) ||
+                          mcp_estimate_compute(dump, den, eo, &e)))
             goto done;
         /* nothing after the estimate reads the dump, nor Σ̂^r, which only cut the
            blocks: their memory goes to the pictures and files */
@@ -234,7 +247,9 @@ cmd_estimate(int argc, char **argv)
             char path_json[4352];
             char *text = cJSON_Print(summary);
             int rc =
-                !text || mcp__estimate_write_single(e, &od, section, summary) ||
+                !text ||
+                mcp__estimate_write_single(e, &od, section, summary,
+                                           files.denoised_rgb) ||
                 mcp__estimate_path(&od, "estimate.json", path_json, sizeof path_json) ||
                 mcp_write_file_atomic(path_json, text, strlen(text)) ||
                 mcp__estimate_report_single(section, summary, e);
@@ -255,6 +270,7 @@ cmd_estimate(int argc, char **argv)
         summary = NULL;
     }
 done:
+    mcp__estimate_files_free(&files);
     mcp__outdir_abort(&whole);
     if (status == 1) mcp_cli_fail();
     cJSON_Delete(summary);

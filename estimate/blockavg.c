@@ -368,6 +368,26 @@ mcp_blocks_label(const mcp_blocks *blocks, int32_t **label)
     return 0;
 }
 
+float *
+mcp__blocks_means(const mcp_blocks *blocks, const mcp_image *values)
+{
+    float *m = mcp_malloc(((size_t)blocks->count * 3 + 1) * sizeof *m);
+    if (!m) return NULL;
+#pragma omp parallel for schedule(dynamic, 1)
+    for (int i = 0; i < blocks->count; i++) {
+        const mcp_block *k = &blocks->items[i];
+        double sum[3] = {0, 0, 0};
+        for (int y = k->y; y < k->y + k->h; y++)
+            for (int x = k->x; x < k->x + k->w; x++)
+                for (int c = 0; c < 3; c++)
+                    sum[c] += mcp_image_px(values, x, y)[c];
+        const double n = (double)k->w * k->h;
+        for (int c = 0; c < 3; c++)
+            m[3 * i + c] = (float)(sum[c] / n);
+    }
+    return m;
+}
+
 int
 mcp_blocks_mean_image(const mcp_blocks *blocks, const mcp_image *values, mcp_image **out)
 {
@@ -378,23 +398,21 @@ mcp_blocks_mean_image(const mcp_blocks *blocks, const mcp_image *values, mcp_ima
         return mcp_error("block mean: %s is %dx%d but the blocks cover %dx%d",
                          values->source ? values->source : "image", values->width,
                          values->height, blocks->width, blocks->height);
-    if (mcp__image_new(values->width, values->height, 3, NULL, "block mean", out))
+    float *means = mcp__blocks_means(blocks, values);
+    if (!means ||
+        mcp__image_new(values->width, values->height, 3, NULL, "block mean", out)) {
+        free(means);
         return -1;
+    }
     mcp_image *o = *out;
 #pragma omp parallel for schedule(dynamic, 1)
     for (int i = 0; i < blocks->count; i++) {
         const mcp_block *k = &blocks->items[i];
-        double sum[3] = {0, 0, 0};
         for (int y = k->y; y < k->y + k->h; y++)
             for (int x = k->x; x < k->x + k->w; x++)
-                for (int c = 0; c < 3; c++)
-                    sum[c] += mcp_image_px(values, x, y)[c];
-        double n = (double)k->w * k->h;
-        for (int y = k->y; y < k->y + k->h; y++)
-            for (int x = k->x; x < k->x + k->w; x++)
-                for (int c = 0; c < 3; c++)
-                    mcp_image_px(o, x, y)[c] = (float)(sum[c] / n);
+                memcpy(mcp_image_px(o, x, y), means + 3 * i, 3 * sizeof *means);
     }
+    free(means);
     return 0;
 }
 

@@ -14,9 +14,6 @@
 #include <mcpost/imageio.h>
 
 #include <stdlib.h>
-#ifdef __GLIBC__
-#include <malloc.h>
-#endif
 
 typedef struct {
     mcp__dump_rows *in;
@@ -41,19 +38,6 @@ write_rows(void *ctx, const mcp_image *rows, int y0)
 {
     stream_io *io = ctx;
     return mcp__exr_band_file_rows(&io->out, rows, y0);
-}
-
-/* The command line keeps freed memory in the heap for reuse (cli/main.c): right for
- * frames of one size, but a band's blocks (its images, the network's arena for each
- * tile's crop) change size from band to band and tile to tile, and kept they fragment
- * the heap: 2400x1600 in bands of 256 rows held 3.2 GB instead of 1.3. Blocks of 32 MB
- * and more are mapped and unmapped instead, for the rest of the process. */
-static void
-unmap_freed_blocks(void)
-{
-#ifdef __GLIBC__
-    mallopt(M_MMAP_THRESHOLD, 32 << 20);
-#endif
 }
 
 int
@@ -87,7 +71,7 @@ mcp__denoise_dump_streamed(const mcp_denoiser *den, const mcp_dump_spec *spec,
         return 0;
     }
     *done = 1;
-    unmap_freed_blocks();
+    mcp__unmap_freed_blocks();
     /* the output's header: the dump's attributes and the denoiser's name, as the whole
        run writes them (cli/cmd_denoise.c) */
     mcp_attrs attrs = {0};

@@ -295,10 +295,9 @@ sampling_outputs(const mcp_dump *dump, const mcp_estimate_options *o,
 
 /* 1 when some pixel has a positive variance of the mean. Our departure from the
  * paper: with none at all the model has s_i = 0 everywhere and would stop at once. */
-static int
-has_variance(const mcp_dump *d)
+int
+mcp__any_variance(const mcp_image *v)
 {
-    const mcp_image *v = d->var_of_mean;
     for (int y = 0; y < v->height; y++)
         for (int x = 0; x < v->width; x++) {
             const float *p = mcp_image_px(v, x, y);
@@ -340,6 +339,74 @@ mcp__dump_parts_unread(const mcp_denoiser *den, int sure_features)
            (den->uses_normal || sure_features ? 0u : MCP__DUMP_NO_NORMAL);
 }
 
+/* The options the denoiser and the dump choose where o leaves them automatic: the
+ * probes and the probe floor (the s² pooling is chosen with the maps). */
+static void
+resolve_options(const mcp_dump *dump, const mcp_denoiser *den, mcp_estimate_options *o)
+{
+    if (o->sure.n_probes < 1) o->sure.n_probes = mcp_estimate_auto_probes(dump, den);
+    if (o->probe_floor < 0)
+        o->probe_floor = mcp_estimate_auto_probe_floor(dump, den, o->sure.metric);
+}
+
+/* What follows the maps, whole or streamed: s² pooled (and Var[F], where held), Alg. 1
+ * (but where neither Σ̂ nor s² is above 0 — a dump without variance, or a region
+ * without any — the block stays whole: F(τ) is the same, and the tree does not end in
+ * a block per pixel there), the distribution, the stop and the percentiles.
+ * e->s2_pool and e->no_variance are set; the maps were made by time t1. keep_sigma 0
+ * frees Σ̂^r once the blocks are cut, for the percentiles' bins. */
+static int
+model(mcp_estimate *e, const mcp_estimate_options *o, double t1, int keep_sigma)
+{
+    if (mcp_pool_window(e->maps.var_rel, NULL, e->s2_pool) ||
+        (e->maps.var && mcp_pool_window(e->maps.var, NULL, e->s2_pool)))
+        return -1;
+    double t2 = mcp__now_ms();
+    if (mcp__block_average_quiet(e->maps.sure_rel, e->maps.sigma_rel, e->maps.var_rel,
+                                 &o->blocks, &e->blocks))
+        return -1;
+    double t3 = mcp__now_ms();
+    if (!keep_sigma) {
+        mcp_image_free(e->maps.sigma_rel);
+        e->maps.sigma_rel = NULL;
+    }
+    if (mcp_error_distribution(e->blocks, e->maps.var_rel, &e->dist)) return -1;
+    e->tau = o->tau;
+    e->p = o->p;
+    int stop = mcp_error_should_stop(e->dist, o->tau, o->p, &e->cdf_at_tau);
+    if (stop < 0) return -1;
+    e->stop = stop && !e->no_variance;
+    double t4 = mcp__now_ms();
+    e->n_percentiles = o->n_percentiles;
+    memcpy(e->percentiles, o->percentiles, sizeof o->percentiles);
+    if (mcp_error_percentiles(e->dist, e->percentiles, e->n_percentiles,
+                              e->percentile_tau))
+        return -1;
+    e->ms_error_terms = t2 - t1;
+    e->ms_blocks = t3 - t2;
+    e->ms_stopping = t4 - t3;
+    e->ms_percentiles = mcp__now_ms() - t4;
+    return 0;
+}
+
+/* The end of an estimate that ran: its bar stopped where it failed (no "100%") or
+ * ended, and e handed out, or freed on failure (rc). */
+static int
+finish(mcp_progress *bar, int rc, mcp_estimate *e, mcp_estimate **out)
+{
+    if (bar) {
+        if (rc)
+            mcp__progress_stop(bar);
+        else
+            mcp_progress_end(bar);
+    }
+    if (rc)
+        mcp_estimate_free(e);
+    else
+        *out = e;
+    return rc;
+}
+
 static int compute(const mcp_dump *dump, const mcp_denoiser *den,
                    const mcp_estimate_options *opt, const mcp__group_terms *groups,
                    mcp_estimate **out);
@@ -367,9 +434,7 @@ compute(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_option
     mcp_estimate_options o = opt ? *opt : mcp_estimate_defaults();
     if (mcp_estimate_check(&o) || mcp__check_dump("estimate", dump)) return -1;
     if (!den) return mcp_error("estimate: missing denoiser");
-    if (o.sure.n_probes < 1) o.sure.n_probes = mcp_estimate_auto_probes(dump, den);
-    if (o.probe_floor < 0)
-        o.probe_floor = mcp_estimate_auto_probe_floor(dump, den, o.sure.metric);
+    resolve_options(dump, den, &o);
     mcp_estimate *e = mcp_calloc(1, sizeof *e);
     if (!e) return -1;
     e->probe_floor = o.probe_floor;
@@ -401,7 +466,10 @@ compute(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_option
     /* a large image with a denoiser of bounded reach: the evaluation and the maps a
        band of rows at a time (estimate_bands.c), the same values */
     const mcp_denoiser *runs = running(dump, den);
-    const int band_rows = groups || ev_bad ? 0 : mcp__estimate_band_rows(dump, runs, &o);
+    const int band_rows = groups || ev_bad
+                              ? 0
+                              : mcp__estimate_band_rows(dump->color->width,
+                                                        dump->color->height, runs, &o, 0);
     memset(&ev, 0, sizeof ev);
     if (band_rows) {
         step(bar, 1);
@@ -457,54 +525,109 @@ compute(const mcp_dump *dump, const mcp_denoiser *den, const mcp_estimate_option
     e->s2_pool = o.s2_pool >= 0          ? o.s2_pool
                  : e->probes_from_groups ? 1
                                          : mcp_estimate_auto_s2_pool(dump, den);
-    if (mcp_pool_window(e->maps.var_rel, NULL, e->s2_pool) ||
-        mcp_pool_window(e->maps.var, NULL, e->s2_pool))
-        goto done;
     e->variance_source = dump->variance_source;
     e->variance_dof = dump->variance_dof;
-    double t2 = mcp__now_ms();
-    /* Alg. 1, but where neither Σ̂ nor s² is above 0 (a dump without variance, or a
-       region without any) the block stays whole: F(τ) is the same, and the tree does
-       not end in a block per pixel there */
-    e->no_variance = !has_variance(dump);
-    if (mcp__block_average_quiet(e->maps.sure_rel, e->maps.sigma_rel, e->maps.var_rel,
-                                 &o.blocks, &e->blocks))
-        goto done;
-    double t3 = mcp__now_ms();
-    if (mcp_error_distribution(e->blocks, e->maps.var_rel, &e->dist)) goto done;
-    e->tau = o.tau;
-    e->p = o.p;
-    int stop = mcp_error_should_stop(e->dist, o.tau, o.p, &e->cdf_at_tau);
-    if (stop < 0) goto done;
-    e->stop = stop && !e->no_variance;
-    double t4 = mcp__now_ms();
-    e->n_percentiles = o.n_percentiles;
-    memcpy(e->percentiles, o.percentiles, sizeof o.percentiles);
-    if (mcp_error_percentiles(e->dist, e->percentiles, e->n_percentiles,
-                              e->percentile_tau))
-        goto done;
+    e->no_variance = !mcp__any_variance(dump->var_of_mean);
+    if (model(e, &o, t1, 1)) goto done;
     double t5 = mcp__now_ms();
     if (sampling_outputs(dump, &o, &ev, e)) goto done;
-    e->ms_percentiles = t5 - t4;
     e->ms_sampling = mcp__now_ms() - t5;
     e->ms_denoise = t1 - t0;
-    e->ms_error_terms = t2 - t1;
-    e->ms_blocks = t3 - t2;
-    e->ms_stopping = t4 - t3;
     rc = 0;
 done:
-    if (bar) {
-        if (rc)
-            mcp__progress_stop(bar);
-        else
-            mcp_progress_end(bar);
-    }
     evaluation_free(&ev);
-    if (rc)
-        mcp_estimate_free(e);
-    else
-        *out = e;
-    return rc;
+    return finish(bar, rc, e, out);
+}
+
+/* ---- one dump read a band at a time ---- */
+
+/* The rows read from the dump's file at a time: the EXR chunks of every compression
+ * (PIZ's and B44's 32 rows) end on them. */
+#define STREAM_READ_ROWS 64
+
+int
+mcp__estimate_streamed(const mcp_dump_spec *spec, unsigned without,
+                       const mcp_denoiser *den, const mcp_estimate_options *opt,
+                       const mcp__estimate_sink *sink, mcp_estimate **out, int *done)
+{
+    *out = NULL;
+    *done = 0;
+    mcp_estimate_options o = opt ? *opt : mcp_estimate_defaults();
+    /* what the whole run says in its own words: bad options, a denoiser that picks
+       another by the dump (the default), a dump the band reader cannot take */
+    if (!den || den->pick || mcp_estimate_check(&o) || mcp__sampling_check(&o.sampling)) {
+        mcp_error_clear();
+        return 0;
+    }
+    /* a header the band reader cannot read fails in a whole read's words; out of
+       memory fails here as it would there */
+    mcp__dump_held held = {.read_rows = STREAM_READ_ROWS};
+    if (mcp__dump_bands_open_without(spec, without, &held.in)) return -1;
+    if (!held.in) return 0;
+    int W, H, rc = -1;
+    mcp__dump_bands_size(held.in, &W, &H);
+    held.height = H;
+    mcp_estimate *e = NULL;
+    mcp_progress bar_store, *bar = NULL;
+    /* a denoiser that does not pick another chooses the probes and their floor by
+       itself; the bands, and the rows held for them: a band, its pooling's reach (16
+       rows at most) and the denoiser's halo on each side, and the next rows read */
+    resolve_options(NULL, den, &o);
+    int band_rows = mcp__estimate_band_rows(W, H, den, &o, 1);
+    /* bands that end on the output files' chunks (mcp__exr_band_file) */
+    band_rows = band_rows / STREAM_READ_ROWS * STREAM_READ_ROWS;
+    if (band_rows < STREAM_READ_ROWS && band_rows > 0) band_rows = STREAM_READ_ROWS;
+    if (!band_rows || band_rows >= H) goto whole;
+    held.cap = band_rows + 2 * (16 + den->band_halo) + STREAM_READ_ROWS;
+    /* the first rows: the dump's parts, and its variance's source for the pooling; a
+       dump that the estimate refuses is refused by the whole run, whose read may find
+       something else wrong first */
+    *done = 1;
+    if (mcp__dump_held_rows(&held, 0, H < STREAM_READ_ROWS ? H : STREAM_READ_ROWS))
+        goto done;
+    if (mcp__check_dump("estimate", held.d)) {
+        *done = 0;
+        goto whole;
+    }
+    mcp__unmap_freed_blocks();
+    if (!(e = mcp_calloc(1, sizeof *e))) goto done;
+    e->probe_floor = o.probe_floor;
+    e->probes = o.sure.n_probes;
+    e->variance_source = held.d->variance_source;
+    e->variance_dof = held.d->variance_dof;
+    e->s2_pool = o.s2_pool >= 0 ? o.s2_pool : mcp_estimate_auto_s2_pool(held.d, den);
+    if ((double)W * H >= 1048576.0 && !mcp_progress_quiet()) {
+        bar = &bar_store;
+        mcp_progress_begin(bar, "estimate", ESTIMATE_STEPS);
+    }
+    step(bar, 1);
+    double t0 = mcp__now_ms();
+    int any_variance = 0;
+    if (mcp__error_maps_streamed(&held, den, &o, band_rows, e->s2_pool, sink, band_step,
+                                 bar, &e->maps, &e->sampling_map, &any_variance))
+        goto done;
+    mcp__dump_held_clear(&held);
+    double t1 = mcp__now_ms();
+    step(bar, 2 + JVP_STEPS);
+    e->no_variance = !any_variance;
+    /* Σ̂^r only cuts the blocks: its memory goes to the percentiles */
+    if (model(e, &o, t1, 0)) goto done;
+    double t5 = mcp__now_ms();
+    if (mcp__sampling_map_finish(&e->sampling_map, &o.sampling) ||
+        (o.budget > 0 && mcp_sample_counts(e->sampling_map, o.budget, &e->sample_counts)))
+        goto done;
+    e->ms_sampling = mcp__now_ms() - t5;
+    e->ms_denoise = t1 - t0;
+    rc = 0;
+done:
+    mcp__dump_held_clear(&held);
+    mcp__dump_bands_close(held.in);
+    return finish(bar, rc, e, out);
+whole: /* read whole by the caller, which says what is wrong */
+    mcp_error_clear();
+    mcp__dump_held_clear(&held);
+    mcp__dump_bands_close(held.in);
+    return 0;
 }
 
 /* ---- the truth, for evaluation ---- */

@@ -117,6 +117,11 @@ unsigned mcp__dump_parts_unread(const mcp_denoiser *den, int sure_features);
  * (stopping.c). distribution.exr holds λ alone (jobs/estimate_output.c). */
 int mcp__error_dist_image(const mcp_error_dist *d, int with_s2, mcp_image **out);
 
+/* Each block's mean of values (R, G, B: blocks->count x 3, malloc'd; NULL when out
+ * of memory), summed in double over its rows in order: the values of
+ * mcp_blocks_mean_image (blockavg.c). */
+float *mcp__blocks_means(const mcp_blocks *blocks, const mcp_image *values);
+
 /* mcp_block_average, except that a quiet block, one where Σ̂^r and the model's s² (s2:
  * the distribution's Var^r) are 0 in every pixel and channel, is not cut. Every value in
  * it has s = 0, so F_i = 1 whatever its block's λ: F(τ) and the percentiles are those of
@@ -162,19 +167,72 @@ int mcp__error_maps_rows(const mcp_dump *rows, const mcp_image *f,
                          const mcp_image *const *eps, const mcp_image *const *jeps, int k,
                          int y0, mcp_error_maps *m);
 
-/* The rows of a band for the estimate's evaluation in bands, or 0 to evaluate the
- * image whole: bands where the whole evaluation's probes and JVPs would pass 1 GB
- * and the bands are exact (a denoiser with a band_halo, the metric se or relse,
+/* The rows of a band for the estimate's evaluation in bands of a w x h image, or 0 to
+ * evaluate it whole: bands where the whole evaluation's probes and JVPs would pass
+ * 1 GB and the bands are exact (a denoiser with a band_halo, the metric se or relse,
  * Gaussian probes of the dump's own variance); MCPOST_ESTIMATE_BAND_ROWS=N forces N,
- * =whole none (for tests). The maps (and their F(X)) made so, the same values as
+ * =whole none (for tests); streamed, the rows of mcp__error_maps_streamed's bands,
+ * which hold the band's maps too. The maps (and their F(X)) made so, the same values as
  * mcp__error_maps_from_own_probes after a whole evaluation; progress(ctx, fraction)
  * after each band (estimate_bands.c). */
-int mcp__estimate_band_rows(const mcp_dump *dump, const mcp_denoiser *den,
-                            const mcp_estimate_options *o);
+int mcp__estimate_band_rows(int w, int h, const mcp_denoiser *den,
+                            const mcp_estimate_options *o, int streamed);
 int mcp__error_maps_in_bands(const mcp_dump *dump, const mcp_denoiser *den,
                              const mcp_estimate_options *o, int band_rows,
                              void (*progress)(void *ctx, double done), void *ctx,
                              mcp_error_maps *out);
+
+/* The rows of an estimate's images that a streamed estimate hands out as its bands are
+ * evaluated, instead of holding them whole: rows [y0, y1) of the width x height image
+ * of F(X), SURE and Var[F] pooled as the estimate pools it (each a view of those rows
+ * alone; the estimate's maps keep them NULL). */
+typedef struct mcp__estimate_rows {
+    int y0, y1, width, height;
+    const mcp_image *denoised, *sure, *var;
+    const mcp_attrs *denoised_attrs; /* F(X)'s header attributes (views carry none) */
+} mcp__estimate_rows;
+typedef struct mcp__estimate_sink {
+    int (*rows)(void *ctx, const mcp__estimate_rows *rows);
+    void *ctx;
+} mcp__estimate_sink;
+
+struct mcp__dump_held; /* common/dump/internal.h */
+/* The streamed estimate's evaluation (estimate_bands.c): the dump read from held's
+ * file a band at a time, the maps made band by band as mcp__error_maps_in_bands makes
+ * them, of which only SURE^r, Var^r (unpooled) and Σ̂^r are kept whole in out; F(X),
+ * SURE and Var[F] pooled by pool go to sink, and the sampling map's unblurred weights
+ * (mcp__sampling_weights_rows) to *weights, made here. *any_variance: 1 when some
+ * pixel has a variance above 0. band_rows must be a multiple of the EXR chunks'
+ * height. */
+int mcp__error_maps_streamed(struct mcp__dump_held *held, const mcp_denoiser *den,
+                             const mcp_estimate_options *o, int band_rows, int pool,
+                             const mcp__estimate_sink *sink,
+                             void (*progress)(void *ctx, double done), void *ctx,
+                             mcp_error_maps *out, mcp_image **weights, int *any_variance);
+
+/* 1 when some pixel of a variance image (R, G, B) is above 0 (estimate.c). */
+int mcp__any_variance(const mcp_image *var);
+
+/* The sampling map in parts, for an estimate made band by band (sampling_map.c):
+ * check says what is wrong with the options; weights_begin makes the w x h image of
+ * unblurred weights, weights_rows fills the rows of s (the rows of dump, denoised and
+ * numerator alike), finish blurs and normalises s into the map (it may replace *s). */
+int mcp__sampling_check(const mcp_sampling_options *o);
+int mcp__sampling_weights_begin(int w, int h, mcp_image **out);
+void mcp__sampling_weights_rows(const mcp_dump *dump, const mcp_image *denoised,
+                                const mcp_image *numerator, const mcp_sampling_options *o,
+                                mcp_image *s);
+int mcp__sampling_map_finish(mcp_image **s, const mcp_sampling_options *o);
+
+/* An estimate of a dump read a band at a time from its file (estimate.c), for a large
+ * EXR dump whose estimate goes in bands (mcp__estimate_band_rows): the dump is never
+ * held whole, nor F(X), SURE and Var[F] (they go to sink as their bands are made, and
+ * stay NULL in the estimate's maps, as Σ̂^r does, freed once the blocks are cut); the
+ * estimate is otherwise mcp_estimate_compute's on the dump read whole with `without`.
+ * *done 0 (and 0 returned) where it does not apply: the caller reads the dump whole. */
+int mcp__estimate_streamed(const mcp_dump_spec *spec, unsigned without,
+                           const mcp_denoiser *den, const mcp_estimate_options *opt,
+                           const mcp__estimate_sink *sink, mcp_estimate **out, int *done);
 
 /* mcp_error_maps_from_probes for a caller that is done with its evaluation: takes
  * *denoised for the maps' denoised image and may take probes[j] and jvps[j] (k of

@@ -88,37 +88,44 @@ normalise(mcp_image *img)
     return 0;
 }
 
-int
-mcp_sampling_map(const mcp_dump *dump, const mcp_image *denoised,
-                 const mcp_image *numerator, const mcp_sampling_options *opt,
-                 mcp_image **map)
+/* The blur of a kind's map, where the options leave it to the kind; -1 on bad
+ * options. */
+static int
+blur_of(const mcp_sampling_options *o, double *sigma, int *window)
 {
-    *map = NULL;
-    mcp_sampling_options o = opt ? *opt : mcp_sampling_defaults();
-    if ((unsigned)o.kind > MCP_SAMPLING_MC_SURE)
-        return mcp_error("sampling map: unknown kind %d", (int)o.kind);
-    double sigma = o.blur_sigma_px > 0.0            ? o.blur_sigma_px
-                   : o.kind == MCP_SAMPLING_MC_SURE ? 4.0
-                                                    : 0.5;
-    int window = o.blur_window > 0                ? o.blur_window
-                 : o.kind == MCP_SAMPLING_MC_SURE ? 17
-                                                  : 5;
-    if (!isfinite(sigma) || sigma < 0.0)
+    if ((unsigned)o->kind > MCP_SAMPLING_MC_SURE)
+        return mcp_error("sampling map: unknown kind %d", (int)o->kind);
+    *sigma = o->blur_sigma_px > 0.0            ? o->blur_sigma_px
+             : o->kind == MCP_SAMPLING_MC_SURE ? 4.0
+                                               : 0.5;
+    *window = o->blur_window > 0                ? o->blur_window
+              : o->kind == MCP_SAMPLING_MC_SURE ? 17
+                                                : 5;
+    if (!isfinite(*sigma) || *sigma < 0.0)
         return mcp_error("sampling map: blur_sigma_px must be >= 0 (got %g)",
-                         o.blur_sigma_px);
-    if (window % 2 == 0 || window > 1001)
+                         o->blur_sigma_px);
+    if (*window % 2 == 0 || *window > 1001)
         return mcp_error("sampling map: blur_window must be odd and <= 1001 (got %d)",
-                         o.blur_window);
-    if (!dump || !dump->color) return mcp_error("sampling map: missing dump");
-    if (same_shape("sampling map", "denoised image", denoised, dump->color, 3) ||
-        same_shape("sampling map", "numerator", numerator, dump->color, 3))
-        return -1;
-    int w = denoised->width, h = denoised->height;
-    static const char *const name[1] = {"weight"};
-    mcp_image *s = NULL;
-    if (mcp__image_new(w, h, 1, name, "sampling map", &s)) return -1;
-    mcp_sampling_kind kind = o.kind;
-    mcp_tonemap tm = o.tone_map;
+                         o->blur_window);
+    return 0;
+}
+
+int
+mcp__sampling_check(const mcp_sampling_options *o)
+{
+    double sigma = 0.0;
+    int window = 0;
+    return blur_of(o, &sigma, &window);
+}
+
+void
+mcp__sampling_weights_rows(const mcp_dump *dump, const mcp_image *denoised,
+                           const mcp_image *numerator, const mcp_sampling_options *o,
+                           mcp_image *s)
+{
+    const int w = denoised->width, h = denoised->height;
+    const mcp_sampling_kind kind = o->kind;
+    const mcp_tonemap tm = o->tone_map;
 #pragma omp parallel for schedule(static)
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++) {
@@ -136,16 +143,47 @@ mcp_sampling_map(const mcp_dump *dump, const mcp_image *denoised,
             double sp = sum / 3.0;
             mcp_image_px(s, x, y)[0] = (float)(sp > 0.0 && isfinite(sp) ? sp : 0.0);
         }
-    mcp_image *blurred = NULL;
+}
+
+int
+mcp__sampling_weights_begin(int w, int h, mcp_image **out)
+{
+    static const char *const name[1] = {"weight"};
+    return mcp__image_new(w, h, 1, name, "sampling map", out);
+}
+
+int
+mcp__sampling_map_finish(mcp_image **weights, const mcp_sampling_options *o)
+{
+    double sigma = 0.0;
+    int window = 0;
+    if (blur_of(o, &sigma, &window)) return -1;
+    mcp_image *s = *weights;
     if (sigma > 0.0 && window > 1) {
-        if (mcp_gaussian_blur(s, window, sigma, &blurred)) {
-            mcp_image_free(s);
-            return -1;
-        }
+        mcp_image *blurred = NULL;
+        if (mcp_gaussian_blur(s, window, sigma, &blurred)) return -1;
         mcp_image_free(s);
-        s = blurred;
+        *weights = s = blurred;
     }
-    if (normalise(s) || mcp_image_set_source(s, "sampling map")) {
+    return normalise(s) || mcp_image_set_source(s, "sampling map") ? -1 : 0;
+}
+
+int
+mcp_sampling_map(const mcp_dump *dump, const mcp_image *denoised,
+                 const mcp_image *numerator, const mcp_sampling_options *opt,
+                 mcp_image **map)
+{
+    *map = NULL;
+    mcp_sampling_options o = opt ? *opt : mcp_sampling_defaults();
+    if (mcp__sampling_check(&o)) return -1;
+    if (!dump || !dump->color) return mcp_error("sampling map: missing dump");
+    if (same_shape("sampling map", "denoised image", denoised, dump->color, 3) ||
+        same_shape("sampling map", "numerator", numerator, dump->color, 3))
+        return -1;
+    mcp_image *s = NULL;
+    if (mcp__sampling_weights_begin(denoised->width, denoised->height, &s)) return -1;
+    mcp__sampling_weights_rows(dump, denoised, numerator, &o, s);
+    if (mcp__sampling_map_finish(&s, &o)) {
         mcp_image_free(s);
         return -1;
     }

@@ -82,16 +82,28 @@ mcp__estimate_json(const mcp_estimate *e, const char *input, const char *denoise
     return j;
 }
 
+/* Each block's λ (R, G, B) as the distribution's image holds it (float), blocks->count
+ * x 3 values (the caller frees them). */
+static float *
+block_lambdas(const mcp_estimate *e)
+{
+    float *l = mcp_malloc((size_t)e->blocks->count * 3 * sizeof *l);
+    for (int i = 0; l && i < e->blocks->count; i++)
+        for (int c = 0; c < 3; c++)
+            l[3 * i + c] = (float)mcp_error_dist_lambda(e->dist, i, c);
+    return l;
+}
+
 /* The report's block picture: the error each pixel is expected to have under the
  * model that F(tau) comes from, s²(λ + 1) (mean of R, G, B; log10 from -5 to 0 in
  * inferno, like the metrics' RelSE map), with the block edges in white. Unlike
  * blocks.png, whose colours only tell blocks apart, its colour bar reads as a value,
  * and a single block still shows where the error is: s² varies per pixel. s2 is the
- * distribution's (Var^r, variance_rel.exr), lambda mcp__error_dist_image's. *log_error:
- * the log10 values it shows (the caller frees them). */
+ * distribution's (Var^r, variance_rel.exr), lambda each block's (block_lambdas).
+ * *log_error: the log10 values it shows (the caller frees them). */
 static int
-blocks_error_picture(const mcp_blocks *blocks, const mcp_image *lambda,
-                     const mcp_image *s2, unsigned char *rgb8, mcp_image **log_error)
+blocks_error_picture(const mcp_blocks *blocks, const float *lambda, const mcp_image *s2,
+                     unsigned char *rgb8, mcp_image **log_error)
 {
     int w = blocks->width, h = blocks->height;
     int32_t *label = NULL;
@@ -104,7 +116,8 @@ blocks_error_picture(const mcp_blocks *blocks, const mcp_image *lambda,
 #pragma omp parallel for schedule(static)
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++) {
-            const float *l = mcp_image_px(lambda, x, y), *v = mcp_image_px(s2, x, y);
+            const float *l = lambda + 3 * (size_t)label[(size_t)y * w + x],
+                        *v = mcp_image_px(s2, x, y);
             double mean = 0;
             for (int c = 0; c < 3; c++)
                 mean += v[c] * (l[c] + 1.0) / 3.0;
@@ -166,18 +179,24 @@ sampling_map_picture(const mcp_image *map, unsigned char *rgb8, double *top)
  * channels took 0.23 s of deflate at 1080p, for three that repeated a file). */
 int
 mcp__estimate_write_single(const mcp_estimate *e, const mcp__estimate_dir *o,
-                           cJSON *section, const cJSON *summary)
+                           cJSON *section, const cJSON *summary,
+                           const unsigned char *denoised_rgb)
 {
     enum { MAX_FILES = 14 };
     mcp_image *block_mean = NULL, *lambda = NULL, *log_error = NULL;
+    float *block_lambda = NULL;
     unsigned char *blocks_rgb = NULL, *error_rgb = NULL, *map_rgb = NULL,
-                  *denoised_rgb = NULL;
+                  *screen_rgb = NULL;
     char(*paths)[4352] = NULL;
     double map_top = 0;
     int rc = -1, n = 0, w = e->blocks->width, h = e->blocks->height;
-    if (mcp_make_dirs(o->dir) ||
-        mcp_blocks_mean_image(e->blocks, e->maps.sure_rel, &block_mean) ||
-        mcp__error_dist_image(e->dist, 0, &lambda) ||
+    /* a streamed estimate (its F(X) written band by band) writes its images of the
+       blocks' values a band at a time too (estimate_stream.c) */
+    const int streamed = !e->maps.denoised;
+    if (mcp_make_dirs(o->dir) || !(block_lambda = block_lambdas(e)) ||
+        (streamed ? mcp__estimate_block_files(e, block_lambda, o)
+                  : mcp_blocks_mean_image(e->blocks, e->maps.sure_rel, &block_mean) ||
+                        mcp__error_dist_image(e->dist, 0, &lambda)) ||
         !(paths = mcp_malloc(MAX_FILES * sizeof *paths)))
         goto done;
     /* one block is one colour: a flat square that shows nothing, so no blocks.png
@@ -185,15 +204,17 @@ mcp__estimate_write_single(const mcp_estimate *e, const mcp__estimate_dir *o,
     if (e->blocks->count > 1 && (!(blocks_rgb = mcp_malloc((size_t)w * h * 3)) ||
                                  mcp_blocks_picture(e->blocks, blocks_rgb)))
         goto done;
-    if (section &&
-        (!(error_rgb = mcp_malloc((size_t)w * h * 3)) ||
-         blocks_error_picture(e->blocks, lambda, e->maps.var_rel, error_rgb, &log_error)))
+    if (section && (!(error_rgb = mcp_malloc((size_t)w * h * 3)) ||
+                    blocks_error_picture(e->blocks, block_lambda, e->maps.var_rel,
+                                         error_rgb, &log_error)))
         goto done;
     /* what the report shows beside the error: the denoised image (its PNG as a screen
      * shows it, the page re-exposes denoised.exr) and where the next samples go */
-    if (section && (!(denoised_rgb = mcp_malloc((size_t)w * h * 3)) ||
-                    screen_picture(e->maps.denoised, denoised_rgb)))
+    if (section && !denoised_rgb &&
+        (!(screen_rgb = mcp_malloc((size_t)w * h * 3)) ||
+         screen_picture(e->maps.denoised, screen_rgb)))
         goto done;
+    if (section && !denoised_rgb) denoised_rgb = screen_rgb;
     if (section && e->sampling_map &&
         (!(map_rgb = mcp_malloc((size_t)w * h * 3)) ||
          sampling_map_picture(e->sampling_map, map_rgb, &map_top)))
@@ -281,12 +302,13 @@ mcp__estimate_write_single(const mcp_estimate *e, const mcp__estimate_dir *o,
 done:
     free(map_rgb);
     mcp_image_free(log_error);
-    free(denoised_rgb);
+    free(screen_rgb);
     free(error_rgb);
     free(blocks_rgb);
     free(paths);
     mcp_image_free(block_mean);
     mcp_image_free(lambda);
+    free(block_lambda);
     return rc;
 }
 

@@ -145,10 +145,39 @@ int mcp__estimate_add_truth(const mcp_estimate *e, const mcp_image *ref,
                             const mcp_estimate_options *eo, cJSON *summary);
 cJSON *mcp__estimate_json(const mcp_estimate *e, const char *input, const char *denoiser,
                           const mcp_estimate_options *o);
+/* The files a streamed estimate writes band by band (estimate_stream.c; the sink of
+ * estimate/'s mcp__estimate_streamed, with this as its ctx): denoised.exr, sure.exr
+ * and variance.exr into dir, opened at the first band; with want_picture the denoised
+ * picture's bytes too, for the report. end closes them, renamed when failed is 0 and
+ * every row was written, else removed; free frees the rest. */
+#define MCP__ESTIMATE_STREAMED 3
+typedef struct mcp__estimate_files {
+    const mcp__estimate_dir *dir;
+    int want_picture;
+    char paths[MCP__ESTIMATE_STREAMED][4352];
+    mcp__exr_band_file files[MCP__ESTIMATE_STREAMED];
+    mcp_image *gather[MCP__ESTIMATE_STREAMED]; /* each file's rows before written */
+    mcp_attrs attrs;                           /* F(X)'s, for denoised.exr */
+    int begun, width, height;
+    unsigned char *denoised_rgb;
+} mcp__estimate_files;
+struct mcp__estimate_rows;
+int mcp__estimate_files_rows(void *ctx, const struct mcp__estimate_rows *rows);
+int mcp__estimate_files_end(mcp__estimate_files *f, int failed);
+void mcp__estimate_files_free(mcp__estimate_files *f);
+/* distribution.exr (each block's λ, lambda: 3 a block) and blocks_sure_rel.exr (each
+ * block's mean SURE^r) of a streamed estimate into o->dir, a band of rows at a time:
+ * the pixels of the images mcp__error_dist_image and mcp_blocks_mean_image make whole
+ * (estimate_stream.c). */
+int mcp__estimate_block_files(const mcp_estimate *e, const float *lambda,
+                              const mcp__estimate_dir *o);
 /* Every image of one estimate and the block pictures into o->dir (made), and with a
- * section its block map in the report. */
+ * section its block map in the report. The maps that are NULL (a streamed estimate's
+ * F(X), SURE and Var[F]) are not written: they were; denoised_rgb, when not NULL, is
+ * the denoised picture's bytes, made from F(X) otherwise. */
 int mcp__estimate_write_single(const mcp_estimate *e, const mcp__estimate_dir *o,
-                               cJSON *section, const cJSON *summary);
+                               cJSON *section, const cJSON *summary,
+                               const unsigned char *denoised_rgb);
 /* The report section of one estimate: key figures, the percentile table and curve. */
 int mcp__estimate_report_single(cJSON *section, const cJSON *summary,
                                 const mcp_estimate *e);

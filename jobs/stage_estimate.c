@@ -93,7 +93,7 @@ stage_estimate(mcp_job *job, const mcp_node *settings)
         int bad = ref && mcp__estimate_add_truth(e, ref, &so.est, j);
         char path[4352];
         char *text = bad ? NULL : cJSON_Print(j);
-        bad = bad || !text || mcp__estimate_write_single(e, &od, section, j) ||
+        bad = bad || !text || mcp__estimate_write_single(e, &od, section, j, NULL) ||
               mcp__estimate_path(&od, "estimate.json", path, sizeof path) ||
               mcp_write_file_atomic(path, text, strlen(text)) ||
               mcp__estimate_report_single(section, j, e);

@@ -8,6 +8,17 @@
 #include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
+
+void
+mcp__unmap_freed_blocks(void)
+{
+#ifdef __GLIBC__
+    mallopt(M_MMAP_THRESHOLD, 32 << 20);
+#endif
+}
 
 /* The hook: the number of the allocation that fails (-1: none), and how many went
  * through here since it was set. Atomic because OpenMP workers allocate too. Outside

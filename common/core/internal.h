@@ -20,6 +20,15 @@ int mcp_image_check_size(int width, int height, int channels);
  * reader that has made the image but not yet placed its pixels by name (image.c). */
 int mcp__image_permute_names(mcp_image *img, const int *order);
 
+/* For a command that streams an image too large to hold whole (alloc.c): the command
+ * line keeps freed memory in the heap for reuse (cli/heap.c), right for frames of one
+ * size, but a band's blocks change size from band to band and, kept, they fragment
+ * the heap (a streamed U-Net denoise of 2400x1600 held 3.2 GB instead of 1.3), and what
+ * a streamed command frees after its bands (an estimate's maps) would stay resident.
+ * Blocks of 32 MB and more are mapped and unmapped instead, for the rest of the
+ * process. */
+void mcp__unmap_freed_blocks(void);
+
 /* Fault injection, for tests only (alloc.c): allocation number n (0-based) through
  * mcp_malloc, mcp_calloc, mcp_realloc and mcp_strdup from now on fails as if memory
  * were out, the others succeed; n < 0 turns it off. mcp__alloc_count() is how many

@@ -1222,6 +1222,7 @@ done:
  * denoise reads overlapping bands of three parts instead: mcp__dump_rows, above.) */
 struct mcp__dump_bands {
     mcp_dump_spec spec;
+    unsigned without; /* MCP__DUMP_NO_*: parts left out */
     mcp__exr_rows *exr;
     const mcp_image *header;
     int width, height;
@@ -1271,13 +1272,25 @@ direct_read_clear(direct_read *r)
 int
 mcp__dump_bands_open(const mcp_dump_spec *spec, mcp__dump_bands **out)
 {
+    return mcp__dump_bands_open_without(spec, 0, out);
+}
+
+int
+mcp__dump_bands_open_without(const mcp_dump_spec *spec_, unsigned without,
+                             mcp__dump_bands **out)
+{
     *out = NULL;
+    mcp_dump_spec kept = *spec_; /* the parts left out are not looked for */
+    if (without & MCP__DUMP_NO_ALBEDO) kept.albedo_path = NULL;
+    if (without & MCP__DUMP_NO_NORMAL) kept.normal_path = NULL;
+    const mcp_dump_spec *spec = &kept;
     if (!spec->path || spec->variance_path || spec->albedo_path || spec->normal_path ||
         spec->spp_map_path || mcp_format_from_path(spec->path) != MCP_FORMAT_EXR)
         return 0;
     mcp__dump_bands *b = mcp_calloc(1, sizeof *b);
     if (!b) return -1;
     b->spec = *spec;
+    b->without = without;
     if (mcp__exr_rows_open(spec->path, &b->exr)) {
         mcp__dump_bands_close(b);
         return -1;
@@ -1286,7 +1299,7 @@ mcp__dump_bands_open(const mcp_dump_spec *spec, mcp__dump_bands **out)
     /* the layout of the first row: two parts on one channel are read whole, and what
        is wrong with the header is said here, in a whole read's words */
     static const mcp_dump_buffers none;
-    direct_read r = {.spec = spec, .parts = &none};
+    direct_read r = {.spec = &b->spec, .parts = &none, .without = without};
     int clash = 0, rc = -1;
     if ((r.d = mcp_calloc(1, sizeof *r.d)))
         rc = read_band_parts(b, 0, b->height > 0 ? 1 : 0, &r, &clash);
@@ -1356,7 +1369,7 @@ mcp__dump_bands_read(mcp__dump_bands *b, int y0, int y1, mcp_dump **out)
         return mcp_error("%s: rows %d..%d do not follow row %d of %d", b->header->source,
                          y0, y1, b->next_row, b->height);
     static const mcp_dump_buffers none;
-    direct_read r = {.spec = &b->spec, .parts = &none};
+    direct_read r = {.spec = &b->spec, .parts = &none, .without = b->without};
     int clash = 0, rc = -1;
     b->check.y_off = y0;
     b->check.last = y1 == b->height;

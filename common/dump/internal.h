@@ -101,10 +101,26 @@ void mcp__dump_rows_close(mcp__dump_rows *r);
  * them in every band. */
 typedef struct mcp__dump_bands mcp__dump_bands;
 int mcp__dump_bands_open(const mcp_dump_spec *spec, mcp__dump_bands **out);
+/* open for a reader that does without some parts, as mcp__dump_load_without does */
+int mcp__dump_bands_open_without(const mcp_dump_spec *spec, unsigned without,
+                                 mcp__dump_bands **out);
 void mcp__dump_bands_size(const mcp__dump_bands *b, int *width, int *height);
 const char *mcp__dump_bands_source(const mcp__dump_bands *b);
 int mcp__dump_bands_read(mcp__dump_bands *b, int y0, int y1, mcp_dump **out);
 void mcp__dump_bands_close(mcp__dump_bands *b);
+/* A dump's rows [lo, hi) read from in band after band of read_rows rows and held in
+ * images of room for cap rows (rows_held.c): rows asks for [lo, hi), dropping the rows
+ * above lo and reading down to hi (lo and hi never move up; hi - lo plus a read must
+ * fit cap); d is the dump of the rows held, its parts hi - lo rows high. Set in, cap,
+ * read_rows and height (the image's) before the first call; clear frees the rows. */
+typedef struct mcp__dump_held {
+    mcp__dump_bands *in;
+    int cap, read_rows, height;
+    mcp_dump *d;
+    int lo, hi;
+} mcp__dump_held;
+int mcp__dump_held_rows(mcp__dump_held *h, int lo, int hi);
+void mcp__dump_held_clear(mcp__dump_held *h);
 /* The same checks for a caller that reads the rows itself (`mcpost info`, which reads
  * every channel for its statistics): for_rows opens no file; from_rows gives the dump
  * of rows, an image of rows [y0, y0 + rows->height) of the file as

@@ -6,7 +6,7 @@
  *
  * Every input is read in bands (dump.c's mcp__dump_bands: the parts laid out,
  * converted and checked by the code of a whole read) and its rows held while a band of
- * the output needs them (rows_held); each band's rows merged by mcp_dump_merge, and
+ * the output needs them (rows_held.c); each band's rows merged by mcp_dump_merge, and
  * written at once into the output EXR under a temporary name, renamed when every row
  * is written and removed on failure (common/io's mcp__exr_band_file). A merged value
  * depends on its own pixel only, except with pooling (--pool R), whose window reaches
@@ -26,85 +26,11 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* An input's rows [lo, hi), held for the bands that read them: a band's rows and,
- * with pooling, the radius above and below it (the windows of the pixels at its
- * edges). The parts' images have room for cap rows: a band read from the file is
- * appended below, and the rows no band needs any more are dropped from the top. */
-typedef struct rows_held {
-    mcp_dump *d; /* the parts hi - lo rows high, and what the dump says of itself */
-    int lo, hi;
-} rows_held;
-
 typedef struct merge_stream {
-    int count, band_rows, radius, cap;
-    mcp__dump_bands **in;
-    rows_held *held; /* each input's */
+    int count, band_rows, radius;
+    mcp__dump_held *held; /* each input's rows (rows_held.c) */
     mcp__exr_band_file out;
 } merge_stream;
-
-enum { N_ROW_PARTS = 6 };
-
-static mcp_image **
-part_of(mcp_dump *d, int p)
-{
-    mcp_image **parts[N_ROW_PARTS] = {&d->color,  &d->var_of_mean, &d->cov_of_mean,
-                                      &d->albedo, &d->normal,      &d->spp_map};
-    return parts[p];
-}
-
-/* Appends band b (the next rows of the input) to h; takes b. */
-static int
-hold(rows_held *h, mcp_dump *b, int cap)
-{
-    const int n = b->color->height;
-    for (int p = 0; p < N_ROW_PARTS; p++) {
-        mcp_image **src = part_of(b, p), **dst = h->d ? part_of(h->d, p) : NULL;
-        if (!*src) continue;
-        if (!h->d) { /* the first band: its parts move into images with room */
-            mcp_image *room = NULL;
-            if (mcp_image_new((*src)->width, cap, (*src)->channels,
-                              (const char *const *)(*src)->names, &room) ||
-                mcp_image_set_source(room, (*src)->source) ||
-                mcp_attrs_copy(&(*src)->attrs, &room->attrs)) {
-                mcp_image_free(room);
-                mcp_dump_free(b);
-                return -1;
-            }
-            memcpy(room->data, (*src)->data,
-                   (size_t)n * (size_t)(*src)->row_stride * sizeof(float));
-            room->height = n;
-            mcp_image_free(*src);
-            *src = room;
-            continue;
-        }
-        memcpy((*dst)->data + (ptrdiff_t)(*dst)->height * (*dst)->row_stride,
-               (*src)->data, (size_t)n * (size_t)(*src)->row_stride * sizeof(float));
-        (*dst)->height += n;
-    }
-    if (!h->d) {
-        h->d = b;
-    } else {
-        mcp_dump_free(b);
-    }
-    h->hi += n;
-    return 0;
-}
-
-/* Drops the rows above lo. */
-static void
-drop_above(rows_held *h, int lo)
-{
-    const int gone = lo - h->lo;
-    if (gone <= 0) return;
-    for (int p = 0; p < N_ROW_PARTS; p++) {
-        mcp_image *img = *part_of(h->d, p);
-        if (!img) continue;
-        memmove(img->data, img->data + (ptrdiff_t)gone * img->row_stride,
-                (size_t)(img->height - gone) * (size_t)img->row_stride * sizeof(float));
-        img->height -= gone;
-    }
-    h->lo = lo;
-}
 
 /* Every input's rows [y0 - radius, y1 + radius) within the image, read as needed. */
 static int
@@ -112,16 +38,8 @@ hold_rows(merge_stream *m, int y0, int y1, int height)
 {
     const int lo = y0 - m->radius > 0 ? y0 - m->radius : 0,
               hi = y1 + m->radius < height ? y1 + m->radius : height;
-    for (int k = 0; k < m->count; k++) {
-        rows_held *h = &m->held[k];
-        if (h->d) drop_above(h, lo);
-        while (h->hi < hi) {
-            const int b1 = h->hi + m->band_rows < height ? h->hi + m->band_rows : height;
-            mcp_dump *b = NULL;
-            if (mcp__dump_bands_read(m->in[k], h->hi, b1, &b) || hold(h, b, m->cap))
-                return -1;
-        }
-    }
+    for (int k = 0; k < m->count; k++)
+        if (mcp__dump_held_rows(&m->held[k], lo, hi)) return -1;
     return 0;
 }
 
@@ -170,18 +88,23 @@ open_inputs(merge_stream *m, const mcp_dump_spec *specs, int *width, int *height
 {
     *streamable = 0;
     for (int k = 0; k < m->count; k++) {
-        if (mcp__dump_bands_open(&specs[k], &m->in[k])) return -1;
-        if (!m->in[k]) return 0;
+        mcp__dump_bands **in = &m->held[k].in;
+        if (mcp__dump_bands_open(&specs[k], in)) return -1;
+        if (!*in) return 0;
         int w, h;
-        mcp__dump_bands_size(m->in[k], &w, &h);
+        mcp__dump_bands_size(*in, &w, &h);
         if (k == 0) {
             *width = w;
             *height = h;
         } else if (w != *width || h != *height) {
             return mcp_error("merge: %s is %dx%d, but %s is %dx%d",
-                             mcp__dump_bands_source(m->in[k]), w, h,
-                             mcp__dump_bands_source(m->in[0]), *width, *height);
+                             mcp__dump_bands_source(*in), w, h,
+                             mcp__dump_bands_source(m->held[0].in), *width, *height);
         }
+        /* a band's rows and the radius above and below, and the next band read */
+        m->held[k].cap = 2 * m->band_rows + 2 * m->radius;
+        m->held[k].read_rows = m->band_rows;
+        m->held[k].height = h;
     }
     *streamable = 1;
     return 0;
@@ -200,14 +123,10 @@ mcp__dump_merge_streamed(const mcp_dump_spec *specs, int count,
         opt->pool_radius < 0 || wo->exr_tiled ||
         mcp_format_from_path(out_path) != MCP_FORMAT_EXR)
         return 0;
-    /* a band's rows and the radius above and below, and the next band read */
     merge_stream m = {.count = count, .band_rows = rows, .radius = opt->pool_radius};
-    m.cap = 2 * rows + 2 * m.radius;
-    m.in = mcp_calloc((size_t)count, sizeof *m.in);
     m.held = mcp_calloc((size_t)count, sizeof *m.held);
     int rc = -1, streamable = 0, width = 0, height = 0;
-    if (!m.in || !m.held || open_inputs(&m, specs, &width, &height, &streamable))
-        goto done;
+    if (!m.held || open_inputs(&m, specs, &width, &height, &streamable)) goto done;
     if (!streamable) { /* read whole by the caller */
         rc = 0;
         goto done;
@@ -224,11 +143,10 @@ done:
         mcp_dump_free(*last);
         *last = NULL;
     }
-    for (int k = 0; m.in && k < count; k++)
-        mcp__dump_bands_close(m.in[k]);
-    for (int k = 0; m.held && k < count; k++)
-        mcp_dump_free(m.held[k].d);
-    free(m.in);
+    for (int k = 0; m.held && k < count; k++) {
+        mcp__dump_bands_close(m.held[k].in);
+        mcp__dump_held_clear(&m.held[k]);
+    }
     free(m.held);
     return rc ? -1 : 0;
 }

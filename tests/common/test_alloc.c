@@ -1,5 +1,6 @@
 /* test_alloc.c: running out of memory and out of disk (common/core/alloc.c's failure
- * hook, issue 15). A small estimate, blend and perceptual run, each made to fail at every
+ * hook, issue 15). A small estimate (whole, and in bands), blend and perceptual run,
+ * each made to fail at every
  * one of its allocations in turn, must end with an error (non-zero status, one line
  * set) and no crash; the ASan build adds: no leak, whichever allocation failed. Then
  * the same runs with a file-size limit, as on a full disk. Either way no partial
@@ -48,8 +49,10 @@ setup(void **state)
     snprintf(
         cmd, sizeof cmd,
         "mkdir -p '%s' && '%s' --width 8 --height 8 --spp 4 --singles 4 -o '%s/p' "
-        ">/dev/null && '%s' --width 8 --height 8 --spp 8 --seed 2 -o '%s/q' >/dev/null",
-        dir, MCP_TEST_PROCEDURAL, dir, MCP_TEST_PROCEDURAL, dir);
+        ">/dev/null && '%s' --width 8 --height 8 --spp 8 --seed 2 -o '%s/q' >/dev/null "
+        "&& '%s' --width 8 --height 150 --spp 4 --seed 3 -o '%s/tall' >/dev/null",
+        dir, MCP_TEST_PROCEDURAL, dir, MCP_TEST_PROCEDURAL, dir, MCP_TEST_PROCEDURAL,
+        dir);
     return system(cmd) == 0 ? 0 : -1;
 }
 
@@ -197,6 +200,21 @@ test_estimate_fails_cleanly_at_every_allocation(void **state)
     assert_true(fail_each_allocation(args, out) > 10);
 }
 
+/* The estimate of a dump read and written in bands (estimate/estimate.c's
+ * mcp__estimate_streamed): bands of 64 rows of a dump of 150. */
+static void
+test_estimate_in_bands_fails_cleanly_at_every_allocation(void **state)
+{
+    (void)state;
+    char args[4096], out[4096];
+    snprintf(out, sizeof out, "%s/estimate-bands-out", dir);
+    snprintf(args, sizeof args, "estimate %s/tall_0000.exr --denoiser gauss -o %s", dir,
+             out);
+    setenv("MCPOST_ESTIMATE_BAND_ROWS", "64", 1);
+    assert_true(fail_each_allocation(args, out) > 10);
+    unsetenv("MCPOST_ESTIMATE_BAND_ROWS");
+}
+
 static void
 test_blend_fails_cleanly_at_every_allocation(void **state)
 {
@@ -287,6 +305,7 @@ main(void)
 {
     const struct CMUnitTest tests[] = {
         cmocka_unit_test(test_estimate_fails_cleanly_at_every_allocation),
+        cmocka_unit_test(test_estimate_in_bands_fails_cleanly_at_every_allocation),
         cmocka_unit_test(test_blend_fails_cleanly_at_every_allocation),
         cmocka_unit_test(test_perceptual_fails_cleanly_at_every_allocation),
         cmocka_unit_test(test_compare_fails_cleanly_at_every_allocation),
