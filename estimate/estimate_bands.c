@@ -30,8 +30,8 @@
 
 /* The band working set's bound: probes, JVPs and F of a crop (12 bytes a pixel
  * each), and streamed, the band's own maps too (76 bytes a pixel): at 8K with gauss
- * bands of 128 rows (64 took 12% longer for their halos: docs/benchmarks.md, "The
- * estimate in bands"). */
+ * bands of 128 rows (bands of 64 recompute twice the share of halo rows, 6% of the
+ * whole command: docs/benchmarks.md, "The estimate in bands"). */
 #define BAND_BYTES (256.0 * 1048576.0)
 /* Bands only where the whole evaluation's probes and JVPs would take more. */
 #define WHOLE_BYTES (1024.0 * 1048576.0)
