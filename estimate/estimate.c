@@ -19,6 +19,10 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* The widest pooling of s² the options take: the streamed estimate holds that many
+ * rows above and below a band. */
+#define MCP__S2_POOL_MAX 16
+
 static const char *const variance_probes_names[] = {"sure", "rademacher"};
 const mcp_wordlist mcp_variance_probes_words = {"variance probes", variance_probes_names,
                                                 2};
@@ -120,9 +124,9 @@ mcp_estimate_check(const mcp_estimate_options *o)
                          (long long)o->budget);
     if ((unsigned)o->sampling.kind > MCP_SAMPLING_MC_SURE)
         return mcp_error("estimate: unknown sampling map kind %d", (int)o->sampling.kind);
-    if (o->s2_pool < -1 || o->s2_pool > 16)
-        return mcp_error("estimate: s2_pool must be -1 (automatic) or 0 to 16 (got %d)",
-                         o->s2_pool);
+    if (o->s2_pool < -1 || o->s2_pool > MCP__S2_POOL_MAX)
+        return mcp_error("estimate: s2_pool must be -1 (automatic) or 0 to %d (got %d)",
+                         MCP__S2_POOL_MAX, o->s2_pool);
     if (o->probe_floor < -1 || o->probe_floor > MCP__PROBE_FLOOR_MAX)
         return mcp_error(
             "estimate: probe_floor must be -1 (automatic) or 0 to %d (got %d)",
@@ -559,35 +563,39 @@ mcp__estimate_streamed(const mcp_dump_spec *spec, unsigned without,
         mcp_error_clear();
         return 0;
     }
-    /* a header the band reader cannot read fails in a whole read's words; out of
-       memory fails here as it would there */
-    mcp__dump_held held = {.read_rows = STREAM_READ_ROWS};
-    if (mcp__dump_bands_open_without(spec, without, &held.in)) return -1;
-    if (!held.in) return 0;
+    /* the size from the header alone: an estimate that does not go in bands (1080p)
+       does not pay for the band reader's first rows (12 ms). A header that cannot be
+       read fails in a whole read's words; out of memory fails here as it would there */
     int W, H, rc = -1;
-    mcp__dump_bands_size(held.in, &W, &H);
-    held.height = H;
-    mcp_estimate *e = NULL;
-    mcp_progress bar_store, *bar = NULL;
+    if (mcp__dump_bands_size_of(spec, without, &W, &H)) return -1;
+    if (!W || !H) return 0;
     /* a denoiser that does not pick another chooses the probes and their floor by
-       itself; the bands, and the rows held for them: a band, its pooling's reach (16
-       rows at most) and the denoiser's halo on each side, and the next rows read */
+       itself */
     resolve_options(NULL, den, &o);
     int band_rows = mcp__estimate_band_rows(W, H, den, &o, 1);
     /* bands that end on the output files' chunks (mcp__exr_band_file) */
     band_rows = band_rows / STREAM_READ_ROWS * STREAM_READ_ROWS;
     if (band_rows < STREAM_READ_ROWS && band_rows > 0) band_rows = STREAM_READ_ROWS;
-    if (!band_rows || band_rows >= H) goto whole;
-    held.cap = band_rows + 2 * (16 + den->band_halo) + STREAM_READ_ROWS;
+    if (!band_rows || band_rows >= H) return 0;
+    /* the rows held for the bands: a band, its pooling's reach and the denoiser's halo
+       on each side, and the next rows read */
+    mcp__dump_held held = {.read_rows = STREAM_READ_ROWS, .height = H};
+    held.cap = band_rows + 2 * (MCP__S2_POOL_MAX + den->band_halo) + STREAM_READ_ROWS;
+    if (mcp__dump_bands_open_without(spec, without, &held.in)) return -1;
+    if (!held.in) return 0;
+    mcp_estimate *e = NULL;
+    mcp_progress bar_store, *bar = NULL;
     /* the first rows: the dump's parts, and its variance's source for the pooling; a
        dump that the estimate refuses is refused by the whole run, whose read may find
        something else wrong first */
     *done = 1;
     if (mcp__dump_held_rows(&held, 0, H < STREAM_READ_ROWS ? H : STREAM_READ_ROWS))
         goto done;
-    if (mcp__check_dump("estimate", held.d)) {
+    if (mcp__check_dump("estimate", held.d)) { /* the caller reads it whole */
+        mcp_error_clear();
         *done = 0;
-        goto whole;
+        rc = 0;
+        goto done;
     }
     mcp__unmap_freed_blocks();
     if (!(e = mcp_calloc(1, sizeof *e))) goto done;
@@ -623,11 +631,6 @@ done:
     mcp__dump_held_clear(&held);
     mcp__dump_bands_close(held.in);
     return finish(bar, rc, e, out);
-whole: /* read whole by the caller, which says what is wrong */
-    mcp_error_clear();
-    mcp__dump_held_clear(&held);
-    mcp__dump_bands_close(held.in);
-    return 0;
 }
 
 /* ---- the truth, for evaluation ---- */

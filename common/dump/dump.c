@@ -1275,18 +1275,41 @@ mcp__dump_bands_open(const mcp_dump_spec *spec, mcp__dump_bands **out)
     return mcp__dump_bands_open_without(spec, 0, out);
 }
 
+/* spec for a reader that does without some parts (they are not looked for), and
+ * whether the band reader takes it: one EXR that holds every part. */
+static int
+spec_for_bands(const mcp_dump_spec *spec, unsigned without, mcp_dump_spec *kept)
+{
+    *kept = *spec;
+    if (without & MCP__DUMP_NO_ALBEDO) kept->albedo_path = NULL;
+    if (without & MCP__DUMP_NO_NORMAL) kept->normal_path = NULL;
+    return kept->path && !kept->variance_path && !kept->albedo_path &&
+           !kept->normal_path && !kept->spp_map_path &&
+           mcp_format_from_path(kept->path) == MCP_FORMAT_EXR;
+}
+
+int
+mcp__dump_bands_size_of(const mcp_dump_spec *spec, unsigned without, int *width,
+                        int *height)
+{
+    *width = *height = 0;
+    mcp_dump_spec kept;
+    if (!spec_for_bands(spec, without, &kept)) return 0;
+    mcp__exr_rows *r = NULL;
+    if (mcp__exr_rows_open(kept.path, &r)) return -1;
+    mcp__exr_rows_header(r, width, height);
+    mcp__exr_rows_close(r);
+    return 0;
+}
+
 int
 mcp__dump_bands_open_without(const mcp_dump_spec *spec_, unsigned without,
                              mcp__dump_bands **out)
 {
     *out = NULL;
-    mcp_dump_spec kept = *spec_; /* the parts left out are not looked for */
-    if (without & MCP__DUMP_NO_ALBEDO) kept.albedo_path = NULL;
-    if (without & MCP__DUMP_NO_NORMAL) kept.normal_path = NULL;
+    mcp_dump_spec kept;
+    if (!spec_for_bands(spec_, without, &kept)) return 0;
     const mcp_dump_spec *spec = &kept;
-    if (!spec->path || spec->variance_path || spec->albedo_path || spec->normal_path ||
-        spec->spp_map_path || mcp_format_from_path(spec->path) != MCP_FORMAT_EXR)
-        return 0;
     mcp__dump_bands *b = mcp_calloc(1, sizeof *b);
     if (!b) return -1;
     b->spec = *spec;

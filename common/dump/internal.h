@@ -101,9 +101,13 @@ void mcp__dump_rows_close(mcp__dump_rows *r);
  * them in every band. */
 typedef struct mcp__dump_bands mcp__dump_bands;
 int mcp__dump_bands_open(const mcp_dump_spec *spec, mcp__dump_bands **out);
-/* open for a reader that does without some parts, as mcp__dump_load_without does */
+/* open for a reader that does without some parts, as mcp__dump_load_without does;
+ * size_of gives the image's size from the header alone (0 x 0 for a dump that open
+ * leaves to a whole read), for a caller that decides by it whether to open. */
 int mcp__dump_bands_open_without(const mcp_dump_spec *spec, unsigned without,
                                  mcp__dump_bands **out);
+int mcp__dump_bands_size_of(const mcp_dump_spec *spec, unsigned without, int *width,
+                            int *height);
 void mcp__dump_bands_size(const mcp__dump_bands *b, int *width, int *height);
 const char *mcp__dump_bands_source(const mcp__dump_bands *b);
 int mcp__dump_bands_read(mcp__dump_bands *b, int y0, int y1, mcp_dump **out);

@@ -189,15 +189,22 @@ fail_each_allocation(const char *args, const char *outdir)
     return failed;
 }
 
+/* `mcpost estimate INPUT --denoiser gauss -o DIR/OUT` made to fail at every
+ * allocation. */
+static void
+assert_estimate_fails_cleanly(const char *input, const char *out_name)
+{
+    char args[4096], out[4096];
+    snprintf(out, sizeof out, "%s/%s", dir, out_name);
+    snprintf(args, sizeof args, "estimate %s/%s --denoiser gauss -o %s", dir, input, out);
+    assert_true(fail_each_allocation(args, out) > 10);
+}
+
 static void
 test_estimate_fails_cleanly_at_every_allocation(void **state)
 {
     (void)state;
-    char args[4096], out[4096];
-    snprintf(out, sizeof out, "%s/estimate-out", dir);
-    snprintf(args, sizeof args, "estimate %s/p_0000.exr --denoiser gauss -o %s", dir,
-             out);
-    assert_true(fail_each_allocation(args, out) > 10);
+    assert_estimate_fails_cleanly("p_0000.exr", "estimate-out");
 }
 
 /* The estimate of a dump read and written in bands (estimate/estimate.c's
@@ -206,12 +213,8 @@ static void
 test_estimate_in_bands_fails_cleanly_at_every_allocation(void **state)
 {
     (void)state;
-    char args[4096], out[4096];
-    snprintf(out, sizeof out, "%s/estimate-bands-out", dir);
-    snprintf(args, sizeof args, "estimate %s/tall_0000.exr --denoiser gauss -o %s", dir,
-             out);
     setenv("MCPOST_ESTIMATE_BAND_ROWS", "64", 1);
-    assert_true(fail_each_allocation(args, out) > 10);
+    assert_estimate_fails_cleanly("tall_0000.exr", "estimate-bands-out");
     unsetenv("MCPOST_ESTIMATE_BAND_ROWS");
 }
 
